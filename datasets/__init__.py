@@ -1,0 +1,1 @@
+"""Readers of real logs (marina layout, keyframes, raw ``_IS.log``), geodesy, the MSIS simulator."""

@@ -1,0 +1,215 @@
+"""Sonar settings and sensor mountings of a dataset, from an optional ``sonarslam.toml``.
+
+A ``sonarslam.toml`` beside the logs overrides any of these keys (angles in degrees in the file,
+radians in the objects)::
+
+    [sonar]
+    n_bins = 500            # bins per beam
+    bin_size_m = 0.1        # range step (m); bin i (0-based) is at (i + 1) * bin_size_m
+    step_deg = 1.8          # mechanical step between beams (deg)
+    beam_width_deg = 3.0    # horizontal beam width alpha (deg)
+    angle_sense = -1        # -1: logged transducer angle grows clockwise seen from above
+
+    [mounting.sonar]        # sonar head in the body frame (x forward, y left)
+    x_m = 0.0
+    y_m = 0.0
+    yaw_deg = 151.0         # bearing in body = yaw + angle_sense * transducer angle
+    source = "..."
+
+    [mounting.dvl]          # DVL frame in the body frame
+    yaw_deg = -90.0
+    source = "..."
+
+    [mounting.ahrs]         # AHRS frame in the body frame: body yaw = AHRS yaw - yaw
+    yaw_deg = -115.3
+    source = "..."
+
+    [noise]                 # 1-sigma sensor noise used by the estimators
+    dvl_sigma_mps = 0.05
+    ahrs_sigma_deg = 2.0
+    gps_sigma_m = 1.0
+    dvl_max_gap_s = 10.0    # a DVL dropout longer than this inflates the velocity noise
+
+Without a file, the defaults are the marina's calibration (see ``MARINA_CONFIG`` and the
+README's "Calibration" section for how each number was found and whether GPS was used).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+from datasets.errors import DataError
+from sonar.beam import Mounting, SonarHead
+
+__all__ = [
+    "NoiseConfig",
+    "DatasetConfig",
+    "MARINA_CONFIG",
+    "load_dataset_config",
+    "dump_dataset_config",
+]
+
+
+@dataclass(frozen=True)
+class NoiseConfig:
+    """1-sigma noise of the navigation sensors, as used by the estimators."""
+
+    dvl_sigma_mps: float = 0.05
+    ahrs_sigma_deg: float = 2.0
+    gps_sigma_m: float = 1.0
+    dvl_max_gap_s: float = 10.0
+
+
+@dataclass(frozen=True)
+class DatasetConfig:
+    """Everything about a dataset that is not in its logs."""
+
+    sonar: SonarHead = field(default_factory=SonarHead)
+    sonar_mounting: Mounting = field(default_factory=Mounting)
+    dvl_mounting: Mounting = field(default_factory=Mounting)
+    ahrs_mounting: Mounting = field(default_factory=Mounting)
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
+
+
+#: The abandoned marina (Ribas et al. 2008). How each mounting was calibrated is in README.md.
+MARINA_CONFIG = DatasetConfig(
+    sonar=SonarHead(
+        n_bins=500,
+        bin_size_m=0.1,
+        step_rad=math.radians(1.8),
+        beam_width_rad=math.radians(3.0),
+        angle_sense=-1,
+    ),
+    sonar_mounting=Mounting(
+        yaw_rad=math.radians(151.0),
+        source="sonar-map entropy over dead-reckoning poses, GPS-free (sonarslam calibrate)",
+    ),
+    dvl_mounting=Mounting(
+        yaw_rad=math.radians(-90.0),
+        source="vehicle's own DVL-to-body transform read off PID.log velocities (GPS-free)",
+    ),
+    ahrs_mounting=Mounting(
+        yaw_rad=math.radians(-115.3),
+        source="circular mean of DVL compass minus MTi yaw, minus 90 deg of DVL mount (GPS-free)",
+    ),
+    noise=NoiseConfig(dvl_sigma_mps=0.05, ahrs_sigma_deg=2.0, gps_sigma_m=1.0),
+)
+
+
+def _check_keys(path: Path, table: str, data: dict[str, Any], allowed: set[str]) -> None:
+    unknown = set(data) - allowed
+    if unknown:
+        raise DataError(
+            path, None, f"unknown key(s) {sorted(unknown)} in [{table}]; allowed: {sorted(allowed)}"
+        )
+
+
+def _number(path: Path, table: str, key: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise DataError(path, None, f"[{table}] {key} must be a number, got {value!r}")
+    return float(value)
+
+
+def _mounting(path: Path, table: str, data: dict[str, Any], default: Mounting) -> Mounting:
+    _check_keys(path, table, data, {"x_m", "y_m", "yaw_deg", "source"})
+    kwargs: dict[str, Any] = {}
+    for key in ("x_m", "y_m"):
+        if key in data:
+            kwargs[key] = _number(path, table, key, data[key])
+    if "yaw_deg" in data:
+        kwargs["yaw_rad"] = math.radians(_number(path, table, "yaw_deg", data["yaw_deg"]))
+    kwargs["source"] = str(data.get("source", f"{path}"))
+    return replace(default, **kwargs)
+
+
+def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> DatasetConfig:
+    """Read a ``sonarslam.toml`` over ``base`` (default: a plain :class:`DatasetConfig`).
+
+    Raises
+    ------
+    DataError
+        On a TOML syntax error (with its line), an unknown key or a value of the wrong type.
+    """
+    p = Path(path)
+    base = base if base is not None else DatasetConfig()
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise DataError(p, getattr(exc, "lineno", None), f"TOML syntax error: {exc}") from exc
+    except OSError as exc:
+        raise DataError(p, None, f"cannot read: {exc.strerror}") from exc
+    _check_keys(p, "top level", data, {"sonar", "mounting", "noise"})
+
+    sonar = base.sonar
+    if "sonar" in data:
+        s = data["sonar"]
+        _check_keys(
+            p, "sonar", s, {"n_bins", "bin_size_m", "step_deg", "beam_width_deg", "angle_sense"}
+        )
+        kwargs: dict[str, Any] = {}
+        if "n_bins" in s:
+            kwargs["n_bins"] = int(_number(p, "sonar", "n_bins", s["n_bins"]))
+        if "bin_size_m" in s:
+            kwargs["bin_size_m"] = _number(p, "sonar", "bin_size_m", s["bin_size_m"])
+        if "step_deg" in s:
+            kwargs["step_rad"] = math.radians(_number(p, "sonar", "step_deg", s["step_deg"]))
+        if "beam_width_deg" in s:
+            kwargs["beam_width_rad"] = math.radians(
+                _number(p, "sonar", "beam_width_deg", s["beam_width_deg"])
+            )
+        if "angle_sense" in s:
+            kwargs["angle_sense"] = int(_number(p, "sonar", "angle_sense", s["angle_sense"]))
+        try:
+            sonar = replace(sonar, **kwargs)
+        except ValueError as exc:
+            raise DataError(p, None, f"[sonar] {exc}") from exc
+
+    mountings = {"sonar": base.sonar_mounting, "dvl": base.dvl_mounting, "ahrs": base.ahrs_mounting}
+    if "mounting" in data:
+        _check_keys(p, "mounting", data["mounting"], set(mountings))
+        for name, table in data["mounting"].items():
+            mountings[name] = _mounting(p, f"mounting.{name}", table, mountings[name])
+
+    noise = base.noise
+    if "noise" in data:
+        allowed = {f.name for f in fields(NoiseConfig)}
+        _check_keys(p, "noise", data["noise"], allowed)
+        noise = replace(noise, **{k: _number(p, "noise", k, v) for k, v in data["noise"].items()})
+    return DatasetConfig(
+        sonar=sonar,
+        sonar_mounting=mountings["sonar"],
+        dvl_mounting=mountings["dvl"],
+        ahrs_mounting=mountings["ahrs"],
+        noise=noise,
+    )
+
+
+def dump_dataset_config(config: DatasetConfig) -> str:
+    """The TOML text of ``config`` (what the simulator writes beside its logs)."""
+
+    def mount(name: str, m: Mounting) -> str:
+        return (
+            f"[mounting.{name}]\nx_m = {m.x_m!r}\ny_m = {m.y_m!r}\n"
+            f"yaw_deg = {math.degrees(m.yaw_rad)!r}\nsource = {m.source!r}\n"
+        )
+
+    s = config.sonar
+    n = config.noise
+    return (
+        f"[sonar]\nn_bins = {s.n_bins}\nbin_size_m = {s.bin_size_m!r}\n"
+        f"step_deg = {math.degrees(s.step_rad)!r}\n"
+        f"beam_width_deg = {math.degrees(s.beam_width_rad)!r}\n"
+        f"angle_sense = {s.angle_sense}\n\n"
+        + mount("sonar", config.sonar_mounting)
+        + "\n"
+        + mount("dvl", config.dvl_mounting)
+        + "\n"
+        + mount("ahrs", config.ahrs_mounting)
+        + "\n"
+        + f"[noise]\ndvl_sigma_mps = {n.dvl_sigma_mps!r}\nahrs_sigma_deg = {n.ahrs_sigma_deg!r}\n"
+        f"gps_sigma_m = {n.gps_sigma_m!r}\ndvl_max_gap_s = {n.dvl_max_gap_s!r}\n"
+    )

@@ -1,0 +1,85 @@
+"""The raw MSIS log ``*_IS.log``: reader and writer.
+
+Format (as read by public readers of the marina dataset): 7 header lines starting with ``%``,
+then one row per beam ``logTime sensorTime transducerAngle bin_1 ... bin_N`` separated by tabs or
+spaces; ``logTime`` in Unix s, ``sensorTime`` in ms since midnight, the transducer angle in rad,
+intensities 0-255.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+
+from datasets.errors import DataError
+from datasets.logfile import read_table
+from sonar.beam import SonarBeam
+
+__all__ = ["read_is_log", "write_is_log"]
+
+_HEADER = [
+    "% ----------------------------------------------------------------------",
+    "% MSIS raw log written by sonarslam",
+    "% Data columns:",
+    "% logTime (s), sensorTime (ms since midnight), transducerAngle (rad), bin_1 ... bin_N (0-255)",
+    "% bins: {n_bins}",
+    "% ----------------------------------------------------------------------",
+    "%",
+]
+
+
+def read_is_log(path: str | Path, n_bins: int | None = None) -> list[SonarBeam]:
+    """Read a raw ``_IS.log`` into beams.
+
+    Parameters
+    ----------
+    path : str or Path
+        The log.
+    n_bins : int, optional
+        Bins per beam; by default taken from the first beam row.
+
+    Returns
+    -------
+    list of SonarBeam
+        In file order (time never decreases).
+
+    Raises
+    ------
+    DataError
+        Missing file, non-numeric field, intensity outside 0-255, time going backwards.
+        Rows with a wrong bin count (e.g. a truncated last row) are skipped with a warning.
+    """
+    table = read_table(path, n_columns=None if n_bins is None else n_bins + 3, min_columns=4)
+    bins = table.data[:, 3:]
+    out_of_range = np.flatnonzero(np.any((bins < 0.0) | (bins > 255.0), axis=1))
+    if out_of_range.size:
+        i = int(out_of_range[0])
+        raise DataError(table.path, int(table.line_numbers[i]), "intensity outside 0-255")
+    intensities = np.rint(bins).astype(np.uint8)
+    return [
+        SonarBeam(t=float(row[0]), transducer_angle_rad=float(row[2]), intensities=intensities[i])
+        for i, row in enumerate(table.data)
+    ]
+
+
+def write_is_log(path: str | Path, beams: Iterable[SonarBeam]) -> int:
+    """Write beams as a raw ``_IS.log``; returns the number of rows written.
+
+    The sensor time column is the log time in ms since midnight UTC, as the Miniking logs it.
+    """
+    p = Path(path)
+    lines: list[str] = []
+    n_bins = None
+    for beam in beams:
+        if n_bins is None:
+            n_bins = beam.intensities.size
+        elif beam.intensities.size != n_bins:
+            raise ValueError(f"beam at t={beam.t} has {beam.intensities.size} bins, not {n_bins}")
+        sensor_ms = int(round((beam.t % 86400.0) * 1000.0))
+        bins = " ".join(map(str, beam.intensities.astype(int).tolist()))
+        lines.append(f"{beam.t:.3f}\t{sensor_ms}\t{beam.transducer_angle_rad:.6f}\t{bins}")
+    header = [h.format(n_bins=n_bins or 0) for h in _HEADER]
+    p.write_text("\n".join(header + lines) + "\n", encoding="ascii")
+    return len(lines)

@@ -1,0 +1,120 @@
+"""The mechanically scanned imaging sonar (MSIS): one beam, the head settings, sensor mountings."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from features.geometry import FloatArray
+
+__all__ = ["SonarBeam", "SonarHead", "Mounting"]
+
+
+@dataclass(frozen=True)
+class SonarHead:
+    """Settings of the sonar head.
+
+    Bin ``i`` (0-based) of a beam is the echo at range ``(i + 1) * bin_size_m``, as in the marina
+    keyframes (bin 500 at 50.0 m). The transducer angle ``a`` of a beam, as logged, is turned
+    into a bearing in the right-handed sonar frame as ``angle_sense * a``; ``angle_sense = -1``
+    for a head whose logged angle grows clockwise seen from above (the marina's Miniking).
+
+    Attributes
+    ----------
+    n_bins : int
+        Bins per beam.
+    bin_size_m : float
+        Range step between bins (m).
+    step_rad : float
+        Mechanical step between beams (rad).
+    beam_width_rad : float
+        Horizontal beam width alpha (rad), 3 deg for a Miniking.
+    angle_sense : int
+        +1 or -1, see above.
+    """
+
+    n_bins: int = 500
+    bin_size_m: float = 0.1
+    step_rad: float = float(np.deg2rad(1.8))
+    beam_width_rad: float = float(np.deg2rad(3.0))
+    angle_sense: int = -1
+
+    def __post_init__(self) -> None:
+        if self.n_bins <= 0:
+            raise ValueError(f"SonarHead.n_bins must be positive, got {self.n_bins}")
+        if self.bin_size_m <= 0.0:
+            raise ValueError(f"SonarHead.bin_size_m must be positive, got {self.bin_size_m}")
+        if not 0.0 < self.step_rad < np.pi:
+            raise ValueError(f"SonarHead.step_rad must be in (0, pi), got {self.step_rad}")
+        if not 0.0 < self.beam_width_rad < np.pi / 2:
+            raise ValueError(
+                f"SonarHead.beam_width_rad must be in (0, pi/2), got {self.beam_width_rad}"
+            )
+        if self.angle_sense not in (-1, 1):
+            raise ValueError(f"SonarHead.angle_sense must be +1 or -1, got {self.angle_sense}")
+
+    @property
+    def range_max_m(self) -> float:
+        """Range of the last bin (m)."""
+        return self.n_bins * self.bin_size_m
+
+    def bin_ranges_m(self) -> FloatArray:
+        """Range of every bin, shape ``(n_bins,)`` (m)."""
+        return (np.arange(self.n_bins, dtype=np.float64) + 1.0) * self.bin_size_m
+
+    def range_to_bin(self, range_m: npt.ArrayLike) -> npt.NDArray[np.int64]:
+        """Nearest 0-based bin index of ranges (m); not clipped."""
+        return np.rint(np.asarray(range_m, dtype=np.float64) / self.bin_size_m).astype(np.int64) - 1
+
+    def bearing_rad(self, transducer_angle_rad: npt.ArrayLike) -> FloatArray:
+        """Bearing in the right-handed sonar frame of logged transducer angles (rad)."""
+        return np.asarray(self.angle_sense * np.asarray(transducer_angle_rad, dtype=np.float64))
+
+
+@dataclass(frozen=True)
+class Mounting:
+    """Pose of a sensor frame in the vehicle body frame (x forward, y left), ``bTs``.
+
+    Attributes
+    ----------
+    x_m, y_m : float
+        Position of the sensor in the body frame (m).
+    yaw_rad : float
+        Rotation of the sensor frame about the body z axis, counter-clockwise (rad).
+    source : str
+        Where the numbers come from (calibration method, drawing, ...).
+    """
+
+    x_m: float = 0.0
+    y_m: float = 0.0
+    yaw_rad: float = 0.0
+    source: str = "identity"
+
+    def as_pose(self) -> FloatArray:
+        """``bTs`` as an array ``(x_m, y_m, yaw_rad)``."""
+        return np.array([self.x_m, self.y_m, self.yaw_rad], dtype=np.float64)
+
+
+@dataclass(frozen=True, eq=False)
+class SonarBeam:
+    """One MSIS beam.
+
+    Attributes
+    ----------
+    t : float
+        Time of the beam (Unix s).
+    transducer_angle_rad : float
+        Head angle as logged (rad); see :meth:`SonarHead.bearing_rad`.
+    intensities : ndarray of uint8, shape (n_bins,)
+        Echo intensity per bin, 0-255. Beams that were thresholded before they reached us
+        (the marina keyframes) carry 255 for the bins that passed and 0 elsewhere.
+    thresholded : bool
+        True when ``intensities`` is such a 0/255 mask rather than raw echo strength.
+    """
+
+    t: float
+    transducer_angle_rad: float
+    intensities: npt.NDArray[np.uint8] = field(repr=False)
+    thresholded: bool = False
