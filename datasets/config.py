@@ -13,7 +13,7 @@ radians in the objects)::
     [mounting.sonar]        # sonar head in the body frame (x forward, y left)
     x_m = 0.0
     y_m = 0.0
-    yaw_deg = 151.0         # bearing in body = yaw + angle_sense * transducer angle
+    yaw_deg = 156.0         # bearing in body = yaw + angle_sense * transducer angle
     source = "..."
 
     [mounting.dvl]          # DVL frame in the body frame
@@ -85,7 +85,7 @@ MARINA_CONFIG = DatasetConfig(
         angle_sense=-1,
     ),
     sonar_mounting=Mounting(
-        yaw_rad=math.radians(151.0),
+        yaw_rad=math.radians(156.0),
         source="sonar-map entropy over dead-reckoning poses, GPS-free (sonarslam calibrate)",
     ),
     dvl_mounting=Mounting(

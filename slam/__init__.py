@@ -1,0 +1,1 @@
+"""Motion model, pose sources, data association, EKF-SLAM, factor graph, pipeline, evaluation, CLI."""

@@ -1,0 +1,171 @@
+"""The ``sonarslam`` command: parse, call a library function, print. Known errors: one line, exit 1."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+
+from datasets.errors import DataError, DataWarning
+
+__all__ = ["main", "build_parser"]
+
+EPILOG = (
+    "Data: a SOURCE is a directory in the marina layout (see README) or the named source 'marina', "
+    "found under $SONARSLAM_DATA/marina."
+)
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    from datasets.simulator import simulate
+
+    out = simulate(args.kind, seed=args.seed, out_dir=args.out, duration_s=args.duration)
+    print(f"simulated {args.kind} (seed {args.seed}) written to {out}")
+    return 0
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from slam.pipeline import run, summary_line
+
+    result = run(args.source, args.backend, args.out, progress=not args.quiet)
+    print(summary_line(result.metrics))
+    print(
+        f"outputs: {result.out_dir.resolve()} (trajectory.tum, ground_truth.tum, metrics.json, report.png)"
+    )
+    return 0
+
+
+def _cmd_plot_scans(args: argparse.Namespace) -> int:
+    from datasets.source import open_dataset
+    from features.projection import project_beams
+    from slam.pipeline import pose_source_by_name
+    from slam.plots import plot_scans
+
+    dataset = open_dataset(args.source)
+    poses = pose_source_by_name(dataset, args.poses)
+    points, _ = project_beams(
+        dataset.nav_beams(),
+        dataset.config.sonar,
+        dataset.config.sonar_mounting,
+        poses,
+        args.min_intensity,
+    )
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    plot_scans(
+        out,
+        points,
+        {args.poses: poses},
+        f"{dataset.name}: sonar bins projected with {args.poses} poses",
+    )
+    print(f"{points.shape[0]} bins projected; picture: {out.resolve()}")
+    return 0
+
+
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from datasets.source import open_dataset
+    from slam.calibration import calibrate_sonar_yaw
+    from slam.pipeline import pose_source_by_name
+
+    dataset = open_dataset(args.source)
+    poses = pose_source_by_name(dataset, args.poses)
+    result = calibrate_sonar_yaw(dataset, poses, window_s=args.window)
+    current = math.degrees(dataset.config.sonar_mounting.yaw_rad)
+    print(
+        f"sonar mounting yaw with {args.poses} poses: {math.degrees(result.best_yaw_rad):.2f} deg "
+        f"(configured: {current:.2f} deg); put it under [mounting.sonar] yaw_deg in sonarslam.toml"
+    )
+    return 0
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    from datasets.source import open_dataset
+
+    d = open_dataset(args.source)
+    t0, t1 = d.nav_span_s
+    print(f"{d.name}: {d.root}")
+    print(f"  sonar beams {len(d.beams)} ({len(d.nav_beams())} inside the navigation span)")
+    print(f"  DVL rows {d.dvl.t.size} ({int((~d.dvl.valid).sum())} without bottom lock)")
+    print(f"  AHRS rows {d.attitude.t.size}; GPS fixes {0 if d.gps is None else d.gps.t.size}")
+    print(f"  navigation span {t1 - t0:.1f} s; head {d.config.sonar}")
+    for name in ("sonar", "dvl", "ahrs"):
+        m = getattr(d.config, f"{name}_mounting")
+        print(
+            f"  {name} mounting x={m.x_m} m y={m.y_m} m yaw={math.degrees(m.yaw_rad):.2f} deg ({m.source})"
+        )
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="sonarslam",
+        description="Line features with honest uncertainty from MSIS sonar, and SLAM with them.",
+        epilog=EPILOG,
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("simulate", help="simulate a run in the marina layout", epilog=EPILOG)
+    p.add_argument(
+        "kind",
+        choices=["pool", "harbour", "random"],
+        help="world: seed pool, harbour, random harbour",
+    )
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument(
+        "--duration", type=float, default=None, help="seconds of simulated time (default per world)"
+    )
+    p.set_defaults(func=_cmd_simulate)
+
+    p = sub.add_parser("run", help="run a back end and evaluate it against GPS", epilog=EPILOG)
+    p.add_argument("source", help="dataset directory or 'marina'")
+    p.add_argument(
+        "--backend", default="dr", help="dr (dead reckoning), gps (GPS+AHRS), ekf, isam2"
+    )
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser(
+        "plot-scans", help="project the sonar bins into the world and draw them", epilog=EPILOG
+    )
+    p.add_argument("source", help="dataset directory or 'marina'")
+    p.add_argument(
+        "--poses", default="gps", help="pose source: gps (GPS+AHRS), dr, truth (simulated only)"
+    )
+    p.add_argument("--out", default="out/scans.png", help="PNG file (default out/scans.png)")
+    p.add_argument(
+        "--min-intensity", type=int, default=1, help="smallest intensity drawn (0-255, default 1)"
+    )
+    p.set_defaults(func=_cmd_plot_scans)
+
+    p = sub.add_parser("calibrate", help="sonar mounting yaw by map sharpness", epilog=EPILOG)
+    p.add_argument("source", help="dataset directory or 'marina'")
+    p.add_argument("--poses", default="dr", help="pose source (default dr: GPS-free)")
+    p.add_argument("--window", type=float, default=120.0, help="entropy window (s, default 120)")
+    p.set_defaults(func=_cmd_calibrate)
+
+    p = sub.add_parser("info", help="what a dataset holds", epilog=EPILOG)
+    p.add_argument("source", help="dataset directory or 'marina'")
+    p.set_defaults(func=_cmd_info)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", DataWarning)
+        warnings.formatwarning = lambda msg, *a, **k: f"warning: {msg}\n"  # type: ignore[assignment]
+        try:
+            return int(args.func(args))
+        except (DataError, ValueError, FileNotFoundError) as exc:
+            print(f"sonarslam {args.command}: error: {exc}", file=sys.stderr)
+            return 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

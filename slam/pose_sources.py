@@ -1,0 +1,103 @@
+"""Pose sources that need no estimator: GPS + AHRS, dead reckoning, the simulator's truth.
+
+All return a :class:`slam.trajectory.Trajectory`, which implements the front end's
+:class:`features.pose_source.PoseSource`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from datasets.source import Dataset
+from features.geometry import wrap_angle
+from slam.motion import MotionNoise, body_yaw, dead_reckoning
+from slam.trajectory import Trajectory
+
+__all__ = [
+    "motion_noise",
+    "start_pose",
+    "gps_ahrs_trajectory",
+    "dead_reckoning_trajectory",
+    "truth_trajectory",
+]
+
+
+def motion_noise(dataset: Dataset) -> MotionNoise:
+    """The motion-model noise from the dataset's ``[noise]`` settings."""
+    n = dataset.config.noise
+    return MotionNoise(
+        dvl_sigma_mps=n.dvl_sigma_mps,
+        ahrs_sigma_rad=float(np.deg2rad(n.ahrs_sigma_deg)),
+        dvl_max_gap_s=n.dvl_max_gap_s,
+    )
+
+
+def _require_gps(dataset: Dataset):  # noqa: ANN202
+    if dataset.gps is None:
+        raise ValueError(f"{dataset.root}: no *_DGPS.log, so no start pose nor ground truth")
+    return dataset.gps
+
+
+def start_pose(dataset: Dataset) -> tuple[float, np.ndarray, np.ndarray]:
+    """Start time, pose and covariance of every estimator (the ATE protocol).
+
+    The start is the first GPS fix inside the navigation span; its position is that fix, its
+    yaw the heading sensor's (through the AHRS mounting).
+    """
+    gps = _require_gps(dataset)
+    t_nav0, t_nav1 = dataset.nav_span_s
+    inside = np.flatnonzero((gps.t >= t_nav0) & (gps.t <= t_nav1))
+    if inside.size == 0:
+        raise ValueError(f"{dataset.root}: no GPS fix inside the navigation span")
+    i = int(inside[0])
+    t0 = float(gps.t[i])
+    yaw_a = np.interp(t0, dataset.attitude.t, np.unwrap(dataset.attitude.yaw_rad))
+    psi = float(body_yaw(yaw_a, dataset.config.ahrs_mounting))
+    sigma_gps = dataset.config.noise.gps_sigma_m
+    sigma_yaw = np.deg2rad(dataset.config.noise.ahrs_sigma_deg)
+    cov = np.diag([sigma_gps**2, sigma_gps**2, sigma_yaw**2])
+    return t0, np.array([gps.en_m[i, 0], gps.en_m[i, 1], psi]), cov
+
+
+def dead_reckoning_trajectory(dataset: Dataset) -> Trajectory:
+    """Dead reckoning over the navigation span from the ATE protocol's start pose."""
+    t0, pose0, cov0 = start_pose(dataset)
+    return dead_reckoning(
+        dataset.attitude,
+        dataset.dvl,
+        dataset.config.dvl_mounting,
+        dataset.config.ahrs_mounting,
+        pose0,
+        cov0,
+        t0,
+        dataset.nav_span_s[1],
+        motion_noise(dataset),
+    )
+
+
+def gps_ahrs_trajectory(dataset: Dataset) -> Trajectory:
+    """GPS positions (interpolated) with the AHRS body heading, on the AHRS timeline."""
+    gps = _require_gps(dataset)
+    t0, t1 = (
+        max(dataset.nav_span_s[0], float(gps.t[0])),
+        min(dataset.nav_span_s[1], float(gps.t[-1])),
+    )
+    att = dataset.attitude
+    keep = (att.t >= t0) & (att.t <= t1)
+    t = att.t[keep]
+    psi = body_yaw(att.yaw_rad[keep], dataset.config.ahrs_mounting)
+    xy = np.column_stack([np.interp(t, gps.t, gps.en_m[:, 0]), np.interp(t, gps.t, gps.en_m[:, 1])])
+    n = dataset.config.noise
+    cov = np.diag([n.gps_sigma_m**2, n.gps_sigma_m**2, np.deg2rad(n.ahrs_sigma_deg) ** 2])
+    return Trajectory(t, np.column_stack([xy, psi]), np.broadcast_to(cov, (t.size, 3, 3)).copy())
+
+
+def truth_trajectory(dataset: Dataset) -> Trajectory:
+    """The simulator's true body poses, shifted into the readers' local frame (first GPS fix)."""
+    if dataset.truth is None:
+        raise ValueError(f"{dataset.root}: no truth.json (only simulated datasets have one)")
+    truth = dataset.truth
+    poses = np.asarray(truth["poses"], dtype=np.float64)  # rows t, x, y, yaw in the world frame
+    offset = np.asarray(truth.get("first_fix_enu_m", [0.0, 0.0]), dtype=np.float64)
+    xy = poses[:, 1:3] - offset
+    return Trajectory(poses[:, 0].copy(), np.column_stack([xy, wrap_angle(poses[:, 3])]))
