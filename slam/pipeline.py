@@ -9,7 +9,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-
 from datasets.source import Dataset, open_dataset
 from slam.metrics import ate_against_gps, ate_errors
 from slam.plots import plot_trajectories
