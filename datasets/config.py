@@ -37,6 +37,7 @@ README's "Calibration" section for how each number was found and whether GPS was
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -139,7 +140,10 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
     try:
         data = tomllib.loads(p.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
-        raise DataError(p, getattr(exc, "lineno", None), f"TOML syntax error: {exc}") from exc
+        found = re.search(r"at line (\d+)", str(exc))
+        raise DataError(
+            p, int(found.group(1)) if found else None, f"TOML syntax error: {exc}"
+        ) from exc
     except OSError as exc:
         raise DataError(p, None, f"cannot read: {exc.strerror}") from exc
     _check_keys(p, "top level", data, {"sonar", "mounting", "noise"})

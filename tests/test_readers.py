@@ -1,0 +1,243 @@
+"""Readers: exact counts of the real marina logs, the raw-log round trip, and every bad input."""
+
+from __future__ import annotations
+
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from datasets.config import load_dataset_config
+from datasets.errors import DataError, DataWarning
+from datasets.geodesy import (
+    ddmm_to_degrees,
+    degrees_to_ddmm,
+    geodetic_to_local_en,
+    local_en_to_geodetic,
+)
+from datasets.islog import read_is_log, write_is_log
+from datasets.keyframes import read_pcd_xy
+from datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti
+from datasets.source import open_dataset
+from sonar.beam import SonarBeam
+from tests.conftest import marina_root, needs_marina
+
+DVL_ROW = "1093455407.147\t\t2007 3 16 13 0 56 38.20 -47.00 1.80 1 6.10 -4.90 2.80 1 1.84 1.88 1.86 143.00 142.00 149.00 100 207.70 -0.50 1.60 14.27 1488.00 12.80 0.50 1.50 0.08 -0.25"
+MTI_ROW = "{t}\t\t0.5\t-2.5\t-126.276\t\t0.01\t-0.006\t0.005\t\t-0.42\t-0.07\t-9.77"
+
+
+def write_lines(path: Path, lines: list[str]) -> Path:
+    path.write_text("% header\r\n" + "\r\n".join(lines) + "\r\n", encoding="latin-1")
+    return path
+
+
+# --- the real marina ---------------------------------------------------------------------------
+
+
+@needs_marina
+def test_marina_counts(marina):
+    assert marina.dvl.t.size == 5045
+    assert marina.attitude.t.size == 33457
+    assert marina.gps is not None and marina.gps.t.size == 3342
+    stamps = read_is_timestamps(next((marina_root() / "logs").glob("*_IS_timestamps.log")))
+    assert stamps.size == 46259
+    assert len(marina.beams) == 230 * 200
+    angles = np.array([b.transducer_angle_rad for b in marina.beams[:200]])
+    assert np.allclose(np.diff(angles), np.deg2rad(1.8), atol=1e-12)
+    assert all(b.thresholded for b in marina.beams[:5])
+    # every beam time is a row of IS_timestamps, in order
+    t = np.array([b.t for b in marina.beams])
+    assert np.all(np.diff(t) > 0)
+    assert np.isin(t, stamps).all()
+
+
+@needs_marina
+def test_marina_frames(marina):
+    # origin at the first DGPS fix; the run spans ~120 m east and ~240 m south
+    assert np.allclose(marina.gps.en_m[0], 0.0, atol=1e-6)
+    assert 100 < np.ptp(marina.gps.en_m[:, 0]) < 140 and 220 < np.ptp(marina.gps.en_m[:, 1]) < 260
+    # MTi heading -126.276 deg (clockwise from north) is yaw 216.276 deg CCW from east
+    assert abs(marina.attitude.yaw_rad[0] - np.deg2rad(216.276 - 360.0)) < 1e-9
+    # 84 DVL rows without bottom lock, kept and flagged
+    assert int((~marina.dvl.valid).sum()) == 84
+
+
+# --- geodesy -----------------------------------------------------------------------------------
+
+
+def test_ddmm_round_trip_and_local_frame():
+    assert abs(ddmm_to_degrees(4212.225) - (42 + 12.225 / 60)) < 1e-12
+    assert abs(degrees_to_ddmm(ddmm_to_degrees(306.2832)) - 306.2832) < 1e-9
+    lat0, lon0 = 42.20375, 3.10472
+    lat, lon = local_en_to_geodetic(np.array([10.0, -50.0]), np.array([100.0, 3.0]), lat0, lon0)
+    en = geodetic_to_local_en(lat, lon, lat0, lon0)
+    assert np.allclose(en, [[10.0, 100.0], [-50.0, 3.0]], atol=1e-6)
+    # one minute of latitude is ~1852 m
+    en = geodetic_to_local_en(np.array([lat0 + 1 / 60]), np.array([lon0]), lat0, lon0)
+    assert abs(en[0, 1] - 1852.0) < 10.0
+
+
+# --- raw IS log --------------------------------------------------------------------------------
+
+
+def test_is_log_round_trip(tmp_path):
+    rng = np.random.default_rng(3)
+    beams = [
+        SonarBeam(
+            1.7e9 + 0.068 * i,
+            float(np.deg2rad(1.8) * i % (2 * np.pi)),
+            rng.integers(0, 256, 500).astype(np.uint8),
+        )
+        for i in range(50)
+    ]
+    path = tmp_path / "x_IS.log"
+    assert write_is_log(path, beams) == 50
+    lines = path.read_text().splitlines()
+    assert all(line.startswith("%") for line in lines[:7]) and not lines[7].startswith("%")
+    back = read_is_log(path)
+    assert len(back) == 50
+    for a, b in zip(beams, back, strict=True):
+        assert abs(a.t - b.t) < 5e-4
+        assert abs(a.transducer_angle_rad - b.transducer_angle_rad) < 1e-6
+        assert np.array_equal(a.intensities, b.intensities)
+
+
+def test_is_log_truncated_last_row_is_skipped_with_warning(tmp_path):
+    beams = [SonarBeam(10.0 + i, 0.1 * i, np.full(20, i, np.uint8)) for i in range(5)]
+    path = tmp_path / "t_IS.log"
+    write_is_log(path, beams)
+    text = path.read_text()
+    path.write_text(text[: text.rstrip().rfind(" ")])  # cut the last row mid-way
+    with pytest.warns(DataWarning, match=r"skipped 1 row.*lines 12"):
+        back = read_is_log(path)
+    assert len(back) == 4
+
+
+def test_is_log_intensity_out_of_range(tmp_path):
+    path = write_lines(tmp_path / "b_IS.log", ["1.0 0 0.0 1 2 3", "2.0 0 0.1 1 300 3"])
+    with pytest.raises(DataError, match=r"b_IS.log:3: intensity outside 0-255"):
+        read_is_log(path)
+
+
+# --- bad input, one case each ------------------------------------------------------------------
+
+
+def test_missing_file_names_it(tmp_path):
+    with pytest.raises(DataError, match=r"nope_DVL.log: file not found"):
+        read_dvl(tmp_path / "nope_DVL.log")
+
+
+def test_non_numeric_field_names_file_and_line(tmp_path):
+    path = write_lines(
+        tmp_path / "a_MTi.log",
+        [MTI_ROW.format(t=1.0), MTI_ROW.format(t=2.0).replace("-2.5", "x2.5")],
+    )
+    with pytest.raises(DataError, match=r"a_MTi.log:3: non-numeric field 'x2.5'"):
+        read_mti(path)
+
+
+def test_time_going_backwards_names_file_and_line(tmp_path):
+    path = write_lines(tmp_path / "a_MTi.log", [MTI_ROW.format(t=t) for t in (1.0, 2.0, 1.5, 3.0)])
+    with pytest.raises(DataError, match=r"a_MTi.log:4: time goes backwards"):
+        read_mti(path)
+
+
+def test_short_row_is_skipped_and_counted(tmp_path):
+    rows = [MTI_ROW.format(t=t) for t in (1.0, 2.0, 3.0)]
+    rows[1] = rows[1][:20]
+    path = write_lines(tmp_path / "a_MTi.log", rows)
+    with pytest.warns(
+        DataWarning, match=r"a_MTi.log: skipped 1 row\(s\) without 10 columns \(lines 3\)"
+    ):
+        att = read_mti(path)
+    assert np.array_equal(att.t, [1.0, 3.0])
+
+
+def test_empty_log_is_an_error(tmp_path):
+    path = write_lines(tmp_path / "a_DGPS.log", [])
+    with pytest.raises(DataError, match=r"a_DGPS.log: no data rows"):
+        read_dgps(path)
+
+
+def test_dvl_status_must_be_a_flag(tmp_path):
+    row = DVL_ROW.split()
+    row[14] = "7"
+    path = write_lines(
+        tmp_path / "a_DVL.log", [DVL_ROW, " ".join(row).replace("1093455407.147", "1093455408")]
+    )
+    with pytest.raises(DataError, match=r"a_DVL.log:3: bottomVelStatus not 0 or 1"):
+        read_dvl(path)
+
+
+def test_dvl_units_and_flags(tmp_path):
+    dvl = read_dvl(write_lines(tmp_path / "a_DVL.log", [DVL_ROW]))
+    assert np.allclose(dvl.v_mps[0], [0.061, -0.049]) and bool(dvl.valid[0])
+    assert abs(dvl.heading_rad[0] - np.deg2rad(90 - 207.7)) < 1e-9
+
+
+def test_pcd_errors(tmp_path):
+    good = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n1.0 2.0 0.0\n3.0 4.0 0.0\n"
+    (tmp_path / "a.pcd").write_text(good)
+    assert np.allclose(read_pcd_xy(tmp_path / "a.pcd"), [[1, 2], [3, 4]])
+    (tmp_path / "b.pcd").write_text(good.replace("3.0 4.0 0.0", "3.0 4.0"))
+    with pytest.raises(DataError, match=r"b.pcd:12: expected 3 fields"):
+        read_pcd_xy(tmp_path / "b.pcd")
+    (tmp_path / "c.pcd").write_text(good.replace("POINTS 2", "POINTS 3"))
+    with pytest.raises(DataError, match=r"c.pcd: POINTS says 3 but the file has 2"):
+        read_pcd_xy(tmp_path / "c.pcd")
+    (tmp_path / "d.pcd").write_text(good.replace("3.0 4.0", "3.0 four"))
+    with pytest.raises(DataError, match=r"d.pcd:12: non-numeric"):
+        read_pcd_xy(tmp_path / "d.pcd")
+
+
+def test_config_errors_name_file_and_key(tmp_path):
+    path = tmp_path / "sonarslam.toml"
+    path.write_text("[sonar]\nn_bins = 500\nstep_deg = 'x'\n")
+    with pytest.raises(DataError, match=r"sonarslam.toml: \[sonar\] step_deg must be a number"):
+        load_dataset_config(path)
+    path.write_text("[mounting.sonar]\nyaw = 3\n")
+    with pytest.raises(DataError, match=r"unknown key\(s\) \['yaw'\] in \[mounting.sonar\]"):
+        load_dataset_config(path)
+    path.write_text("[sonar\n")
+    with pytest.raises(DataError, match=r"sonarslam.toml:1: TOML syntax error"):
+        load_dataset_config(path)
+    path.write_text("[sonar]\nangle_sense = 2\n")
+    with pytest.raises(DataError, match=r"angle_sense must be \+1 or -1"):
+        load_dataset_config(path)
+    path.write_text("[mounting.dvl]\nyaw_deg = -90.0\n[noise]\ndvl_sigma_mps = 0.02\n")
+    cfg = load_dataset_config(path)
+    assert abs(cfg.dvl_mounting.yaw_rad + np.pi / 2) < 1e-12 and cfg.noise.dvl_sigma_mps == 0.02
+
+
+@needs_marina
+def test_dataset_directory_missing_required_log(tmp_path):
+    src = marina_root()
+    dst = tmp_path / "m"
+    shutil.copytree(src, dst)
+    next((dst / "logs").glob("*_DVL.log")).unlink()
+    with pytest.raises(DataError, match=re.escape(str(dst)) + r": missing \*_DVL.log"):
+        open_dataset(dst)
+
+
+@needs_marina
+def test_keyframe_start_must_be_a_timestamp_row(tmp_path):
+    src = marina_root()
+    dst = tmp_path / "m"
+    shutil.copytree(src, dst)
+    csv = dst / "keyframes" / "keyFrameTimeStamps.csv"
+    lines = csv.read_text().splitlines()
+    k, b, e = lines[5].split(",")
+    lines[5] = f"{k},{float(b) + 0.03:.5f},{e}"
+    csv.write_text("\n".join(lines) + "\n")
+    with pytest.raises(
+        DataError, match=r"keyFrameTimeStamps.csv:6: keyframe 5 start .* is no IS_timestamps row"
+    ):
+        open_dataset(dst)
+
+
+def test_named_source_needs_the_environment(monkeypatch):
+    monkeypatch.delenv("SONARSLAM_DATA", raising=False)
+    with pytest.raises(DataError, match=r"needs \$SONARSLAM_DATA"):
+        open_dataset("marina")
