@@ -22,10 +22,13 @@ def circle_run(dropouts: slice | None = None):
     omega = speed / radius
     t_ahrs = np.arange(0.0, 300.0, 0.1)
     t_dvl = np.arange(0.0, 300.0, 0.66)
-    psi = lambda t: wrap_angle(np.pi / 2 + omega * t)  # noqa: E731
-    truth = lambda t: np.column_stack(
-        [radius * np.cos(omega * t), radius * np.sin(omega * t), psi(t)]
-    )  # noqa: E731
+
+    def psi(t):
+        return wrap_angle(np.pi / 2 + omega * t)
+
+    def truth(t):
+        return np.column_stack([radius * np.cos(omega * t), radius * np.sin(omega * t), psi(t)])  # noqa: E731
+
     # body velocity is (speed, 0); the DVL sees it rotated by the inverse mounting
     c, s = np.cos(-DVL_MOUNT.yaw_rad), np.sin(-DVL_MOUNT.yaw_rad)
     v_dvl = np.tile([c * speed, s * speed], (t_dvl.size, 1))
