@@ -19,12 +19,21 @@ __all__ = ["plot_scans", "plot_trajectories"]
 _COLOURS = {"gps": "k", "dr": "tab:red", "ekf": "tab:blue", "isam2": "tab:green", "truth": "k"}
 
 
-def _draw_points(ax: plt.Axes, points_w: FloatArray, max_points: int = 400_000) -> None:
-    if points_w.shape[0] > max_points:
-        rng = np.random.default_rng(0)
-        points_w = points_w[rng.choice(points_w.shape[0], max_points, replace=False)]
-    ax.scatter(
-        points_w[:, 0], points_w[:, 1], s=0.2, c="0.55", alpha=0.35, linewidths=0, rasterized=True
+def _draw_points(ax: plt.Axes, points_w: FloatArray, cell_m: float = 0.25) -> None:
+    """Projected bins as a density image (log scale): walls are where many bins agree."""
+    if points_w.shape[0] == 0:
+        return
+    lo = points_w.min(axis=0) - 1.0
+    hi = points_w.max(axis=0) + 1.0
+    bins = np.maximum(((hi - lo) / cell_m).astype(int), 1)
+    h, xe, ye = np.histogram2d(points_w[:, 0], points_w[:, 1], bins=bins, range=[[lo[0], hi[0]], [lo[1], hi[1]]])
+    ax.imshow(
+        np.log1p(h.T),
+        origin="lower",
+        extent=(xe[0], xe[-1], ye[0], ye[-1]),
+        cmap="Greys",
+        interpolation="nearest",
+        vmax=max(np.log1p(h).max() * 0.8, 1e-9),
     )
 
 
