@@ -27,6 +27,7 @@ __all__ = [
     "wrap_angle",
     "normalize_line",
     "compose",
+    "compose_jacobians",
     "inverse",
     "between",
     "transform_points",
@@ -92,6 +93,26 @@ def compose(aTb: npt.ArrayLike, bTc: npt.ArrayLike) -> FloatArray:
     x = p[..., 0] + c * q[..., 0] - s * q[..., 1]
     y = p[..., 1] + s * q[..., 0] + c * q[..., 1]
     return np.stack([x, y, wrap_angle(p[..., 2] + q[..., 2])], axis=-1)
+
+
+def compose_jacobians(aTb: npt.ArrayLike, bTc: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Jacobians of :func:`compose` ``aTc = aTb * bTc`` in plain (x, y, yaw) coordinates.
+
+    Returns
+    -------
+    J_a : ndarray, shape (3, 3)
+        ``d aTc / d aTb``.
+    J_b : ndarray, shape (3, 3)
+        ``d aTc / d bTc``.
+    """
+    p = np.asarray(aTb, dtype=np.float64)
+    q = np.asarray(bTc, dtype=np.float64)
+    c, s = np.cos(p[2]), np.sin(p[2])
+    J_a = np.array(
+        [[1.0, 0.0, -s * q[0] - c * q[1]], [0.0, 1.0, c * q[0] - s * q[1]], [0.0, 0.0, 1.0]]
+    )
+    J_b = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return J_a, J_b
 
 
 def inverse(aTb: npt.ArrayLike) -> FloatArray:

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 from features.geometry import (
     between,
     compose,
+    compose_jacobians,
     interpolate_poses,
     inverse,
     line_frame_to_world,
@@ -110,3 +111,17 @@ def test_interpolate_poses_takes_the_short_arc():
     mid = interpolate_poses([0.5], t, poses)[0]
     assert np.allclose(mid[:2], [1.0, 2.0], atol=1e-12)
     assert abs(wrap_angle(mid[2] - np.pi)) < 1e-12
+
+
+@given(pose, pose)
+def test_compose_jacobians_match_numerical(a, b):
+    J_a, J_b = compose_jacobians(a, b)
+    eps = 1e-6
+    for i in range(3):
+        d = np.zeros(3)
+        d[i] = eps
+        num_a = compose(a + d, b) - compose(a - d, b)
+        num_b = compose(a, b + d) - compose(a, b - d)
+        num_a[2], num_b[2] = wrap_angle(num_a[2]), wrap_angle(num_b[2])
+        assert np.allclose(J_a[:, i], num_a / (2 * eps), atol=1e-5)
+        assert np.allclose(J_b[:, i], num_b / (2 * eps), atol=1e-5)

@@ -1,0 +1,197 @@
+"""The closed loop: back end -> poses -> front end -> lines -> back end (the design card's shape).
+
+The driver walks the merged record stream in time order. Every record first predicts the back
+end to its time with the motion model's input (:func:`slam.motion.velocity_input`, causal).
+AHRS records update the heading; sonar beams go to the :class:`features.extractor.LineExtractor`,
+whose only view of the vehicle is a :class:`features.pose_source.PoseSource` provided by the back
+end; the lines it returns update the back end. GPS records are never used here (evaluation only).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+import numpy.typing as npt
+from tqdm import tqdm
+
+from datasets.records import Attitude, DvlVelocity, GpsFix
+from datasets.source import Dataset
+from features.extractor import ExtractorConfig, LineExtractor
+from features.geometry import FloatArray, between, compose, interpolate_poses
+from features.line import LineFeature
+from features.pose_source import PoseSource
+from slam.motion import body_yaw, velocity_input
+from slam.pose_sources import motion_noise, start_pose
+from slam.trajectory import Trajectory
+from sonar.beam import SonarBeam
+
+__all__ = ["AnchoredOdometry", "Backend", "ClosedLoopResult", "run_closed_loop"]
+
+
+class AnchoredOdometry:
+    """PoseSource of a filter: past poses from the odometry chain, anchored at the current estimate.
+
+    ``wTb(t) = wTb_now * inverse(O(t_now)) * O(t)``, where ``O`` chains the relative motions of the
+    filter's predictions. After a correction the whole stored sector moves rigidly with the
+    current estimate, so the motion-distortion correction uses the (locally accurate) odometry
+    and the absolute pose comes from the filter.
+    """
+
+    def __init__(self, t0_s: float, wTb0: FloatArray) -> None:
+        self._t = [t0_s]
+        self._odo = [np.zeros(3)]
+        self._anchor_t = t0_s
+        self._anchor = np.asarray(wTb0, dtype=np.float64).copy()
+        self._anchor_cov: FloatArray | None = None
+        self._arr_t: FloatArray | None = None
+        self._arr_o: FloatArray | None = None
+
+    def append(self, t_s: float, bTb_next: FloatArray) -> None:
+        """Chain one step of relative motion ending at ``t_s``."""
+        self._odo.append(compose(self._odo[-1], bTb_next))
+        self._t.append(t_s)
+        self._arr_t = None
+
+    def set_anchor(self, t_s: float, wTb: FloatArray, cov: FloatArray | None = None) -> None:
+        self._anchor_t = t_s
+        self._anchor = np.asarray(wTb, dtype=np.float64).copy()
+        self._anchor_cov = cov
+
+    def _arrays(self) -> tuple[FloatArray, FloatArray]:
+        if self._arr_t is None:
+            self._arr_t = np.asarray(self._t)
+            self._arr_o = np.asarray(self._odo)
+        assert self._arr_o is not None
+        return self._arr_t, self._arr_o
+
+    def poses(self, t_s: npt.ArrayLike) -> FloatArray:
+        t, odo = self._arrays()
+        o_t = interpolate_poses(t_s, t, odo)
+        o_now = interpolate_poses([self._anchor_t], t, odo)[0]
+        return compose(compose(self._anchor, between(o_now, np.zeros(3))), o_t)
+
+    def covariance(self, t_s: float) -> FloatArray | None:
+        return self._anchor_cov
+
+
+class Backend(Protocol):
+    """What the driver needs from a SLAM back end."""
+
+    @property
+    def pose(self) -> FloatArray: ...
+
+    @property
+    def pose_cov(self) -> FloatArray: ...
+
+    def predict(
+        self, t_s: float, v_b_mps: FloatArray, sigma_v_mps: float, yaw_rate_radps: float
+    ) -> FloatArray: ...
+
+    def update_heading(self, t_s: float, yaw_body_rad: float) -> bool: ...
+
+    def update_lines(self, features: list[LineFeature]) -> list[int | None]: ...
+
+
+@dataclass
+class ClosedLoopResult:
+    trajectory: Trajectory
+    backend: Any
+    features: list[LineFeature]
+    feature_landmarks: list[int | None]
+    wall_s: float
+    extractor_s: float
+    backend_s: float
+    counts: dict[str, int] = field(default_factory=dict)
+
+
+def run_closed_loop(
+    dataset: Dataset,
+    make_backend: Callable[[float, FloatArray, FloatArray], Any],
+    extractor_config: ExtractorConfig,
+    pose_source_of: Callable[[Any, AnchoredOdometry], PoseSource] | None = None,
+    progress: bool = True,
+    t_end_s: float | None = None,
+) -> ClosedLoopResult:
+    """Run a back end in closed loop with the line extractor over a dataset.
+
+    Parameters
+    ----------
+    dataset : Dataset
+    make_backend : callable
+        ``(t0_s, wTb0, P0) -> backend`` (see :class:`Backend`).
+    extractor_config : ExtractorConfig
+    pose_source_of : callable, optional
+        ``(backend, odometry) -> PoseSource`` given to the extractor; default the anchored
+        odometry (filters). The factor graph gives its smoothed trajectory here.
+    progress : bool
+        A progress bar over the records.
+    t_end_s : float, optional
+        Stop early (for tests and sweeps).
+    """
+    wall0 = time.perf_counter()
+    t0, pose0, cov0 = start_pose(dataset)
+    t1 = dataset.nav_span_s[1] if t_end_s is None else min(t_end_s, dataset.nav_span_s[1])
+    records = [r for r in dataset.stream(t0, t1) if not isinstance(r, GpsFix)]
+    times = np.array([r.t for r in records])
+    cfg = dataset.config
+    vin = velocity_input(times, dataset.dvl, cfg.dvl_mounting, motion_noise(dataset))
+    backend = make_backend(t0, pose0, cov0)
+    odometry = AnchoredOdometry(t0, pose0)
+    pose_source = pose_source_of(backend, odometry) if pose_source_of else odometry
+    extractor = LineExtractor(extractor_config, cfg.sonar, cfg.sonar_mounting, pose_source)
+
+    traj_t: list[float] = [t0]
+    traj_p: list[FloatArray] = [backend.pose]
+    traj_c: list[FloatArray] = [backend.pose_cov]
+    features: list[LineFeature] = []
+    landmark_ids: list[int | None] = []
+    yaw_rate = 0.0
+    v_prev, s_prev = np.zeros(2), float(vin.sigma_mps[0]) if len(records) else 0.0
+    extractor_s = backend_s = 0.0
+    counts = {"beams": 0, "ahrs": 0, "dvl": 0}
+    for k, rec in enumerate(
+        tqdm(records, disable=not progress, unit="rec", desc="closed loop", mininterval=1.0)
+    ):
+        tb = time.perf_counter()
+        rel = backend.predict(rec.t, v_prev, s_prev, yaw_rate)
+        odometry.append(rec.t, rel)
+        v_prev, s_prev = vin.v_b_mps[k], float(vin.sigma_mps[k])
+        if isinstance(rec, Attitude):
+            counts["ahrs"] += 1
+            yaw_rate = rec.yaw_rate_radps
+            backend.update_heading(rec.t, float(body_yaw(rec.yaw_rad, cfg.ahrs_mounting)))
+            traj_t.append(rec.t)
+            traj_p.append(backend.pose)
+            traj_c.append(backend.pose_cov)
+            backend_s += time.perf_counter() - tb
+        elif isinstance(rec, DvlVelocity):
+            counts["dvl"] += 1
+            backend_s += time.perf_counter() - tb
+        elif isinstance(rec, SonarBeam):
+            counts["beams"] += 1
+            odometry.set_anchor(rec.t, backend.pose, backend.pose_cov)
+            backend_s += time.perf_counter() - tb
+            te = time.perf_counter()
+            found = extractor.add(rec)
+            extractor_s += time.perf_counter() - te
+            if found:
+                tb = time.perf_counter()
+                ids = backend.update_lines(found)
+                backend_s += time.perf_counter() - tb
+                features.extend(found)
+                landmark_ids.extend(ids)
+    trajectory = Trajectory(np.asarray(traj_t), np.asarray(traj_p), np.asarray(traj_c))
+    return ClosedLoopResult(
+        trajectory=trajectory,
+        backend=backend,
+        features=features,
+        feature_landmarks=landmark_ids,
+        wall_s=time.perf_counter() - wall0,
+        extractor_s=extractor_s,
+        backend_s=backend_s,
+        counts=counts,
+    )

@@ -1,0 +1,80 @@
+"""Data association on hand-made problems with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from slam.association import (
+    AssociationConfig,
+    AssociationProblem,
+    associate,
+    individual_compatibility,
+    line_innovation,
+)
+
+
+def problem_with(z, z_hat, sigma_obs=0.1, sigma_state=0.05):
+    z = np.asarray(z, float)
+    z_hat = np.asarray(z_hat, float)
+    k = len(z_hat)
+    d = 2 * k
+    H = np.zeros((k, 2, d))
+    for j in range(k):
+        H[j, :, 2 * j : 2 * j + 2] = np.eye(2)
+    R = np.tile(np.diag([sigma_obs**2, np.deg2rad(1.0) ** 2]), (len(z), 1, 1))
+    return AssociationProblem(z, R, z_hat, H, np.eye(d) * sigma_state**2)
+
+
+def test_innovation_handles_the_sign_ambiguity_near_rho_zero():
+    nu, flipped = line_innovation(np.array([0.05, 0.0]), np.array([0.02, -np.pi + 0.01]))
+    assert flipped
+    assert np.allclose(nu, [-0.05 - 0.02, -0.01], atol=1e-12)
+    nu, flipped = line_innovation(np.array([5.0, 3.1]), np.array([5.1, -3.1]))
+    assert not flipped and np.allclose(nu, [-0.1, 6.2 - 2 * np.pi], atol=1e-12)
+
+
+@pytest.mark.parametrize("method", ["nn", "jcbb"])
+def test_finds_the_true_pairing_and_rejects_clutter(method):
+    rng = np.random.default_rng(4)
+    lm = np.array([[10.0, 0.3], [12.0, 1.9], [25.0, -1.2], [8.0, -2.8]])
+    truth = [2, 0, None, 3]
+    z = []
+    for j in truth:
+        if j is None:
+            z.append([40.0, 0.9])  # clutter: far from every landmark
+        else:
+            z.append(lm[j] + rng.normal(0, [0.08, np.deg2rad(0.8)]))
+    out = associate(problem_with(z, lm), AssociationConfig(method=method))
+    assert out == truth
+
+
+def test_jcbb_resolves_what_nearest_neighbour_gets_wrong():
+    # Two parallel landmarks 0.6 m apart; the vehicle's own shift (common to both observations
+    # through the state) makes each observation individually nearest to the wrong landmark.
+    lm = np.array([[10.0, 0.0], [10.6, 0.0], [20.0, 1.5]])
+    d = 3
+    H = np.zeros((3, 2, d))
+    H[:, 0, 0] = -np.cos(lm[:, 1])  # rho of every landmark moves with the vehicle's x (state 0)
+    H[:, 1, 2] = 1.0
+    P = np.diag([0.5**2, 1e-6, 1e-6])
+    shift = 0.45
+    z = np.array([[10.0 - shift, 0.0], [10.6 - shift, 0.0], [20.0 - shift * np.cos(1.5), 1.5]])
+    R = np.tile(np.diag([0.05**2, np.deg2rad(0.5) ** 2]), (3, 1, 1))
+    p = AssociationProblem(z, R, lm, H, P)
+    assert associate(p, AssociationConfig(method="jcbb")) == [0, 1, 2]
+    d2, _, _ = individual_compatibility(p)
+    assert d2[1, 0] < d2[1, 1]  # individually, observation 1 is nearer landmark 0
+    assert associate(p, AssociationConfig(method="nn")) != [0, 1, 2]
+
+
+def test_empty_inputs():
+    p = problem_with(np.zeros((0, 2)), [[1.0, 0.0]])
+    assert associate(p, AssociationConfig()) == []
+    p = problem_with([[1.0, 0.0]], np.zeros((0, 2)))
+    assert associate(p, AssociationConfig()) == [None]
+
+
+def test_config_is_checked():
+    with pytest.raises(ValueError, match="association method"):
+        AssociationConfig(method="hungarian")
