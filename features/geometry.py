@@ -182,7 +182,8 @@ def line_world_to_frame(
     H_pose : ndarray, shape (2, 3)
         ``d line_r / d wTr``.
     """
-    rho_w, theta_w = float(line_w[0]), float(line_w[1])  # type: ignore[index]
+    lw = np.asarray(line_w, dtype=np.float64)
+    rho_w, theta_w = float(lw[0]), float(lw[1])
     x, y, psi = (float(v) for v in np.asarray(wTr, dtype=np.float64))
     c, s = np.cos(theta_w), np.sin(theta_w)
     rho_r = rho_w - x * c - y * s
@@ -217,7 +218,8 @@ def line_frame_to_world(
     G_pose : ndarray, shape (2, 3)
         ``d line_w / d wTr``.
     """
-    rho_r, theta_r = float(line_r[0]), float(line_r[1])  # type: ignore[index]
+    lr = np.asarray(line_r, dtype=np.float64)
+    rho_r, theta_r = float(lr[0]), float(lr[1])
     x, y, psi = (float(v) for v in np.asarray(wTr, dtype=np.float64))
     theta_w = theta_r + psi
     c, s = np.cos(theta_w), np.sin(theta_w)

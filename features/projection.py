@@ -30,8 +30,13 @@ def beam_points(
         return np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
     stack = np.stack([b.intensities for b in beams])
     bi, bins = np.nonzero(stack >= min_intensity)
+    bi = bi.astype(np.int64)
     angles = np.array([b.transducer_angle_rad for b in beams])
-    return bi, (bins + 1.0) * head.bin_size_m, head.bearing_rad(angles[bi])
+    return (
+        bi,
+        np.asarray((bins + 1.0) * head.bin_size_m, dtype=np.float64),
+        head.bearing_rad(angles[bi]),
+    )
 
 
 def project_beams(

@@ -74,6 +74,9 @@ class EkfConfig:
     min_rho_m : float
         Observations of lines closer than this to the sonar are not used (sign ambiguity,
         the sonar's near field).
+    first_estimates_jacobians : bool
+        FEJ-EKF: line Jacobians at the landmarks' first estimates (consistency; see
+        :meth:`LineEkf._predict_line`).
     """
 
     association: AssociationConfig = field(default_factory=AssociationConfig)
@@ -86,6 +89,7 @@ class EkfConfig:
     tentative_observations: int = 2
     tentative_max_age_s: float = 60.0
     min_rho_m: float = 1.0
+    first_estimates_jacobians: bool = True
 
 
 @dataclass
@@ -97,9 +101,10 @@ class Landmark:
     n_obs: int
     s_min_m: float
     s_max_m: float
+    first_line_w: FloatArray = field(default_factory=lambda: np.zeros(2))
 
 
-@dataclass
+@dataclass(eq=False)
 class _Tentative:
     t: float
     line_w: FloatArray
@@ -269,11 +274,28 @@ class LineEkf:
         self.stats["ahrs_updates"] += 1
         return True
 
-    def _predict_line(self, lm: Landmark) -> tuple[FloatArray, FloatArray]:
-        """Predicted observation of a landmark in the sonar frame and its full Jacobian (2, n)."""
+    def _predict_line(
+        self, lm: Landmark, pose_lin: FloatArray | None = None
+    ) -> tuple[FloatArray, FloatArray]:
+        """Predicted observation of a landmark in the sonar frame and its full Jacobian (2, n).
+
+        With ``first_estimates_jacobians`` the Jacobian is evaluated at the landmark's first
+        estimate and at ``pose_lin`` (the propagated pose of this batch), as the FEJ-EKF of
+        Huang, Mourikis & Roumeliotis (2008): without it the filter gains spurious information
+        on the unobservable global heading and becomes overconfident.
+        """
         pose = self.x[POSE]
         wTs = compose(pose, self.bTs)
         z_hat, H_line, H_sensor = line_world_to_frame(self.landmark_line(lm), wTs)
+        if self.config.first_estimates_jacobians:
+            pose = pose if pose_lin is None else pose_lin
+            wTs_lin = compose(pose, self.bTs)
+            z_lin, H_line, H_sensor = line_world_to_frame(lm.first_line_w, wTs_lin)
+            if line_innovation(z_lin, z_hat)[1]:  # same line seen from the other side of 0
+                H_line, H_sensor = (
+                    -H_line * np.array([[1.0], [-1.0]]),
+                    -H_sensor * np.array([[1.0], [-1.0]]),
+                )
         J_pose, _ = compose_jacobians(pose, self.bTs)
         H = np.zeros((2, self.x.size))
         H[:, POSE] = H_sensor @ J_pose
@@ -292,7 +314,8 @@ class LineEkf:
         self.stats["observations"] += len(use)
         z = np.array([f.z for f in use])
         R = np.array([f.cov for f in use])
-        preds = [self._predict_line(lm) for lm in self.landmarks]
+        pose_lin = self.x[POSE].copy()
+        preds = [self._predict_line(lm, pose_lin) for lm in self.landmarks]
         z_hat = np.array([p[0] for p in preds]).reshape(-1, 2)
         H = np.array([p[1] for p in preds]).reshape(-1, 2, self.x.size)
         pairing = associate(AssociationProblem(z, R, z_hat, H, self.P), self.config.association)
@@ -302,7 +325,7 @@ class LineEkf:
             if j is None:
                 continue
             lm = self.landmarks[j]
-            z_hat_j, H_j = self._predict_line(lm)
+            z_hat_j, H_j = self._predict_line(lm, pose_lin)
             _, flipped = line_innovation(z[i], z_hat_j)
             R_i = _FLIP @ R[i] @ _FLIP if flipped else R[i]
             self._update(z[i], H_j, z_hat_j, R_i, lambda a, b: line_innovation(a, b)[0])
@@ -369,7 +392,7 @@ class LineEkf:
         kf.P = P_new
         kf.dim_x = n + 2
         kf._I = np.eye(n + 2)
-        lm = Landmark(self._next_id, n, 1, s_range[0], s_range[1])
+        lm = Landmark(self._next_id, n, 1, s_range[0], s_range[1], line_w.copy())
         self._next_id += 1
         self.landmarks.append(lm)
         self.stats["new_landmarks"] += 1

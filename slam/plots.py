@@ -26,7 +26,9 @@ def _draw_points(ax: plt.Axes, points_w: FloatArray, cell_m: float = 0.25) -> No
     lo = points_w.min(axis=0) - 1.0
     hi = points_w.max(axis=0) + 1.0
     bins = np.maximum(((hi - lo) / cell_m).astype(int), 1)
-    h, xe, ye = np.histogram2d(points_w[:, 0], points_w[:, 1], bins=bins, range=[[lo[0], hi[0]], [lo[1], hi[1]]])
+    h, xe, ye = np.histogram2d(
+        points_w[:, 0], points_w[:, 1], bins=bins, range=[[lo[0], hi[0]], [lo[1], hi[1]]]
+    )
     ax.imshow(
         np.log1p(h.T),
         origin="lower",

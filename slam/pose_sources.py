@@ -97,7 +97,7 @@ def truth_trajectory(dataset: Dataset) -> Trajectory:
     if dataset.truth is None:
         raise ValueError(f"{dataset.root}: no truth.json (only simulated datasets have one)")
     truth = dataset.truth
-    poses = np.asarray(truth["poses"], dtype=np.float64)  # rows t, x, y, yaw in the world frame
+    poses = np.asarray(truth["body_poses"]["rows"], dtype=np.float64)  # t, x, y, yaw (world frame)
     offset = np.asarray(truth.get("first_fix_enu_m", [0.0, 0.0]), dtype=np.float64)
     xy = poses[:, 1:3] - offset
     return Trajectory(poses[:, 0].copy(), np.column_stack([xy, wrap_angle(poses[:, 3])]))

@@ -1,0 +1,48 @@
+"""The MSIS simulator: the runs whose right answer is known.
+
+``simulate(kind, seed, out_dir)`` writes a run in the marina layout with its ``truth.json``;
+``simulate_records(make_scenario(kind, seed))`` gives the same run in memory.
+
+Modules: ``world`` (walls), ``path`` (true motion), ``msis`` (the sonar beam model),
+``sensors`` (DVL, AHRS, GPS), ``scenario`` (what is simulated, in memory), ``writer`` (files).
+"""
+
+from datasets.simulator.msis import EchoModel, beam_axis_hits, cast_rays, simulate_msis
+from datasets.simulator.path import Trajectory, free_path, stationary, survey, waypoint_path
+from datasets.simulator.scenario import (
+    KINDS,
+    Scenario,
+    Simulation,
+    make_scenario,
+    make_world,
+    simulate_records,
+)
+from datasets.simulator.sensors import GeodeticOrigin, SensorNoise
+from datasets.simulator.world import World, harbour_world, pool_world, random_harbour_world
+from datasets.simulator.writer import simulate, write_dataset
+
+__all__ = [
+    "KINDS",
+    "EchoModel",
+    "GeodeticOrigin",
+    "Scenario",
+    "SensorNoise",
+    "Simulation",
+    "Trajectory",
+    "World",
+    "beam_axis_hits",
+    "cast_rays",
+    "free_path",
+    "harbour_world",
+    "make_scenario",
+    "make_world",
+    "pool_world",
+    "random_harbour_world",
+    "simulate",
+    "simulate_msis",
+    "simulate_records",
+    "stationary",
+    "survey",
+    "waypoint_path",
+    "write_dataset",
+]

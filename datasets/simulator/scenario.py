@@ -1,0 +1,331 @@
+"""Scenarios (what is simulated) and their in-memory simulation (what the sensors saw, and truth).
+
+A scenario is fully determined by its kind and seed: every random draw comes from
+``numpy.random.SeedSequence([seed, kind index])``, spawned into one independent stream per component (world,
+path, sonar, DVL, AHRS, GPS), so the same seed always gives the same run, bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from datasets.config import DatasetConfig, NoiseConfig
+from datasets.records import Attitude, DvlVelocity, GpsFix, Record
+from datasets.simulator.msis import EchoModel, beam_axis_hits, simulate_msis
+from datasets.simulator.path import T0_S, Trajectory, free_path, stationary, survey
+from datasets.simulator.sensors import (
+    MARINA_ORIGIN,
+    AhrsSamples,
+    DvlSamples,
+    GeodeticOrigin,
+    GpsSamples,
+    SensorNoise,
+    simulate_ahrs,
+    simulate_dvl,
+    simulate_gps,
+)
+from datasets.simulator.world import World, harbour_world, pool_world, random_harbour_world
+from features.geometry import FloatArray, compose, inverse, wrap_angle
+from sonar.beam import Mounting, SonarBeam, SonarHead
+
+__all__ = [
+    "KINDS",
+    "MARINA_HEAD",
+    "POOL_HEAD",
+    "SONAR_MOUNTING",
+    "DVL_MOUNTING",
+    "AHRS_MOUNTING",
+    "Scenario",
+    "Simulation",
+    "make_scenario",
+    "make_world",
+    "simulate_records",
+]
+
+KINDS = ("pool", "harbour", "random")
+
+#: The marina's Miniking: 500 bins of 0.1 m (50 m), 1.8 deg step, 3 deg beam, clockwise angles.
+MARINA_HEAD = SonarHead(
+    n_bins=500,
+    bin_size_m=0.1,
+    step_rad=math.radians(1.8),
+    beam_width_rad=math.radians(3.0),
+    angle_sense=-1,
+)
+
+#: The seed paper's pool test: 6 m range in 500 bins of 0.012 m, 0.45 deg step.
+POOL_HEAD = replace(MARINA_HEAD, bin_size_m=0.012, step_rad=math.radians(0.45))
+
+#: Marina-like mountings, chosen non-trivial so that every mounting code path is exercised.
+SONAR_MOUNTING = Mounting(x_m=0.3, y_m=0.0, yaw_rad=math.pi, source="simulator truth")
+DVL_MOUNTING = Mounting(yaw_rad=math.radians(-90.0), source="simulator truth")
+AHRS_MOUNTING = Mounting(yaw_rad=0.0, source="simulator truth (the heading bias is in the noise)")
+
+_DEFAULT_DURATION_S = {"pool": 165.0, "harbour": 600.0, "random": 600.0}
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Everything that defines a simulated run.
+
+    Attributes
+    ----------
+    kind : str
+        ``"pool"`` (stationary sonar in the seed paper's pool), ``"harbour"`` (survey of a
+        marina-like harbour) or ``"random"`` (free path in a random rectilinear harbour).
+    seed : int
+        Seed of every random draw (with the kind, see the module docstring).
+    duration_s : float
+        Length of the run (s).
+    t0_s : float
+        Start time (Unix s).
+    head : SonarHead
+    beam_rate_hz : float
+        Sonar beams per second.
+    sector_rad : float or None
+        None for continuous 360 deg scanning, else the width of a back-and-forth sector.
+    sonar_mounting, dvl_mounting, ahrs_mounting : Mounting
+        True ``bTs`` of each sensor (written to ``sonarslam.toml``).
+    noise : SensorNoise
+    echo : EchoModel
+    speed_mps : float
+        Mean speed of the vehicle (m/s); unused for the pool.
+    pool_sonar_yaw_rad : float
+        Pool only: yaw of the sonar frame in the world (rad); the sonar sits at the origin.
+    origin : GeodeticOrigin
+        Geodetic point of the world origin.
+    path_rate_hz, dvl_rate_hz, ahrs_rate_hz, gps_rate_hz : float
+        Sampling rates of the truth and the sensors (Hz).
+    """
+
+    kind: str
+    seed: int
+    duration_s: float
+    t0_s: float = T0_S
+    head: SonarHead = field(default_factory=lambda: MARINA_HEAD)
+    beam_rate_hz: float = 14.7
+    sector_rad: float | None = None
+    sonar_mounting: Mounting = SONAR_MOUNTING
+    dvl_mounting: Mounting = DVL_MOUNTING
+    ahrs_mounting: Mounting = AHRS_MOUNTING
+    noise: SensorNoise = field(default_factory=SensorNoise)
+    echo: EchoModel = field(default_factory=EchoModel)
+    speed_mps: float = 0.45
+    pool_sonar_yaw_rad: float = math.radians(10.0)
+    origin: GeodeticOrigin = MARINA_ORIGIN
+    path_rate_hz: float = 50.0
+    dvl_rate_hz: float = 1.5
+    ahrs_rate_hz: float = 10.0
+    gps_rate_hz: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"Scenario.kind must be one of {KINDS}, got {self.kind!r}")
+        if self.duration_s <= 1.0:
+            raise ValueError(f"Scenario.duration_s must be above 1 s, got {self.duration_s}")
+
+    @property
+    def prefix(self) -> str:
+        """Common prefix of the log files, ``sim_<kind>_<seed>``."""
+        return f"sim_{self.kind}_{self.seed}"
+
+    def dataset_config(self) -> DatasetConfig:
+        """The ``sonarslam.toml`` content: head, true mountings, and the noise the estimators
+        should assume (the AHRS sigma includes the unmodelled constant bias, in quadrature)."""
+        n = self.noise
+        return DatasetConfig(
+            sonar=self.head,
+            sonar_mounting=self.sonar_mounting,
+            dvl_mounting=self.dvl_mounting,
+            ahrs_mounting=self.ahrs_mounting,
+            noise=NoiseConfig(
+                dvl_sigma_mps=n.dvl_sigma_mps,
+                ahrs_sigma_deg=math.hypot(n.ahrs_sigma_deg, n.ahrs_bias_deg),
+                gps_sigma_m=n.gps_sigma_m,
+                dvl_max_gap_s=10.0,
+            ),
+        )
+
+
+def make_scenario(kind: str, seed: int, duration_s: float | None = None) -> Scenario:
+    """The default scenario of a kind.
+
+    Parameters
+    ----------
+    kind : {"pool", "harbour", "random"}
+        Pool: stationary sonar at the world origin, 6 m range, 0.45 deg step, 0.5 m dead zone,
+        165 s (three full turns at 14.7 beams/s). Harbour and random: the marina's head, 600 s.
+    seed : int
+    duration_s : float, optional
+        Overrides the default length (s).
+
+    Returns
+    -------
+    Scenario
+    """
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
+    duration = float(duration_s) if duration_s is not None else _DEFAULT_DURATION_S[kind]
+    if kind == "pool":
+        return Scenario(
+            kind=kind,
+            seed=seed,
+            duration_s=duration,
+            head=POOL_HEAD,
+            echo=EchoModel(dead_zone_m=0.5, range_decay_per_m=0.02),
+        )
+    return Scenario(kind=kind, seed=seed, duration_s=duration)
+
+
+def _streams(scenario: Scenario) -> dict[str, np.random.Generator]:
+    """One independent generator per component, from the seed and the kind (so that two kinds
+    with the same seed do not share their noise)."""
+    names = ("world", "path", "sonar", "dvl", "ahrs", "gps")
+    root = np.random.SeedSequence([scenario.seed, KINDS.index(scenario.kind)])
+    return {n: np.random.default_rng(c) for n, c in zip(names, root.spawn(len(names)), strict=True)}
+
+
+def make_world(scenario: Scenario) -> World:
+    """The world of a scenario (random worlds drawn from the scenario's own stream)."""
+    if scenario.kind == "pool":
+        return pool_world()
+    if scenario.kind == "harbour":
+        return harbour_world()
+    return random_harbour_world(_streams(scenario)["world"])
+
+
+@dataclass(frozen=True, eq=False)
+class Simulation:
+    """A simulated run in memory: the sensors' output and the truth.
+
+    Attributes
+    ----------
+    scenario : Scenario
+    world : World
+    trajectory : Trajectory
+        True body motion (50 Hz); a ``PoseSource``.
+    beams : list of SonarBeam
+        Raw sonar beams.
+    beam_axis_range_m, beam_axis_incidence_rad : ndarray, shape (B,)
+        Geometric range and incidence of the first wall on each beam's axis (NaN if none).
+    dvl : DvlSamples
+    ahrs : AhrsSamples
+    gps : GpsSamples
+    """
+
+    scenario: Scenario
+    world: World
+    trajectory: Trajectory
+    beams: list[SonarBeam] = field(repr=False)
+    beam_axis_range_m: FloatArray = field(repr=False)
+    beam_axis_incidence_rad: FloatArray = field(repr=False)
+    dvl: DvlSamples = field(repr=False)
+    ahrs: AhrsSamples = field(repr=False)
+    gps: GpsSamples = field(repr=False)
+
+    def records(self) -> list[Record]:
+        """The sensor stream as the project's readers would give it, merged in time order.
+
+        DVL velocities in the DVL frame (m/s), compass as yaw CCW from East; AHRS yaw CCW from
+        East of the AHRS frame and its CCW rate; GPS fixes relative to the first fix (approximated
+        by the difference of world East-North, within a few cm over a few hundred metres).
+        At equal times the order is sonar, DVL, AHRS, GPS.
+        """
+        out: list[tuple[float, int, Record]] = []
+        out += [(b.t, 0, b) for b in self.beams]
+        d = self.dvl
+        compass = wrap_angle(np.deg2rad(90.0 - d.compass_deg))
+        for i in range(d.t_s.size):
+            rec = DvlVelocity(
+                t=float(d.t_s[i]),
+                vx_mps=float(d.v_dvl_mps[i, 0]),
+                vy_mps=float(d.v_dvl_mps[i, 1]),
+                valid=bool(d.valid[i]),
+                heading_rad=float(compass[i]),
+            )
+            out.append((rec.t, 1, rec))
+        a = self.ahrs
+        yaw = wrap_angle(np.deg2rad(90.0 - a.heading_deg))
+        out += [
+            (
+                float(a.t_s[i]),
+                2,
+                Attitude(float(a.t_s[i]), float(yaw[i]), float(-a.rate_radps[i, 2])),
+            )
+            for i in range(a.t_s.size)
+        ]
+        g = self.gps
+        local = g.enu_m - g.enu_m[0]
+        out += [
+            (float(g.t_s[i]), 3, GpsFix(float(g.t_s[i]), float(local[i, 0]), float(local[i, 1])))
+            for i in range(g.t_s.size)
+        ]
+        out.sort(key=lambda x: (x[0], x[1]))
+        return [r for _, _, r in out]
+
+
+def _trajectory(scenario: Scenario, world: World, rng: np.random.Generator) -> Trajectory:
+    if scenario.kind == "pool":
+        wTs = np.array([0.0, 0.0, scenario.pool_sonar_yaw_rad])
+        wTb = compose(wTs, inverse(scenario.sonar_mounting.as_pose()))
+        return stationary(wTb, scenario.duration_s, scenario.path_rate_hz, scenario.t0_s)
+    if scenario.kind == "harbour":
+        return survey(
+            world, scenario.duration_s, scenario.speed_mps, scenario.path_rate_hz, scenario.t0_s
+        )
+    return free_path(
+        world,
+        rng,
+        scenario.duration_s,
+        speed_mps=scenario.speed_mps,
+        rate_hz=scenario.path_rate_hz,
+        t0_s=scenario.t0_s,
+    )
+
+
+def simulate_records(scenario: Scenario) -> Simulation:
+    """Simulate a scenario in memory.
+
+    Parameters
+    ----------
+    scenario : Scenario
+
+    Returns
+    -------
+    Simulation
+    """
+    rngs = _streams(scenario)
+    world = make_world(scenario)
+    trajectory = _trajectory(scenario, world, rngs["path"])
+    beams = simulate_msis(
+        world,
+        scenario.head,
+        scenario.sonar_mounting,
+        trajectory,
+        rngs["sonar"],
+        rate_hz=scenario.beam_rate_hz,
+        sector_rad=scenario.sector_rad,
+        echo=scenario.echo,
+    )
+    t_beam = np.array([b.t for b in beams])
+    a_beam = np.array([b.transducer_angle_rad for b in beams])
+    r_axis, inc_axis = beam_axis_hits(
+        world, scenario.head, scenario.sonar_mounting, trajectory.poses(t_beam), a_beam
+    )
+    n = scenario.noise
+    return Simulation(
+        scenario=scenario,
+        world=world,
+        trajectory=trajectory,
+        beams=beams,
+        beam_axis_range_m=r_axis,
+        beam_axis_incidence_rad=inc_axis,
+        dvl=simulate_dvl(trajectory, scenario.dvl_mounting, n, rngs["dvl"], scenario.dvl_rate_hz),
+        ahrs=simulate_ahrs(
+            trajectory, scenario.ahrs_mounting, n, rngs["ahrs"], scenario.ahrs_rate_hz
+        ),
+        gps=simulate_gps(trajectory, scenario.origin, n, rngs["gps"], scenario.gps_rate_hz),
+    )

@@ -1,0 +1,160 @@
+"""Beam pre-processing, one beam at a time (design.md step 1, paper section 2.1).
+
+Three stages, each vectorised over the bins of the beam:
+
+a. **threshold**: keep the bins whose intensity is at least ``intensity_threshold``. These
+   *threshold bins* are kept apart: the uncertainty step (paper 2.6) counts them.
+b. **maximum intensity difference**: of the threshold bins, keep those whose intensity is within
+   ``max_intensity_difference`` of the strongest bin of the beam.
+c. **sparseness**: of two kept bins closer than ``min_distance_m``, drop the weaker; on a tie of
+   intensity, keep the nearer. The rule is applied to every pair at once: a bin survives if and
+   only if no *stronger* kept bin (higher intensity, or equal intensity and nearer) lies closer
+   than ``min_distance_m``. The survivors are the *final bins*, the voters of the Hough step.
+
+Bins nearer than ``min_range_m`` (the near-field dead zone: transducer ringing, the vehicle's own
+hull) take no part in any stage.
+
+Already-thresholded beams (:attr:`sonar.beam.SonarBeam.thresholded`, e.g. the marina keyframes,
+whose intensities are a 0/255 mask made by a third party) go through the same three stages,
+which then reduce to:
+
+a. the threshold is the third party's: every non-zero bin (beyond ``min_range_m``) is a threshold
+   bin, whatever ``intensity_threshold`` says;
+b. all given bins have the same intensity, so the maximum-intensity-difference stage keeps all;
+c. with all intensities equal, the tie rule (keep the nearer) decides every pair, so the
+   sparseness stage keeps the **nearest bin of each run**, a run being a chain of given bins
+   whose gaps are all shorter than ``min_distance_m``. This is the first return of each echo.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy.ndimage import maximum_filter1d
+
+from sonar.beam import SonarBeam, SonarHead
+
+__all__ = ["SegmentedBeam", "segment_intensities", "segment_beam"]
+
+IntArray = npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True, eq=False)
+class SegmentedBeam:
+    """The bins of one beam that survive each stage of the segmentation.
+
+    Attributes
+    ----------
+    threshold_bins : ndarray of int64, shape (M,)
+        0-based bin indices that passed the threshold stage (a), increasing.
+    final_bins : ndarray of int64, shape (K,)
+        0-based bin indices that passed all three stages, increasing; a subset of
+        ``threshold_bins``.
+    final_intensities : ndarray of uint8, shape (K,)
+        Intensities of the final bins (0-255).
+    """
+
+    threshold_bins: IntArray
+    final_bins: IntArray
+    final_intensities: npt.NDArray[np.uint8]
+
+
+def _sparse_window_bins(min_distance_m: float, bin_size_m: float) -> int:
+    """Largest bin-index gap ``k`` with ``k * bin_size_m < min_distance_m`` (0 if none)."""
+    ratio = min_distance_m / bin_size_m
+    # Two bins k indices apart are closer than min_distance_m iff k < ratio; the tolerance keeps
+    # 0.5 m / 0.1 m from counting as 5.000000000000001.
+    return max(int(np.ceil(ratio - 1e-9)) - 1, 0)
+
+
+def segment_intensities(
+    intensities: npt.ArrayLike,
+    bin_size_m: float,
+    *,
+    intensity_threshold: float,
+    max_intensity_difference: float,
+    min_distance_m: float,
+    min_range_m: float = 0.0,
+    thresholded: bool = False,
+) -> SegmentedBeam:
+    """Segment the intensity profile of one beam (paper 2.1).
+
+    Parameters
+    ----------
+    intensities : array_like, shape (n_bins,)
+        Echo intensity per bin (0-255); bin ``i`` is at range ``(i + 1) * bin_size_m``.
+    bin_size_m : float
+        Range step between bins (m).
+    intensity_threshold : float
+        Stage (a): bins with intensity ``>=`` this are threshold bins. Ignored when
+        ``thresholded`` (every non-zero bin is one).
+    max_intensity_difference : float
+        Stage (b): keep the threshold bins with intensity ``>= max - max_intensity_difference``.
+    min_distance_m : float
+        Stage (c): of two kept bins closer than this (m), drop the weaker (ties: the farther).
+        0 disables the stage.
+    min_range_m : float
+        Near-field dead zone (m): bins at a range below this are ignored by every stage.
+    thresholded : bool
+        True when ``intensities`` is already a 0/255 mask (see the module docstring).
+
+    Returns
+    -------
+    SegmentedBeam
+    """
+    inten = np.asarray(intensities)
+    n_bins = inten.shape[0]
+    ranges_m = (np.arange(n_bins, dtype=np.float64) + 1.0) * bin_size_m
+    alive = ranges_m >= min_range_m - 1e-9 * bin_size_m
+    # (a) threshold stage
+    if thresholded:
+        passed = alive & (inten > 0)
+    else:
+        passed = alive & (inten >= intensity_threshold)
+    threshold_bins = np.flatnonzero(passed).astype(np.int64)
+    if threshold_bins.size == 0:
+        empty = np.empty(0, dtype=np.int64)
+        return SegmentedBeam(threshold_bins, empty, np.empty(0, dtype=np.uint8))
+    # (b) maximum intensity difference to the strongest bin of the beam
+    thr_int = inten[threshold_bins].astype(np.int64)
+    kept = threshold_bins[thr_int >= thr_int.max() - max_intensity_difference]
+    # (c) sparseness: a kept bin survives iff it holds the strongest key within the window of
+    # bins closer than min_distance_m. Key = intensity, ties broken towards the nearer bin; keys
+    # are unique, so a bin and a stronger neighbour never both survive.
+    k = _sparse_window_bins(min_distance_m, bin_size_m)
+    if k > 0 and kept.size > 1:
+        key = np.full(n_bins, -1, dtype=np.int64)
+        key[kept] = inten[kept].astype(np.int64) * (n_bins + 1) + (n_bins - kept)
+        local_max = maximum_filter1d(key, size=2 * k + 1, mode="constant", cval=-1)
+        kept = kept[local_max[kept] == key[kept]]
+    return SegmentedBeam(
+        threshold_bins=threshold_bins,
+        final_bins=kept,
+        final_intensities=inten[kept].astype(np.uint8),
+    )
+
+
+def segment_beam(
+    beam: SonarBeam,
+    head: SonarHead,
+    *,
+    intensity_threshold: float,
+    max_intensity_difference: float,
+    min_distance_m: float,
+    min_range_m: float = 0.0,
+) -> SegmentedBeam:
+    """Segment a :class:`~sonar.beam.SonarBeam` with its head settings.
+
+    See :func:`segment_intensities`; ``beam.thresholded`` selects the mask behaviour.
+    """
+    return segment_intensities(
+        beam.intensities,
+        head.bin_size_m,
+        intensity_threshold=intensity_threshold,
+        max_intensity_difference=max_intensity_difference,
+        min_distance_m=min_distance_m,
+        min_range_m=min_range_m,
+        thresholded=beam.thresholded,
+    )

@@ -1,0 +1,138 @@
+"""Beam segmentation (paper 2.1): each stage on hand-made beams."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sonar.beam import SonarBeam, SonarHead
+from sonar.segmentation import segment_beam, segment_intensities
+
+BIN_M = 0.1
+
+
+def _beam(n: int, values: dict[int, int]) -> np.ndarray:
+    b = np.zeros(n, dtype=np.uint8)
+    for i, v in values.items():
+        b[i] = v
+    return b
+
+
+def test_threshold_stage_keeps_bins_at_or_above_threshold() -> None:
+    b = _beam(50, {5: 79, 6: 80, 7: 200, 30: 120})
+    seg = segment_intensities(
+        b, BIN_M, intensity_threshold=80, max_intensity_difference=255, min_distance_m=0.0
+    )
+    np.testing.assert_array_equal(seg.threshold_bins, [6, 7, 30])
+    np.testing.assert_array_equal(seg.final_bins, [6, 7, 30])
+    np.testing.assert_array_equal(seg.final_intensities, [80, 200, 120])
+
+
+def test_max_intensity_difference_keeps_bins_near_the_beam_maximum() -> None:
+    b = _beam(50, {10: 100, 20: 200, 30: 170, 40: 169})
+    seg = segment_intensities(
+        b, BIN_M, intensity_threshold=50, max_intensity_difference=30, min_distance_m=0.0
+    )
+    np.testing.assert_array_equal(seg.threshold_bins, [10, 20, 30, 40])
+    np.testing.assert_array_equal(seg.final_bins, [20, 30])
+
+
+def test_sparseness_drops_the_weaker_of_close_bins() -> None:
+    # 0.5 m = 5 bins: bins 4 apart are close, 5 apart are not
+    b = _beam(60, {10: 150, 14: 200, 19: 150, 40: 180, 45: 181})
+    seg = segment_intensities(
+        b, BIN_M, intensity_threshold=50, max_intensity_difference=255, min_distance_m=0.5
+    )
+    # 10 is 0.4 m from the stronger 14; 19 is 0.5 m from 14 (not closer); 40 and 45 are 0.5 m
+    np.testing.assert_array_equal(seg.final_bins, [14, 19, 40, 45])
+    seg = segment_intensities(
+        b, BIN_M, intensity_threshold=50, max_intensity_difference=255, min_distance_m=0.51
+    )
+    np.testing.assert_array_equal(seg.final_bins, [14, 45])
+
+
+def test_sparseness_tie_keeps_the_nearer_bin() -> None:
+    b = _beam(40, {10: 150, 12: 150, 30: 90})
+    seg = segment_intensities(
+        b, BIN_M, intensity_threshold=50, max_intensity_difference=255, min_distance_m=0.3
+    )
+    np.testing.assert_array_equal(seg.final_bins, [10, 30])
+
+
+def test_near_field_dead_zone_is_ignored_by_every_stage() -> None:
+    # a strong ringing bin at 0.3 m must neither pass nor set the beam maximum
+    b = _beam(40, {2: 255, 20: 120, 25: 110})
+    seg = segment_intensities(
+        b,
+        BIN_M,
+        intensity_threshold=50,
+        max_intensity_difference=20,
+        min_distance_m=0.0,
+        min_range_m=1.0,
+    )
+    np.testing.assert_array_equal(seg.threshold_bins, [20, 25])
+    np.testing.assert_array_equal(seg.final_bins, [20, 25])
+    # bin 9 is at exactly 1.0 m: inside the kept range
+    seg = segment_intensities(
+        _beam(40, {9: 100}),
+        BIN_M,
+        intensity_threshold=50,
+        max_intensity_difference=20,
+        min_distance_m=0.0,
+        min_range_m=1.0,
+    )
+    np.testing.assert_array_equal(seg.threshold_bins, [9])
+
+
+def test_empty_beam() -> None:
+    seg = segment_intensities(
+        np.zeros(30, dtype=np.uint8),
+        BIN_M,
+        intensity_threshold=50,
+        max_intensity_difference=20,
+        min_distance_m=0.5,
+    )
+    assert seg.threshold_bins.size == 0 and seg.final_bins.size == 0
+
+
+def test_thresholded_mask_keeps_nearest_bin_of_each_run() -> None:
+    head = SonarHead(n_bins=100, bin_size_m=BIN_M)
+    mask = np.zeros(100, dtype=np.uint8)
+    mask[20:35] = 255  # one 1.5 m run
+    mask[37:40] = 255  # a gap of 0.3 m: same run for a 0.5 m min distance
+    mask[60:62] = 255  # a separate run
+    beam = SonarBeam(t=0.0, transducer_angle_rad=0.0, intensities=mask, thresholded=True)
+    # the intensity threshold is the third party's: 255 > 0 passes whatever we set
+    seg = segment_beam(
+        beam, head, intensity_threshold=300, max_intensity_difference=0, min_distance_m=0.5
+    )
+    np.testing.assert_array_equal(seg.threshold_bins, np.flatnonzero(mask))
+    np.testing.assert_array_equal(seg.final_bins, [20, 60])
+    # a smaller min distance splits the run at the 0.3 m gap
+    seg = segment_beam(
+        beam, head, intensity_threshold=300, max_intensity_difference=0, min_distance_m=0.25
+    )
+    np.testing.assert_array_equal(seg.final_bins, [20, 37, 60])
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_sparseness_matches_the_pairwise_rule(seed: int) -> None:
+    """Vectorised stage (c) against the pairwise definition, on random beams."""
+    rng = np.random.default_rng(seed)
+    b = np.where(rng.random(200) < 0.2, rng.integers(0, 256, 200), 0).astype(np.uint8)
+    d_m = 0.45
+    seg = segment_intensities(
+        b, BIN_M, intensity_threshold=60, max_intensity_difference=120, min_distance_m=d_m
+    )
+    thr = np.flatnonzero(b >= 60)
+    kept = thr[b[thr].astype(int) >= int(b[thr].max()) - 120]
+    expect = []
+    for i in kept:
+        stronger_close = [
+            j
+            for j in kept
+            if j != i and abs(j - i) * BIN_M < d_m and (b[j] > b[i] or (b[j] == b[i] and j < i))
+        ]
+        if not stronger_close:
+            expect.append(i)
+    np.testing.assert_array_equal(seg.final_bins, expect)
