@@ -13,7 +13,7 @@ radians in the objects)::
     [mounting.sonar]        # sonar head in the body frame (x forward, y left)
     x_m = 0.0
     y_m = 0.0
-    yaw_deg = 156.0         # bearing in body = yaw + angle_sense * transducer angle
+    yaw_deg = 154.75        # bearing in body = yaw + angle_sense * transducer angle
     source = "..."
 
     [mounting.dvl]          # DVL frame in the body frame
@@ -23,6 +23,10 @@ radians in the objects)::
     [mounting.ahrs]         # AHRS frame in the body frame: body yaw = AHRS yaw - yaw
     yaw_deg = -115.3
     source = "..."
+
+    [keyframes]             # only for datasets of keyframes (thresholded PCD scans)
+    scan_direction = -1     # -1: the head turns toward decreasing angle (measured, see
+                            # datasets/keyframes.py); +1: as the marina README says
 
     [noise]                 # 1-sigma sensor noise used by the estimators
     dvl_sigma_mps = 0.05
@@ -74,6 +78,7 @@ class DatasetConfig:
     dvl_mounting: Mounting = field(default_factory=Mounting)
     ahrs_mounting: Mounting = field(default_factory=Mounting)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
+    keyframe_scan_direction: int = -1
 
 
 #: The abandoned marina (Ribas et al. 2008). How each mounting was calibrated is in README.md.
@@ -86,7 +91,7 @@ MARINA_CONFIG = DatasetConfig(
         angle_sense=-1,
     ),
     sonar_mounting=Mounting(
-        yaw_rad=math.radians(156.0),
+        yaw_rad=math.radians(154.75),
         source="sonar-map entropy over dead-reckoning poses, GPS-free (sonarslam calibrate)",
     ),
     dvl_mounting=Mounting(
@@ -146,7 +151,7 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
         ) from exc
     except OSError as exc:
         raise DataError(p, None, f"cannot read: {exc.strerror}") from exc
-    _check_keys(p, "top level", data, {"sonar", "mounting", "noise"})
+    _check_keys(p, "top level", data, {"sonar", "mounting", "noise", "keyframes"})
 
     sonar = base.sonar
     if "sonar" in data:
@@ -183,12 +188,19 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
         allowed = {f.name for f in fields(NoiseConfig)}
         _check_keys(p, "noise", data["noise"], allowed)
         noise = replace(noise, **{k: _number(p, "noise", k, v) for k, v in data["noise"].items()})
+    scan_direction = base.keyframe_scan_direction
+    if "keyframes" in data:
+        _check_keys(p, "keyframes", data["keyframes"], {"scan_direction"})
+        scan_direction = int(_number(p, "keyframes", "scan_direction", data["keyframes"]["scan_direction"]))
+        if scan_direction not in (-1, 1):
+            raise DataError(p, None, f"[keyframes] scan_direction must be +1 or -1, got {scan_direction}")
     return DatasetConfig(
         sonar=sonar,
         sonar_mounting=mountings["sonar"],
         dvl_mounting=mountings["dvl"],
         ahrs_mounting=mountings["ahrs"],
         noise=noise,
+        keyframe_scan_direction=scan_direction,
     )
 
 

@@ -2,9 +2,14 @@
 
 Each PCD point is a bin of one beam in the SONAR frame, ``x = r cos a, y = r sin a``, with ``a``
 the raw transducer angle (a multiple of the head step) and ``r`` the bin range (a multiple of
-the bin size). Scan ``k`` starts at ``keyFrameBeginning``, a row of ``IS_timestamps``; the beam
-with angle index ``j = a / step`` was taken at ``IS_timestamps[row(begin) + j]`` (marina README).
-Every beam of a scan is returned, also those with no point (an empty beam is information too).
+the bin size). Scan ``k`` starts at ``keyFrameBeginning``, a row of ``IS_timestamps``, at transducer angle 0.
+The marina README says the beam with angle index ``j = a / step`` was taken at
+``IS_timestamps[row(begin) + j]`` (``scan_direction=+1``). Measured here, GPS-free: the head
+turns the other way, ``IS_timestamps[row(begin) + (-j mod n)]`` (``scan_direction=-1``, the
+default): with dead-reckoning poses the motion-corrected map is much sharper (summed entropy of
+60 s windows 389.5 against 402.8 for the best forward mapping of any start angle; GPS poses
+agree). Every beam of a scan is returned, also those with no point (an empty beam is
+information too), in time order.
 """
 
 from __future__ import annotations
@@ -89,7 +94,7 @@ def read_keyframe_times(path: str | Path) -> tuple[np.ndarray, FloatArray, Float
 
 
 def read_keyframes(
-    keyframe_dir: str | Path, is_timestamps_s: FloatArray, head: SonarHead
+    keyframe_dir: str | Path, is_timestamps_s: FloatArray, head: SonarHead, scan_direction: int = -1
 ) -> list[SonarBeam]:
     """Rebuild the thresholded beams of every keyframe with their exact times.
 
@@ -101,6 +106,9 @@ def read_keyframes(
         Beam times from ``*_IS_timestamps.log`` (Unix s).
     head : SonarHead
         Step and bin size of the scans.
+    scan_direction : int
+        +1: angle index ``j`` is the ``j``-th beam of the scan; -1: the ``(-j mod n)``-th
+        (see the module docstring).
 
     Returns
     -------
@@ -113,6 +121,8 @@ def read_keyframes(
         A missing PCD, a keyframe start that is no IS_timestamps row, a point off the polar
         grid or beyond the last bin, scans that overlap in time.
     """
+    if scan_direction not in (-1, 1):
+        raise ValueError(f"scan_direction must be +1 or -1, got {scan_direction}")
     folder = Path(keyframe_dir)
     times_path = folder / "keyFrameTimeStamps.csv"
     numbers, begins, _ = read_keyframe_times(times_path)
@@ -152,10 +162,11 @@ def read_keyframes(
             )
         mask = np.zeros((beams_per_scan, head.n_bins), dtype=np.uint8)
         mask[j, bins] = 255
-        for jj in range(beams_per_scan):
+        for i in range(beams_per_scan):  # the i-th beam in time has angle index jj
+            jj = (scan_direction * i) % beams_per_scan
             beams.append(
                 SonarBeam(
-                    t=float(is_timestamps_s[row + jj]),
+                    t=float(is_timestamps_s[row + i]),
                     transducer_angle_rad=jj * head.step_rad,
                     intensities=mask[jj],
                     thresholded=True,

@@ -170,7 +170,9 @@ def open_dataset(source: str | Path) -> Dataset:
                 "no sonar: need *_IS.log, or keyFrameTimeStamps.csv with pclKeyFrame*.pcd"
                 " and *_IS_timestamps.log",
             )
-        beams = read_keyframes(times_csv.parent, read_is_timestamps(stamps), config.sonar)
+        beams = read_keyframes(
+            times_csv.parent, read_is_timestamps(stamps), config.sonar, config.keyframe_scan_direction
+        )
 
     truth_path = _find_one(root, "truth.json", required=False)
     truth = json.loads(truth_path.read_text()) if truth_path is not None else None
