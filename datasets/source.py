@@ -171,8 +171,14 @@ def open_dataset(source: str | Path) -> Dataset:
                 " and *_IS_timestamps.log",
             )
         beams = read_keyframes(
-            times_csv.parent, read_is_timestamps(stamps), config.sonar, config.keyframe_scan_direction
+            times_csv.parent,
+            read_is_timestamps(stamps),
+            config.sonar,
+            config.keyframe_scan_direction,
         )
+
+    if config.sonar_time_offset_s:
+        beams = [replace(b, t=b.t + config.sonar_time_offset_s) for b in beams]
 
     truth_path = _find_one(root, "truth.json", required=False)
     truth = json.loads(truth_path.read_text()) if truth_path is not None else None
