@@ -38,20 +38,35 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from slam.pipeline import main_job, summary_line
+
+    results = main_job(args.out, progress=not args.quiet)
+    print("\nResults (ATE against GPS, no alignment):")
+    for r in results:
+        print("  " + summary_line(r.metrics))
+    print("\nOutputs and pictures:")
+    for r in results:
+        pics = ", ".join(p.name for p in sorted(r.out_dir.glob("*.png")))
+        print(f"  {r.out_dir.resolve()}  ({pics})")
+    return 0
+
+
 def _cmd_plot_scans(args: argparse.Namespace) -> int:
     from datasets.source import open_dataset
     from features.projection import project_beams
-    from slam.pipeline import pose_source_by_name
+    from slam.pipeline import map_min_intensity, pose_source_by_name
     from slam.plots import plot_scans
 
     dataset = open_dataset(args.source)
     poses = pose_source_by_name(dataset, args.poses)
+    min_intensity = map_min_intensity(dataset) if args.min_intensity is None else args.min_intensity
     points, _ = project_beams(
         dataset.nav_beams(),
         dataset.config.sonar,
         dataset.config.sonar_mounting,
         poses,
-        args.min_intensity,
+        min_intensity,
     )
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -62,6 +77,29 @@ def _cmd_plot_scans(args: argparse.Namespace) -> int:
         f"{dataset.name}: sonar bins projected with {args.poses} poses",
     )
     print(f"{points.shape[0]} bins projected; picture: {out.resolve()}")
+    return 0
+
+
+def _cmd_extract(args: argparse.Namespace) -> int:
+    from slam.extraction import extract
+
+    result = extract(
+        args.source,
+        args.poses,
+        args.out,
+        config_path=args.config,
+        preset=args.preset,
+        progress=not args.quiet,
+    )
+    s = result.stats
+    print(
+        f"{s['features']} lines from {s['beams']} beams ({s['preset']} preset, {s['poses']} poses); "
+        f"per beam p50 {s['beam_time_p50_us']:.0f} us, p99 {s['beam_time_p99_us']:.0f} us; "
+        f"{s['data_s']:.0f} s of data in {s['wall_s']:.2f} s ({s['realtime_factor']:.0f}x real time)"
+    )
+    print(
+        f"outputs: {Path(result.out_dir or args.out).resolve()} (lines.jsonl, lines_world.png, extract.json)"
+    )
     return 0
 
 
@@ -138,9 +176,45 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--out", default="out/scans.png", help="PNG file (default out/scans.png)")
     p.add_argument(
-        "--min-intensity", type=int, default=1, help="smallest intensity drawn (0-255, default 1)"
+        "--min-intensity",
+        type=int,
+        default=None,
+        help="smallest intensity drawn, 0-255 (default: every bin of thresholded beams, the "
+        "extractor's threshold for raw beams)",
     )
     p.set_defaults(func=_cmd_plot_scans)
+
+    p = sub.add_parser(
+        "extract", help="extract line features with a pose source and draw them", epilog=EPILOG
+    )
+    p.add_argument("source", help="dataset directory or 'marina'")
+    p.add_argument(
+        "--poses",
+        default="gps",
+        choices=["gps", "dr", "truth"],
+        help="pose source: gps (GPS+AHRS, default), dr, truth (simulated only)",
+    )
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument(
+        "--config", default=None, help="TOML of extractor settings over the preset ([extractor])"
+    )
+    p.add_argument(
+        "--preset",
+        default=None,
+        choices=["marina", "default"],
+        help="starting settings (default: marina for thresholded beams, else default)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_extract)
+
+    p = sub.add_parser(
+        "demo",
+        help="the main job (make run): closed loop and dead reckoning on the marina or a simulated harbour",
+        epilog=EPILOG,
+    )
+    p.add_argument("--out", default="out", help="output directory (default out)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=_cmd_demo)
 
     p = sub.add_parser("calibrate", help="sonar mounting yaw by map sharpness", epilog=EPILOG)
     p.add_argument("source", help="dataset directory or 'marina'")

@@ -55,6 +55,14 @@ def default_extractor_config(dataset: Dataset) -> ExtractorConfig:
     return ExtractorConfig()
 
 
+def map_min_intensity(dataset: Dataset) -> int:
+    """Smallest intensity drawn in maps: every given bin of thresholded beams, else the bins
+    above the extractor's intensity threshold (raw beams are mostly background noise)."""
+    if dataset.beams and dataset.beams[0].thresholded:
+        return 1
+    return int(np.ceil(default_extractor_config(dataset).intensity_threshold))
+
+
 def _ekf(
     dataset: Dataset, out_dir: Path, progress: bool = True
 ) -> tuple[Trajectory, dict[str, Any]]:
@@ -201,3 +209,28 @@ def summary_line(metrics: dict[str, Any]) -> str:
         f"over {metrics['ate_n']} fixes; {metrics['data_s']:.0f} s of data in {metrics['wall_s']:.2f} s "
         f"({metrics['realtime_factor']:.0f}x real time)"
     )
+
+
+def main_job(out_dir: str | Path, progress: bool = True) -> list[RunResult]:
+    """What ``make run`` does: the closed loop next to dead reckoning on the real marina when
+    ``$SONARSLAM_DATA`` holds it, otherwise on a freshly simulated harbour; plus the scan map.
+
+    Returns the run results (dead reckoning first).
+    """
+    from datasets.source import data_root
+
+    out = Path(out_dir)
+    root = data_root()
+    if root is not None and (root / "marina").is_dir():
+        source: str | Path = "marina"
+        name = "marina"
+    else:
+        from datasets.simulator import simulate
+
+        source = simulate("harbour", seed=0, out_dir=out / "sim_harbour_0")
+        name = "sim_harbour_0"
+    results = [
+        run(source, backend, out / f"{name}-{backend}", progress=progress)
+        for backend in ("dr", "ekf")
+    ]
+    return results

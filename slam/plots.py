@@ -14,7 +14,7 @@ import numpy as np  # noqa: E402
 from features.geometry import FloatArray  # noqa: E402
 from slam.trajectory import Trajectory  # noqa: E402
 
-__all__ = ["plot_scans", "plot_trajectories"]
+__all__ = ["plot_scans", "plot_trajectories", "plot_lines"]
 
 _COLOURS = {"gps": "k", "dr": "tab:red", "ekf": "tab:blue", "isam2": "tab:green", "truth": "k"}
 
@@ -107,6 +107,113 @@ def plot_trajectories(
     fig.suptitle(title)
     fig.tight_layout()
     out = Path(path)
+    fig.savefig(out)
+    plt.close(fig)
+    return out
+
+
+def _densest_window(points_w: FloatArray, side_m: float) -> tuple[float, float]:
+    """Centre of the ``side_m`` square (on a grid of half steps) holding most of ``points_w``."""
+    lo = points_w.min(axis=0)
+    cells = np.floor((points_w - lo) / (0.5 * side_m)).astype(np.int64)
+    keys, counts = np.unique(cells, axis=0, return_counts=True)
+    # a window is 2 x 2 half cells: sum the counts of each 2 x 2 block
+    table = {tuple(k): int(c) for k, c in zip(keys, counts, strict=True)}
+    best, best_n = keys[0], -1
+    for k in keys:
+        n = sum(table.get((int(k[0]) + a, int(k[1]) + b), 0) for a in (0, 1) for b in (0, 1))
+        if n > best_n:
+            best, best_n = k, n
+    centre = lo + (best + 1.0) * 0.5 * side_m
+    return float(centre[0]), float(centre[1])
+
+
+def _draw_lines(
+    ax: plt.Axes,
+    segments_w: Sequence[FloatArray],
+    bands_w: Sequence[FloatArray],
+    lw: float,
+) -> None:
+    for band in bands_w:
+        ax.fill(band[:, 0], band[:, 1], fc="tab:orange", ec="darkorange", alpha=0.45, lw=0.3)
+    for k, seg in enumerate(segments_w):
+        ax.plot(
+            seg[:, 0],
+            seg[:, 1],
+            "-",
+            color="tab:red",
+            lw=lw,
+            label="line segment, 95 % band in orange" if k == 0 else None,
+        )
+
+
+def plot_lines(
+    path: str | Path,
+    points_w: FloatArray,
+    segments_w: Sequence[FloatArray],
+    bands_w: Sequence[FloatArray],
+    title: str,
+    trajectories: dict[str, Trajectory] | None = None,
+    zoom_side_m: float | None = None,
+) -> Path:
+    """Line segments with their confidence bands over the density image of projected bins.
+
+    The left panel shows everything; the right one zooms on the square of side ``zoom_side_m``
+    (default: an eighth of the larger extent of the points) holding most segment midpoints, where
+    the bands are wide enough to see.
+
+    Parameters
+    ----------
+    path : str or Path
+        PNG file.
+    points_w : ndarray, shape (N, 2)
+        Projected bins, world East-North (m).
+    segments_w : sequence of ndarray, shape (2, 2)
+        Segment ends, world (m).
+    bands_w : sequence of ndarray, shape (M, 2)
+        Band polygons, world (m), e.g. :func:`slam.extraction.segment_band_world`.
+    title : str
+    trajectories : dict of str to Trajectory, optional
+        Drawn thin, under the lines.
+    zoom_side_m : float, optional
+        Side of the zoomed square (m).
+    """
+    fig, axes = plt.subplots(1, 2, figsize=(16, 9), dpi=90)
+    for ax, lw in zip(axes, (0.6, 1.0), strict=True):
+        _draw_points(ax, points_w)
+        for name, tr in (trajectories or {}).items():
+            ax.plot(
+                tr.poses_wTb[:, 0],
+                tr.poses_wTb[:, 1],
+                "-",
+                lw=0.6,
+                alpha=0.7,
+                color="tab:blue",
+                label=f"{name} trajectory",
+            )
+        _draw_lines(ax, segments_w, bands_w, lw)
+        ax.set_aspect("equal")
+        ax.set_xlabel("East (m)")
+        ax.set_ylabel("North (m)")
+        ax.grid(True, lw=0.3)
+    axes[0].set_title(title)
+    if segments_w or trajectories:
+        axes[0].legend(loc="best", fontsize="small")
+    if segments_w:
+        mids = np.array([0.5 * (seg[0] + seg[1]) for seg in segments_w])
+        ext = np.ptp(points_w, axis=0).max() if points_w.shape[0] else np.ptp(mids, axis=0).max()
+        side = zoom_side_m if zoom_side_m is not None else max(float(ext) / 8.0, 1.0)
+        cx, cy = _densest_window(mids, side)
+        axes[1].set_xlim(cx - 0.5 * side, cx + 0.5 * side)
+        axes[1].set_ylim(cy - 0.5 * side, cy + 0.5 * side)
+        axes[1].set_title(f"zoom: {side:.0f} m x {side:.0f} m with the most segments")
+        axes[0].add_patch(
+            plt.Rectangle(
+                (cx - 0.5 * side, cy - 0.5 * side), side, side, fill=False, ec="tab:blue", lw=0.8
+            )
+        )
+    out = Path(path)
+    fig.tight_layout()
     fig.savefig(out)
     plt.close(fig)
     return out

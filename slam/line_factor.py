@@ -1,0 +1,354 @@
+"""GTSAM factors of the line back end: line landmark, AHRS heading with bias, DVL odometry.
+
+Variables (keys from :mod:`gtsam.symbol_shorthand`):
+
+* ``X(k)``: body pose ``wTb`` of node k, a ``gtsam.Pose2``. GTSAM perturbs it in its *local*
+  (body-frame) tangent ``(dx_b, dy_b, dtheta)``: ``wTb.retract(xi) = wTb * Exp(xi)``, so a
+  Jacobian in plain world coordinates ``(x, y, yaw)`` is multiplied by
+  :func:`local_to_world` ``= blockdiag(R(yaw), 1)``.
+* ``L(j)``: a world line ``(rho_m, theta_rad)`` stored as a ``gtsam.Point2``. Point2 is a vector
+  space (retract is ``+``), which is what a ``(rho, theta)`` pair needs near a solution; it is a
+  first-class GTSAM value (``Values.atPoint2``, priors, serialisation) unlike a bare ``Vector``
+  of size 2, whose Python ``insert`` overload is ambiguous with Point2. The stored pair is not
+  kept normalised (the optimiser may leave ``rho < 0`` or ``theta`` outside ``[-pi, pi)``); the
+  factor compares lines through :func:`features.geometry.line_world_to_frame`, which normalises,
+  and :func:`line_residual`, which resolves the sign ambiguity.
+* ``B(0)``: the constant AHRS heading bias (rad), a size-1 ``Vector``; the AHRS measures
+  ``yaw + b`` (the model of :class:`slam.ekf.LineEkf`).
+* ``D(0)``: optional constant misalignment (rad) of the DVL velocity with the body heading: the
+  vehicle moves along ``R(yaw + delta) v_b`` (as :class:`slam.ekf.LineEkf`).
+
+Every factor here is a ``gtsam.CustomFactor`` around a plain function that returns the error and
+its analytic Jacobians (``tests/test_factor_graph.py`` checks them against
+``gtsam.utils.numerical_derivative`` on the manifold).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gtsam
+import numpy as np
+import numpy.typing as npt
+
+from features.geometry import (
+    FloatArray,
+    compose,
+    compose_jacobians,
+    line_world_to_frame,
+    wrap_angle,
+)
+
+__all__ = [
+    "ROBUST_KERNELS",
+    "local_to_world",
+    "noise_model",
+    "line_prediction",
+    "line_predictions",
+    "line_residual",
+    "line_factor",
+    "heading_residual",
+    "heading_factor",
+    "odometry_residual",
+    "misaligned_odometry_factor",
+]
+
+_FLIP = np.diag([-1.0, 1.0])
+_S = np.array([[0.0, -1.0], [1.0, 0.0]])  # d R(a) / da = R(a) S
+
+ROBUST_KERNELS = ("huber", "cauchy")
+"""Robust kernels :func:`noise_model` accepts (``gtsam.noiseModel.mEstimator``)."""
+
+
+def local_to_world(yaw_rad: float) -> FloatArray:
+    """``d (x, y, yaw) / d xi`` of ``Pose2.retract(xi)`` at ``xi = 0``: ``blockdiag(R(yaw), 1)``."""
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def noise_model(
+    cov: npt.ArrayLike, robust: str | None = None, robust_k: float = 1.345
+) -> gtsam.noiseModel.Base:
+    """A Gaussian noise model of covariance ``cov``, optionally wrapped in a robust kernel.
+
+    Parameters
+    ----------
+    cov : array_like, shape (n, n)
+        Covariance of the factor's error, in its units.
+    robust : {None, "huber", "cauchy"}
+        Robust kernel (``gtsam.noiseModel.Robust``) on the whitened error.
+    robust_k : float
+        Kernel width in sigmas (Huber: 1.345 is 95 % efficient on Gaussian data).
+    """
+    base = gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, dtype=np.float64))
+    if robust is None:
+        return base
+    if robust == "huber":
+        kernel = gtsam.noiseModel.mEstimator.Huber.Create(robust_k)
+    elif robust == "cauchy":
+        kernel = gtsam.noiseModel.mEstimator.Cauchy.Create(robust_k)
+    else:
+        raise ValueError(f"robust must be None or one of {ROBUST_KERNELS}, got {robust!r}")
+    return gtsam.noiseModel.Robust.Create(kernel, base)
+
+
+# -- line landmark -----------------------------------------------------------------------------
+
+
+def line_prediction(
+    wTb: FloatArray, line_w: FloatArray, bTs: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The line ``line_w`` seen by the sonar at ``wTs = wTb * bTs``, and its Jacobians.
+
+    Parameters
+    ----------
+    wTb : ndarray, shape (3,)
+        Body pose ``(x_m, y_m, yaw_rad)``.
+    line_w : ndarray, shape (2,)
+        World line ``(rho_m, theta_rad)`` (need not be normalised).
+    bTs : ndarray, shape (3,)
+        Sonar mounting.
+
+    Returns
+    -------
+    z_hat : ndarray, shape (2,)
+        Normalised line in the sonar frame.
+    H_pose : ndarray, shape (2, 3)
+        ``d z_hat / d xi`` in the *local* tangent of ``wTb`` (GTSAM's Pose2 convention).
+    H_line : ndarray, shape (2, 2)
+        ``d z_hat / d line_w``.
+    """
+    wTs = compose(wTb, bTs)
+    z_hat, H_line, H_sensor = line_world_to_frame(line_w, wTs)
+    J_b, _ = compose_jacobians(wTb, bTs)
+    return z_hat, H_sensor @ J_b @ local_to_world(float(wTb[2])), H_line
+
+
+def line_predictions(
+    wTb: FloatArray, lines_w: FloatArray, bTs: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """:func:`line_prediction` of many lines from one pose (vectorised).
+
+    Parameters
+    ----------
+    wTb : ndarray, shape (3,)
+    lines_w : ndarray, shape (K, 2)
+    bTs : ndarray, shape (3,)
+
+    Returns
+    -------
+    z_hat : ndarray, shape (K, 2)
+    H_pose : ndarray, shape (K, 2, 3)
+        Local tangent of ``wTb``.
+    H_line : ndarray, shape (K, 2, 2)
+    """
+    x, y, psi = compose(wTb, bTs)
+    J_b, _ = compose_jacobians(wTb, bTs)
+    JM = J_b @ local_to_world(float(wTb[2]))
+    lw = np.asarray(lines_w, dtype=np.float64).reshape(-1, 2)
+    c, s = np.cos(lw[:, 1]), np.sin(lw[:, 1])
+    rho_r = lw[:, 0] - x * c - y * s
+    sign = np.where(rho_r < 0.0, -1.0, 1.0)
+    k = lw.shape[0]
+    H_line = np.zeros((k, 2, 2))
+    H_line[:, 0, 0] = sign
+    H_line[:, 0, 1] = sign * (x * s - y * c)
+    H_line[:, 1, 1] = 1.0
+    H_sensor = np.zeros((k, 2, 3))
+    H_sensor[:, 0, 0] = -sign * c
+    H_sensor[:, 0, 1] = -sign * s
+    H_sensor[:, 1, 2] = -1.0
+    z_hat = np.column_stack(
+        [np.abs(rho_r), wrap_angle(lw[:, 1] - psi + np.where(rho_r < 0.0, np.pi, 0.0))]
+    )
+    return z_hat, H_sensor @ JM, H_line
+
+
+def line_residual(
+    z: FloatArray, wTb: FloatArray, line_w: FloatArray, bTs: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Error of a line observation: measured minus predicted, in the sonar frame R.
+
+    ``e = z - z_hat``, the angle wrapped, with ``z_hat`` taken in the representation nearest
+    ``z`` (``(rho, theta)`` or ``(-rho, theta + pi)``): the sign ambiguity of lines near
+    ``rho = 0`` handled as :func:`slam.association.line_innovation` does, but by flipping the
+    prediction rather than the measurement, so that ``e ~ N(0, R)`` with the measurement's own
+    covariance ``R`` (flipping ``z`` would change ``R`` to ``diag(-1, 1) R diag(-1, 1)``).
+
+    Returns
+    -------
+    e : ndarray, shape (2,)
+    H_pose : ndarray, shape (2, 3)
+        ``d e / d xi`` (local tangent of ``wTb``).
+    H_line : ndarray, shape (2, 2)
+        ``d e / d line_w``.
+    """
+    z_hat, H_pose, H_line = line_prediction(wTb, line_w, bTs)
+    d_theta = float(wrap_angle(z[1] - z_hat[1]))
+    if abs(d_theta) <= 0.5 * np.pi:
+        return np.array([z[0] - z_hat[0], d_theta]), -H_pose, -H_line
+    # z_hat as (-rho, theta + pi): e = (z_rho + rho_hat, z_theta - theta_hat - pi)
+    e = np.array([z[0] + z_hat[0], float(wrap_angle(z[1] - z_hat[1] - np.pi))])
+    return e, -_FLIP @ H_pose, -_FLIP @ H_line
+
+
+def line_factor(
+    pose_key: int,
+    line_key: int,
+    z: npt.ArrayLike,
+    cov: npt.ArrayLike,
+    bTs: npt.ArrayLike,
+    robust: str | None = None,
+    robust_k: float = 1.345,
+) -> gtsam.CustomFactor:
+    """Factor between ``X(k)`` (Pose2 ``wTb``) and ``L(j)`` (Point2 ``(rho_w, theta_w)``).
+
+    Parameters
+    ----------
+    pose_key, line_key : int
+        Keys of the body pose and of the world line.
+    z : array_like, shape (2,)
+        Measured line ``(rho_m, theta_rad)`` in the sonar frame R, normalised.
+    cov : array_like, shape (2, 2)
+        Its covariance (the extractor's).
+    bTs : array_like, shape (3,)
+        Sonar mounting, a constant of the factor.
+    robust, robust_k
+        See :func:`noise_model`.
+    """
+    z_m = np.asarray(z, dtype=np.float64).copy()
+    bTs_m = np.asarray(bTs, dtype=np.float64).copy()
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> FloatArray:
+        keys = this.keys()
+        p = values.atPose2(keys[0])
+        wTb = np.array([p.x(), p.y(), p.theta()])
+        e, H_pose, H_line = line_residual(z_m, wTb, values.atPoint2(keys[1]), bTs_m)
+        if H is not None:
+            H[0] = H_pose
+            H[1] = H_line
+        return e
+
+    return gtsam.CustomFactor(noise_model(cov, robust, robust_k), [pose_key, line_key], error)
+
+
+# -- AHRS heading with a constant bias --------------------------------------------------------
+
+
+def heading_residual(yaw_meas_rad: float, yaw_rad: float, bias_rad: float) -> float:
+    """``wrap(yaw + b - z)``; its Jacobians are 1 for the pose's local ``dtheta`` and for ``b``."""
+    return float(wrap_angle(yaw_rad + bias_rad - yaw_meas_rad))
+
+
+_H_HEADING_POSE = np.array([[0.0, 0.0, 1.0]])
+_H_HEADING_BIAS = np.array([[1.0]])
+
+
+def heading_factor(
+    pose_key: int, bias_key: int, yaw_meas_rad: float, sigma_rad: float
+) -> gtsam.CustomFactor:
+    """AHRS heading ``z = yaw(X(k)) + b``, with ``b = B(0)`` a size-1 Vector.
+
+    Parameters
+    ----------
+    pose_key, bias_key : int
+    yaw_meas_rad : float
+        Body heading from the AHRS through its mounting (rad).
+    sigma_rad : float
+        White noise of one heading (rad).
+    """
+    z = float(yaw_meas_rad)
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> FloatArray:
+        keys = this.keys()
+        e = heading_residual(z, values.atPose2(keys[0]).theta(), values.atVector(keys[1])[0])
+        if H is not None:
+            H[0] = _H_HEADING_POSE
+            H[1] = _H_HEADING_BIAS
+        return np.array([e])
+
+    return gtsam.CustomFactor(
+        gtsam.noiseModel.Isotropic.Sigma(1, float(sigma_rad)), [pose_key, bias_key], error
+    )
+
+
+# -- DVL odometry with a misalignment ---------------------------------------------------------
+
+
+def odometry_residual(
+    measured: FloatArray, wTi: FloatArray, wTj: FloatArray, delta_rad: float
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Error of a relative motion whose translation is rotated by the DVL misalignment.
+
+    The motion model integrates ``R(yaw + delta) v_b``, so in the frame of node i the
+    translation is ``R(delta) t`` where ``t`` is the one integrated with ``delta = 0``
+    (``measured``); the heading change does not depend on ``delta``. With
+    ``m = (R(delta) t, yaw_m)`` and ``r = wTi^-1 wTj``, the error is ``m^-1 r`` in
+    ``(x, y, yaw)``: ``(R(yaw_m)^T (r_t - m_t), wrap(r_yaw - yaw_m))``, the first-order
+    equivalent of ``BetweenFactorPose2``'s.
+
+    Returns
+    -------
+    e : ndarray, shape (3,)
+    H_i, H_j : ndarray, shape (3, 3)
+        Jacobians in the local tangents of ``wTi`` and ``wTj``.
+    H_delta : ndarray, shape (3, 1)
+    """
+    ci, si = np.cos(wTi[2]), np.sin(wTi[2])
+    Ri = np.array([[ci, -si], [si, ci]])
+    r_t = Ri.T @ (wTj[:2] - wTi[:2])
+    r_yaw = float(wrap_angle(wTj[2] - wTi[2]))
+    cd, sd = np.cos(delta_rad), np.sin(delta_rad)
+    m_t = np.array([[cd, -sd], [sd, cd]]) @ measured[:2]
+    cm, sm = np.cos(measured[2]), np.sin(measured[2])
+    RmT = np.array([[cm, sm], [-sm, cm]])
+    e = np.empty(3)
+    e[:2] = RmT @ (r_t - m_t)
+    e[2] = float(wrap_angle(r_yaw - measured[2]))
+    H_i = np.zeros((3, 3))
+    H_i[:2, :2] = -RmT
+    H_i[:2, 2] = RmT @ (-_S @ r_t)
+    H_i[2, 2] = -1.0
+    cr, sr = np.cos(r_yaw), np.sin(r_yaw)
+    H_j = np.zeros((3, 3))
+    H_j[:2, :2] = RmT @ np.array([[cr, -sr], [sr, cr]])
+    H_j[2, 2] = 1.0
+    H_d = np.zeros((3, 1))
+    H_d[:2, 0] = RmT @ (-_S @ m_t)
+    return e, H_i, H_j, H_d
+
+
+def misaligned_odometry_factor(
+    key_i: int,
+    key_j: int,
+    misalignment_key: int,
+    measured: npt.ArrayLike,
+    cov: npt.ArrayLike,
+) -> gtsam.CustomFactor:
+    """Odometry between ``X(i)`` and ``X(j)`` with the DVL misalignment ``D(0)`` (size-1 Vector).
+
+    Parameters
+    ----------
+    measured : array_like, shape (3,)
+        Relative pose ``iTj`` integrated with ``delta = 0`` ``(x_m, y_m, yaw_rad)``.
+    cov : array_like, shape (3, 3)
+        Covariance of the error of :func:`odometry_residual` (the frame of ``measured``).
+    """
+    m = np.asarray(measured, dtype=np.float64).copy()
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> FloatArray:
+        keys = this.keys()
+        pi, pj = values.atPose2(keys[0]), values.atPose2(keys[1])
+        e, H_i, H_j, H_d = odometry_residual(
+            m,
+            np.array([pi.x(), pi.y(), pi.theta()]),
+            np.array([pj.x(), pj.y(), pj.theta()]),
+            float(values.atVector(keys[2])[0]),
+        )
+        if H is not None:
+            H[0] = H_i
+            H[1] = H_j
+            H[2] = H_d
+        return e
+
+    return gtsam.CustomFactor(noise_model(cov), [key_i, key_j, misalignment_key], error)
