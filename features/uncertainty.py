@@ -43,6 +43,25 @@ and refits. The covariance is
 first order, the covariance of the weighted total-least-squares line fit of Arras & Siegwart
 (1997) with per-point polar covariances.
 
+The range error of a bin is not all independent: the offset between the range of the bin that
+holds an echo's peak (or first return) and the wall is common to every bin of a head (the bin
+convention, the pulse's asymmetry: the vertical beam's footprint leaves a tail behind the wall),
+and unlike the independent errors it does not average down with the number of voters. It is
+modelled as one range offset ``c ~ N(0, sigma_c^2)`` shared by all the voters: it moves each
+echo by ``c`` along its bearing, its residual by ``a_i c`` with ``a_i = cos(theta - b_i)``, hence
+
+    P <- P + sigma_c^2 g g^T,   g = P J^T W a
+
+(the line moves by about ``c`` in ``rho``). The extractor's default is ``sigma_c = bin_size /
+sqrt(12)`` (the wall is known to be somewhere in its bin, uniformly). Measured on the simulator
+with truth poses (``benchmarks/extractor_consistency.py``): the peak bin of a raw echo lies
+0.1-0.3 bins beyond the wall (0.1 with the harbour's 10 cm bins, 0.2-0.3 with the pool's 1.2 cm
+bins, whose echo tail is longer in bins), and the fitted ``rho`` of the well-seen walls is biased
+by about +0.1 bin. Without the term the mean NEES of the fit is 11.6 over 800 pool lines and 3.4
+over 524 harbour lines (95 % bands about [1.85, 2.15]); with it, 1.87 (consistent) and 1.27
+(conservative: the harbour's offset, 0.1 bin, is smaller than the prior's 0.29 bin; a calibrated
+``sigma_c`` of 1 cm gives 2.20).
+
 Optionally the pose uncertainty is added: the relative pose of each beam with respect to R is
 taken as a random walk backwards from R, ``Cov(d_k, d_l) = Q(t_max(k, l))`` with
 ``Q(t) = psd(Sigma(t_R) - Sigma(t))`` from the :class:`~features.pose_source.PoseSource`
@@ -264,6 +283,7 @@ def fit_line(
     return_model: str = "axis",
     n_iter: int = 5,
     pose_cov_r: npt.ArrayLike | None = None,
+    range_offset_sigma_m: float = 0.0,
 ) -> LineEstimate:
     """Weighted least-squares line through the voters' echoes, with its covariance.
 
@@ -283,6 +303,10 @@ def fit_line(
         Gauss-Newton iterations.
     pose_cov_r : array_like, shape (B, 3, 3), optional
         :func:`relative_pose_covariances` of the snapshot's beams (indexed by ``bins.beam``).
+    range_offset_sigma_m : float
+        Standard deviation of a range error common to all the bins (m), added through
+        ``P + sigma_c^2 g g^T``, ``g = P J^T W a``, ``a_i = cos(theta - b_i)`` (module docstring);
+        0 leaves it out.
 
     Returns
     -------
@@ -312,6 +336,11 @@ def fit_line(
     ct, st = np.cos(theta), np.sin(theta)
     jac[:, 1] = -x * st + y * ct - r * np.sin(d)
     cov = np.linalg.inv(jac.T @ (w[:, None] * jac))
+    if range_offset_sigma_m > 0.0:
+        # a range offset c common to every bin moves each echo by c along its bearing, so its
+        # residual by c cos(theta - b): d(rho, theta) / dc = -P J^T W a, a_i = cos(theta - b_i)
+        g = cov @ (jac.T @ (w * np.cos(d)))
+        cov = cov + range_offset_sigma_m**2 * np.outer(g, g)
     if pose_cov_r is not None:
         q = np.asarray(pose_cov_r, dtype=np.float64)
         # d e / d (x_S, y_S, yaw_S) of each voter

@@ -340,6 +340,7 @@ def _single_wall_nees(
         vote_every_n_beams=10**6,
         return_model=return_model_fit,
         range_sigma_m=float(np.sqrt(0.1**2 / 12 + sigma_n**2)),
+        range_offset_sigma_m=0.0,  # this generator's echoes have no common range offset
     )
     nees, errs = [], []
     for _ in range(n_runs):

@@ -1,0 +1,33 @@
+"""``make bench``: every benchmark of this folder, each writing its JSON under ``out/``.
+
+* ``extractor_speed.py``: real-time factor of the whole marina extraction on one core, time per
+  beam, and voting one sector against scikit-image's ``hough_line``;
+* ``extractor_consistency.py``: the pool test over 50 seeds and the NEES of both covariance
+  methods on the simulator.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+SCRIPTS = (
+    ("extractor_speed.py", "out/extractor_speed.json"),
+    ("extractor_consistency.py", "out/extractor_consistency.json"),
+)
+
+
+def main() -> int:
+    # one process each: the speed benchmark pins itself to one CPU and sets the BLAS threads
+    for script, out in SCRIPTS:
+        print(f"== {script}", flush=True)
+        rc = subprocess.call([sys.executable, str(HERE / script), "--out", out])
+        if rc != 0:
+            return rc
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
