@@ -1,0 +1,112 @@
+"""The command line: help everywhere, one-line errors, and end-to-end runs checked with numbers."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from datasets.simulator import simulate
+from datasets.source import open_dataset
+from slam.cli import build_parser, main
+from slam.metrics import ate_against_gps
+from slam.pose_sources import dead_reckoning_trajectory, truth_trajectory
+from slam.trajectory import read_tum
+
+
+@pytest.fixture(scope="module")
+def short_harbour(tmp_path_factory):
+    return simulate(
+        "harbour", seed=3, out_dir=tmp_path_factory.mktemp("sim") / "h3", duration_s=200.0
+    )
+
+
+def test_every_command_has_help(capsys):
+    parser = build_parser()
+    commands = parser._subparsers._group_actions[0].choices  # type: ignore[union-attr]
+    assert {"simulate", "run", "plot-scans", "calibrate", "info", "demo", "extract"} <= set(
+        commands
+    )
+    for name in commands:
+        with pytest.raises(SystemExit) as exc:
+            main([name, "--help"])
+        assert exc.value.code == 0
+        out = capsys.readouterr().out
+        assert "usage: sonarslam " + name in out and "SONARSLAM_DATA" in out
+
+
+def test_known_errors_are_one_line_and_exit_1(tmp_path, capsys, monkeypatch):
+    monkeypatch.delenv("SONARSLAM_DATA", raising=False)
+    assert (
+        main(["run", str(tmp_path / "nowhere"), "--backend", "dr", "--out", str(tmp_path / "o")])
+        == 1
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "nowhere: not a directory" in err[0]
+    assert main(["info", "marina"]) == 1
+    assert "needs $SONARSLAM_DATA" in capsys.readouterr().err
+
+
+def test_unknown_backend_is_named(short_harbour, tmp_path, capsys):
+    assert main(["run", str(short_harbour), "--backend", "kalman", "--out", str(tmp_path)]) == 1
+    assert "--backend must be one of" in capsys.readouterr().err
+
+
+def test_run_dr_writes_what_it_measured(short_harbour, tmp_path):
+    out = tmp_path / "dr"
+    assert main(["run", str(short_harbour), "--backend", "dr", "--out", str(out), "--quiet"]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    for key in (
+        "ate_mean_m",
+        "ate_sd_m",
+        "ate_min_m",
+        "ate_max_m",
+        "ate_rmse_m",
+        "wall_s",
+        "data_s",
+        "realtime_factor",
+    ):
+        assert key in metrics
+    ds = open_dataset(short_harbour)
+    expected = ate_against_gps(dead_reckoning_trajectory(ds), ds.gps)
+    assert metrics["ate_mean_m"] == pytest.approx(expected.ate_mean_m, rel=1e-9)
+    # the TUM file holds the same trajectory (to the file's precision)
+    tum = read_tum(out / "trajectory.tum")
+    dr = dead_reckoning_trajectory(ds)
+    assert np.allclose(tum.poses_wTb[:, :2], dr.poses_wTb[:, :2], atol=1e-3)
+    assert (out / "report.png").stat().st_size > 10_000
+
+
+def test_run_ekf_maps_the_true_walls(short_harbour, tmp_path):
+    out = tmp_path / "ekf"
+    assert main(["run", str(short_harbour), "--backend", "ekf", "--out", str(out), "--quiet"]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    landmarks = json.loads((out / "map.json").read_text())["landmarks"]
+    assert metrics["landmarks"] == len(landmarks) >= 3
+    assert metrics["assoc_associated"] > 0.5 * metrics["assoc_observations"]
+    ds = open_dataset(short_harbour)
+    offset = np.asarray(ds.truth["first_fix_enu_m"])
+    walls = np.asarray(ds.truth["walls_m"]) - offset
+    # a mapped landmark lies on a true wall when both its ends are within 1.5 m of the wall's
+    # line and its direction within 3 deg: all those seen 3 times or more, 80 % of all
+    on_wall = []
+    for lm in landmarks:
+        ends = np.asarray(lm["endpoints"])
+        d = ends[1] - ends[0]
+        ok = False
+        for a, b in walls:
+            w = (b - a) / np.linalg.norm(b - a)
+            n = np.array([-w[1], w[0]])
+            angle = np.degrees(np.arccos(min(1.0, abs(w @ d) / np.linalg.norm(d))))
+            if np.abs((ends - a) @ n).max() < 1.5 and angle < 3.0:
+                ok = True
+                break
+        on_wall.append(ok)
+        assert ok or lm["observations"] < 3, f"landmark {lm['id']} is on no wall"
+    assert np.mean(on_wall) >= 0.8
+    # and the closed loop stays within a few metres of the truth
+    truth = truth_trajectory(ds)
+    ekf = read_tum(out / "trajectory.tum")
+    err = np.hypot(*(ekf.poses(ekf.t_s)[:, :2] - truth.poses(ekf.t_s)[:, :2]).T)
+    assert err.mean() < 3.0
