@@ -405,12 +405,19 @@ def overlap_ratio(
     thr = snapshot.threshold
     n_actual = np.zeros(rho.size, dtype=np.int64)
     if len(thr):
-        rb = thr.beam
-        rr = thr.range_m[None, :]
-        on = hit[:, rb] & (rr >= r_near[:, rb] - tol_m) & (rr <= r_far[:, rb] + tol_m)
-        ci, bi = np.nonzero(on)
-        key = np.unique(ci * snapshot.n_beams + rb[bi])  # one per (candidate, beam)
-        n_actual = np.bincount(key // snapshot.n_beams, minlength=rho.size).astype(np.int64)
+        # A beam counts when one of its threshold bins lies in [r_near - tol, r_far + tol]:
+        # count bins in that interval with two binary searches on keys sorted by (beam, range),
+        # C x B x log M work instead of a C x M mask.
+        top = max_range_m + tol_m
+        stride = 2.0 * top + 1.0
+        keys = np.sort(thr.beam * stride + np.clip(thr.range_m, 0.0, top))
+        offset = np.arange(snapshot.n_beams, dtype=np.float64)[None, :] * stride
+        lo = offset + np.clip(r_near - tol_m, 0.0, top)
+        hi = offset + np.clip(r_far + tol_m, 0.0, top)
+        count = np.searchsorted(keys, hi.ravel(), side="right") - np.searchsorted(
+            keys, lo.ravel(), side="left"
+        )
+        n_actual = (hit & (count.reshape(hit.shape) > 0)).sum(axis=1).astype(np.int64)
     ratio = np.where(n_ideal > 0, n_actual / np.maximum(n_ideal, 1), 0.0)
     return ratio, n_ideal, n_actual
 

@@ -21,7 +21,7 @@ from tqdm import tqdm
 from datasets.records import Attitude, DvlVelocity, GpsFix
 from datasets.source import Dataset
 from features.extractor import ExtractorConfig, LineExtractor
-from features.geometry import FloatArray, between, compose, interpolate_poses
+from features.geometry import FloatArray, between, compose
 from features.line import LineFeature
 from features.pose_source import PoseSource
 from slam.motion import body_yaw, velocity_input
@@ -39,39 +39,50 @@ class AnchoredOdometry:
     filter's predictions. After a correction the whole stored sector moves rigidly with the
     current estimate, so the motion-distortion correction uses the (locally accurate) odometry
     and the absolute pose comes from the filter.
+
+    The chain lives in growing buffers (amortised doubling) with its yaw kept unwrapped, and a
+    query interpolates only over the samples spanning the queried times (a sector of beams), so
+    a vote costs the same at the end of a long run as at its start.
     """
 
-    def __init__(self, t0_s: float, wTb0: FloatArray) -> None:
-        self._t = [t0_s]
-        self._odo = [np.zeros(3)]
+    def __init__(self, t0_s: float, wTb0: FloatArray, capacity: int = 4096) -> None:
+        self._t = np.empty(capacity)
+        self._odo = np.empty((capacity, 3))  # x, y, unwrapped yaw of O(t)
+        self._t[0] = t0_s
+        self._odo[0] = 0.0
+        self._n = 1
         self._anchor_t = t0_s
         self._anchor = np.asarray(wTb0, dtype=np.float64).copy()
         self._anchor_cov: FloatArray | None = None
-        self._arr_t: FloatArray | None = None
-        self._arr_o: FloatArray | None = None
 
     def append(self, t_s: float, bTb_next: FloatArray) -> None:
         """Chain one step of relative motion ending at ``t_s``."""
-        self._odo.append(compose(self._odo[-1], bTb_next))
-        self._t.append(t_s)
-        self._arr_t = None
+        if self._n == self._t.size:
+            self._t = np.concatenate([self._t, np.empty(self._t.size)])
+            self._odo = np.concatenate([self._odo, np.empty_like(self._odo)])
+        last = self._odo[self._n - 1]
+        nxt = compose(last, bTb_next)
+        nxt[2] = last[2] + bTb_next[2]  # keep the chain's yaw unwrapped
+        self._t[self._n] = t_s
+        self._odo[self._n] = nxt
+        self._n += 1
 
     def set_anchor(self, t_s: float, wTb: FloatArray, cov: FloatArray | None = None) -> None:
         self._anchor_t = t_s
         self._anchor = np.asarray(wTb, dtype=np.float64).copy()
         self._anchor_cov = cov
 
-    def _arrays(self) -> tuple[FloatArray, FloatArray]:
-        if self._arr_t is None:
-            self._arr_t = np.asarray(self._t)
-            self._arr_o = np.asarray(self._odo)
-        assert self._arr_o is not None
-        return self._arr_t, self._arr_o
+    def _chain_at(self, t_s: FloatArray) -> FloatArray:
+        t, odo = self._t[: self._n], self._odo[: self._n]
+        lo = max(int(np.searchsorted(t, t_s.min(), side="right")) - 1, 0)
+        hi = min(int(np.searchsorted(t, t_s.max(), side="left")) + 1, self._n)
+        t, odo = t[lo:hi], odo[lo:hi]
+        return np.column_stack([np.interp(t_s, t, odo[:, k]) for k in range(3)])
 
     def poses(self, t_s: npt.ArrayLike) -> FloatArray:
-        t, odo = self._arrays()
-        o_t = interpolate_poses(t_s, t, odo)
-        o_now = interpolate_poses([self._anchor_t], t, odo)[0]
+        tq = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+        chain = self._chain_at(np.append(tq, self._anchor_t))
+        o_t, o_now = chain[:-1], chain[-1]
         return compose(compose(self._anchor, between(o_now, np.zeros(3))), o_t)
 
     def covariance(self, t_s: float) -> FloatArray | None:

@@ -117,3 +117,27 @@ def test_marina_dead_reckoning_in_the_published_regime(marina):
     assert ate.ate_n == 3342
     assert 8.0 < ate.ate_mean_m < 20.0
     assert ate.ate_max_m < 46.0
+
+
+def test_anchored_odometry_is_the_chain_anchored_at_the_estimate():
+    from features.geometry import compose, inverse
+    from slam.closed_loop import AnchoredOdometry
+
+    rng = np.random.default_rng(5)
+    steps = np.column_stack(
+        [rng.uniform(0, 0.05, 5000), rng.normal(0, 0.01, 5000), rng.normal(0, 0.02, 5000)]
+    )
+    odo = AnchoredOdometry(0.0, np.array([3.0, -2.0, 0.4]), capacity=8)  # forces buffer growth
+    chain = [np.zeros(3)]
+    for k, step in enumerate(steps, start=1):
+        odo.append(0.1 * k, step)
+        chain.append(compose(chain[-1], step))
+    anchor = np.array([10.0, 5.0, -2.9])
+    odo.set_anchor(500.0, anchor)
+    # at a sample time: wTb(t) = anchor * inverse(O(t_now)) * O(t), yaw wrapped
+    k = 4321
+    expected = compose(compose(anchor, inverse(chain[-1])), chain[k])
+    got = odo.poses([0.1 * k])[0]
+    assert np.allclose(got[:2], expected[:2], atol=1e-9)
+    assert abs(wrap_angle(got[2] - expected[2])) < 1e-9
+    assert np.allclose(odo.poses([500.0])[0], compose(anchor, np.zeros(3)), atol=1e-9)
