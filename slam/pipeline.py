@@ -43,15 +43,18 @@ def _baseline(
 
 
 def default_extractor_config(dataset: Dataset) -> ExtractorConfig:
-    """The extractor settings a run uses: the marina preset for thresholded beams (keyframes),
-    the seed's defaults for raw intensity beams.
+    """The extractor settings a closed-loop run uses.
 
-    On the real marina the "fit" covariance is ~70x overconfident against repeated observations
-    of the same walls (curved, rough walls; see README), while the seed's overlap-ratio ellipse
-    is consistent, so the marina preset runs with ``covariance_method="seed"`` in closed loop.
+    Raw intensity beams: the seed's defaults. Thresholded beams (the marina keyframes): the
+    marina preset with a 360 deg sector, 15 votes and the seed's covariance. Measured on the real
+    marina (GPS-free, dead-reckoning poses): repeated lines of one wall scatter by ~5 deg and
+    ~0.5 m because the walls' echo bands are metres thick; the "fit" covariance is ~30x too
+    small against that (median pair d2 55), the seed's ellipse is consistent (median 0.91);
+    longer segments (360 deg) scatter less. Closed-loop EKF ATE (mean, m) with 180/10, 360/20
+    and 360/15 (sector, votes): 8.97, 10.44, 8.22.
     """
     if dataset.beams and dataset.beams[0].thresholded:
-        return MARINA_PRESET.replace(covariance_method="seed")
+        return MARINA_PRESET.replace(covariance_method="seed", sector_deg=360.0, min_votes=15)
     return ExtractorConfig()
 
 

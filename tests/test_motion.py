@@ -141,3 +141,37 @@ def test_anchored_odometry_is_the_chain_anchored_at_the_estimate():
     assert np.allclose(got[:2], expected[:2], atol=1e-9)
     assert abs(wrap_angle(got[2] - expected[2])) < 1e-9
     assert np.allclose(odo.poses([500.0])[0], compose(anchor, np.zeros(3)), atol=1e-9)
+
+
+def test_ekf_recovers_a_dvl_mounting_error(tmp_path):
+    """The EKF's misalignment state finds a 5 deg DVL mounting error from the line landmarks."""
+    import math
+    from dataclasses import replace
+
+    from datasets.simulator import simulate
+    from datasets.source import open_dataset
+    from features.extractor import ExtractorConfig
+    from slam.closed_loop import run_closed_loop
+    from slam.ekf import EkfConfig, LineEkf
+
+    ds = open_dataset(simulate("harbour", seed=1, out_dir=tmp_path / "h", duration_s=400.0))
+    c = ds.config
+    ds = replace(
+        ds,
+        config=replace(
+            c,
+            dvl_mounting=replace(
+                c.dvl_mounting, yaw_rad=c.dvl_mounting.yaw_rad + math.radians(5.0)
+            ),
+        ),
+    )
+    cfg = EkfConfig(estimate_misalignment=True)
+    res = run_closed_loop(
+        ds,
+        lambda t, p, P: LineEkf(t, p, P, ds.config.sonar_mounting, cfg),
+        ExtractorConfig(),
+        progress=False,
+    )
+    delta_deg = math.degrees(res.backend.x[4])
+    sigma_deg = math.degrees(math.sqrt(res.backend.P[4, 4]))
+    assert abs(delta_deg + 5.0) < max(3 * sigma_deg, 1.0), (delta_deg, sigma_deg)
