@@ -137,6 +137,57 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_report(args: argparse.Namespace) -> int:
+    from slam.report import report
+
+    result = report(
+        args.dirs,
+        args.out,
+        rpe_delta_m=args.rpe_delta,
+        align=args.align,
+        open_sources=not args.no_source,
+    )
+    for row in result.rows:
+        if row.get("ate_n") is not None:
+            print(
+                f"{row['method']} [{row['run']}, {row['dataset']}]: ATE mean {row['ate_mean_m']:.2f} m, "
+                f"rmse {row['ate_rmse_m']:.2f}; evo APE rmse {row['evo_ape_rmse_m']:.2f} m"
+                + (
+                    f"; pose NEES mean {row['nees_mean']:.2f}"
+                    if row.get("nees_mean") is not None
+                    else ""
+                )
+            )
+    print(f"report: {result.path.resolve()} ({len(result.figures)} figures)")
+    return 0
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from slam.sweep import format_summary, load_grid_toml, parse_grid, parse_seeds, sweep
+
+    grid = load_grid_toml(args.grid_file) if args.grid_file else {}
+    grid.update(parse_grid(args.grid or []))
+    result = sweep(
+        parse_seeds(args.seeds),
+        [b.strip() for b in args.backend.split(",") if b.strip()],
+        args.out,
+        grid=grid,
+        world=args.world,
+        duration_s=args.duration,
+        cache_dir=args.cache,
+        scheduler=args.scheduler,
+        n_workers=args.workers,
+        progress=not args.quiet,
+    )
+    failed = int((result.table["error"].fillna("") != "").sum()) if len(result.table) else 0
+    print(format_summary(result.summary))
+    print(
+        f"{len(result.table)} runs ({failed} failed) in {result.wall_s:.1f} s; "
+        f"outputs: {result.out_dir.resolve()} ({', '.join(p.name for p in result.files.values())})"
+    )
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="sonarslam",
@@ -225,6 +276,63 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("info", help="what a dataset holds", epilog=EPILOG)
     p.add_argument("source", help="dataset directory or 'marina'")
     p.set_defaults(func=_cmd_info)
+
+    p = sub.add_parser(
+        "report",
+        help="side-by-side report of run directories: table, maps, errors, NEES",
+        epilog=EPILOG,
+    )
+    p.add_argument("dirs", nargs="+", help="run directories written by 'sonarslam run'")
+    p.add_argument("--out", required=True, help="output directory (report.md and PNGs)")
+    p.add_argument(
+        "--rpe-delta", type=float, default=10.0, help="path length of evo's RPE (m, default 10)"
+    )
+    p.add_argument(
+        "--align", action="store_true", help="Umeyama-align before evo's APE/RPE (default none)"
+    )
+    p.add_argument(
+        "--no-source",
+        action="store_true",
+        help="do not re-open the runs' datasets (no reprojected map, no truth)",
+    )
+    p.set_defaults(func=_cmd_report)
+
+    p = sub.add_parser(
+        "sweep",
+        help="Monte Carlo runs and parameter grids on Dask: ATE and ANEES per back end",
+        epilog=EPILOG,
+    )
+    p.add_argument("--seeds", default="0-9", help="seeds: 0-49, 3, or 0,2,5-7 (default 0-9)")
+    p.add_argument(
+        "--world", default="harbour", choices=["harbour", "random", "pool"], help="simulated world"
+    )
+    p.add_argument(
+        "--backend",
+        default="dr,ekf",
+        help="comma list of back ends (default dr,ekf), e.g. ekf,isam2",
+    )
+    p.add_argument(
+        "--grid",
+        action="append",
+        metavar="SCOPE.FIELD=V1,V2",
+        help="a grid axis, e.g. ekf.association=jcbb,nn or extractor.min_votes=10,15 (repeatable)",
+    )
+    p.add_argument("--grid-file", default=None, help="TOML of grid axes ([grid] table of arrays)")
+    p.add_argument(
+        "--duration", type=float, default=None, help="simulated seconds (default per world)"
+    )
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument(
+        "--cache", default=None, help="simulated folders, reused across sweeps (default OUT/sim)"
+    )
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        help="address of a Dask scheduler (default: a local cluster; 'synchronous': no Dask)",
+    )
+    p.add_argument("--workers", type=int, default=2, help="local cluster processes (default 2)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_sweep)
     return parser
 
 

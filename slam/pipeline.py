@@ -13,6 +13,7 @@ import numpy as np
 
 from datasets.source import Dataset, open_dataset
 from features.extractor import MARINA_PRESET, ExtractorConfig
+from slam.evaluation import COV_FILE, write_trajectory_covariances
 from slam.metrics import ate_against_gps, ate_errors
 from slam.plots import plot_trajectories
 from slam.pose_sources import dead_reckoning_trajectory, gps_ahrs_trajectory, truth_trajectory
@@ -184,11 +185,13 @@ def run(source: str | Path, backend: str, out_dir: str | Path, progress: bool = 
         **extras.pop("metrics", {}),
     }
     write_tum(out / "trajectory.tum", trajectory)
+    write_trajectory_covariances(out / COV_FILE, trajectory)  # no-op without covariances
     gps_in = (dataset.gps.t >= t0) & (dataset.gps.t <= t1)
-    write_tum(
-        out / "ground_truth.tum",
-        Trajectory(dataset.gps.t[gps_in], gps_tr.poses(dataset.gps.t[gps_in])),
+    # the raw fixes (the ATE reference), with the AHRS heading for a full pose
+    gps_pose = np.column_stack(
+        [dataset.gps.en_m[gps_in], gps_tr.poses(dataset.gps.t[gps_in])[:, 2]]
     )
+    write_tum(out / "ground_truth.tum", Trajectory(dataset.gps.t[gps_in], gps_pose))
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
     errors = {backend: ate_errors(trajectory, dataset.gps)}
     if backend != "dr":

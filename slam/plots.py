@@ -217,3 +217,198 @@ def plot_lines(
     fig.savefig(out)
     plt.close(fig)
     return out
+
+
+# -- evaluation pictures (slam.report, slam.sweep) ---------------------------------------------
+
+
+def _chi2_band(dof: int, n_runs: int = 1, probability: float = 0.95) -> tuple[float, float]:
+    from scipy.stats import chi2
+
+    a = 0.5 * (1.0 - probability)
+    lo, hi = chi2.ppf([a, 1.0 - a], n_runs * dof) / n_runs
+    return float(lo), float(hi)
+
+
+def plot_error_bounds(
+    path: str | Path,
+    t_s: FloatArray,
+    errors: FloatArray,
+    sigmas: FloatArray | None,
+    title: str,
+    reference: str = "GPS",
+) -> Path:
+    """Errors against time with their 3-sigma bounds: East, North (and heading when given).
+
+    Parameters
+    ----------
+    path : str or Path
+        PNG file.
+    t_s : ndarray, shape (K,)
+        Times (s); drawn from the first.
+    errors : ndarray, shape (K, 2) or (K, 3)
+        Estimate minus reference: East (m), North (m) and optionally heading (rad, wrapped).
+    sigmas : ndarray, shape (K, 2) or (K, 3), or None
+        One-sigma of each error (no bounds drawn when None).
+    title : str
+    reference : str
+        Name of the reference in the labels.
+    """
+    n = errors.shape[1]
+    names = ["East error (m)", "North error (m)", "heading error (deg)"][:n]
+    scale = np.array([1.0, 1.0, np.rad2deg(1.0)])[:n]
+    fig, axes = plt.subplots(n, 1, figsize=(11, 2.6 * n + 0.8), dpi=100, sharex=True)
+    axes = np.atleast_1d(axes)
+    t = t_s - t_s[0] if t_s.size else t_s
+    for k, ax in enumerate(axes):
+        e = errors[:, k] * scale[k]
+        ax.plot(t, e, lw=0.8, color="tab:blue", label=f"estimate - {reference}")
+        if sigmas is not None:
+            b = 3.0 * sigmas[:, k] * scale[k]
+            inside = float(np.mean(np.abs(e) <= b)) if e.size else float("nan")
+            ax.fill_between(
+                t,
+                -b,
+                b,
+                color="tab:orange",
+                alpha=0.3,
+                lw=0,
+                label=f"±3 sigma ({100 * inside:.1f} % inside)",
+            )
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.set_ylabel(names[k])
+        ax.grid(True, lw=0.3)
+        ax.legend(loc="upper left", fontsize="small")
+    axes[-1].set_xlabel("time (s)")
+    axes[0].set_title(title)
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out)
+    plt.close(fig)
+    return out
+
+
+def plot_nees(
+    path: str | Path,
+    series: dict[str, tuple[FloatArray, FloatArray, int]],
+    title: str,
+    probability: float = 0.95,
+) -> Path:
+    """NEES against time, one panel per series, with the two-sided chi2(dof) band of one value.
+
+    ``series`` maps a label to ``(t_s (K,), nees (K,), dof)``.
+    """
+    n = max(len(series), 1)
+    fig, axes = plt.subplots(n, 1, figsize=(11, 2.8 * n + 0.8), dpi=100, sharex=True)
+    axes = np.atleast_1d(axes)
+    for ax, (label, (t, v, dof)) in zip(axes, series.items(), strict=False):
+        lo, hi = _chi2_band(dof, 1, probability)
+        tt = t - t[0] if t.size else t
+        inside = float(np.mean((v >= lo) & (v <= hi))) if v.size else float("nan")
+        ax.semilogy(
+            tt,
+            np.maximum(v, 1e-6),
+            lw=0.7,
+            color="tab:blue",
+            label=f"{label}: mean {np.mean(v):.2f}",
+        )
+        ax.axhspan(
+            lo,
+            hi,
+            color="tab:green",
+            alpha=0.15,
+            label=f"{100 * probability:.0f} % band of chi2({dof}): {100 * inside:.1f} % inside",
+        )
+        ax.axhline(dof, color="tab:green", lw=0.8)
+        ax.set_ylabel(f"NEES ({dof} dof)")
+        ax.grid(True, which="both", lw=0.3)
+        ax.legend(loc="upper left", fontsize="small")
+    axes[-1].set_xlabel("time (s)")
+    axes[0].set_title(title)
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out)
+    plt.close(fig)
+    return out
+
+
+def plot_anees(path: str | Path, curves: dict[str, object], title: str) -> Path:
+    """ANEES against time with the band of its number of runs, one curve per configuration.
+
+    ``curves`` maps a label to a :class:`slam.evaluation.AneesResult`.
+    """
+    fig, ax = plt.subplots(figsize=(11, 5), dpi=100)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for k, (label, res) in enumerate(curves.items()):
+        c = colours[k % len(colours)]
+        t = res.t_rel_s  # type: ignore[attr-defined]
+        ax.semilogy(
+            t,
+            res.anees,
+            lw=0.9,
+            color=c,
+            label=f"{label}: ANEES {res.mean:.2f}, {100 * res.in_band_fraction:.0f} % of times in band",
+        )  # type: ignore[attr-defined]
+        ax.fill_between(t, res.band_lo, res.band_hi, color=c, alpha=0.12, lw=0)  # type: ignore[attr-defined]
+    if curves:
+        dof = next(iter(curves.values())).dof  # type: ignore[attr-defined]
+        ax.axhline(dof, color="k", lw=0.6, ls="--", label=f"dof = {dof}")
+    ax.set_xlabel("time since start (s)")
+    ax.set_ylabel("ANEES (mean NEES over the runs)")
+    ax.set_title(title + "\n(shaded: two-sided 95 % band of the mean of N chi2)")
+    ax.grid(True, which="both", lw=0.3)
+    ax.legend(loc="best", fontsize="small")
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out)
+    plt.close(fig)
+    return out
+
+
+def plot_sweep(path: str | Path, table: object, labels: FloatArray, title: str) -> Path:
+    """Per configuration: the ATE mean of each run, its pose NEES mean (log), its wall time.
+
+    ``table`` is the sweep's DataFrame; ``labels`` (R,) names each row's configuration.
+    """
+    import pandas as pd
+
+    assert isinstance(table, pd.DataFrame)
+    ok = (
+        (table["error"].fillna("") == "").to_numpy()
+        if "error" in table
+        else np.ones(len(table), bool)
+    )
+    names = list(dict.fromkeys(labels))
+    panels = [
+        ("ate_mean_m", "ATE mean against GPS (m)", False),
+        ("nees_mean", "pose NEES mean over time (3 dof)", True),
+        ("wall_s", "wall time (s)", False),
+    ]
+    fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 5), dpi=100)
+    rng = np.random.default_rng(0)  # jitter of the dots only
+    for ax, (col, ylabel, log) in zip(axes, panels, strict=True):
+        data = []
+        for name in names:
+            sel = (labels == name) & ok
+            v = table.loc[sel, col].to_numpy(dtype=float) if col in table else np.zeros(0)
+            data.append(v[np.isfinite(v)])
+        ax.boxplot([d if d.size else [np.nan] for d in data], showfliers=False)
+        for i, d in enumerate(data):
+            ax.plot(i + 1 + rng.uniform(-0.15, 0.15, d.size), d, ".", ms=4, alpha=0.6)
+        if col == "nees_mean":
+            ax.axhline(3.0, color="tab:green", lw=0.8, label="dof = 3")
+            ax.legend(fontsize="small")
+        if log:
+            ax.set_yscale("log")
+        ax.set_xticks(range(1, len(names) + 1), names, rotation=20, ha="right", fontsize="small")
+        ax.set_ylabel(ylabel)
+        ax.grid(True, which="both", lw=0.3)
+    fig.suptitle(title)
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out)
+    plt.close(fig)
+    return out
+
+
+__all__ += ["plot_error_bounds", "plot_nees", "plot_anees", "plot_sweep"]

@@ -1,0 +1,752 @@
+"""Monte Carlo runs and parameter grids on Dask (``sonarslam sweep``).
+
+A sweep is the product of seeds, back ends and the grid axes that apply to each back end. Every
+seed's world is simulated once (a Dask task; the folder is cached on disk, so back ends and later
+sweeps share it) and each (seed, back end, parameters) is one task that runs the back end and
+returns one flat row: the seed, back end and parameters, the ATE by the GPS protocol
+(:mod:`slam.metrics`), the pose NEES against the simulator's truth (:mod:`slam.evaluation`), the
+association counts, and the wall time. The rows make one table (``sweep.csv``); the NEES of every
+run on a common 1 s grid (``nees.npz``) give the ANEES of each configuration with its 95 % band
+(``summary.csv``, ``sweep.png``).
+
+Grid axes are ``<scope>.<field>=v1,v2,...``:
+
+* ``extractor.<field>``: a :class:`features.extractor.ExtractorConfig` field, over the settings
+  the pipeline uses (:func:`slam.pipeline.default_extractor_config`); applies to every
+  closed-loop back end;
+* ``<backend>.<field>[.<field>]``: a field of that back end's configuration (``ekf``:
+  :class:`slam.ekf.EkfConfig`; ``isam2``: :class:`slam.factor_graph.GraphConfig`), nested
+  dataclasses by dots (``ekf.association.gate_probability``); ``<backend>.association`` is short
+  for ``<backend>.association.method``.
+
+Back ends (:func:`run_backend`): ``dr`` and ``gps`` are the pose sources of the pipeline;
+the closed-loop ones of :func:`closed_loop_backends` are run here with
+:func:`slam.closed_loop.run_closed_loop` so that their settings can be changed (the pipeline
+runs them with the defaults: the same numbers when no axis is given, see the tests); any other
+name of :data:`slam.pipeline.BACKENDS` is run by :func:`slam.pipeline.run` (no grid axes).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import logging
+import math
+import os
+import re
+import shutil
+import tempfile
+import time
+import tomllib
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from datasets.source import Dataset, open_dataset
+from slam.evaluation import NeesSeries, anees, nees_on_grid, nees_series
+from slam.metrics import ate_against_gps
+from slam.trajectory import Trajectory
+
+__all__ = [
+    "BASELINES",
+    "ClosedLoopBackend",
+    "SweepTask",
+    "SweepResult",
+    "BackendRun",
+    "closed_loop_backends",
+    "available_backends",
+    "parse_seeds",
+    "parse_value",
+    "parse_grid",
+    "load_grid_toml",
+    "axis_applies",
+    "expand_tasks",
+    "apply_overrides",
+    "run_backend",
+    "simulate_cached",
+    "run_task",
+    "config_labels",
+    "format_summary",
+    "summarise",
+    "sweep",
+]
+
+#: Back ends that are pose sources, not estimators with settings.
+BASELINES = ("dr", "gps")
+
+#: Step (s) of the common time grid of the NEES series.
+NEES_PERIOD_S = 1.0
+
+_ALIASES = {"association": "association.method"}
+
+
+# -- back ends ------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ClosedLoopBackend:
+    """How to build a closed-loop back end from its configuration.
+
+    Attributes
+    ----------
+    config_type : type
+        Frozen dataclass of its settings (default-constructible).
+    factory : callable
+        ``(dataset, config) -> make_backend`` for :func:`slam.closed_loop.run_closed_loop`.
+    pose_source_of : callable or None
+        ``run_closed_loop``'s ``pose_source_of`` (None: the anchored odometry of filters).
+    """
+
+    config_type: type
+    factory: Callable[[Dataset, Any], Callable[..., Any]]
+    pose_source_of: Callable[..., Any] | None = None
+
+
+def _ekf_factory(dataset: Dataset, config: Any) -> Callable[..., Any]:
+    from slam.ekf import LineEkf
+
+    mounting = dataset.config.sonar_mounting
+
+    def make(t0_s: float, wTb0: np.ndarray, P0: np.ndarray) -> LineEkf:
+        return LineEkf(t0_s, wTb0, P0, mounting, config)
+
+    return make
+
+
+def _isam2_factory(dataset: Dataset, config: Any) -> Callable[..., Any]:
+    from slam.factor_graph import isam2_backend_factory
+
+    return isam2_backend_factory(dataset.config.sonar_mounting, config)
+
+
+def closed_loop_backends() -> dict[str, ClosedLoopBackend]:
+    """The closed-loop back ends whose settings a sweep can change: ``ekf``, and ``isam2`` when
+    :mod:`slam.factor_graph` provides ``GraphConfig``, ``isam2_backend_factory`` and
+    ``pose_source_of``. Both are run causally: the trajectory is the filtered pose at every
+    AHRS record, with its covariance (what the NEES needs)."""
+    from slam.ekf import EkfConfig
+
+    specs = {"ekf": ClosedLoopBackend(EkfConfig, _ekf_factory)}
+    try:
+        from slam.factor_graph import GraphConfig, isam2_backend_factory, pose_source_of  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        specs["isam2"] = ClosedLoopBackend(GraphConfig, _isam2_factory, pose_source_of)
+    return specs
+
+
+def available_backends() -> list[str]:
+    """Every back end name a sweep can run: baselines, closed loops, the pipeline's."""
+    from slam.pipeline import BACKENDS
+
+    names = list(BASELINES) + list(closed_loop_backends())
+    return names + [b for b in BACKENDS if b not in names]
+
+
+# -- parsing --------------------------------------------------------------------------------------
+
+
+def parse_seeds(text: str) -> list[int]:
+    """Seeds from ``"0-49"``, ``"3"`` or ``"0,2,5-7"`` (ranges inclusive), in order, unique."""
+    seeds: list[int] = []
+    for part in text.split(","):
+        part = part.strip()
+        m = re.fullmatch(r"(\d+)\s*-\s*(\d+)", part)
+        if m:
+            a, b = int(m.group(1)), int(m.group(2))
+            if b < a:
+                raise ValueError(f"--seeds: empty range {part!r}")
+            seeds.extend(range(a, b + 1))
+        elif re.fullmatch(r"\d+", part):
+            seeds.append(int(part))
+        else:
+            raise ValueError(f"--seeds: expected N, A-B or a comma list of them, got {text!r}")
+    return list(dict.fromkeys(seeds))
+
+
+def parse_value(text: str) -> Any:
+    """A grid value: int, float, true/false, none, else the string itself."""
+    t = text.strip()
+    low = t.lower()
+    if low in ("true", "false"):
+        return low == "true"
+    if low in ("none", "null"):
+        return None
+    for kind in (int, float):
+        try:
+            return kind(t)
+        except ValueError:
+            pass
+    return t
+
+
+def parse_grid(specs: Iterable[str]) -> dict[str, list[Any]]:
+    """Grid axes from ``["ekf.association=jcbb,nn", "extractor.min_votes=10,15"]``."""
+    grid: dict[str, list[Any]] = {}
+    for spec in specs:
+        name, sep, values = spec.partition("=")
+        name = name.strip()
+        if not sep or "." not in name or not values.strip():
+            raise ValueError(f"--grid: expected SCOPE.FIELD=V1,V2,..., got {spec!r}")
+        grid[name] = [parse_value(v) for v in values.split(",")]
+    return grid
+
+
+def load_grid_toml(path: str | Path) -> dict[str, list[Any]]:
+    """Grid axes from a TOML file: a ``[grid]`` table (or the top level) of arrays, flat
+    (``"ekf.association" = ["jcbb", "nn"]``) or nested (``[grid.extractor] min_votes = [10]``)."""
+    with open(path, "rb") as f:
+        data = tomllib.load(f)
+    data = data.get("grid", data)
+    grid: dict[str, list[Any]] = {}
+
+    def walk(prefix: str, node: dict[str, Any]) -> None:
+        for k, v in node.items():
+            name = f"{prefix}.{k}" if prefix else k
+            if isinstance(v, dict):
+                walk(name, v)
+            else:
+                grid[name] = list(v) if isinstance(v, list) else [v]
+
+    walk("", data)
+    for name in grid:
+        if "." not in name:
+            raise ValueError(f"{path}: grid axis {name!r} needs a scope (extractor., ekf., ...)")
+    return grid
+
+
+# -- tasks ----------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SweepTask:
+    """One run: a seed, a back end and its parameter values (sorted ``(axis, value)`` pairs)."""
+
+    seed: int
+    backend: str
+    params: tuple[tuple[str, Any], ...] = ()
+
+    @property
+    def params_dict(self) -> dict[str, Any]:
+        return dict(self.params)
+
+
+def axis_applies(backend: str, axis: str) -> bool:
+    """Whether a grid axis changes ``backend`` (``extractor.*``: every closed loop)."""
+    scope = axis.split(".", 1)[0]
+    loops = closed_loop_backends()
+    return backend in loops and scope in ("extractor", backend)
+
+
+def expand_tasks(
+    seeds: Sequence[int], backends: Sequence[str], grid: dict[str, list[Any]]
+) -> list[SweepTask]:
+    """Seeds x back ends x the product of the axes that apply to each back end.
+
+    Raises ValueError for an unknown back end, an axis no back end uses, or an axis on a back
+    end run by the pipeline (no settings).
+    """
+    known = available_backends()
+    for b in backends:
+        if b not in known:
+            raise ValueError(f"--backend: unknown {b!r}; one of {known}")
+    loops = closed_loop_backends()
+    for axis in grid:
+        scope = axis.split(".", 1)[0]
+        if scope != "extractor" and scope not in loops:
+            if scope in known:
+                raise ValueError(
+                    f"--grid {axis}: back end {scope!r} has no settings a sweep can change"
+                )
+            raise ValueError(
+                f"--grid {axis}: unknown scope {scope!r}; extractor or one of {list(loops)}"
+            )
+        if not any(axis_applies(b, axis) for b in backends):
+            raise ValueError(f"--grid {axis}: no back end of {list(backends)} uses it")
+    tasks: list[SweepTask] = []
+    for seed in seeds:
+        for b in backends:
+            axes = sorted(a for a in grid if axis_applies(b, a))
+            for values in itertools.product(*(grid[a] for a in axes)):
+                tasks.append(SweepTask(int(seed), b, tuple(zip(axes, values, strict=True))))
+    return tasks
+
+
+def _set_path(config: Any, path: Sequence[str], value: Any) -> Any:
+    if not dataclasses.is_dataclass(config) or isinstance(config, type):
+        raise ValueError(f"cannot set {'.'.join(path)} on a {type(config).__name__}")
+    names = [f.name for f in dataclasses.fields(config)]
+    if path[0] not in names:
+        raise ValueError(f"unknown field {path[0]!r} of {type(config).__name__}; one of {names}")
+    if len(path) == 1:
+        return dataclasses.replace(config, **{path[0]: value})
+    inner = _set_path(getattr(config, path[0]), path[1:], value)
+    return dataclasses.replace(config, **{path[0]: inner})
+
+
+def apply_overrides(config: Any, overrides: dict[str, Any]) -> Any:
+    """``config`` with dotted fields (``"association.method"``, aliases too) replaced."""
+    for name, value in overrides.items():
+        path = _ALIASES.get(name, name).split(".")
+        config = _set_path(config, path, value)
+    return config
+
+
+@dataclass
+class BackendRun:
+    """A back end's trajectory and the metrics of its run (the keys of ``metrics.json``)."""
+
+    trajectory: Trajectory
+    metrics: dict[str, Any]
+    backend: Any = None
+    extras: dict[str, Any] = field(default_factory=dict)
+
+
+def _split(params: dict[str, Any], backend: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    ext: dict[str, Any] = {}
+    own: dict[str, Any] = {}
+    for name, value in params.items():
+        scope, _, rest = name.partition(".")
+        if scope == "extractor":
+            ext[rest] = value
+        elif scope == backend:
+            own[rest] = value
+        else:
+            raise ValueError(f"parameter {name!r} does not apply to back end {backend!r}")
+    return ext, own
+
+
+def run_backend(
+    dataset: Dataset,
+    backend: str,
+    params: dict[str, Any] | None = None,
+    t_end_s: float | None = None,
+    progress: bool = False,
+) -> BackendRun:
+    """Run one back end on a dataset with optional parameter overrides; no file is written.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        With GPS (start pose and ATE).
+    backend : str
+        One of :func:`available_backends`.
+    params : dict, optional
+        Grid values (``"extractor.min_votes": 10``, ``"ekf.association": "nn"``, ...).
+    t_end_s : float, optional
+        Stop at this time (Unix s): a shorter run (the pipeline fallback runs all and clips).
+    progress : bool
+        Progress bar of the closed loop.
+
+    Returns
+    -------
+    BackendRun
+        ``metrics`` has the ATE fields, ``wall_s``, ``data_s``, ``realtime_factor`` and, for
+        closed loops, ``landmarks``, ``line_features``, ``assoc_*``, ``extractor_s``,
+        ``backend_s``, ``beams`` (as :func:`slam.pipeline.run`).
+    """
+    from slam.pipeline import POSE_SOURCES, default_extractor_config
+
+    if dataset.gps is None:
+        raise ValueError(f"{dataset.root}: runs need *_DGPS.log for the start pose and the ATE")
+    params = dict(params or {})
+    loops = closed_loop_backends()
+    extra: dict[str, Any] = {}
+    backend_obj = None
+    wall0 = time.perf_counter()
+    if backend in BASELINES:
+        if params:
+            raise ValueError(f"back end {backend!r} has no settings, got {sorted(params)}")
+        trajectory = POSE_SOURCES[backend](dataset)
+    elif backend in loops:
+        from slam.closed_loop import run_closed_loop
+
+        spec = loops[backend]
+        ext, own = _split(params, backend)
+        ext_cfg = default_extractor_config(dataset)
+        if ext:
+            ext_cfg = apply_overrides(ext_cfg, ext)
+        cfg = apply_overrides(spec.config_type(), own)
+        result = run_closed_loop(
+            dataset,
+            spec.factory(dataset, cfg),
+            ext_cfg,
+            pose_source_of=spec.pose_source_of,
+            progress=progress,
+            t_end_s=t_end_s,
+        )
+        trajectory, backend_obj = result.trajectory, result.backend
+        stats = dict(getattr(backend_obj, "stats", {}))
+        n_landmarks = len(getattr(backend_obj, "landmarks", []))
+        extra = {
+            "landmarks": n_landmarks,
+            "line_features": len(result.features),
+            **{f"assoc_{k}": v for k, v in stats.items()},
+            "extractor_s": result.extractor_s,
+            "backend_s": result.backend_s,
+            "beams": result.counts.get("beams", 0),
+        }
+    else:
+        from slam.pipeline import BACKENDS, run
+
+        if backend not in BACKENDS:
+            raise ValueError(f"unknown back end {backend!r}; one of {available_backends()}")
+        if params:
+            raise ValueError(
+                f"back end {backend!r} is run by slam.pipeline.run, which takes no settings"
+            )
+        with tempfile.TemporaryDirectory(prefix=f"sweep-{backend}-") as tmp:
+            res = run(dataset.root, backend, tmp, progress=progress)
+        trajectory = res.trajectory
+        extra = {k: v for k, v in res.metrics.items() if k not in ("source", "backend")}
+    if t_end_s is not None and trajectory.t_s[-1] > t_end_s:
+        trajectory = trajectory.clip(trajectory.t_s[0], t_end_s)
+    wall_s = time.perf_counter() - wall0
+    if "wall_s" in extra:  # the pipeline timed itself
+        wall_s = float(extra.pop("wall_s"))
+    t0, t1 = trajectory.span_s
+    metrics: dict[str, Any] = {
+        "source": str(dataset.root),
+        "backend": backend,
+        **ate_against_gps(trajectory, dataset.gps).as_dict(),
+        "wall_s": wall_s,
+        "data_s": t1 - t0,
+        "realtime_factor": (t1 - t0) / wall_s if wall_s > 0 else float("inf"),
+        **{k: v for k, v in extra.items() if k not in ("data_s", "realtime_factor")},
+    }
+    return BackendRun(trajectory, metrics, backend_obj)
+
+
+def simulate_cached(world: str, seed: int, duration_s: float | None, cache_dir: str | Path) -> str:
+    """The folder of a simulated world and seed, simulated once (atomically) and then reused."""
+    from datasets.simulator import simulate
+
+    tag = "default" if duration_s is None else f"{duration_s:g}s"
+    folder = Path(cache_dir) / f"{world}_{seed}_{tag}"
+    if (folder / "truth.json").is_file():
+        return str(folder)
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}-", dir=folder.parent))
+    try:
+        simulate(world, seed=seed, out_dir=tmp, duration_s=duration_s)
+        try:
+            os.rename(tmp, folder)  # atomic; fails when another process was first
+        except OSError:
+            if not (folder / "truth.json").is_file():
+                raise
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return str(folder)
+
+
+def _nees_grid(
+    trajectory: Trajectory, truth: Trajectory, period_s: float
+) -> dict[str, tuple[NeesSeries, np.ndarray]]:
+    t0, t1 = trajectory.span_s
+    grid = np.arange(0.0, t1 - t0 + 1e-9, period_s)
+    out = {}
+    for comp in ("pose", "position"):
+        s = nees_series(trajectory, truth, comp)
+        out[comp] = (s, nees_on_grid(s, t0, grid))
+    return out
+
+
+def run_task(
+    task: SweepTask,
+    source: str,
+    world: str | None = None,
+    duration_s: float | None = None,
+    nees_period_s: float = NEES_PERIOD_S,
+) -> dict[str, Any]:
+    """Run one task on a simulated folder; a failed run is a row with its ``error``.
+
+    Returns
+    -------
+    dict
+        ``row``: the flat row (``seed``, ``backend``, the parameters by axis name, ``world``,
+        ``duration_s``, the ATE fields, ``nees_mean``, ``nees_in_band_fraction``,
+        ``nees_position_mean``, the association counts, ``wall_s``, ..., ``error``);
+        ``nees_pose`` and ``nees_position``: NEES on the grid ``0, period, ...`` s after the
+        start (NaN where missing).
+    """
+    from slam.pose_sources import truth_trajectory
+
+    row: dict[str, Any] = {
+        "seed": task.seed,
+        "backend": task.backend,
+        **task.params_dict,
+        "world": world,
+        "duration_s": duration_s,
+    }
+    empty = np.zeros(0)
+    try:
+        dataset = open_dataset(source)
+        run = run_backend(dataset, task.backend, task.params_dict)
+        row.update({k: v for k, v in run.metrics.items() if k not in ("source", "backend")})
+        nees_pose = nees_position = empty
+        if dataset.truth is not None and run.trajectory.covs is not None:
+            grid = _nees_grid(run.trajectory, truth_trajectory(dataset), nees_period_s)
+            s_pose, nees_pose = grid["pose"]
+            s_pos, nees_position = grid["position"]
+            row["nees_mean"] = s_pose.mean
+            row["nees_in_band_fraction"] = s_pose.in_band_fraction()
+            row["nees_position_mean"] = s_pos.mean
+        row["error"] = ""
+    except Exception as exc:  # one failed run must not stop a 50-seed sweep
+        row["error"] = f"{type(exc).__name__}: {exc}"
+        nees_pose = nees_position = empty
+    return {"row": row, "nees_pose": nees_pose, "nees_position": nees_position}
+
+
+# -- aggregation ----------------------------------------------------------------------------------
+
+
+def _pad(rows: Sequence[np.ndarray]) -> np.ndarray:
+    k = max((r.size for r in rows), default=0)
+    out = np.full((len(rows), k), np.nan)
+    for i, r in enumerate(rows):
+        out[i, : r.size] = r
+    return out
+
+
+def _config_columns(table: pd.DataFrame) -> list[str]:
+    return ["backend"] + sorted(c for c in table.columns if "." in c)
+
+
+def _ordered(table: pd.DataFrame) -> pd.DataFrame:
+    """Columns: seed, backend, the parameters, the rest, error last."""
+    if table.empty:
+        return table
+    first = ["seed"] + _config_columns(table)
+    rest = [c for c in table.columns if c not in first and c != "error"]
+    return table[first + rest + (["error"] if "error" in table else [])]
+
+
+def _missing(v: Any) -> bool:
+    return v is None or (isinstance(v, float) and math.isnan(v)) or v is pd.NA
+
+
+def config_labels(table: pd.DataFrame) -> np.ndarray:
+    """A label per row naming its configuration: ``"ekf association=nn"`` (the back end, then
+    the parameter values that apply to it, scope dropped)."""
+    params = _config_columns(table)[1:]
+    out = []
+    for _, row in table.iterrows():
+        parts = [str(row["backend"])]
+        for c in params:
+            if not _missing(row[c]):
+                parts.append(f"{c.split('.', 1)[1]}={row[c]}")
+        out.append(" ".join(parts))
+    return np.array(out, dtype=object)
+
+
+def summarise(
+    table: pd.DataFrame, nees_pose: np.ndarray, nees_position: np.ndarray
+) -> pd.DataFrame:
+    """One row per configuration (back end and parameter values) over its seeds.
+
+    Columns: the configuration, ``runs``, ``failed``, ``ate_mean_m`` (mean over the runs of
+    their ATE mean), ``ate_mean_sd_m``, ``ate_rmse_m`` (mean), ``anees`` (pose, 3 dof: mean over
+    time of the mean over runs), ``anees_in_band_fraction`` (times whose ANEES is inside the
+    95 % band of that many runs), ``anees_band_lo/hi`` (for all the runs), ``anees_position``
+    (2 dof) and its band, ``wall_s`` (mean).
+    """
+    cols = _config_columns(table)
+    key = config_labels(table)
+    out = []
+    for k in dict.fromkeys(key):
+        idx = np.flatnonzero(key == k)
+        sub = table.iloc[idx]
+        ok = idx[(sub["error"].fillna("") == "").to_numpy()]
+        good = table.iloc[ok]
+        rec: dict[str, Any] = {"config": k, **{c: sub.iloc[0][c] for c in cols}}
+        rec.update(runs=int(ok.size), failed=int(idx.size - ok.size))
+        if ok.size:
+            rec["ate_mean_m"] = float(good["ate_mean_m"].mean())
+            rec["ate_mean_sd_m"] = float(good["ate_mean_m"].std(ddof=1)) if ok.size > 1 else 0.0
+            rec["ate_rmse_m"] = float(good["ate_rmse_m"].mean())
+            rec["wall_s"] = float(good["wall_s"].mean())
+            for name, arr, dof in (("anees", nees_pose, 3), ("anees_position", nees_position, 2)):
+                X = arr[ok] if arr.size else np.zeros((0, 0))
+                if X.size and np.isfinite(X).any():
+                    s = anees(X, dof).summary()
+                    rec[name] = s["anees"]
+                    rec[f"{name}_in_band_fraction"] = s["anees_in_band_fraction"]
+                    rec[f"{name}_band_lo"] = s["anees_band_lo"]
+                    rec[f"{name}_band_hi"] = s["anees_band_hi"]
+        out.append(rec)
+    return pd.DataFrame(out)
+
+
+@dataclass
+class SweepResult:
+    """The sweep's table, summary and files."""
+
+    table: pd.DataFrame
+    summary: pd.DataFrame
+    nees_pose: np.ndarray
+    nees_position: np.ndarray
+    out_dir: Path
+    files: dict[str, Path]
+    wall_s: float
+
+
+def _client(scheduler: str | None, n_workers: int):  # noqa: ANN202
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler:
+        return Client(scheduler), None
+    cluster = LocalCluster(
+        n_workers=n_workers,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=":0",  # a free port: several clusters may run at once
+        silence_logs=logging.ERROR,
+    )
+    return Client(cluster), cluster
+
+
+def sweep(
+    seeds: Sequence[int],
+    backends: Sequence[str],
+    out_dir: str | Path,
+    grid: dict[str, list[Any]] | None = None,
+    world: str = "harbour",
+    duration_s: float | None = None,
+    cache_dir: str | Path | None = None,
+    scheduler: str | None = None,
+    n_workers: int = 2,
+    progress: bool = True,
+    nees_period_s: float = NEES_PERIOD_S,
+) -> SweepResult:
+    """Run a Monte Carlo sweep on Dask and write its table, summary and plot.
+
+    Parameters
+    ----------
+    seeds : sequence of int
+    backends : sequence of str
+        Names of :func:`available_backends`.
+    out_dir : str or Path
+        Receives ``sweep.csv`` (one row per run), ``summary.csv`` (one per configuration),
+        ``nees.npz`` (``pose`` (R, K), ``position`` (R, K), ``t_rel_s`` (K,): row ``i`` is
+        ``sweep.csv``'s), ``anees.png`` and ``sweep.png``.
+    grid : dict of str to list, optional
+        Axes (see the module docstring).
+    world : {"harbour", "random", "pool"}
+        Simulated world.
+    duration_s : float, optional
+        Simulated length (s); default the world's (600 s for the harbours).
+    cache_dir : str or Path, optional
+        Simulated folders, one per world, seed and length; default ``out_dir/sim``.
+    scheduler : str, optional
+        Address of a running Dask scheduler; default a ``LocalCluster`` of ``n_workers``
+        processes of one thread; ``"synchronous"`` runs the tasks here, one after another.
+    n_workers : int
+        Workers of the local cluster.
+    progress : bool
+        A progress bar over the finished tasks.
+    nees_period_s : float
+        Step of the NEES grid (s).
+    """
+    from tqdm import tqdm
+
+    from slam.plots import plot_anees, plot_sweep
+
+    wall0 = time.perf_counter()
+    grid = dict(grid or {})
+    tasks = expand_tasks(seeds, backends, grid)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    cache = Path(cache_dir) if cache_dir is not None else out / "sim"
+    results: list[dict[str, Any] | None] = [None] * len(tasks)
+    bar = tqdm(total=len(tasks), desc="sweep", unit="run", disable=not progress)
+    if scheduler == "synchronous":
+        sims = {s: simulate_cached(world, s, duration_s, cache) for s in dict.fromkeys(seeds)}
+        for i, task in enumerate(tasks):
+            results[i] = run_task(task, sims[task.seed], world, duration_s, nees_period_s)
+            bar.update()
+    else:
+        from dask.distributed import as_completed
+
+        client, cluster = _client(scheduler, n_workers)
+        try:
+            sims = {
+                s: client.submit(
+                    simulate_cached, world, s, duration_s, str(cache.resolve()), pure=False
+                )
+                for s in dict.fromkeys(seeds)
+            }
+            futures = {
+                client.submit(
+                    run_task,
+                    task,
+                    sims[task.seed],
+                    world,
+                    duration_s,
+                    nees_period_s,
+                    pure=False,
+                ): i
+                for i, task in enumerate(tasks)
+            }
+            for fut in as_completed(futures):
+                results[futures[fut]] = fut.result()
+                bar.update()
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    bar.close()
+    done = [r for r in results if r is not None]
+    table = _ordered(pd.DataFrame([r["row"] for r in done]))
+    nees_pose = _pad([r["nees_pose"] for r in done])
+    nees_position = _pad([r["nees_position"] for r in done])
+    t_rel_s = np.arange(nees_pose.shape[1]) * nees_period_s
+    summary = summarise(table, nees_pose, nees_position)
+    files = {
+        "table": out / "sweep.csv",
+        "summary": out / "summary.csv",
+        "nees": out / "nees.npz",
+        "plot": out / "sweep.png",
+        "anees_plot": out / "anees.png",
+    }
+    table.to_csv(files["table"], index=False)
+    try:
+        import pyarrow  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        files["parquet"] = out / "sweep.parquet"
+        table.to_parquet(files["parquet"])
+    summary.to_csv(files["summary"], index=False)
+    np.savez_compressed(files["nees"], pose=nees_pose, position=nees_position, t_rel_s=t_rel_s)
+    labels = config_labels(table)
+    title = f"{world}, {len(dict.fromkeys(seeds))} seeds" + (
+        "" if duration_s is None else f", {duration_s:g} s"
+    )
+    plot_sweep(files["plot"], table, labels, title)
+    curves = {}
+    for label in dict.fromkeys(labels):
+        rows = np.flatnonzero((labels == label) & (table["error"].fillna("") == "").to_numpy())
+        X = nees_pose[rows] if nees_pose.size else np.zeros((0, 0))
+        if X.size and np.isfinite(X).any():
+            curves[label] = anees(X, 3, t_rel_s)
+    plot_anees(files["anees_plot"], curves, f"pose ANEES (3 dof) over the runs: {title}")
+    return SweepResult(
+        table, summary, nees_pose, nees_position, out, files, time.perf_counter() - wall0
+    )
+
+
+def format_summary(summary: pd.DataFrame) -> str:
+    """The summary as aligned text for the terminal."""
+    if summary.empty:
+        return "(no runs)"
+    show = summary.copy()
+    for c in show.columns:
+        if show[c].dtype.kind == "f":
+            show[c] = show[c].map(lambda v: "" if math.isnan(v) else f"{v:.3g}")
+    return show.to_string(index=False)

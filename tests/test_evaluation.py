@@ -1,0 +1,231 @@
+"""slam.evaluation: evo's APE/RPE and the NEES/ANEES checked on trajectories with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from datasets.marina import GpsSeries
+from slam.evaluation import (
+    COV_FILE,
+    anees,
+    chi2_band,
+    evo_ape,
+    evo_rpe,
+    load_run_trajectory,
+    mean_nees_band,
+    nees,
+    nees_on_grid,
+    nees_series,
+    nis,
+    write_trajectory_covariances,
+)
+from slam.metrics import ate_against_gps
+from slam.trajectory import Trajectory, write_tum
+
+T0_S = 1.7e9
+
+
+def loop_path(n: int = 200, dt_s: float = 0.5) -> Trajectory:
+    """A smooth closed loop (an ellipse, 40 m x 20 m) at ``dt_s`` steps, yaw along the path."""
+    t = T0_S + dt_s * np.arange(n)
+    a = np.linspace(0.0, 2.0 * np.pi, n)
+    x, y = 20.0 * np.cos(a), 10.0 * np.sin(a)
+    yaw = np.arctan2(10.0 * np.cos(a), -20.0 * np.sin(a))
+    return Trajectory(t, np.column_stack([x, y, yaw]))
+
+
+# -- evo APE / RPE --------------------------------------------------------------------------------
+
+
+def test_constant_offset_gives_that_ape_and_alignment_removes_it():
+    truth = loop_path()
+    est = Trajectory(truth.t_s, truth.poses_wTb + np.array([3.0, 4.0, 0.0]))
+    ape = evo_ape(truth, est)
+    assert ape.n == truth.t_s.size
+    for v in (ape.rmse_m, ape.mean_m, ape.median_m, ape.min_m, ape.max_m):
+        assert v == pytest.approx(5.0, abs=1e-9)
+    assert ape.sd_m == pytest.approx(0.0, abs=1e-9)
+    assert evo_ape(truth, est, align=True).rmse_m == pytest.approx(0.0, abs=1e-6)
+
+
+def test_rotation_about_the_start_is_removed_by_alignment_only():
+    truth = loop_path()
+    c, s = np.cos(0.1), np.sin(0.1)
+    xy = truth.poses_wTb[:, :2] @ np.array([[c, s], [-s, c]]) + np.array([1.0, -2.0])
+    est = Trajectory(truth.t_s, np.column_stack([xy, truth.poses_wTb[:, 2] + 0.1]))
+    # unaligned: the largest error is at the point farthest from the rotation centre, known
+    expected = np.hypot(*(xy - truth.poses_wTb[:, :2]).T)
+    ape = evo_ape(truth, est)
+    assert ape.max_m == pytest.approx(expected.max(), abs=1e-9)
+    assert ape.mean_m == pytest.approx(expected.mean(), abs=1e-9)
+    assert evo_ape(truth, est, align=True).max_m == pytest.approx(0.0, abs=1e-6)
+
+
+def test_evo_ape_equals_the_gps_ate_protocol():
+    """Estimate at a jittered 10 Hz, GPS at 1 Hz with noise: evo's interpolating association
+    gives the errors of slam.metrics (the estimate interpolated at every fix), to 1e-9 m."""
+    rng = np.random.default_rng(7)
+    truth = loop_path(n=400, dt_s=0.5)
+    t_est = T0_S + 0.1 * np.arange(1996) + rng.uniform(-0.03, 0.03, 1996)
+    t_est[0], t_est[-1] = T0_S, T0_S + 199.5
+    est = Trajectory(t_est, truth.poses(t_est) + rng.normal(0.0, 0.3, (t_est.size, 3)) * [1, 1, 0])
+    t_gps = T0_S + np.arange(0.0, 199.6, 1.0)
+    en = truth.poses(t_gps)[:, :2] + rng.normal(0.0, 0.5, (t_gps.size, 2))
+    gps = GpsSeries(t_gps, en, (42.0, 3.0))
+    ate = ate_against_gps(est, gps)
+    ref = Trajectory(t_gps, np.column_stack([en, np.zeros(t_gps.size)]))
+    ape = evo_ape(ref, est)
+    assert ape.n == ate.ate_n == t_gps.size
+    assert ape.mean_m == pytest.approx(ate.ate_mean_m, abs=1e-9)
+    assert ape.rmse_m == pytest.approx(ate.ate_rmse_m, abs=1e-9)
+    assert ape.max_m == pytest.approx(ate.ate_max_m, abs=1e-9)
+
+
+def test_rpe_per_distance_of_a_10_percent_scale_error():
+    """Straight line at 1 m per pose, estimate shrunk by 0.9: over 10 m of reference path the
+    relative error is 1.0 m; over the estimate's path (evo's default: the first pose at least
+    10 m of path on) pairs are 12 poses (10.8 m) apart, so 1.2 m."""
+    n = 101
+    t = T0_S + np.arange(n, dtype=float)
+    truth = Trajectory(t, np.column_stack([np.arange(n, dtype=float), np.zeros(n), np.zeros(n)]))
+    est = Trajectory(t, truth.poses_wTb * [0.9, 1.0, 1.0])
+    rpe_ref = evo_rpe(truth, est, delta_m=10.0, pairs_from_reference=True)
+    assert rpe_ref.n == 10
+    assert rpe_ref.min_m == pytest.approx(1.0, abs=1e-9)
+    assert rpe_ref.max_m == pytest.approx(1.0, abs=1e-9)
+    rpe_est = evo_rpe(truth, est, delta_m=10.0)
+    assert rpe_est.n == 8
+    assert rpe_est.mean_m == pytest.approx(1.2, abs=1e-9)
+    assert rpe_est.sd_m == pytest.approx(0.0, abs=1e-9)
+
+
+def test_unknown_sync_is_refused():
+    truth = loop_path(n=10)
+    with pytest.raises(ValueError, match="sync must be one of"):
+        evo_ape(truth, truth, sync="linear")
+
+
+# -- covariances on disk --------------------------------------------------------------------------
+
+
+def test_covariances_round_trip_beside_the_tum(tmp_path):
+    rng = np.random.default_rng(1)
+    tr = loop_path(n=50)
+    A = rng.normal(size=(50, 3, 3))
+    covs = A @ A.transpose(0, 2, 1) + 0.1 * np.eye(3)
+    tr = Trajectory(tr.t_s, tr.poses_wTb, covs)
+    write_tum(tmp_path / "trajectory.tum", tr)
+    assert load_run_trajectory(tmp_path).covs is None  # absent: handled
+    assert write_trajectory_covariances(tmp_path / COV_FILE, tr) == tmp_path / COV_FILE
+    back = load_run_trajectory(tmp_path)
+    np.testing.assert_array_equal(back.covs, covs)
+    np.testing.assert_allclose(back.poses_wTb, tr.poses_wTb, atol=1e-12)
+    no_cov = Trajectory(tr.t_s, tr.poses_wTb)
+    assert write_trajectory_covariances(tmp_path / "none.npz", no_cov) is None
+    assert not (tmp_path / "none.npz").exists()
+
+
+def test_covariances_of_other_times_are_refused(tmp_path):
+    tr = loop_path(n=20)
+    write_tum(tmp_path / "trajectory.tum", tr)
+    other = Trajectory(tr.t_s + 0.25, tr.poses_wTb, np.broadcast_to(np.eye(3), (20, 3, 3)).copy())
+    write_trajectory_covariances(tmp_path / COV_FILE, other)
+    with pytest.raises(ValueError, match="do not match"):
+        load_run_trajectory(tmp_path)
+
+
+# -- NEES, NIS, ANEES -----------------------------------------------------------------------------
+
+
+def test_nees_of_known_errors_with_the_angle_wrapped():
+    assert nees([[1.0, 2.0, 0.1]], [np.diag([1.0, 4.0, 0.01])])[0] == pytest.approx(3.0, abs=1e-12)
+    t = T0_S + np.arange(3.0)
+    truth = Trajectory(t, np.array([[0.0, 0.0, -np.pi + 0.05]] * 3))
+    est = Trajectory(
+        t, np.array([[0.0, 0.0, np.pi - 0.05]] * 3), np.broadcast_to(np.eye(3) * 0.01, (3, 3, 3))
+    )
+    s = nees_series(est, truth)
+    assert s.dof == 3
+    np.testing.assert_allclose(s.nees, 1.0, atol=1e-9)  # error -0.1 rad, not 2 pi - 0.1
+    assert nees_series(est, truth, "position").nees == pytest.approx([0.0] * 3, abs=1e-12)
+    assert nees_series(est, truth, "heading").dof == 1
+    with pytest.raises(ValueError, match="covariances"):
+        nees_series(truth, truth)
+
+
+def test_nis_of_known_innovations():
+    s = nis([0.0, 1.0], [[0.3, 0.0], [0.0, 0.02]], [np.diag([0.09, 1.0]), np.diag([1.0, 1e-4])])
+    np.testing.assert_allclose(s.nees, [1.0, 4.0], atol=1e-12)
+    assert s.dof == 2
+
+
+def test_chi2_bands_match_the_tables():
+    assert chi2_band(3) == pytest.approx((0.2158, 9.3484), abs=1e-4)
+    assert chi2_band(2) == pytest.approx((0.0506, 7.3778), abs=1e-4)
+    # chi2(150) 2.5 % and 97.5 % points 117.985 and 185.800, over 50 runs
+    assert mean_nees_band(50, 3) == pytest.approx((2.35969, 3.71601), abs=1e-4)
+    with pytest.raises(ValueError):
+        mean_nees_band(0, 3)
+
+
+def test_nees_on_grid_takes_the_last_value_at_or_before():
+    from slam.evaluation import NeesSeries
+
+    s = NeesSeries(T0_S + np.array([0.0, 1.0, 2.0, 3.0]), np.array([1.0, 2.0, 3.0, 4.0]), 3)
+    got = nees_on_grid(s, T0_S, [0.0, 0.5, 1.5, 3.0, 4.0, 10.0])
+    np.testing.assert_array_equal(got[:5], [1.0, 1.0, 2.0, 4.0, 4.0])
+    assert np.isnan(got[5])  # more than one grid step past the last sample
+    assert np.isnan(nees_on_grid(s, T0_S - 5.0, [0.0, 1.0])).all()
+
+
+def monte_carlo(scale: float, n_runs: int = 50, n_times: int = 100, seed: int = 3):
+    """N runs of a trajectory whose errors are drawn from per-time covariances P_k; the runs
+    report ``scale * P_k``. Returns the NEES array (N, K) through nees_series and nees_on_grid."""
+    rng = np.random.default_rng(seed)
+    truth = loop_path(n=n_times, dt_s=1.0)
+    A = rng.normal(size=(n_times, 3, 3)) * np.array([0.5, 0.5, 0.02])[:, None]
+    P = A @ A.transpose(0, 2, 1) + np.diag([0.01, 0.01, 1e-5])
+    L = np.linalg.cholesky(P)
+    grid = np.arange(n_times, dtype=float)
+    rows = []
+    for _ in range(n_runs):
+        e = np.einsum("kij,kj->ki", L, rng.standard_normal((n_times, 3)))
+        est = Trajectory(truth.t_s, truth.poses_wTb + e, scale * P)
+        rows.append(nees_on_grid(nees_series(est, truth), truth.t_s[0], grid))
+    return np.array(rows), grid
+
+
+def test_anees_of_errors_drawn_from_the_covariance_is_inside_the_band():
+    X, grid = monte_carlo(1.0)
+    res = anees(X, 3, grid)
+    assert (res.n_runs == 50).all()
+    assert res.band_lo[0] == pytest.approx(2.35969, abs=1e-4)
+    assert res.band_hi[0] == pytest.approx(3.71601, abs=1e-4)
+    assert res.in_band_fraction >= 0.9  # 0.95 expected, binomial sd 0.022 over 100 times
+    lo, hi = mean_nees_band(X.size, 3)  # the mean of all N K independent NEES
+    assert lo <= res.mean <= hi
+    s = res.summary()
+    assert s["anees_runs"] == 50 and s["anees_band_lo"] == pytest.approx(2.35969, abs=1e-4)
+
+
+@pytest.mark.parametrize(("scale", "side"), [(4.0, "below"), (0.25, "above")])
+def test_anees_of_a_scaled_covariance_is_outside_the_band(scale, side):
+    X, grid = monte_carlo(scale)
+    res = anees(X, 3, grid)
+    assert res.in_band_fraction <= 0.02
+    assert res.mean == pytest.approx(3.0 / scale, rel=0.1)
+    if side == "below":
+        assert res.mean < res.band_lo[0]
+    else:
+        assert res.mean > res.band_hi[0]
+
+
+def test_anees_counts_the_runs_present_at_each_time():
+    X = np.array([[1.0, 2.0, np.nan], [3.0, np.nan, np.nan]])
+    res = anees(X, 2)
+    np.testing.assert_array_equal(res.n_runs, [2, 1, 0])
+    np.testing.assert_allclose(res.anees[:2], [2.0, 2.0], atol=1e-12)
+    assert np.isnan(res.anees[2])
+    assert res.band_lo[1] == pytest.approx(chi2_band(2)[0], abs=1e-12)
+    assert res.band_lo[0] == pytest.approx(mean_nees_band(2, 2)[0], abs=1e-12)

@@ -1,0 +1,191 @@
+"""slam.sweep: parsing, task expansion, overrides, and sweeps whose rows equal direct runs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import slam.sweep as sweep_mod
+from datasets.source import open_dataset
+from slam.cli import main
+from slam.ekf import EkfConfig
+from slam.evaluation import anees, nees_on_grid, nees_series
+from slam.metrics import ate_against_gps
+from slam.pipeline import run
+from slam.pose_sources import dead_reckoning_trajectory, truth_trajectory
+from slam.sweep import (
+    apply_overrides,
+    expand_tasks,
+    load_grid_toml,
+    parse_grid,
+    parse_seeds,
+    parse_value,
+    run_backend,
+    simulate_cached,
+    sweep,
+)
+
+DURATION_S = 90.0
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    """Two short harbours, simulated once for the module (as a sweep caches them)."""
+    root = tmp_path_factory.mktemp("simcache")
+    for seed in (0, 1):
+        simulate_cached("harbour", seed, DURATION_S, root)
+    return root
+
+
+def test_seeds_parse_ranges_and_lists():
+    assert parse_seeds("0-49") == list(range(50))
+    assert parse_seeds("0,2,5-7,2") == [0, 2, 5, 6, 7]
+    assert parse_seeds("3") == [3]
+    for bad in ("a", "5-2", "1-", ""):
+        with pytest.raises(ValueError, match="--seeds"):
+            parse_seeds(bad)
+
+
+def test_grid_values_are_typed():
+    assert [parse_value(v) for v in ("10", "0.5", "true", "None", "jcbb")] == [
+        10,
+        0.5,
+        True,
+        None,
+        "jcbb",
+    ]
+    grid = parse_grid(["ekf.association=jcbb,nn", "extractor.min_votes=10,15"])
+    assert grid == {"ekf.association": ["jcbb", "nn"], "extractor.min_votes": [10, 15]}
+    with pytest.raises(ValueError, match="SCOPE.FIELD"):
+        parse_grid(["min_votes=10"])
+
+
+def test_grid_toml_flat_and_nested(tmp_path):
+    f = tmp_path / "g.toml"
+    f.write_text(
+        '[grid]\n"ekf.association" = ["jcbb", "nn"]\n[grid.extractor]\nmin_votes = [10, 15]\n'
+    )
+    assert load_grid_toml(f) == {"ekf.association": ["jcbb", "nn"], "extractor.min_votes": [10, 15]}
+
+
+def test_tasks_take_only_the_axes_of_their_back_end():
+    grid = {"ekf.association": ["jcbb", "nn"], "extractor.min_votes": [10, 15]}
+    tasks = expand_tasks([0, 1], ["dr", "ekf"], grid)
+    assert len(tasks) == 2 * (1 + 4)
+    assert [t.params for t in tasks if t.backend == "dr"] == [(), ()]
+    ekf0 = [t.params_dict for t in tasks if t.backend == "ekf" and t.seed == 0]
+    assert {(p["ekf.association"], p["extractor.min_votes"]) for p in ekf0} == {
+        ("jcbb", 10),
+        ("jcbb", 15),
+        ("nn", 10),
+        ("nn", 15),
+    }
+    with pytest.raises(ValueError, match="no back end"):
+        expand_tasks([0], ["dr"], {"ekf.association": ["nn"]})
+    with pytest.raises(ValueError, match="no settings"):
+        expand_tasks([0], ["dr"], {"dr.anything": [1]})
+    with pytest.raises(ValueError, match="unknown 'kalman'"):
+        expand_tasks([0], ["kalman"], {})
+
+
+def test_overrides_reach_nested_fields_and_name_the_valid_ones():
+    cfg = apply_overrides(EkfConfig(), {"association": "nn", "ahrs_bias_sigma_deg": 3.0})
+    assert cfg.association.method == "nn" and cfg.ahrs_bias_sigma_deg == 3.0
+    cfg = apply_overrides(EkfConfig(), {"association.gate_probability": 0.95})
+    assert cfg.association.gate_probability == 0.95 and cfg.association.method == "jcbb"
+    with pytest.raises(ValueError, match="unknown field 'gate'.*gate_probability"):
+        apply_overrides(EkfConfig(), {"association.gate": 0.9})
+    with pytest.raises(ValueError, match="association method"):  # the dataclass's own check
+        apply_overrides(EkfConfig(), {"association": "icp"})
+
+
+def test_simulation_is_cached_per_seed(cache):
+    folder = simulate_cached("harbour", 0, DURATION_S, cache)
+    assert folder == str(cache / "harbour_0_90s")
+    assert sorted(p.name for p in cache.iterdir()) == ["harbour_0_90s", "harbour_1_90s"]
+
+
+def test_run_backend_without_overrides_equals_the_pipeline(cache, tmp_path, monkeypatch):
+    """The sweep's closed loop is the pipeline's: the same ATE to the last bit; and a back end
+    the sweep does not know is run by slam.pipeline.run, with the same numbers."""
+    source = cache / "harbour_1_90s"
+    dataset = open_dataset(source)
+    piped = run(source, "ekf", tmp_path / "ekf", progress=False).metrics
+    mine = run_backend(dataset, "ekf").metrics
+    for key in ("ate_mean_m", "ate_rmse_m", "ate_max_m", "ate_n", "line_features"):
+        assert mine[key] == piped[key]
+
+    def no_closed_loops():
+        return {}
+
+    monkeypatch.setattr(sweep_mod, "closed_loop_backends", no_closed_loops)
+    fallback = run_backend(dataset, "ekf").metrics
+    assert fallback["ate_mean_m"] == piped["ate_mean_m"]
+    assert fallback["assoc_observations"] == piped["assoc_observations"]
+    with pytest.raises(ValueError, match="takes no settings"):
+        run_backend(dataset, "ekf", {"ekf.association": "nn"})
+
+
+def test_extractor_override_reaches_the_front_end(cache):
+    dataset = open_dataset(cache / "harbour_0_90s")
+    run_ = run_backend(dataset, "ekf", {"extractor.min_votes": 10**6})
+    assert run_.metrics["line_features"] == 0
+    assert run_.metrics["landmarks"] == 0
+    assert run_.metrics["assoc_observations"] == 0
+    assert run_.metrics["beams"] > 1000
+
+
+def test_sweep_on_a_local_cluster_gives_the_rows_of_direct_runs(cache, tmp_path, capsys):
+    """2 seeds x (dr, ekf with two association methods) on the default 2-process LocalCluster
+    (through the CLI): each dr row is the dead-reckoning ATE of its seed, each ekf row the one
+    of run_backend, and the summary's ANEES is that of nees.npz."""
+    out = tmp_path / "sweep"
+    argv = ["sweep", "--seeds", "0-1", "--backend", "dr,ekf", "--duration", str(DURATION_S)]
+    argv += ["--grid", "ekf.association=jcbb,nn", "--out", str(out), "--cache", str(cache)]
+    assert main(argv + ["--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "6 runs (0 failed)" in printed
+    table = pd.read_csv(out / "sweep.csv")
+    assert len(table) == 6 and table["error"].isna().all()
+    assert list(table.columns[:3]) == ["seed", "backend", "ekf.association"]
+    for seed in (0, 1):
+        dataset = open_dataset(cache / f"harbour_{seed}_90s")
+        dr = table[(table.seed == seed) & (table.backend == "dr")].iloc[0]
+        expected = ate_against_gps(dead_reckoning_trajectory(dataset), dataset.gps)
+        assert dr["ate_mean_m"] == pytest.approx(expected.ate_mean_m, rel=1e-12)
+        for method in ("jcbb", "nn"):
+            row = table[(table.seed == seed) & (table["ekf.association"] == method)].iloc[0]
+            direct = run_backend(dataset, "ekf", {"ekf.association": method}).metrics
+            assert row["ate_mean_m"] == pytest.approx(direct["ate_mean_m"], rel=1e-12)
+            assert row["assoc_associated"] == direct["assoc_associated"]
+    nees = np.load(out / "nees.npz")
+    assert nees["pose"].shape == (6, nees["t_rel_s"].size)
+    summary = pd.read_csv(out / "summary.csv")
+    assert list(summary["runs"]) == [2, 2, 2]
+    for k, label in enumerate(summary["config"]):
+        rows = [i for i in range(6) if sweep_mod.config_labels(table)[i] == label]
+        assert summary.loc[k, "anees"] == pytest.approx(anees(nees["pose"][rows], 3).mean, rel=1e-9)
+        assert summary.loc[k, "anees_band_lo"] == pytest.approx(0.6187, abs=1e-4)  # chi2(6)/2
+    for name in ("sweep.png", "anees.png"):
+        assert (out / name).stat().st_size > 10_000
+
+
+def test_synchronous_sweep_equals_the_cluster_one(cache, tmp_path):
+    res = sweep(
+        [0],
+        ["dr"],
+        tmp_path / "s",
+        duration_s=DURATION_S,
+        cache_dir=cache,
+        scheduler="synchronous",
+        progress=False,
+    )
+    dataset = open_dataset(cache / "harbour_0_90s")
+    expected = ate_against_gps(dead_reckoning_trajectory(dataset), dataset.gps)
+    assert res.table.loc[0, "ate_mean_m"] == pytest.approx(expected.ate_mean_m, rel=1e-12)
+    dr = dead_reckoning_trajectory(dataset)
+    expected_nees = nees_series(dr, truth_trajectory(dataset))
+    assert res.table.loc[0, "nees_mean"] == pytest.approx(expected_nees.mean, rel=1e-12)
+    on_grid = nees_on_grid(expected_nees, dr.t_s[0], np.arange(res.nees_pose.shape[1]))
+    np.testing.assert_allclose(res.nees_pose[0], on_grid, rtol=1e-12)
