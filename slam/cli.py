@@ -30,7 +30,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 def _cmd_run(args: argparse.Namespace) -> int:
     from slam.pipeline import run, summary_line
 
-    result = run(args.source, args.backend, args.out, progress=not args.quiet)
+    result = run(args.source, args.backend, args.out, progress=not args.quiet, batch=args.batch)
     print(summary_line(result.metrics))
     print(
         f"outputs: {result.out_dir.resolve()} (trajectory.tum, ground_truth.tum, metrics.json, report.png)"
@@ -216,6 +216,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--batch",
+        action="store_true",
+        help="isam2 only: a final batch Levenberg-Marquardt pass (trajectory_batch.tum, ate_*_batch_m)",
+    )
     p.set_defaults(func=_cmd_run)
 
     p = sub.add_parser(

@@ -38,6 +38,7 @@ from features.geometry import (
 )
 from features.line import LineFeature
 from slam.association import AssociationConfig, AssociationProblem, associate, line_innovation
+from slam.motion import held_velocity_variance_step
 from sonar.beam import Mounting
 
 __all__ = ["EkfConfig", "Landmark", "LineEkf", "POSE", "N_VEHICLE"]
@@ -173,6 +174,8 @@ class LineEkf:
         self._tentative: list[_Tentative] = []
         self._next_id = 0
         self._last_ahrs_t = -np.inf
+        self._held_v: tuple[float, float] | None = None
+        self._held_s = 0.0
         self.stats = {
             "observations": 0,
             "associated": 0,
@@ -233,8 +236,12 @@ class LineEkf:
         if self.config.estimate_misalignment:
             F[0, 4] = -dy
             F[1, 4] = dx
+        # one held DVL sample has one error: count it per sample, not per step (slam.motion)
+        v_key = (float(v_b_mps[0]), float(v_b_mps[1]))
+        self._held_s = self._held_s + dt if v_key == self._held_v else dt
+        self._held_v = v_key
         Q = np.zeros((N_VEHICLE, N_VEHICLE))
-        Q[0, 0] = Q[1, 1] = (dt * sigma_v_mps) ** 2  # R diag(s^2) R^T = s^2 I
+        Q[0, 0] = Q[1, 1] = float(held_velocity_variance_step(self._held_s, dt, sigma_v_mps))
         Q[2, 2] = (dt * self.config.gyro_sigma_radps) ** 2
         V = slice(0, N_VEHICLE)
         P[V, :] = F @ P[V, :]

@@ -6,17 +6,20 @@ Variables (keys from :mod:`gtsam.symbol_shorthand`):
   (body-frame) tangent ``(dx_b, dy_b, dtheta)``: ``wTb.retract(xi) = wTb * Exp(xi)``, so a
   Jacobian in plain world coordinates ``(x, y, yaw)`` is multiplied by
   :func:`local_to_world` ``= blockdiag(R(yaw), 1)``.
-* ``L(j)``: a world line ``(rho_m, theta_rad)`` stored as a ``gtsam.Point2``. Point2 is a vector
-  space (retract is ``+``), which is what a ``(rho, theta)`` pair needs near a solution; it is a
-  first-class GTSAM value (``Values.atPoint2``, priors, serialisation) unlike a bare ``Vector``
-  of size 2, whose Python ``insert`` overload is ambiguous with Point2. The stored pair is not
-  kept normalised (the optimiser may leave ``rho < 0`` or ``theta`` outside ``[-pi, pi)``); the
-  factor compares lines through :func:`features.geometry.line_world_to_frame`, which normalises,
-  and :func:`line_residual`, which resolves the sign ambiguity.
+* ``L(j)``: a world line ``(rho_m, theta_rad)``, a 2-vector (a GTSAM ``Vector``: what
+  ``Values.insert`` makes of a numpy array, read with ``Values.atVector``). A vector space
+  (retract is ``+``) is what a ``(rho, theta)`` pair needs near a solution: ``theta`` enters
+  only through ``cos`` and ``sin``, so it needs no wrapping in the state, and a manifold such as
+  ``Pose2``/``Rot2`` would add nothing but conversions. The stored pair is not kept normalised
+  (the optimiser may leave ``rho < 0`` or ``theta`` outside ``[-pi, pi)``); the factor compares
+  lines through :func:`features.geometry.line_world_to_frame`, which normalises, and
+  :func:`line_residual`, which resolves the sign ambiguity; reports normalise.
 * ``B(0)``: the constant AHRS heading bias (rad), a size-1 ``Vector``; the AHRS measures
   ``yaw + b`` (the model of :class:`slam.ekf.LineEkf`).
 * ``D(0)``: optional constant misalignment (rad) of the DVL velocity with the body heading: the
   vehicle moves along ``R(yaw + delta) v_b`` (as :class:`slam.ekf.LineEkf`).
+* ``G(0)``: optional constant scale of the gyro's yaw rate (the odometry's heading change is
+  ``s`` times the gyro's integral; the marina's MTi turns 0.86 times as fast as its heading).
 
 Every factor here is a ``gtsam.CustomFactor`` around a plain function that returns the error and
 its analytic Jacobians (``tests/test_factor_graph.py`` checks them against
@@ -50,7 +53,7 @@ __all__ = [
     "heading_residual",
     "heading_factor",
     "odometry_residual",
-    "misaligned_odometry_factor",
+    "odometry_factor",
 ]
 
 _FLIP = np.diag([-1.0, 1.0])
@@ -83,6 +86,7 @@ def noise_model(
     base = gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, dtype=np.float64))
     if robust is None:
         return base
+    kernel: gtsam.noiseModel.mEstimator.Base
     if robust == "huber":
         kernel = gtsam.noiseModel.mEstimator.Huber.Create(robust_k)
     elif robust == "cauchy":
@@ -201,7 +205,7 @@ def line_factor(
     robust: str | None = None,
     robust_k: float = 1.345,
 ) -> gtsam.CustomFactor:
-    """Factor between ``X(k)`` (Pose2 ``wTb``) and ``L(j)`` (Point2 ``(rho_w, theta_w)``).
+    """Factor between ``X(k)`` (Pose2 ``wTb``) and ``L(j)`` (2-vector ``(rho_w, theta_w)``).
 
     Parameters
     ----------
@@ -223,7 +227,7 @@ def line_factor(
         keys = this.keys()
         p = values.atPose2(keys[0])
         wTb = np.array([p.x(), p.y(), p.theta()])
-        e, H_pose, H_line = line_residual(z_m, wTb, values.atPoint2(keys[1]), bTs_m)
+        e, H_pose, H_line = line_residual(z_m, wTb, values.atVector(keys[1]), bTs_m)
         if H is not None:
             H[0] = H_pose
             H[1] = H_line
@@ -272,39 +276,54 @@ def heading_factor(
     )
 
 
-# -- DVL odometry with a misalignment ---------------------------------------------------------
+# -- DVL + gyro odometry with a misalignment and a gyro scale ------------------------------------
 
 
 def odometry_residual(
-    measured: FloatArray, wTi: FloatArray, wTj: FloatArray, delta_rad: float
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Error of a relative motion whose translation is rotated by the DVL misalignment.
+    measured: FloatArray,
+    wTi: FloatArray,
+    wTj: FloatArray,
+    delta_rad: float = 0.0,
+    scale: float | None = None,
+    yaw_raw_rad: float = 0.0,
+    d_t_d_scale: FloatArray | None = None,
+    scale0: float = 1.0,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Error of a relative motion integrated with a DVL misalignment and a gyro scale.
 
-    The motion model integrates ``R(yaw + delta) v_b``, so in the frame of node i the
-    translation is ``R(delta) t`` where ``t`` is the one integrated with ``delta = 0``
-    (``measured``); the heading change does not depend on ``delta``. With
-    ``m = (R(delta) t, yaw_m)`` and ``r = wTi^-1 wTj``, the error is ``m^-1 r`` in
-    ``(x, y, yaw)``: ``(R(yaw_m)^T (r_t - m_t), wrap(r_yaw - yaw_m))``, the first-order
-    equivalent of ``BetweenFactorPose2``'s.
+    The motion model integrates ``R(yaw + delta) v_b`` with ``yaw`` the gyro's integral times
+    its scale ``s``. Between two nodes, integrated with ``delta = 0`` and ``s = s0``, it gives
+    ``measured = (t, yaw)``; for other values, to first order in ``s - s0``, the translation is
+    ``R(delta) (t + (s - s0) dt/ds)`` and the heading change ``s * yaw_raw`` (``yaw_raw`` the
+    gyro's own integral). With ``m`` that motion and ``r = wTi^-1 wTj`` the error is ``m^-1 r``
+    in ``(x, y, yaw)``: ``(R(yaw_m)^T (r_t - m_t), wrap(r_yaw - yaw_m))``, the first-order
+    equivalent of ``BetweenFactorPose2``'s. ``scale=None``: no scale, ``m_yaw = measured[2]``.
 
     Returns
     -------
     e : ndarray, shape (3,)
     H_i, H_j : ndarray, shape (3, 3)
         Jacobians in the local tangents of ``wTi`` and ``wTj``.
-    H_delta : ndarray, shape (3, 1)
+    H_delta, H_scale : ndarray, shape (3, 1)
     """
     ci, si = np.cos(wTi[2]), np.sin(wTi[2])
     Ri = np.array([[ci, -si], [si, ci]])
     r_t = Ri.T @ (wTj[:2] - wTi[:2])
     r_yaw = float(wrap_angle(wTj[2] - wTi[2]))
+    q = np.array(measured[:2], dtype=np.float64)
+    yaw_m = float(measured[2])
+    J = np.zeros(2) if d_t_d_scale is None else np.asarray(d_t_d_scale, dtype=np.float64)
+    if scale is not None:
+        q = q + (scale - scale0) * J
+        yaw_m = scale * yaw_raw_rad
     cd, sd = np.cos(delta_rad), np.sin(delta_rad)
-    m_t = np.array([[cd, -sd], [sd, cd]]) @ measured[:2]
-    cm, sm = np.cos(measured[2]), np.sin(measured[2])
+    Rd = np.array([[cd, -sd], [sd, cd]])
+    m_t = Rd @ q
+    cm, sm = np.cos(yaw_m), np.sin(yaw_m)
     RmT = np.array([[cm, sm], [-sm, cm]])
     e = np.empty(3)
     e[:2] = RmT @ (r_t - m_t)
-    e[2] = float(wrap_angle(r_yaw - measured[2]))
+    e[2] = float(wrap_angle(r_yaw - yaw_m))
     H_i = np.zeros((3, 3))
     H_i[:2, :2] = -RmT
     H_i[:2, 2] = RmT @ (-_S @ r_t)
@@ -315,40 +334,75 @@ def odometry_residual(
     H_j[2, 2] = 1.0
     H_d = np.zeros((3, 1))
     H_d[:2, 0] = RmT @ (-_S @ m_t)
-    return e, H_i, H_j, H_d
+    H_s = np.zeros((3, 1))
+    if scale is not None:
+        H_s[:2, 0] = -RmT @ (Rd @ J) - yaw_raw_rad * (_S @ e[:2])
+        H_s[2, 0] = -yaw_raw_rad
+    return e, H_i, H_j, H_d, H_s
 
 
-def misaligned_odometry_factor(
+def odometry_factor(
     key_i: int,
     key_j: int,
-    misalignment_key: int,
     measured: npt.ArrayLike,
     cov: npt.ArrayLike,
+    misalignment_key: int | None = None,
+    scale_key: int | None = None,
+    yaw_raw_rad: float = 0.0,
+    d_t_d_scale: npt.ArrayLike | None = None,
+    scale0: float = 1.0,
 ) -> gtsam.CustomFactor:
-    """Odometry between ``X(i)`` and ``X(j)`` with the DVL misalignment ``D(0)`` (size-1 Vector).
+    """Odometry between ``X(i)`` and ``X(j)`` with the DVL misalignment ``D(0)`` and/or the gyro
+    scale ``G(0)`` (size-1 Vectors); see :func:`odometry_residual`.
 
     Parameters
     ----------
     measured : array_like, shape (3,)
-        Relative pose ``iTj`` integrated with ``delta = 0`` ``(x_m, y_m, yaw_rad)``.
+        Relative pose ``iTj`` integrated with ``delta = 0`` and ``s = scale0``.
     cov : array_like, shape (3, 3)
         Covariance of the error of :func:`odometry_residual` (the frame of ``measured``).
+    misalignment_key, scale_key : int or None
+        Keys of ``D(0)`` and ``G(0)``; None leaves that term out (``delta = 0``, ``s = scale0``).
+    yaw_raw_rad : float
+        The gyro's integral over the interval (rad), for the scale.
+    d_t_d_scale : array_like, shape (2,)
+        Derivative of the translation with respect to the scale (m).
+    scale0 : float
+        The scale ``measured`` was integrated with.
     """
     m = np.asarray(measured, dtype=np.float64).copy()
+    J = None if d_t_d_scale is None else np.asarray(d_t_d_scale, dtype=np.float64).copy()
+    keys = [key_i, key_j]
+    if misalignment_key is not None:
+        keys.append(misalignment_key)
+    if scale_key is not None:
+        keys.append(scale_key)
+    i_delta = 2 if misalignment_key is not None else None
+    i_scale = len(keys) - 1 if scale_key is not None else None
+    yaw_raw, s0 = float(yaw_raw_rad), float(scale0)
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> FloatArray:
-        keys = this.keys()
-        pi, pj = values.atPose2(keys[0]), values.atPose2(keys[1])
-        e, H_i, H_j, H_d = odometry_residual(
+        k = this.keys()
+        pi, pj = values.atPose2(k[0]), values.atPose2(k[1])
+        delta = 0.0 if i_delta is None else float(values.atVector(k[i_delta])[0])
+        scale = None if i_scale is None else float(values.atVector(k[i_scale])[0])
+        e, H_i, H_j, H_d, H_s = odometry_residual(
             m,
             np.array([pi.x(), pi.y(), pi.theta()]),
             np.array([pj.x(), pj.y(), pj.theta()]),
-            float(values.atVector(keys[2])[0]),
+            delta,
+            scale,
+            yaw_raw,
+            J,
+            s0,
         )
         if H is not None:
             H[0] = H_i
             H[1] = H_j
-            H[2] = H_d
+            if i_delta is not None:
+                H[i_delta] = H_d
+            if i_scale is not None:
+                H[i_scale] = H_s
         return e
 
-    return gtsam.CustomFactor(noise_model(cov), [key_i, key_j, misalignment_key], error)
+    return gtsam.CustomFactor(noise_model(cov), keys, error)

@@ -24,6 +24,7 @@ __all__ = [
     "MotionNoise",
     "body_velocity",
     "body_yaw",
+    "held_velocity_variance_step",
     "propagate",
     "VelocityInput",
     "velocity_input",
@@ -66,6 +67,21 @@ def body_yaw(yaw_ahrs_rad: npt.ArrayLike, ahrs_mounting: Mounting) -> FloatArray
     return wrap_angle(np.asarray(yaw_ahrs_rad, dtype=np.float64) - ahrs_mounting.yaw_rad)
 
 
+def held_velocity_variance_step(
+    held_s: npt.ArrayLike, dt_s: npt.ArrayLike, sigma_mps: npt.ArrayLike
+) -> FloatArray:
+    """Position variance (m^2, per axis) added by one step while one DVL sample is held.
+
+    The error of a held velocity sample is the same at every step of the hold, so the position
+    error over a hold of ``T`` seconds is ``T * sigma`` (variance ``T^2 sigma^2``), not
+    ``sqrt(sum dt^2) * sigma``. A step of ``dt`` that ends ``held_s`` after the sample adds
+    ``(held_s^2 - (held_s - dt)^2) sigma^2 = (2 held_s - dt) dt sigma^2``.
+    """
+    T = np.asarray(held_s, dtype=np.float64)
+    dt = np.asarray(dt_s, dtype=np.float64)
+    return np.asarray((2.0 * T - dt) * dt * np.asarray(sigma_mps, dtype=np.float64) ** 2)
+
+
 def propagate(
     wTb: npt.ArrayLike, v_b_mps: npt.ArrayLike, yaw_rate_radps: float, dt_s: float
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -96,6 +112,7 @@ class VelocityInput:
     v_b_mps: FloatArray  # (N, 2)
     sigma_mps: FloatArray  # (N,)
     in_dropout: np.ndarray  # (N,) bool
+    sample_t_s: FloatArray  # (N,) time of the held DVL sample (Unix s); the query time if none
 
 
 def velocity_input(
@@ -122,7 +139,8 @@ def velocity_input(
     expired = in_dropout & (age > noise.dvl_max_gap_s)
     v[expired] = 0.0
     sigma = np.where(expired, noise.gap_sigma_mps, sigma)
-    return VelocityInput(v_b_mps=v, sigma_mps=sigma, in_dropout=in_dropout)
+    sample_t = np.where(have & ~expired, t_s - np.where(np.isfinite(age), age, 0.0), t_s)
+    return VelocityInput(v_b_mps=v, sigma_mps=sigma, in_dropout=in_dropout, sample_t_s=sample_t)
 
 
 def dead_reckoning(
@@ -162,9 +180,10 @@ def dead_reckoning(
     start = np.asarray(start_wTb, dtype=np.float64)
     xy = start[:2] + np.vstack([[0.0, 0.0], np.cumsum(vw * dt[:, None], axis=0)])
 
-    # Covariance of the position increments: velocity noise (isotropic, so R Sigma R^T = Sigma)
-    # and heading noise through d(R v)/d psi = (-vw_y, vw_x); independent per step.
-    var_v = (vin.sigma_mps[:-1] * dt) ** 2
+    # Covariance of the position increments: velocity noise (isotropic, so R Sigma R^T = Sigma),
+    # counted once per held DVL sample, and heading noise through d(R v)/d psi = (-vw_y, vw_x).
+    held = np.maximum(t[1:] - vin.sample_t_s[:-1], dt)
+    var_v = held_velocity_variance_step(held, dt, vin.sigma_mps[:-1])
     jx, jy = -vw[:, 1] * dt, vw[:, 0] * dt
     var_h = noise.ahrs_sigma_rad**2
     q = np.zeros((dt.size, 2, 2))
