@@ -34,6 +34,8 @@ __all__ = [
     "line_world_to_frame",
     "line_frame_to_world",
     "interpolate_poses",
+    "along_line",
+    "segment_on_line",
 ]
 
 
@@ -232,6 +234,35 @@ def line_frame_to_world(
     G_pose[0] *= sign
     rho_n, theta_n = normalize_line(rho_w, theta_w)
     return np.array([float(rho_n), float(theta_n)]), G_line, G_pose
+
+
+def along_line(line: npt.ArrayLike, points: npt.ArrayLike) -> FloatArray:
+    """Coordinate of points along a line's direction ``(-sin theta, cos theta)`` (m).
+
+    Parameters
+    ----------
+    line : array_like, shape (2,)
+        ``(rho_m, theta_rad)``.
+    points : array_like, shape (N, 2)
+        Points in the line's frame (m).
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        0 at the foot of the normal from the origin.
+    """
+    ln = np.asarray(line, dtype=np.float64)
+    return np.asarray(
+        np.asarray(points, dtype=np.float64) @ np.array([-np.sin(ln[1]), np.cos(ln[1])])
+    )
+
+
+def segment_on_line(line: npt.ArrayLike, s_min_m: float, s_max_m: float) -> FloatArray:
+    """The two ends of the segment ``[s_min_m, s_max_m]`` of a line (:func:`along_line`), (2, 2)."""
+    ln = np.asarray(line, dtype=np.float64)
+    foot = ln[0] * np.array([np.cos(ln[1]), np.sin(ln[1])])
+    tangent = np.array([-np.sin(ln[1]), np.cos(ln[1])])
+    return np.stack([foot + s_min_m * tangent, foot + s_max_m * tangent])
 
 
 def interpolate_poses(

@@ -29,11 +29,13 @@ from scipy.stats import chi2
 
 from features.geometry import (
     FloatArray,
+    along_line,
     between,
     compose,
     compose_jacobians,
     line_frame_to_world,
     line_world_to_frame,
+    segment_on_line,
     wrap_angle,
 )
 from features.line import LineFeature
@@ -115,17 +117,6 @@ class _Tentative:
     cov_w: FloatArray
     s_range: tuple[float, float]
     count: int = 1
-
-
-def _along(line_w: FloatArray, points_w: FloatArray) -> FloatArray:
-    """Coordinate of points along a world line's direction ``(-sin theta, cos theta)`` (m)."""
-    return points_w @ np.array([-np.sin(line_w[1]), np.cos(line_w[1])])
-
-
-def _line_endpoints(line_w: FloatArray, s_min: float, s_max: float) -> FloatArray:
-    foot = line_w[0] * np.array([np.cos(line_w[1]), np.sin(line_w[1])])
-    tangent = np.array([-np.sin(line_w[1]), np.cos(line_w[1])])
-    return np.stack([foot + s_min * tangent, foot + s_max * tangent])
 
 
 class LineEkf:
@@ -368,7 +359,7 @@ class LineEkf:
         P_pose = self.P[POSE, POSE]
         cov_w = G_pose @ P_pose @ G_pose.T + G_z @ f.cov @ G_z.T
         ends_w = compose(wTs, np.column_stack([f.endpoints_r, np.zeros(2)]))[:, :2]
-        s = _along(line_w, ends_w)
+        s = along_line(line_w, ends_w)
         cfg = self.config
         self._tentative = [c for c in self._tentative if f.t - c.t <= cfg.tentative_max_age_s]
         gate = chi2.ppf(cfg.association.gate_probability, 2)
@@ -411,7 +402,7 @@ class LineEkf:
     def _grow_extent(self, lm: Landmark, f: LineFeature) -> None:
         wTs = compose(self.x[POSE], self.bTs)
         ends_w = compose(wTs, np.column_stack([f.endpoints_r, np.zeros(2)]))[:, :2]
-        s = _along(self.landmark_line(lm), ends_w)
+        s = along_line(self.landmark_line(lm), ends_w)
         lm.s_min_m = min(lm.s_min_m, float(s.min()))
         lm.s_max_m = max(lm.s_max_m, float(s.max()))
 
@@ -427,7 +418,7 @@ class LineEkf:
                     "rho": float(line[0]),
                     "theta": float(line[1]),
                     "cov": cov.tolist(),
-                    "endpoints": _line_endpoints(line, lm.s_min_m, lm.s_max_m).tolist(),
+                    "endpoints": segment_on_line(line, lm.s_min_m, lm.s_max_m).tolist(),
                     "observations": lm.n_obs,
                 }
             )

@@ -73,9 +73,11 @@ from scipy.stats import chi2
 
 from features.geometry import (
     FloatArray,
+    along_line,
     compose,
     compose_jacobians,
     line_frame_to_world,
+    segment_on_line,
     transform_points,
     wrap_angle,
 )
@@ -412,17 +414,6 @@ def sonar_side(wTb: FloatArray, lines_w: FloatArray, bTs: FloatArray) -> FloatAr
     lw = np.asarray(lines_w, dtype=np.float64).reshape(-1, 2)
     raw = lw[:, 0] - x * np.cos(lw[:, 1]) - y * np.sin(lw[:, 1])
     return np.where(raw < 0.0, -1.0, 1.0)
-
-
-def _along(line_w: FloatArray, points_w: FloatArray) -> FloatArray:
-    """Coordinate of points along a world line's direction ``(-sin theta, cos theta)`` (m)."""
-    return points_w @ np.array([-np.sin(line_w[1]), np.cos(line_w[1])])
-
-
-def _line_endpoints(line_w: FloatArray, s_min: float, s_max: float) -> FloatArray:
-    foot = line_w[0] * np.array([np.cos(line_w[1]), np.sin(line_w[1])])
-    tangent = np.array([-np.sin(line_w[1]), np.cos(line_w[1])])
-    return np.stack([foot + s_min * tangent, foot + s_max * tangent])
 
 
 def _normalised_landmark(line: FloatArray, cov: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -1073,7 +1064,7 @@ class LineIsam2:
         J_pose, _ = compose_jacobians(pose_w, self.bTs)
         G_pose = G_sensor @ J_pose
         cov_w = G_pose @ P_pose_w @ G_pose.T + G_z @ (self.config.line_cov_scale * f.cov) @ G_z.T
-        s = _along(line_w, transform_points(wTs, f.endpoints_r))
+        s = along_line(line_w, transform_points(wTs, f.endpoints_r))
         return line_w, cov_w, (float(s.min()), float(s.max()))
 
     def _new_line(
@@ -1129,7 +1120,7 @@ class LineIsam2:
         self._refresh()
         wTs = compose(self.pose, self.bTs)
         line = self._lm_est[lm.id]
-        s = _along(line, transform_points(wTs, f.endpoints_r))
+        s = along_line(line, transform_points(wTs, f.endpoints_r))
         lm.s_min_m = min(lm.s_min_m, float(s.min()))
         lm.s_max_m = max(lm.s_max_m, float(s.max()))
 
@@ -1212,7 +1203,7 @@ class LineIsam2:
                     "rho": float(line[0]),
                     "theta": float(line[1]),
                     "cov": cov.tolist(),
-                    "endpoints": _line_endpoints(line, s_min, s_max).tolist(),
+                    "endpoints": segment_on_line(line, s_min, s_max).tolist(),
                     "observations": lm.n_obs,
                 }
             )

@@ -7,6 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from features.geometry import (
+    along_line,
     between,
     compose,
     compose_jacobians,
@@ -15,6 +16,7 @@ from features.geometry import (
     line_frame_to_world,
     line_world_to_frame,
     normalize_line,
+    segment_on_line,
     transform_points,
     wrap_angle,
 )
@@ -125,3 +127,12 @@ def test_compose_jacobians_match_numerical(a, b):
         num_a[2], num_b[2] = wrap_angle(num_a[2]), wrap_angle(num_b[2])
         assert np.allclose(J_a[:, i], num_a / (2 * eps), atol=1e-5)
         assert np.allclose(J_b[:, i], num_b / (2 * eps), atol=1e-5)
+
+
+@given(line, st.floats(-50, 50), st.floats(0.1, 50))
+def test_segment_on_line_and_along_line_are_inverse(lw, s0, length):
+    ends = segment_on_line(lw, s0, s0 + length)
+    # the ends lie on the line, at the asked coordinates along it
+    n = np.array([np.cos(lw[1]), np.sin(lw[1])])
+    assert np.allclose(ends @ n, lw[0], atol=1e-9)
+    assert np.allclose(along_line(lw, ends), [s0, s0 + length], atol=1e-9)
