@@ -24,6 +24,7 @@ from scipy.stats import chi2
 from features.geometry import FloatArray, wrap_angle
 
 __all__ = [
+    "FLIP_RHO",
     "AssociationConfig",
     "AssociationProblem",
     "line_innovation",
@@ -33,7 +34,8 @@ __all__ = [
     "associate",
 ]
 
-_FLIP = np.diag([-1.0, 1.0])
+#: ``(rho, theta) -> (-rho, theta + pi)`` on a covariance: ``FLIP_RHO @ R @ FLIP_RHO``
+FLIP_RHO = np.diag([-1.0, 1.0])
 
 
 @dataclass(frozen=True)
@@ -102,7 +104,7 @@ def _pair_terms(problem: AssociationProblem) -> tuple[FloatArray, FloatArray, Fl
     for i in range(m):
         for j in range(k):
             nu[i, j], flipped = line_innovation(problem.z[i], problem.z_hat[j])
-            R[i, j] = _FLIP @ problem.R[i] @ _FLIP if flipped else problem.R[i]
+            R[i, j] = FLIP_RHO @ problem.R[i] @ FLIP_RHO if flipped else problem.R[i]
     return nu, R, problem.H
 
 

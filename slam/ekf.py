@@ -39,7 +39,13 @@ from features.geometry import (
     wrap_angle,
 )
 from features.line import LineFeature
-from slam.association import AssociationConfig, AssociationProblem, associate, line_innovation
+from slam.association import (
+    FLIP_RHO,
+    AssociationConfig,
+    AssociationProblem,
+    associate,
+    line_innovation,
+)
 from slam.motion import held_velocity_variance_step
 from sonar.beam import Mounting
 
@@ -47,7 +53,6 @@ __all__ = ["EkfConfig", "Landmark", "LineEkf", "POSE", "N_VEHICLE"]
 
 POSE = slice(0, 3)
 N_VEHICLE = 5  # x, y, psi, b, delta
-_FLIP = np.diag([-1.0, 1.0])
 
 
 @dataclass(frozen=True)
@@ -328,7 +333,7 @@ class LineEkf:
             lm = self.landmarks[j]
             z_hat_j, H_j = self._predict_line(lm, pose_lin)
             _, flipped = line_innovation(z[i], z_hat_j)
-            R_i = _FLIP @ R[i] @ _FLIP if flipped else R[i]
+            R_i = FLIP_RHO @ R[i] @ FLIP_RHO if flipped else R[i]
             self._update(z[i], H_j, z_hat_j, R_i, lambda a, b: line_innovation(a, b)[0])
             lm.n_obs += 1
             self._grow_extent(lm, use[i])

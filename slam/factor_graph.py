@@ -82,7 +82,13 @@ from features.geometry import (
     wrap_angle,
 )
 from features.line import LineFeature
-from slam.association import AssociationConfig, AssociationProblem, associate, line_innovation
+from slam.association import (
+    FLIP_RHO,
+    AssociationConfig,
+    AssociationProblem,
+    associate,
+    line_innovation,
+)
 from slam.line_factor import (
     heading_factor,
     line_factor,
@@ -109,8 +115,6 @@ __all__ = [
     "load_graph",
     "factor_from_record",
 ]
-
-_FLIP = np.diag([-1.0, 1.0])
 
 
 @dataclass(frozen=True)
@@ -419,7 +423,7 @@ def sonar_side(wTb: FloatArray, lines_w: FloatArray, bTs: FloatArray) -> FloatAr
 def _normalised_landmark(line: FloatArray, cov: FloatArray) -> tuple[FloatArray, FloatArray]:
     """A landmark's ``(rho, theta)`` normalised (``rho >= 0``), its covariance alike."""
     if line[0] < 0.0:
-        return np.array([-line[0], float(wrap_angle(line[1] + np.pi))]), _FLIP @ cov @ _FLIP
+        return np.array([-line[0], float(wrap_angle(line[1] + np.pi))]), FLIP_RHO @ cov @ FLIP_RHO
     return np.array([line[0], float(wrap_angle(line[1]))]), cov
 
 

@@ -41,6 +41,7 @@ from features.geometry import (
     line_world_to_frame,
     wrap_angle,
 )
+from slam.association import FLIP_RHO
 
 __all__ = [
     "ROBUST_KERNELS",
@@ -56,7 +57,6 @@ __all__ = [
     "odometry_factor",
 ]
 
-_FLIP = np.diag([-1.0, 1.0])
 _S = np.array([[0.0, -1.0], [1.0, 0.0]])  # d R(a) / da = R(a) S
 
 ROBUST_KERNELS = ("huber", "cauchy")
@@ -193,7 +193,7 @@ def line_residual(
         return np.array([z[0] - z_hat[0], d_theta]), -H_pose, -H_line
     # z_hat as (-rho, theta + pi): e = (z_rho + rho_hat, z_theta - theta_hat - pi)
     e = np.array([z[0] + z_hat[0], float(wrap_angle(z[1] - z_hat[1] - np.pi))])
-    return e, -_FLIP @ H_pose, -_FLIP @ H_line
+    return e, -FLIP_RHO @ H_pose, -FLIP_RHO @ H_line
 
 
 def line_factor(

@@ -39,6 +39,18 @@ def _draw_points(ax: plt.Axes, points_w: FloatArray, cell_m: float = 0.25) -> No
     )
 
 
+def _draw_trajectories(ax: plt.Axes, trajectories: dict[str, Trajectory]) -> None:
+    for name, tr in trajectories.items():
+        ax.plot(
+            tr.poses_wTb[:, 0],
+            tr.poses_wTb[:, 1],
+            "-",
+            lw=1.0,
+            color=_COLOURS.get(name),
+            label=name,
+        )
+
+
 def plot_scans(
     path: str | Path,
     points_w: FloatArray,
@@ -51,15 +63,7 @@ def plot_scans(
     _draw_points(ax, points_w)
     for seg in segments_w:
         ax.plot(seg[:, 0], seg[:, 1], "m-", lw=1.2)
-    for name, tr in trajectories.items():
-        ax.plot(
-            tr.poses_wTb[:, 0],
-            tr.poses_wTb[:, 1],
-            "-",
-            lw=1.0,
-            color=_COLOURS.get(name),
-            label=name,
-        )
+    _draw_trajectories(ax, trajectories)
     ax.set_aspect("equal")
     ax.set_xlabel("East (m)")
     ax.set_ylabel("North (m)")
@@ -82,15 +86,7 @@ def plot_trajectories(
 ) -> Path:
     """Trajectories in the plane (left) and their ATE against time (right)."""
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(14, 6.5), dpi=110)
-    for name, tr in trajectories.items():
-        ax.plot(
-            tr.poses_wTb[:, 0],
-            tr.poses_wTb[:, 1],
-            "-",
-            lw=1.0,
-            color=_COLOURS.get(name),
-            label=name,
-        )
+    _draw_trajectories(ax, trajectories)
     ax.set_aspect("equal")
     ax.set_xlabel("East (m)")
     ax.set_ylabel("North (m)")
