@@ -521,3 +521,88 @@ def anees(
         lo[n == m], hi[n == m] = mean_nees_band(int(m), dof, probability)
     grid = np.arange(X.shape[1], dtype=np.float64) if t_rel_s is None else np.asarray(t_rel_s)
     return AneesResult(grid, mean, n, dof, lo, hi, probability)
+
+
+@dataclass(frozen=True)
+class AssociationScores:
+    """Association quality against the simulator's walls.
+
+    ``precision``: of the observations paired with a landmark, the fraction whose true wall is
+    the landmark's (a landmark's wall is the true wall most of its observations come from).
+    ``recall``: of the observations of a wall that has a landmark, the fraction paired with a
+    landmark of that wall. Observations matching no wall (within ``gate_rho_m`` and
+    ``gate_theta_rad`` in their own frame, with the true pose) are spurious and count in neither
+    denominator except precision's.
+    """
+
+    precision: float
+    recall: float
+    n_associated: int
+    n_true_pairs: int
+    n_spurious: int
+
+
+def association_scores(
+    features: list[Any],
+    feature_landmarks: list[int | None],
+    walls_w: FloatArray,
+    truth: Trajectory,
+    bTs: FloatArray,
+    gate_rho_m: float = 1.0,
+    gate_theta_rad: float = float(np.deg2rad(5.0)),
+) -> AssociationScores:
+    """Precision and recall of a run's associations (see :class:`AssociationScores`).
+
+    Parameters
+    ----------
+    features, feature_landmarks : list
+        The run's line features and the landmark id each was paired with (None: not paired).
+    walls_w : ndarray, shape (W, 2, 2)
+        True wall segments in the run's frame (reader frame: world minus ``first_fix_enu_m``).
+    truth : Trajectory
+        True body poses.
+    bTs : ndarray, shape (3,)
+        Sonar mounting.
+    """
+    from collections import Counter
+
+    from features.geometry import compose, line_world_to_frame, normalize_line
+    from slam.association import line_innovation
+
+    lines = []
+    for a, b in np.asarray(walls_w, dtype=np.float64):
+        n = np.array([b[1] - a[1], a[0] - b[0]]) / np.hypot(*(b - a))
+        rho, theta = normalize_line(n @ a, np.arctan2(n[1], n[0]))
+        lines.append(np.array([float(rho), float(theta)]))
+    true_wall: list[int | None] = []
+    for f in features:
+        wTs = compose(truth.poses([f.t])[0], bTs)
+        best, best_cost = None, np.inf
+        for w, lw in enumerate(lines):
+            nu, _ = line_innovation(f.z, line_world_to_frame(lw, wTs)[0])
+            if abs(nu[0]) <= gate_rho_m and abs(nu[1]) <= gate_theta_rad:
+                cost = abs(nu[0]) / gate_rho_m + abs(nu[1]) / gate_theta_rad
+                if cost < best_cost:
+                    best, best_cost = w, cost
+        true_wall.append(best)
+    by_landmark: dict[int, Counter[int | None]] = {}
+    for w, lm in zip(true_wall, feature_landmarks, strict=True):
+        if lm is not None:
+            by_landmark.setdefault(lm, Counter())[w] += 1
+    wall_of = {lm: c.most_common(1)[0][0] for lm, c in by_landmark.items()}
+    mapped_walls = {w for w in wall_of.values() if w is not None}
+    associated = [
+        (w, lm) for w, lm in zip(true_wall, feature_landmarks, strict=True) if lm is not None
+    ]
+    correct = sum(1 for w, lm in associated if w is not None and wall_of[lm] == w)
+    of_mapped = [
+        (w, lm) for w, lm in zip(true_wall, feature_landmarks, strict=True) if w in mapped_walls
+    ]
+    found = sum(1 for w, lm in of_mapped if lm is not None and wall_of[lm] == w)
+    return AssociationScores(
+        precision=correct / len(associated) if associated else float("nan"),
+        recall=found / len(of_mapped) if of_mapped else float("nan"),
+        n_associated=len(associated),
+        n_true_pairs=len(of_mapped),
+        n_spurious=sum(1 for w in true_wall if w is None),
+    )

@@ -229,3 +229,31 @@ def test_anees_counts_the_runs_present_at_each_time():
     assert np.isnan(res.anees[2])
     assert res.band_lo[1] == pytest.approx(chi2_band(2)[0], abs=1e-12)
     assert res.band_lo[0] == pytest.approx(mean_nees_band(2, 2)[0], abs=1e-12)
+
+
+def test_association_scores_on_known_pairings():
+    from types import SimpleNamespace
+
+    from features.geometry import compose, line_world_to_frame
+    from slam.evaluation import association_scores
+    from slam.trajectory import Trajectory
+
+    walls = np.array([[[-10.0, 5.0], [10.0, 5.0]], [[8.0, -10.0], [8.0, 10.0]]])  # y = 5, x = 8
+    truth = Trajectory(np.array([0.0, 100.0]), np.array([[0.0, 0.0, 0.3], [1.0, 0.0, 0.3]]))
+    bTs = np.array([0.3, 0.0, np.pi])
+    lines_w = [np.array([5.0, np.pi / 2]), np.array([8.0, 0.0])]
+    feats, lms = [], []
+    for k in range(20):
+        t = 5.0 * k
+        wall = k % 2
+        z = line_world_to_frame(lines_w[wall], compose(truth.poses([t])[0], bTs))[0]
+        feats.append(SimpleNamespace(t=t, z=z))
+        lms.append(wall + 10)  # landmark 10 is wall 0, landmark 11 wall 1
+    lms[4] = 11  # one wrong pairing (wall 0 observation to wall 1's landmark)
+    lms[6] = None  # one missed
+    feats.append(SimpleNamespace(t=50.0, z=np.array([30.0, 1.0])))  # spurious, unpaired
+    lms.append(None)
+    s = association_scores(feats, lms, walls, truth, bTs)
+    assert s.n_associated == 19 and s.n_spurious == 1 and s.n_true_pairs == 20
+    assert s.precision == pytest.approx(18 / 19)
+    assert s.recall == pytest.approx(18 / 20)
