@@ -46,6 +46,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     for r in results:
         print("  " + summary_line(r.metrics))
     print("\nOutputs and pictures:")
+    print(f"  {Path(args.out).resolve()}  (*_scans_gps.png: the sonar map with GPS poses)")
     for r in results:
         pics = ", ".join(p.name for p in sorted(r.out_dir.glob("*.png")))
         print(f"  {r.out_dir.resolve()}  ({pics})")
@@ -265,7 +266,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser(
         "demo",
-        help="the main job (make run): closed loop and dead reckoning on the marina or a simulated harbour",
+        help="the main job (make run): both closed loops and dead reckoning on the marina or a simulated harbour",
         epilog=EPILOG,
     )
     p.add_argument("--out", default="out", help="output directory (default out)")

@@ -284,6 +284,24 @@ def main_job(out_dir: str | Path, progress: bool = True) -> list[RunResult]:
         name = "sim_harbour_0"
     results = [
         run(source, backend, out / f"{name}-{backend}", progress=progress)
-        for backend in ("dr", "ekf")
+        for backend in ("dr", "ekf", "isam2")
     ]
+    from features.projection import project_beams
+    from slam.plots import plot_scans
+
+    dataset = open_dataset(source)
+    gps = gps_ahrs_trajectory(dataset)
+    points, _ = project_beams(
+        dataset.nav_beams(),
+        dataset.config.sonar,
+        dataset.config.sonar_mounting,
+        gps,
+        map_min_intensity(dataset),
+    )
+    plot_scans(
+        out / f"{name}_scans_gps.png",
+        points,
+        {"gps": gps},
+        f"{name}: sonar bins projected with GPS poses",
+    )
     return results
