@@ -35,8 +35,9 @@ radians in the objects)::
     gps_sigma_m = 1.0
     dvl_max_gap_s = 10.0    # a DVL dropout longer than this inflates the velocity noise
 
-Keys a file leaves out take the marina's values (the simulator writes every key). Without a
-file, the defaults are the marina's calibration (see ``MARINA_CONFIG`` and the
+Keys a file leaves out take the neutral defaults of :class:`DatasetConfig` (no clock offset,
+identity mountings); the simulator writes every key. Without a file, a dataset gets the marina's
+calibration (see ``MARINA_CONFIG`` and the
 README's "Calibration" section for how each number was found and whether GPS was used).
 """
 

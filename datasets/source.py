@@ -10,7 +10,8 @@ A directory (searched to two levels deep) holds, by file-name suffix:
 ``keyFrameTimeStamps.csv``  + ``pclKeyFrame*.pcd`` + ``*_IS_timestamps.log`` (marina keyframes)
 ``*_SETUP.log``             ``range_m bin_size_m step_rad`` of the head (optional)
 ``sonarslam.toml``          sonar settings, sensor mountings, noise (optional, see
-                            :mod:`datasets.config`); without it the marina's calibration
+                            :mod:`datasets.config`; keys it leaves out take neutral
+                            defaults); without it, the marina's calibration
 ``truth.json``              the simulator's ground truth (optional)
 ==========================  ===========================================================
 
@@ -143,7 +144,9 @@ def open_dataset(source: str | Path) -> Dataset:
     """
     root = resolve_source(source)
     toml = _find_one(root, "sonarslam.toml", required=False)
-    config = load_dataset_config(toml, MARINA_CONFIG) if toml else MARINA_CONFIG
+    # a sonarslam.toml starts from neutral defaults (no clock offset, identity mountings): a
+    # partial file must not inherit the marina's calibration silently
+    config = load_dataset_config(toml) if toml else MARINA_CONFIG
     setup = _find_one(root, "*_SETUP.log", required=False)
     if setup is not None and toml is None:
         range_m, bin_m, step_rad = read_setup(setup)

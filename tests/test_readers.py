@@ -243,3 +243,14 @@ def test_named_source_needs_the_environment(monkeypatch):
     monkeypatch.delenv("SONARSLAM_DATA", raising=False)
     with pytest.raises(DataError, match=r"needs \$SONARSLAM_DATA"):
         open_dataset("marina")
+
+
+def test_partial_toml_does_not_inherit_the_marina_calibration(tmp_path):
+    from datasets.simulator import simulate
+
+    src = simulate("harbour", seed=2, out_dir=tmp_path / "h", duration_s=30.0)
+    toml = src / "sonarslam.toml"
+    toml.write_text("[mounting.dvl]\nyaw_deg = -90.0\n")  # everything else left out
+    ds = open_dataset(src)
+    assert ds.config.sonar_time_offset_s == 0.0
+    assert ds.config.sonar_mounting.yaw_rad == 0.0 and ds.config.ahrs_mounting.yaw_rad == 0.0
