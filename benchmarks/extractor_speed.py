@@ -40,6 +40,7 @@ from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
+from common import pin_one_core  # noqa: E402
 
 from features.extractor import MARINA_PRESET, ExtractorConfig, LineExtractor  # noqa: E402
 from features.hough import find_winners  # noqa: E402
@@ -49,15 +50,6 @@ from sonar.beam import Mounting, SonarBeam, SonarHead  # noqa: E402
 from sonar.store import SectorSnapshot  # noqa: E402
 
 REALTIME_FACTOR_MIN = 200.0
-
-
-def pin_one_core() -> int | None:
-    """Pin this process to the first CPU it may use; the CPU, or None where unsupported."""
-    if not hasattr(os, "sched_setaffinity"):
-        return None
-    cpu = min(os.sched_getaffinity(0))
-    os.sched_setaffinity(0, {cpu})
-    return cpu
 
 
 def load_run(

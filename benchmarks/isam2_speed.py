@@ -36,19 +36,11 @@ from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
+from common import pin_one_core  # noqa: E402
 
 from features.extractor import ExtractorConfig  # noqa: E402
 
 REALTIME_FACTOR_MIN = 100.0
-
-
-def pin_one_core() -> int | None:
-    """Pin this process to the first CPU it may use; the CPU, or None where unsupported."""
-    if not hasattr(os, "sched_setaffinity"):
-        return None
-    cpu = min(os.sched_getaffinity(0))
-    os.sched_setaffinity(0, {cpu})
-    return cpu
 
 
 def open_run(source: str) -> tuple[str, Any, ExtractorConfig]:

@@ -3,7 +3,10 @@
 * ``extractor_speed.py``: real-time factor of the whole marina extraction on one core, time per
   beam, and voting one sector against scikit-image's ``hough_line``;
 * ``extractor_consistency.py``: the pool test over 50 seeds and the NEES of both covariance
-  methods on the simulator.
+  methods on the simulator;
+* ``isam2_speed.py``: the GTSAM back end in closed loop on one core, time per iSAM2 update;
+* ``association_quality.py``: association precision and recall of both back ends against the
+  simulator's walls.
 """
 
 from __future__ import annotations
@@ -16,6 +19,8 @@ HERE = Path(__file__).resolve().parent
 SCRIPTS = (
     ("extractor_speed.py", "out/extractor_speed.json"),
     ("extractor_consistency.py", "out/extractor_consistency.json"),
+    ("isam2_speed.py", "out/isam2_speed.json"),
+    ("association_quality.py", "out/association_quality.json"),
 )
 
 
