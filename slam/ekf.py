@@ -35,7 +35,6 @@ from features.geometry import (
     compose_jacobians,
     line_frame_to_world,
     line_world_to_frame,
-    segment_on_line,
     wrap_angle,
 )
 from features.line import LineFeature
@@ -46,6 +45,7 @@ from slam.association import (
     associate,
     line_innovation,
 )
+from slam.landmarks import landmark_record
 from slam.motion import held_velocity_variance_step
 from sonar.beam import Mounting
 
@@ -413,18 +413,14 @@ class LineEkf:
 
     def map_json(self) -> list[dict[str, Any]]:
         """Per landmark: id, rho, theta, cov, world endpoints, observation count."""
-        out = []
-        for lm in self.landmarks:
-            line = self.landmark_line(lm)
-            cov = self.P[lm.index : lm.index + 2, lm.index : lm.index + 2]
-            out.append(
-                {
-                    "id": lm.id,
-                    "rho": float(line[0]),
-                    "theta": float(line[1]),
-                    "cov": cov.tolist(),
-                    "endpoints": segment_on_line(line, lm.s_min_m, lm.s_max_m).tolist(),
-                    "observations": lm.n_obs,
-                }
+        return [
+            landmark_record(
+                lm.id,
+                self.landmark_line(lm),
+                self.P[lm.index : lm.index + 2, lm.index : lm.index + 2],
+                lm.s_min_m,
+                lm.s_max_m,
+                lm.n_obs,
             )
-        return out
+            for lm in self.landmarks
+        ]

@@ -77,7 +77,6 @@ from features.geometry import (
     compose,
     compose_jacobians,
     line_frame_to_world,
-    segment_on_line,
     transform_points,
     wrap_angle,
 )
@@ -89,6 +88,7 @@ from slam.association import (
     associate,
     line_innovation,
 )
+from slam.landmarks import landmark_record
 from slam.line_factor import (
     heading_factor,
     line_factor,
@@ -1201,16 +1201,7 @@ class LineIsam2:
             s_min, s_max = lm.s_min_m, lm.s_max_m
             if raw[0] < 0.0:  # the along-line axis turns with the normal
                 s_min, s_max = -s_max, -s_min
-            out.append(
-                {
-                    "id": lm.id,
-                    "rho": float(line[0]),
-                    "theta": float(line[1]),
-                    "cov": cov.tolist(),
-                    "endpoints": segment_on_line(line, s_min, s_max).tolist(),
-                    "observations": lm.n_obs,
-                }
-            )
+            out.append(landmark_record(lm.id, line, cov, s_min, s_max, lm.n_obs))
         return out
 
     def save(self, path: str | Path) -> None:

@@ -105,8 +105,9 @@ def _isam2(
     assert dataset.gps is not None
     smoothed = backend.smoothed_trajectory()
     write_tum(out_dir / "trajectory_smoothed.tum", smoothed)
-    extras["metrics"]["ate_mean_smoothed_m"] = ate_against_gps(smoothed, dataset.gps).ate_mean_m
-    extras["metrics"]["ate_max_smoothed_m"] = ate_against_gps(smoothed, dataset.gps).ate_max_m
+    ate_smoothed = ate_against_gps(smoothed, dataset.gps)
+    extras["metrics"]["ate_mean_smoothed_m"] = ate_smoothed.ate_mean_m
+    extras["metrics"]["ate_max_smoothed_m"] = ate_smoothed.ate_max_m
     if batch:
         backend.optimize_batch()
         optimised = backend.smoothed_trajectory()
@@ -240,14 +241,13 @@ def run(
     )
     write_tum(out / "ground_truth.tum", Trajectory(dataset.gps.t[gps_in], gps_pose))
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
-    errors = {backend: ate_errors(trajectory, dataset.gps)}
-    if backend != "dr":
-        errors["dr"] = ate_errors(dead_reckoning_trajectory(dataset), dataset.gps)
+    drawn = {"gps": gps_tr, backend: trajectory}
+    if backend != "dr":  # dead reckoning beside every other back end, as the reference
+        drawn["dr"] = dead_reckoning_trajectory(dataset)
+    errors = {name: ate_errors(tr, dataset.gps) for name, tr in drawn.items() if name != "gps"}
     plot_trajectories(
         out / "report.png",
-        {"gps": gps_tr, "dr": dead_reckoning_trajectory(dataset), backend: trajectory}
-        if backend != "dr"
-        else {"gps": gps_tr, backend: trajectory},
+        drawn,
         errors,
         f"{dataset.name}: {backend}, ATE mean {ate.ate_mean_m:.2f} m, max {ate.ate_max_m:.2f} m",
     )
