@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from datasets.errors import DataError
+from datasets.logfile import is_number
 from features.geometry import FloatArray
 from sonar.beam import SonarBeam, SonarHead
 
@@ -64,7 +65,7 @@ def read_pcd_xy(path: str | Path) -> FloatArray:
     try:
         xyz = np.array([f for _, f in rows], dtype=np.float64).reshape(-1, n_fields)
     except ValueError:
-        number = next(n for n, f in rows if not all(_is_number(v) for v in f))
+        number = next(n for n, f in rows if not all(is_number(v) for v in f))
         raise DataError(p, number, "non-numeric field") from None
     return xyz[:, :2].copy()
 
@@ -173,11 +174,3 @@ def read_keyframes(
                 )
             )
     return beams
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True

@@ -30,7 +30,7 @@ import numpy as np
 from datasets.errors import DataError, DataWarning
 from features.geometry import FloatArray
 
-__all__ = ["Table", "read_table", "check_time_order"]
+__all__ = ["Table", "read_table", "check_time_order", "is_number"]
 
 
 @dataclass(frozen=True)
@@ -100,7 +100,7 @@ def read_table(
         try:
             values = np.array(fields, dtype=np.float64)
         except ValueError:
-            bad = next(f for f in fields if not _is_number(f))
+            bad = next(f for f in fields if not is_number(f))
             raise DataError(p, number, f"non-numeric field {bad!r}") from None
         if not np.all(np.isfinite(values)):
             raise DataError(p, number, "field is NaN or infinite")
@@ -140,7 +140,8 @@ def check_time_order(table: Table, column: int = 0) -> None:
         )
 
 
-def _is_number(text: str) -> bool:
+def is_number(text: str) -> bool:
+    """True when ``float(text)`` parses (the readers' test for a non-numeric field)."""
     try:
         float(text)
     except ValueError:
