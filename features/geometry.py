@@ -266,7 +266,10 @@ def segment_on_line(line: npt.ArrayLike, s_min_m: float, s_max_m: float) -> Floa
 
 
 def interpolate_poses(
-    t_query_s: npt.ArrayLike, t_s: npt.ArrayLike, poses: npt.ArrayLike
+    t_query_s: npt.ArrayLike,
+    t_s: npt.ArrayLike,
+    poses: npt.ArrayLike,
+    yaw_unwrapped_rad: npt.ArrayLike | None = None,
 ) -> FloatArray:
     """Linear interpolation of poses in time, yaw through its shortest arc.
 
@@ -278,6 +281,8 @@ def interpolate_poses(
         Increasing sample times (Unix s).
     poses : array_like, shape (N, 3)
         Poses at ``t_s``.
+    yaw_unwrapped_rad : array_like, shape (N,), optional
+        ``np.unwrap(poses[:, 2])``, for callers that interpolate the same poses many times.
 
     Returns
     -------
@@ -286,7 +291,7 @@ def interpolate_poses(
     tq = np.atleast_1d(np.asarray(t_query_s, dtype=np.float64))
     t = np.asarray(t_s, dtype=np.float64)
     p = np.asarray(poses, dtype=np.float64)
-    yaw = np.unwrap(p[:, 2])
+    yaw = np.unwrap(p[:, 2]) if yaw_unwrapped_rad is None else np.asarray(yaw_unwrapped_rad)
     out = np.empty((tq.size, 3))
     out[:, 0] = np.interp(tq, t, p[:, 0])
     out[:, 1] = np.interp(tq, t, p[:, 1])

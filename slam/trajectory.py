@@ -10,7 +10,7 @@ import numpy.typing as npt
 from evo.core.trajectory import PoseTrajectory3D
 from evo.tools import file_interface
 
-from features.geometry import FloatArray, wrap_angle
+from features.geometry import FloatArray, interpolate_poses
 
 __all__ = ["Trajectory", "write_tum", "read_tum"]
 
@@ -48,15 +48,8 @@ class Trajectory:
         return float(self.t_s[0]), float(self.t_s[-1])
 
     def poses(self, t_s: npt.ArrayLike) -> FloatArray:
-        """Poses interpolated at ``t_s`` (ends held outside the span), shape (M, 3).
-
-        Same as :func:`features.geometry.interpolate_poses`, with the unwrapped yaw cached.
-        """
-        tq = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
-        yaw = wrap_angle(np.interp(tq, self.t_s, self._yaw_unwrapped))  # type: ignore[attr-defined]
-        x = np.interp(tq, self.t_s, self.poses_wTb[:, 0])
-        y = np.interp(tq, self.t_s, self.poses_wTb[:, 1])
-        return np.column_stack([x, y, yaw])
+        """Poses interpolated at ``t_s`` (ends held outside the span), shape (M, 3)."""
+        return interpolate_poses(t_s, self.t_s, self.poses_wTb, self._yaw_unwrapped)  # type: ignore[attr-defined]
 
     def covariance(self, t_s: float) -> FloatArray | None:
         """Covariance of the last sample at or before ``t_s`` (3, 3), or None."""
