@@ -134,8 +134,17 @@ def _find_one(root: Path, pattern: str, required: bool) -> Path | None:
     return found[0] if found else None
 
 
-def open_dataset(source: str | Path) -> Dataset:
+def open_dataset(source: str | Path, config_override: str | Path | None = None) -> Dataset:
     """Read a dataset directory (or a named source) into a :class:`Dataset`.
+
+    Parameters
+    ----------
+    source : str or Path
+        A directory in the marina layout, or a named source (``"marina"``).
+    config_override : str or Path, optional
+        A ``sonarslam.toml``-format file whose keys replace those of the dataset's own
+        configuration (its ``sonarslam.toml``, else the marina calibration); keys it leaves out
+        keep the dataset's values. For trying another calibration without editing the data.
 
     Raises
     ------
@@ -154,6 +163,8 @@ def open_dataset(source: str | Path) -> Dataset:
             config.sonar, n_bins=int(round(range_m / bin_m)), bin_size_m=bin_m, step_rad=step_rad
         )
         config = replace(config, sonar=head)
+    if config_override is not None:
+        config = load_dataset_config(config_override, base=config)
 
     dvl = read_dvl(_find_one(root, "*_DVL.log", required=True))  # type: ignore[arg-type]
     attitude = read_mti(_find_one(root, "*_MTi.log", required=True))  # type: ignore[arg-type]

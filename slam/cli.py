@@ -30,7 +30,14 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 def _cmd_run(args: argparse.Namespace) -> int:
     from slam.pipeline import run, summary_line
 
-    result = run(args.source, args.backend, args.out, progress=not args.quiet, batch=args.batch)
+    result = run(
+        args.source,
+        args.backend,
+        args.out,
+        progress=not args.quiet,
+        batch=args.batch,
+        config=args.config,
+    )
     print(summary_line(result.metrics))
     print(
         f"outputs: {result.out_dir.resolve()} (trajectory.tum, ground_truth.tum, metrics.json, report.png)"
@@ -221,6 +228,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--batch",
         action="store_true",
         help="isam2 only: a final batch Levenberg-Marquardt pass (trajectory_batch.tum, ate_*_batch_m)",
+    )
+    p.add_argument(
+        "--config",
+        default=None,
+        help="a sonarslam.toml-format file whose keys replace the dataset's calibration"
+        " (e.g. [mounting.ahrs] yaw_deg); the one used is written to OUT/config_used.toml",
     )
     p.set_defaults(func=_cmd_run)
 

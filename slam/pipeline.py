@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from datasets.config import dump_dataset_config
 from datasets.source import Dataset, open_dataset
 from features.extractor import MARINA_PRESET, ExtractorConfig
 from slam.evaluation import COV_FILE, write_trajectory_covariances
@@ -196,19 +197,23 @@ def run(
     out_dir: str | Path,
     progress: bool = True,
     batch: bool = False,
+    config: str | Path | None = None,
 ) -> RunResult:
     """Run a back end on a dataset and write ``trajectory.tum``, ``ground_truth.tum``,
     ``metrics.json`` and ``report.png`` into ``out_dir``.
 
     The ATE protocol: the start pose is the first GPS fix and the heading sensor; the ATE is
     taken at every GPS fix inside the trajectory's span, with no alignment (:mod:`slam.metrics`).
+    ``config``: a ``sonarslam.toml``-format file whose keys replace the dataset's calibration
+    (:func:`datasets.source.open_dataset`); the configuration used is written to
+    ``config_used.toml``.
     """
     backends = _load_backends()
     if backend not in backends:
         raise ValueError(f"--backend must be one of {sorted(backends)}, got {backend!r}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    dataset = open_dataset(source)
+    dataset = open_dataset(source, config_override=config)
     if dataset.gps is None:
         raise ValueError(
             f"{dataset.root}: runs need *_DGPS.log for the start pose and the evaluation"
@@ -232,6 +237,7 @@ def run(
         "dvl_invalid_rows": int((~dataset.dvl.valid).sum()),
         **extras.pop("metrics", {}),
     }
+    (out / "config_used.toml").write_text(dump_dataset_config(dataset.config))
     write_tum(out / "trajectory.tum", trajectory)
     write_trajectory_covariances(out / COV_FILE, trajectory)  # no-op without covariances
     gps_in = (dataset.gps.t >= t0) & (dataset.gps.t <= t1)

@@ -110,3 +110,38 @@ def test_run_ekf_maps_the_true_walls(short_harbour, tmp_path):
     ekf = read_tum(out / "trajectory.tum")
     err = np.hypot(*(ekf.poses(ekf.t_s)[:, :2] - truth.poses(ekf.t_s)[:, :2]).T)
     assert err.mean() < 3.0
+
+
+def test_run_config_replaces_only_the_keys_it_gives(short_harbour, tmp_path, capsys):
+    """--config: a partial sonarslam.toml on top of the dataset's own; the result is the
+    dead reckoning of the dataset with that one mounting changed, and it is written out."""
+    import math
+    from dataclasses import replace
+
+    from datasets.config import load_dataset_config
+
+    ds = open_dataset(short_harbour)
+    yaw_deg = math.degrees(ds.config.ahrs_mounting.yaw_rad) + 3.0
+    override = tmp_path / "heading.toml"
+    override.write_text(f"[mounting.ahrs]\nyaw_deg = {yaw_deg!r}\n")
+    out = tmp_path / "dr3"
+    args = ["run", str(short_harbour), "--backend", "dr", "--out", str(out), "--quiet"]
+    assert main([*args, "--config", str(override)]) == 0
+    used = load_dataset_config(out / "config_used.toml")
+    assert math.degrees(used.ahrs_mounting.yaw_rad) == pytest.approx(yaw_deg, abs=1e-9)
+    assert used.sonar_mounting == ds.config.sonar_mounting  # untouched keys kept
+    assert used.dvl_mounting.yaw_rad == ds.config.dvl_mounting.yaw_rad
+    turned = replace(
+        ds, config=replace(ds.config, ahrs_mounting=replace(used.ahrs_mounting, source=""))
+    )
+    expected = ate_against_gps(dead_reckoning_trajectory(turned), ds.gps).ate_mean_m
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["ate_mean_m"] == pytest.approx(expected, rel=1e-9)
+    assert metrics["ate_mean_m"] != pytest.approx(
+        ate_against_gps(dead_reckoning_trajectory(ds), ds.gps).ate_mean_m, rel=1e-3
+    )
+    # a wrong key is named with the file
+    override.write_text("[mounting.ahrs]\nyaw = 3.0\n")
+    assert main([*args, "--config", str(override)]) == 1
+    err = capsys.readouterr().err
+    assert "heading.toml" in err and "yaw" in err
