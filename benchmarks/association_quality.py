@@ -42,13 +42,21 @@ def measure(source: Path, backend: str) -> dict[str, float]:
         )
     walls = np.asarray(ds.truth["walls_m"]) - np.asarray(ds.truth["first_fix_enu_m"])
     s = association_scores(
-        res.features, res.feature_landmarks, walls, truth_trajectory(ds), mount.as_pose()
+        res.features,
+        res.feature_landmarks,
+        walls,
+        truth_trajectory(ds),
+        mount.as_pose(),
+        feature_seeds=res.feature_seeds,
     )
     return {
         "precision": s.precision,
         "recall": s.recall,
         "associated": s.n_associated,
+        "true_pairs": s.n_true_pairs,
         "spurious": s.n_spurious,
+        "seeds": s.n_seeds,
+        "seed_precision": s.seed_precision,
     }
 
 
@@ -71,9 +79,15 @@ def main() -> None:
         r = [x for x in rows if x["backend"] == backend]
         n = sum(x["associated"] for x in r)
         prec = sum(x["precision"] * x["associated"] for x in r) / n
+        m = sum(x["true_pairs"] for x in r)
+        rec = sum(x["recall"] * x["true_pairs"] for x in r if x["true_pairs"]) / m
+        seeds = sum(x["seeds"] for x in r)
+        seed_ok = sum(x["seed_precision"] * x["seeds"] for x in r if x["seeds"])
         print(
-            f"{backend}: precision {prec:.4f} over {n} associations; recall {np.nanmean([x['recall'] for x in r]):.4f} "
-            f"(mean of runs); spurious features {sum(x['spurious'] for x in r)}"
+            f"{backend}: precision {prec:.4f} over {n} associations; recall {rec:.4f} over {m}"
+            f" re-observations of mapped lines; {seeds} seeding observations"
+            f" ({seed_ok / max(seeds, 1):.4f} on their landmark's line);"
+            f" spurious features {sum(x['spurious'] for x in r)}"
         )
     if args.out:
         Path(args.out).write_text(json.dumps(rows, indent=1))

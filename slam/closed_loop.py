@@ -106,17 +106,21 @@ class Backend(Protocol):
 
     def update_lines(self, features: list[LineFeature]) -> list[int | None]: ...
 
+    seed_log: list[tuple[LineFeature, int]]  # (tentative observation, landmark it seeded)
+
 
 @dataclass
 class ClosedLoopResult:
     trajectory: Trajectory
     backend: Any
     features: list[LineFeature]
-    feature_landmarks: list[int | None]
+    feature_landmarks: list[int | None]  # landmark each feature was associated with, or None
     wall_s: float
     extractor_s: float
     backend_s: float
     counts: dict[str, int] = field(default_factory=dict)
+    # landmark each feature seeded as a tentative line before the landmark existed, or None
+    feature_seeds: list[int | None] = field(default_factory=list)
 
 
 def run_closed_loop(
@@ -196,6 +200,7 @@ def run_closed_loop(
                 features.extend(found)
                 landmark_ids.extend(ids)
     trajectory = Trajectory(np.asarray(traj_t), np.asarray(traj_p), np.asarray(traj_c))
+    seeded = {id(f): lm for f, lm in backend.seed_log}
     return ClosedLoopResult(
         trajectory=trajectory,
         backend=backend,
@@ -205,4 +210,5 @@ def run_closed_loop(
         extractor_s=extractor_s,
         backend_s=backend_s,
         counts=counts,
+        feature_seeds=[seeded.get(id(f)) for f in features],
     )

@@ -121,7 +121,7 @@ class _Tentative:
     line_w: FloatArray
     cov_w: FloatArray
     s_range: tuple[float, float]
-    count: int = 1
+    features: list[LineFeature] = field(default_factory=list)
 
 
 class LineEkf:
@@ -183,6 +183,9 @@ class LineEkf:
         self.association_log: list[
             tuple[float, int, int | None]
         ] = []  # (t, obs index, landmark id)
+        # tentative observations of a line that became a landmark, with its id: they seeded it
+        # (the EKF initialises from the promoting observation; these were not updates)
+        self.seed_log: list[tuple[LineFeature, int]] = []
 
     # -- state access ----------------------------------------------------------------------
 
@@ -371,15 +374,19 @@ class LineEkf:
         for cand in self._tentative:
             nu, _ = line_innovation(line_w, cand.line_w)
             if nu @ np.linalg.solve(cov_w + cand.cov_w, nu) <= gate:
-                cand.count += 1
                 cand.s_range = (min(cand.s_range[0], s.min()), max(cand.s_range[1], s.max()))
-                if cand.count >= cfg.tentative_observations:
+                if len(cand.features) + 1 >= cfg.tentative_observations:
                     self._tentative.remove(cand)
-                    return self._augment(f, cand.s_range)
+                    lm_id = self._augment(f, cand.s_range)
+                    self.seed_log.extend((g, lm_id) for g in cand.features)
+                    return lm_id
+                cand.features.append(f)
                 return None
         if cfg.tentative_observations <= 1:
             return self._augment(f, (float(s.min()), float(s.max())))
-        self._tentative.append(_Tentative(f.t, line_w, cov_w, (float(s.min()), float(s.max()))))
+        self._tentative.append(
+            _Tentative(f.t, line_w, cov_w, (float(s.min()), float(s.max())), [f])
+        )
         return None
 
     def _augment(self, f: LineFeature, s_range: tuple[float, float]) -> int:

@@ -527,12 +527,17 @@ def anees(
 class AssociationScores:
     """Association quality against the simulator's walls.
 
-    ``precision``: of the observations paired with a landmark, the fraction whose true wall is
-    the landmark's (a landmark's wall is the true wall most of its observations come from).
-    ``recall``: of the observations of a wall that has a landmark, the fraction paired with a
-    landmark of that wall. Observations matching no wall (within ``gate_rho_m`` and
-    ``gate_theta_rad`` in their own frame, with the true pose) are spurious and count in neither
-    denominator except precision's.
+    The truth unit is a wall's *line*: collinear wall segments (two quays on one line) are one
+    line, because a line landmark ``(rho, theta)`` is the infinite line and pairing both with it
+    is right. An observation's true line is the one it matches within ``gate_rho_m`` and
+    ``gate_theta_rad`` in its own frame, with the true pose; observations matching none are
+    spurious. A landmark's line is the true line most of its observations come from.
+
+    ``precision``: of the observations associated with a landmark, the fraction whose true line
+    is the landmark's. ``recall``: of the observations of a line that has a landmark, excluding
+    the ones that seeded a landmark as tentative lines (the creation rule, not an association
+    decision), the fraction associated with a landmark of that line. ``seed_precision``: of the
+    seeding observations, the fraction whose line is their landmark's.
     """
 
     precision: float
@@ -540,6 +545,48 @@ class AssociationScores:
     n_associated: int
     n_true_pairs: int
     n_spurious: int
+    n_seeds: int = 0
+    seed_precision: float = float("nan")
+
+
+def wall_lines(
+    walls_w: FloatArray, rho_tol_m: float = 1e-3, theta_tol_rad: float = 1e-4
+) -> tuple[FloatArray, np.ndarray]:
+    """The distinct lines ``(rho, theta)`` of wall segments and each wall's line index.
+
+    Parameters
+    ----------
+    walls_w : ndarray, shape (W, 2, 2)
+        Wall segments (m).
+    rho_tol_m, theta_tol_rad : float
+        Two walls are on one line when their normalised lines differ by less than these.
+
+    Returns
+    -------
+    lines : ndarray, shape (K, 2)
+        Distinct lines (m, rad), normalised (:func:`features.geometry.normalize_line`).
+    line_of_wall : ndarray of int, shape (W,)
+    """
+    from features.geometry import normalize_line, wrap_angle
+
+    lines: list[FloatArray] = []
+    line_of_wall = []
+    for a, b in np.asarray(walls_w, dtype=np.float64):
+        n = np.array([b[1] - a[1], a[0] - b[0]]) / np.hypot(*(b - a))
+        rho, theta = normalize_line(n @ a, np.arctan2(n[1], n[0]))
+        line = np.array([float(rho), float(theta)])
+        same = [
+            k
+            for k, other in enumerate(lines)
+            if abs(other[0] - line[0]) < rho_tol_m
+            and abs(float(wrap_angle(other[1] - line[1]))) < theta_tol_rad
+        ]
+        if same:
+            line_of_wall.append(same[0])
+        else:
+            line_of_wall.append(len(lines))
+            lines.append(line)
+    return np.array(lines).reshape(-1, 2), np.array(line_of_wall, dtype=np.int64)
 
 
 def association_scores(
@@ -550,31 +597,34 @@ def association_scores(
     bTs: FloatArray,
     gate_rho_m: float = 1.0,
     gate_theta_rad: float = float(np.deg2rad(5.0)),
+    feature_seeds: list[int | None] | None = None,
 ) -> AssociationScores:
     """Precision and recall of a run's associations (see :class:`AssociationScores`).
 
     Parameters
     ----------
     features, feature_landmarks : list
-        The run's line features and the landmark id each was paired with (None: not paired).
+        The run's line features and the landmark id each was associated with (None: not).
     walls_w : ndarray, shape (W, 2, 2)
         True wall segments in the run's frame (reader frame: world minus ``first_fix_enu_m``).
     truth : Trajectory
         True body poses.
     bTs : ndarray, shape (3,)
         Sonar mounting.
+    gate_rho_m, gate_theta_rad : float
+        How close (m, rad) an observation must be to a true line to be of it.
+    feature_seeds : list, optional
+        The landmark each feature seeded as a tentative line (None: none), as
+        :attr:`slam.closed_loop.ClosedLoopResult.feature_seeds`.
     """
     from collections import Counter
 
-    from features.geometry import compose, line_world_to_frame, normalize_line
+    from features.geometry import compose, line_world_to_frame
     from slam.association import line_innovation
 
-    lines = []
-    for a, b in np.asarray(walls_w, dtype=np.float64):
-        n = np.array([b[1] - a[1], a[0] - b[0]]) / np.hypot(*(b - a))
-        rho, theta = normalize_line(n @ a, np.arctan2(n[1], n[0]))
-        lines.append(np.array([float(rho), float(theta)]))
-    true_wall: list[int | None] = []
+    lines, _ = wall_lines(walls_w)
+    seeds = feature_seeds if feature_seeds is not None else [None] * len(features)
+    true_line: list[int | None] = []
     for f in features:
         wTs = compose(truth.poses([f.t])[0], bTs)
         best, best_cost = None, np.inf
@@ -584,25 +634,34 @@ def association_scores(
                 cost = abs(nu[0]) / gate_rho_m + abs(nu[1]) / gate_theta_rad
                 if cost < best_cost:
                     best, best_cost = w, cost
-        true_wall.append(best)
+        true_line.append(best)
     by_landmark: dict[int, Counter[int | None]] = {}
-    for w, lm in zip(true_wall, feature_landmarks, strict=True):
-        if lm is not None:
-            by_landmark.setdefault(lm, Counter())[w] += 1
-    wall_of = {lm: c.most_common(1)[0][0] for lm, c in by_landmark.items()}
-    mapped_walls = {w for w in wall_of.values() if w is not None}
+    for w, lm, sd in zip(true_line, feature_landmarks, seeds, strict=True):
+        if lm is not None or sd is not None:
+            by_landmark.setdefault(lm if lm is not None else sd, Counter())[w] += 1  # type: ignore[arg-type]
+    line_of = {lm: c.most_common(1)[0][0] for lm, c in by_landmark.items()}
+    mapped = {w for w in line_of.values() if w is not None}
     associated = [
-        (w, lm) for w, lm in zip(true_wall, feature_landmarks, strict=True) if lm is not None
+        (w, lm) for w, lm in zip(true_line, feature_landmarks, strict=True) if lm is not None
     ]
-    correct = sum(1 for w, lm in associated if w is not None and wall_of[lm] == w)
+    correct = sum(1 for w, lm in associated if w is not None and line_of[lm] == w)
     of_mapped = [
-        (w, lm) for w, lm in zip(true_wall, feature_landmarks, strict=True) if w in mapped_walls
+        (w, lm)
+        for w, lm, sd in zip(true_line, feature_landmarks, seeds, strict=True)
+        if w in mapped and sd is None
     ]
-    found = sum(1 for w, lm in of_mapped if lm is not None and wall_of[lm] == w)
+    found = sum(1 for w, lm in of_mapped if lm is not None and line_of[lm] == w)
+    seeding = [(w, sd) for w, sd in zip(true_line, seeds, strict=True) if sd is not None]
     return AssociationScores(
         precision=correct / len(associated) if associated else float("nan"),
         recall=found / len(of_mapped) if of_mapped else float("nan"),
         n_associated=len(associated),
         n_true_pairs=len(of_mapped),
-        n_spurious=sum(1 for w in true_wall if w is None),
+        n_spurious=sum(1 for w in true_line if w is None),
+        n_seeds=len(seeding),
+        seed_precision=(
+            sum(1 for w, sd in seeding if w is not None and line_of[sd] == w) / len(seeding)
+            if seeding
+            else float("nan")
+        ),
     )

@@ -623,6 +623,9 @@ class LineIsam2:
             "isam_updates": 0,
             "factors": 0,
         }
+        # tentative observations of a line that became a landmark, with its id: their factors
+        # entered the graph when it was promoted
+        self.seed_log: list[tuple[LineFeature, int]] = []
         self.association_log: list[tuple[float, int, int | None]] = []
         self.timing_s = {"isam_update": 0.0, "marginals": 0.0, "association": 0.0}
         self.update_log: list[tuple[float, float, int]] = []  # (t, wall s, new factors)
@@ -1114,6 +1117,7 @@ class LineIsam2:
         self._pending_values.insert(lm.key, np.asarray(line_w, dtype=np.float64))
         for (k, bTs), f in observations:
             self._add_line_factor(k, bTs, lm, f)
+        self.seed_log.extend((f, lm.id) for _, f in observations[:-1])
         self.landmarks.append(lm)
         self._new_landmarks.append(lm.id)
         self._lm_est[lm.id] = np.asarray(line_w, dtype=np.float64).copy()

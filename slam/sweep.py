@@ -391,6 +391,8 @@ def run_backend(
             "backend_s": result.backend_s,
             "beams": result.counts.get("beams", 0),
         }
+        if dataset.truth is not None and "walls_m" in dataset.truth:
+            extra.update(_association_against_truth(dataset, result))
     else:
         from slam.pipeline import BACKENDS, run
 
@@ -420,6 +422,34 @@ def run_backend(
         **{k: v for k, v in extra.items() if k not in ("data_s", "realtime_factor")},
     }
     return BackendRun(trajectory, metrics, backend_obj)
+
+
+def _association_against_truth(dataset: Dataset, result: Any) -> dict[str, Any]:
+    """Association precision and recall against the simulator's walls
+    (:func:`slam.evaluation.association_scores`), with the counts to pool them over runs."""
+    from slam.evaluation import association_scores
+    from slam.pose_sources import truth_trajectory
+
+    assert dataset.truth is not None
+    walls = np.asarray(dataset.truth["walls_m"], dtype=np.float64) - np.asarray(
+        dataset.truth.get("first_fix_enu_m", [0.0, 0.0]), dtype=np.float64
+    )
+    s = association_scores(
+        result.features,
+        result.feature_landmarks,
+        walls,
+        truth_trajectory(dataset),
+        dataset.config.sonar_mounting.as_pose(),
+        feature_seeds=result.feature_seeds,
+    )
+    return {
+        "truth_precision": s.precision,
+        "truth_recall": s.recall,
+        "truth_associations": s.n_associated,
+        "truth_reobservations": s.n_true_pairs,
+        "truth_seeds": s.n_seeds,
+        "truth_spurious_features": s.n_spurious,
+    }
 
 
 def simulate_cached(world: str, seed: int, duration_s: float | None, cache_dir: str | Path) -> str:
@@ -554,7 +584,9 @@ def summarise(
     their ATE mean), ``ate_mean_sd_m``, ``ate_rmse_m`` (mean), ``anees`` (pose, 3 dof: mean over
     time of the mean over runs), ``anees_in_band_fraction`` (times whose ANEES is inside the
     95 % band of that many runs), ``anees_band_lo/hi`` (for all the runs), ``anees_position``
-    (2 dof) and its band, ``wall_s`` (mean).
+    (2 dof) and its band, ``wall_s`` (mean); for closed loops on simulated data,
+    ``assoc_precision`` and ``assoc_recall`` against the true walls, pooled over the runs, and
+    ``assoc_pairings``.
     """
     cols = _config_columns(table)
     key = config_labels(table)
@@ -571,6 +603,17 @@ def summarise(
             rec["ate_mean_sd_m"] = float(good["ate_mean_m"].std(ddof=1)) if ok.size > 1 else 0.0
             rec["ate_rmse_m"] = float(good["ate_rmse_m"].mean())
             rec["wall_s"] = float(good["wall_s"].mean())
+            if "truth_precision" in good and good["truth_associations"].fillna(0).sum() > 0:
+                # pooled over the runs: every pairing (re-observation) weighs the same
+                n = good["truth_associations"].fillna(0)
+                m = good["truth_reobservations"].fillna(0)
+                rec["assoc_precision"] = float(
+                    (good["truth_precision"].fillna(0) * n).sum() / n.sum()
+                )
+                rec["assoc_recall"] = float(
+                    (good["truth_recall"].fillna(0) * m).sum() / max(m.sum(), 1)
+                )
+                rec["assoc_pairings"] = int(n.sum())
             for name, arr, dof in (("anees", nees_pose, 3), ("anees_position", nees_position, 2)):
                 X = arr[ok] if arr.size else np.zeros((0, 0))
                 if X.size and np.isfinite(X).any():

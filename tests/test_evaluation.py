@@ -257,3 +257,40 @@ def test_association_scores_on_known_pairings():
     assert s.n_associated == 19 and s.n_spurious == 1 and s.n_true_pairs == 20
     assert s.precision == pytest.approx(18 / 19)
     assert s.recall == pytest.approx(18 / 20)
+
+
+def test_association_scores_collinear_walls_are_one_line_and_seeds_are_not_misses():
+    """Two quays on one line are one truth line; the tentative observation that seeded a
+    landmark is not counted as a missed association (it is reported as a seed)."""
+    from types import SimpleNamespace
+
+    from features.geometry import compose, line_world_to_frame
+    from slam.evaluation import association_scores, wall_lines
+    from slam.trajectory import Trajectory
+
+    # y = 5 split in two collinear segments, and x = 8
+    walls = np.array(
+        [[[-10.0, 5.0], [0.0, 5.0]], [[2.0, 5.0], [10.0, 5.0]], [[8.0, -10.0], [8.0, 10.0]]]
+    )
+    lines, line_of_wall = wall_lines(walls)
+    assert lines.shape == (2, 2)
+    np.testing.assert_array_equal(line_of_wall, [0, 0, 1])
+    truth = Trajectory(np.array([0.0, 100.0]), np.array([[0.0, 0.0, 0.3], [1.0, 0.0, 0.3]]))
+    bTs = np.array([0.3, 0.0, np.pi])
+    lines_w = [np.array([5.0, np.pi / 2]), np.array([8.0, 0.0])]
+    feats, lms, seeds = [], [], []
+    for k in range(20):
+        t = 5.0 * k
+        wall = k % 2
+        z = line_world_to_frame(lines_w[wall], compose(truth.poses([t])[0], bTs))[0]
+        feats.append(SimpleNamespace(t=t, z=z))
+        lms.append(wall + 10)
+        seeds.append(None)
+    lms[0], seeds[0] = None, 10  # seeded landmark 10 (its own line)
+    lms[1], seeds[1] = None, 10  # a wrong seed: a wall-1 observation in landmark 10's tentative
+    lms[7] = None  # one missed re-observation of wall 1
+    s = association_scores(feats, lms, walls, truth, bTs, feature_seeds=seeds)
+    assert s.n_associated == 17 and s.n_seeds == 2 and s.n_spurious == 0
+    assert s.precision == pytest.approx(1.0)
+    assert s.n_true_pairs == 18 and s.recall == pytest.approx(17 / 18)
+    assert s.seed_precision == pytest.approx(0.5)
