@@ -6,7 +6,9 @@
   methods on the simulator;
 * ``isam2_speed.py``: the GTSAM back end in closed loop on one core, time per iSAM2 update;
 * ``association_quality.py``: association precision and recall of both back ends against the
-  simulator's walls.
+  simulator's walls;
+* ``marina_heading.py``: how much of the marina ATE is the absolute heading (skipped without
+  the marina).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ SCRIPTS = (
     ("extractor_consistency.py", "out/extractor_consistency.json"),
     ("isam2_speed.py", "out/isam2_speed.json"),
     ("association_quality.py", "out/association_quality.json"),
+    ("marina_heading.py", "out/marina_heading.json"),
 )
 
 

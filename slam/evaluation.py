@@ -567,14 +567,12 @@ def wall_lines(
         Distinct lines (m, rad), normalised (:func:`features.geometry.normalize_line`).
     line_of_wall : ndarray of int, shape (W,)
     """
-    from features.geometry import normalize_line, wrap_angle
+    from features.geometry import wrap_angle
+    from slam.line_eval import wall_lines_world
 
     lines: list[FloatArray] = []
     line_of_wall = []
-    for a, b in np.asarray(walls_w, dtype=np.float64):
-        n = np.array([b[1] - a[1], a[0] - b[0]]) / np.hypot(*(b - a))
-        rho, theta = normalize_line(n @ a, np.arctan2(n[1], n[0]))
-        line = np.array([float(rho), float(theta)])
+    for line in wall_lines_world(walls_w):
         same = [
             k
             for k, other in enumerate(lines)
