@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
-from features.geometry import FloatArray, wrap_angle
+from features.geometry import FloatArray, along_line, wrap_angle
 
 __all__ = [
     "FLIP_RHO",
@@ -32,6 +32,7 @@ __all__ = [
     "nearest_neighbour",
     "jcbb",
     "associate",
+    "extent_allowed",
 ]
 
 #: ``(rho, theta) -> (-rho, theta + pi)`` on a covariance: ``FLIP_RHO @ R @ FLIP_RHO``
@@ -71,6 +72,9 @@ class AssociationProblem:
     z_hat : ndarray, shape (k, 2)
     H : ndarray, shape (k, 2, d)
     P : ndarray, shape (d, d)
+    allowed : ndarray of bool, shape (m, k), optional
+        Pairings the back end rules out on other grounds (the landmark's extent, the side of
+        the line it was seen from) are False: they are never made, whatever their distance.
     """
 
     z: FloatArray
@@ -78,6 +82,7 @@ class AssociationProblem:
     z_hat: FloatArray
     H: FloatArray
     P: FloatArray
+    allowed: np.ndarray | None = None
 
 
 def line_innovation(z: FloatArray, z_hat: FloatArray) -> tuple[FloatArray, bool]:
@@ -116,6 +121,7 @@ def individual_compatibility(
     Returns
     -------
     d2 : ndarray, shape (m, k)
+        Infinite for the pairings ``problem.allowed`` rules out.
     nu : ndarray, shape (m, k, 2)
     R_pair : ndarray, shape (m, k, 2, 2)
     """
@@ -127,6 +133,8 @@ def individual_compatibility(
         if nu.size
         else np.zeros(nu.shape[:2])
     )
+    if problem.allowed is not None:
+        d2 = np.where(problem.allowed, d2, np.inf)
     return d2, nu, R_pair
 
 
@@ -202,3 +210,39 @@ def associate(problem: AssociationProblem, config: AssociationConfig) -> list[in
     if config.method == "nn":
         return nearest_neighbour(problem, config)
     return jcbb(problem, config)
+
+
+def extent_allowed(
+    lines_w: FloatArray, extents_m: FloatArray, segments_w: FloatArray, margin_m: float
+) -> np.ndarray:
+    """Which (observation, landmark) pairings overlap along the line, within a margin.
+
+    A line landmark is an infinite line, but the wall it stands for is a segment: an
+    observation of another stretch of a long, not quite straight wall (or of a collinear quay
+    far away) would pull the pose by the wall's bend. This gate keeps an observation to the
+    landmarks whose extent its own segment reaches, give or take ``margin_m``.
+
+    Parameters
+    ----------
+    lines_w : ndarray, shape (k, 2)
+        Landmark lines ``(rho_m, theta_rad)`` (world).
+    extents_m : ndarray, shape (k, 2)
+        Their extents ``(s_min, s_max)`` along the line (:func:`features.geometry.along_line`).
+    segments_w : ndarray, shape (m, 2, 2)
+        Each observation's two end points in the world (m).
+    margin_m : float
+        How far beyond a landmark's extent an observation may start (m).
+
+    Returns
+    -------
+    ndarray of bool, shape (m, k)
+    """
+    m, k = len(segments_w), len(lines_w)
+    out = np.zeros((m, k), dtype=bool)
+    for j in range(k):
+        s = along_line(lines_w[j], np.asarray(segments_w, dtype=np.float64).reshape(-1, 2))
+        s = s.reshape(m, 2)
+        out[:, j] = (s.max(axis=1) >= extents_m[j, 0] - margin_m) & (
+            s.min(axis=1) <= extents_m[j, 1] + margin_m
+        )
+    return out

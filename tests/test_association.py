@@ -110,3 +110,19 @@ def test_ekf_closed_loop_associates_the_true_walls(tmp_path):
     assert s.n_seeds == len(res.backend.landmarks) >= 3
     assert s.n_associated >= 20
     assert s.precision >= 0.99 and s.recall >= 0.95 and s.seed_precision == 1.0
+
+
+@pytest.mark.parametrize("method", ["jcbb", "nn"])
+def test_a_pairing_ruled_out_by_the_back_end_is_never_made(method):
+    """``allowed`` (e.g. the landmark's extent) overrides a perfect Mahalanobis match."""
+    from slam.association import AssociationConfig, AssociationProblem, associate
+
+    z = np.array([[5.0, 0.1], [8.0, 1.2]])
+    R = np.broadcast_to(np.diag([0.01, 1e-4]), (2, 2, 2)).copy()
+    z_hat = z.copy()  # each observation matches its landmark exactly
+    H = np.zeros((2, 2, 3))
+    P = np.eye(3)
+    cfg = AssociationConfig(method=method)
+    assert associate(AssociationProblem(z, R, z_hat, H, P), cfg) == [0, 1]
+    allowed = np.array([[False, True], [True, True]])
+    assert associate(AssociationProblem(z, R, z_hat, H, P, allowed), cfg) == [None, 1]
