@@ -62,6 +62,9 @@ class ExtractorConfig:
         Segmentation (c): of two kept bins closer than this, drop the weaker (m). 0.5.
     min_range_m : float
         Near-field dead zone (m). 0.5.
+    max_range_m : float or None
+        Bins beyond this range (m) take no part (None: the head's range). On thick echo bands
+        a wall seen far off and at a slant gives a line metres off the wall.
     sector_deg : float
         Angular span of the stored beams (deg): 180 (*paper*); 270 and 360 are settings.
     beam_width_rad : float or None
@@ -134,6 +137,7 @@ class ExtractorConfig:
     max_intensity_difference: float = 40.0
     min_distance_m: float = 0.5
     min_range_m: float = 0.5
+    max_range_m: float | None = None
     sector_deg: float = 180.0
     beam_width_rad: float | None = None
     incidence_beta_rad: float = 25.0 * _DEG
@@ -187,6 +191,10 @@ class ExtractorConfig:
             raise ValueError("incidence_beta_rad must be in (0, pi/2)")
         if self.remove_on_line_sigma < 0.0:
             raise ValueError("remove_on_line_sigma must be >= 0")
+        if self.max_range_m is not None and not self.max_range_m > self.min_range_m:
+            raise ValueError(
+                f"max_range_m must be > min_range_m ({self.min_range_m}), got {self.max_range_m}"
+            )
         if self.range_offset_sigma_m is not None and self.range_offset_sigma_m < 0.0:
             raise ValueError("range_offset_sigma_m must be >= 0 (or None)")
 
@@ -294,6 +302,11 @@ class LineExtractor:
         self.beam_width_rad = (
             float(cfg.beam_width_rad) if cfg.beam_width_rad is not None else head.beam_width_rad
         )
+        self.max_range_m = (
+            head.range_max_m
+            if cfg.max_range_m is None
+            else min(float(cfg.max_range_m), head.range_max_m)
+        )
         self.store = SectorStore(
             head,
             sonar_mounting,
@@ -355,6 +368,7 @@ class LineExtractor:
             min_distance_m=cfg.min_distance_m,
             min_range_m=cfg.min_range_m,
             thresholded=beam.thresholded,
+            max_range_m=cfg.max_range_m,
         )
         bearing = float(self.head.angle_sense * beam.transducer_angle_rad)
         self.store.add(float(beam.t), bearing, seg)
@@ -525,7 +539,7 @@ class LineExtractor:
                 beam_width_rad=self.beam_width_rad,
                 incidence_beta_rad=cfg.incidence_beta_rad,
                 min_range_m=cfg.min_range_m,
-                max_range_m=self.head.range_max_m,
+                max_range_m=self.max_range_m,
                 tol_m=0.5 * max(self.head.bin_size_m, self.grid.rho_res_m),
                 confidence=cfg.confidence,
                 similarity=cfg.overlap_similarity,

@@ -78,6 +78,7 @@ def segment_intensities(
     min_distance_m: float,
     min_range_m: float = 0.0,
     thresholded: bool = False,
+    max_range_m: float | None = None,
 ) -> SegmentedBeam:
     """Segment the intensity profile of one beam (paper 2.1).
 
@@ -99,6 +100,8 @@ def segment_intensities(
         Near-field dead zone (m): bins at a range below this are ignored by every stage.
     thresholded : bool
         True when ``intensities`` is already a 0/255 mask (see the module docstring).
+    max_range_m : float, optional
+        Bins beyond this range (m) are ignored by every stage; None: all.
 
     Returns
     -------
@@ -108,6 +111,8 @@ def segment_intensities(
     n_bins = inten.shape[0]
     ranges_m = (np.arange(n_bins, dtype=np.float64) + 1.0) * bin_size_m
     alive = ranges_m >= min_range_m - 1e-9 * bin_size_m
+    if max_range_m is not None:
+        alive &= ranges_m <= max_range_m + 1e-9 * bin_size_m
     # (a) threshold stage
     if thresholded:
         passed = alive & (inten > 0)
@@ -144,6 +149,7 @@ def segment_beam(
     max_intensity_difference: float,
     min_distance_m: float,
     min_range_m: float = 0.0,
+    max_range_m: float | None = None,
 ) -> SegmentedBeam:
     """Segment a :class:`~sonar.beam.SonarBeam` with its head settings.
 
@@ -157,4 +163,5 @@ def segment_beam(
         min_distance_m=min_distance_m,
         min_range_m=min_range_m,
         thresholded=beam.thresholded,
+        max_range_m=max_range_m,
     )

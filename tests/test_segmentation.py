@@ -136,3 +136,14 @@ def test_sparseness_matches_the_pairwise_rule(seed: int) -> None:
         if not stronger_close:
             expect.append(i)
     np.testing.assert_array_equal(seg.final_bins, expect)
+
+
+def test_bins_beyond_the_maximum_range_are_ignored_by_every_stage() -> None:
+    # bin 29 (3.0 m) is the strongest: beyond max_range_m it must not set stage (b)'s maximum
+    beam = _beam(40, {10: 100, 19: 90, 29: 250})
+    kwargs = dict(intensity_threshold=50, max_intensity_difference=20, min_distance_m=0.0)
+    seg = segment_intensities(beam, BIN_M, max_range_m=2.0, **kwargs)  # bin 19 is at 2.0 m
+    np.testing.assert_array_equal(seg.threshold_bins, [10, 19])
+    np.testing.assert_array_equal(seg.final_bins, [10, 19])
+    seg = segment_intensities(beam, BIN_M, **kwargs)
+    np.testing.assert_array_equal(seg.final_bins, [29])
