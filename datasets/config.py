@@ -35,6 +35,10 @@ radians in the objects)::
     gps_sigma_m = 1.0
     dvl_max_gap_s = 10.0    # a DVL dropout longer than this inflates the velocity noise
 
+    [motion]
+    yaw_rate_source = "heading"  # what turns the heading between AHRS samples: "gyro" (the
+                            # logged rate) or "heading" (the AHRS heading's own change)
+
 Keys a file leaves out take the neutral defaults of :class:`DatasetConfig` (no clock offset,
 identity mountings); the simulator writes every key. Without a file, a dataset gets the marina's
 calibration (see ``MARINA_CONFIG`` and the
@@ -72,6 +76,14 @@ class NoiseConfig:
     dvl_max_gap_s: float = 10.0
 
 
+#: What turns the estimators' heading between AHRS samples (``[motion] yaw_rate_source``):
+#: ``"gyro"``, the logged yaw rate; ``"heading"``, the change of the AHRS heading since its
+#: previous sample (causal). The marina's MTi gyro has a bias of ~0.6 deg/s (its integral drifts
+#: off the MTi's own heading by that much), which the estimators do not model: with it, the
+#: closed-loop heading ran ~10 deg off the compass between heading updates.
+YAW_RATE_SOURCES = ("gyro", "heading")
+
+
 @dataclass(frozen=True)
 class DatasetConfig:
     """Everything about a dataset that is not in its logs."""
@@ -83,6 +95,13 @@ class DatasetConfig:
     noise: NoiseConfig = field(default_factory=NoiseConfig)
     keyframe_scan_direction: int = -1
     sonar_time_offset_s: float = 0.0
+    yaw_rate_source: str = "gyro"
+
+    def __post_init__(self) -> None:
+        if self.yaw_rate_source not in YAW_RATE_SOURCES:
+            raise ValueError(
+                f"yaw_rate_source must be one of {YAW_RATE_SOURCES}, got {self.yaw_rate_source!r}"
+            )
 
 
 #: The abandoned marina (Ribas et al. 2008). How each mounting was calibrated is in README.md.
@@ -110,6 +129,7 @@ MARINA_CONFIG = DatasetConfig(
     keyframe_scan_direction=-1,
     # map entropy over DR poses, 60 s windows: 384.4 at 0 s, 381.4 at 0.75 s (GPS-free)
     sonar_time_offset_s=0.75,
+    yaw_rate_source="heading",
 )
 
 
@@ -158,7 +178,7 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
         ) from exc
     except OSError as exc:
         raise DataError(p, None, f"cannot read: {exc.strerror}") from exc
-    _check_keys(p, "top level", data, {"sonar", "mounting", "noise", "keyframes"})
+    _check_keys(p, "top level", data, {"sonar", "mounting", "noise", "keyframes", "motion"})
 
     sonar = base.sonar
     time_offset_s = base.sonar_time_offset_s
@@ -211,6 +231,18 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
             raise DataError(
                 p, None, f"[keyframes] scan_direction must be +1 or -1, got {scan_direction}"
             )
+    yaw_rate_source = base.yaw_rate_source
+    if "motion" in data:
+        _check_keys(p, "motion", data["motion"], {"yaw_rate_source"})
+        if "yaw_rate_source" in data["motion"]:
+            yaw_rate_source = data["motion"]["yaw_rate_source"]
+            if yaw_rate_source not in YAW_RATE_SOURCES:
+                raise DataError(
+                    p,
+                    None,
+                    f"[motion] yaw_rate_source must be one of {YAW_RATE_SOURCES},"
+                    f" got {yaw_rate_source!r}",
+                )
     return DatasetConfig(
         sonar=sonar,
         sonar_mounting=mountings["sonar"],
@@ -219,6 +251,7 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
         noise=noise,
         keyframe_scan_direction=scan_direction,
         sonar_time_offset_s=time_offset_s,
+        yaw_rate_source=yaw_rate_source,
     )
 
 
@@ -247,5 +280,6 @@ def dump_dataset_config(config: DatasetConfig) -> str:
         + "\n"
         + f"[noise]\ndvl_sigma_mps = {n.dvl_sigma_mps!r}\nahrs_sigma_deg = {n.ahrs_sigma_deg!r}\n"
         f"gps_sigma_m = {n.gps_sigma_m!r}\ndvl_max_gap_s = {n.dvl_max_gap_s!r}\n\n"
-        f"[keyframes]\nscan_direction = {config.keyframe_scan_direction}\n"
+        f"[keyframes]\nscan_direction = {config.keyframe_scan_direction}\n\n"
+        f"[motion]\nyaw_rate_source = {config.yaw_rate_source!r}\n"
     )

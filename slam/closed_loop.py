@@ -21,7 +21,7 @@ from tqdm import tqdm
 from datasets.records import Attitude, DvlVelocity, GpsFix
 from datasets.source import Dataset
 from features.extractor import ExtractorConfig, LineExtractor
-from features.geometry import FloatArray, between, compose
+from features.geometry import FloatArray, between, compose, wrap_angle
 from features.line import LineFeature
 from features.pose_source import PoseSource
 from slam.motion import body_yaw, velocity_input
@@ -165,6 +165,8 @@ def run_closed_loop(
     features: list[LineFeature] = []
     landmark_ids: list[int | None] = []
     yaw_rate = 0.0
+    heading_rate = cfg.yaw_rate_source == "heading"
+    prev_att: Attitude | None = None
     v_prev, s_prev = np.zeros(2), float(vin.sigma_mps[0]) if len(records) else 0.0
     extractor_s = backend_s = 0.0
     counts = {"beams": 0, "ahrs": 0, "dvl": 0}
@@ -177,7 +179,14 @@ def run_closed_loop(
         v_prev, s_prev = vin.v_b_mps[k], float(vin.sigma_mps[k])
         if isinstance(rec, Attitude):
             counts["ahrs"] += 1
-            yaw_rate = rec.yaw_rate_radps
+            if heading_rate:  # the heading's change since its previous sample (causal)
+                if prev_att is not None and rec.t > prev_att.t:
+                    yaw_rate = float(wrap_angle(rec.yaw_rad - prev_att.yaw_rad)) / (
+                        rec.t - prev_att.t
+                    )
+                prev_att = rec
+            else:
+                yaw_rate = rec.yaw_rate_radps
             backend.update_heading(rec.t, float(body_yaw(rec.yaw_rad, cfg.ahrs_mounting)))
             traj_t.append(rec.t)
             traj_p.append(backend.pose)

@@ -35,6 +35,7 @@ from features.geometry import (
     compose_jacobians,
     line_frame_to_world,
     line_world_to_frame,
+    transform_points,
     wrap_angle,
 )
 from features.line import LineFeature
@@ -43,6 +44,7 @@ from slam.association import (
     AssociationConfig,
     AssociationProblem,
     associate,
+    extent_allowed,
     line_innovation,
 )
 from slam.landmarks import landmark_record
@@ -85,6 +87,9 @@ class EkfConfig:
     min_rho_m : float
         Observations of lines closer than this to the sonar are not used (sign ambiguity,
         the sonar's near field).
+    extent_margin_m : float or None
+        A landmark is paired only with observations whose world segment reaches its extent
+        within this margin (m), :func:`slam.association.extent_allowed`; None: no extent gate.
     first_estimates_jacobians : bool
         FEJ-EKF: line Jacobians at the landmarks' first estimates (consistency; see
         :meth:`LineEkf._predict_line`).
@@ -100,6 +105,7 @@ class EkfConfig:
     tentative_observations: int = 2
     tentative_max_age_s: float = 60.0
     min_rho_m: float = 1.0
+    extent_margin_m: float | None = None
     first_estimates_jacobians: bool = True
 
 
@@ -327,7 +333,18 @@ class LineEkf:
         preds = [self._predict_line(lm, pose_lin) for lm in self.landmarks]
         z_hat = np.array([p[0] for p in preds]).reshape(-1, 2)
         H = np.array([p[1] for p in preds]).reshape(-1, 2, self.x.size)
-        pairing = associate(AssociationProblem(z, R, z_hat, H, self.P), self.config.association)
+        allowed = None
+        if self.config.extent_margin_m is not None and self.landmarks:
+            wTs = compose(self.x[POSE], self.bTs)
+            allowed = extent_allowed(
+                np.array([self.landmark_line(lm) for lm in self.landmarks]),
+                np.array([[lm.s_min_m, lm.s_max_m] for lm in self.landmarks]),
+                np.array([transform_points(wTs, f.endpoints_r) for f in use]),
+                self.config.extent_margin_m,
+            )
+        pairing = associate(
+            AssociationProblem(z, R, z_hat, H, self.P, allowed), self.config.association
+        )
         ids: dict[int, int | None] = {}
         # updates first (sequentially, re-linearised at the updated state), then new lines
         for i, j in enumerate(pairing):

@@ -86,6 +86,7 @@ from slam.association import (
     AssociationConfig,
     AssociationProblem,
     associate,
+    extent_allowed,
     line_innovation,
 )
 from slam.landmarks import landmark_record
@@ -176,6 +177,9 @@ class GraphConfig:
     side_gate : bool
         A landmark (or tentative line) is a candidate only for observations from the side of
         its line it was first seen from (:func:`sonar_side`).
+    extent_margin_m : float or None
+        A landmark is paired only with observations whose world segment reaches its extent
+        within this margin (m), :func:`slam.association.extent_allowed`; None: no extent gate.
     robust : {None, "huber", "cauchy"}
         Robust kernel on the line factors. Huber by default: on the simulated harbours it
         changes the trajectory by centimetres; on the marina, whose lines scatter beyond their
@@ -222,6 +226,7 @@ class GraphConfig:
     min_rho_m: float = 1.0
     line_cov_scale: float = 1.0
     side_gate: bool = True
+    extent_margin_m: float | None = None
     robust: str | None = "huber"
     robust_k: float = 1.345
     relinearize_threshold: float = 0.1
@@ -1025,7 +1030,18 @@ class LineIsam2:
                 z_hat[c], H_pose, H_line = line_prediction(pose_w, self._lm_est[lm.id], self.bTs)
                 H[c, :, :3] = H_pose @ Minv
                 H[c, :, 3 + 2 * c : 5 + 2 * c] = H_line
-            pairing = associate(AssociationProblem(z, R, z_hat, H, P), self.config.association)
+            allowed = None
+            if self.config.extent_margin_m is not None:
+                wTs = compose(pose_w, self.bTs)
+                allowed = extent_allowed(
+                    np.array([self._lm_est[lm.id] for lm in cands]),
+                    np.array([[lm.s_min_m, lm.s_max_m] for lm in cands]),
+                    np.array([transform_points(wTs, f.endpoints_r) for f in use]),
+                    self.config.extent_margin_m,
+                )
+            pairing = associate(
+                AssociationProblem(z, R, z_hat, H, P, allowed), self.config.association
+            )
         ids: dict[int, int | None] = {}
         associated: list[tuple[GraphLandmark, LineFeature]] = []
         for i, j in enumerate(pairing):

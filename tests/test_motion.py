@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from datasets.marina import AttitudeSeries, DvlSeries
 from features.geometry import wrap_angle
@@ -175,3 +176,56 @@ def test_ekf_recovers_a_dvl_mounting_error(tmp_path):
     delta_deg = math.degrees(res.backend.x[4])
     sigma_deg = math.degrees(math.sqrt(res.backend.P[4, 4]))
     assert abs(delta_deg + 5.0) < max(3 * sigma_deg, 1.0), (delta_deg, sigma_deg)
+
+
+@pytest.fixture(scope="module")
+def biased_gyro_harbour(tmp_path_factory):
+    """300 s of harbour whose AHRS yaw rate has the marina MTi's bias (0.01 rad/s)."""
+    from dataclasses import replace
+
+    from datasets.simulator import make_scenario, simulate_records
+    from datasets.simulator.writer import write_dataset
+    from datasets.source import open_dataset
+
+    scenario = make_scenario("harbour", 2, 300.0)
+    noise = replace(scenario.noise, ahrs_gyro_bias_radps=0.01)
+    root = write_dataset(
+        simulate_records(replace(scenario, noise=noise)), tmp_path_factory.mktemp("gyro")
+    )
+    return open_dataset(root)
+
+
+@pytest.mark.parametrize("backend", ["ekf", "isam2"])
+def test_heading_rate_source_survives_a_biased_gyro(biased_gyro_harbour, backend):
+    """With the logged rate, an unmodelled gyro bias turns the closed-loop heading ~7 deg off
+    between AHRS updates; with ``yaw_rate_source = "heading"`` it stays at the AHRS's own
+    error (its 2 deg constant bias, unobservable) and the position error drops."""
+    from dataclasses import replace
+
+    from features.extractor import ExtractorConfig
+    from slam.closed_loop import run_closed_loop
+    from slam.ekf import EkfConfig, LineEkf
+    from slam.factor_graph import GraphConfig, isam2_backend_factory, pose_source_of
+    from slam.pose_sources import truth_trajectory
+
+    ds0 = biased_gyro_harbour
+    assert ds0.config.yaw_rate_source == "gyro"  # the simulator's toml: the neutral default
+    errors = {}
+    for source in ("gyro", "heading"):
+        ds = replace(ds0, config=replace(ds0.config, yaw_rate_source=source))
+        mount = ds.config.sonar_mounting
+        if backend == "ekf":
+            kw: dict = {"make_backend": lambda t, p, c, m=mount: LineEkf(t, p, c, m, EkfConfig())}
+        else:
+            kw = {
+                "make_backend": isam2_backend_factory(mount, GraphConfig()),
+                "pose_source_of": pose_source_of,
+            }
+        res = run_closed_loop(ds, extractor_config=ExtractorConfig(), progress=False, **kw)
+        truth = truth_trajectory(ds).poses(res.trajectory.t_s)
+        yaw_err = np.degrees(np.abs(wrap_angle(res.trajectory.poses_wTb[:, 2] - truth[:, 2])))
+        pos_err = np.hypot(*(res.trajectory.poses_wTb[:, :2] - truth[:, :2]).T)
+        errors[source] = (float(np.median(yaw_err)), float(pos_err.mean()))
+    assert errors["gyro"][0] > 5.0
+    assert errors["heading"][0] < 3.5  # the AHRS bias (2 deg) plus its noise
+    assert errors["heading"][1] < 0.8 * errors["gyro"][1]

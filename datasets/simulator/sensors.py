@@ -60,6 +60,9 @@ class SensorNoise:
         from East is therefore ``true - bias``.
     ahrs_rate_sigma_radps : float
         White noise of the AHRS rates (rad/s).
+    ahrs_gyro_bias_radps : float
+        Constant bias of the AHRS yaw rate (rad/s, counter-clockwise); the marina's MTi has
+        ~0.01 (0.6 deg/s).
     ahrs_acc_sigma_mps2 : float
         White noise of the AHRS accelerations (m/s^2).
     ahrs_attitude_sigma_deg : float
@@ -76,6 +79,7 @@ class SensorNoise:
     ahrs_sigma_deg: float = 0.5
     ahrs_bias_deg: float = 2.0
     ahrs_rate_sigma_radps: float = 0.002
+    ahrs_gyro_bias_radps: float = 0.0
     ahrs_acc_sigma_mps2: float = 0.02
     ahrs_attitude_sigma_deg: float = 0.1
     gps_sigma_m: float = 0.7
@@ -310,7 +314,7 @@ def simulate_ahrs(
     )
     c, s = np.cos(mounting.yaw_rad), np.sin(mounting.yaw_rad)
     acc_a = np.column_stack([c * acc_b[:, 0] + s * acc_b[:, 1], -s * acc_b[:, 0] + c * acc_b[:, 1]])
-    rate = np.column_stack([np.zeros(n), np.zeros(n), -w])
+    rate = np.column_stack([np.zeros(n), np.zeros(n), -w - noise.ahrs_gyro_bias_radps])
     acc = np.column_stack([acc_a[:, 0], -acc_a[:, 1], np.full(n, -GRAVITY_MPS2)])
     return AhrsSamples(
         t_s=t,
