@@ -29,6 +29,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from slam.pipeline import run, summary_line
+    from slam.settings import parse_settings
 
     result = run(
         args.source,
@@ -37,6 +38,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         batch=args.batch,
         config=args.config,
+        settings=parse_settings(args.set),
     )
     print(summary_line(result.metrics))
     print(
@@ -234,6 +236,15 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="a sonarslam.toml-format file whose keys replace the dataset's calibration"
         " (e.g. [mounting.ahrs] yaw_deg); the one used is written to OUT/config_used.toml",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SCOPE.FIELD=VALUE",
+        help="an extractor or back-end setting, repeatable: extractor.max_range_m=25,"
+        " ekf.extent_margin_m=10, isam2.robust=cauchy, isam2.association=nn (fields of"
+        " ExtractorConfig, EkfConfig, GraphConfig); recorded in metrics.json",
     )
     p.set_defaults(func=_cmd_run)
 

@@ -18,6 +18,7 @@ from slam.evaluation import COV_FILE, write_trajectory_covariances
 from slam.metrics import ate_against_gps, ate_errors
 from slam.plots import plot_trajectories
 from slam.pose_sources import dead_reckoning_trajectory, gps_ahrs_trajectory, truth_trajectory
+from slam.settings import apply_overrides, split_settings
 from slam.trajectory import Trajectory, write_tum
 
 __all__ = ["RunResult", "BACKENDS", "run", "pose_source_by_name", "POSE_SOURCES", "summary_line"]
@@ -68,17 +69,28 @@ def map_min_intensity(dataset: Dataset) -> int:
     return int(np.ceil(default_extractor_config(dataset).intensity_threshold))
 
 
+def _configs(
+    dataset: Dataset, backend: str, default: Any, settings: dict[str, Any] | None
+) -> tuple[ExtractorConfig, Any]:
+    """The extractor and back-end configurations of a run, with ``--set`` settings applied."""
+    ext, own = split_settings(settings or {}, backend)
+    return apply_overrides(default_extractor_config(dataset), ext), apply_overrides(default, own)
+
+
 def _ekf(
-    dataset: Dataset, out_dir: Path, progress: bool = True
+    dataset: Dataset,
+    out_dir: Path,
+    progress: bool = True,
+    settings: dict[str, Any] | None = None,
 ) -> tuple[Trajectory, dict[str, Any]]:
     from slam.closed_loop import run_closed_loop
     from slam.ekf import EkfConfig, LineEkf
 
-    config = EkfConfig()
+    extractor, config = _configs(dataset, "ekf", EkfConfig(), settings)
     result = run_closed_loop(
         dataset,
         lambda t0, pose0, cov0: LineEkf(t0, pose0, cov0, dataset.config.sonar_mounting, config),
-        default_extractor_config(dataset),
+        extractor,
         progress=progress,
     )
     return result.trajectory, _closed_loop_outputs(
@@ -87,17 +99,22 @@ def _ekf(
 
 
 def _isam2(
-    dataset: Dataset, out_dir: Path, progress: bool = True, batch: bool = False
+    dataset: Dataset,
+    out_dir: Path,
+    progress: bool = True,
+    batch: bool = False,
+    settings: dict[str, Any] | None = None,
 ) -> tuple[Trajectory, dict[str, Any]]:
     """The GTSAM back end: the causal (online) trajectory is the run's; the smoothed one (and the
     batch Levenberg-Marquardt one, with ``batch``) are written beside it and measured too."""
     from slam.closed_loop import run_closed_loop
     from slam.factor_graph import GraphConfig, isam2_backend_factory, pose_source_of
 
+    extractor, config = _configs(dataset, "isam2", GraphConfig(), settings)
     result = run_closed_loop(
         dataset,
-        isam2_backend_factory(dataset.config.sonar_mounting, GraphConfig()),
-        default_extractor_config(dataset),
+        isam2_backend_factory(dataset.config.sonar_mounting, config),
+        extractor,
         pose_source_of=pose_source_of,
         progress=progress,
     )
@@ -198,6 +215,7 @@ def run(
     progress: bool = True,
     batch: bool = False,
     config: str | Path | None = None,
+    settings: dict[str, Any] | None = None,
 ) -> RunResult:
     """Run a back end on a dataset and write ``trajectory.tum``, ``ground_truth.tum``,
     ``metrics.json`` and ``report.png`` into ``out_dir``.
@@ -206,7 +224,8 @@ def run(
     taken at every GPS fix inside the trajectory's span, with no alignment (:mod:`slam.metrics`).
     ``config``: a ``sonarslam.toml``-format file whose keys replace the dataset's calibration
     (:func:`datasets.source.open_dataset`); the configuration used is written to
-    ``config_used.toml``.
+    ``config_used.toml``. ``settings``: extractor and back-end settings
+    (``{"isam2.robust": "cauchy"}``, :mod:`slam.settings`), recorded in ``metrics.json``.
     """
     backends = _load_backends()
     if backend not in backends:
@@ -219,7 +238,11 @@ def run(
             f"{dataset.root}: runs need *_DGPS.log for the start pose and the evaluation"
         )
     wall0 = time.perf_counter()
-    options = {"batch": True} if batch and backend == "isam2" else {}
+    options: dict[str, Any] = {"batch": True} if batch and backend == "isam2" else {}
+    if settings:
+        if backend not in ("ekf", "isam2"):
+            raise ValueError(f"--set: back end {backend!r} has no settings")
+        options["settings"] = settings
     trajectory, extras = backends[backend](dataset, out, progress=progress, **options)
     wall_s = time.perf_counter() - wall0
     t0, t1 = trajectory.span_s
@@ -235,6 +258,7 @@ def run(
         "realtime_factor": data_s / wall_s if wall_s > 0 else float("inf"),
         "dvl_rows": int(dataset.dvl.t.size),
         "dvl_invalid_rows": int((~dataset.dvl.valid).sum()),
+        "settings": dict(settings or {}),
         **extras.pop("metrics", {}),
     }
     (out / "config_used.toml").write_text(dump_dataset_config(dataset.config))

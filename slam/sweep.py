@@ -28,7 +28,6 @@ name of :data:`slam.pipeline.BACKENDS` is run by :func:`slam.pipeline.run` (no g
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 import logging
 import math
@@ -49,6 +48,7 @@ import pandas as pd
 from datasets.source import Dataset, open_dataset
 from slam.evaluation import NeesSeries, anees, nees_on_grid, nees_series
 from slam.metrics import ate_against_gps
+from slam.settings import apply_overrides, parse_value, split_settings
 from slam.trajectory import Trajectory
 
 __all__ = [
@@ -80,8 +80,6 @@ BASELINES = ("dr", "gps")
 
 #: Step (s) of the common time grid of the NEES series.
 NEES_PERIOD_S = 1.0
-
-_ALIASES = {"association": "association.method"}
 
 
 # -- back ends ------------------------------------------------------------------------------------
@@ -167,22 +165,6 @@ def parse_seeds(text: str) -> list[int]:
         else:
             raise ValueError(f"--seeds: expected N, A-B or a comma list of them, got {text!r}")
     return list(dict.fromkeys(seeds))
-
-
-def parse_value(text: str) -> Any:
-    """A grid value: int, float, true/false, none, else the string itself."""
-    t = text.strip()
-    low = t.lower()
-    if low in ("true", "false"):
-        return low == "true"
-    if low in ("none", "null"):
-        return None
-    for kind in (int, float):
-        try:
-            return kind(t)
-        except ValueError:
-            pass
-    return t
 
 
 def parse_grid(specs: Iterable[str]) -> dict[str, list[Any]]:
@@ -277,26 +259,6 @@ def expand_tasks(
     return tasks
 
 
-def _set_path(config: Any, path: Sequence[str], value: Any) -> Any:
-    if not dataclasses.is_dataclass(config) or isinstance(config, type):
-        raise ValueError(f"cannot set {'.'.join(path)} on a {type(config).__name__}")
-    names = [f.name for f in dataclasses.fields(config)]
-    if path[0] not in names:
-        raise ValueError(f"unknown field {path[0]!r} of {type(config).__name__}; one of {names}")
-    if len(path) == 1:
-        return dataclasses.replace(config, **{path[0]: value})
-    inner = _set_path(getattr(config, path[0]), path[1:], value)
-    return dataclasses.replace(config, **{path[0]: inner})
-
-
-def apply_overrides(config: Any, overrides: dict[str, Any]) -> Any:
-    """``config`` with dotted fields (``"association.method"``, aliases too) replaced."""
-    for name, value in overrides.items():
-        path = _ALIASES.get(name, name).split(".")
-        config = _set_path(config, path, value)
-    return config
-
-
 @dataclass
 class BackendRun:
     """A back end's trajectory and the metrics of its run (the keys of ``metrics.json``)."""
@@ -305,20 +267,6 @@ class BackendRun:
     metrics: dict[str, Any]
     backend: Any = None
     extras: dict[str, Any] = field(default_factory=dict)
-
-
-def _split(params: dict[str, Any], backend: str) -> tuple[dict[str, Any], dict[str, Any]]:
-    ext: dict[str, Any] = {}
-    own: dict[str, Any] = {}
-    for name, value in params.items():
-        scope, _, rest = name.partition(".")
-        if scope == "extractor":
-            ext[rest] = value
-        elif scope == backend:
-            own[rest] = value
-        else:
-            raise ValueError(f"parameter {name!r} does not apply to back end {backend!r}")
-    return ext, own
 
 
 def run_backend(
@@ -367,7 +315,7 @@ def run_backend(
         from slam.closed_loop import run_closed_loop
 
         spec = loops[backend]
-        ext, own = _split(params, backend)
+        ext, own = split_settings(params, backend)
         ext_cfg = default_extractor_config(dataset)
         if ext:
             ext_cfg = apply_overrides(ext_cfg, ext)

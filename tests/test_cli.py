@@ -145,3 +145,20 @@ def test_run_config_replaces_only_the_keys_it_gives(short_harbour, tmp_path, cap
     assert main([*args, "--config", str(override)]) == 1
     err = capsys.readouterr().err
     assert "heading.toml" in err and "yaw" in err
+
+
+def test_run_set_changes_the_settings_it_names(short_harbour, tmp_path, capsys):
+    """--set reaches the extractor and the back end, is recorded, and a wrong field is named."""
+    out = tmp_path / "ekf-set"
+    args = ["run", str(short_harbour), "--backend", "ekf", "--out", str(out), "--quiet"]
+    assert main([*args, "--set", "extractor.max_range_m=3", "--set", "ekf.min_rho_m=2"]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["settings"] == {"extractor.max_range_m": 3, "ekf.min_rho_m": 2}
+    # walls farther than 3 m are not seen: fewer lines than with the defaults
+    assert main([*args[:-2], str(tmp_path / "ekf"), "--quiet"]) == 0
+    default = json.loads((tmp_path / "ekf" / "metrics.json").read_text())
+    assert metrics["line_features"] < default["line_features"]
+    assert main([*args, "--set", "ekf.no_such_field=1"]) == 1
+    assert "no_such_field" in capsys.readouterr().err
+    assert main([*args, "--set", "isam2.robust=cauchy"]) == 1
+    assert "does not apply to back end 'ekf'" in capsys.readouterr().err
