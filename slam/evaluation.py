@@ -587,6 +587,33 @@ def wall_lines(
     return np.array(lines).reshape(-1, 2), np.array(line_of_wall, dtype=np.int64)
 
 
+def landmark_overshoot_m(landmarks: list[dict[str, Any]], walls_w: FloatArray) -> FloatArray:
+    """How far each landmark's end points lie from the nearest true wall segment (m).
+
+    Parameters
+    ----------
+    landmarks : list of dict
+        ``map.json`` records (``endpoints``: two world points).
+    walls_w : ndarray, shape (W, 2, 2)
+        True wall segments in the run's frame (m).
+
+    Returns
+    -------
+    ndarray, shape (L,)
+        Per landmark, the larger of its two end points' distances to the walls.
+    """
+    w = np.asarray(walls_w, dtype=np.float64)
+    a, d = w[:, 0], w[:, 1] - w[:, 0]
+    out = []
+    for lm in landmarks:
+        worst = 0.0
+        for p in np.asarray(lm["endpoints"], dtype=np.float64):
+            t = np.clip(np.einsum("wi,wi->w", p - a, d) / np.einsum("wi,wi->w", d, d), 0.0, 1.0)
+            worst = max(worst, float(np.min(np.linalg.norm(a + t[:, None] * d - p, axis=1))))
+        out.append(worst)
+    return np.array(out)
+
+
 def association_scores(
     features: list[Any],
     feature_landmarks: list[int | None],

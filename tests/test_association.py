@@ -89,7 +89,7 @@ def test_ekf_closed_loop_associates_the_true_walls(tmp_path):
     from features.extractor import ExtractorConfig
     from slam.closed_loop import run_closed_loop
     from slam.ekf import EkfConfig, LineEkf
-    from slam.evaluation import association_scores
+    from slam.evaluation import association_scores, landmark_overshoot_m
     from slam.pose_sources import truth_trajectory
 
     ds = open_dataset(simulate("harbour", seed=4, out_dir=tmp_path / "h", duration_s=300.0))
@@ -110,6 +110,7 @@ def test_ekf_closed_loop_associates_the_true_walls(tmp_path):
     assert s.n_seeds == len(res.backend.landmarks) >= 3
     assert s.n_associated >= 20
     assert s.precision >= 0.99 and s.recall >= 0.95 and s.seed_precision == 1.0
+    assert landmark_overshoot_m(res.backend.map_json(), walls).max() < 12.0
 
 
 @pytest.mark.parametrize("method", ["jcbb", "nn"])
@@ -126,3 +127,43 @@ def test_a_pairing_ruled_out_by_the_back_end_is_never_made(method):
     assert associate(AssociationProblem(z, R, z_hat, H, P), cfg) == [0, 1]
     allowed = np.array([[False, True], [True, True]])
     assert associate(AssociationProblem(z, R, z_hat, H, P, allowed), cfg) == [None, 1]
+
+
+@pytest.mark.parametrize("backend", ["ekf", "isam2"])
+def test_a_line_seen_in_both_representations_gets_the_extent_it_was_seen_over(backend):
+    """A wall through the origin's neighbourhood (x = 0.05 m) is seen once as (rho, 0) and
+    once as (rho', pi): their along-line axes are reversed. The landmark's extent must be the
+    10 m stretch both saw, not their mirror images joined (40 m)."""
+    from features.geometry import compose, inverse, line_world_to_frame, transform_points
+    from features.line import LineFeature
+    from slam.ekf import EkfConfig, LineEkf
+    from slam.factor_graph import GraphConfig, isam2_backend_factory
+    from sonar.beam import Mounting
+
+    pose = np.array([-8.0, 15.0, 0.0])
+    P0 = np.diag([1e-4, 1e-4, 1e-6])
+    mount = Mounting()
+    if backend == "ekf":
+        be = LineEkf(0.0, pose, P0, mount, EkfConfig())
+    else:
+        be = isam2_backend_factory(mount, GraphConfig())(0.0, pose, P0)
+    wTs = compose(pose, mount.as_pose())
+    ends_w = np.array([[0.05, 10.0], [0.05, 20.0]])
+    ids = []
+    for k, line_w in enumerate((np.array([0.05, 0.0]), np.array([0.05, np.pi]))):
+        z = line_world_to_frame(line_w, wTs)[0]
+        f = LineFeature(
+            t=0.1 * (k + 1),
+            wTr=wTs,
+            rho_m=float(z[0]),
+            theta_rad=float(z[1]),
+            cov=np.diag([0.05**2, np.deg2rad(1.0) ** 2]),
+            votes=30,
+            endpoints_r=transform_points(inverse(wTs), ends_w),
+        )
+        be.predict(f.t, np.zeros(2), 0.01, 0.0)
+        ids.extend(be.update_lines([f]))
+    assert ids[0] is None and ids[1] is not None  # tentative, then the landmark
+    (record,) = be.map_json()
+    length = float(np.linalg.norm(np.subtract(*record["endpoints"])))
+    assert length == pytest.approx(10.0, abs=0.5)

@@ -511,7 +511,7 @@ def test_short_simulated_closed_loop_beats_dead_reckoning(tmp_path_factory):
     from datasets.source import open_dataset
     from features.extractor import ExtractorConfig
     from slam.closed_loop import run_closed_loop
-    from slam.evaluation import association_scores
+    from slam.evaluation import association_scores, landmark_overshoot_m
     from slam.factor_graph import isam2_backend_factory, pose_source_of
     from slam.metrics import ate_against_gps
     from slam.pose_sources import dead_reckoning_trajectory, truth_trajectory
@@ -557,3 +557,6 @@ def test_short_simulated_closed_loop_beats_dead_reckoning(tmp_path_factory):
     assert scores.n_associated >= 20 and scores.n_seeds >= 1
     assert scores.precision >= 0.99 and scores.recall >= 0.95
     assert scores.seed_precision == 1.0
+    # every landmark's extent stays on its walls (2 m of pose error, margin of the extent gate)
+    overshoot = landmark_overshoot_m(result.backend.map_json(), walls)
+    assert overshoot.max() < 12.0, overshoot
