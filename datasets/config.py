@@ -141,9 +141,16 @@ def _check_keys(path: Path, table: str, data: dict[str, Any], allowed: set[str])
         )
 
 
-def _number(path: Path, table: str, key: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise DataError(path, None, f"[{table}] {key} must be a number, got {value!r}")
+def _number(
+    path: Path, table: str, key: str, value: Any, *, positive: bool = False, integer: bool = False
+) -> float:
+    """A finite number from a TOML value (optionally > 0, optionally whole), else DataError."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise DataError(path, None, f"[{table}] {key} must be a finite number, got {value!r}")
+    if integer and float(value) != int(value):
+        raise DataError(path, None, f"[{table}] {key} must be a whole number, got {value!r}")
+    if positive and not value > 0:
+        raise DataError(path, None, f"[{table}] {key} must be > 0, got {value!r}")
     return float(value)
 
 
@@ -192,17 +199,23 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
         )
         kwargs: dict[str, Any] = {}
         if "n_bins" in s:
-            kwargs["n_bins"] = int(_number(p, "sonar", "n_bins", s["n_bins"]))
+            kwargs["n_bins"] = int(
+                _number(p, "sonar", "n_bins", s["n_bins"], positive=True, integer=True)
+            )
         if "bin_size_m" in s:
-            kwargs["bin_size_m"] = _number(p, "sonar", "bin_size_m", s["bin_size_m"])
+            kwargs["bin_size_m"] = _number(p, "sonar", "bin_size_m", s["bin_size_m"], positive=True)
         if "step_deg" in s:
-            kwargs["step_rad"] = math.radians(_number(p, "sonar", "step_deg", s["step_deg"]))
+            kwargs["step_rad"] = math.radians(
+                _number(p, "sonar", "step_deg", s["step_deg"], positive=True)
+            )
         if "beam_width_deg" in s:
             kwargs["beam_width_rad"] = math.radians(
-                _number(p, "sonar", "beam_width_deg", s["beam_width_deg"])
+                _number(p, "sonar", "beam_width_deg", s["beam_width_deg"], positive=True)
             )
         if "angle_sense" in s:
-            kwargs["angle_sense"] = int(_number(p, "sonar", "angle_sense", s["angle_sense"]))
+            kwargs["angle_sense"] = int(
+                _number(p, "sonar", "angle_sense", s["angle_sense"], integer=True)
+            )
         if "time_offset_s" in s:
             time_offset_s = _number(p, "sonar", "time_offset_s", s["time_offset_s"])
         try:
@@ -220,7 +233,10 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
     if "noise" in data:
         allowed = {f.name for f in fields(NoiseConfig)}
         _check_keys(p, "noise", data["noise"], allowed)
-        noise = replace(noise, **{k: _number(p, "noise", k, v) for k, v in data["noise"].items()})
+        noise = replace(
+            noise,
+            **{k: _number(p, "noise", k, v, positive=True) for k, v in data["noise"].items()},
+        )
     scan_direction = base.keyframe_scan_direction
     if "keyframes" in data:
         _check_keys(p, "keyframes", data["keyframes"], {"scan_direction"})
@@ -255,21 +271,26 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
     )
 
 
+def _deg(angle_rad: float) -> float:
+    """Degrees to 12 significant digits (1.8, not 1.8000000000001186)."""
+    return float(f"{math.degrees(angle_rad):.12g}")
+
+
 def dump_dataset_config(config: DatasetConfig) -> str:
     """The TOML text of ``config`` (what the simulator writes beside its logs)."""
 
     def mount(name: str, m: Mounting) -> str:
         return (
             f"[mounting.{name}]\nx_m = {m.x_m!r}\ny_m = {m.y_m!r}\n"
-            f"yaw_deg = {math.degrees(m.yaw_rad)!r}\nsource = {m.source!r}\n"
+            f"yaw_deg = {_deg(m.yaw_rad)!r}\nsource = {m.source!r}\n"
         )
 
     s = config.sonar
     n = config.noise
     return (
         f"[sonar]\nn_bins = {s.n_bins}\nbin_size_m = {s.bin_size_m!r}\n"
-        f"step_deg = {math.degrees(s.step_rad)!r}\n"
-        f"beam_width_deg = {math.degrees(s.beam_width_rad)!r}\n"
+        f"step_deg = {_deg(s.step_rad)!r}\n"
+        f"beam_width_deg = {_deg(s.beam_width_rad)!r}\n"
         f"angle_sense = {s.angle_sense}\n"
         f"time_offset_s = {config.sonar_time_offset_s!r}\n\n"
         + mount("sonar", config.sonar_mounting)

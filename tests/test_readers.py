@@ -197,7 +197,9 @@ def test_pcd_errors(tmp_path):
 def test_config_errors_name_file_and_key(tmp_path):
     path = tmp_path / "sonarslam.toml"
     path.write_text("[sonar]\nn_bins = 500\nstep_deg = 'x'\n")
-    with pytest.raises(DataError, match=r"sonarslam.toml: \[sonar\] step_deg must be a number"):
+    with pytest.raises(
+        DataError, match=r"sonarslam.toml: \[sonar\] step_deg must be a finite number"
+    ):
         load_dataset_config(path)
     path.write_text("[mounting.sonar]\nyaw = 3\n")
     with pytest.raises(DataError, match=r"unknown key\(s\) \['yaw'\] in \[mounting.sonar\]"):
@@ -212,6 +214,15 @@ def test_config_errors_name_file_and_key(tmp_path):
     cfg = load_dataset_config(path)
     assert abs(cfg.dvl_mounting.yaw_rad + np.pi / 2) < 1e-12 and cfg.noise.dvl_sigma_mps == 0.02
     assert cfg.yaw_rate_source == "gyro"  # neutral default
+    for text, message in (
+        ("[noise]\ndvl_sigma_mps = -1\n", r"\[noise\] dvl_sigma_mps must be > 0, got -1"),
+        ("[mounting.ahrs]\nyaw_deg = nan\n", r"yaw_deg must be a finite number, got nan"),
+        ("[sonar]\nn_bins = 500.5\n", r"n_bins must be a whole number, got 500.5"),
+        ("[sonar]\nbin_size_m = 0\n", r"bin_size_m must be > 0"),
+    ):
+        path.write_text(text)
+        with pytest.raises(DataError, match=message):
+            load_dataset_config(path)
     path.write_text("[motion]\nyaw_rate_source = 'compass'\n")
     with pytest.raises(DataError, match=r"sonarslam.toml: \[motion\] yaw_rate_source must be one"):
         load_dataset_config(path)
