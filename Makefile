@@ -33,7 +33,7 @@ lint: $(STAMP)
 	$(BIN)/mypy
 
 test: lint
-	$(BIN)/python -m pytest -q -n 2 --durations=10
+	$(BIN)/python -m pytest -q -n 2 -rs --durations=10
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run_benchmarks.py

@@ -28,3 +28,16 @@ def marina() -> Dataset:
     if marina_root() is None:
         pytest.skip("real marina data not found under $SONARSLAM_DATA")
     return open_dataset("marina")
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Mark every test that needs the real marina (its fixture or ``needs_marina``) with
+    ``marina``, so that ``pytest -m marina`` runs them and ``-m "not marina"`` leaves them."""
+    for item in items:
+        uses_fixture = "marina" in getattr(item, "fixturenames", ())
+        skipif = any(
+            m.name == "skipif" and "marina" in str(m.kwargs.get("reason", ""))
+            for m in item.iter_markers()
+        )
+        if uses_fixture or skipif:
+            item.add_marker(pytest.mark.marina)
