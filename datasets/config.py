@@ -22,7 +22,7 @@ radians in the objects)::
     source = "..."
 
     [mounting.ahrs]         # AHRS frame in the body frame: body yaw = AHRS yaw - yaw
-    yaw_deg = -115.3
+    yaw_deg = -114.5
     source = "..."
 
     [keyframes]             # only for datasets of keyframes (thresholded PCD scans)
@@ -122,8 +122,10 @@ MARINA_CONFIG = DatasetConfig(
         source="vehicle's own DVL-to-body transform read off PID.log velocities (GPS-free)",
     ),
     ahrs_mounting=Mounting(
-        yaw_rad=math.radians(-115.3),
-        source="circular mean of DVL compass minus MTi yaw, minus 90 deg of DVL mount (GPS-free)",
+        yaw_rad=math.radians(-114.5),
+        source="DVL compass minus MTi yaw, constant term of a fit over heading (its 5.3 deg"
+        " deviation averages out over headings, not over the run's time), minus 90 deg of DVL"
+        " mount (GPS-free, sonarslam calibrate --ahrs)",
     ),
     noise=NoiseConfig(dvl_sigma_mps=0.05, ahrs_sigma_deg=2.0, gps_sigma_m=1.0),
     keyframe_scan_direction=-1,

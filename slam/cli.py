@@ -115,10 +115,22 @@ def _cmd_extract(args: argparse.Namespace) -> int:
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from datasets.source import open_dataset
-    from slam.calibration import calibrate_sonar_yaw
+    from slam.calibration import calibrate_ahrs_yaw, calibrate_sonar_yaw
     from slam.pipeline import pose_source_by_name
 
     dataset = open_dataset(args.source)
+    if args.ahrs:
+        fit = calibrate_ahrs_yaw(dataset)
+        amp = math.degrees(math.hypot(*fit.harmonics_rad[:2]))
+        print(
+            f"AHRS mounting yaw from the DVL compass (GPS-free): "
+            f"{math.degrees(fit.ahrs_yaw_rad):.2f} deg (configured: "
+            f"{math.degrees(dataset.config.ahrs_mounting.yaw_rad):.2f} deg); DVL compass - AHRS "
+            f"yaw = {math.degrees(fit.offset_rad):.2f} deg over headings (time mean "
+            f"{math.degrees(fit.time_mean_rad):.2f} deg), deviation {amp:.1f} deg, residual sd "
+            f"{math.degrees(fit.residual_sd_rad):.2f} deg; put it under [mounting.ahrs] yaw_deg"
+        )
+        return 0
     poses = pose_source_by_name(dataset, args.poses)
     result = calibrate_sonar_yaw(dataset, poses, window_s=args.window)
     current = math.degrees(dataset.config.sonar_mounting.yaw_rad)
@@ -297,10 +309,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=_cmd_demo)
 
-    p = sub.add_parser("calibrate", help="sonar mounting yaw by map sharpness", epilog=EPILOG)
+    p = sub.add_parser(
+        "calibrate",
+        help="sonar mounting yaw by map sharpness; --ahrs: AHRS yaw from the DVL compass",
+        epilog=EPILOG,
+    )
     p.add_argument("source", help="dataset directory or 'marina'")
     p.add_argument("--poses", default="dr", help="pose source (default dr: GPS-free)")
     p.add_argument("--window", type=float, default=120.0, help="entropy window (s, default 120)")
+    p.add_argument(
+        "--ahrs",
+        action="store_true",
+        help="the AHRS mounting yaw from the DVL's own compass instead (GPS-free)",
+    )
     p.set_defaults(func=_cmd_calibrate)
 
     p = sub.add_parser("info", help="what a dataset holds", epilog=EPILOG)

@@ -229,3 +229,44 @@ def test_heading_rate_source_survives_a_biased_gyro(biased_gyro_harbour, backend
     assert errors["gyro"][0] > 5.0
     assert errors["heading"][0] < 3.5  # the AHRS bias (2 deg) plus its noise
     assert errors["heading"][1] < 0.8 * errors["gyro"][1]
+
+
+def test_ahrs_yaw_from_a_deviated_dvl_compass(tmp_path):
+    """A DVL compass deflected by 5 deg (hard iron) over a run that spends unequal time at each
+    heading: the time mean of (DVL compass - AHRS) is off, the harmonic fit recovers the AHRS
+    mounting (no AHRS bias here, so the mounting is the truth)."""
+    import math
+    from dataclasses import replace
+
+    from datasets.simulator import make_scenario, simulate_records
+    from datasets.simulator.writer import write_dataset
+    from datasets.source import open_dataset
+    from slam.calibration import calibrate_ahrs_yaw
+
+    scenario = make_scenario("harbour", 5, 600.0)
+    noise = replace(scenario.noise, ahrs_bias_deg=0.0, dvl_compass_deviation_deg=(-4.5, 2.8))
+    ds = open_dataset(write_dataset(simulate_records(replace(scenario, noise=noise)), tmp_path))
+    truth = ds.config.ahrs_mounting.yaw_rad
+    fit = calibrate_ahrs_yaw(ds)
+    plain = calibrate_ahrs_yaw(ds, harmonics=0)
+    err = math.degrees(abs(float(wrap_angle(fit.ahrs_yaw_rad - truth))))
+    err_plain = math.degrees(abs(float(wrap_angle(plain.ahrs_yaw_rad - truth))))
+    assert err < 0.3, err
+    assert err_plain > 2 * err
+    # the deviation's amplitude (its phase is in the AHRS yaw, the simulator's in the DVL's)
+    assert math.degrees(math.hypot(*fit.harmonics_rad)) == pytest.approx(
+        math.hypot(4.5, 2.8), abs=0.5
+    )
+
+
+def test_marina_ahrs_mounting_is_the_compass_fit(marina):
+    """The configured AHRS yaw is what ``sonarslam calibrate --ahrs`` finds, GPS-free."""
+    import math
+
+    from slam.calibration import calibrate_ahrs_yaw
+
+    fit = calibrate_ahrs_yaw(marina)
+    assert math.degrees(fit.ahrs_yaw_rad) == pytest.approx(
+        math.degrees(marina.config.ahrs_mounting.yaw_rad), abs=0.01
+    )
+    assert math.degrees(fit.time_mean_rad) == pytest.approx(25.31, abs=0.01)  # the old value's

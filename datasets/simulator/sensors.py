@@ -53,6 +53,10 @@ class SensorNoise:
         ``[dvl_dropout_min_s, dvl_dropout_max_s]``, during which ``bottomVelStatus`` is 0.
     dvl_compass_sigma_deg : float
         White noise of the DVL's own compass (deg).
+    dvl_compass_deviation_deg : tuple of float
+        ``(B, C)``: the DVL compass reads ``B sin(yaw) + C cos(yaw)`` (deg) off, ``yaw`` the
+        DVL frame's yaw, as a compass deflected by the vehicle's own field (hard iron); the
+        marina's is ~5 deg.
     ahrs_sigma_deg : float
         White noise of the AHRS heading (deg).
     ahrs_bias_deg : float
@@ -76,6 +80,7 @@ class SensorNoise:
     dvl_dropout_min_s: float = 3.0
     dvl_dropout_max_s: float = 10.0
     dvl_compass_sigma_deg: float = 3.0
+    dvl_compass_deviation_deg: tuple[float, float] = (0.0, 0.0)
     ahrs_sigma_deg: float = 0.5
     ahrs_bias_deg: float = 2.0
     ahrs_rate_sigma_radps: float = 0.002
@@ -258,8 +263,14 @@ def simulate_dvl(
     for start, end in dropouts:
         lost |= (t >= start) & (t <= end)
     yaw_dvl = trajectory.poses(t)[:, 2] + mounting.yaw_rad
+    b_deg, c_deg = noise.dvl_compass_deviation_deg
+    deviation = b_deg * np.sin(yaw_dvl) + c_deg * np.cos(yaw_dvl)
     compass = np.mod(
-        90.0 - np.rad2deg(yaw_dvl) + rng.normal(0.0, noise.dvl_compass_sigma_deg, t.size), 360.0
+        90.0
+        - np.rad2deg(yaw_dvl)
+        + deviation
+        + rng.normal(0.0, noise.dvl_compass_sigma_deg, t.size),
+        360.0,
     )
     return DvlSamples(
         t_s=t,
