@@ -9,7 +9,9 @@
 * ``association_quality.py``: association precision and recall of both back ends against the
   simulator's walls;
 * ``marina_heading.py``: how much of the marina ATE is the absolute heading (skipped without
-  the marina).
+  the marina);
+* ``marina_sonar_timing.py``: the sonar clock offset and keyframe scan direction by map
+  sharpness (skipped without the marina).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ SCRIPTS = (
     ("isam2_speed.py", "out/isam2_speed.json"),
     ("association_quality.py", "out/association_quality.json"),
     ("marina_heading.py", "out/marina_heading.json"),
+    ("marina_sonar_timing.py", "out/marina_sonar_timing.json"),
 )
 
 

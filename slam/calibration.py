@@ -9,6 +9,7 @@ ground truth is not used to calibrate.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -18,7 +19,14 @@ from features.geometry import FloatArray, compose, wrap_angle
 from features.pose_source import PoseSource
 from features.projection import beam_points
 
-__all__ = ["YawSearch", "map_entropy", "calibrate_sonar_yaw", "CompassFit", "calibrate_ahrs_yaw"]
+__all__ = [
+    "YawSearch",
+    "map_entropy",
+    "scan_entropy",
+    "calibrate_sonar_yaw",
+    "CompassFit",
+    "calibrate_ahrs_yaw",
+]
 
 
 @dataclass(frozen=True)
@@ -40,6 +48,38 @@ def map_entropy(points_w: FloatArray, cell_m: float) -> float:
     counts = np.bincount(np.unique(keys, return_inverse=True)[1])
     p = counts / counts.sum()
     return float(-(p * np.log(p)).sum())
+
+
+def _windowed_entropy(
+    dataset: Dataset, pose_source: PoseSource, window_s: float, cell_m: float
+) -> Callable[[float], float]:
+    """``sonar yaw (rad) -> summed entropy (nats)`` of the dataset's beams projected with
+    ``pose_source`` in windows of ``window_s`` (the mounting's x, y kept)."""
+    beams = dataset.nav_beams()
+    bi, r, bearing = beam_points(beams, dataset.config.sonar)
+    t = np.array([b.t for b in beams])[bi]
+    mount = dataset.config.sonar_mounting
+    wTs0 = compose(pose_source.poses(t), replace(mount, yaw_rad=0.0).as_pose())
+    window = np.floor((t - t[0]) / window_s).astype(np.int64)
+    splits = np.flatnonzero(np.diff(window)) + 1
+
+    def cost(yaw: float) -> float:
+        ang = wTs0[:, 2] + yaw + bearing
+        pts = np.column_stack([wTs0[:, 0] + r * np.cos(ang), wTs0[:, 1] + r * np.sin(ang)])
+        return sum(map_entropy(chunk, cell_m) for chunk in np.split(pts, splits))
+
+    return cost
+
+
+def scan_entropy(
+    dataset: Dataset, pose_source: PoseSource, window_s: float = 60.0, cell_m: float = 0.5
+) -> float:
+    """Summed windowed map entropy (nats) with the configured sonar mounting: the sharpness
+    criterion of the sonar clock offset and the keyframes' scan direction (lower is sharper;
+    compare values of one dataset with one pose source and one window only)."""
+    return _windowed_entropy(dataset, pose_source, window_s, cell_m)(
+        dataset.config.sonar_mounting.yaw_rad
+    )
 
 
 def calibrate_sonar_yaw(
@@ -65,20 +105,7 @@ def calibrate_sonar_yaw(
     coarse_step_deg, fine_step_deg : float
         Grid over 360 deg, then refined +-2 coarse steps around the best.
     """
-    beams = dataset.nav_beams()
-    head = dataset.config.sonar
-    bi, r, bearing = beam_points(beams, head)
-    t = np.array([b.t for b in beams])[bi]
-    mount = dataset.config.sonar_mounting
-    wTs0 = compose(pose_source.poses(t), replace(mount, yaw_rad=0.0).as_pose())
-    window = np.floor((t - t[0]) / window_s).astype(np.int64)
-    splits = np.flatnonzero(np.diff(window)) + 1
-
-    def cost(yaw: float) -> float:
-        ang = wTs0[:, 2] + yaw + bearing
-        pts = np.column_stack([wTs0[:, 0] + r * np.cos(ang), wTs0[:, 1] + r * np.sin(ang)])
-        return sum(map_entropy(chunk, cell_m) for chunk in np.split(pts, splits))
-
+    cost = _windowed_entropy(dataset, pose_source, window_s, cell_m)
     coarse = np.deg2rad(np.arange(-180.0, 180.0, coarse_step_deg))
     costs = np.array([cost(y) for y in coarse])
     best = coarse[int(np.argmin(costs))]
