@@ -141,7 +141,7 @@ def main() -> None:
         return
     result: dict[str, object] = {}
 
-    grid = np.arange(-4.0, 12.01, 0.5)
+    grid = np.arange(-8.0, 12.01, 0.5)
     dr = dr_ate_against_turn(ds, grid)
     best = min(dr, key=lambda r: r["ate_mean_m"])
     result["dr_ate_against_turn"] = dr
@@ -151,13 +151,11 @@ def main() -> None:
             print(
                 f"   d {r['d_deg']:+5.1f} deg: mean {r['ate_mean_m']:6.2f} m, max {r['ate_max_m']:6.2f} m"
             )
-    slope = np.polyfit(
-        [r["d_deg"] for r in dr if -2 <= r["d_deg"] <= 2],
-        [r["ate_mean_m"] for r in dr if -2 <= r["d_deg"] <= 2],
-        1,
-    )[0]
+    at = {r["d_deg"]: r["ate_mean_m"] for r in dr}
     print(
-        f"   GPS-best d = {best['d_deg']:+.1f} deg; near d = 0 the mean ATE moves {abs(slope):.2f} m per degree"
+        f"   GPS-best d = {best['d_deg']:+.1f} deg; one degree either side of it costs"
+        f" {0.5 * (at[best['d_deg'] - 1.0] + at[best['d_deg'] + 1.0]) - best['ate_mean_m']:.2f} m"
+        " of mean ATE on average"
     )
 
     comp = compass_disagreement(ds)

@@ -38,6 +38,8 @@ radians in the objects)::
     [motion]
     yaw_rate_source = "heading"  # what turns the heading between AHRS samples: "gyro" (the
                             # logged rate) or "heading" (the AHRS heading's own change)
+    ahrs_deviation_deg = [-2.01, 2.57]  # the AHRS yaw errs by B sin(yaw) + C cos(yaw) (deg):
+                            # taken off (sonarslam calibrate --ahrs-deviation)
 
 Keys a file leaves out take the neutral defaults of :class:`DatasetConfig` (no clock offset,
 identity mountings); the simulator writes every key. Without a file, a dataset gets the marina's
@@ -96,6 +98,7 @@ class DatasetConfig:
     keyframe_scan_direction: int = -1
     sonar_time_offset_s: float = 0.0
     yaw_rate_source: str = "gyro"
+    ahrs_deviation_rad: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self) -> None:
         if self.yaw_rate_source not in YAW_RATE_SOURCES:
@@ -132,6 +135,9 @@ MARINA_CONFIG = DatasetConfig(
     # map entropy over DR poses, 60 s windows: 384.4 at 0 s, 381.4 at 0.75 s (GPS-free)
     sonar_time_offset_s=0.75,
     yaw_rate_source="heading",
+    # the MTi yaw's hard-iron deviation, from the sonar lines of EKF closed loops (GPS-free):
+    # sonarslam calibrate marina --ahrs-deviation (4 iterations, from 0)
+    ahrs_deviation_rad=(math.radians(-2.01), math.radians(2.57)),
 )
 
 
@@ -251,7 +257,7 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
             )
     yaw_rate_source = base.yaw_rate_source
     if "motion" in data:
-        _check_keys(p, "motion", data["motion"], {"yaw_rate_source"})
+        _check_keys(p, "motion", data["motion"], {"yaw_rate_source", "ahrs_deviation_deg"})
         if "yaw_rate_source" in data["motion"]:
             yaw_rate_source = data["motion"]["yaw_rate_source"]
             if yaw_rate_source not in YAW_RATE_SOURCES:
@@ -261,6 +267,15 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
                     f"[motion] yaw_rate_source must be one of {YAW_RATE_SOURCES},"
                     f" got {yaw_rate_source!r}",
                 )
+    ahrs_deviation_rad = base.ahrs_deviation_rad
+    if "motion" in data and "ahrs_deviation_deg" in data["motion"]:
+        dev = data["motion"]["ahrs_deviation_deg"]
+        if not isinstance(dev, list) or len(dev) != 2:
+            raise DataError(
+                p, None, f"[motion] ahrs_deviation_deg must be [B, C] (deg), got {dev!r}"
+            )
+        b_deg, c_deg = (_number(p, "motion", "ahrs_deviation_deg", v) for v in dev)
+        ahrs_deviation_rad = (math.radians(b_deg), math.radians(c_deg))
     return DatasetConfig(
         sonar=sonar,
         sonar_mounting=mountings["sonar"],
@@ -270,6 +285,7 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
         keyframe_scan_direction=scan_direction,
         sonar_time_offset_s=time_offset_s,
         yaw_rate_source=yaw_rate_source,
+        ahrs_deviation_rad=ahrs_deviation_rad,
     )
 
 
@@ -305,4 +321,6 @@ def dump_dataset_config(config: DatasetConfig) -> str:
         f"gps_sigma_m = {n.gps_sigma_m!r}\ndvl_max_gap_s = {n.dvl_max_gap_s!r}\n\n"
         f"[keyframes]\nscan_direction = {config.keyframe_scan_direction}\n\n"
         f"[motion]\nyaw_rate_source = {config.yaw_rate_source!r}\n"
+        f"ahrs_deviation_deg = [{_deg(config.ahrs_deviation_rad[0])!r},"
+        f" {_deg(config.ahrs_deviation_rad[1])!r}]\n"
     )

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -26,6 +27,8 @@ __all__ = [
     "calibrate_sonar_yaw",
     "CompassFit",
     "calibrate_ahrs_yaw",
+    "heading_deviation_from_lines",
+    "calibrate_ahrs_deviation",
 ]
 
 
@@ -175,3 +178,106 @@ def calibrate_ahrs_yaw(dataset: Dataset, harmonics: int = 1) -> CompassFit:
     # DVL compass = yaw of the DVL frame = body yaw + dvl yaw = AHRS yaw - ahrs yaw + dvl yaw
     ahrs_yaw = float(wrap_angle(dataset.config.dvl_mounting.yaw_rad - offset))
     return CompassFit(ahrs_yaw, offset, mean, coef[1:], float(np.std(r - A @ coef)))
+
+
+def heading_deviation_from_lines(
+    dataset: Dataset,
+    features: list[Any],
+    feature_landmarks: list[int | None],
+    min_observations: int = 4,
+) -> tuple[FloatArray, int]:
+    """The AHRS yaw's heading-dependent error seen by the sonar, GPS-free.
+
+    A wall keeps its direction whatever the vehicle's heading, and the sonar is fixed to the
+    vehicle: the world direction of an observed line, ``theta_sonar + psi_AHRS + sonar yaw``,
+    differs from its landmark's mean direction by the AHRS error at that heading, ``e(psi)``,
+    less the landmark's mean of it. Over the landmarks seen at least ``min_observations``
+    times, the residuals are fitted (weighted by the lines' theta variances) with
+    ``e(psi) = B sin psi + C cos psi``, the hard-iron deviation of a compass; its constant part
+    is not observable this way (nor any other way without an absolute reference).
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The dataset of the run (its AHRS series and configuration: the current deviation is
+        applied, so the result is what is left of it).
+    features, feature_landmarks : list
+        A closed-loop run's lines and the landmark each was associated with
+        (:class:`slam.closed_loop.ClosedLoopResult`).
+    min_observations : int
+        Landmarks seen fewer times are left out.
+
+    Returns
+    -------
+    coef_rad : ndarray, shape (2,)
+        ``(B, C)`` (rad) of the residual deviation.
+    n : int
+        Lines used.
+    """
+    from slam.motion import body_yaw
+
+    cfg = dataset.config
+    att = dataset.attitude
+    yaw_unwrapped = np.unwrap(att.yaw_rad)
+    pairs = [(f, lm) for f, lm in zip(features, feature_landmarks, strict=True) if lm is not None]
+    if not pairs:
+        return np.zeros(2), 0
+    t = np.array([f.t for f, _ in pairs])
+    psi = body_yaw(np.interp(t, att.t, yaw_unwrapped), cfg.ahrs_mounting, cfg.ahrs_deviation_rad)
+    theta_w = np.array([f.z[1] for f, _ in pairs]) + psi
+    var = np.array([f.cov[1, 1] for f, _ in pairs])
+    lm = np.array([lm for _, lm in pairs])
+    w = 1.0 / var
+    A = np.column_stack([np.sin(psi), np.cos(psi)])
+    res = np.zeros(t.size)
+    keep = np.zeros(t.size, dtype=bool)
+    for k in np.unique(lm):
+        m = lm == k
+        if m.sum() < min_observations:
+            continue
+        # a line's direction is defined modulo pi (rho's sign): compare doubled angles
+        mean = np.angle(np.mean(np.exp(2j * theta_w[m]))) / 2.0
+        r = np.angle(np.exp(2j * (theta_w[m] - mean))) / 2.0
+        # each landmark's own unknown direction: take its weighted mean off the residuals and
+        # off the regressors alike (fixed effects), or a landmark seen over a narrow range of
+        # headings would absorb part of the deviation
+        wm = w[m] / w[m].sum()
+        res[m] = r - wm @ r
+        A[m] -= wm @ A[m]
+        keep |= m
+    if keep.sum() < 3:
+        return np.zeros(2), int(keep.sum())
+    sw = np.sqrt(w[keep])
+    coef, *_ = np.linalg.lstsq(A[keep] * sw[:, None], res[keep] * sw, rcond=None)
+    return coef, int(keep.sum())
+
+
+def calibrate_ahrs_deviation(
+    dataset: Dataset,
+    run: Callable[[Dataset], Any],
+    iterations: int = 4,
+) -> list[tuple[FloatArray, int]]:
+    """Self-calibrate the AHRS deviation ``(B, C)`` with closed loops, GPS-free.
+
+    Each iteration runs ``run(dataset)`` (a closed loop returning a
+    :class:`slam.closed_loop.ClosedLoopResult`) with the deviation found so far, fits what is
+    left of it (:func:`heading_deviation_from_lines`) and adds it. The associations improve as
+    the heading does, hence the iterations.
+
+    Returns
+    -------
+    list of (ndarray, int)
+        Per iteration, the deviation ``(B, C)`` (rad) found so far after it, and the lines used.
+    """
+    out: list[tuple[FloatArray, int]] = []
+    total = np.asarray(dataset.config.ahrs_deviation_rad, dtype=np.float64)
+    for _ in range(iterations):
+        ds = replace(
+            dataset,
+            config=replace(dataset.config, ahrs_deviation_rad=(float(total[0]), float(total[1]))),
+        )
+        result = run(ds)
+        coef, n = heading_deviation_from_lines(ds, result.features, result.feature_landmarks)
+        total = total + coef
+        out.append((total.copy(), n))
+    return out

@@ -119,6 +119,33 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     from slam.pipeline import pose_source_by_name
 
     dataset = open_dataset(args.source)
+    if args.ahrs_deviation:
+        from slam.calibration import calibrate_ahrs_deviation
+        from slam.closed_loop import run_closed_loop
+        from slam.ekf import EkfConfig, LineEkf
+        from slam.pipeline import default_extractor_config
+
+        def run(ds):  # noqa: ANN001, ANN202
+            mount = ds.config.sonar_mounting
+            return run_closed_loop(
+                ds,
+                lambda t, p, c: LineEkf(t, p, c, mount, EkfConfig()),
+                default_extractor_config(ds),
+                progress=False,
+            )
+
+        b0, c0 = (math.degrees(v) for v in dataset.config.ahrs_deviation_rad)
+        print(
+            f"AHRS deviation from the EKF's line re-observations (GPS-free), from [{b0:.2f}, {c0:.2f}] deg:"
+        )
+        steps = calibrate_ahrs_deviation(dataset, run, iterations=args.iterations)
+        for k, (dev, n) in enumerate(steps, start=1):
+            print(
+                f"  iteration {k}: [{math.degrees(dev[0]):.2f}, {math.degrees(dev[1]):.2f}] deg ({n} lines)"
+            )
+        b, c = (math.degrees(v) for v in steps[-1][0])
+        print(f"put it under [motion] as ahrs_deviation_deg = [{b:.2f}, {c:.2f}]")
+        return 0
     if args.ahrs:
         fit = calibrate_ahrs_yaw(dataset)
         amp = math.degrees(math.hypot(*fit.harmonics_rad[:2]))
@@ -321,6 +348,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--ahrs",
         action="store_true",
         help="the AHRS mounting yaw from the DVL's own compass instead (GPS-free)",
+    )
+    p.add_argument(
+        "--ahrs-deviation",
+        action="store_true",
+        help="the AHRS heading's deviation B sin(yaw) + C cos(yaw) from the sonar lines of EKF"
+        " closed loops instead (GPS-free, ~20 s per iteration on the marina)",
+    )
+    p.add_argument(
+        "--iterations", type=int, default=4, help="closed loops for --ahrs-deviation (default 4)"
     )
     p.set_defaults(func=_cmd_calibrate)
 

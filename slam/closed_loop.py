@@ -166,7 +166,7 @@ def run_closed_loop(
     landmark_ids: list[int | None] = []
     yaw_rate = 0.0
     heading_rate = cfg.yaw_rate_source == "heading"
-    prev_att: Attitude | None = None
+    prev_yaw: tuple[float, float] | None = None  # (t, body yaw) of the previous AHRS sample
     v_prev, s_prev = np.zeros(2), float(vin.sigma_mps[0]) if len(records) else 0.0
     extractor_s = backend_s = 0.0
     counts = {"beams": 0, "ahrs": 0, "dvl": 0}
@@ -179,15 +179,14 @@ def run_closed_loop(
         v_prev, s_prev = vin.v_b_mps[k], float(vin.sigma_mps[k])
         if isinstance(rec, Attitude):
             counts["ahrs"] += 1
+            yaw_b = float(body_yaw(rec.yaw_rad, cfg.ahrs_mounting, cfg.ahrs_deviation_rad))
             if heading_rate:  # the heading's change since its previous sample (causal)
-                if prev_att is not None and rec.t > prev_att.t:
-                    yaw_rate = float(wrap_angle(rec.yaw_rad - prev_att.yaw_rad)) / (
-                        rec.t - prev_att.t
-                    )
-                prev_att = rec
+                if prev_yaw is not None and rec.t > prev_yaw[0]:
+                    yaw_rate = float(wrap_angle(yaw_b - prev_yaw[1])) / (rec.t - prev_yaw[0])
+                prev_yaw = (rec.t, yaw_b)
             else:
                 yaw_rate = rec.yaw_rate_radps
-            backend.update_heading(rec.t, float(body_yaw(rec.yaw_rad, cfg.ahrs_mounting)))
+            backend.update_heading(rec.t, yaw_b)
             traj_t.append(rec.t)
             traj_p.append(backend.pose)
             traj_c.append(backend.pose_cov)

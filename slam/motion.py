@@ -62,9 +62,22 @@ def body_velocity(v_dvl_mps: npt.ArrayLike, dvl_mounting: Mounting) -> FloatArra
     return np.column_stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]])
 
 
-def body_yaw(yaw_ahrs_rad: npt.ArrayLike, ahrs_mounting: Mounting) -> FloatArray:
-    """AHRS-frame yaw to body yaw (rad), wrapped."""
-    return wrap_angle(np.asarray(yaw_ahrs_rad, dtype=np.float64) - ahrs_mounting.yaw_rad)
+def body_yaw(
+    yaw_ahrs_rad: npt.ArrayLike,
+    ahrs_mounting: Mounting,
+    deviation_rad: tuple[float, float] = (0.0, 0.0),
+) -> FloatArray:
+    """AHRS-frame yaw to body yaw (rad), wrapped.
+
+    ``deviation_rad = (B, C)``: the AHRS yaw errs by ``B sin psi + C cos psi`` around the body
+    yaw ``psi`` (a compass deflected by the vehicle's own field, hard iron); it is taken off,
+    evaluated at the measured yaw (the error of that is second order in ``B``, ``C``).
+    """
+    psi = wrap_angle(np.asarray(yaw_ahrs_rad, dtype=np.float64) - ahrs_mounting.yaw_rad)
+    b, c = deviation_rad
+    if b == 0.0 and c == 0.0:
+        return psi
+    return wrap_angle(psi - (b * np.sin(psi) + c * np.cos(psi)))
 
 
 def held_velocity_variance_step(
@@ -153,6 +166,7 @@ def dead_reckoning(
     t0_s: float,
     t1_s: float,
     noise: MotionNoise | None = None,
+    ahrs_deviation_rad: tuple[float, float] = (0.0, 0.0),
 ) -> Trajectory:
     """Dead reckoning from DVL velocity and AHRS heading on the AHRS timeline (10 Hz marina).
 
@@ -171,7 +185,7 @@ def dead_reckoning(
     inside = (attitude.t > t0_s) & (attitude.t <= t1_s)
     t = np.concatenate([[t0_s], attitude.t[inside]])
     yaw_unwrapped = np.unwrap(attitude.yaw_rad)
-    psi = body_yaw(np.interp(t, attitude.t, yaw_unwrapped), ahrs_mounting)
+    psi = body_yaw(np.interp(t, attitude.t, yaw_unwrapped), ahrs_mounting, ahrs_deviation_rad)
     vin = velocity_input(t, dvl, dvl_mounting, noise)
     dt = np.diff(t)
     c, s = np.cos(psi[:-1]), np.sin(psi[:-1])

@@ -52,7 +52,7 @@ def start_pose(dataset: Dataset) -> tuple[float, np.ndarray, np.ndarray]:
     i = int(inside[0])
     t0 = float(gps.t[i])
     yaw_a = np.interp(t0, dataset.attitude.t, np.unwrap(dataset.attitude.yaw_rad))
-    psi = float(body_yaw(yaw_a, dataset.config.ahrs_mounting))
+    psi = float(body_yaw(yaw_a, dataset.config.ahrs_mounting, dataset.config.ahrs_deviation_rad))
     sigma_gps = dataset.config.noise.gps_sigma_m
     sigma_yaw = np.deg2rad(dataset.config.noise.ahrs_sigma_deg)
     cov = np.diag([sigma_gps**2, sigma_gps**2, sigma_yaw**2])
@@ -72,6 +72,7 @@ def dead_reckoning_trajectory(dataset: Dataset) -> Trajectory:
         t0,
         dataset.nav_span_s[1],
         motion_noise(dataset),
+        dataset.config.ahrs_deviation_rad,
     )
 
 
@@ -85,7 +86,9 @@ def gps_ahrs_trajectory(dataset: Dataset) -> Trajectory:
     att = dataset.attitude
     keep = (att.t >= t0) & (att.t <= t1)
     t = att.t[keep]
-    psi = body_yaw(att.yaw_rad[keep], dataset.config.ahrs_mounting)
+    psi = body_yaw(
+        att.yaw_rad[keep], dataset.config.ahrs_mounting, dataset.config.ahrs_deviation_rad
+    )
     xy = np.column_stack([np.interp(t, gps.t, gps.en_m[:, 0]), np.interp(t, gps.t, gps.en_m[:, 1])])
     n = dataset.config.noise
     cov = np.diag([n.gps_sigma_m**2, n.gps_sigma_m**2, np.deg2rad(n.ahrs_sigma_deg) ** 2])

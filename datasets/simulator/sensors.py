@@ -64,6 +64,9 @@ class SensorNoise:
         from East is therefore ``true - bias``.
     ahrs_rate_sigma_radps : float
         White noise of the AHRS rates (rad/s).
+    ahrs_deviation_deg : tuple of float
+        ``(B, C)``: the AHRS yaw (counter-clockwise) reads ``B sin(psi) + C cos(psi)`` (deg)
+        off, ``psi`` the true body yaw, as a compass deflected by the vehicle (hard iron).
     ahrs_gyro_bias_radps : float
         Constant bias of the AHRS yaw rate (rad/s, counter-clockwise); the marina's MTi has
         ~0.01 (0.6 deg/s).
@@ -85,6 +88,7 @@ class SensorNoise:
     ahrs_bias_deg: float = 2.0
     ahrs_rate_sigma_radps: float = 0.002
     ahrs_gyro_bias_radps: float = 0.0
+    ahrs_deviation_deg: tuple[float, float] = (0.0, 0.0)
     ahrs_acc_sigma_mps2: float = 0.02
     ahrs_attitude_sigma_deg: float = 0.1
     gps_sigma_m: float = 0.7
@@ -313,7 +317,10 @@ def simulate_ahrs(
     t = sample_times(trajectory, rate_hz, 0.04, rng, 0.003)
     n = t.size
     yaw_ahrs = trajectory.poses(t)[:, 2] + mounting.yaw_rad
+    psi = trajectory.poses(t)[:, 2]
+    b_deg, c_deg = noise.ahrs_deviation_deg
     heading = 90.0 - np.rad2deg(yaw_ahrs) + noise.ahrs_bias_deg
+    heading = heading - (b_deg * np.sin(psi) + c_deg * np.cos(psi))  # yaw CCW = 90 - heading
     heading = heading + rng.normal(0.0, noise.ahrs_sigma_deg, n)
     heading = np.rad2deg(wrap_angle(np.deg2rad(heading)))
     w = trajectory.yaw_rate_at(t)
