@@ -183,6 +183,11 @@ def _cmd_info(args: argparse.Namespace) -> int:
         print(
             f"  {name} mounting x={m.x_m} m y={m.y_m} m yaw={math.degrees(m.yaw_rad):.2f} deg ({m.source})"
         )
+    b, c = (math.degrees(v) for v in d.config.ahrs_deviation_rad)
+    print(
+        f"  AHRS deviation B={b:.2f} C={c:.2f} deg (taken off: B sin(yaw) + C cos(yaw)); heading"
+        f" between AHRS samples from the {d.config.yaw_rate_source}"
+    )
     return 0
 
 
