@@ -386,7 +386,7 @@ class LineEkf:
         line_w, G_z, G_pose, wTs = self._observation_in_world(f)
         P_pose = self.P[POSE, POSE]
         cov_w = G_pose @ P_pose @ G_pose.T + G_z @ f.cov @ G_z.T
-        ends_w = compose(wTs, np.column_stack([f.endpoints_r, np.zeros(2)]))[:, :2]
+        ends_w = transform_points(wTs, f.endpoints_r)
         cfg = self.config
         self._tentative = [c for c in self._tentative if f.t - c.t <= cfg.tentative_max_age_s]
         gate = chi2.ppf(cfg.association.gate_probability, 2)
@@ -433,7 +433,7 @@ class LineEkf:
 
     def _grow_extent(self, lm: Landmark, f: LineFeature) -> None:
         wTs = compose(self.x[POSE], self.bTs)
-        ends_w = compose(wTs, np.column_stack([f.endpoints_r, np.zeros(2)]))[:, :2]
+        ends_w = transform_points(wTs, f.endpoints_r)
         s = along_line(self.landmark_line(lm), ends_w)
         lm.s_min_m = min(lm.s_min_m, float(s.min()))
         lm.s_max_m = max(lm.s_max_m, float(s.max()))
