@@ -10,16 +10,13 @@ import json
 import tempfile
 from pathlib import Path
 
-import numpy as np
-
 from datasets.simulator import simulate
 from datasets.source import open_dataset
 from slam.closed_loop import run_closed_loop
 from slam.ekf import EkfConfig, LineEkf
-from slam.evaluation import association_scores
+from slam.evaluation import association_against_truth
 from slam.factor_graph import GraphConfig, isam2_backend_factory, pose_source_of
 from slam.pipeline import default_extractor_config
-from slam.pose_sources import truth_trajectory
 
 
 def measure(source: Path, backend: str) -> dict[str, float]:
@@ -40,15 +37,7 @@ def measure(source: Path, backend: str) -> dict[str, float]:
             pose_source_of=pose_source_of,
             progress=False,
         )
-    walls = np.asarray(ds.truth["walls_m"]) - np.asarray(ds.truth["first_fix_enu_m"])
-    s = association_scores(
-        res.features,
-        res.feature_landmarks,
-        walls,
-        truth_trajectory(ds),
-        mount.as_pose(),
-        feature_seeds=res.feature_seeds,
-    )
+    s = association_against_truth(ds, res)
     return {
         "precision": s.precision,
         "recall": s.recall,

@@ -587,6 +587,31 @@ def wall_lines(
     return np.array(lines).reshape(-1, 2), np.array(line_of_wall, dtype=np.int64)
 
 
+def truth_walls(dataset: Any) -> FloatArray:
+    """The simulator's wall segments (W, 2, 2) in the readers' frame (world minus the first fix)."""
+    if dataset.truth is None or "walls_m" not in dataset.truth:
+        raise ValueError(
+            f"{dataset.root}: no walls in truth.json (only simulated datasets have them)"
+        )
+    offset = np.asarray(dataset.truth.get("first_fix_enu_m", [0.0, 0.0]), dtype=np.float64)
+    return np.asarray(dataset.truth["walls_m"], dtype=np.float64) - offset
+
+
+def association_against_truth(dataset: Any, result: Any) -> AssociationScores:
+    """:func:`association_scores` of a closed-loop run (``ClosedLoopResult``) on a simulated
+    dataset: its features, pairings and seeds against the true walls and poses."""
+    from slam.pose_sources import truth_trajectory
+
+    return association_scores(
+        result.features,
+        result.feature_landmarks,
+        truth_walls(dataset),
+        truth_trajectory(dataset),
+        dataset.config.sonar_mounting.as_pose(),
+        feature_seeds=result.feature_seeds,
+    )
+
+
 def landmark_overshoot_m(landmarks: list[dict[str, Any]], walls_w: FloatArray) -> FloatArray:
     """How far each landmark's end points lie from the nearest true wall segment (m).
 

@@ -374,22 +374,10 @@ def run_backend(
 
 def _association_against_truth(dataset: Dataset, result: Any) -> dict[str, Any]:
     """Association precision and recall against the simulator's walls
-    (:func:`slam.evaluation.association_scores`), with the counts to pool them over runs."""
-    from slam.evaluation import association_scores
-    from slam.pose_sources import truth_trajectory
+    (:func:`slam.evaluation.association_against_truth`), with the counts to pool them over runs."""
+    from slam.evaluation import association_against_truth
 
-    assert dataset.truth is not None
-    walls = np.asarray(dataset.truth["walls_m"], dtype=np.float64) - np.asarray(
-        dataset.truth.get("first_fix_enu_m", [0.0, 0.0]), dtype=np.float64
-    )
-    s = association_scores(
-        result.features,
-        result.feature_landmarks,
-        walls,
-        truth_trajectory(dataset),
-        dataset.config.sonar_mounting.as_pose(),
-        feature_seeds=result.feature_seeds,
-    )
+    s = association_against_truth(dataset, result)
     return {
         "truth_precision": s.precision,
         "truth_recall": s.recall,

@@ -89,23 +89,15 @@ def test_ekf_closed_loop_associates_the_true_walls(tmp_path):
     from features.extractor import ExtractorConfig
     from slam.closed_loop import run_closed_loop
     from slam.ekf import EkfConfig, LineEkf
-    from slam.evaluation import association_scores, landmark_overshoot_m
-    from slam.pose_sources import truth_trajectory
+    from slam.evaluation import association_against_truth, landmark_overshoot_m, truth_walls
 
     ds = open_dataset(simulate("harbour", seed=4, out_dir=tmp_path / "h", duration_s=300.0))
     mount = ds.config.sonar_mounting
     res = run_closed_loop(
         ds, lambda t, p, P: LineEkf(t, p, P, mount, EkfConfig()), ExtractorConfig(), progress=False
     )
-    walls = np.asarray(ds.truth["walls_m"]) - np.asarray(ds.truth["first_fix_enu_m"])
-    s = association_scores(
-        res.features,
-        res.feature_landmarks,
-        walls,
-        truth_trajectory(ds),
-        mount.as_pose(),
-        feature_seeds=res.feature_seeds,
-    )
+    walls = truth_walls(ds)
+    s = association_against_truth(ds, res)
     # with the default rule (a landmark needs 2 sightings) each landmark has one seed
     assert s.n_seeds == len(res.backend.landmarks) >= 3
     assert s.n_associated >= 20

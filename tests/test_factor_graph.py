@@ -511,7 +511,7 @@ def test_short_simulated_closed_loop_beats_dead_reckoning(tmp_path_factory):
     from datasets.source import open_dataset
     from features.extractor import ExtractorConfig
     from slam.closed_loop import run_closed_loop
-    from slam.evaluation import association_scores, landmark_overshoot_m
+    from slam.evaluation import association_against_truth, landmark_overshoot_m, truth_walls
     from slam.factor_graph import isam2_backend_factory, pose_source_of
     from slam.metrics import ate_against_gps
     from slam.pose_sources import dead_reckoning_trajectory, truth_trajectory
@@ -545,15 +545,8 @@ def test_short_simulated_closed_loop_beats_dead_reckoning(tmp_path_factory):
     assert 0.3 < anees < 6.0  # one run: its samples are correlated in time, the band is loose
     assert result.backend.stats["associated"] >= 0.4 * result.backend.stats["observations"]
     # association against the true walls: the targets (precision 99 %, recall 95 %)
-    walls = np.asarray(dataset.truth["walls_m"]) - np.asarray(dataset.truth["first_fix_enu_m"])
-    scores = association_scores(
-        result.features,
-        result.feature_landmarks,
-        walls,
-        truth_trajectory(dataset),
-        dataset.config.sonar_mounting.as_pose(),
-        feature_seeds=result.feature_seeds,
-    )
+    walls = truth_walls(dataset)
+    scores = association_against_truth(dataset, result)
     assert scores.n_associated >= 20 and scores.n_seeds >= 1
     assert scores.precision >= 0.99 and scores.recall >= 0.95
     assert scores.seed_precision == 1.0
