@@ -532,7 +532,7 @@ class LineExtractor:
     ) -> LineEstimate:
         cfg = self.config
         if cfg.covariance_method == "seed":
-            return seed_ellipse(
+            seed = seed_ellipse(
                 cell,
                 self.grid,
                 snap,
@@ -546,6 +546,12 @@ class LineExtractor:
                 window_theta_cells=cfg.seed_window_theta_cells,
                 window_rho_cells=cfg.seed_window_rho_cells,
             )
+            if pose_cov is None:
+                return seed
+            # the ellipse knows nothing of the poses: add the fit's first-order pose term
+            with_pose = self._fit(voters, seed.rho_m, seed.theta_rad, pose_cov).cov
+            without = self._fit(voters, seed.rho_m, seed.theta_rad, None).cov
+            return replace(seed, cov=seed.cov + (with_pose - without))
         return self._fit(voters, rho_m, theta_rad, pose_cov)
 
     def _fit(

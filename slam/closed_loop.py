@@ -24,7 +24,7 @@ from features.extractor import ExtractorConfig, LineExtractor
 from features.geometry import FloatArray, between, compose, wrap_angle
 from features.line import LineFeature
 from features.pose_source import PoseSource
-from slam.motion import body_yaw, velocity_input
+from slam.motion import body_yaw, held_velocity_variance_step, velocity_input
 from slam.pose_sources import motion_noise, start_pose
 from slam.trajectory import Trajectory
 from sonar.beam import SonarBeam
@@ -40,6 +40,11 @@ class AnchoredOdometry:
     current estimate, so the motion-distortion correction uses the (locally accurate) odometry
     and the absolute pose comes from the filter.
 
+    :meth:`covariance` is the chain's own position variance accumulated from the DVL noise
+    (isotropic, so frame-free) on top of the anchor's covariance: the extractor takes only its
+    differences between beams (``ExtractorConfig.pose_uncertainty``), which are the odometry's
+    uncertainty over the sector and so grow when the DVL degrades.
+
     The chain lives in growing buffers (amortised doubling) with its yaw kept unwrapped, and a
     query interpolates only over the samples spanning the queried times (a sector of beams), so
     a vote costs the same at the end of a long run as at its start.
@@ -48,23 +53,28 @@ class AnchoredOdometry:
     def __init__(self, t0_s: float, wTb0: FloatArray, capacity: int = 4096) -> None:
         self._t = np.empty(capacity)
         self._odo = np.empty((capacity, 3))  # x, y, unwrapped yaw of O(t)
+        self._var = np.empty(capacity)  # accumulated position variance of O(t), per axis (m^2)
         self._t[0] = t0_s
         self._odo[0] = 0.0
+        self._var[0] = 0.0
         self._n = 1
         self._anchor_t = t0_s
         self._anchor = np.asarray(wTb0, dtype=np.float64).copy()
         self._anchor_cov: FloatArray | None = None
 
-    def append(self, t_s: float, bTb_next: FloatArray) -> None:
-        """Chain one step of relative motion ending at ``t_s``."""
+    def append(self, t_s: float, bTb_next: FloatArray, var_step_m2: float = 0.0) -> None:
+        """Chain one step of relative motion ending at ``t_s``, whose position variance per
+        axis is ``var_step_m2``."""
         if self._n == self._t.size:
             self._t = np.concatenate([self._t, np.empty(self._t.size)])
             self._odo = np.concatenate([self._odo, np.empty_like(self._odo)])
+            self._var = np.concatenate([self._var, np.empty_like(self._var)])
         last = self._odo[self._n - 1]
         nxt = compose(last, bTb_next)
         nxt[2] = last[2] + bTb_next[2]  # keep the chain's yaw unwrapped
         self._t[self._n] = t_s
         self._odo[self._n] = nxt
+        self._var[self._n] = self._var[self._n - 1] + var_step_m2
         self._n += 1
 
     def set_anchor(self, t_s: float, wTb: FloatArray, cov: FloatArray | None = None) -> None:
@@ -86,7 +96,10 @@ class AnchoredOdometry:
         return compose(compose(self._anchor, between(o_now, np.zeros(3))), o_t)
 
     def covariance(self, t_s: float) -> FloatArray | None:
-        return self._anchor_cov
+        if self._anchor_cov is None:
+            return None
+        v = float(np.interp(t_s, self._t[: self._n], self._var[: self._n]))
+        return np.asarray(self._anchor_cov) + np.diag([v, v, 0.0])
 
 
 class Backend(Protocol):
@@ -168,6 +181,7 @@ def run_closed_loop(
     heading_rate = cfg.yaw_rate_source == "heading"
     prev_yaw: tuple[float, float] | None = None  # (t, body yaw) of the previous AHRS sample
     v_prev, s_prev = np.zeros(2), float(vin.sigma_mps[0]) if len(records) else 0.0
+    t_prev, held_from = t0, t0  # previous record; time of the DVL sample held since
     extractor_s = backend_s = 0.0
     counts = {"beams": 0, "ahrs": 0, "dvl": 0}
     for k, rec in enumerate(
@@ -175,8 +189,12 @@ def run_closed_loop(
     ):
         tb = time.perf_counter()
         rel = backend.predict(rec.t, v_prev, s_prev, yaw_rate)
-        odometry.append(rec.t, rel)
+        dt = max(rec.t - t_prev, 0.0)
+        odometry.append(
+            rec.t, rel, float(held_velocity_variance_step(max(rec.t - held_from, dt), dt, s_prev))
+        )
         v_prev, s_prev = vin.v_b_mps[k], float(vin.sigma_mps[k])
+        t_prev, held_from = rec.t, float(vin.sample_t_s[k])
         if isinstance(rec, Attitude):
             counts["ahrs"] += 1
             yaw_b = float(body_yaw(rec.yaw_rad, cfg.ahrs_mounting, cfg.ahrs_deviation_rad))

@@ -25,6 +25,8 @@ __all__ = [
     "body_velocity",
     "body_yaw",
     "held_velocity_variance_step",
+    "dvl_scatter",
+    "dvl_sample_sigma",
     "propagate",
     "VelocityInput",
     "velocity_input",
@@ -47,12 +49,20 @@ class MotionNoise:
         taken as zero with ``gap_sigma_mps``.
     gap_sigma_mps : float
         Velocity 1-sigma added during a dropout (grows linearly to this at ``dvl_max_gap_s``).
+    dvl_scatter_window_s : float
+        Window (s) of the DVL's own scatter (:func:`dvl_scatter`); 0 turns the excess-scatter
+        noise off.
+    dvl_nominal_scatter_mps : float
+        The scatter of the DVL when it works as usual (m/s): its excess over this is white
+        velocity noise added to ``dvl_sigma_mps`` (:func:`dvl_sample_sigma`).
     """
 
     dvl_sigma_mps: float = 0.05
     ahrs_sigma_rad: float = float(np.deg2rad(2.0))
     dvl_max_gap_s: float = 10.0
     gap_sigma_mps: float = 0.3
+    dvl_scatter_window_s: float = 0.0
+    dvl_nominal_scatter_mps: float = 0.0
 
 
 def body_velocity(v_dvl_mps: npt.ArrayLike, dvl_mounting: Mounting) -> FloatArray:
@@ -118,6 +128,56 @@ def propagate(
     return nxt, F, G
 
 
+def dvl_scatter(t_s: FloatArray, v_mps: FloatArray, window_s: float) -> FloatArray:
+    """Causal scatter of DVL velocities (m/s, per axis) at each sample: the root mean square of
+    ``|v_k - v_{k-1}| / 2`` over the samples of the last ``window_s`` seconds.
+
+    For white noise of 1-sigma ``s`` per axis, ``E |v_k - v_{k-1}|^2 = 4 s^2``, so this
+    estimates ``s`` (the Allan deviation at one sample); the vehicle's own accelerations add
+    little at ~1 Hz. The first sample has no difference and takes the second's value.
+
+    Parameters
+    ----------
+    t_s : ndarray, shape (N,)
+        Times of the valid samples (s), increasing.
+    v_mps : ndarray, shape (N, 2)
+        Their velocities (m/s).
+    window_s : float
+        Averaging window (s), > 0.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+    """
+    n = t_s.size
+    if n < 2:
+        return np.zeros(n)
+    d2 = np.concatenate([[np.nan], 0.25 * np.sum(np.diff(v_mps, axis=0) ** 2, axis=1)])
+    d2[0] = d2[1]
+    csum = np.concatenate([[0.0], np.cumsum(d2)])
+    first = np.searchsorted(t_s, t_s - window_s, side="right")
+    count = np.arange(1, n + 1) - first
+    return np.asarray(np.sqrt((csum[1:] - csum[first]) / count))
+
+
+def dvl_sample_sigma(t_s: FloatArray, v_mps: FloatArray, noise: MotionNoise) -> FloatArray:
+    """1-sigma (m/s, per axis) of each valid DVL sample: ``dvl_sigma_mps``, plus the excess of
+    the DVL's own scatter over its nominal scatter taken as white noise,
+    ``sqrt(dvl_sigma^2 + max(0, scatter^2 - nominal^2))``.
+
+    ``dvl_sigma_mps`` is the error that accumulates into drift when the DVL works as usual; its
+    scatter then is mostly the vehicle's real wobble, which integrates to nothing. When the
+    scatter rises above that (the marina's last ~700 s, bottom at 1.3 m: 0.35 against
+    0.15 m/s, white up to a minute), the excess does integrate, and the estimators must know.
+    """
+    base = np.full(t_s.size, noise.dvl_sigma_mps)
+    if noise.dvl_scatter_window_s <= 0.0:
+        return base
+    s = dvl_scatter(t_s, v_mps, noise.dvl_scatter_window_s)
+    excess = np.maximum(s**2 - noise.dvl_nominal_scatter_mps**2, 0.0)
+    return np.asarray(np.sqrt(base**2 + excess))
+
+
 @dataclass(frozen=True)
 class VelocityInput:
     """Body velocity held between DVL samples, with its 1-sigma, at given times."""
@@ -133,12 +193,14 @@ def velocity_input(
 ) -> VelocityInput:
     """Body velocity at times ``t_s``: the last valid DVL sample (zero-order hold).
 
-    During a bottom-lock dropout the last valid velocity is held and its 1-sigma grows
-    linearly from ``dvl_sigma_mps`` to ``gap_sigma_mps`` over ``dvl_max_gap_s``; past that the
-    velocity is zero with ``gap_sigma_mps``. Before the first valid sample it is zero.
+    The 1-sigma of a valid sample is :func:`dvl_sample_sigma`. During a bottom-lock dropout the
+    last valid velocity is held and its 1-sigma grows linearly from that to ``gap_sigma_mps``
+    (or stays, when larger) over ``dvl_max_gap_s``; past that the velocity is zero with
+    ``gap_sigma_mps``. Before the first valid sample it is zero.
     """
     valid_t = dvl.t[dvl.valid]
     v_valid = body_velocity(dvl.v_mps[dvl.valid], dvl_mounting)
+    sigma_valid = dvl_sample_sigma(valid_t, v_valid, noise)
     last_valid = np.searchsorted(valid_t, t_s, side="right") - 1
     last_any = np.searchsorted(dvl.t, t_s, side="right") - 1
     have = last_valid >= 0
@@ -148,7 +210,8 @@ def velocity_input(
     newest_invalid = (last_any >= 0) & ~dvl.valid[np.clip(last_any, 0, None)]
     in_dropout = newest_invalid | ~have
     frac = np.clip(np.where(in_dropout, age, 0.0) / noise.dvl_max_gap_s, 0.0, 1.0)
-    sigma = noise.dvl_sigma_mps + frac * (noise.gap_sigma_mps - noise.dvl_sigma_mps)
+    s0 = np.where(have, sigma_valid[np.clip(last_valid, 0, None)], noise.dvl_sigma_mps)
+    sigma = np.maximum(s0 + frac * (noise.gap_sigma_mps - s0), s0)
     expired = in_dropout & (age > noise.dvl_max_gap_s)
     v[expired] = 0.0
     sigma = np.where(expired, noise.gap_sigma_mps, sigma)

@@ -17,7 +17,12 @@ from features.extractor import MARINA_PRESET, ExtractorConfig
 from slam.evaluation import COV_FILE, write_trajectory_covariances
 from slam.metrics import ate_against_gps, ate_errors
 from slam.plots import plot_trajectories
-from slam.pose_sources import dead_reckoning_trajectory, gps_ahrs_trajectory, truth_trajectory
+from slam.pose_sources import (
+    dead_reckoning_trajectory,
+    dvl_quality,
+    gps_ahrs_trajectory,
+    truth_trajectory,
+)
 from slam.settings import apply_overrides, split_settings
 from slam.trajectory import Trajectory, write_tum
 
@@ -53,10 +58,14 @@ def default_extractor_config(dataset: Dataset) -> ExtractorConfig:
     marina (GPS-free, dead-reckoning poses): repeated lines of one wall scatter by ~5 deg and
     ~0.5 m because the walls' echo bands are metres thick; the "fit" covariance is ~30x too
     small against that (median pair d2 55), the seed's ellipse is consistent (median 0.91);
-    longer segments (360 deg) scatter less.
+    longer segments (360 deg) scatter less. The odometry's uncertainty over the sector is added
+    (``pose_uncertainty``): it matters when the DVL degrades (the marina's last ~700 s, where its
+    relative error over one 13.6 s scan reaches ~1 m).
     """
     if dataset.beams and dataset.beams[0].thresholded:
-        return MARINA_PRESET.replace(covariance_method="seed", sector_deg=360.0, min_votes=15)
+        return MARINA_PRESET.replace(
+            covariance_method="seed", sector_deg=360.0, min_votes=15, pose_uncertainty=True
+        )
     return ExtractorConfig()
 
 
@@ -257,6 +266,7 @@ def run(
         "realtime_factor": data_s / wall_s if wall_s > 0 else float("inf"),
         "dvl_rows": int(dataset.dvl.t.size),
         "dvl_invalid_rows": int((~dataset.dvl.valid).sum()),
+        **dvl_quality(dataset),
         "settings": dict(settings or {}),
         **extras.pop("metrics", {}),
     }

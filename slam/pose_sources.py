@@ -10,7 +10,7 @@ import numpy as np
 
 from datasets.source import Dataset
 from features.geometry import wrap_angle
-from slam.motion import MotionNoise, body_yaw, dead_reckoning
+from slam.motion import MotionNoise, body_yaw, dead_reckoning, dvl_scatter
 from slam.trajectory import Trajectory
 
 __all__ = [
@@ -18,6 +18,7 @@ __all__ = [
     "start_pose",
     "gps_ahrs_trajectory",
     "dead_reckoning_trajectory",
+    "dvl_quality",
     "truth_trajectory",
 ]
 
@@ -29,7 +30,30 @@ def motion_noise(dataset: Dataset) -> MotionNoise:
         dvl_sigma_mps=n.dvl_sigma_mps,
         ahrs_sigma_rad=float(np.deg2rad(n.ahrs_sigma_deg)),
         dvl_max_gap_s=n.dvl_max_gap_s,
+        dvl_scatter_window_s=n.dvl_scatter_window_s,
+        dvl_nominal_scatter_mps=n.dvl_nominal_scatter_mps,
     )
+
+
+def dvl_quality(dataset: Dataset) -> dict[str, float]:
+    """How the DVL behaved (for ``metrics.json``): the median of its own scatter
+    (:func:`slam.motion.dvl_scatter`, m/s), and the time its scatter stayed above the nominal one,
+    when :func:`slam.motion.dvl_sample_sigma` added the excess as noise (s; 0 when that is off),
+    with the first such time after the start of the logs (s, -1 if none)."""
+    noise = motion_noise(dataset)
+    dvl = dataset.dvl
+    t, v = dvl.t[dvl.valid], dvl.v_mps[dvl.valid]
+    out = {"dvl_scatter_p50_mps": float("nan"), "dvl_excess_s": 0.0, "dvl_excess_from_s": -1.0}
+    if t.size < 2:
+        return out
+    out["dvl_scatter_p50_mps"] = float(np.median(dvl_scatter(t, v, 60.0)))
+    if noise.dvl_scatter_window_s > 0.0:
+        scatter = dvl_scatter(t, v, noise.dvl_scatter_window_s)
+        over = scatter[1:] > noise.dvl_nominal_scatter_mps
+        out["dvl_excess_s"] = float(np.diff(t)[over].sum())
+        if over.any():
+            out["dvl_excess_from_s"] = float(t[1:][over][0] - dataset.nav_span_s[0])
+    return out
 
 
 def _require_gps(dataset: Dataset):  # noqa: ANN202

@@ -538,3 +538,26 @@ def test_pose_uncertainty_widens_the_covariance() -> None:
         d = b.cov - a.cov
         assert np.linalg.eigvalsh(d).min() > -1e-15  # only adds uncertainty
         assert np.trace(d) > 0.1 * np.trace(a.cov)
+
+
+def test_pose_uncertainty_widens_the_seed_ellipse_by_the_fit_pose_term() -> None:
+    """The seed's ellipse knows nothing of the poses: pose uncertainty adds the fit's pose
+    term to it and leaves the line itself alone."""
+    beams = _pool_beams(600, -70.0, seed=6)
+    src = MutablePoses(ConstantVelocityPoses(t0_s=1000.0), growth_per_s=(1e-4, 1e-4, 1e-5))
+    seed_cfg = POOL_CONFIG.replace(covariance_method="seed")
+    plain = run(LineExtractor(seed_cfg, POOL_HEAD, Mounting(), src), beams)
+    wide = run(
+        LineExtractor(seed_cfg.replace(pose_uncertainty=True), POOL_HEAD, Mounting(), src), beams
+    )
+    fit_plain = run(LineExtractor(POOL_CONFIG, POOL_HEAD, Mounting(), src), beams)
+    fit_wide = run(
+        LineExtractor(POOL_CONFIG.replace(pose_uncertainty=True), POOL_HEAD, Mounting(), src),
+        beams,
+    )
+    assert len(plain) == len(wide) == len(fit_plain) == len(fit_wide) == 4
+    for a, b, fa, fb in zip(plain, wide, fit_plain, fit_wide, strict=True):
+        assert (a.rho_m, a.theta_rad) == (b.rho_m, b.theta_rad)
+        # the same pose variances up to the voters: the fit refits on its gated support (~30 %)
+        np.testing.assert_allclose(np.diag(b.cov - a.cov), np.diag(fb.cov - fa.cov), rtol=0.5)
+        assert np.linalg.eigvalsh(b.cov - a.cov).min() > -1e-15

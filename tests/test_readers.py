@@ -219,10 +219,13 @@ def test_config_errors_name_file_and_key(tmp_path):
         ("[mounting.ahrs]\nyaw_deg = nan\n", r"yaw_deg must be a finite number, got nan"),
         ("[sonar]\nn_bins = 500.5\n", r"n_bins must be a whole number, got 500.5"),
         ("[sonar]\nbin_size_m = 0\n", r"bin_size_m must be > 0"),
+        ("[noise]\ndvl_scatter_window_s = -60\n", r"dvl_scatter_window_s must be >= 0, got -60"),
     ):
         path.write_text(text)
         with pytest.raises(DataError, match=message):
             load_dataset_config(path)
+    path.write_text("[noise]\ndvl_scatter_window_s = 0\n")  # 0: off, allowed
+    assert load_dataset_config(path).noise.dvl_scatter_window_s == 0.0
     path.write_text("[motion]\nyaw_rate_source = 'compass'\n")
     with pytest.raises(DataError, match=r"sonarslam.toml: \[motion\] yaw_rate_source must be one"):
         load_dataset_config(path)

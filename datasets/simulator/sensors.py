@@ -76,6 +76,12 @@ class SensorNoise:
         White noise of roll and pitch (deg).
     gps_sigma_m : float
         White noise of each GPS position component, East and North (m).
+    dvl_degraded_from_s : float or None
+        From this many seconds after the start, the DVL's white noise is
+        ``dvl_degraded_sigma_mps`` instead (the marina's last ~700 s: bottom at 1.3 m, scatter
+        0.35 against 0.15 m/s); None: never.
+    dvl_degraded_sigma_mps : float
+        The DVL's white noise once degraded (m/s).
     """
 
     dvl_sigma_mps: float = 0.02
@@ -92,6 +98,8 @@ class SensorNoise:
     ahrs_acc_sigma_mps2: float = 0.02
     ahrs_attitude_sigma_deg: float = 0.1
     gps_sigma_m: float = 0.7
+    dvl_degraded_from_s: float | None = None
+    dvl_degraded_sigma_mps: float = 0.3
 
     def __post_init__(self) -> None:
         if self.dvl_dropout_min_s > self.dvl_dropout_max_s:
@@ -259,8 +267,12 @@ def simulate_dvl(
     v_d = np.column_stack(
         [c * v_point[:, 0] + s * v_point[:, 1], -s * v_point[:, 0] + c * v_point[:, 1]]
     )
-    v_meas = np.column_stack([v_d, np.zeros(t.size)]) + rng.normal(
-        0.0, noise.dvl_sigma_mps, (t.size, 3)
+    sigma = np.full(t.size, noise.dvl_sigma_mps)
+    if noise.dvl_degraded_from_s is not None:
+        late = t >= float(trajectory.t_s[0]) + noise.dvl_degraded_from_s
+        sigma[late] = noise.dvl_degraded_sigma_mps
+    v_meas = np.column_stack([v_d, np.zeros(t.size)]) + sigma[:, None] * rng.normal(
+        0.0, 1.0, (t.size, 3)
     )
     dropouts = _dropouts(float(trajectory.t_s[0]), float(trajectory.t_s[-1]), noise, rng)
     lost = np.zeros(t.size, dtype=bool)
