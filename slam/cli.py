@@ -188,30 +188,19 @@ def _cmd_info(args: argparse.Namespace) -> int:
         f"  AHRS deviation B={b:.2f} C={c:.2f} deg (taken off: B sin(yaw) + C cos(yaw)); heading"
         f" between AHRS samples from the {d.config.yaw_rate_source}"
     )
-    import numpy as np
-
-    from slam.motion import dvl_scatter
     from slam.pose_sources import dvl_quality
 
-    n = d.config.noise
-    ok = d.dvl.valid
-    if ok.sum() > 1:
-        q = np.percentile(dvl_scatter(d.dvl.t[ok], d.dvl.v_mps[ok], 60.0), [10, 50, 90, 99])
-        print(
-            "  DVL scatter over 60 s (m/s): p10 {:.3f}, p50 {:.3f}, p90 {:.3f}, p99 {:.3f}".format(
-                *q
-            )
-        )
+    n, dq = d.config.noise, dvl_quality(d)
+    print(
+        f"  DVL scatter over {n.dvl_scatter_window_s or 60.0:g} s (m/s): "
+        + ", ".join(f"p{p} {dq[f'dvl_scatter_p{p}_mps']:.3f}" for p in (10, 50, 90, 99))
+    )
     if n.dvl_scatter_window_s > 0:
-        dq = dvl_quality(d)
+        first = dq["dvl_excess_from_s"]
         print(
             f"  DVL sigma {n.dvl_sigma_mps} m/s, plus the scatter's excess over"
             f" {n.dvl_nominal_scatter_mps} m/s: {dq['dvl_excess_s']:.0f} s of the run"
-            + (
-                f", first at {dq['dvl_excess_from_s']:.0f} s"
-                if dq["dvl_excess_from_s"] >= 0
-                else ""
-            )
+            + (f", first at {first:.0f} s" if first >= 0 else "")
         )
     else:
         print(f"  DVL sigma {n.dvl_sigma_mps} m/s (the scatter's excess is not added)")

@@ -36,19 +36,24 @@ def motion_noise(dataset: Dataset) -> MotionNoise:
 
 
 def dvl_quality(dataset: Dataset) -> dict[str, float]:
-    """How the DVL behaved (for ``metrics.json``): the median of its own scatter
-    (:func:`slam.motion.dvl_scatter`, m/s), and the time its scatter stayed above the nominal one,
-    when :func:`slam.motion.dvl_sample_sigma` added the excess as noise (s; 0 when that is off),
-    with the first such time after the start of the logs (s, -1 if none)."""
+    """How the DVL behaved (for ``metrics.json`` and ``sonarslam info``).
+
+    Quantiles (10, 50, 90, 99 %) of its own scatter (:func:`slam.motion.dvl_scatter`, m/s,
+    over ``[noise] dvl_scatter_window_s``, 60 s when that is off); the time its scatter stayed
+    above the nominal one, when :func:`slam.motion.dvl_sample_sigma` added the excess as noise
+    (s; 0 when off), and the first such time after the start of the logs (s, -1 if none).
+    """
     noise = motion_noise(dataset)
     dvl = dataset.dvl
     t, v = dvl.t[dvl.valid], dvl.v_mps[dvl.valid]
-    out = {"dvl_scatter_p50_mps": float("nan"), "dvl_excess_s": 0.0, "dvl_excess_from_s": -1.0}
+    out = {f"dvl_scatter_p{p}_mps": float("nan") for p in (10, 50, 90, 99)}
+    out.update({"dvl_excess_s": 0.0, "dvl_excess_from_s": -1.0})
     if t.size < 2:
         return out
-    out["dvl_scatter_p50_mps"] = float(np.median(dvl_scatter(t, v, 60.0)))
+    scatter = dvl_scatter(t, v, noise.dvl_scatter_window_s or 60.0)
+    for p in (10, 50, 90, 99):
+        out[f"dvl_scatter_p{p}_mps"] = float(np.percentile(scatter, p))
     if noise.dvl_scatter_window_s > 0.0:
-        scatter = dvl_scatter(t, v, noise.dvl_scatter_window_s)
         over = scatter[1:] > noise.dvl_nominal_scatter_mps
         out["dvl_excess_s"] = float(np.diff(t)[over].sum())
         if over.any():
