@@ -549,9 +549,9 @@ class LineExtractor:
             if pose_cov is None:
                 return seed
             # the ellipse knows nothing of the poses: add the fit's first-order pose term
-            with_pose = self._fit(voters, seed.rho_m, seed.theta_rad, pose_cov).cov
-            without = self._fit(voters, seed.rho_m, seed.theta_rad, None).cov
-            return replace(seed, cov=seed.cov + (with_pose - without))
+            term = self._fit(voters, seed.rho_m, seed.theta_rad, pose_cov).pose_term
+            assert term is not None
+            return replace(seed, cov=seed.cov + term)
         return self._fit(voters, rho_m, theta_rad, pose_cov)
 
     def _fit(

@@ -106,12 +106,16 @@ class LineEstimate:
         Covariance of ``(rho_m, theta_rad)``.
     region_cells : ndarray of int64, shape (K,) or None
         Seed method: flat cells of the similar-overlap region.
+    pose_term : ndarray, shape (2, 2) or None
+        Fit with ``pose_cov_r``: the part of ``cov`` due to the relative pose uncertainty
+        (already included in ``cov``), for a method whose covariance knows nothing of poses.
     """
 
     rho_m: float
     theta_rad: float
     cov: FloatArray
     region_cells: npt.NDArray[np.int64] | None = None
+    pose_term: FloatArray | None = None
 
 
 def chi2_2dof(confidence: float) -> float:
@@ -348,9 +352,13 @@ def fit_line(
         later = np.maximum(bins.beam[:, None], bins.beam[None, :])  # random walk back from R
         c_pose = np.einsum("ia,ijab,jb->ij", a, q[later], a)
         k = cov @ (jac.T * w)  # (2, N)
-        cov = cov + k @ c_pose @ k.T
+        pose_term = k @ c_pose @ k.T
+        pose_term = 0.5 * (pose_term + pose_term.T)
+        cov = cov + pose_term
+    else:
+        pose_term = None
     cov = 0.5 * (cov + cov.T)
-    return LineEstimate(rho_m=rho, theta_rad=theta, cov=cov)
+    return LineEstimate(rho_m=rho, theta_rad=theta, cov=cov, pose_term=pose_term)
 
 
 def overlap_ratio(
