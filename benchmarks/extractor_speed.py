@@ -47,7 +47,7 @@ from features.hough import find_winners  # noqa: E402
 from features.pose_source import PoseSource  # noqa: E402
 from slam.extraction import extract_lines  # noqa: E402
 from sonar.beam import Mounting, SonarBeam, SonarHead  # noqa: E402
-from sonar.store import SectorSnapshot  # noqa: E402
+from features.sector import SectorSnapshot  # noqa: E402
 
 REALTIME_FACTOR_MIN = 200.0
 
@@ -100,11 +100,11 @@ def full_sector(
 ) -> tuple[LineExtractor, SectorSnapshot]:
     """A full sector stored from the beams ending at ``end_fraction`` of the run, no vote made."""
     ex = LineExtractor(config.replace(vote_every_n_beams=10**9), head, mounting, poses)
-    end = max(int(end_fraction * len(beams)), ex.store.capacity)
-    for b in beams[end - ex.store.capacity : end]:
+    end = max(int(end_fraction * len(beams)), ex.sector.capacity)
+    for b in beams[end - ex.sector.capacity : end]:
         ex.add(b)
-    assert ex.store.is_full and ex.n_votes == 0
-    return ex, ex.store.snapshot()
+    assert ex.sector.is_full and ex.n_votes == 0
+    return ex, ex.sector.snapshot()
 
 
 def rasterise(points_m: np.ndarray, pixel_m: float) -> np.ndarray:
@@ -184,7 +184,7 @@ def voting_over_sectors(
     big = max(per, key=lambda p: p["bins"])
     return {
         "sectors": n_sectors,
-        "beams_per_sector": ex.store.capacity,
+        "beams_per_sector": ex.sector.capacity,
         "grid_n_theta": ex.grid.n_theta,
         "grid_n_rho": ex.grid.n_rho,
         "theta_res_deg": float(np.rad2deg(ex.grid.theta_res_rad)),

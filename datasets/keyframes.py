@@ -151,7 +151,7 @@ def read_keyframes(
         j_float = angle / head.step_rad
         j = np.rint(j_float).astype(np.int64) % beams_per_scan
         r = np.hypot(xy[:, 0], xy[:, 1])
-        bin_float = r / head.bin_size_m - 1.0
+        bin_float = head.range_to_bin_float(r)
         bins = np.rint(bin_float).astype(np.int64)
         off_grid = (np.abs(j_float - np.rint(j_float)) > _GRID_TOLERANCE) | (
             np.abs(bin_float - bins) > _GRID_TOLERANCE

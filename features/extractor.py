@@ -28,6 +28,7 @@ from features.hough import (
 )
 from features.line import LineFeature
 from features.pose_source import PoseSource
+from features.sector import BinsInR, Sector, SectorSnapshot
 from features.uncertainty import (
     LineEstimate,
     effective_bearings,
@@ -38,7 +39,6 @@ from features.uncertainty import (
 )
 from sonar.beam import Mounting, SonarBeam, SonarHead
 from sonar.segmentation import segment_intensities
-from sonar.store import BinsInR, SectorSnapshot, SectorStore
 
 __all__ = ["ExtractorConfig", "MARINA_PRESET", "LineExtractor"]
 
@@ -307,7 +307,7 @@ class LineExtractor:
             if cfg.max_range_m is None
             else min(float(cfg.max_range_m), head.range_max_m)
         )
-        self.store = SectorStore(
+        self.sector = Sector(
             head,
             sonar_mounting,
             pose_source,
@@ -371,15 +371,15 @@ class LineExtractor:
             max_range_m=cfg.max_range_m,
         )
         bearing = float(self.head.angle_sense * beam.transducer_angle_rad)
-        self.store.add(float(beam.t), bearing, seg)
+        self.sector.add(float(beam.t), bearing, seg)
         self._since_vote += 1
-        if self.store.is_full and self._since_vote >= cfg.vote_every_n_beams:
+        if self.sector.is_full and self._since_vote >= cfg.vote_every_n_beams:
             return self.vote()
         return []
 
     def flush(self) -> list[LineFeature]:
         """Vote on the stored beams if any arrived since the last vote (end of a stream)."""
-        if self._since_vote == 0 or len(self.store) == 0:
+        if self._since_vote == 0 or len(self.sector) == 0:
             return []
         return self.vote()
 
@@ -415,7 +415,7 @@ class LineExtractor:
         cfg = self.config
         self._since_vote = 0
         self.n_votes += 1
-        snap = self.store.snapshot()  # paper 2.3: every stored bin in R
+        snap = self.sector.snapshot()  # paper 2.3: every stored bin in R
         fin = snap.final
         if len(fin) < cfg.min_votes:
             return []
@@ -437,7 +437,7 @@ class LineExtractor:
             assert fin.bin_id is not None
             if np.count_nonzero(taken[w.voters]) > 0.5 * w.voters.size:
                 # most of its voters rest on a line of this vote already: the same wall
-                self.store.remove_final_bins(fin.bin_id[w.removed])
+                self.sector.remove_final_bins(fin.bin_id[w.removed])
                 taken[w.removed] = True
                 continue
             est = self._estimate(w.cell, w.rho_m, w.theta_rad, fin.take(w.voters), snap, pose_cov)
@@ -461,7 +461,7 @@ class LineExtractor:
             if cfg.remove_on_line_sigma > 0.0:
                 gone = np.union1d(gone, self._echoes_on_line(est, fin, taken))
             taken[gone] = True
-            self.store.remove_final_bins(fin.bin_id[gone])  # paper 2.5
+            self.sector.remove_final_bins(fin.bin_id[gone])  # paper 2.5
         return lines
 
     def _refit_on_support(
@@ -518,7 +518,7 @@ class LineExtractor:
         if any(c is None for c in covs):
             return None
         return relative_pose_covariances(
-            snap, np.stack([np.asarray(c, dtype=np.float64) for c in covs]), self.store.bTs
+            snap, np.stack([np.asarray(c, dtype=np.float64) for c in covs]), self.sector.bTs
         )
 
     def _estimate(

@@ -20,12 +20,15 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-FloatArray = npt.NDArray[np.float64]
+from sonar.beam import FloatArray
 
 __all__ = [
     "FloatArray",
     "wrap_angle",
     "normalize_line",
+    "FLIP_RHO",
+    "normalize_line_cov",
+    "line_difference",
     "compose",
     "compose_jacobians",
     "inverse",
@@ -75,6 +78,61 @@ def normalize_line(rho_m: npt.ArrayLike, theta_rad: npt.ArrayLike) -> tuple[Floa
     theta = np.asarray(theta_rad, dtype=np.float64)
     flip = rho < 0.0
     return np.where(flip, -rho, rho), wrap_angle(np.where(flip, theta + np.pi, theta))
+
+
+#: ``(rho, theta) -> (-rho, theta + pi)`` acting on a covariance (``FLIP_RHO @ R @ FLIP_RHO``) or
+#: on the rows of a Jacobian (``FLIP_RHO @ H``): the one representation change of a line.
+FLIP_RHO = np.diag([-1.0, 1.0])
+
+
+def normalize_line_cov(line: npt.ArrayLike, cov: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """A line ``(rho_m, theta_rad)`` normalised (:func:`normalize_line`), its 2x2 covariance alike.
+
+    Parameters
+    ----------
+    line : array_like, shape (2,)
+    cov : array_like, shape (2, 2)
+
+    Returns
+    -------
+    line : ndarray, shape (2,)
+    cov : ndarray, shape (2, 2)
+        ``FLIP_RHO @ cov @ FLIP_RHO`` when the sign of ``rho`` was flipped, else ``cov``.
+    """
+    ln = np.asarray(line, dtype=np.float64)
+    c = np.asarray(cov, dtype=np.float64)
+    rho, theta = normalize_line(ln[0], ln[1])
+    out = np.array([float(rho), float(theta)])
+    return (out, FLIP_RHO @ c @ FLIP_RHO) if ln[0] < 0.0 else (out, c)
+
+
+def line_difference(z: npt.ArrayLike, z_ref: npt.ArrayLike) -> tuple[FloatArray, bool]:
+    """Sign-free difference of two lines ``z - z_ref``, with ``z`` in its representation nearest
+    ``z_ref``.
+
+    A line is both ``(rho, theta)`` and ``(-rho, theta + pi)``; near ``rho = 0`` both are close to
+    a normalised reference. The difference is taken in the one whose angle is within ``pi / 2``
+    of ``z_ref``'s.
+
+    Parameters
+    ----------
+    z, z_ref : array_like, shape (2,)
+        Lines ``(rho_m, theta_rad)``, any representation.
+
+    Returns
+    -------
+    nu : ndarray, shape (2,)
+        ``(rho_m, theta_rad)`` difference, the angle wrapped.
+    flipped : bool
+        True when ``z`` was taken as ``(-rho, theta + pi)``: its covariance is then
+        ``FLIP_RHO @ R @ FLIP_RHO`` and ``d nu / d z`` is ``FLIP_RHO``.
+    """
+    zz = np.asarray(z, dtype=np.float64)
+    zr = np.asarray(z_ref, dtype=np.float64)
+    d_theta = float(wrap_angle(zz[1] - zr[1]))
+    if abs(d_theta) <= 0.5 * np.pi:
+        return np.array([zz[0] - zr[0], d_theta]), False
+    return np.array([-zz[0] - zr[0], float(wrap_angle(zz[1] + np.pi - zr[1]))]), True
 
 
 def compose(aTb: npt.ArrayLike, bTc: npt.ArrayLike) -> FloatArray:

@@ -34,7 +34,7 @@ def beam_points(
     angles = np.array([b.transducer_angle_rad for b in beams])
     return (
         bi,
-        np.asarray((bins + 1.0) * head.bin_size_m, dtype=np.float64),
+        head.bin_range_m(bins),
         head.bearing_rad(angles[bi]),
     )
 

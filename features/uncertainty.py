@@ -80,7 +80,7 @@ from scipy import ndimage
 
 from features.geometry import FloatArray, normalize_line, wrap_angle
 from features.hough import HoughGrid
-from sonar.store import BinsInR, SectorSnapshot
+from features.sector import BinsInR, SectorSnapshot
 
 __all__ = [
     "LineEstimate",

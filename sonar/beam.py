@@ -7,9 +7,16 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from features.geometry import FloatArray
+__all__ = ["FloatArray", "SonarBeam", "SonarHead", "Mounting", "bin_range_m"]
 
-__all__ = ["SonarBeam", "SonarHead", "Mounting"]
+#: The project's float array type (``features.geometry`` re-exports it).
+FloatArray = npt.NDArray[np.float64]
+
+
+def bin_range_m(bin_index: npt.ArrayLike, bin_size_m: float) -> FloatArray:
+    """Range (m) of 0-based bin indices: ``(i + 1) * bin_size_m`` (the one place of this rule;
+    bin 500 of the marina's 0.1 m bins is at 50.0 m)."""
+    return (np.asarray(bin_index, dtype=np.float64) + 1.0) * bin_size_m
 
 
 @dataclass(frozen=True)
@@ -60,13 +67,21 @@ class SonarHead:
         """Range of the last bin (m)."""
         return self.n_bins * self.bin_size_m
 
+    def bin_range_m(self, bin_index: npt.ArrayLike) -> FloatArray:
+        """Range (m) of 0-based bin indices (:func:`bin_range_m`)."""
+        return bin_range_m(bin_index, self.bin_size_m)
+
     def bin_ranges_m(self) -> FloatArray:
         """Range of every bin, shape ``(n_bins,)`` (m)."""
-        return (np.arange(self.n_bins, dtype=np.float64) + 1.0) * self.bin_size_m
+        return self.bin_range_m(np.arange(self.n_bins))
 
     def range_to_bin(self, range_m: npt.ArrayLike) -> npt.NDArray[np.int64]:
-        """Nearest 0-based bin index of ranges (m); not clipped."""
-        return np.rint(np.asarray(range_m, dtype=np.float64) / self.bin_size_m).astype(np.int64) - 1
+        """Nearest 0-based bin index of ranges (m); not clipped (inverse of :meth:`bin_range_m`)."""
+        return np.rint(self.range_to_bin_float(range_m)).astype(np.int64)
+
+    def range_to_bin_float(self, range_m: npt.ArrayLike) -> FloatArray:
+        """Fractional 0-based bin index of ranges (m): ``r / bin_size_m - 1``."""
+        return np.asarray(np.asarray(range_m, dtype=np.float64) / self.bin_size_m - 1.0)
 
     def bearing_rad(self, transducer_angle_rad: npt.ArrayLike) -> FloatArray:
         """Bearing in the right-handed sonar frame of logged transducer angles (rad)."""

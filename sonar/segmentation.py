@@ -34,7 +34,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.ndimage import maximum_filter1d
 
-from sonar.beam import SonarBeam, SonarHead
+from sonar.beam import SonarBeam, SonarHead, bin_range_m
 
 __all__ = ["SegmentedBeam", "segment_intensities", "segment_beam"]
 
@@ -109,7 +109,7 @@ def segment_intensities(
     """
     inten = np.asarray(intensities)
     n_bins = inten.shape[0]
-    ranges_m = (np.arange(n_bins, dtype=np.float64) + 1.0) * bin_size_m
+    ranges_m = bin_range_m(np.arange(n_bins), bin_size_m)
     alive = ranges_m >= min_range_m - 1e-9 * bin_size_m
     if max_range_m is not None:
         alive &= ranges_m <= max_range_m + 1e-9 * bin_size_m

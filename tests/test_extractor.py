@@ -464,7 +464,8 @@ def _segmented(ranges_bins: list[int]):  # type: ignore[no-untyped-def]
 @pytest.mark.parametrize("requery", [True, False])
 def test_store_ring_buffer_and_motion_correction(requery: bool) -> None:
     from features.geometry import transform_points
-    from sonar.store import SectorStore, sector_beam_count
+    from features.sector import Sector
+    from sonar.store import sector_beam_count
 
     assert sector_beam_count(np.pi, np.deg2rad(0.9)) == 200
     assert sector_beam_count(1.5 * np.pi, np.deg2rad(0.45)) == 600
@@ -472,7 +473,7 @@ def test_store_ring_buffer_and_motion_correction(requery: bool) -> None:
     truth = ConstantVelocityPoses((1.0, -2.0, 0.5), (0.3, 0.1), 0.05, t0_s=10.0)
     src = MutablePoses(truth)
     mount = Mounting(x_m=0.5, y_m=-0.2, yaw_rad=0.3)
-    store = SectorStore(head, mount, src, sector_rad=np.pi, requery_poses=requery)
+    store = Sector(head, mount, src, sector_rad=np.pi, requery_poses=requery)
     assert store.capacity == 100
     rng = np.random.default_rng(0)
     bins_of = {}
