@@ -45,9 +45,9 @@ from common import pin_one_core  # noqa: E402
 from features.extractor import MARINA_PRESET, ExtractorConfig, LineExtractor  # noqa: E402
 from features.hough import find_winners  # noqa: E402
 from features.pose_source import PoseSource  # noqa: E402
+from features.sector import SectorSnapshot  # noqa: E402
 from slam.extraction import extract_lines  # noqa: E402
 from sonar.beam import Mounting, SonarBeam, SonarHead  # noqa: E402
-from features.sector import SectorSnapshot  # noqa: E402
 
 REALTIME_FACTOR_MIN = 200.0
 

@@ -149,7 +149,11 @@ def reference_to_newest(stored: StoredSector, beam_wTs: FloatArray) -> SectorSna
         bin_id=f.bin_id,
     )
     threshold = BinsInR(
-        x_m=bx[th.beam], y_m=by[th.beam], bearing_rad=bbear[th.beam], range_m=th.range_m, beam=th.beam
+        x_m=bx[th.beam],
+        y_m=by[th.beam],
+        bearing_rad=bbear[th.beam],
+        range_m=th.range_m,
+        beam=th.beam,
     )
     return SectorSnapshot(
         t_ref_s=float(stored.t_s[-1]),

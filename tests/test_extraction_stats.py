@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from features.sector import BinsInR
 from features.uncertainty import LineEstimate, fit_line
 from slam.line_eval import TrialResult, harbour_trial, mean_nees_band, pool_trial
-from features.sector import BinsInR
 
 POOL_SEEDS = range(8)
 RMS_RHO_MAX_M = 0.05  # the pool test's requirement
