@@ -12,11 +12,11 @@ from pathlib import Path
 
 from datasets.simulator import simulate
 from datasets.source import open_dataset
-from slam.closed_loop import run_closed_loop
-from slam.ekf import EkfConfig, LineEkf
-from slam.evaluation import association_against_truth
-from slam.factor_graph import GraphConfig, isam2_backend_factory, pose_source_of
-from slam.pipeline import default_extractor_config
+from slam.backends.ekf import EkfConfig, LineEkf
+from slam.backends.isam2.graph import GraphConfig, isam2_backend_factory, pose_source_of
+from slam.eval.consistency import association_against_truth
+from slam.run.closed_loop import run_closed_loop
+from slam.run.run import default_extractor_config
 
 
 def measure(source: Path, backend: str) -> dict[str, float]:

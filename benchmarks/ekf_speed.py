@@ -1,7 +1,7 @@
 """Speed of the EKF back end in closed loop on one core (issue: >= 100x real time).
 
-The whole marina with the closed-loop extractor settings (:func:`slam.pipeline.default_extractor_config`)
-and :class:`slam.ekf.LineEkf` with its defaults, the anchored odometry as the extractor's pose
+The whole marina with the closed-loop extractor settings (:func:`slam.run.run.default_extractor_config`)
+and :class:`slam.backends.ekf.LineEkf` with its defaults, the anchored odometry as the extractor's pose
 source: the real-time factor of the whole loop (data span / wall time, extractor included), the
 split between extractor and filter, and the time per line update (one per vote with lines).
 Without ``$SONARSLAM_DATA/marina`` a simulated harbour replaces it (as ``isam2_speed.py``).
@@ -36,9 +36,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     cpu = pin_one_core()
 
-    from slam.closed_loop import run_closed_loop
-    from slam.ekf import EkfConfig, LineEkf
-    from slam.metrics import ate_against_gps
+    from slam.backends.ekf import EkfConfig, LineEkf
+    from slam.eval.ate import ate_against_gps
+    from slam.run.closed_loop import run_closed_loop
 
     label, dataset, extractor_config = open_run(args.source)
     mount = dataset.config.sonar_mounting

@@ -46,7 +46,7 @@ from features.extractor import MARINA_PRESET, ExtractorConfig, LineExtractor  # 
 from features.hough import find_winners  # noqa: E402
 from features.pose_source import PoseSource  # noqa: E402
 from features.sector import SectorSnapshot  # noqa: E402
-from slam.extraction import extract_lines  # noqa: E402
+from slam.run.extraction import extract_lines  # noqa: E402
 from sonar.beam import Mounting, SonarBeam, SonarHead  # noqa: E402
 
 REALTIME_FACTOR_MIN = 200.0
@@ -61,7 +61,7 @@ def load_run(
     root = data_root()
     if source == "marina" and root is not None and (root / "marina").is_dir():
         from datasets.source import open_dataset
-        from slam.pose_sources import gps_ahrs_trajectory
+        from slam.run.sources import gps_ahrs_trajectory
 
         ds = open_dataset("marina")
         poses = gps_ahrs_trajectory(ds)

@@ -1,7 +1,7 @@
 """Speed of the GTSAM back end in closed loop on one core.
 
 The whole marina (the closed-loop extractor settings of
-:func:`slam.pipeline.default_extractor_config`, :class:`slam.factor_graph.LineIsam2` with its defaults,
+:func:`slam.run.run.default_extractor_config`, :class:`slam.backends.isam2.graph.LineIsam2` with its defaults,
 its smoothed trajectory as the extractor's pose source): the real-time factor of the whole
 closed loop (data span / wall time, extractor included; required >= 100x), the split between
 extractor and back end, and per iSAM2 update (one per vote with lines, and the pending odometry
@@ -45,9 +45,9 @@ REALTIME_FACTOR_MIN = 100.0
 
 def open_run(source: str) -> tuple[str, Any, ExtractorConfig]:
     """The marina, a dataset directory, or a simulated harbour when the marina is absent; with
-    the closed-loop extractor settings of :func:`slam.pipeline.default_extractor_config`."""
+    the closed-loop extractor settings of :func:`slam.run.run.default_extractor_config`."""
     from datasets.source import data_root, open_dataset
-    from slam.pipeline import default_extractor_config
+    from slam.run.run import default_extractor_config
 
     root = data_root()
     if source == "marina" and root is not None and (root / "marina").is_dir():
@@ -72,10 +72,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     cpu = pin_one_core()
 
-    from slam.closed_loop import run_closed_loop
-    from slam.factor_graph import GraphConfig, isam2_backend_factory, pose_source_of
-    from slam.metrics import ate_against_gps
-    from slam.pose_sources import dead_reckoning_trajectory
+    from slam.backends.isam2.graph import GraphConfig, isam2_backend_factory, pose_source_of
+    from slam.eval.ate import ate_against_gps
+    from slam.run.closed_loop import run_closed_loop
+    from slam.run.sources import dead_reckoning_trajectory
 
     label, dataset, extractor_config = open_run(args.source)
     config = GraphConfig()

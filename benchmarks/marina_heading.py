@@ -31,8 +31,8 @@ import numpy as np
 
 from datasets.errors import DataError
 from datasets.source import Dataset, open_dataset
-from slam.metrics import ate_against_gps
-from slam.pose_sources import dead_reckoning_trajectory, start_pose
+from slam.eval.ate import ate_against_gps
+from slam.run.sources import dead_reckoning_trajectory, start_pose
 
 
 def turned(dataset: Dataset, d_deg: float) -> Dataset:
@@ -92,10 +92,10 @@ def leg_rotation(dataset: Dataset, legs_s: list[float]) -> list[dict[str, float]
 
 
 def closed_loops(dataset: Dataset, d_deg: float) -> list[dict[str, float]]:
-    from slam.closed_loop import run_closed_loop
-    from slam.ekf import EkfConfig, LineEkf
-    from slam.factor_graph import GraphConfig, isam2_backend_factory, pose_source_of
-    from slam.pipeline import default_extractor_config
+    from slam.backends.ekf import EkfConfig, LineEkf
+    from slam.backends.isam2.graph import GraphConfig, isam2_backend_factory, pose_source_of
+    from slam.run.closed_loop import run_closed_loop
+    from slam.run.run import default_extractor_config
 
     assert dataset.gps is not None
     rows = []

@@ -79,7 +79,7 @@ class NoiseConfig:
     ahrs_sigma_deg: float = 2.0
     gps_sigma_m: float = 1.0
     dvl_max_gap_s: float = 10.0
-    #: 0 turns the excess-scatter DVL noise off (slam.motion.dvl_sample_sigma)
+    #: 0 turns the excess-scatter DVL noise off (slam.model.motion.dvl_sample_sigma)
     dvl_scatter_window_s: float = 0.0
     dvl_nominal_scatter_mps: float = 0.0
 
@@ -140,7 +140,7 @@ MARINA_CONFIG = DatasetConfig(
     # differences) has median 0.15 m/s while the DR drifts as if 0.05 (the rest is the
     # vehicle's wobble). Nominal scatter 0.2: the 99th percentile of the first 2,600 s. In the
     # last ~700 s (bottom at 1.3 m) it is 0.35, white to a minute: that excess is added
-    # (slam.motion.dvl_sample_sigma; sonarslam info prints the quantiles; GPS-free).
+    # (slam.model.motion.dvl_sample_sigma; sonarslam info prints the quantiles; GPS-free).
     noise=NoiseConfig(
         dvl_sigma_mps=0.05,
         ahrs_sigma_deg=2.0,

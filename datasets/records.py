@@ -2,7 +2,7 @@
 
 Frames and units are fixed in the readers: yaw angles are counter-clockwise from East (rad),
 velocities are in the sensor's own frame (m/s), positions are local East-North (m). Sensor
-mountings are applied by the consumers (``slam.motion``), from ``datasets.config``.
+mountings are applied by the consumers (``slam.model.motion``), from ``datasets.config``.
 The sonar beam record is :class:`sonar.beam.SonarBeam`.
 """
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slam.association import (
+from slam.mapping.association import (
     AssociationConfig,
     AssociationProblem,
     associate,
@@ -87,9 +87,9 @@ def test_ekf_closed_loop_associates_the_true_walls(tmp_path):
     from datasets.simulator import simulate
     from datasets.source import open_dataset
     from features.extractor import ExtractorConfig
-    from slam.closed_loop import run_closed_loop
-    from slam.ekf import EkfConfig, LineEkf
-    from slam.evaluation import association_against_truth, landmark_overshoot_m, truth_walls
+    from slam.backends.ekf import EkfConfig, LineEkf
+    from slam.eval.consistency import association_against_truth, landmark_overshoot_m, truth_walls
+    from slam.run.closed_loop import run_closed_loop
 
     ds = open_dataset(simulate("harbour", seed=4, out_dir=tmp_path / "h", duration_s=300.0))
     mount = ds.config.sonar_mounting
@@ -108,7 +108,7 @@ def test_ekf_closed_loop_associates_the_true_walls(tmp_path):
 @pytest.mark.parametrize("method", ["jcbb", "nn"])
 def test_a_pairing_ruled_out_by_the_back_end_is_never_made(method):
     """``allowed`` (e.g. the landmark's extent) overrides a perfect Mahalanobis match."""
-    from slam.association import AssociationConfig, AssociationProblem, associate
+    from slam.mapping.association import AssociationConfig, AssociationProblem, associate
 
     z = np.array([[5.0, 0.1], [8.0, 1.2]])
     R = np.broadcast_to(np.diag([0.01, 1e-4]), (2, 2, 2)).copy()
@@ -128,8 +128,8 @@ def test_a_line_seen_in_both_representations_gets_the_extent_it_was_seen_over(ba
     10 m stretch both saw, not their mirror images joined (40 m)."""
     from features.geometry import compose, inverse, line_world_to_frame, transform_points
     from features.line import LineFeature
-    from slam.ekf import EkfConfig, LineEkf
-    from slam.factor_graph import GraphConfig, isam2_backend_factory
+    from slam.backends.ekf import EkfConfig, LineEkf
+    from slam.backends.isam2.graph import GraphConfig, isam2_backend_factory
     from sonar.beam import Mounting
 
     pose = np.array([-8.0, 15.0, 0.0])

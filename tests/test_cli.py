@@ -9,10 +9,10 @@ import pytest
 
 from datasets.simulator import simulate
 from datasets.source import open_dataset
-from slam.cli import build_parser, main
-from slam.metrics import ate_against_gps
-from slam.pose_sources import dead_reckoning_trajectory, truth_trajectory
-from slam.trajectory import read_tum
+from slam.cli.main import build_parser, main
+from slam.eval.ate import ate_against_gps
+from slam.io.trajectory import read_tum
+from slam.run.sources import dead_reckoning_trajectory, truth_trajectory
 
 
 @pytest.fixture(scope="module")

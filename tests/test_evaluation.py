@@ -1,4 +1,4 @@
-"""slam.evaluation: evo's APE/RPE and the NEES/ANEES checked on trajectories with known answers."""
+"""slam.eval.consistency: evo's APE/RPE and the NEES/ANEES checked on trajectories with known answers."""
 
 from __future__ import annotations
 
@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from datasets.marina import GpsSeries
-from slam.evaluation import (
+from slam.eval.ate import ate_against_gps
+from slam.eval.consistency import (
     COV_FILE,
     anees,
     chi2_band,
@@ -20,8 +21,7 @@ from slam.evaluation import (
     nis,
     write_trajectory_covariances,
 )
-from slam.metrics import ate_against_gps
-from slam.trajectory import Trajectory, write_tum
+from slam.io.trajectory import Trajectory, write_tum
 
 T0_S = 1.7e9
 
@@ -64,7 +64,7 @@ def test_rotation_about_the_start_is_removed_by_alignment_only():
 
 def test_evo_ape_equals_the_gps_ate_protocol():
     """Estimate at a jittered 10 Hz, GPS at 1 Hz with noise: evo's interpolating association
-    gives the errors of slam.metrics (the estimate interpolated at every fix), to 1e-9 m."""
+    gives the errors of slam.eval.ate (the estimate interpolated at every fix), to 1e-9 m."""
     rng = np.random.default_rng(7)
     truth = loop_path(n=400, dt_s=0.5)
     t_est = T0_S + 0.1 * np.arange(1996) + rng.uniform(-0.03, 0.03, 1996)
@@ -170,7 +170,7 @@ def test_chi2_bands_match_the_tables():
 
 
 def test_nees_on_grid_takes_the_last_value_at_or_before():
-    from slam.evaluation import NeesSeries
+    from slam.eval.consistency import NeesSeries
 
     s = NeesSeries(T0_S + np.array([0.0, 1.0, 2.0, 3.0]), np.array([1.0, 2.0, 3.0, 4.0]), 3)
     got = nees_on_grid(s, T0_S, [0.0, 0.5, 1.5, 3.0, 4.0, 10.0])
@@ -235,8 +235,8 @@ def test_association_scores_on_known_pairings():
     from types import SimpleNamespace
 
     from features.geometry import compose, line_world_to_frame
-    from slam.evaluation import association_scores
-    from slam.trajectory import Trajectory
+    from slam.eval.consistency import association_scores
+    from slam.io.trajectory import Trajectory
 
     walls = np.array([[[-10.0, 5.0], [10.0, 5.0]], [[8.0, -10.0], [8.0, 10.0]]])  # y = 5, x = 8
     truth = Trajectory(np.array([0.0, 100.0]), np.array([[0.0, 0.0, 0.3], [1.0, 0.0, 0.3]]))
@@ -265,8 +265,8 @@ def test_association_scores_collinear_walls_are_one_line_and_seeds_are_not_misse
     from types import SimpleNamespace
 
     from features.geometry import compose, line_world_to_frame
-    from slam.evaluation import association_scores, wall_lines
-    from slam.trajectory import Trajectory
+    from slam.eval.consistency import association_scores, wall_lines
+    from slam.io.trajectory import Trajectory
 
     # y = 5 split in two collinear segments, and x = 8
     walls = np.array(

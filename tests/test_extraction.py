@@ -1,4 +1,4 @@
-"""``sonarslam extract`` and :mod:`slam.extraction`: presets, TOML over a preset, the 95 % band
+"""``sonarslam extract`` and :mod:`slam.run.extraction`: presets, TOML over a preset, the 95 % band
 of a segment, and an end-to-end run on a simulated harbour checked against its true walls."""
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ from features.extractor import MARINA_PRESET, ExtractorConfig
 from features.geometry import inverse, line_frame_to_world, transform_points
 from features.line import LineFeature
 from features.uncertainty import chi2_2dof
-from slam.cli import main
-from slam.extraction import default_preset, extractor_config, segment_band_world
-from slam.line_eval import GATE_RAD, HARBOUR_GATE_M, match_features
+from slam.cli.main import main
+from slam.eval.lines import GATE_RAD, HARBOUR_GATE_M, match_features
+from slam.run.extraction import default_preset, extractor_config, segment_band_world
 from sonar.beam import SonarBeam
 
 # -- configuration ---------------------------------------------------------------------------

@@ -13,7 +13,7 @@ import pytest
 
 from features.sector import BinsInR
 from features.uncertainty import LineEstimate, fit_line
-from slam.line_eval import TrialResult, harbour_trial, mean_nees_band, pool_trial
+from slam.eval.lines import TrialResult, harbour_trial, mean_nees_band, pool_trial
 
 POOL_SEEDS = range(8)
 RMS_RHO_MAX_M = 0.05  # the pool test's requirement

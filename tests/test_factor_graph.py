@@ -28,20 +28,20 @@ from features.geometry import (
     wrap_angle,
 )
 from features.line import LineFeature
-from slam.factor_graph import (
-    GraphConfig,
-    LineIsam2,
-    load_graph,
-    smoothed_poses,
-    sonar_side,
-)
-from slam.line_factor import (
+from slam.backends.isam2.factors import (
     heading_factor,
     line_factor,
     line_predictions,
     line_residual,
     noise_model,
     odometry_factor,
+)
+from slam.backends.isam2.graph import (
+    GraphConfig,
+    LineIsam2,
+    load_graph,
+    smoothed_poses,
+    sonar_side,
 )
 from sonar.beam import Mounting
 
@@ -192,7 +192,7 @@ def test_odometry_agrees_with_gtsams_between_factor_without_misalignment_and_sca
 
 def test_odometry_translation_follows_the_gyro_scale():
     """The accumulated ``d(x, y)/d(scale)`` is the derivative of the integrated arc's end."""
-    from slam.factor_graph import _Motion
+    from slam.backends.isam2.graph import _Motion
 
     def arc(scale: float) -> _Motion:
         m = _Motion()
@@ -404,8 +404,8 @@ def test_online_pose_and_covariance_follow_the_newest_node(room: SyntheticRun):
 
 def test_between_nodes_the_pose_is_the_ekf_prediction():
     """Before the first node after X(0) the current pose and covariance are X(0)'s marginal
-    propagated by :func:`slam.motion.propagate`, the EKF's prediction."""
-    from slam.motion import propagate
+    propagated by :func:`slam.model.motion.propagate`, the EKF's prediction."""
+    from slam.model.motion import propagate
 
     rng = np.random.default_rng(21)
     cfg = GraphConfig()
@@ -510,11 +510,11 @@ def test_short_simulated_closed_loop_beats_dead_reckoning(tmp_path_factory):
     from datasets.simulator.writer import write_dataset
     from datasets.source import open_dataset
     from features.extractor import ExtractorConfig
-    from slam.closed_loop import run_closed_loop
-    from slam.evaluation import association_against_truth, landmark_overshoot_m, truth_walls
-    from slam.factor_graph import isam2_backend_factory, pose_source_of
-    from slam.metrics import ate_against_gps
-    from slam.pose_sources import dead_reckoning_trajectory, truth_trajectory
+    from slam.backends.isam2.graph import isam2_backend_factory, pose_source_of
+    from slam.eval.ate import ate_against_gps
+    from slam.eval.consistency import association_against_truth, landmark_overshoot_m, truth_walls
+    from slam.run.closed_loop import run_closed_loop
+    from slam.run.sources import dead_reckoning_trajectory, truth_trajectory
 
     scenario = make_scenario("harbour", 3, 300.0)
     noise = replace(

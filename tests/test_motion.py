@@ -7,9 +7,9 @@ import pytest
 
 from datasets.marina import AttitudeSeries, DvlSeries
 from features.geometry import wrap_angle
-from slam.metrics import ate_against_gps
-from slam.motion import MotionNoise, body_velocity, dead_reckoning, propagate, velocity_input
-from slam.pose_sources import dead_reckoning_trajectory
+from slam.eval.ate import ate_against_gps
+from slam.model.motion import MotionNoise, body_velocity, dead_reckoning, propagate, velocity_input
+from slam.run.sources import dead_reckoning_trajectory
 from sonar.beam import Mounting
 from tests.conftest import needs_marina
 
@@ -128,7 +128,7 @@ def test_marina_dead_reckoning_with_the_gps_free_calibration(marina):
 
 def test_anchored_odometry_is_the_chain_anchored_at_the_estimate():
     from features.geometry import compose, inverse
-    from slam.closed_loop import AnchoredOdometry
+    from slam.run.closed_loop import AnchoredOdometry
 
     rng = np.random.default_rng(5)
     steps = np.column_stack(
@@ -158,8 +158,8 @@ def test_ekf_recovers_a_dvl_mounting_error(tmp_path):
     from datasets.simulator import simulate
     from datasets.source import open_dataset
     from features.extractor import ExtractorConfig
-    from slam.closed_loop import run_closed_loop
-    from slam.ekf import EkfConfig, LineEkf
+    from slam.backends.ekf import EkfConfig, LineEkf
+    from slam.run.closed_loop import run_closed_loop
 
     ds = open_dataset(simulate("harbour", seed=1, out_dir=tmp_path / "h", duration_s=400.0))
     c = ds.config
@@ -209,10 +209,10 @@ def test_heading_rate_source_survives_a_biased_gyro(biased_gyro_harbour, backend
     from dataclasses import replace
 
     from features.extractor import ExtractorConfig
-    from slam.closed_loop import run_closed_loop
-    from slam.ekf import EkfConfig, LineEkf
-    from slam.factor_graph import GraphConfig, isam2_backend_factory, pose_source_of
-    from slam.pose_sources import truth_trajectory
+    from slam.backends.ekf import EkfConfig, LineEkf
+    from slam.backends.isam2.graph import GraphConfig, isam2_backend_factory, pose_source_of
+    from slam.run.closed_loop import run_closed_loop
+    from slam.run.sources import truth_trajectory
 
     ds0 = biased_gyro_harbour
     assert ds0.config.yaw_rate_source == "gyro"  # the simulator's toml: the neutral default
@@ -247,7 +247,7 @@ def test_ahrs_yaw_from_a_deviated_dvl_compass(tmp_path):
     from datasets.simulator import make_scenario, simulate_records
     from datasets.simulator.writer import write_dataset
     from datasets.source import open_dataset
-    from slam.calibration import calibrate_ahrs_yaw
+    from slam.run.calibration import calibrate_ahrs_yaw
 
     scenario = make_scenario("harbour", 5, 600.0)
     noise = replace(scenario.noise, ahrs_bias_deg=0.0, dvl_compass_deviation_deg=(-4.5, 2.8))
@@ -269,7 +269,7 @@ def test_marina_ahrs_mounting_is_the_compass_fit(marina):
     """The configured AHRS yaw is what ``sonarslam calibrate --ahrs`` finds, GPS-free."""
     import math
 
-    from slam.calibration import calibrate_ahrs_yaw
+    from slam.run.calibration import calibrate_ahrs_yaw
 
     fit = calibrate_ahrs_yaw(marina)
     assert math.degrees(fit.ahrs_yaw_rad) == pytest.approx(
@@ -288,9 +288,9 @@ def test_ahrs_deviation_self_calibration_from_sonar_lines(tmp_path):
     from datasets.simulator.writer import write_dataset
     from datasets.source import open_dataset
     from features.extractor import ExtractorConfig
-    from slam.calibration import calibrate_ahrs_deviation
-    from slam.closed_loop import run_closed_loop
-    from slam.ekf import EkfConfig, LineEkf
+    from slam.backends.ekf import EkfConfig, LineEkf
+    from slam.run.calibration import calibrate_ahrs_deviation
+    from slam.run.closed_loop import run_closed_loop
 
     scenario = make_scenario("harbour", 1, 600.0)
     noise = replace(scenario.noise, ahrs_bias_deg=0.0, ahrs_deviation_deg=(-2.0, 2.5))
@@ -318,7 +318,7 @@ def test_ahrs_deviation_self_calibration_from_sonar_lines(tmp_path):
 def test_dvl_scatter_is_the_white_noise_sigma():
     """On a slowly varying velocity with white noise of 0.3 m/s per axis, the scatter over
     60 s (~90 samples) is 0.3 within 20 % (its sampling error is ~7 %)."""
-    from slam.motion import dvl_scatter
+    from slam.model.motion import dvl_scatter
 
     rng = np.random.default_rng(11)
     t = np.cumsum(rng.uniform(0.6, 0.75, 3000))
@@ -330,7 +330,7 @@ def test_dvl_scatter_is_the_white_noise_sigma():
 
 
 def test_dvl_sample_sigma_adds_only_the_excess_scatter():
-    from slam.motion import dvl_sample_sigma
+    from slam.model.motion import dvl_sample_sigma
 
     rng = np.random.default_rng(12)
     t = np.arange(4000) * 0.66
@@ -351,7 +351,7 @@ def test_dvl_sample_sigma_adds_only_the_excess_scatter():
 def test_anchored_odometry_covariance_grows_with_the_chain():
     """Differences of the odometry's covariance are the variance chained between two times
     (what the extractor's relative pose uncertainty takes); the anchor's cancels."""
-    from slam.closed_loop import AnchoredOdometry
+    from slam.run.closed_loop import AnchoredOdometry
 
     odo = AnchoredOdometry(0.0, np.zeros(3), capacity=4)
     assert odo.covariance(0.0) is None  # no anchor covariance yet: no covariance
@@ -373,7 +373,7 @@ def test_dead_reckoning_stays_consistent_when_the_dvl_degrades(tmp_path):
     from datasets.simulator import make_scenario, simulate_records
     from datasets.simulator.writer import write_dataset
     from datasets.source import open_dataset
-    from slam.pose_sources import truth_trajectory
+    from slam.run.sources import truth_trajectory
 
     nees_on, nees_off = [], []
     for seed in range(5):

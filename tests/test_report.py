@@ -1,4 +1,4 @@
-"""slam.report: the table holds the runs' own numbers and the published ones; bands and figures."""
+"""slam.run.report: the table holds the runs' own numbers and the published ones; bands and figures."""
 
 from __future__ import annotations
 
@@ -9,17 +9,17 @@ import pytest
 from scipy.stats import chi2
 
 from datasets.simulator import simulate
-from slam.cli import main
-from slam.evaluation import (
+from slam.cli.main import main
+from slam.eval.consistency import (
     COV_FILE,
     evo_ape,
     evo_rpe,
     nees_series,
 )
-from slam.pipeline import run
-from slam.pose_sources import truth_trajectory
-from slam.report import PUBLISHED, landmark_band_world, load_run, report
-from slam.trajectory import read_tum
+from slam.io.trajectory import read_tum
+from slam.run.report import PUBLISHED, landmark_band_world, load_run, report
+from slam.run.run import run
+from slam.run.sources import truth_trajectory
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""slam.sweep: parsing, task expansion, overrides, and sweeps whose rows equal direct runs."""
+"""slam.run.sweep: parsing, task expansion, overrides, and sweeps whose rows equal direct runs."""
 
 from __future__ import annotations
 
@@ -6,15 +6,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import slam.sweep as sweep_mod
+import slam.run.sweep as sweep_mod
 from datasets.source import open_dataset
-from slam.cli import main
-from slam.ekf import EkfConfig
-from slam.evaluation import anees, nees_on_grid, nees_series
-from slam.metrics import ate_against_gps
-from slam.pipeline import run
-from slam.pose_sources import dead_reckoning_trajectory, truth_trajectory
-from slam.sweep import (
+from slam.backends.ekf import EkfConfig
+from slam.cli.main import main
+from slam.eval.ate import ate_against_gps
+from slam.eval.consistency import anees, nees_on_grid, nees_series
+from slam.run.run import run
+from slam.run.sources import dead_reckoning_trajectory, truth_trajectory
+from slam.run.sweep import (
     apply_overrides,
     expand_tasks,
     load_grid_toml,
@@ -108,7 +108,7 @@ def test_simulation_is_cached_per_seed(cache):
 
 def test_run_backend_without_overrides_equals_the_pipeline(cache, tmp_path, monkeypatch):
     """The sweep's closed loop is the pipeline's: the same ATE to the last bit; and a back end
-    the sweep does not know is run by slam.pipeline.run, with the same numbers."""
+    the sweep does not know is run by slam.run.run.run, with the same numbers."""
     source = cache / "harbour_1_90s"
     dataset = open_dataset(source)
     piped = run(source, "ekf", tmp_path / "ekf", progress=False).metrics

@@ -146,7 +146,7 @@ class Scenario:
                 ahrs_sigma_deg=math.hypot(n.ahrs_sigma_deg, n.ahrs_bias_deg),
                 gps_sigma_m=n.gps_sigma_m,
                 dvl_max_gap_s=10.0,
-                # a DVL that degrades: its usual scatter is its white noise (slam.motion)
+                # a DVL that degrades: its usual scatter is its white noise (slam.model.motion)
                 dvl_scatter_window_s=0.0 if n.dvl_degraded_from_s is None else 60.0,
                 dvl_nominal_scatter_mps=n.dvl_sigma_mps,
             ),

@@ -1,17 +1,17 @@
 """Factor-graph SLAM with line landmarks on GTSAM iSAM2: the second back end.
 
-:class:`LineIsam2` implements the :class:`slam.closed_loop.Backend` protocol of
-:class:`slam.ekf.LineEkf`, so :func:`slam.closed_loop.run_closed_loop` drives it unchanged::
+:class:`LineIsam2` implements the :class:`slam.run.closed_loop.Backend` protocol of
+:class:`slam.backends.ekf.LineEkf`, so :func:`slam.run.closed_loop.run_closed_loop` drives it unchanged::
 
     make_backend = isam2_backend_factory(dataset.config.sonar_mounting, GraphConfig())
     result = run_closed_loop(dataset, make_backend, extractor_config, pose_source_of=pose_source_of)
     smoothed = result.backend.smoothed_trajectory(covariances=True)
 
-The graph (factors in :mod:`slam.line_factor`):
+The graph (factors in :mod:`slam.backends.isam2.factors`):
 
 * ``X(k)``: body poses ``wTb`` (``Pose2``) at *nodes*: one at each vote that returns lines and
   one every ``node_period_s`` otherwise;
-* odometry between consecutive nodes: the motion model of the EKF (:func:`slam.motion.propagate`:
+* odometry between consecutive nodes: the motion model of the EKF (:func:`slam.model.motion.propagate`:
   DVL velocity, gyro yaw rate) integrated between them with its covariance (the error of a
   held DVL sample counted once per sample, ``dvl_noise``), as a
   ``BetweenFactorPose2`` (or, with ``estimate_misalignment`` / ``estimate_gyro_scale``, the
@@ -38,7 +38,7 @@ association), and between votes the pending odometry and heading factors are add
 every ``update_period_s``. Until then the current pose is the newest optimised node composed
 with the odometry since it (:attr:`LineIsam2.pose`, :attr:`LineIsam2.pose_cov`).
 
-Association (:mod:`slam.association`, the EKF's module) uses the iSAM2 joint marginal of the
+Association (:mod:`slam.mapping.association`, the EKF's module) uses the iSAM2 joint marginal of the
 newest optimised node and of the candidate landmarks only (those individually compatible under
 a loose gate with cached per-landmark marginals), propagated to the current time by the
 odometry; a landmark is a candidate only for observations from the side of its line it was
@@ -81,16 +81,7 @@ from features.geometry import (
     wrap_angle,
 )
 from features.line import LineFeature
-from slam.association import (
-    FLIP_RHO,
-    AssociationConfig,
-    AssociationProblem,
-    associate,
-    extent_allowed,
-    line_innovation,
-)
-from slam.landmarks import landmark_record
-from slam.line_factor import (
+from slam.backends.isam2.factors import (
     heading_factor,
     line_factor,
     line_prediction,
@@ -99,8 +90,17 @@ from slam.line_factor import (
     noise_model,
     odometry_factor,
 )
-from slam.motion import held_velocity_variance_step
-from slam.trajectory import Trajectory
+from slam.io.trajectory import Trajectory
+from slam.mapping.association import (
+    FLIP_RHO,
+    AssociationConfig,
+    AssociationProblem,
+    associate,
+    extent_allowed,
+    line_innovation,
+)
+from slam.mapping.landmarks import landmark_record
+from slam.model.motion import held_velocity_variance_step
 from sonar.beam import Mounting
 
 __all__ = [
@@ -138,7 +138,7 @@ class GraphConfig:
         An AHRS heading is used at most this often (s); the AHRS errors are not white.
     dvl_noise : {"hold", "white"}
         How the velocity noise adds up. ``"hold"``: the body velocity is a DVL sample held
-        until the next one (:func:`slam.motion.velocity_input`), so its error is one draw per
+        until the next one (:func:`slam.model.motion.velocity_input`), so its error is one draw per
         sample and the position error over a hold of ``T`` seconds is ``T * sigma``; steps with
         the same velocity as the previous one share it. ``"white"``: independent per motion
         step, ``(dt * sigma)**2`` each (the EKF's model), which with a 1.5 Hz DVL and 20
@@ -179,7 +179,7 @@ class GraphConfig:
         its line it was first seen from (:func:`sonar_side`).
     extent_margin_m : float or None
         A landmark is paired only with observations whose world segment reaches its extent
-        within this margin (m), :func:`slam.association.extent_allowed`; None: no extent gate.
+        within this margin (m), :func:`slam.mapping.association.extent_allowed`; None: no extent gate.
         10 m: on the marina it keeps a landmark from spanning the gap to a collinear wall of the
         other basin (extents of 200-490 m without it) and takes the ATE down by ~1 m; on the
         simulated harbours precision and recall do not move.
@@ -336,7 +336,7 @@ class _HeadingMean:
 class _Motion:
     """Relative motion since a start, ``(x, y, yaw)`` in the start frame, and its covariance.
 
-    The model of :func:`slam.motion.propagate` from the identity, in plain floats (it runs for
+    The model of :func:`slam.model.motion.propagate` from the identity, in plain floats (it runs for
     every record): ``F = [[1, 0, -dy], [0, 1, dx], [0, 0, 1]]``, ``Q = diag(qv, qv, qr)``.
     """
 
@@ -537,10 +537,10 @@ def save_graph(
     * ``HeadingBias`` on ``(x, b)``: ``[yaw_meas]``, error ``wrap(yaw + b - yaw_meas)``;
     * ``DvlGyroOdometry`` on ``(x_i, x_j[, d][, g])``: ``[x, y, yaw]`` integrated with
       ``delta = 0`` and scale ``"scale0"``, plus ``"yaw_raw"`` (the gyro's integral) and
-      ``"d_t_d_scale"`` ``[dx/ds, dy/ds]`` (:func:`slam.line_factor.odometry_residual`);
+      ``"d_t_d_scale"`` ``[dx/ds, dy/ds]`` (:func:`slam.backends.isam2.factors.odometry_residual`);
     * ``LineObservation`` on ``(x, l)``: ``[rho, theta]`` in the sonar frame, plus ``"bTs"``
       ``[x, y, yaw]`` and ``"robust"`` (``null`` or ``{"kernel": "huber", "k": 1.345}``);
-      error :func:`slam.line_factor.line_residual`.
+      error :func:`slam.backends.isam2.factors.line_residual`.
 
     ``meta`` holds what is not a factor: node times, the sonar mounting, the settings.
     """
@@ -560,7 +560,7 @@ def load_graph(path: str | Path) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Valu
     -------
     graph : gtsam.NonlinearFactorGraph
         GTSAM's own factors for the standard types, ``CustomFactor`` from
-        :mod:`slam.line_factor` for the others.
+        :mod:`slam.backends.isam2.factors` for the others.
     values : gtsam.Values
     """
     doc = json.loads(Path(path).read_text())

@@ -11,7 +11,7 @@ State ``x = [x, y, psi, b, delta, rho_1, theta_1, ..., rho_L, theta_L]``:
   make it observable; it absorbs the error of the GPS-free DVL/AHRS calibration;
 * world lines ``(rho_w, theta_w)`` (:mod:`features.geometry` conventions).
 
-Prediction uses :func:`slam.motion.propagate` on the pose block only (the landmarks are static,
+Prediction uses :func:`slam.model.motion.propagate` on the pose block only (the landmarks are static,
 so only the pose rows and columns of P change). Updates are filterpy's (Joseph form) with H
 evaluated at the predicted state: the AHRS heading, and each line observation in the sonar frame
 R, ``z = line_world_to_frame(L, wTb * bTs)`` (design.md conventions), Jacobians from
@@ -39,7 +39,7 @@ from features.geometry import (
     wrap_angle,
 )
 from features.line import LineFeature
-from slam.association import (
+from slam.mapping.association import (
     FLIP_RHO,
     AssociationConfig,
     AssociationProblem,
@@ -47,8 +47,8 @@ from slam.association import (
     extent_allowed,
     line_innovation,
 )
-from slam.landmarks import landmark_record
-from slam.motion import held_velocity_variance_step
+from slam.mapping.landmarks import landmark_record
+from slam.model.motion import held_velocity_variance_step
 from sonar.beam import Mounting
 
 __all__ = ["EkfConfig", "Landmark", "LineEkf", "POSE", "N_VEHICLE"]
@@ -89,7 +89,7 @@ class EkfConfig:
         the sonar's near field).
     extent_margin_m : float or None
         A landmark is paired only with observations whose world segment reaches its extent
-        within this margin (m), :func:`slam.association.extent_allowed`; None: no extent gate.
+        within this margin (m), :func:`slam.mapping.association.extent_allowed`; None: no extent gate.
         10 m: on the marina it keeps a landmark from spanning the gap to a collinear wall of the
         other basin (extents of 200-490 m without it) and takes the ATE down by ~1 m; on the
         simulated harbours precision and recall do not move.
@@ -244,7 +244,7 @@ class LineEkf:
         if self.config.estimate_misalignment:
             F[0, 4] = -dy
             F[1, 4] = dx
-        # one held DVL sample has one error: count it per sample, not per step (slam.motion)
+        # one held DVL sample has one error: count it per sample, not per step (slam.model.motion)
         v_key = (float(v_b_mps[0]), float(v_b_mps[1]))
         self._held_s = self._held_s + dt if v_key == self._held_v else dt
         self._held_v = v_key

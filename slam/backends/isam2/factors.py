@@ -15,9 +15,9 @@ Variables (keys from :mod:`gtsam.symbol_shorthand`):
   lines through :func:`features.geometry.line_world_to_frame`, which normalises, and
   :func:`line_residual`, which resolves the sign ambiguity; reports normalise.
 * ``B(0)``: the constant AHRS heading bias (rad), a size-1 ``Vector``; the AHRS measures
-  ``yaw + b`` (the model of :class:`slam.ekf.LineEkf`).
+  ``yaw + b`` (the model of :class:`slam.backends.ekf.LineEkf`).
 * ``D(0)``: optional constant misalignment (rad) of the DVL velocity with the body heading: the
-  vehicle moves along ``R(yaw + delta) v_b`` (as :class:`slam.ekf.LineEkf`).
+  vehicle moves along ``R(yaw + delta) v_b`` (as :class:`slam.backends.ekf.LineEkf`).
 * ``G(0)``: optional constant scale of the gyro's yaw rate (the odometry's heading change is
   ``s`` times the gyro's integral; the marina's MTi turns 0.86 times as fast as its heading).
 
@@ -41,7 +41,7 @@ from features.geometry import (
     line_world_to_frame,
     wrap_angle,
 )
-from slam.association import FLIP_RHO
+from slam.mapping.association import FLIP_RHO
 
 __all__ = [
     "ROBUST_KERNELS",
@@ -175,7 +175,7 @@ def line_residual(
 
     ``e = z - z_hat``, the angle wrapped, with ``z_hat`` taken in the representation nearest
     ``z`` (``(rho, theta)`` or ``(-rho, theta + pi)``): the sign ambiguity of lines near
-    ``rho = 0`` handled as :func:`slam.association.line_innovation` does, but by flipping the
+    ``rho = 0`` handled as :func:`slam.mapping.association.line_innovation` does, but by flipping the
     prediction rather than the measurement, so that ``e ~ N(0, R)`` with the measurement's own
     covariance ``R`` (flipping ``z`` would change ``R`` to ``diag(-1, 1) R diag(-1, 1)``).
 

@@ -7,7 +7,7 @@ Accuracy, through evo's API on the TUM outputs (``trajectory.tum`` against ``gro
   none), Umeyama SE(3) alignment (``PoseTrajectory3D.align``) as an option. The default
   association interpolates the denser trajectory at the times of the sparser one (evo's
   ``SyncMethod.interpolation``), so that against GPS the APE is taken at every GPS fix on the
-  estimate interpolated there: the same errors as :mod:`slam.metrics` (a test checks it);
+  estimate interpolated there: the same errors as :mod:`slam.eval.ate` (a test checks it);
 * RPE per travelled distance (``evo.core.metrics.RPE`` with ``delta_unit=Unit.meters``): the
   translation error of the relative motion between poses ``delta_m`` metres of path apart.
 
@@ -42,7 +42,7 @@ from evo.core.units import Unit
 from scipy import stats
 
 from features.geometry import FloatArray, wrap_angle
-from slam.trajectory import Trajectory, read_tum
+from slam.io.trajectory import Trajectory, read_tum
 
 __all__ = [
     "COV_FILE",
@@ -568,7 +568,7 @@ def wall_lines(
     line_of_wall : ndarray of int, shape (W,)
     """
     from features.geometry import wrap_angle
-    from slam.line_eval import wall_lines_world
+    from slam.eval.lines import wall_lines_world
 
     lines: list[FloatArray] = []
     line_of_wall = []
@@ -600,7 +600,7 @@ def truth_walls(dataset: Any) -> FloatArray:
 def association_against_truth(dataset: Any, result: Any) -> AssociationScores:
     """:func:`association_scores` of a closed-loop run (``ClosedLoopResult``) on a simulated
     dataset: its features, pairings and seeds against the true walls and poses."""
-    from slam.pose_sources import truth_trajectory
+    from slam.run.sources import truth_trajectory
 
     return association_scores(
         result.features,
@@ -665,12 +665,12 @@ def association_scores(
         How close (m, rad) an observation must be to a true line to be of it.
     feature_seeds : list, optional
         The landmark each feature seeded as a tentative line (None: none), as
-        :attr:`slam.closed_loop.ClosedLoopResult.feature_seeds`.
+        :attr:`slam.run.closed_loop.ClosedLoopResult.feature_seeds`.
     """
     from collections import Counter
 
     from features.geometry import compose, line_world_to_frame
-    from slam.association import line_innovation
+    from slam.mapping.association import line_innovation
 
     lines, _ = wall_lines(walls_w)
     seeds = feature_seeds if feature_seeds is not None else [None] * len(features)

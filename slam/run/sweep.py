@@ -4,7 +4,7 @@ A sweep is the product of seeds, back ends and the grid axes that apply to each 
 seed's world is simulated once (a Dask task; the folder is cached on disk, so back ends and later
 sweeps share it) and each (seed, back end, parameters) is one task that runs the back end and
 returns one flat row: the seed, back end and parameters, the ATE by the GPS protocol
-(:mod:`slam.metrics`), the pose NEES against the simulator's truth (:mod:`slam.evaluation`), the
+(:mod:`slam.eval.ate`), the pose NEES against the simulator's truth (:mod:`slam.eval.consistency`), the
 association counts, and the wall time. The rows make one table (``sweep.csv``); the NEES of every
 run on a common 1 s grid (``nees.npz``) give the ANEES of each configuration with its 95 % band
 (``summary.csv``, ``sweep.png``).
@@ -12,18 +12,18 @@ run on a common 1 s grid (``nees.npz``) give the ANEES of each configuration wit
 Grid axes are ``<scope>.<field>=v1,v2,...``:
 
 * ``extractor.<field>``: a :class:`features.extractor.ExtractorConfig` field, over the settings
-  the pipeline uses (:func:`slam.pipeline.default_extractor_config`); applies to every
+  the pipeline uses (:func:`slam.run.run.default_extractor_config`); applies to every
   closed-loop back end;
 * ``<backend>.<field>[.<field>]``: a field of that back end's configuration (``ekf``:
-  :class:`slam.ekf.EkfConfig`; ``isam2``: :class:`slam.factor_graph.GraphConfig`), nested
+  :class:`slam.backends.ekf.EkfConfig`; ``isam2``: :class:`slam.backends.isam2.graph.GraphConfig`), nested
   dataclasses by dots (``ekf.association.gate_probability``); ``<backend>.association`` is short
   for ``<backend>.association.method``.
 
 Back ends (:func:`run_backend`): ``dr`` and ``gps`` are the pose sources of the pipeline;
 the closed-loop ones of :func:`closed_loop_backends` are run here with
-:func:`slam.closed_loop.run_closed_loop` so that their settings can be changed (the pipeline
+:func:`slam.run.closed_loop.run_closed_loop` so that their settings can be changed (the pipeline
 runs them with the defaults: the same numbers when no axis is given, see the tests); any other
-name of :data:`slam.pipeline.BACKENDS` is run by :func:`slam.pipeline.run` (no grid axes).
+name of :data:`slam.run.run.BACKENDS` is run by :func:`slam.run.run.run` (no grid axes).
 """
 
 from __future__ import annotations
@@ -46,10 +46,10 @@ import numpy as np
 import pandas as pd
 
 from datasets.source import Dataset, open_dataset
-from slam.evaluation import NeesSeries, anees, nees_on_grid, nees_series
-from slam.metrics import ate_against_gps
-from slam.settings import apply_overrides, parse_value, split_settings
-from slam.trajectory import Trajectory
+from slam.eval.ate import ate_against_gps
+from slam.eval.consistency import NeesSeries, anees, nees_on_grid, nees_series
+from slam.io.trajectory import Trajectory
+from slam.run.presets import apply_overrides, parse_value, split_settings
 
 __all__ = [
     "BASELINES",
@@ -94,7 +94,7 @@ class ClosedLoopBackend:
     config_type : type
         Frozen dataclass of its settings (default-constructible).
     factory : callable
-        ``(dataset, config) -> make_backend`` for :func:`slam.closed_loop.run_closed_loop`.
+        ``(dataset, config) -> make_backend`` for :func:`slam.run.closed_loop.run_closed_loop`.
     pose_source_of : callable or None
         ``run_closed_loop``'s ``pose_source_of`` (None: the anchored odometry of filters).
     """
@@ -105,7 +105,7 @@ class ClosedLoopBackend:
 
 
 def _ekf_factory(dataset: Dataset, config: Any) -> Callable[..., Any]:
-    from slam.ekf import LineEkf
+    from slam.backends.ekf import LineEkf
 
     mounting = dataset.config.sonar_mounting
 
@@ -116,21 +116,21 @@ def _ekf_factory(dataset: Dataset, config: Any) -> Callable[..., Any]:
 
 
 def _isam2_factory(dataset: Dataset, config: Any) -> Callable[..., Any]:
-    from slam.factor_graph import isam2_backend_factory
+    from slam.backends.isam2.graph import isam2_backend_factory
 
     return isam2_backend_factory(dataset.config.sonar_mounting, config)
 
 
 def closed_loop_backends() -> dict[str, ClosedLoopBackend]:
     """The closed-loop back ends whose settings a sweep can change: ``ekf``, and ``isam2`` when
-    :mod:`slam.factor_graph` provides ``GraphConfig``, ``isam2_backend_factory`` and
+    :mod:`slam.backends.isam2.graph` provides ``GraphConfig``, ``isam2_backend_factory`` and
     ``pose_source_of``. Both are run causally: the trajectory is the filtered pose at every
     AHRS record, with its covariance (what the NEES needs)."""
-    from slam.ekf import EkfConfig
+    from slam.backends.ekf import EkfConfig
 
     specs = {"ekf": ClosedLoopBackend(EkfConfig, _ekf_factory)}
     try:
-        from slam.factor_graph import GraphConfig, isam2_backend_factory, pose_source_of  # noqa: F401
+        from slam.backends.isam2.graph import GraphConfig, isam2_backend_factory, pose_source_of  # noqa: F401
     except ImportError:
         pass
     else:
@@ -140,7 +140,7 @@ def closed_loop_backends() -> dict[str, ClosedLoopBackend]:
 
 def available_backends() -> list[str]:
     """Every back end name a sweep can run: baselines, closed loops, the pipeline's."""
-    from slam.pipeline import BACKENDS
+    from slam.run.run import BACKENDS
 
     names = list(BASELINES) + list(closed_loop_backends())
     return names + [b for b in BACKENDS if b not in names]
@@ -296,9 +296,9 @@ def run_backend(
     BackendRun
         ``metrics`` has the ATE fields, ``wall_s``, ``data_s``, ``realtime_factor`` and, for
         closed loops, ``landmarks``, ``line_features``, ``assoc_*``, ``extractor_s``,
-        ``backend_s``, ``beams`` (as :func:`slam.pipeline.run`).
+        ``backend_s``, ``beams`` (as :func:`slam.run.run.run`).
     """
-    from slam.pipeline import POSE_SOURCES, default_extractor_config
+    from slam.run.run import POSE_SOURCES, default_extractor_config
 
     if dataset.gps is None:
         raise ValueError(f"{dataset.root}: runs need *_DGPS.log for the start pose and the ATE")
@@ -312,7 +312,7 @@ def run_backend(
             raise ValueError(f"back end {backend!r} has no settings, got {sorted(params)}")
         trajectory = POSE_SOURCES[backend](dataset)
     elif backend in loops:
-        from slam.closed_loop import run_closed_loop
+        from slam.run.closed_loop import run_closed_loop
 
         spec = loops[backend]
         ext, own = split_settings(params, backend)
@@ -342,13 +342,13 @@ def run_backend(
         if dataset.truth is not None and "walls_m" in dataset.truth:
             extra.update(_association_against_truth(dataset, result))
     else:
-        from slam.pipeline import BACKENDS, run
+        from slam.run.run import BACKENDS, run
 
         if backend not in BACKENDS:
             raise ValueError(f"unknown back end {backend!r}; one of {available_backends()}")
         if params:
             raise ValueError(
-                f"back end {backend!r} is run by slam.pipeline.run, which takes no settings"
+                f"back end {backend!r} is run by slam.run.run.run, which takes no settings"
             )
         with tempfile.TemporaryDirectory(prefix=f"sweep-{backend}-") as tmp:
             res = run(dataset.root, backend, tmp, progress=progress)
@@ -374,8 +374,8 @@ def run_backend(
 
 def _association_against_truth(dataset: Dataset, result: Any) -> dict[str, Any]:
     """Association precision and recall against the simulator's walls
-    (:func:`slam.evaluation.association_against_truth`), with the counts to pool them over runs."""
-    from slam.evaluation import association_against_truth
+    (:func:`slam.eval.consistency.association_against_truth`), with the counts to pool them over runs."""
+    from slam.eval.consistency import association_against_truth
 
     s = association_against_truth(dataset, result)
     return {
@@ -440,7 +440,7 @@ def run_task(
         ``nees_pose`` and ``nees_position``: NEES on the grid ``0, period, ...`` s after the
         start (NaN where missing).
     """
-    from slam.pose_sources import truth_trajectory
+    from slam.run.sources import truth_trajectory
 
     row: dict[str, Any] = {
         "seed": task.seed,
@@ -634,7 +634,7 @@ def sweep(
     """
     from tqdm import tqdm
 
-    from slam.plots import plot_anees, plot_sweep
+    from slam.io.plots import plot_anees, plot_sweep
 
     wall0 = time.perf_counter()
     grid = dict(grid or {})

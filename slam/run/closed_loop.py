@@ -1,7 +1,7 @@
 """The closed loop: back end -> poses -> front end -> lines -> back end (the design card's shape).
 
 The driver walks the merged record stream in time order. Every record first predicts the back
-end to its time with the motion model's input (:func:`slam.motion.velocity_input`, causal).
+end to its time with the motion model's input (:func:`slam.model.motion.velocity_input`, causal).
 AHRS records update the heading; sonar beams go to the :class:`features.extractor.LineExtractor`,
 whose only view of the vehicle is a :class:`features.pose_source.PoseSource` provided by the back
 end; the lines it returns update the back end. GPS records are never used here (evaluation only).
@@ -24,9 +24,9 @@ from features.extractor import ExtractorConfig, LineExtractor
 from features.geometry import FloatArray, between, compose, wrap_angle
 from features.line import LineFeature
 from features.pose_source import PoseSource
-from slam.motion import body_yaw, held_velocity_variance_step, velocity_input
-from slam.pose_sources import motion_noise, start_pose
-from slam.trajectory import Trajectory
+from slam.io.trajectory import Trajectory
+from slam.model.motion import body_yaw, held_velocity_variance_step, velocity_input
+from slam.run.sources import motion_noise, start_pose
 from sonar.beam import SonarBeam
 
 __all__ = ["AnchoredOdometry", "Backend", "ClosedLoopResult", "run_closed_loop"]

@@ -1,7 +1,7 @@
 """Settings given as ``SCOPE.FIELD=VALUE`` (``sonarslam run --set``, ``sonarslam sweep --grid``).
 
 ``SCOPE`` is ``extractor`` (:class:`features.extractor.ExtractorConfig`) or a back end (``ekf``:
-:class:`slam.ekf.EkfConfig`, ``isam2``: :class:`slam.factor_graph.GraphConfig`); ``FIELD`` is a
+:class:`slam.backends.ekf.EkfConfig`, ``isam2``: :class:`slam.backends.isam2.graph.GraphConfig`); ``FIELD`` is a
 field of that frozen dataclass, nested by dots (``ekf.association.gate_probability``);
 ``<backend>.association`` is short for ``<backend>.association.method``.
 """

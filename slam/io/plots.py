@@ -12,7 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from features.geometry import FloatArray  # noqa: E402
-from slam.trajectory import Trajectory  # noqa: E402
+from slam.io.trajectory import Trajectory  # noqa: E402
 
 __all__ = ["plot_scans", "plot_trajectories", "plot_lines"]
 
@@ -167,7 +167,7 @@ def plot_lines(
     segments_w : sequence of ndarray, shape (2, 2)
         Segment ends, world (m).
     bands_w : sequence of ndarray, shape (M, 2)
-        Band polygons, world (m), e.g. :func:`slam.extraction.segment_band_world`.
+        Band polygons, world (m), e.g. :func:`slam.run.extraction.segment_band_world`.
     title : str
     trajectories : dict of str to Trajectory, optional
         Drawn thin, under the lines.
@@ -215,7 +215,7 @@ def plot_lines(
     return out
 
 
-# -- evaluation pictures (slam.report, slam.sweep) ---------------------------------------------
+# -- evaluation pictures (slam.run.report, slam.run.sweep) ---------------------------------------------
 
 
 def _chi2_band(dof: int, n_runs: int = 1, probability: float = 0.95) -> tuple[float, float]:
@@ -331,7 +331,7 @@ def plot_nees(
 def plot_anees(path: str | Path, curves: dict[str, object], title: str) -> Path:
     """ANEES against time with the band of its number of runs, one curve per configuration.
 
-    ``curves`` maps a label to a :class:`slam.evaluation.AneesResult`.
+    ``curves`` maps a label to a :class:`slam.eval.consistency.AneesResult`.
     """
     fig, ax = plt.subplots(figsize=(11, 5), dpi=100)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]

@@ -12,7 +12,7 @@ import numpy as np
 
 from datasets.marina import GpsSeries
 from features.geometry import FloatArray
-from slam.trajectory import Trajectory
+from slam.io.trajectory import Trajectory
 
 __all__ = ["AteResult", "ate_against_gps", "ate_errors"]
 

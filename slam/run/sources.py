@@ -1,6 +1,6 @@
 """Pose sources that need no estimator: GPS + AHRS, dead reckoning, the simulator's truth.
 
-All return a :class:`slam.trajectory.Trajectory`, which implements the front end's
+All return a :class:`slam.io.trajectory.Trajectory`, which implements the front end's
 :class:`features.pose_source.PoseSource`.
 """
 
@@ -10,8 +10,8 @@ import numpy as np
 
 from datasets.source import Dataset
 from features.geometry import wrap_angle
-from slam.motion import MotionNoise, body_yaw, dead_reckoning, dvl_scatter
-from slam.trajectory import Trajectory
+from slam.io.trajectory import Trajectory
+from slam.model.motion import MotionNoise, body_yaw, dead_reckoning, dvl_scatter
 
 __all__ = [
     "motion_noise",
@@ -38,9 +38,9 @@ def motion_noise(dataset: Dataset) -> MotionNoise:
 def dvl_quality(dataset: Dataset) -> dict[str, float]:
     """How the DVL behaved (for ``metrics.json`` and ``sonarslam info``).
 
-    Quantiles (10, 50, 90, 99 %) of its own scatter (:func:`slam.motion.dvl_scatter`, m/s,
+    Quantiles (10, 50, 90, 99 %) of its own scatter (:func:`slam.model.motion.dvl_scatter`, m/s,
     over ``[noise] dvl_scatter_window_s``, 60 s when that is off); the time its scatter stayed
-    above the nominal one, when :func:`slam.motion.dvl_sample_sigma` added the excess as noise
+    above the nominal one, when :func:`slam.model.motion.dvl_sample_sigma` added the excess as noise
     (s; 0 when off), and the first such time after the start of the logs (s, -1 if none).
     """
     noise = motion_noise(dataset)

@@ -35,8 +35,8 @@ from features.line import LineFeature
 from features.pose_source import PoseSource
 from features.projection import project_beams
 from features.uncertainty import chi2_2dof
-from slam.pipeline import pose_source_by_name
-from slam.plots import plot_lines
+from slam.io.plots import plot_lines
+from slam.run.run import pose_source_by_name
 from sonar.beam import SonarBeam
 
 __all__ = [
@@ -214,7 +214,7 @@ def extract(
     source : str, Path or Dataset
         Dataset directory, the named source ``"marina"``, or an opened dataset.
     poses : {"gps", "dr", "truth"}
-        Pose source (:data:`slam.pipeline.POSE_SOURCES`).
+        Pose source (:data:`slam.run.run.POSE_SOURCES`).
     out_dir : str or Path
         Created if needed; receives ``lines.jsonl``, ``lines_world.png`` and ``extract.json``.
     config_path : str or Path, optional

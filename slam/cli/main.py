@@ -28,8 +28,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from slam.pipeline import run, summary_line
-    from slam.settings import parse_settings
+    from slam.run.presets import parse_settings
+    from slam.run.run import run, summary_line
 
     result = run(
         args.source,
@@ -48,7 +48,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from slam.pipeline import main_job, summary_line
+    from slam.run.run import main_job, summary_line
 
     results = main_job(args.out, progress=not args.quiet)
     print("\nResults (ATE against GPS, no alignment):")
@@ -65,8 +65,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 def _cmd_plot_scans(args: argparse.Namespace) -> int:
     from datasets.source import open_dataset
     from features.projection import project_beams
-    from slam.pipeline import map_min_intensity, pose_source_by_name
-    from slam.plots import plot_scans
+    from slam.io.plots import plot_scans
+    from slam.run.run import map_min_intensity, pose_source_by_name
 
     dataset = open_dataset(args.source)
     poses = pose_source_by_name(dataset, args.poses)
@@ -91,7 +91,7 @@ def _cmd_plot_scans(args: argparse.Namespace) -> int:
 
 
 def _cmd_extract(args: argparse.Namespace) -> int:
-    from slam.extraction import extract
+    from slam.run.extraction import extract
 
     result = extract(
         args.source,
@@ -115,15 +115,15 @@ def _cmd_extract(args: argparse.Namespace) -> int:
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from datasets.source import open_dataset
-    from slam.calibration import calibrate_ahrs_yaw, calibrate_sonar_yaw
-    from slam.pipeline import pose_source_by_name
+    from slam.run.calibration import calibrate_ahrs_yaw, calibrate_sonar_yaw
+    from slam.run.run import pose_source_by_name
 
     dataset = open_dataset(args.source)
     if args.ahrs_deviation:
-        from slam.calibration import calibrate_ahrs_deviation
-        from slam.closed_loop import run_closed_loop
-        from slam.ekf import EkfConfig, LineEkf
-        from slam.pipeline import default_extractor_config
+        from slam.backends.ekf import EkfConfig, LineEkf
+        from slam.run.calibration import calibrate_ahrs_deviation
+        from slam.run.closed_loop import run_closed_loop
+        from slam.run.run import default_extractor_config
 
         def run(ds):  # noqa: ANN001, ANN202
             mount = ds.config.sonar_mounting
@@ -188,7 +188,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
         f"  AHRS deviation B={b:.2f} C={c:.2f} deg (taken off: B sin(yaw) + C cos(yaw)); heading"
         f" between AHRS samples from the {d.config.yaw_rate_source}"
     )
-    from slam.pose_sources import dvl_quality
+    from slam.run.sources import dvl_quality
 
     n, dq = d.config.noise, dvl_quality(d)
     print(
@@ -208,7 +208,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from slam.report import report
+    from slam.run.report import report
 
     result = report(
         args.dirs,
@@ -233,7 +233,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    from slam.sweep import format_summary, load_grid_toml, parse_grid, parse_seeds, sweep
+    from slam.run.sweep import format_summary, load_grid_toml, parse_grid, parse_seeds, sweep
 
     grid = load_grid_toml(args.grid_file) if args.grid_file else {}
     grid.update(parse_grid(args.grid or []))

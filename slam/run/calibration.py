@@ -203,7 +203,7 @@ def heading_deviation_from_lines(
         applied, so the result is what is left of it).
     features, feature_landmarks : list
         A closed-loop run's lines and the landmark each was associated with
-        (:class:`slam.closed_loop.ClosedLoopResult`).
+        (:class:`slam.run.closed_loop.ClosedLoopResult`).
     min_observations : int
         Landmarks seen fewer times are left out.
 
@@ -214,7 +214,7 @@ def heading_deviation_from_lines(
     n : int
         Lines used.
     """
-    from slam.motion import body_yaw
+    from slam.model.motion import body_yaw
 
     cfg = dataset.config
     att = dataset.attitude
@@ -260,7 +260,7 @@ def calibrate_ahrs_deviation(
     """Self-calibrate the AHRS deviation ``(B, C)`` with closed loops, GPS-free.
 
     Each iteration runs ``run(dataset)`` (a closed loop returning a
-    :class:`slam.closed_loop.ClosedLoopResult`) with the deviation found so far, fits what is
+    :class:`slam.run.closed_loop.ClosedLoopResult`) with the deviation found so far, fits what is
     left of it (:func:`heading_deviation_from_lines`) and adds it. The associations improve as
     the heading does, hence the iterations.
 

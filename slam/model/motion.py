@@ -17,7 +17,7 @@ import numpy.typing as npt
 
 from datasets.marina import AttitudeSeries, DvlSeries
 from features.geometry import FloatArray, wrap_angle
-from slam.trajectory import Trajectory
+from slam.io.trajectory import Trajectory
 from sonar.beam import Mounting
 
 __all__ = [

@@ -1,13 +1,13 @@
 """A side-by-side report of run directories (``sonarslam report DIR... --out OUT``).
 
-Reads what :func:`slam.pipeline.run` wrote in each directory (``metrics.json``,
+Reads what :func:`slam.run.run.run` wrote in each directory (``metrics.json``,
 ``trajectory.tum``, ``ground_truth.tum``, and when present ``trajectory_cov.npz``, ``map.json``),
 re-opens the run's dataset when it is still there (``metrics.json``'s ``source``: the GPS fixes,
 the sonar beams, the simulator's truth), and writes into ``OUT``:
 
 * ``report.md``: one table of every run beside the published figures on the marina (Mallios et
   al. 2014, Table 2): ATE mean, sd, min, max, rmse by the GPS protocol, the real-time factor,
-  evo's APE and RPE per ``rpe_delta_m`` of path (:mod:`slam.evaluation`), and the pose NEES of
+  evo's APE and RPE per ``rpe_delta_m`` of path (:mod:`slam.eval.consistency`), and the pose NEES of
   simulated runs; then the consistency over the runs of each back end (ANEES) and the figures;
 * ``trajectories_<dataset>.png``: the runs of one dataset against GPS, with their ATE in time;
 * ``map_<run>.png``: the landmarks' segments with their 95 % bands over the sonar bins projected
@@ -33,7 +33,7 @@ from datasets.errors import DataError
 from datasets.source import Dataset, open_dataset
 from features.geometry import FloatArray
 from features.line import LineFeature
-from slam.evaluation import (
+from slam.eval.consistency import (
     COV_FILE,
     NeesSeries,
     anees,
@@ -44,7 +44,7 @@ from slam.evaluation import (
     nees_series,
     pose_errors,
 )
-from slam.trajectory import Trajectory, read_tum
+from slam.io.trajectory import Trajectory, read_tum
 
 __all__ = [
     "PUBLISHED",
@@ -133,7 +133,7 @@ class RunData:
 
 def load_run(run_dir: str | Path, open_source: bool = True) -> RunData:
     """Read a run directory; open its dataset unless ``open_source`` is False (or it is gone)."""
-    from slam.pose_sources import truth_trajectory
+    from slam.run.sources import truth_trajectory
 
     run = Path(run_dir)
     for name in ("metrics.json", "trajectory.tum", "ground_truth.tum"):
@@ -162,7 +162,7 @@ def evaluate_run(run: RunData, rpe_delta_m: float = 10.0, align: bool = False) -
     Returns
     -------
     dict
-        :func:`slam.evaluation.evo_metrics_of_run`'s keys, and ``nees_mean``,
+        :func:`slam.eval.consistency.evo_metrics_of_run`'s keys, and ``nees_mean``,
         ``nees_in_band_fraction`` (pose, 3 dof), ``nees_position_mean`` when available.
     """
     out: dict[str, Any] = dict(evo_metrics_of_run(run.run_dir, rpe_delta_m, align=align))
@@ -180,10 +180,10 @@ def landmark_band_world(
     """Segment (2, 2) and 95 % band polygon (M, 2) of a ``map.json`` landmark, world (m).
 
     The landmark's world line ``(rho, theta)`` with its covariance is a line feature seen from
-    the world origin, so the band is :func:`slam.extraction.segment_band_world`'s (exact: the
+    the world origin, so the band is :func:`slam.run.extraction.segment_band_world`'s (exact: the
     envelope of the lines of the confidence ellipse, over the segment).
     """
-    from slam.extraction import segment_band_world
+    from slam.run.extraction import segment_band_world
 
     ends = np.asarray(landmark["endpoints"], dtype=np.float64)
     feature = LineFeature(
@@ -239,7 +239,7 @@ def _sigmas_at(trajectory: Trajectory, t_s: FloatArray) -> FloatArray | None:
 
 
 def _error_figure(run: RunData, label: str, out: Path) -> Path:
-    from slam.plots import plot_error_bounds
+    from slam.io.plots import plot_error_bounds
 
     t, ref, ref_name, ref_sigma_m = _reference(run)
     if ref_name == "truth":
@@ -260,7 +260,7 @@ def _error_figure(run: RunData, label: str, out: Path) -> Path:
 
 
 def _nees_figure(run: RunData, label: str, out: Path) -> Path:
-    from slam.plots import plot_nees
+    from slam.io.plots import plot_nees
 
     assert run.truth is not None
     series = {}
@@ -274,8 +274,8 @@ def _nees_figure(run: RunData, label: str, out: Path) -> Path:
 
 def _map_figure(run: RunData, label: str, out: Path) -> Path | None:
     from features.projection import project_beams
-    from slam.pipeline import map_min_intensity
-    from slam.plots import plot_lines
+    from slam.io.plots import plot_lines
+    from slam.run.run import map_min_intensity
 
     assert run.landmarks is not None
     if run.dataset is None:
@@ -306,7 +306,7 @@ def _map_figure(run: RunData, label: str, out: Path) -> Path | None:
 
 
 def _trajectory_figure(runs: list[RunData], labels: dict[str, str], out: Path) -> Path:
-    from slam.plots import plot_trajectories
+    from slam.io.plots import plot_trajectories
 
     longest = max(runs, key=lambda r: r.ground_truth.t_s.size)
     trajectories: dict[str, Trajectory] = {"gps": longest.ground_truth}

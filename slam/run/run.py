@@ -14,17 +14,17 @@ import numpy as np
 from datasets.config import dump_dataset_config
 from datasets.source import Dataset, open_dataset
 from features.extractor import MARINA_PRESET, ExtractorConfig
-from slam.evaluation import COV_FILE, write_trajectory_covariances
-from slam.metrics import ate_against_gps, ate_errors
-from slam.plots import plot_trajectories
-from slam.pose_sources import (
+from slam.eval.ate import ate_against_gps, ate_errors
+from slam.eval.consistency import COV_FILE, write_trajectory_covariances
+from slam.io.plots import plot_trajectories
+from slam.io.trajectory import Trajectory, write_tum
+from slam.run.presets import apply_overrides, split_settings
+from slam.run.sources import (
     dead_reckoning_trajectory,
     dvl_quality,
     gps_ahrs_trajectory,
     truth_trajectory,
 )
-from slam.settings import apply_overrides, split_settings
-from slam.trajectory import Trajectory, write_tum
 
 __all__ = ["RunResult", "BACKENDS", "run", "pose_source_by_name", "POSE_SOURCES", "summary_line"]
 
@@ -91,8 +91,8 @@ def _ekf(
     progress: bool = True,
     settings: dict[str, Any] | None = None,
 ) -> tuple[Trajectory, dict[str, Any]]:
-    from slam.closed_loop import run_closed_loop
-    from slam.ekf import EkfConfig, LineEkf
+    from slam.backends.ekf import EkfConfig, LineEkf
+    from slam.run.closed_loop import run_closed_loop
 
     extractor, config = _configs(dataset, "ekf", EkfConfig(), settings)
     result = run_closed_loop(
@@ -115,8 +115,8 @@ def _isam2(
 ) -> tuple[Trajectory, dict[str, Any]]:
     """The GTSAM back end: the causal (online) trajectory is the run's; the smoothed one (and the
     batch Levenberg-Marquardt one, with ``batch``) are written beside it and measured too."""
-    from slam.closed_loop import run_closed_loop
-    from slam.factor_graph import GraphConfig, isam2_backend_factory, pose_source_of
+    from slam.backends.isam2.graph import GraphConfig, isam2_backend_factory, pose_source_of
+    from slam.run.closed_loop import run_closed_loop
 
     extractor, config = _configs(dataset, "isam2", GraphConfig(), settings)
     result = run_closed_loop(
@@ -156,7 +156,7 @@ def _closed_loop_outputs(
 ) -> dict[str, Any]:
     """map.json, lines.jsonl and map.png of a closed-loop run; the extra metrics."""
     from features.projection import project_beams
-    from slam.plots import plot_scans
+    from slam.io.plots import plot_scans
 
     (out_dir / "map.json").write_text(json.dumps({"landmarks": landmarks}, indent=1) + "\n")
     with (out_dir / "lines.jsonl").open("w") as fh:
@@ -229,11 +229,11 @@ def run(
     ``metrics.json`` and ``report.png`` into ``out_dir``.
 
     The ATE protocol: the start pose is the first GPS fix and the heading sensor; the ATE is
-    taken at every GPS fix inside the trajectory's span, with no alignment (:mod:`slam.metrics`).
+    taken at every GPS fix inside the trajectory's span, with no alignment (:mod:`slam.eval.ate`).
     ``config``: a ``sonarslam.toml``-format file whose keys replace the dataset's calibration
     (:func:`datasets.source.open_dataset`); the configuration used is written to
     ``config_used.toml``. ``settings``: extractor and back-end settings
-    (``{"isam2.robust": "cauchy"}``, :mod:`slam.settings`), recorded in ``metrics.json``.
+    (``{"isam2.robust": "cauchy"}``, :mod:`slam.run.presets`), recorded in ``metrics.json``.
     """
     backends = _load_backends()
     if backend not in backends:
@@ -326,7 +326,7 @@ def main_job(out_dir: str | Path, progress: bool = True) -> list[RunResult]:
         for backend in ("dr", "ekf", "isam2")
     ]
     from features.projection import project_beams
-    from slam.plots import plot_scans
+    from slam.io.plots import plot_scans
 
     dataset = open_dataset(source)
     gps = gps_ahrs_trajectory(dataset)
