@@ -12,40 +12,20 @@ from pathlib import Path
 
 from datasets.simulator import simulate
 from datasets.source import open_dataset
-from slam.backends.ekf import EkfConfig, LineEkf
-from slam.backends.isam2.graph import GraphConfig, isam2_backend_factory, pose_source_of
-from slam.eval.consistency import association_against_truth
-from slam.run.closed_loop import run_closed_loop
-from slam.run.run import default_extractor_config
+from slam.run.run import run_backend
 
 
 def measure(source: Path, backend: str) -> dict[str, float]:
-    ds = open_dataset(source)
-    mount = ds.config.sonar_mounting
-    if backend == "ekf":
-        res = run_closed_loop(
-            ds,
-            lambda t, p, c: LineEkf(t, p, c, mount, EkfConfig()),
-            default_extractor_config(ds),
-            progress=False,
-        )
-    else:
-        res = run_closed_loop(
-            ds,
-            isam2_backend_factory(mount, GraphConfig()),
-            default_extractor_config(ds),
-            pose_source_of=pose_source_of,
-            progress=False,
-        )
-    s = association_against_truth(ds, res)
+    """The association scores the runner measures against the true walls (``truth_*``)."""
+    m = run_backend(open_dataset(source), backend).metrics
     return {
-        "precision": s.precision,
-        "recall": s.recall,
-        "associated": s.n_associated,
-        "true_pairs": s.n_true_pairs,
-        "spurious": s.n_spurious,
-        "seeds": s.n_seeds,
-        "seed_precision": s.seed_precision,
+        "precision": m["truth_precision"],
+        "recall": m["truth_recall"],
+        "associated": m["truth_associations"],
+        "true_pairs": m["truth_reobservations"],
+        "spurious": m["truth_spurious_features"],
+        "seeds": m["truth_seeds"],
+        "seed_precision": m["truth_seed_precision"],
     }
 
 

@@ -1,9 +1,19 @@
 """What the benchmark scripts share (they run as ``python benchmarks/NAME.py``, so this folder is
-on ``sys.path``)."""
+on ``sys.path``). Import it first: it sets the BLAS thread pools to one thread before numpy
+loads."""
 
 from __future__ import annotations
 
 import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import tempfile  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+from datasets.simulator import simulate  # noqa: E402
+from datasets.source import Dataset, data_root, open_dataset  # noqa: E402
 
 
 def pin_one_core() -> int | None:
@@ -13,3 +23,16 @@ def pin_one_core() -> int | None:
     cpu = min(os.sched_getaffinity(0))
     os.sched_setaffinity(0, {cpu})
     return cpu
+
+
+def open_run(source: str) -> tuple[str, Dataset]:
+    """The marina, a dataset directory, or a simulated harbour (600 s, seed 1) when the marina
+    is absent; with a label that says which."""
+    root = data_root()
+    if source == "marina" and root is not None and (root / "marina").is_dir():
+        return "marina", open_dataset("marina")
+    if source != "marina":
+        return str(source), open_dataset(source)
+    out = Path(tempfile.mkdtemp(prefix="benchmark_"))
+    label = "simulated harbour seed 1, 600 s: the marina was not found under $SONARSLAM_DATA"
+    return label, open_dataset(simulate("harbour", 1, out))

@@ -33,8 +33,9 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from features.extractor import ExtractorConfig
-from slam.eval.lines import TrialResult, harbour_trial, mean_nees_band, pool_trial
+from features.config import ExtractorConfig
+from slam.eval.consistency import mean_nees_band
+from slam.run.line_trials import TrialResult, harbour_trial, pool_trial
 
 METHODS = ("fit", "seed")
 POOL_WALL_SEED_FRACTION_MIN = 0.95
@@ -46,7 +47,7 @@ CHI2_95_2DOF = 5.991
 def nees_summary(nees: np.ndarray) -> dict[str, Any]:
     """Mean NEES of N detections, its 95 % band, and the tail fraction."""
     n = int(nees.size)
-    lo, hi = mean_nees_band(n)
+    lo, hi = mean_nees_band(n, 2)
     mean = float(nees.mean())
     return {
         "n": n,

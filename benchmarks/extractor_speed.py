@@ -1,6 +1,7 @@
 """Speed of the line extractor on one core.
 
-1. The whole marina (GPS + AHRS poses, ``MARINA_PRESET``): real-time factor (data span / wall
+1. The whole marina (GPS + AHRS poses, an extractor preset of :mod:`slam.run.presets`,
+   ``marina-fit`` by default): real-time factor (data span / wall
    time of the loop over the beams; required >= 200x) and the time per beam (one
    ``LineExtractor.add``: segmentation, storage, and the vote when due), p50 and p99.
 2. Voting one stored full sector, side by side in the same run: ours
@@ -26,51 +27,47 @@ Usage::
 
 from __future__ import annotations
 
-import os
+from common import pin_one_core  # first: one BLAS thread  # isort: skip
 
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+import argparse
+import json
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from collections.abc import Callable, Sequence  # noqa: E402
-from pathlib import Path  # noqa: E402
-from typing import Any  # noqa: E402
+import numpy as np
 
-import numpy as np  # noqa: E402
-from common import pin_one_core  # noqa: E402
-
-from features.extractor import MARINA_PRESET, ExtractorConfig, LineExtractor  # noqa: E402
-from features.hough import find_winners  # noqa: E402
-from features.pose_source import PoseSource  # noqa: E402
-from features.sector import SectorSnapshot  # noqa: E402
-from slam.run.extraction import extract_lines  # noqa: E402
-from sonar.beam import Mounting, SonarBeam, SonarHead  # noqa: E402
+from datasets.simulator import make_scenario, simulate_records
+from datasets.source import data_root, open_dataset
+from features.config import ExtractorConfig
+from features.extractor import LineExtractor
+from features.hough import find_winners
+from features.pose_source import PoseSource
+from features.sector import SectorSnapshot
+from slam.run.extraction import extract_lines
+from slam.run.presets import EXTRACTOR_PRESETS
+from slam.run.sources import gps_ahrs_trajectory
+from sonar.beam import Mounting, SonarBeam, SonarHead
 
 REALTIME_FACTOR_MIN = 200.0
 
 
 def load_run(
-    source: str,
+    source: str, preset: str
 ) -> tuple[str, list[SonarBeam], SonarHead, Mounting, PoseSource, ExtractorConfig]:
-    """The marina with GPS poses and MARINA_PRESET, or a simulated harbour when it is absent."""
-    from datasets.source import data_root
-
+    """The marina with GPS poses and an extractor preset, or a simulated harbour when it is
+    absent."""
     root = data_root()
     if source == "marina" and root is not None and (root / "marina").is_dir():
-        from datasets.source import open_dataset
-        from slam.run.sources import gps_ahrs_trajectory
-
         ds = open_dataset("marina")
         poses = gps_ahrs_trajectory(ds)
         t0, t1 = poses.span_s
         beams = [b for b in ds.nav_beams() if t0 <= b.t <= t1]
-        cfg = MARINA_PRESET
-        return "marina (GPS + AHRS poses, MARINA_PRESET)", beams, ds.config.sonar, ds.config.sonar_mounting, poses, cfg  # fmt: skip
-    from datasets.simulator import make_scenario, simulate_records
-
+        cfg = EXTRACTOR_PRESETS[preset]
+        label = f"marina (GPS + AHRS poses, the {preset} preset)"
+        return label, beams, ds.config.sonar, ds.config.sonar_mounting, poses, cfg
     sim = simulate_records(make_scenario("harbour", 1))
     sc = sim.scenario
     label = "simulated harbour seed 1, 600 s (truth poses, default ExtractorConfig)"
@@ -203,10 +200,12 @@ def voting_over_sectors(
     }
 
 
-def run(source: str, pixel_m: float, repeats: int, n_sectors: int) -> dict[str, Any]:
+def run(
+    source: str, pixel_m: float, repeats: int, n_sectors: int, preset: str = "marina-fit"
+) -> dict[str, Any]:
     """Both measurements (the JSON written by :func:`main`)."""
     cpu = pin_one_core()
-    label, beams, head, mounting, poses, cfg = load_run(source)
+    label, beams, head, mounting, poses, cfg = load_run(source, preset)
     ex = LineExtractor(cfg, head, mounting, poses)
     lines, dt, wall_s = extract_lines(beams, ex)
     data_s = float(beams[-1].t - beams[0].t)
@@ -267,13 +266,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--sectors", type=int, default=20, help="full sectors compared, spread over the run (20)"
     )
+    p.add_argument(
+        "--preset",
+        default="marina-fit",
+        choices=sorted(EXTRACTOR_PRESETS),
+        help="extractor preset on the marina (default marina-fit: the least-squares lines over a"
+        " 180 deg sector; 'marina' is the closed loops')",
+    )
     p.add_argument("--out", default="out/extractor_speed.json", help="results JSON")
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    res = run(args.source, args.pixel, args.repeats, args.sectors)
+    res = run(args.source, args.pixel, args.repeats, args.sectors, args.preset)
     print(format_report(res))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -1,8 +1,8 @@
 """Speed of the GTSAM back end in closed loop on one core.
 
-The whole marina (the closed-loop extractor settings of
-:func:`slam.run.run.default_extractor_config`, :class:`slam.backends.isam2.graph.LineIsam2` with its defaults,
-its smoothed trajectory as the extractor's pose source): the real-time factor of the whole
+The whole marina through the runner (:func:`slam.run.run.run_backend`: the extractor preset of
+the beams, :class:`slam.backends.isam2.graph.LineIsam2` with its defaults, its smoothed
+trajectory as the extractor's pose source): the real-time factor of the whole
 closed loop (data span / wall time, extractor included; required >= 100x), the split between
 extractor and back end, and per iSAM2 update (one per vote with lines, and the pending odometry
 and heading factors at most every ``update_period_s``): p50, p99 and max wall time, with the
@@ -12,7 +12,7 @@ covariances and an optional batch Levenberg-Marquardt pass. ATE (Mallios protoco
 online and smoothed trajectories and of dead reckoning.
 
 Without ``$SONARSLAM_DATA/marina`` a simulated harbour (600 s, seed 1, the same rule: the
-extractor's defaults for raw beams) replaces it, and the output says so. The process is pinned to one CPU and the BLAS thread pools
+``default`` preset for raw beams) replaces it, and the output says so. The process is pinned to one CPU and the BLAS thread pools
 to one thread before numpy loads.
 
 Usage::
@@ -22,46 +22,24 @@ Usage::
 
 from __future__ import annotations
 
-import os
+from common import open_run, pin_one_core  # first: one BLAS thread  # isort: skip
 
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+import argparse
+import json
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import sys  # noqa: E402
-import tempfile  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
-from typing import Any  # noqa: E402
+import numpy as np
 
-import numpy as np  # noqa: E402
-from common import pin_one_core  # noqa: E402
-
-from features.extractor import ExtractorConfig  # noqa: E402
+from slam.backends.isam2.graph import LineIsam2
+from slam.eval.ate import ate_against_gps
+from slam.run.run import run_backend
+from slam.run.sources import dead_reckoning_trajectory
 
 REALTIME_FACTOR_MIN = 100.0
-
-
-def open_run(source: str) -> tuple[str, Any, ExtractorConfig]:
-    """The marina, a dataset directory, or a simulated harbour when the marina is absent; with
-    the closed-loop extractor settings of :func:`slam.run.run.default_extractor_config`."""
-    from datasets.source import data_root, open_dataset
-    from slam.run.run import default_extractor_config
-
-    root = data_root()
-    if source == "marina" and root is not None and (root / "marina").is_dir():
-        ds = open_dataset("marina")
-        return "marina", ds, default_extractor_config(ds)
-    if source != "marina":
-        ds = open_dataset(source)
-        return str(source), ds, default_extractor_config(ds)
-    from datasets.simulator import simulate
-
-    out = Path(tempfile.mkdtemp(prefix="isam2_speed_"))
-    label = "simulated harbour seed 1, 600 s: the marina was not found under $SONARSLAM_DATA"
-    ds = open_dataset(simulate("harbour", 1, out))
-    return label, ds, default_extractor_config(ds)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -71,21 +49,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--batch", action="store_true", help="also time a final batch LM")
     args = parser.parse_args(argv)
     cpu = pin_one_core()
-
-    from slam.backends.isam2.graph import GraphConfig, isam2_backend_factory, pose_source_of
-    from slam.eval.ate import ate_against_gps
-    from slam.run.closed_loop import run_closed_loop
-    from slam.run.sources import dead_reckoning_trajectory
-
-    label, dataset, extractor_config = open_run(args.source)
-    config = GraphConfig()
-    res = run_closed_loop(
-        dataset,
-        isam2_backend_factory(dataset.config.sonar_mounting, config),
-        extractor_config,
-        pose_source_of=pose_source_of,
-        progress=False,
-    )
+    label, dataset = open_run(args.source)
+    run = run_backend(dataset, "isam2")
+    res = run.closed_loop
+    assert res is not None and isinstance(res.backend, LineIsam2) and run.config is not None
     be = res.backend
     t0, t1 = res.trajectory.span_s
     data_s = t1 - t0
@@ -93,7 +60,8 @@ def main(argv: list[str] | None = None) -> int:
     report: dict[str, Any] = {
         "source": label,
         "cpu": cpu,
-        "config": {k: v for k, v in config.__dict__.items() if k != "association"},
+        "extractor_preset": run.config.preset,
+        "config": {k: v for k, v in asdict(be.config).items() if k != "association"},
         "data_s": data_s,
         "wall_s": res.wall_s,
         "extractor_s": res.extractor_s,
@@ -108,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
         "marginals_s": be.timing_s["marginals"],
         "association_s": be.timing_s["association"],
         "pose_nodes": be.n_nodes,
-        "landmarks": len(be.landmarks),
+        "landmarks": len(be.map),
         "stats": be.stats,
         "counts": res.counts,
     }
@@ -136,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
         f"{res.backend_s:.1f} s; {log.size} iSAM2 updates, p50 {report['isam_update_ms_p50']:.1f} "
         f"ms, p99 {report['isam_update_ms_p99']:.1f} ms, max {report['isam_update_ms_max']:.0f} ms, "
         f"total {log.sum():.1f} s; marginals {be.timing_s['marginals']:.1f} s, association "
-        f"{be.timing_s['association']:.1f} s; {be.n_nodes} poses, {len(be.landmarks)} landmarks"
+        f"{be.timing_s['association']:.1f} s; {be.n_nodes} poses, {len(be.map)} landmarks"
     )
     if "ate_online_m" in report:
         print(

@@ -32,6 +32,7 @@ import numpy as np
 from datasets.errors import DataError
 from datasets.source import Dataset, open_dataset
 from slam.eval.ate import ate_against_gps
+from slam.run.run import run_backend
 from slam.run.sources import dead_reckoning_trajectory, start_pose
 
 
@@ -92,32 +93,17 @@ def leg_rotation(dataset: Dataset, legs_s: list[float]) -> list[dict[str, float]
 
 
 def closed_loops(dataset: Dataset, d_deg: float) -> list[dict[str, float]]:
-    from slam.backends.ekf import EkfConfig, LineEkf
-    from slam.backends.isam2.graph import GraphConfig, isam2_backend_factory, pose_source_of
-    from slam.run.closed_loop import run_closed_loop
-    from slam.run.run import default_extractor_config
-
     assert dataset.gps is not None
     rows = []
     for d in (0.0, d_deg):
         ds = turned(dataset, d)
-        mount = ds.config.sonar_mounting
-        xc = default_extractor_config(ds)
-        ekf = run_closed_loop(
-            ds, lambda t, p, c, m=mount: LineEkf(t, p, c, m, EkfConfig()), xc, progress=False
-        )
-        gr = run_closed_loop(
-            ds,
-            isam2_backend_factory(mount, GraphConfig()),
-            xc,
-            pose_source_of=pose_source_of,
-            progress=False,
-        )
+        ekf = run_backend(ds, "ekf")
+        gr = run_backend(ds, "isam2")
         for name, tr in (
             ("dr", dead_reckoning_trajectory(ds)),
             ("ekf", ekf.trajectory),
             ("isam2", gr.trajectory),
-            ("isam2_smoothed", gr.backend.smoothed_trajectory()),
+            ("isam2_smoothed", gr.trajectories["smoothed"]),
         ):
             a = ate_against_gps(tr, dataset.gps)
             rows.append(

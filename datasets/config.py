@@ -191,6 +191,81 @@ def _mounting(path: Path, table: str, data: dict[str, Any], default: Mounting) -
     return replace(default, **kwargs)
 
 
+def _sonar_table(p: Path, s: dict[str, Any], base: DatasetConfig) -> tuple[SonarHead, float]:
+    """``[sonar]`` over ``base``: the head and the clock offset."""
+    _check_keys(
+        p,
+        "sonar",
+        s,
+        {"n_bins", "bin_size_m", "step_deg", "beam_width_deg", "angle_sense", "time_offset_s"},
+    )
+    kwargs: dict[str, Any] = {}
+    if "n_bins" in s:
+        kwargs["n_bins"] = int(
+            _number(p, "sonar", "n_bins", s["n_bins"], positive=True, integer=True)
+        )
+    if "bin_size_m" in s:
+        kwargs["bin_size_m"] = _number(p, "sonar", "bin_size_m", s["bin_size_m"], positive=True)
+    if "step_deg" in s:
+        kwargs["step_rad"] = math.radians(
+            _number(p, "sonar", "step_deg", s["step_deg"], positive=True)
+        )
+    if "beam_width_deg" in s:
+        kwargs["beam_width_rad"] = math.radians(
+            _number(p, "sonar", "beam_width_deg", s["beam_width_deg"], positive=True)
+        )
+    if "angle_sense" in s:
+        kwargs["angle_sense"] = int(
+            _number(p, "sonar", "angle_sense", s["angle_sense"], integer=True)
+        )
+    time_offset_s = base.sonar_time_offset_s
+    if "time_offset_s" in s:
+        time_offset_s = _number(p, "sonar", "time_offset_s", s["time_offset_s"])
+    try:
+        return replace(base.sonar, **kwargs), time_offset_s
+    except ValueError as exc:
+        raise DataError(p, None, f"[sonar] {exc}") from exc
+
+
+def _noise_table(p: Path, table: dict[str, Any], base: NoiseConfig) -> NoiseConfig:
+    """``[noise]`` over ``base``: finite, positive (the scatter settings may be 0)."""
+    _check_keys(p, "noise", table, {f.name for f in fields(NoiseConfig)})
+    may_be_zero = {"dvl_scatter_window_s", "dvl_nominal_scatter_mps"}
+    values = {}
+    for k, v in table.items():
+        values[k] = _number(p, "noise", k, v, positive=k not in may_be_zero)
+        if values[k] < 0:
+            raise DataError(p, None, f"[noise] {k} must be >= 0, got {v!r}")
+    return replace(base, **values)
+
+
+def _motion_table(
+    p: Path, table: dict[str, Any], base: DatasetConfig
+) -> tuple[str, tuple[float, float]]:
+    """``[motion]`` over ``base``: the yaw-rate source and the AHRS deviation (rad)."""
+    _check_keys(p, "motion", table, {"yaw_rate_source", "ahrs_deviation_deg"})
+    yaw_rate_source = base.yaw_rate_source
+    if "yaw_rate_source" in table:
+        yaw_rate_source = table["yaw_rate_source"]
+        if yaw_rate_source not in YAW_RATE_SOURCES:
+            raise DataError(
+                p,
+                None,
+                f"[motion] yaw_rate_source must be one of {YAW_RATE_SOURCES},"
+                f" got {yaw_rate_source!r}",
+            )
+    deviation = base.ahrs_deviation_rad
+    if "ahrs_deviation_deg" in table:
+        dev = table["ahrs_deviation_deg"]
+        if not isinstance(dev, list) or len(dev) != 2:
+            raise DataError(
+                p, None, f"[motion] ahrs_deviation_deg must be [B, C] (deg), got {dev!r}"
+            )
+        b_deg, c_deg = (_number(p, "motion", "ahrs_deviation_deg", v) for v in dev)
+        deviation = (math.radians(b_deg), math.radians(c_deg))
+    return yaw_rate_source, deviation
+
+
 def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> DatasetConfig:
     """Read a ``sonarslam.toml`` over ``base`` (default: a plain :class:`DatasetConfig`).
 
@@ -212,59 +287,15 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
         raise DataError(p, None, f"cannot read: {exc.strerror}") from exc
     _check_keys(p, "top level", data, {"sonar", "mounting", "noise", "keyframes", "motion"})
 
-    sonar = base.sonar
-    time_offset_s = base.sonar_time_offset_s
+    sonar, time_offset_s = base.sonar, base.sonar_time_offset_s
     if "sonar" in data:
-        s = data["sonar"]
-        _check_keys(
-            p,
-            "sonar",
-            s,
-            {"n_bins", "bin_size_m", "step_deg", "beam_width_deg", "angle_sense", "time_offset_s"},
-        )
-        kwargs: dict[str, Any] = {}
-        if "n_bins" in s:
-            kwargs["n_bins"] = int(
-                _number(p, "sonar", "n_bins", s["n_bins"], positive=True, integer=True)
-            )
-        if "bin_size_m" in s:
-            kwargs["bin_size_m"] = _number(p, "sonar", "bin_size_m", s["bin_size_m"], positive=True)
-        if "step_deg" in s:
-            kwargs["step_rad"] = math.radians(
-                _number(p, "sonar", "step_deg", s["step_deg"], positive=True)
-            )
-        if "beam_width_deg" in s:
-            kwargs["beam_width_rad"] = math.radians(
-                _number(p, "sonar", "beam_width_deg", s["beam_width_deg"], positive=True)
-            )
-        if "angle_sense" in s:
-            kwargs["angle_sense"] = int(
-                _number(p, "sonar", "angle_sense", s["angle_sense"], integer=True)
-            )
-        if "time_offset_s" in s:
-            time_offset_s = _number(p, "sonar", "time_offset_s", s["time_offset_s"])
-        try:
-            sonar = replace(sonar, **kwargs)
-        except ValueError as exc:
-            raise DataError(p, None, f"[sonar] {exc}") from exc
-
+        sonar, time_offset_s = _sonar_table(p, data["sonar"], base)
     mountings = {"sonar": base.sonar_mounting, "dvl": base.dvl_mounting, "ahrs": base.ahrs_mounting}
     if "mounting" in data:
         _check_keys(p, "mounting", data["mounting"], set(mountings))
         for name, table in data["mounting"].items():
             mountings[name] = _mounting(p, f"mounting.{name}", table, mountings[name])
-
-    noise = base.noise
-    if "noise" in data:
-        allowed = {f.name for f in fields(NoiseConfig)}
-        _check_keys(p, "noise", data["noise"], allowed)
-        may_be_zero = {"dvl_scatter_window_s", "dvl_nominal_scatter_mps"}
-        values = {}
-        for k, v in data["noise"].items():
-            values[k] = _number(p, "noise", k, v, positive=k not in may_be_zero)
-            if values[k] < 0:
-                raise DataError(p, None, f"[noise] {k} must be >= 0, got {v!r}")
-        noise = replace(noise, **values)
+    noise = _noise_table(p, data["noise"], base.noise) if "noise" in data else base.noise
     scan_direction = base.keyframe_scan_direction
     if "keyframes" in data:
         _check_keys(p, "keyframes", data["keyframes"], {"scan_direction"})
@@ -275,27 +306,9 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
             raise DataError(
                 p, None, f"[keyframes] scan_direction must be +1 or -1, got {scan_direction}"
             )
-    yaw_rate_source = base.yaw_rate_source
+    yaw_rate_source, ahrs_deviation_rad = base.yaw_rate_source, base.ahrs_deviation_rad
     if "motion" in data:
-        _check_keys(p, "motion", data["motion"], {"yaw_rate_source", "ahrs_deviation_deg"})
-        if "yaw_rate_source" in data["motion"]:
-            yaw_rate_source = data["motion"]["yaw_rate_source"]
-            if yaw_rate_source not in YAW_RATE_SOURCES:
-                raise DataError(
-                    p,
-                    None,
-                    f"[motion] yaw_rate_source must be one of {YAW_RATE_SOURCES},"
-                    f" got {yaw_rate_source!r}",
-                )
-    ahrs_deviation_rad = base.ahrs_deviation_rad
-    if "motion" in data and "ahrs_deviation_deg" in data["motion"]:
-        dev = data["motion"]["ahrs_deviation_deg"]
-        if not isinstance(dev, list) or len(dev) != 2:
-            raise DataError(
-                p, None, f"[motion] ahrs_deviation_deg must be [B, C] (deg), got {dev!r}"
-            )
-        b_deg, c_deg = (_number(p, "motion", "ahrs_deviation_deg", v) for v in dev)
-        ahrs_deviation_rad = (math.radians(b_deg), math.radians(c_deg))
+        yaw_rate_source, ahrs_deviation_rad = _motion_table(p, data["motion"], base)
     return DatasetConfig(
         sonar=sonar,
         sonar_mounting=mountings["sonar"],

@@ -9,7 +9,6 @@ East-North metres with the origin at the first DGPS fix. Bad input follows the p
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +16,7 @@ import numpy as np
 from datasets.errors import DataError
 from datasets.geodesy import ddmm_to_degrees, geodetic_to_local_en
 from datasets.logfile import read_table
-from datasets.records import Attitude, DvlVelocity, GpsFix
+from datasets.records import AttitudeSeries, DvlSeries, GpsSeries
 from features.geometry import FloatArray, wrap_angle
 
 __all__ = [
@@ -40,52 +39,6 @@ DGPS_COLUMNS = 10
 def heading_deg_to_yaw_rad(heading_deg: np.ndarray) -> FloatArray:
     """Heading clockwise from North (deg) to yaw counter-clockwise from East (rad)."""
     return wrap_angle(np.pi / 2.0 - np.deg2rad(heading_deg))
-
-
-@dataclass(frozen=True)
-class DvlSeries:
-    """DVL bottom-track velocities in the DVL frame; see :class:`datasets.records.DvlVelocity`."""
-
-    t: FloatArray
-    v_mps: FloatArray  # (N, 2) vx, vy in the DVL frame
-    valid: np.ndarray  # (N,) bool, bottom lock
-    heading_rad: FloatArray  # (N,) DVL compass as yaw CCW from East of the DVL x axis
-
-    def records(self) -> list[DvlVelocity]:
-        return [
-            DvlVelocity(float(t), float(v[0]), float(v[1]), bool(ok), float(h))
-            for t, v, ok, h in zip(self.t, self.v_mps, self.valid, self.heading_rad, strict=True)
-        ]
-
-
-@dataclass(frozen=True)
-class AttitudeSeries:
-    """AHRS yaw of its own frame (CCW from East, rad) and yaw rate (CCW, rad/s)."""
-
-    t: FloatArray
-    yaw_rad: FloatArray
-    yaw_rate_radps: FloatArray
-
-    def records(self) -> list[Attitude]:
-        return [
-            Attitude(float(t), float(y), float(r))
-            for t, y, r in zip(self.t, self.yaw_rad, self.yaw_rate_radps, strict=True)
-        ]
-
-
-@dataclass(frozen=True)
-class GpsSeries:
-    """GPS positions in local East-North (m), origin at ``origin_lat_lon_deg`` (the first fix)."""
-
-    t: FloatArray
-    en_m: FloatArray  # (N, 2)
-    origin_lat_lon_deg: tuple[float, float]
-
-    def records(self) -> list[GpsFix]:
-        return [
-            GpsFix(float(t), float(p[0]), float(p[1]))
-            for t, p in zip(self.t, self.en_m, strict=True)
-        ]
 
 
 def read_dvl(path: str | Path) -> DvlSeries:

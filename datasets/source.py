@@ -32,17 +32,8 @@ from datasets.config import MARINA_CONFIG, DatasetConfig, load_dataset_config
 from datasets.errors import DataError
 from datasets.islog import read_is_log
 from datasets.keyframes import read_keyframes
-from datasets.marina import (
-    AttitudeSeries,
-    DvlSeries,
-    GpsSeries,
-    read_dgps,
-    read_dvl,
-    read_is_timestamps,
-    read_mti,
-    read_setup,
-)
-from datasets.records import Record
+from datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti, read_setup
+from datasets.records import AttitudeSeries, DvlSeries, GpsSeries, Record
 from sonar.beam import SonarBeam
 
 __all__ = ["Dataset", "open_dataset", "resolve_source", "data_root"]

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from features.geometry import line_difference
 from slam.mapping.association import (
     AssociationConfig,
     AssociationProblem,
     associate,
     individual_compatibility,
-    line_innovation,
 )
 
 
@@ -27,10 +27,10 @@ def problem_with(z, z_hat, sigma_obs=0.1, sigma_state=0.05):
 
 
 def test_innovation_handles_the_sign_ambiguity_near_rho_zero():
-    nu, flipped = line_innovation(np.array([0.05, 0.0]), np.array([0.02, -np.pi + 0.01]))
+    nu, flipped = line_difference(np.array([0.05, 0.0]), np.array([0.02, -np.pi + 0.01]))
     assert flipped
     assert np.allclose(nu, [-0.05 - 0.02, -0.01], atol=1e-12)
-    nu, flipped = line_innovation(np.array([5.0, 3.1]), np.array([5.1, -3.1]))
+    nu, flipped = line_difference(np.array([5.0, 3.1]), np.array([5.1, -3.1]))
     assert not flipped and np.allclose(nu, [-0.1, 6.2 - 2 * np.pi], atol=1e-12)
 
 
@@ -86,9 +86,9 @@ def test_ekf_closed_loop_associates_the_true_walls(tmp_path):
     landmarks are reported as seeds, on their landmark's wall."""
     from datasets.simulator import simulate
     from datasets.source import open_dataset
-    from features.extractor import ExtractorConfig
+    from features.config import ExtractorConfig
     from slam.backends.ekf import EkfConfig, LineEkf
-    from slam.eval.consistency import association_against_truth, landmark_overshoot_m, truth_walls
+    from slam.eval.truth import association_against_truth, landmark_overshoot_m, truth_walls
     from slam.run.closed_loop import run_closed_loop
 
     ds = open_dataset(simulate("harbour", seed=4, out_dir=tmp_path / "h", duration_s=300.0))
@@ -97,12 +97,12 @@ def test_ekf_closed_loop_associates_the_true_walls(tmp_path):
         ds, lambda t, p, P: LineEkf(t, p, P, mount, EkfConfig()), ExtractorConfig(), progress=False
     )
     walls = truth_walls(ds)
-    s = association_against_truth(ds, res)
+    s = association_against_truth(ds, res.features, res.feature_landmarks, res.feature_seeds)
     # with the default rule (a landmark needs 2 sightings) each landmark has one seed
-    assert s.n_seeds == len(res.backend.landmarks) >= 3
+    assert s.n_seeds == len(res.backend.map) >= 3
     assert s.n_associated >= 20
     assert s.precision >= 0.99 and s.recall >= 0.95 and s.seed_precision == 1.0
-    assert landmark_overshoot_m(res.backend.map_json(), walls).max() < 12.0
+    assert landmark_overshoot_m(res.backend.map_records(), walls).max() < 12.0
 
 
 @pytest.mark.parametrize("method", ["jcbb", "nn"])
@@ -129,7 +129,8 @@ def test_a_line_seen_in_both_representations_gets_the_extent_it_was_seen_over(ba
     from features.geometry import compose, inverse, line_world_to_frame, transform_points
     from features.line import LineFeature
     from slam.backends.ekf import EkfConfig, LineEkf
-    from slam.backends.isam2.graph import GraphConfig, isam2_backend_factory
+    from slam.backends.isam2.graph import GraphConfig, LineIsam2
+    from slam.model.motion import motion_step
     from sonar.beam import Mounting
 
     pose = np.array([-8.0, 15.0, 0.0])
@@ -138,7 +139,7 @@ def test_a_line_seen_in_both_representations_gets_the_extent_it_was_seen_over(ba
     if backend == "ekf":
         be = LineEkf(0.0, pose, P0, mount, EkfConfig())
     else:
-        be = isam2_backend_factory(mount, GraphConfig())(0.0, pose, P0)
+        be = LineIsam2(0.0, pose, P0, mount, GraphConfig())
     wTs = compose(pose, mount.as_pose())
     ends_w = np.array([[0.05, 10.0], [0.05, 20.0]])
     ids = []
@@ -153,9 +154,9 @@ def test_a_line_seen_in_both_representations_gets_the_extent_it_was_seen_over(ba
             votes=30,
             endpoints_r=transform_points(inverse(wTs), ends_w),
         )
-        be.predict(f.t, np.zeros(2), 0.01, 0.0)
+        be.predict(motion_step(0.1 * k, f.t, np.zeros(2), 0.01, 0.0, 0.1 * k))
         ids.extend(be.update_lines([f]))
     assert ids[0] is None and ids[1] is not None  # tentative, then the landmark
-    (record,) = be.map_json()
+    (record,) = be.map_records()
     length = float(np.linalg.norm(np.subtract(*record["endpoints"])))
     assert length == pytest.approx(10.0, abs=0.5)

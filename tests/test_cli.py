@@ -11,8 +11,9 @@ from datasets.simulator import simulate
 from datasets.source import open_dataset
 from slam.cli.main import build_parser, main
 from slam.eval.ate import ate_against_gps
+from slam.eval.truth import truth_trajectory
 from slam.io.trajectory import read_tum
-from slam.run.sources import dead_reckoning_trajectory, truth_trajectory
+from slam.run.sources import dead_reckoning_trajectory
 
 
 @pytest.fixture(scope="module")
@@ -48,9 +49,13 @@ def test_known_errors_are_one_line_and_exit_1(tmp_path, capsys, monkeypatch):
     assert "needs $SONARSLAM_DATA" in capsys.readouterr().err
 
 
-def test_unknown_backend_is_named(short_harbour, tmp_path, capsys):
-    assert main(["run", str(short_harbour), "--backend", "kalman", "--out", str(tmp_path)]) == 1
-    assert "--backend must be one of" in capsys.readouterr().err
+def test_unknown_backend_is_a_usage_error_naming_the_choices(short_harbour, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["run", str(short_harbour), "--backend", "kalman", "--out", str(tmp_path / "o")])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "invalid choice: 'kalman'" in err and "'isam2'" in err
+    assert not (tmp_path / "o").exists()
 
 
 def test_run_dr_writes_what_it_measured(short_harbour, tmp_path):

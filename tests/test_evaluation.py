@@ -5,23 +5,25 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from datasets.marina import GpsSeries
+from datasets.records import GpsSeries
 from slam.eval.ate import ate_against_gps
 from slam.eval.consistency import (
-    COV_FILE,
     anees,
     chi2_band,
-    evo_ape,
-    evo_rpe,
-    load_run_trajectory,
     mean_nees_band,
     nees,
     nees_on_grid,
     nees_series,
     nis,
-    write_trajectory_covariances,
 )
-from slam.io.trajectory import Trajectory, write_tum
+from slam.eval.evo_metrics import evo_ape, evo_rpe
+from slam.io.trajectory import (
+    COV_FILE,
+    Trajectory,
+    load_run_trajectory,
+    write_trajectory_covariances,
+    write_tum,
+)
 
 T0_S = 1.7e9
 
@@ -235,7 +237,7 @@ def test_association_scores_on_known_pairings():
     from types import SimpleNamespace
 
     from features.geometry import compose, line_world_to_frame
-    from slam.eval.consistency import association_scores
+    from slam.eval.truth import association_scores
     from slam.io.trajectory import Trajectory
 
     walls = np.array([[[-10.0, 5.0], [10.0, 5.0]], [[8.0, -10.0], [8.0, 10.0]]])  # y = 5, x = 8
@@ -265,7 +267,7 @@ def test_association_scores_collinear_walls_are_one_line_and_seeds_are_not_misse
     from types import SimpleNamespace
 
     from features.geometry import compose, line_world_to_frame
-    from slam.eval.consistency import association_scores, wall_lines
+    from slam.eval.truth import association_scores, wall_lines
     from slam.io.trajectory import Trajectory
 
     # y = 5 split in two collinear segments, and x = 8

@@ -11,41 +11,45 @@ import pytest
 
 from datasets.simulator import simulate
 from datasets.source import open_dataset
-from features.extractor import MARINA_PRESET, ExtractorConfig
+from features.config import ExtractorConfig
 from features.geometry import inverse, line_frame_to_world, transform_points
 from features.line import LineFeature
 from features.uncertainty import chi2_2dof
 from slam.cli.main import main
 from slam.eval.lines import GATE_RAD, HARBOUR_GATE_M, match_features
-from slam.run.extraction import default_preset, extractor_config, segment_band_world
+from slam.io.plots import segment_band_world
+from slam.run.presets import EXTRACTOR_PRESETS, extractor_config, preset_for
 from sonar.beam import SonarBeam
 
 # -- configuration ---------------------------------------------------------------------------
 
 
-def test_default_preset_follows_the_beams() -> None:
+def test_the_preset_follows_the_beams() -> None:
     raw = [SonarBeam(t=0.0, transducer_angle_rad=0.0, intensities=np.zeros(10, np.uint8))]
     mask = [
         SonarBeam(
             t=0.0, transducer_angle_rad=0.0, intensities=np.zeros(10, np.uint8), thresholded=True
         )
     ]
-    assert default_preset(raw) == "default"
-    assert default_preset(mask) == "marina"
+    assert preset_for(raw) == "default"
+    assert preset_for(mask) == "marina"
 
 
 def test_toml_fields_replace_the_preset_s(tmp_path: Path) -> None:
     path = tmp_path / "extractor.toml"
-    path.write_text('[extractor]\nmin_votes = 12\ncovariance_method = "seed"\n')
+    path.write_text('[extractor]\nmin_votes = 12\ncovariance_method = "fit"\n')
+    marina = EXTRACTOR_PRESETS["marina"]
     cfg = extractor_config("marina", path)
-    assert (cfg.min_votes, cfg.covariance_method) == (12, "seed")
-    assert cfg.replace(min_votes=MARINA_PRESET.min_votes, covariance_method="fit") == MARINA_PRESET
+    assert (cfg.min_votes, cfg.covariance_method) == (12, "fit")
+    assert cfg.replace(min_votes=marina.min_votes, covariance_method="seed") == marina
+    over = extractor_config("marina", path, {"min_votes": 20, "max_range_m": 25.0})
+    assert (over.min_votes, over.max_range_m, over.covariance_method) == (20, 25.0, "fit")
     assert extractor_config("default") == ExtractorConfig()
     path.write_text("min_vote = 12\n")
     with pytest.raises(ValueError, match="min_vote"):
         extractor_config("default", path)
     with pytest.raises(ValueError, match="preset"):
-        extractor_config("pool")
+        extractor_config("no-such-preset")
 
 
 # -- the 95 % band -----------------------------------------------------------------------------

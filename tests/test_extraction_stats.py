@@ -13,7 +13,8 @@ import pytest
 
 from features.sector import BinsInR
 from features.uncertainty import LineEstimate, fit_line
-from slam.eval.lines import TrialResult, harbour_trial, mean_nees_band, pool_trial
+from slam.eval.consistency import mean_nees_band
+from slam.run.line_trials import TrialResult, harbour_trial, pool_trial
 
 POOL_SEEDS = range(8)
 RMS_RHO_MAX_M = 0.05  # the pool test's requirement
@@ -73,7 +74,7 @@ def test_fit_covariance_is_honest_on_pool_and_harbour(
 ) -> None:
     for nees in (_nees(pool["fit"]), harbour["fit"].nees):
         assert nees.size >= 40
-        lo, hi = mean_nees_band(nees.size)
+        lo, hi = mean_nees_band(nees.size, 2)
         assert lo / PESSIMISM_FACTOR_MAX < nees.mean() < hi
 
 
@@ -81,7 +82,7 @@ def test_fit_without_the_common_range_offset_is_optimistic() -> None:
     """The bias of the peak bin is shared by all voters and does not average down: without the
     common-mode term the pool's mean NEES is far above the band."""
     nees = _nees([pool_trial(s, ("fit",), {"range_offset_sigma_m": 0.0})[0] for s in range(2)])
-    lo, hi = mean_nees_band(nees.size)
+    lo, hi = mean_nees_band(nees.size, 2)
     assert nees.mean() > 2.0 * hi
 
 
@@ -90,7 +91,7 @@ def test_seed_covariance_is_pessimistic(
 ) -> None:
     """The paper's similar-overlap ellipse is wider than the error of its centre."""
     for nees in (_nees(pool["seed"]), harbour["seed"].nees):
-        lo, _ = mean_nees_band(nees.size)
+        lo, _ = mean_nees_band(nees.size, 2)
         assert nees.mean() < lo
 
 
@@ -98,12 +99,12 @@ def test_mean_nees_band_covers_95_percent() -> None:
     rng = np.random.default_rng(2010)
     n, trials = 50, 4000
     means = rng.chisquare(2, size=(trials, n)).mean(axis=1)
-    lo, hi = mean_nees_band(n)
+    lo, hi = mean_nees_band(n, 2)
     inside = np.mean((means >= lo) & (means <= hi))
     assert inside == pytest.approx(0.95, abs=0.012)  # ~3.5 sd of a binomial over 4000 trials
     assert lo < 2.0 < hi
     with pytest.raises(ValueError):
-        mean_nees_band(0)
+        mean_nees_band(0, 2)
 
 
 def test_common_range_offset_term_is_the_fit_s_numerical_sensitivity() -> None:

@@ -15,11 +15,16 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from features.extractor import MARINA_PRESET, ExtractorConfig, LineExtractor
+from features.config import ExtractorConfig
+from features.extractor import LineExtractor
 from features.geometry import compose, line_world_to_frame, wrap_angle
 from features.line import LineFeature
 from features.pose_source import PoseSource
+from slam.run.presets import EXTRACTOR_PRESETS
 from sonar.beam import Mounting, SonarBeam, SonarHead
+
+#: The marina keyframes' preset with the least-squares covariance (180 deg, 10 votes)
+MARINA_FIT = EXTRACTOR_PRESETS["marina-fit"]
 
 BETA = np.deg2rad(25.0)
 
@@ -386,7 +391,7 @@ def test_fit_covariance_is_consistent_when_the_return_model_matches() -> None:
 
 
 def test_config_toml_round_trip(tmp_path: Path) -> None:
-    cfg = MARINA_PRESET
+    cfg = MARINA_FIT
     items = {k: v for k, v in cfg.to_dict().items() if v is not None}
 
     def fmt(v: object) -> str:
@@ -430,7 +435,7 @@ def test_marina_preset_on_a_thresholded_mask() -> None:
         if i.size:
             m[i[0] : i[0] + int(rng.integers(20, 30))] = 255
         beams.append(SonarBeam(b.t, b.transducer_angle_rad, (m > 0) * np.uint8(255), True))
-    lines = run(LineExtractor(MARINA_PRESET, head, Mounting(), poses), beams)
+    lines = run(LineExtractor(MARINA_FIT, head, Mounting(), poses), beams)
     assert len(lines) >= 3
     drho, dtheta = match_lines(lines, wall_lines_world(walls))
     assert drho.max() < 0.3 and np.rad2deg(dtheta.max()) < 1.5

@@ -28,21 +28,18 @@ from features.geometry import (
     wrap_angle,
 )
 from features.line import LineFeature
-from slam.backends.isam2.factors import (
-    heading_factor,
-    line_factor,
+from slam.backends.isam2.factors import heading_factor, line_factor, noise_model, odometry_factor
+from slam.backends.isam2.graph import GraphConfig, LineIsam2
+from slam.backends.isam2.graph_io import load_graph
+from slam.backends.isam2.pose_source import smoothed_poses
+from slam.model.lines import (
+    line_prediction,
     line_predictions,
     line_residual,
-    noise_model,
-    odometry_factor,
-)
-from slam.backends.isam2.graph import (
-    GraphConfig,
-    LineIsam2,
-    load_graph,
-    smoothed_poses,
+    local_to_world,
     sonar_side,
 )
+from slam.model.motion import motion_step
 from sonar.beam import Mounting
 
 BTS = np.array([0.3, -0.1, np.pi])  # the sonar mounting of the synthetic runs (and the sims)
@@ -192,10 +189,10 @@ def test_odometry_agrees_with_gtsams_between_factor_without_misalignment_and_sca
 
 def test_odometry_translation_follows_the_gyro_scale():
     """The accumulated ``d(x, y)/d(scale)`` is the derivative of the integrated arc's end."""
-    from slam.backends.isam2.graph import _Motion
+    from slam.model.motion import RelativeMotion
 
-    def arc(scale: float) -> _Motion:
-        m = _Motion()
+    def arc(scale: float) -> RelativeMotion:
+        m = RelativeMotion()
         for k in range(50):
             m.step(0.05, 0.01 * np.sin(k), scale * 0.02, 0.0, 0.0, 0.02)
         return m
@@ -211,10 +208,16 @@ def test_vectorised_predictions_equal_the_factor_model():
     wTb = np.array([4.0, -2.0, 2.2])
     lines = np.column_stack([rng.uniform(-30, 30, 50), rng.uniform(-6, 6, 50)])
     z_hat, H_pose, H_line = line_predictions(wTb, lines, BTS)
+    M = local_to_world(float(wTb[2]))
     for k in range(lines.shape[0]):
         e, Hp, Hl = line_residual(z_hat[k], wTb, lines[k], BTS)
         assert np.allclose(e, 0.0, atol=1e-12)
-        assert np.allclose(-Hp, H_pose[k], atol=1e-12) and np.allclose(-Hl, H_line[k], atol=1e-12)
+        assert np.allclose(-Hp, H_pose[k] @ M, atol=1e-12) and np.allclose(
+            -Hl, H_line[k], atol=1e-12
+        )
+        z1, Hp1, Hl1 = line_prediction(wTb, lines[k], BTS)
+        assert np.allclose(z1, z_hat[k], atol=1e-12)
+        assert np.allclose(Hp1, H_pose[k], atol=1e-12) and np.allclose(Hl1, H_line[k], atol=1e-12)
 
 
 def test_sonar_side_tells_the_two_faces_of_a_jetty_apart():
@@ -286,7 +289,7 @@ def run_room(
     for k in range(1, t.size):
         v_meas = np.array([speed, 0.0]) + rng.normal(0.0, sigma_v_mps, 2)
         r_meas = rate + rng.normal(0.0, 0.002)
-        be.predict(t[k], v_meas, sigma_v_mps, r_meas)
+        be.predict(motion_step(t[k - 1], t[k], v_meas, sigma_v_mps, r_meas, t[k - 1]))
         p_dr = compose(p_dr, np.array([dt * v_meas[0], dt * v_meas[1], dt * r_meas]))
         yaw_meas = float(wrap_angle(truth[k, 2] + bias + rng.normal(0.0, sigma_w)))
         be.update_heading(t[k], yaw_meas)
@@ -313,8 +316,8 @@ def room() -> SyntheticRun:
 
 def test_room_recovers_the_walls_and_the_trajectory(room: SyntheticRun):
     be = room.backend
-    assert len(be.landmarks) == 4  # one landmark per wall, no duplicates
-    lines = be.map_json()
+    assert len(be.map) == 4  # one landmark per wall, no duplicates
+    lines = be.map_records()
     for lm in lines:
         d = [abs(lm["rho"] - w[0]) + abs(float(wrap_angle(lm["theta"] - w[1]))) for w in WALLS]
         assert min(d) < 0.15  # m + rad: within 0.15 m and ~2 deg of a true wall
@@ -403,33 +406,36 @@ def test_online_pose_and_covariance_follow_the_newest_node(room: SyntheticRun):
 
 
 def test_between_nodes_the_pose_is_the_ekf_prediction():
-    """Before the first node after X(0) the current pose and covariance are X(0)'s marginal
-    propagated by :func:`slam.model.motion.propagate`, the EKF's prediction."""
-    from slam.model.motion import propagate
+    """One motion model: before the first node after X(0) the graph's current pose and
+    covariance are X(0)'s marginal propagated by the same motion steps as the EKF's prediction
+    (one held DVL sample over several steps included)."""
+    from slam.backends.ekf import POSE, EkfConfig, LineEkf
+    from slam.model.motion import motion_step
 
     rng = np.random.default_rng(21)
     cfg = GraphConfig()
     wTb0 = np.array([3.0, -1.0, 0.4])
     P0 = np.array([[0.5, 0.1, 0.0], [0.1, 0.3, 0.0], [0.0, 0.0, 0.01]])
     be = LineIsam2(100.0, wTb0, P0, Mounting(*BTS), cfg)
+    ekf = LineEkf(100.0, wTb0, P0, Mounting(*BTS), EkfConfig())
     # X(0)'s marginal: the prior's position, the AHRS start heading plus the bias prior
     P = P0.copy()
     P[2, 2] += np.deg2rad(cfg.ahrs_bias_sigma_deg) ** 2
     assert np.allclose(be.pose_cov, P, atol=1e-9)
-    x = wTb0.copy()
-    t = 100.0
-    for _ in range(40):  # 4 s < node_period_s: no node, no update
+    assert np.allclose(ekf.P[POSE, POSE], P, atol=1e-12)
+    t, held_from = 100.0, 100.0
+    v = rng.normal(0.0, 0.5, 2)
+    for k in range(40):  # 4 s < node_period_s: no node, no update
         dt = rng.uniform(0.05, 0.15)
-        v, r, sigma_v = rng.normal(0.0, 0.5, 2), rng.normal(0.0, 0.1), 0.05
+        if k % 5 == 0:  # a new DVL sample every fifth step
+            v, held_from = rng.normal(0.0, 0.5, 2), t
+        step = motion_step(t, t + dt, v, 0.05, rng.normal(0.0, 0.1), held_from)
         t += dt
-        be.predict(t, v, sigma_v, r)
-        x, F, G = propagate(x, v, r, dt)
-        Q = np.diag([sigma_v**2, sigma_v**2, cfg.gyro_sigma_radps**2])
-        P = F @ P @ F.T + G @ Q @ G.T
+        np.testing.assert_allclose(be.predict(step), ekf.predict(step), atol=1e-15)
     assert be.n_nodes == 1
-    assert np.allclose(be.pose[:2], x[:2], atol=1e-9)
-    assert abs(wrap_angle(be.pose[2] - x[2])) < 1e-9
-    assert np.allclose(be.pose_cov, P, atol=1e-9)
+    assert np.allclose(be.pose[:2], ekf.pose[:2], atol=1e-9)
+    assert abs(wrap_angle(be.pose[2] - ekf.pose[2])) < 1e-9
+    assert np.allclose(be.pose_cov, ekf.pose_cov, atol=1e-9)
 
 
 # -- the pose source ---------------------------------------------------------------------------
@@ -469,8 +475,8 @@ def test_smoothed_poses_pass_through_nodes_and_follow_the_odometry():
 
 def test_save_and_load_round_trip(room: SyntheticRun, tmp_path):
     be = room.backend
-    path = tmp_path / "graph.json"
-    be.save(path)
+    (path,) = be.save(tmp_path)
+    assert path == tmp_path / "graph.json"
     graph, values = load_graph(path)
     original = be.estimate()
     assert graph.size() == be.graph.size() == len(be.records)
@@ -509,12 +515,16 @@ def test_short_simulated_closed_loop_beats_dead_reckoning(tmp_path_factory):
     from datasets.simulator import make_scenario, simulate_records
     from datasets.simulator.writer import write_dataset
     from datasets.source import open_dataset
-    from features.extractor import ExtractorConfig
-    from slam.backends.isam2.graph import isam2_backend_factory, pose_source_of
+    from features.config import ExtractorConfig
     from slam.eval.ate import ate_against_gps
-    from slam.eval.consistency import association_against_truth, landmark_overshoot_m, truth_walls
+    from slam.eval.truth import (
+        association_against_truth,
+        landmark_overshoot_m,
+        truth_trajectory,
+        truth_walls,
+    )
     from slam.run.closed_loop import run_closed_loop
-    from slam.run.sources import dead_reckoning_trajectory, truth_trajectory
+    from slam.run.sources import dead_reckoning_trajectory
 
     scenario = make_scenario("harbour", 3, 300.0)
     noise = replace(
@@ -526,9 +536,8 @@ def test_short_simulated_closed_loop_beats_dead_reckoning(tmp_path_factory):
     dataset = open_dataset(root)
     result = run_closed_loop(
         dataset,
-        isam2_backend_factory(dataset.config.sonar_mounting, GraphConfig()),
+        lambda t, p, c: LineIsam2(t, p, c, dataset.config.sonar_mounting, GraphConfig()),
         ExtractorConfig(),
-        pose_source_of=pose_source_of,
         progress=False,
     )
     span = result.trajectory.span_s
@@ -546,10 +555,12 @@ def test_short_simulated_closed_loop_beats_dead_reckoning(tmp_path_factory):
     assert result.backend.stats["associated"] >= 0.4 * result.backend.stats["observations"]
     # association against the true walls: the issue's targets (precision 99 %, recall 95 %)
     walls = truth_walls(dataset)
-    scores = association_against_truth(dataset, result)
+    scores = association_against_truth(
+        dataset, result.features, result.feature_landmarks, result.feature_seeds
+    )
     assert scores.n_associated >= 20 and scores.n_seeds >= 1
     assert scores.precision >= 0.99 and scores.recall >= 0.95
     assert scores.seed_precision == 1.0
     # every landmark's extent stays on its walls (2 m of pose error, margin of the extent gate)
-    overshoot = landmark_overshoot_m(result.backend.map_json(), walls)
+    overshoot = landmark_overshoot_m(result.backend.map_records(), walls)
     assert overshoot.max() < 12.0, overshoot

@@ -5,10 +5,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from datasets.marina import AttitudeSeries, DvlSeries
+from datasets.records import AttitudeSeries, DvlSeries
 from features.geometry import wrap_angle
 from slam.eval.ate import ate_against_gps
-from slam.model.motion import MotionNoise, body_velocity, dead_reckoning, propagate, velocity_input
+from slam.model.motion import (
+    RelativeMotion,
+    body_velocity,
+    dead_reckoning,
+    motion_step,
+    step_displacement,
+    velocity_input,
+)
+from slam.model.noise import MotionNoise
 from slam.run.sources import dead_reckoning_trajectory
 from sonar.beam import Mounting
 from tests.conftest import needs_marina
@@ -49,21 +57,38 @@ def test_body_velocity_applies_the_mounting():
     assert np.allclose(v, [[0.2, 0.0]], atol=1e-12)
 
 
-def test_propagate_jacobians_numerically():
-    x0, v, r, dt = np.array([1.0, -2.0, 0.7]), np.array([0.3, -0.1]), 0.05, 0.4
-    _, F, G = propagate(x0, v, r, dt)
+def test_the_integrator_propagates_its_covariance_with_the_model_jacobian():
+    """One step of the motion model from a pose with covariance ``P``: the relative motion's
+    closed-form covariance is ``F P F^T + Q`` with ``F`` the numerical Jacobian of the step."""
+    rng = np.random.default_rng(3)
+    m = RelativeMotion()
+    for _ in range(7):  # some motion and covariance to start from
+        m.step(*rng.normal(0.0, 0.3, 3), 1e-3, 1e-4)
+    pose0, P0 = m.pose, m.cov
+    sx, sy, syaw, qv, qr = 0.4, -0.1, 0.05, 2e-3, 3e-4
+
+    def step(pose: np.ndarray) -> np.ndarray:
+        dx, dy = step_displacement(float(pose[2]), sx, sy)
+        return np.array([pose[0] + dx, pose[1] + dy, pose[2] + syaw])
+
     eps = 1e-6
-    for i in range(3):
-        d = np.zeros(3)
-        d[i] = eps
-        num = (propagate(x0 + d, v, r, dt)[0] - propagate(x0 - d, v, r, dt)[0]) / (2 * eps)
-        assert np.allclose(F[:, i], num, atol=1e-8)
-        u = np.r_[v, r]
-        num = (
-            propagate(x0, (u + d)[:2], (u + d)[2], dt)[0]
-            - propagate(x0, (u - d)[:2], (u - d)[2], dt)[0]
-        ) / (2 * eps)
-        assert np.allclose(G[:, i], num, atol=1e-8)
+    F = np.column_stack([(step(pose0 + d) - step(pose0 - d)) / (2 * eps) for d in np.eye(3) * eps])
+    m.step(sx, sy, syaw, qv, qr)
+    np.testing.assert_allclose(m.pose, step(pose0), atol=1e-12)
+    np.testing.assert_allclose(m.cov, F @ P0 @ F.T + np.diag([qv, qv, qr]), atol=1e-9)
+
+
+def test_motion_steps_share_the_error_of_a_held_dvl_sample():
+    """A DVL sample held for 1 s over ten 0.1 s steps adds (1 s * sigma)^2 in all, as one
+    draw; the white model adds ten times less."""
+    sigma, held_from = 0.05, 10.0
+    steps = [
+        motion_step(10.0 + 0.1 * k, 10.1 + 0.1 * k, [0.3, 0.0], sigma, 0.0, held_from)
+        for k in range(10)
+    ]
+    assert sum(s.var_xy_m2 for s in steps) == pytest.approx((1.0 * sigma) ** 2, rel=1e-9)
+    assert sum(s.var_xy_white_m2 for s in steps) == pytest.approx(10 * (0.1 * sigma) ** 2, rel=1e-9)
+    assert steps[0].dx_m == pytest.approx(0.03, abs=1e-15) and steps[0].held_s == pytest.approx(0.1)
 
 
 def test_dead_reckoning_follows_a_noiseless_circle():
@@ -128,7 +153,7 @@ def test_marina_dead_reckoning_with_the_gps_free_calibration(marina):
 
 def test_anchored_odometry_is_the_chain_anchored_at_the_estimate():
     from features.geometry import compose, inverse
-    from slam.run.closed_loop import AnchoredOdometry
+    from slam.backends.base import AnchoredOdometry
 
     rng = np.random.default_rng(5)
     steps = np.column_stack(
@@ -157,7 +182,7 @@ def test_ekf_recovers_a_dvl_mounting_error(tmp_path):
 
     from datasets.simulator import simulate
     from datasets.source import open_dataset
-    from features.extractor import ExtractorConfig
+    from features.config import ExtractorConfig
     from slam.backends.ekf import EkfConfig, LineEkf
     from slam.run.closed_loop import run_closed_loop
 
@@ -208,11 +233,11 @@ def test_heading_rate_source_survives_a_biased_gyro(biased_gyro_harbour, backend
     error (its 2 deg constant bias, unobservable) and the position error drops."""
     from dataclasses import replace
 
-    from features.extractor import ExtractorConfig
+    from features.config import ExtractorConfig
     from slam.backends.ekf import EkfConfig, LineEkf
-    from slam.backends.isam2.graph import GraphConfig, isam2_backend_factory, pose_source_of
+    from slam.backends.isam2.graph import GraphConfig, LineIsam2
+    from slam.eval.truth import truth_trajectory
     from slam.run.closed_loop import run_closed_loop
-    from slam.run.sources import truth_trajectory
 
     ds0 = biased_gyro_harbour
     assert ds0.config.yaw_rate_source == "gyro"  # the simulator's toml: the neutral default
@@ -221,13 +246,10 @@ def test_heading_rate_source_survives_a_biased_gyro(biased_gyro_harbour, backend
         ds = replace(ds0, config=replace(ds0.config, yaw_rate_source=source))
         mount = ds.config.sonar_mounting
         if backend == "ekf":
-            kw: dict = {"make_backend": lambda t, p, c, m=mount: LineEkf(t, p, c, m, EkfConfig())}
+            make = lambda t, p, c, m=mount: LineEkf(t, p, c, m, EkfConfig())  # noqa: E731
         else:
-            kw = {
-                "make_backend": isam2_backend_factory(mount, GraphConfig()),
-                "pose_source_of": pose_source_of,
-            }
-        res = run_closed_loop(ds, extractor_config=ExtractorConfig(), progress=False, **kw)
+            make = lambda t, p, c, m=mount: LineIsam2(t, p, c, m, GraphConfig())  # noqa: E731
+        res = run_closed_loop(ds, make, ExtractorConfig(), progress=False)
         truth = truth_trajectory(ds).poses(res.trajectory.t_s)
         yaw_err = np.degrees(np.abs(wrap_angle(res.trajectory.poses_wTb[:, 2] - truth[:, 2])))
         pos_err = np.hypot(*(res.trajectory.poses_wTb[:, :2] - truth[:, :2]).T)
@@ -287,25 +309,13 @@ def test_ahrs_deviation_self_calibration_from_sonar_lines(tmp_path):
     from datasets.simulator import make_scenario, simulate_records
     from datasets.simulator.writer import write_dataset
     from datasets.source import open_dataset
-    from features.extractor import ExtractorConfig
-    from slam.backends.ekf import EkfConfig, LineEkf
     from slam.run.calibration import calibrate_ahrs_deviation
-    from slam.run.closed_loop import run_closed_loop
 
     scenario = make_scenario("harbour", 1, 600.0)
     noise = replace(scenario.noise, ahrs_bias_deg=0.0, ahrs_deviation_deg=(-2.0, 2.5))
     ds = open_dataset(write_dataset(simulate_records(replace(scenario, noise=noise)), tmp_path))
 
-    def run(d):  # noqa: ANN001, ANN202
-        mount = d.config.sonar_mounting
-        return run_closed_loop(
-            d,
-            lambda t, p, c: LineEkf(t, p, c, mount, EkfConfig()),
-            ExtractorConfig(),
-            progress=False,
-        )
-
-    steps = calibrate_ahrs_deviation(ds, run, iterations=2)
+    steps = calibrate_ahrs_deviation(ds, iterations=2)  # EKF closed loops, default settings
     found_deg = np.degrees(steps[-1][0])
     np.testing.assert_allclose(found_deg, [-2.0, 2.5], atol=0.5)
     fixed = replace(ds, config=replace(ds.config, ahrs_deviation_rad=tuple(steps[-1][0])))
@@ -318,7 +328,7 @@ def test_ahrs_deviation_self_calibration_from_sonar_lines(tmp_path):
 def test_dvl_scatter_is_the_white_noise_sigma():
     """On a slowly varying velocity with white noise of 0.3 m/s per axis, the scatter over
     60 s (~90 samples) is 0.3 within 20 % (its sampling error is ~7 %)."""
-    from slam.model.motion import dvl_scatter
+    from slam.model.noise import dvl_scatter
 
     rng = np.random.default_rng(11)
     t = np.cumsum(rng.uniform(0.6, 0.75, 3000))
@@ -330,7 +340,7 @@ def test_dvl_scatter_is_the_white_noise_sigma():
 
 
 def test_dvl_sample_sigma_adds_only_the_excess_scatter():
-    from slam.model.motion import dvl_sample_sigma
+    from slam.model.noise import dvl_sample_sigma
 
     rng = np.random.default_rng(12)
     t = np.arange(4000) * 0.66
@@ -351,7 +361,7 @@ def test_dvl_sample_sigma_adds_only_the_excess_scatter():
 def test_anchored_odometry_covariance_grows_with_the_chain():
     """Differences of the odometry's covariance are the variance chained between two times
     (what the extractor's relative pose uncertainty takes); the anchor's cancels."""
-    from slam.run.closed_loop import AnchoredOdometry
+    from slam.backends.base import AnchoredOdometry
 
     odo = AnchoredOdometry(0.0, np.zeros(3), capacity=4)
     assert odo.covariance(0.0) is None  # no anchor covariance yet: no covariance
@@ -373,7 +383,7 @@ def test_dead_reckoning_stays_consistent_when_the_dvl_degrades(tmp_path):
     from datasets.simulator import make_scenario, simulate_records
     from datasets.simulator.writer import write_dataset
     from datasets.source import open_dataset
-    from slam.run.sources import truth_trajectory
+    from slam.eval.truth import truth_trajectory
 
     nees_on, nees_off = [], []
     for seed in range(5):

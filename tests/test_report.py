@@ -10,16 +10,13 @@ from scipy.stats import chi2
 
 from datasets.simulator import simulate
 from slam.cli.main import main
-from slam.eval.consistency import (
-    COV_FILE,
-    evo_ape,
-    evo_rpe,
-    nees_series,
-)
-from slam.io.trajectory import read_tum
-from slam.run.report import PUBLISHED, landmark_band_world, load_run, report
+from slam.eval.consistency import nees_series
+from slam.eval.evo_metrics import evo_ape, evo_rpe
+from slam.eval.published import PUBLISHED
+from slam.eval.truth import truth_trajectory
+from slam.io.trajectory import COV_FILE, read_tum
+from slam.run.report import landmark_band_world, load_run, report
 from slam.run.run import run
-from slam.run.sources import truth_trajectory
 
 
 @pytest.fixture(scope="module")

@@ -12,16 +12,15 @@ from slam.backends.ekf import EkfConfig
 from slam.cli.main import main
 from slam.eval.ate import ate_against_gps
 from slam.eval.consistency import anees, nees_on_grid, nees_series
-from slam.run.run import run
-from slam.run.sources import dead_reckoning_trajectory, truth_trajectory
+from slam.eval.truth import truth_trajectory
+from slam.run.presets import apply_overrides, parse_value
+from slam.run.run import run, run_backend
+from slam.run.sources import dead_reckoning_trajectory
 from slam.run.sweep import (
-    apply_overrides,
     expand_tasks,
     load_grid_toml,
     parse_grid,
     parse_seeds,
-    parse_value,
-    run_backend,
     simulate_cached,
     sweep,
 )
@@ -106,25 +105,21 @@ def test_simulation_is_cached_per_seed(cache):
     assert sorted(p.name for p in cache.iterdir()) == ["harbour_0_90s", "harbour_1_90s"]
 
 
-def test_run_backend_without_overrides_equals_the_pipeline(cache, tmp_path, monkeypatch):
-    """The sweep's closed loop is the pipeline's: the same ATE to the last bit; and a back end
-    the sweep does not know is run by slam.run.run.run, with the same numbers."""
+def test_one_runner_for_the_cli_and_the_sweep(cache, tmp_path):
+    """``sonarslam run`` and the sweep's tasks run through the same runner: the metrics written
+    by run() are run_backend()'s to the last bit, settings of another back end are refused."""
     source = cache / "harbour_1_90s"
     dataset = open_dataset(source)
     piped = run(source, "ekf", tmp_path / "ekf", progress=False).metrics
     mine = run_backend(dataset, "ekf").metrics
     for key in ("ate_mean_m", "ate_rmse_m", "ate_max_m", "ate_n", "line_features"):
         assert mine[key] == piped[key]
-
-    def no_closed_loops():
-        return {}
-
-    monkeypatch.setattr(sweep_mod, "closed_loop_backends", no_closed_loops)
-    fallback = run_backend(dataset, "ekf").metrics
-    assert fallback["ate_mean_m"] == piped["ate_mean_m"]
-    assert fallback["assoc_observations"] == piped["assoc_observations"]
-    with pytest.raises(ValueError, match="takes no settings"):
-        run_backend(dataset, "ekf", {"ekf.association": "nn"})
+    assert mine["assoc_observations"] == piped["assoc_observations"]
+    assert mine["extractor_preset"] == "default"
+    with pytest.raises(ValueError, match="does not apply"):
+        run_backend(dataset, "ekf", {"isam2.robust": "cauchy"})
+    with pytest.raises(ValueError, match="no settings"):
+        run_backend(dataset, "dr", {"ekf.association": "nn"})
 
 
 def test_extractor_override_reaches_the_front_end(cache):

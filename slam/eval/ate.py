@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from datasets.marina import GpsSeries
+from datasets.records import GpsSeries
 from features.geometry import FloatArray
 from slam.io.trajectory import Trajectory
 

@@ -1,25 +1,45 @@
-"""Pictures (matplotlib, Agg): projected scans, trajectories against GPS, lines with 95 % bands."""
+"""Pictures: projected scans, trajectories against GPS, lines with 95 % bands, errors and NEES.
+
+Matplotlib's object interface (``Figure``), so that importing this module changes no global
+state (no backend switch, no pyplot figure registry): every function draws into its own figure
+and writes a PNG.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any, Protocol
 
 import matplotlib
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+from matplotlib.patches import Rectangle
+from scipy.stats import chi2
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from features.geometry import FloatArray, transform_points
+from features.line import LineFeature
+from slam.io.trajectory import Trajectory
 
-from features.geometry import FloatArray  # noqa: E402
-from slam.io.trajectory import Trajectory  # noqa: E402
-
-__all__ = ["plot_scans", "plot_trajectories", "plot_lines"]
+__all__ = [
+    "plot_scans",
+    "plot_trajectories",
+    "plot_lines",
+    "segment_band_world",
+    "plot_error_bounds",
+    "plot_nees",
+    "AneesCurve",
+    "plot_anees",
+    "plot_sweep",
+]
 
 _COLOURS = {"gps": "k", "dr": "tab:red", "ekf": "tab:blue", "isam2": "tab:green", "truth": "k"}
 
 
-def _draw_points(ax: plt.Axes, points_w: FloatArray, cell_m: float = 0.25) -> None:
+def _draw_points(ax: Axes, points_w: FloatArray, cell_m: float = 0.25) -> None:
     """Projected bins as a density image (log scale): walls are where many bins agree."""
     if points_w.shape[0] == 0:
         return
@@ -39,7 +59,7 @@ def _draw_points(ax: plt.Axes, points_w: FloatArray, cell_m: float = 0.25) -> No
     )
 
 
-def _draw_trajectories(ax: plt.Axes, trajectories: dict[str, Trajectory]) -> None:
+def _draw_trajectories(ax: Axes, trajectories: dict[str, Trajectory]) -> None:
     for name, tr in trajectories.items():
         ax.plot(
             tr.poses_wTb[:, 0],
@@ -59,7 +79,8 @@ def plot_scans(
     segments_w: Sequence[FloatArray] = (),
 ) -> Path:
     """Projected sonar bins (grey), trajectories and optional segments (rows of 2 points)."""
-    fig, ax = plt.subplots(figsize=(9, 9), dpi=130)
+    fig = Figure(figsize=(9, 9), dpi=130)
+    ax = fig.subplots()
     _draw_points(ax, points_w)
     for seg in segments_w:
         ax.plot(seg[:, 0], seg[:, 1], "m-", lw=1.2)
@@ -74,7 +95,6 @@ def plot_scans(
     out = Path(path)
     fig.tight_layout()
     fig.savefig(out)
-    plt.close(fig)
     return out
 
 
@@ -85,7 +105,8 @@ def plot_trajectories(
     title: str,
 ) -> Path:
     """Trajectories in the plane (left) and their ATE against time (right)."""
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(14, 6.5), dpi=110)
+    fig = Figure(figsize=(14, 6.5), dpi=110)
+    (ax, ax2) = fig.subplots(1, 2)
     _draw_trajectories(ax, trajectories)
     ax.set_aspect("equal")
     ax.set_xlabel("East (m)")
@@ -104,7 +125,6 @@ def plot_trajectories(
     fig.tight_layout()
     out = Path(path)
     fig.savefig(out)
-    plt.close(fig)
     return out
 
 
@@ -125,7 +145,7 @@ def _densest_window(points_w: FloatArray, side_m: float) -> tuple[float, float]:
 
 
 def _draw_lines(
-    ax: plt.Axes,
+    ax: Axes,
     segments_w: Sequence[FloatArray],
     bands_w: Sequence[FloatArray],
     lw: float,
@@ -141,6 +161,58 @@ def _draw_lines(
             lw=lw,
             label="line segment, 95 % band in orange" if k == 0 else None,
         )
+
+
+def segment_band_world(
+    feature: LineFeature,
+    confidence: float = 0.95,
+    n_along: int = 25,
+    n_boundary: int = 72,
+) -> FloatArray:
+    """Polygon of the lines within the ``confidence`` ellipse of ``(rho, theta)``, over the segment.
+
+    The ellipse is ``{z : (z - z0)^T cov^-1 (z - z0) <= chi2_2(confidence)}`` in R. Along the
+    segment (``n_along`` points ``q(s) = rho n + s t`` between its ends, ``n`` the normal and ``t``
+    the tangent), every line ``(rho_k, theta_k)`` of ``n_boundary`` samples of the ellipse's
+    boundary meets the normal through ``q(s)`` at the signed offset
+    ``lambda_k = (rho_k - q . n_k) / (n . n_k)``; the band is ``[min_k lambda_k, max_k lambda_k]``
+    (exact, no linearisation; to first order its half width is
+    ``sqrt(chi2 [1, -s] cov [1, -s]^T)``).
+
+    Parameters
+    ----------
+    feature : LineFeature
+    confidence : float
+        Probability of the ellipse (0.95: ``chi2_2 = 5.991``).
+    n_along, n_boundary : int
+        Samples along the segment and on the ellipse boundary.
+
+    Returns
+    -------
+    ndarray, shape (2 n_along, 2)
+        Polygon in the world (m): one side of the band from the first end to the second,
+        then the other side back.
+    """
+    rho, theta = feature.rho_m, feature.theta_rad
+    n = np.array([np.cos(theta), np.sin(theta)])
+    t = np.array([-n[1], n[0]])
+    ends = np.asarray(feature.endpoints_r, dtype=np.float64)
+    s = np.linspace(float(ends[0] @ t), float(ends[1] @ t), n_along)
+    q = rho * n[None, :] + s[:, None] * t[None, :]  # (A, 2) points of the segment in R
+    cov = 0.5 * (feature.cov + feature.cov.T)
+    w, v = np.linalg.eigh(cov)
+    root = v * np.sqrt(np.clip(w, 0.0, None))[None, :]  # cov = root root^T
+    phi = np.linspace(0.0, 2.0 * np.pi, n_boundary, endpoint=False)
+    u = np.stack([np.cos(phi), np.sin(phi)])  # (2, K)
+    z = np.array([rho, theta])[:, None] + np.sqrt(chi2.ppf(confidence, 2)) * root @ u  # (2, K)
+    nk = np.stack([np.cos(z[1]), np.sin(z[1])], axis=-1)  # (K, 2)
+    denom = nk @ n  # (K,)
+    lam = (z[0][None, :] - q @ nk.T) / denom[None, :]  # (A, K)
+    lo, hi = lam.min(axis=1), lam.max(axis=1)
+    side_a = q + hi[:, None] * n[None, :]
+    side_b = q + lo[:, None] * n[None, :]
+    poly_r = np.concatenate([side_a, side_b[::-1]])
+    return transform_points(feature.wTr, poly_r)
 
 
 def plot_lines(
@@ -174,7 +246,8 @@ def plot_lines(
     zoom_side_m : float, optional
         Side of the zoomed square (m).
     """
-    fig, axes = plt.subplots(1, 2, figsize=(16, 9), dpi=90)
+    fig = Figure(figsize=(16, 9), dpi=90)
+    axes = fig.subplots(1, 2)
     for ax, lw in zip(axes, (0.6, 1.0), strict=True):
         _draw_points(ax, points_w)
         for name, tr in (trajectories or {}).items():
@@ -204,26 +277,17 @@ def plot_lines(
         axes[1].set_ylim(cy - 0.5 * side, cy + 0.5 * side)
         axes[1].set_title(f"zoom: {side:.0f} m x {side:.0f} m with the most segments")
         axes[0].add_patch(
-            plt.Rectangle(
+            Rectangle(
                 (cx - 0.5 * side, cy - 0.5 * side), side, side, fill=False, ec="tab:blue", lw=0.8
             )
         )
     out = Path(path)
     fig.tight_layout()
     fig.savefig(out)
-    plt.close(fig)
     return out
 
 
 # -- evaluation pictures (slam.run.report, slam.run.sweep) ---------------------------------------------
-
-
-def _chi2_band(dof: int, n_runs: int = 1, probability: float = 0.95) -> tuple[float, float]:
-    from scipy.stats import chi2
-
-    a = 0.5 * (1.0 - probability)
-    lo, hi = chi2.ppf([a, 1.0 - a], n_runs * dof) / n_runs
-    return float(lo), float(hi)
 
 
 def plot_error_bounds(
@@ -253,8 +317,8 @@ def plot_error_bounds(
     n = errors.shape[1]
     names = ["East error (m)", "North error (m)", "heading error (deg)"][:n]
     scale = np.array([1.0, 1.0, np.rad2deg(1.0)])[:n]
-    fig, axes = plt.subplots(n, 1, figsize=(11, 2.6 * n + 0.8), dpi=100, sharex=True)
-    axes = np.atleast_1d(axes)
+    fig = Figure(figsize=(11, 2.6 * n + 0.8), dpi=100)
+    axes = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
     t = t_s - t_s[0] if t_s.size else t_s
     for k, ax in enumerate(axes):
         e = errors[:, k] * scale[k]
@@ -280,25 +344,24 @@ def plot_error_bounds(
     fig.tight_layout()
     out = Path(path)
     fig.savefig(out)
-    plt.close(fig)
     return out
 
 
 def plot_nees(
     path: str | Path,
-    series: dict[str, tuple[FloatArray, FloatArray, int]],
+    series: dict[str, tuple[FloatArray, FloatArray, int, tuple[float, float]]],
     title: str,
     probability: float = 0.95,
 ) -> Path:
     """NEES against time, one panel per series, with the two-sided chi2(dof) band of one value.
 
-    ``series`` maps a label to ``(t_s (K,), nees (K,), dof)``.
+    ``series`` maps a label to ``(t_s (K,), nees (K,), dof, (lo, hi))``, the band of
+    ``probability`` (:func:`slam.eval.consistency.chi2_band`).
     """
     n = max(len(series), 1)
-    fig, axes = plt.subplots(n, 1, figsize=(11, 2.8 * n + 0.8), dpi=100, sharex=True)
-    axes = np.atleast_1d(axes)
-    for ax, (label, (t, v, dof)) in zip(axes, series.items(), strict=False):
-        lo, hi = _chi2_band(dof, 1, probability)
+    fig = Figure(figsize=(11, 2.8 * n + 0.8), dpi=100)
+    axes = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
+    for ax, (label, (t, v, dof, (lo, hi))) in zip(axes, series.items(), strict=False):
         tt = t - t[0] if t.size else t
         inside = float(np.mean((v >= lo) & (v <= hi))) if v.size else float("nan")
         ax.semilogy(
@@ -324,30 +387,52 @@ def plot_nees(
     fig.tight_layout()
     out = Path(path)
     fig.savefig(out)
-    plt.close(fig)
     return out
 
 
-def plot_anees(path: str | Path, curves: dict[str, object], title: str) -> Path:
-    """ANEES against time with the band of its number of runs, one curve per configuration.
+class AneesCurve(Protocol):
+    """What :func:`plot_anees` draws of an ANEES (:class:`slam.eval.consistency.AneesResult`)."""
 
-    ``curves`` maps a label to a :class:`slam.eval.consistency.AneesResult`.
-    """
-    fig, ax = plt.subplots(figsize=(11, 5), dpi=100)
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    @property
+    def t_rel_s(self) -> FloatArray: ...
+
+    @property
+    def anees(self) -> FloatArray: ...
+
+    @property
+    def band_lo(self) -> FloatArray: ...
+
+    @property
+    def band_hi(self) -> FloatArray: ...
+
+    @property
+    def dof(self) -> int: ...
+
+    @property
+    def mean(self) -> float: ...
+
+    @property
+    def in_band_fraction(self) -> float: ...
+
+
+def plot_anees(path: str | Path, curves: Mapping[str, AneesCurve], title: str) -> Path:
+    """ANEES against time with the band of its number of runs, one curve per configuration."""
+    fig = Figure(figsize=(11, 5), dpi=100)
+    ax = fig.subplots()
+    colours = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     for k, (label, res) in enumerate(curves.items()):
         c = colours[k % len(colours)]
-        t = res.t_rel_s  # type: ignore[attr-defined]
+        t = res.t_rel_s
         ax.semilogy(
             t,
             res.anees,
             lw=0.9,
             color=c,
             label=f"{label}: ANEES {res.mean:.2f}, {100 * res.in_band_fraction:.0f} % of times in band",
-        )  # type: ignore[attr-defined]
-        ax.fill_between(t, res.band_lo, res.band_hi, color=c, alpha=0.12, lw=0)  # type: ignore[attr-defined]
+        )
+        ax.fill_between(t, res.band_lo, res.band_hi, color=c, alpha=0.12, lw=0)
     if curves:
-        dof = next(iter(curves.values())).dof  # type: ignore[attr-defined]
+        dof = next(iter(curves.values())).dof
         ax.axhline(dof, color="k", lw=0.6, ls="--", label=f"dof = {dof}")
     ax.set_xlabel("time since start (s)")
     ax.set_ylabel("ANEES (mean NEES over the runs)")
@@ -357,18 +442,14 @@ def plot_anees(path: str | Path, curves: dict[str, object], title: str) -> Path:
     fig.tight_layout()
     out = Path(path)
     fig.savefig(out)
-    plt.close(fig)
     return out
 
 
-def plot_sweep(path: str | Path, table: object, labels: FloatArray, title: str) -> Path:
+def plot_sweep(path: str | Path, table: pd.DataFrame, labels: npt.NDArray[Any], title: str) -> Path:
     """Per configuration: the ATE mean of each run, its pose NEES mean (log), its wall time.
 
     ``table`` is the sweep's DataFrame; ``labels`` (R,) names each row's configuration.
     """
-    import pandas as pd
-
-    assert isinstance(table, pd.DataFrame)
     ok = (
         (table["error"].fillna("") == "").to_numpy()
         if "error" in table
@@ -380,7 +461,8 @@ def plot_sweep(path: str | Path, table: object, labels: FloatArray, title: str) 
         ("nees_mean", "pose NEES mean over time (3 dof)", True),
         ("wall_s", "wall time (s)", False),
     ]
-    fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 5), dpi=100)
+    fig = Figure(figsize=(5 * len(panels), 5), dpi=100)
+    axes = fig.subplots(1, len(panels))
     rng = np.random.default_rng(0)  # jitter of the dots only
     for ax, (col, ylabel, log) in zip(axes, panels, strict=True):
         data = []
@@ -403,8 +485,4 @@ def plot_sweep(path: str | Path, table: object, labels: FloatArray, title: str) 
     fig.tight_layout()
     out = Path(path)
     fig.savefig(out)
-    plt.close(fig)
     return out
-
-
-__all__ += ["plot_error_bounds", "plot_nees", "plot_anees", "plot_sweep"]

@@ -1,4 +1,10 @@
-"""A timed sequence of poses with covariances: the output of every estimator, and a PoseSource."""
+"""A timed sequence of poses with covariances (the output of every estimator, and a PoseSource),
+and its files: TUM trajectories (``t x y z qx qy qz qw``, evo's reader and writer) with the pose
+covariances beside them in ``trajectory_cov.npz``.
+
+Yaw and quaternions convert here only (:func:`yaw_to_quat_wxyz`, :func:`quat_wxyz_to_yaw`,
+scipy's ``Rotation``).
+"""
 
 from __future__ import annotations
 
@@ -9,10 +15,23 @@ import numpy as np
 import numpy.typing as npt
 from evo.core.trajectory import PoseTrajectory3D
 from evo.tools import file_interface
+from scipy.spatial.transform import Rotation
 
 from features.geometry import FloatArray, interpolate_poses
 
-__all__ = ["Trajectory", "write_tum", "read_tum"]
+__all__ = [
+    "Trajectory",
+    "yaw_to_quat_wxyz",
+    "quat_wxyz_to_yaw",
+    "to_evo",
+    "write_tum",
+    "read_tum",
+    "COV_FILE",
+    "write_trajectory_covariances",
+    "read_trajectory_covariances",
+    "with_covariances",
+    "load_run_trajectory",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -23,7 +42,7 @@ class Trajectory:
     ----------
     t_s : ndarray, shape (N,)
         Unix times (s), non-decreasing.
-    poses : ndarray, shape (N, 3)
+    poses_wTb : ndarray, shape (N, 3)
         ``(x_m, y_m, yaw_rad)`` in local East-North.
     covs : ndarray, shape (N, 3, 3) or None
         Pose covariances.
@@ -49,7 +68,8 @@ class Trajectory:
 
     def poses(self, t_s: npt.ArrayLike) -> FloatArray:
         """Poses interpolated at ``t_s`` (ends held outside the span), shape (M, 3)."""
-        return interpolate_poses(t_s, self.t_s, self.poses_wTb, self._yaw_unwrapped)  # type: ignore[attr-defined]
+        yaw: FloatArray = object.__getattribute__(self, "_yaw_unwrapped")
+        return interpolate_poses(t_s, self.t_s, self.poses_wTb, yaw)
 
     def covariance(self, t_s: float) -> FloatArray | None:
         """Covariance of the last sample at or before ``t_s`` (3, 3), or None."""
@@ -65,27 +85,92 @@ class Trajectory:
         )
 
 
+def yaw_to_quat_wxyz(yaw_rad: npt.ArrayLike) -> FloatArray:
+    """Quaternions ``(w, x, y, z)`` of rotations by ``yaw`` about z, shape (N, 4)."""
+    yaw = np.atleast_1d(np.asarray(yaw_rad, dtype=np.float64))
+    return np.asarray(Rotation.from_euler("z", yaw[:, None]).as_quat(scalar_first=True))
+
+
+def quat_wxyz_to_yaw(quat_wxyz: npt.ArrayLike) -> FloatArray:
+    """The yaw (rad, ``[-pi, pi]``) of quaternions ``(w, x, y, z)``, shape (N,): the first angle
+    of the ``zyx`` Euler angles (a 3D trajectory projected on the plane)."""
+    q = np.atleast_2d(np.asarray(quat_wxyz, dtype=np.float64))
+    return np.asarray(Rotation.from_quat(q, scalar_first=True).as_euler("zyx")[:, 0])
+
+
+def to_evo(trajectory: Trajectory) -> PoseTrajectory3D:
+    """The planar trajectory as an evo ``PoseTrajectory3D`` (z = 0, yaw about z)."""
+    yaw = trajectory.poses_wTb[:, 2]
+    xyz = np.column_stack([trajectory.poses_wTb[:, :2], np.zeros_like(yaw)])
+    return PoseTrajectory3D(
+        positions_xyz=xyz,
+        orientations_quat_wxyz=yaw_to_quat_wxyz(yaw),
+        timestamps=trajectory.t_s.copy(),
+    )
+
+
 def write_tum(path: str | Path, trajectory: Trajectory) -> None:
     """Write ``t x y z qx qy qz qw`` (z = 0, yaw as a quaternion about z) with evo."""
-    yaw = trajectory.poses_wTb[:, 2]
-    quat_wxyz = np.stack(
-        [np.cos(yaw / 2), np.zeros_like(yaw), np.zeros_like(yaw), np.sin(yaw / 2)], axis=1
-    )
-    xyz = np.column_stack([trajectory.poses_wTb[:, :2], np.zeros_like(yaw)])
-    traj = PoseTrajectory3D(
-        positions_xyz=xyz, orientations_quat_wxyz=quat_wxyz, timestamps=trajectory.t_s
-    )
-    file_interface.write_tum_trajectory_file(str(path), traj, confirm_overwrite=False)
+    file_interface.write_tum_trajectory_file(str(path), to_evo(trajectory), confirm_overwrite=False)
 
 
 def read_tum(path: str | Path) -> Trajectory:
     """Read a planar TUM trajectory written by :func:`write_tum` (or any TUM file, projected)."""
     traj = file_interface.read_tum_trajectory_file(str(path))
-    q = traj.orientations_quat_wxyz
-    yaw = np.arctan2(
-        2 * (q[:, 0] * q[:, 3] + q[:, 1] * q[:, 2]), 1 - 2 * (q[:, 2] ** 2 + q[:, 3] ** 2)
-    )
     return Trajectory(
         np.asarray(traj.timestamps, dtype=np.float64),
-        np.column_stack([traj.positions_xyz[:, :2], yaw]),
+        np.column_stack([traj.positions_xyz[:, :2], quat_wxyz_to_yaw(traj.orientations_quat_wxyz)]),
     )
+
+
+#: File of the pose covariances beside ``trajectory.tum``.
+COV_FILE = "trajectory_cov.npz"
+
+
+def write_trajectory_covariances(path: str | Path, trajectory: Trajectory) -> Path | None:
+    """Write ``t_s`` (N,) and ``covs`` (N, 3, 3) of a trajectory to an ``.npz``.
+
+    Returns the path, or None (nothing written) when the trajectory has no covariances.
+    """
+    if trajectory.covs is None:
+        return None
+    out = Path(path)
+    np.savez_compressed(
+        out,
+        t_s=np.asarray(trajectory.t_s, dtype=np.float64),
+        covs=np.asarray(trajectory.covs, dtype=np.float64),
+    )
+    return out
+
+
+def read_trajectory_covariances(path: str | Path) -> tuple[FloatArray, FloatArray]:
+    """``t_s`` (N,) (Unix s) and ``covs`` (N, 3, 3) from :func:`write_trajectory_covariances`."""
+    with np.load(path) as data:
+        t_s, covs = np.asarray(data["t_s"]), np.asarray(data["covs"])
+    if covs.shape != (t_s.size, 3, 3):
+        raise ValueError(f"{path}: covs (N, 3, 3) expected for {t_s.size} times, got {covs.shape}")
+    return t_s, covs
+
+
+def with_covariances(
+    trajectory: Trajectory, t_s: FloatArray, covs: FloatArray, tol_s: float = 1e-6
+) -> Trajectory:
+    """``trajectory`` with the covariances of the same times attached.
+
+    Raises ValueError when a pose has no covariance within ``tol_s`` of its time.
+    """
+    i = np.clip(np.searchsorted(t_s, trajectory.t_s), 1, max(t_s.size - 1, 1))
+    i = np.where(np.abs(t_s[i - 1] - trajectory.t_s) <= np.abs(t_s[i] - trajectory.t_s), i - 1, i)
+    if t_s.size == 0 or np.any(np.abs(t_s[i] - trajectory.t_s) > tol_s):
+        raise ValueError("the covariances' times do not match the trajectory's")
+    return Trajectory(trajectory.t_s, trajectory.poses_wTb, covs[i])
+
+
+def load_run_trajectory(run_dir: str | Path) -> Trajectory:
+    """``trajectory.tum`` of a run, with its ``trajectory_cov.npz`` covariances when present."""
+    run = Path(run_dir)
+    tr = read_tum(run / "trajectory.tum")
+    cov_path = run / COV_FILE
+    if cov_path.is_file():
+        tr = with_covariances(tr, *read_trajectory_covariances(cov_path))
+    return tr

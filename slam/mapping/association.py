@@ -11,7 +11,8 @@ Observation ``i`` is ``z[i]`` with covariance ``R[i]``; all lines are ``(rho_m, 
   (chi2 with 2n dof on the stacked innovation), ties broken by the smaller joint distance.
 
 Near ``rho = 0`` a line has two close representations, ``(rho, theta)`` and
-``(-rho, theta + pi)``; :func:`line_innovation` compares in the one that is nearest.
+``(-rho, theta + pi)``; :func:`features.geometry.line_difference` compares in the one that is
+nearest.
 """
 
 from __future__ import annotations
@@ -21,22 +22,17 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
-from features.geometry import FloatArray, along_line, wrap_angle
+from features.geometry import FLIP_RHO, FloatArray, along_line, line_difference
 
 __all__ = [
-    "FLIP_RHO",
     "AssociationConfig",
     "AssociationProblem",
-    "line_innovation",
     "individual_compatibility",
     "nearest_neighbour",
     "jcbb",
     "associate",
     "extent_allowed",
 ]
-
-#: ``(rho, theta) -> (-rho, theta + pi)`` on a covariance: ``FLIP_RHO @ R @ FLIP_RHO``
-FLIP_RHO = np.diag([-1.0, 1.0])
 
 
 @dataclass(frozen=True)
@@ -85,22 +81,6 @@ class AssociationProblem:
     allowed: np.ndarray | None = None
 
 
-def line_innovation(z: FloatArray, z_hat: FloatArray) -> tuple[FloatArray, bool]:
-    """Innovation ``z - z_hat`` of two lines, in the representation of ``z`` nearest ``z_hat``.
-
-    Returns
-    -------
-    nu : ndarray, shape (2,)
-    flipped : bool
-        True when ``z`` was taken as ``(-rho, theta + pi)`` (its covariance then changes sign in
-        the cross term: ``diag(-1, 1) R diag(-1, 1)``).
-    """
-    d_theta = float(wrap_angle(z[1] - z_hat[1]))
-    if abs(d_theta) <= np.pi / 2:
-        return np.array([z[0] - z_hat[0], d_theta]), False
-    return np.array([-z[0] - z_hat[0], float(wrap_angle(z[1] + np.pi - z_hat[1]))]), True
-
-
 def _pair_terms(problem: AssociationProblem) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Innovations (m, k, 2), observation covariances as compared (m, k, 2, 2), and H P H^T."""
     m, k = problem.z.shape[0], problem.z_hat.shape[0]
@@ -108,7 +88,7 @@ def _pair_terms(problem: AssociationProblem) -> tuple[FloatArray, FloatArray, Fl
     R = np.zeros((m, k, 2, 2))
     for i in range(m):
         for j in range(k):
-            nu[i, j], flipped = line_innovation(problem.z[i], problem.z_hat[j])
+            nu[i, j], flipped = line_difference(problem.z[i], problem.z_hat[j])
             R[i, j] = FLIP_RHO @ problem.R[i] @ FLIP_RHO if flipped else problem.R[i]
     return nu, R, problem.H
 

@@ -1,68 +1,49 @@
-"""Motion model from DVL body velocity and AHRS heading, and dead reckoning with its covariance.
+"""The motion model: DVL body velocity and a yaw rate (or the AHRS heading), integrated.
 
 Frames: the DVL measures velocity in its own frame; ``v_b = R(dvl_yaw) v_dvl`` in the body frame
 (x forward, y left). The AHRS gives the yaw of its own frame; the body yaw is
 ``psi_b = psi_ahrs - ahrs_yaw`` (mountings in :mod:`datasets.config`). Lever arms are ignored
 (the vehicle turns slowly; a 0.3 m arm at 5 deg/s is 2.6 cm/s, below the DVL noise).
 
-The same :func:`propagate` is the prediction of the EKF and the odometry of the factor graph.
+The model, one step of ``dt`` between two records::
+
+    (x, y) += R(psi) (dt v_b)        psi += dt r        F = [[1, 0, -dy], [0, 1, dx], [0, 0, 1]]
+
+with ``(dx, dy) = R(psi) dt v_b`` the step in the world (:func:`step_displacement`) and the
+velocity noise counted once per held DVL sample (:func:`slam.model.noise.held_velocity_variance_step`).
+The driver turns the sensor stream into one :class:`MotionStep` per record
+(:func:`motion_step`), and every estimator integrates those same steps: the EKF's prediction,
+the factor graph's odometry (:class:`RelativeMotion`), the odometry chain of the front end's
+pose sources (:class:`OdometryChain`). Dead reckoning (:func:`dead_reckoning`) is the same
+model with the heading taken from the AHRS instead of integrated, vectorised over a whole run.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from datasets.marina import AttitudeSeries, DvlSeries
-from features.geometry import FloatArray, wrap_angle
+from datasets.records import AttitudeSeries, DvlSeries
+from features.geometry import FloatArray, transform_points, wrap_angle
 from slam.io.trajectory import Trajectory
+from slam.model.noise import MotionNoise, dvl_sample_sigma, held_velocity_variance_step
 from sonar.beam import Mounting
 
 __all__ = [
-    "MotionNoise",
     "body_velocity",
     "body_yaw",
-    "held_velocity_variance_step",
-    "dvl_scatter",
-    "dvl_sample_sigma",
-    "propagate",
+    "MotionStep",
+    "motion_step",
+    "step_displacement",
+    "RelativeMotion",
+    "OdometryChain",
     "VelocityInput",
     "velocity_input",
     "dead_reckoning",
 ]
-
-
-@dataclass(frozen=True)
-class MotionNoise:
-    """Noise of the motion model.
-
-    Attributes
-    ----------
-    dvl_sigma_mps : float
-        1-sigma of a valid DVL velocity, per axis (m/s).
-    ahrs_sigma_rad : float
-        1-sigma of the AHRS heading (rad).
-    dvl_max_gap_s : float
-        A DVL dropout up to this long holds the last valid velocity; longer, the velocity is
-        taken as zero with ``gap_sigma_mps``.
-    gap_sigma_mps : float
-        Velocity 1-sigma added during a dropout (grows linearly to this at ``dvl_max_gap_s``).
-    dvl_scatter_window_s : float
-        Window (s) of the DVL's own scatter (:func:`dvl_scatter`); 0 turns the excess-scatter
-        noise off.
-    dvl_nominal_scatter_mps : float
-        The scatter of the DVL when it works as usual (m/s): its excess over this is white
-        velocity noise added to ``dvl_sigma_mps`` (:func:`dvl_sample_sigma`).
-    """
-
-    dvl_sigma_mps: float = 0.05
-    ahrs_sigma_rad: float = float(np.deg2rad(2.0))
-    dvl_max_gap_s: float = 10.0
-    gap_sigma_mps: float = 0.3
-    dvl_scatter_window_s: float = 0.0
-    dvl_nominal_scatter_mps: float = 0.0
 
 
 def body_velocity(v_dvl_mps: npt.ArrayLike, dvl_mounting: Mounting) -> FloatArray:
@@ -90,92 +71,193 @@ def body_yaw(
     return wrap_angle(psi - (b * np.sin(psi) + c * np.cos(psi)))
 
 
-def held_velocity_variance_step(
-    held_s: npt.ArrayLike, dt_s: npt.ArrayLike, sigma_mps: npt.ArrayLike
-) -> FloatArray:
-    """Position variance (m^2, per axis) added by one step while one DVL sample is held.
+@dataclass(frozen=True, slots=True)
+class MotionStep:
+    """The motion input of one step between two records, as every estimator integrates it.
 
-    The error of a held velocity sample is the same at every step of the hold, so the position
-    error over a hold of ``T`` seconds is ``T * sigma`` (variance ``T^2 sigma^2``), not
-    ``sqrt(sum dt^2) * sigma``. A step of ``dt`` that ends ``held_s`` after the sample adds
-    ``(held_s^2 - (held_s - dt)^2) sigma^2 = (2 held_s - dt) dt sigma^2``.
-    """
-    T = np.asarray(held_s, dtype=np.float64)
-    dt = np.asarray(dt_s, dtype=np.float64)
-    return np.asarray((2.0 * T - dt) * dt * np.asarray(sigma_mps, dtype=np.float64) ** 2)
-
-
-def propagate(
-    wTb: npt.ArrayLike, v_b_mps: npt.ArrayLike, yaw_rate_radps: float, dt_s: float
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """One step of the constant-velocity model ``x += dt R(psi) v_b``, ``psi += dt r``.
-
-    Returns
-    -------
-    wTb_next : ndarray, shape (3,)
-    F : ndarray, shape (3, 3)
-        Jacobian with respect to the pose.
-    G : ndarray, shape (3, 3)
-        Jacobian with respect to the inputs ``(v_x, v_y, r)``.
-    """
-    x, y, psi = (float(v) for v in np.asarray(wTb, dtype=np.float64))
-    vx, vy = (float(v) for v in np.asarray(v_b_mps, dtype=np.float64))
-    c, s = np.cos(psi), np.sin(psi)
-    dx, dy = dt_s * (c * vx - s * vy), dt_s * (s * vx + c * vy)
-    nxt = np.array([x + dx, y + dy, float(wrap_angle(psi + dt_s * yaw_rate_radps))])
-    F = np.array([[1.0, 0.0, -dy], [0.0, 1.0, dx], [0.0, 0.0, 1.0]])
-    G = np.array([[dt_s * c, -dt_s * s, 0.0], [dt_s * s, dt_s * c, 0.0], [0.0, 0.0, dt_s]])
-    return nxt, F, G
-
-
-def dvl_scatter(t_s: FloatArray, v_mps: FloatArray, window_s: float) -> FloatArray:
-    """Causal scatter of DVL velocities (m/s, per axis) at each sample: the root mean square of
-    ``|v_k - v_{k-1}| / 2`` over the samples of the last ``window_s`` seconds.
-
-    For white noise of 1-sigma ``s`` per axis, ``E |v_k - v_{k-1}|^2 = 4 s^2``, so this
-    estimates ``s`` (the Allan deviation at one sample); the vehicle's own accelerations add
-    little at ~1 Hz. The first sample has no difference and takes the second's value.
-
-    Parameters
+    Attributes
     ----------
-    t_s : ndarray, shape (N,)
-        Times of the valid samples (s), increasing.
-    v_mps : ndarray, shape (N, 2)
-        Their velocities (m/s).
-    window_s : float
-        Averaging window (s), > 0.
-
-    Returns
-    -------
-    ndarray, shape (N,)
+    t_s : float
+        End of the step (Unix s).
+    dt_s : float
+        Its length (s), >= 0.
+    dx_m, dy_m : float
+        Displacement ``dt * v_b`` in the body frame at the step's start (m).
+    dyaw_rad : float
+        Heading change ``dt * r`` (rad).
+    sigma_v_mps : float
+        1-sigma of the held velocity, per axis (m/s).
+    held_s : float
+        How long the velocity sample has been held at the end of the step (s), >= ``dt_s``.
     """
-    n = t_s.size
-    if n < 2:
-        return np.zeros(n)
-    d2 = np.concatenate([[np.nan], 0.25 * np.sum(np.diff(v_mps, axis=0) ** 2, axis=1)])
-    d2[0] = d2[1]
-    csum = np.concatenate([[0.0], np.cumsum(d2)])
-    first = np.searchsorted(t_s, t_s - window_s, side="right")
-    count = np.arange(1, n + 1) - first
-    return np.asarray(np.sqrt((csum[1:] - csum[first]) / count))
+
+    t_s: float
+    dt_s: float
+    dx_m: float
+    dy_m: float
+    dyaw_rad: float
+    sigma_v_mps: float
+    held_s: float
+
+    @property
+    def var_xy_m2(self) -> float:
+        """Position variance per axis this step adds, one error per held DVL sample (m^2)."""
+        return float(held_velocity_variance_step(self.held_s, self.dt_s, self.sigma_v_mps))
+
+    @property
+    def var_xy_white_m2(self) -> float:
+        """The same with the velocity error independent at every step, ``(dt sigma)^2`` (m^2)."""
+        return (self.dt_s * self.sigma_v_mps) ** 2
 
 
-def dvl_sample_sigma(t_s: FloatArray, v_mps: FloatArray, noise: MotionNoise) -> FloatArray:
-    """1-sigma (m/s, per axis) of each valid DVL sample: ``dvl_sigma_mps``, plus the excess of
-    the DVL's own scatter over its nominal scatter taken as white noise,
-    ``sqrt(dvl_sigma^2 + max(0, scatter^2 - nominal^2))``.
+def motion_step(
+    t_prev_s: float,
+    t_s: float,
+    v_b_mps: npt.ArrayLike,
+    sigma_v_mps: float,
+    yaw_rate_radps: float,
+    held_from_s: float,
+) -> MotionStep:
+    """The step from ``t_prev_s`` to ``t_s`` with a body velocity and a yaw rate held over it.
 
-    ``dvl_sigma_mps`` is the error that accumulates into drift when the DVL works as usual; its
-    scatter then is mostly the vehicle's real wobble, which integrates to nothing. When the
-    scatter rises above that (the marina's last ~700 s, bottom at 1.3 m: 0.35 against
-    0.15 m/s, white up to a minute), the excess does integrate, and the estimators must know.
+    ``held_from_s`` is when the velocity sample started to be held (its DVL time, or the start
+    of the integration if later): the step's share of the sample's error grows with it.
     """
-    base = np.full(t_s.size, noise.dvl_sigma_mps)
-    if noise.dvl_scatter_window_s <= 0.0:
-        return base
-    s = dvl_scatter(t_s, v_mps, noise.dvl_scatter_window_s)
-    excess = np.maximum(s**2 - noise.dvl_nominal_scatter_mps**2, 0.0)
-    return np.asarray(np.sqrt(base**2 + excess))
+    dt = max(t_s - t_prev_s, 0.0)
+    v = np.asarray(v_b_mps, dtype=np.float64)
+    return MotionStep(
+        t_s=float(t_s),
+        dt_s=dt,
+        dx_m=dt * float(v[0]),
+        dy_m=dt * float(v[1]),
+        dyaw_rad=dt * float(yaw_rate_radps),
+        sigma_v_mps=float(sigma_v_mps),
+        held_s=max(t_s - held_from_s, dt),
+    )
+
+
+def step_displacement(yaw_rad: float, dx_b_m: float, dy_b_m: float) -> tuple[float, float]:
+    """The step in the world ``R(yaw) (dx_b, dy_b)`` (m): the translation of the motion model.
+
+    Plain floats: it runs for every record in every estimator.
+    """
+    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
+    return c * dx_b_m - s * dy_b_m, s * dx_b_m + c * dy_b_m
+
+
+class RelativeMotion:
+    """Motion since a start, ``(x, y, yaw)`` in the start's body frame, and its covariance.
+
+    The motion model from the identity, in plain floats: ``P <- F P F^T + diag(qv, qv, qr)``.
+    It also carries the gyro's own integral and ``d(x, y) / d(gyro scale)`` for the factor
+    graph's gyro-scale odometry (:func:`slam.backends.isam2.factors.odometry_residual`).
+    """
+
+    __slots__ = ("x", "y", "yaw", "a", "b", "c", "d", "e", "f", "yaw_raw", "jx", "jy")
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self.x = self.y = self.yaw = 0.0
+        self.a = self.b = self.c = self.d = self.e = self.f = 0.0  # Pxx Pxy Pyy Pxyaw Pyyaw Pyaw
+        self.yaw_raw = self.jx = self.jy = 0.0  # the gyro's own integral, d(x, y)/d(scale)
+
+    def step(
+        self, sx: float, sy: float, syaw: float, qv: float, qr: float, syaw_raw: float = 0.0
+    ) -> None:
+        """One step: body displacement ``(sx, sy)``, yaw change ``syaw`` (``syaw_raw`` before
+        the gyro scale), velocity and yaw variances ``qv``, ``qr``."""
+        dx, dy = step_displacement(self.yaw, sx, sy)
+        # the step's direction turns with the scale through the yaw so far: d/ds = S d yaw_raw
+        self.jx -= dy * self.yaw_raw
+        self.jy += dx * self.yaw_raw
+        self.yaw_raw += syaw_raw
+        a, b, cc, d, e, f = self.a, self.b, self.c, self.d, self.e, self.f
+        self.a = a - 2.0 * dy * d + dy * dy * f + qv
+        self.b = b - dy * e + dx * d - dx * dy * f
+        self.c = cc + 2.0 * dx * e + dx * dx * f + qv
+        self.d = d - dy * f
+        self.e = e + dx * f
+        self.f = f + qr
+        self.x += dx
+        self.y += dy
+        self.yaw += syaw
+
+    def copy_from(self, other: RelativeMotion, rotate_rad: float = 0.0) -> None:
+        """Take another motion, its translation rotated by ``rotate_rad`` (the misalignment)."""
+        c, s = math.cos(rotate_rad), math.sin(rotate_rad)
+        self.x, self.y = c * other.x - s * other.y, s * other.x + c * other.y
+        self.yaw = other.yaw
+        self.a, self.b, self.c = other.a, other.b, other.c
+        self.d, self.e, self.f = other.d, other.e, other.f
+        self.yaw_raw, self.jx, self.jy = other.yaw_raw, other.jx, other.jy
+
+    @property
+    def pose(self) -> FloatArray:
+        return np.array([self.x, self.y, self.yaw])
+
+    @property
+    def cov(self) -> FloatArray:
+        """Covariance of ``(x, y, yaw)`` (m, m, rad)."""
+        return np.array(
+            [[self.a, self.b, self.d], [self.b, self.c, self.e], [self.d, self.e, self.f]]
+        )
+
+
+class OdometryChain:
+    """The odometry ``O(t)``: the relative motions of a run chained in their own frame.
+
+    Rows ``(t_s, x_m, y_m, yaw_rad)`` with the yaw unwrapped, and the position variance per
+    axis accumulated from the velocity noise (isotropic, so frame-free). Growing buffers
+    (amortised doubling); a query interpolates only over the rows spanning it (a sector of
+    beams), so it costs the same at the end of a long run as at its start.
+    """
+
+    def __init__(self, t0_s: float, capacity: int = 4096) -> None:
+        self._rows = np.empty((max(capacity, 1), 4))  # t, x, y, unwrapped yaw
+        self._var = np.empty(max(capacity, 1))
+        self._rows[0] = (t0_s, 0.0, 0.0, 0.0)
+        self._var[0] = 0.0
+        self._n = 1
+        self._x = self._y = self._yaw = self._v = 0.0
+
+    def append(self, t_s: float, bTb_next: FloatArray, var_step_m2: float = 0.0) -> None:
+        """Chain one step of relative motion ``(dx_b, dy_b, dyaw)`` ending at ``t_s``."""
+        if self._n == self._var.size:
+            self._rows = np.concatenate([self._rows, np.empty_like(self._rows)])
+            self._var = np.concatenate([self._var, np.empty_like(self._var)])
+        dx, dy = step_displacement(self._yaw, float(bTb_next[0]), float(bTb_next[1]))
+        self._x += dx
+        self._y += dy
+        self._yaw += float(bTb_next[2])
+        self._v += var_step_m2
+        self._rows[self._n] = (t_s, self._x, self._y, self._yaw)
+        self._var[self._n] = self._v
+        self._n += 1
+
+    @property
+    def rows(self) -> FloatArray:
+        """``(t_s, x_m, y_m, yaw_rad)`` of every step so far, yaw unwrapped, shape (K, 4)."""
+        return self._rows[: self._n]
+
+    @property
+    def now(self) -> FloatArray:
+        """The chain's newest ``(x_m, y_m, yaw_rad)``, yaw unwrapped."""
+        return np.array([self._x, self._y, self._yaw])
+
+    def at(self, t_s: FloatArray) -> FloatArray:
+        """``O(t)`` interpolated linearly (held past the ends), shape (M, 3), yaw unwrapped."""
+        rows = self.rows
+        t = rows[:, 0]
+        lo = max(int(np.searchsorted(t, t_s.min(), side="right")) - 1, 0)
+        hi = min(int(np.searchsorted(t, t_s.max(), side="left")) + 1, self._n)
+        part = rows[lo:hi]
+        return np.column_stack([np.interp(t_s, part[:, 0], part[:, k]) for k in (1, 2, 3)])
+
+    def variance_at(self, t_s: float) -> float:
+        """Accumulated position variance per axis at ``t_s`` (m^2), interpolated."""
+        return float(np.interp(t_s, self._rows[: self._n, 0], self._var[: self._n]))
 
 
 @dataclass(frozen=True)
@@ -185,7 +267,7 @@ class VelocityInput:
     v_b_mps: FloatArray  # (N, 2)
     sigma_mps: FloatArray  # (N,)
     in_dropout: np.ndarray  # (N,) bool
-    sample_t_s: FloatArray  # (N,) time of the held DVL sample (Unix s); the query time if none
+    sample_t_s: FloatArray  # (N,) since when the velocity has been held (Unix s)
 
 
 def velocity_input(
@@ -193,10 +275,11 @@ def velocity_input(
 ) -> VelocityInput:
     """Body velocity at times ``t_s``: the last valid DVL sample (zero-order hold).
 
-    The 1-sigma of a valid sample is :func:`dvl_sample_sigma`. During a bottom-lock dropout the
-    last valid velocity is held and its 1-sigma grows linearly from that to ``gap_sigma_mps``
-    (or stays, when larger) over ``dvl_max_gap_s``; past that the velocity is zero with
-    ``gap_sigma_mps``. Before the first valid sample it is zero.
+    The 1-sigma of a valid sample is :func:`slam.model.noise.dvl_sample_sigma`. During a
+    bottom-lock dropout the last valid velocity is held and its 1-sigma grows linearly from that
+    to ``gap_sigma_mps`` (or stays, when larger) over ``dvl_max_gap_s``; past that the velocity
+    is zero with ``gap_sigma_mps``, held since the dropout expired. Before the first valid
+    sample it is zero, held since the query time.
     """
     valid_t = dvl.t[dvl.valid]
     v_valid = body_velocity(dvl.v_mps[dvl.valid], dvl_mounting)
@@ -215,7 +298,8 @@ def velocity_input(
     expired = in_dropout & (age > noise.dvl_max_gap_s)
     v[expired] = 0.0
     sigma = np.where(expired, noise.gap_sigma_mps, sigma)
-    sample_t = np.where(have & ~expired, t_s - np.where(np.isfinite(age), age, 0.0), t_s)
+    sample_t = np.where(have, t_s - np.where(np.isfinite(age), age, 0.0), t_s)
+    sample_t = np.where(expired & have, sample_t + noise.dvl_max_gap_s, sample_t)
     return VelocityInput(v_b_mps=v, sigma_mps=sigma, in_dropout=in_dropout, sample_t_s=sample_t)
 
 
@@ -251,17 +335,17 @@ def dead_reckoning(
     psi = body_yaw(np.interp(t, attitude.t, yaw_unwrapped), ahrs_mounting, ahrs_deviation_rad)
     vin = velocity_input(t, dvl, dvl_mounting, noise)
     dt = np.diff(t)
-    c, s = np.cos(psi[:-1]), np.sin(psi[:-1])
-    v = vin.v_b_mps[:-1]
-    vw = np.column_stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]])
+    # the steps in the world: R(psi) (dt v_b), the model's translation, all at once
+    heading = np.column_stack([np.zeros((dt.size, 2)), psi[:-1]])
+    d_w = transform_points(heading, vin.v_b_mps[:-1] * dt[:, None])
     start = np.asarray(start_wTb, dtype=np.float64)
-    xy = start[:2] + np.vstack([[0.0, 0.0], np.cumsum(vw * dt[:, None], axis=0)])
+    xy = start[:2] + np.vstack([[0.0, 0.0], np.cumsum(d_w, axis=0)])
 
     # Covariance of the position increments: velocity noise (isotropic, so R Sigma R^T = Sigma),
-    # counted once per held DVL sample, and heading noise through d(R v)/d psi = (-vw_y, vw_x).
-    held = np.maximum(t[1:] - vin.sample_t_s[:-1], dt)
+    # counted once per held DVL sample, and heading noise through d(R v)/d psi = (-dy_w, dx_w).
+    held = np.maximum(t[1:] - np.maximum(vin.sample_t_s[:-1], t0_s), dt)
     var_v = held_velocity_variance_step(held, dt, vin.sigma_mps[:-1])
-    jx, jy = -vw[:, 1] * dt, vw[:, 0] * dt
+    jx, jy = -d_w[:, 1], d_w[:, 0]
     var_h = noise.ahrs_sigma_rad**2
     q = np.zeros((dt.size, 2, 2))
     q[:, 0, 0] = var_v + var_h * jx * jx

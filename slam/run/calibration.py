@@ -11,14 +11,18 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any
 
 import numpy as np
 
 from datasets.source import Dataset
 from features.geometry import FloatArray, compose, wrap_angle
+from features.line import LineFeature
 from features.pose_source import PoseSource
 from features.projection import beam_points
+from slam.backends.registry import backend_spec
+from slam.model.motion import body_yaw
+from slam.run.closed_loop import ClosedLoopResult, run_closed_loop
+from slam.run.presets import run_config
 
 __all__ = [
     "YawSearch",
@@ -28,6 +32,7 @@ __all__ = [
     "CompassFit",
     "calibrate_ahrs_yaw",
     "heading_deviation_from_lines",
+    "ekf_closed_loop",
     "calibrate_ahrs_deviation",
 ]
 
@@ -166,9 +171,9 @@ def calibrate_ahrs_yaw(dataset: Dataset, harmonics: int = 1) -> CompassFit:
     """
     dvl, att = dataset.dvl, dataset.attitude
     yaw = np.interp(dvl.t, att.t, np.unwrap(att.yaw_rad))
-    diff = np.angle(np.exp(1j * (dvl.heading_rad - yaw)))
+    diff = wrap_angle(dvl.heading_rad - yaw)
     mean = float(np.angle(np.mean(np.exp(1j * diff))))
-    r = np.angle(np.exp(1j * (diff - mean)))
+    r = wrap_angle(diff - mean)
     cols = [np.ones_like(yaw)]
     for k in range(1, harmonics + 1):
         cols += [np.sin(k * yaw), np.cos(k * yaw)]
@@ -177,12 +182,13 @@ def calibrate_ahrs_yaw(dataset: Dataset, harmonics: int = 1) -> CompassFit:
     offset = float(wrap_angle(mean + coef[0]))
     # DVL compass = yaw of the DVL frame = body yaw + dvl yaw = AHRS yaw - ahrs yaw + dvl yaw
     ahrs_yaw = float(wrap_angle(dataset.config.dvl_mounting.yaw_rad - offset))
-    return CompassFit(ahrs_yaw, offset, mean, coef[1:], float(np.std(r - A @ coef)))
+    residual_sd = float(np.std(r - A @ coef))
+    return CompassFit(ahrs_yaw, offset, mean, np.asarray(coef[1:], dtype=np.float64), residual_sd)
 
 
 def heading_deviation_from_lines(
     dataset: Dataset,
-    features: list[Any],
+    features: list[LineFeature],
     feature_landmarks: list[int | None],
     min_observations: int = 4,
 ) -> tuple[FloatArray, int]:
@@ -214,8 +220,6 @@ def heading_deviation_from_lines(
     n : int
         Lines used.
     """
-    from slam.model.motion import body_yaw
-
     cfg = dataset.config
     att = dataset.attitude
     yaw_unwrapped = np.unwrap(att.yaw_rad)
@@ -237,7 +241,7 @@ def heading_deviation_from_lines(
             continue
         # a line's direction is defined modulo pi (rho's sign): compare doubled angles
         mean = np.angle(np.mean(np.exp(2j * theta_w[m]))) / 2.0
-        r = np.angle(np.exp(2j * (theta_w[m] - mean))) / 2.0
+        r = wrap_angle(2.0 * (theta_w[m] - mean)) / 2.0
         # each landmark's own unknown direction: take its weighted mean off the residuals and
         # off the regressors alike (fixed effects), or a landmark seen over a narrow range of
         # headings would absorb part of the deviation
@@ -252,17 +256,32 @@ def heading_deviation_from_lines(
     return coef, int(keep.sum())
 
 
+def ekf_closed_loop(dataset: Dataset) -> ClosedLoopResult:
+    """The EKF closed loop with its default settings and the beams' extractor preset (what
+    :func:`calibrate_ahrs_deviation` iterates); GPS gives only the start position."""
+    config = run_config(dataset.beams, "ekf")
+    spec = backend_spec("ekf")
+    mounting = dataset.config.sonar_mounting
+    return run_closed_loop(
+        dataset,
+        lambda t0, pose0, cov0: spec.make(t0, pose0, cov0, mounting, config.backend),
+        config.extractor,
+        progress=False,
+    )
+
+
 def calibrate_ahrs_deviation(
     dataset: Dataset,
-    run: Callable[[Dataset], Any],
+    run: Callable[[Dataset], ClosedLoopResult] = ekf_closed_loop,
     iterations: int = 4,
+    progress: Callable[[int, int], None] | None = None,
 ) -> list[tuple[FloatArray, int]]:
     """Self-calibrate the AHRS deviation ``(B, C)`` with closed loops, GPS-free.
 
     Each iteration runs ``run(dataset)`` (a closed loop returning a
     :class:`slam.run.closed_loop.ClosedLoopResult`) with the deviation found so far, fits what is
     left of it (:func:`heading_deviation_from_lines`) and adds it. The associations improve as
-    the heading does, hence the iterations.
+    the heading does, hence the iterations. ``progress(k, iterations)`` is called before each.
 
     Returns
     -------
@@ -271,7 +290,9 @@ def calibrate_ahrs_deviation(
     """
     out: list[tuple[FloatArray, int]] = []
     total = np.asarray(dataset.config.ahrs_deviation_rad, dtype=np.float64)
-    for _ in range(iterations):
+    for k in range(iterations):
+        if progress is not None:
+            progress(k + 1, iterations)
         ds = replace(
             dataset,
             config=replace(dataset.config, ahrs_deviation_rad=(float(total[0]), float(total[1]))),

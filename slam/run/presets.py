@@ -1,18 +1,199 @@
-"""Settings given as ``SCOPE.FIELD=VALUE`` (``sonarslam run --set``, ``sonarslam sweep --grid``).
+"""Presets and overrides: the one place where a run's extractor and back-end settings are decided.
 
-``SCOPE`` is ``extractor`` (:class:`features.extractor.ExtractorConfig`) or a back end (``ekf``:
-:class:`slam.backends.ekf.EkfConfig`, ``isam2``: :class:`slam.backends.isam2.graph.GraphConfig`); ``FIELD`` is a
-field of that frozen dataclass, nested by dots (``ekf.association.gate_probability``);
-``<backend>.association`` is short for ``<backend>.association.method``.
+* Extractor presets (:data:`EXTRACTOR_PRESETS`), chosen by the kind of beams
+  (:func:`preset_for`): ``default`` for raw intensity beams (the simulator, ``*_IS.log``),
+  ``marina`` for thresholded 0/255 keyframes (the marina), as the closed loops use them. Every
+  command that extracts lines (``run``, ``extract``, ``calibrate --ahrs-deviation``, the sweep,
+  the benchmarks and notebooks) takes them from here and records the preset's name.
+* Back-end configurations: each back end's defaults (:mod:`slam.backends.registry`), with
+  settings over them.
+* Settings given as ``SCOPE.FIELD=VALUE`` (``sonarslam run --set``, ``sonarslam sweep --grid``):
+  ``SCOPE`` is ``extractor`` (:class:`features.extractor.ExtractorConfig`) or a back end's name
+  (``ekf``: :class:`slam.backends.ekf.EkfConfig`, ``isam2``:
+  :class:`slam.backends.isam2.graph.GraphConfig`); ``FIELD`` is a field of that frozen
+  dataclass, nested by dots (``ekf.association.gate_probability``); ``<backend>.association``
+  is short for ``<backend>.association.method``.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
+import tomllib
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
-__all__ = ["parse_value", "parse_settings", "apply_overrides", "split_settings"]
+import numpy as np
+
+from features.config import ExtractorConfig
+from slam.backends.base import BackendConfig
+from slam.backends.registry import backend_spec
+from sonar.beam import SonarBeam
+from sonar.store import sector_beam_count
+
+__all__ = [
+    "EXTRACTOR_PRESETS",
+    "RunConfig",
+    "preset_for",
+    "extractor_config",
+    "pool_preset",
+    "map_min_intensity",
+    "backend_config",
+    "run_config",
+    "parse_value",
+    "parse_settings",
+    "apply_overrides",
+    "split_settings",
+]
+
+_DEG = math.pi / 180.0
+
+#: The marina keyframes (datasets/marina/README.md): Miniking, 1.8 deg step, 0.1 m bins, 50 m
+#: range, 3 deg beam; beams are 0/255 masks (a third party's threshold, first 10 bins dropped),
+#: with ~0.7 echo runs of ~3 m per beam. The first return of each run votes; the line's
+#: covariance is the paper's overlap-ratio ellipse ("seed"), which matches the scatter of
+#: repeated lines of one wall on these metres-thick echo bands where the least-squares one is
+#: far too small (README, "Line features on the marina"); a 360 deg sector gives longer
+#: segments; the odometry's uncertainty over the sector is added (it grows when the DVL
+#: degrades).
+_MARINA = ExtractorConfig(
+    intensity_threshold=1.0,  # unused for masks: every given bin is a threshold bin
+    max_intensity_difference=0.0,  # masks: all bins equal, all kept
+    min_distance_m=1.0,  # keep the first return of each run (runs are ~3 m thick)
+    min_range_m=1.0,  # the keyframes drop the bins below 1 m anyway
+    sector_deg=360.0,  # 200 beams
+    incidence_beta_rad=25.0 * _DEG,
+    theta_res_rad=1.8 * _DEG,  # the head step
+    rho_res_m=0.3,  # 3 bins: the first bin of a smoothed echo jitters by a few bins
+    min_votes=15,
+    suppress_theta_cells=1,
+    suppress_rho_cells=2,
+    vote_every_n_beams=20,  # 36 deg of scan between votes
+    return_model="first_return",  # the nearest bin of each run of a mask
+    range_sigma_m=0.15,
+    requery_poses=True,
+    covariance_method="seed",
+    pose_uncertainty=True,
+)
+
+#: Extractor presets by name (module docstring).
+EXTRACTOR_PRESETS: dict[str, ExtractorConfig] = {
+    "default": ExtractorConfig(),
+    "marina": _MARINA,
+    # the same with the least-squares covariance over a 180 deg sector and 10 votes: more,
+    # shorter lines whose covariance describes the sonar's own noise only
+    "marina-fit": _MARINA.replace(
+        sector_deg=180.0, min_votes=10, covariance_method="fit", pose_uncertainty=False
+    ),
+}
+
+
+def preset_for(beams: Sequence[SonarBeam]) -> str:
+    """``"marina"`` for thresholded beams (0/255 masks, as the marina keyframes), else
+    ``"default"`` (raw intensities)."""
+    return "marina" if beams and all(b.thresholded for b in beams) else "default"
+
+
+def _read_table(path: str | Path, table: str) -> dict[str, Any]:
+    with open(path, "rb") as f:
+        data = tomllib.load(f)
+    inner = data.get(table, data)
+    if not isinstance(inner, dict):
+        raise ValueError(f"{path}: [{table}] must be a table")
+    return inner
+
+
+def extractor_config(
+    preset: str,
+    config_path: str | Path | None = None,
+    overrides: dict[str, Any] | None = None,
+) -> ExtractorConfig:
+    """A preset, with the fields of a TOML file (``[extractor]`` table or top level) and then
+    ``overrides`` (dotted names, :func:`apply_overrides`) over it.
+
+    Raises ValueError for an unknown preset or field.
+    """
+    if preset not in EXTRACTOR_PRESETS:
+        raise ValueError(
+            f"extractor preset must be one of {sorted(EXTRACTOR_PRESETS)}, got {preset!r}"
+        )
+    config = EXTRACTOR_PRESETS[preset]
+    if config_path is not None:
+        data = _read_table(config_path, "extractor")
+        unknown = set(data) - {f.name for f in dataclasses.fields(ExtractorConfig)}
+        if unknown:
+            raise ValueError(f"{config_path}: unknown ExtractorConfig fields: {sorted(unknown)}")
+        config = config.replace(**data)
+    return apply_overrides(config, overrides or {})
+
+
+def pool_preset(step_rad: float, covariance_method: str = "fit") -> ExtractorConfig:
+    """The seed paper's pool test (section 3): 270 deg sector, beta 25 deg, min votes 15, one
+    vote per full sector (``vote_every_n_beams`` = the sector's beams, 600 at 0.45 deg); the
+    rest are the extractor's defaults."""
+    sector_deg = 270.0
+    return ExtractorConfig(
+        sector_deg=sector_deg,
+        incidence_beta_rad=25.0 * _DEG,
+        min_votes=15,
+        vote_every_n_beams=sector_beam_count(sector_deg * _DEG, step_rad),
+        covariance_method=covariance_method,
+    )
+
+
+def map_min_intensity(beams: Sequence[SonarBeam], config: ExtractorConfig | None = None) -> int:
+    """Smallest intensity drawn in maps: every given bin of thresholded beams, else the bins at
+    or above the extractor's intensity threshold (``config``'s, default the beams' preset's):
+    raw beams are mostly background noise."""
+    if beams and all(b.thresholded for b in beams):
+        return 1
+    threshold = (config or EXTRACTOR_PRESETS[preset_for(beams)]).intensity_threshold
+    return max(int(np.ceil(threshold)), 1)
+
+
+def backend_config(name: str, overrides: dict[str, Any] | None = None) -> BackendConfig:
+    """Back end ``name``'s default configuration with ``overrides`` (dotted names) over it."""
+    return apply_overrides(backend_spec(name).config_type(), overrides or {})
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """The settings of one closed-loop run, decided here.
+
+    Attributes
+    ----------
+    preset : str
+        The extractor preset's name.
+    extractor : ExtractorConfig
+        The preset with the run's ``extractor.*`` settings over it.
+    backend : BackendConfig
+        The back end's defaults with its ``<backend>.*`` settings over them.
+    settings : dict
+        The settings given (``SCOPE.FIELD`` -> value), for ``metrics.json``.
+    """
+
+    preset: str
+    extractor: ExtractorConfig
+    backend: BackendConfig
+    settings: dict[str, Any]
+
+
+def run_config(
+    beams: Sequence[SonarBeam], backend: str, settings: dict[str, Any] | None = None
+) -> RunConfig:
+    """The extractor and back-end configurations of a closed loop of ``backend`` on these beams,
+    with ``settings`` (``{"isam2.robust": "cauchy", "extractor.min_votes": 12}``) applied."""
+    ext, own = split_settings(settings or {}, backend)
+    preset = preset_for(beams)
+    return RunConfig(
+        preset,
+        extractor_config(preset, overrides=ext),
+        backend_config(backend, own),
+        dict(settings or {}),
+    )
+
 
 _ALIASES = {"association": "association.method"}
 

@@ -33,21 +33,30 @@ from datasets.errors import DataError
 from datasets.source import Dataset, open_dataset
 from features.geometry import FloatArray
 from features.line import LineFeature
+from features.projection import project_beams
 from slam.eval.consistency import (
-    COV_FILE,
     NeesSeries,
     anees,
-    evo_metrics_of_run,
-    load_run_trajectory,
+    chi2_band,
     mean_nees_band,
     nees_on_grid,
     nees_series,
     pose_errors,
 )
-from slam.io.trajectory import Trajectory, read_tum
+from slam.eval.evo_metrics import evo_metrics_of_run
+from slam.eval.published import PUBLISHED
+from slam.eval.truth import truth_trajectory
+from slam.io.plots import (
+    plot_error_bounds,
+    plot_lines,
+    plot_nees,
+    plot_trajectories,
+    segment_band_world,
+)
+from slam.io.trajectory import COV_FILE, Trajectory, load_run_trajectory, read_tum
+from slam.run.presets import map_min_intensity
 
 __all__ = [
-    "PUBLISHED",
     "DISPLAY_NAMES",
     "RunData",
     "ReportResult",
@@ -57,32 +66,6 @@ __all__ = [
     "report",
 ]
 
-#: Published ATE against GPS on the marina (m): Mallios, Ridao, Ribas, Hernandez, "Scan
-#: matching SLAM in underwater environments", Autonomous Robots 36:181-198, 2014, Table 2.
-PUBLISHED: list[dict[str, Any]] = [
-    {"method": "dead reckoning (DVL + MTi)", "mean": 17.46, "sd": 11.47, "min": 0.09, "max": 45.42},
-    {
-        "method": "scan matching (Hernández 2009)",
-        "mean": 3.99,
-        "sd": 2.11,
-        "min": 0.03,
-        "max": 8.49,
-    },
-    {
-        "method": "EKF-SLAM, Hough lines (Ribas 2008)",
-        "mean": 1.91,
-        "sd": 1.32,
-        "min": 0.01,
-        "max": 5.08,
-    },
-    {
-        "method": "MSISpIC, pose-based scan matching",
-        "mean": 1.90,
-        "sd": 1.09,
-        "min": 0.01,
-        "max": 4.93,
-    },
-]
 
 #: Names of the back ends in the table.
 DISPLAY_NAMES = {"dr": "dead reckoning", "gps": "GPS + AHRS", "ekf": "EKF-SLAM", "isam2": "iSAM2"}
@@ -133,8 +116,6 @@ class RunData:
 
 def load_run(run_dir: str | Path, open_source: bool = True) -> RunData:
     """Read a run directory; open its dataset unless ``open_source`` is False (or it is gone)."""
-    from slam.run.sources import truth_trajectory
-
     run = Path(run_dir)
     for name in ("metrics.json", "trajectory.tum", "ground_truth.tum"):
         if not (run / name).is_file():
@@ -180,11 +161,9 @@ def landmark_band_world(
     """Segment (2, 2) and 95 % band polygon (M, 2) of a ``map.json`` landmark, world (m).
 
     The landmark's world line ``(rho, theta)`` with its covariance is a line feature seen from
-    the world origin, so the band is :func:`slam.run.extraction.segment_band_world`'s (exact: the
+    the world origin, so the band is :func:`slam.io.plots.segment_band_world`'s (exact: the
     envelope of the lines of the confidence ellipse, over the segment).
     """
-    from slam.run.extraction import segment_band_world
-
     ends = np.asarray(landmark["endpoints"], dtype=np.float64)
     feature = LineFeature(
         t=0.0,
@@ -239,8 +218,6 @@ def _sigmas_at(trajectory: Trajectory, t_s: FloatArray) -> FloatArray | None:
 
 
 def _error_figure(run: RunData, label: str, out: Path) -> Path:
-    from slam.io.plots import plot_error_bounds
-
     t, ref, ref_name, ref_sigma_m = _reference(run)
     if ref_name == "truth":
         e = pose_errors(run.trajectory, Trajectory(t, ref), t)
@@ -260,23 +237,17 @@ def _error_figure(run: RunData, label: str, out: Path) -> Path:
 
 
 def _nees_figure(run: RunData, label: str, out: Path) -> Path:
-    from slam.io.plots import plot_nees
-
     assert run.truth is not None
     series = {}
     for comp in ("pose", "position"):
         s = nees_series(run.trajectory, run.truth, comp)
-        series[f"{comp} NEES"] = (s.t_s, s.nees, s.dof)
+        series[f"{comp} NEES"] = (s.t_s, s.nees, s.dof, chi2_band(s.dof))
     return plot_nees(
         out, series, f"{run.dataset_name}: {label}, NEES against the simulator's truth"
     )
 
 
 def _map_figure(run: RunData, label: str, out: Path) -> Path | None:
-    from features.projection import project_beams
-    from slam.io.plots import plot_lines
-    from slam.run.run import map_min_intensity
-
     assert run.landmarks is not None
     if run.dataset is None:
         if (run.run_dir / "map.png").is_file():
@@ -287,7 +258,7 @@ def _map_figure(run: RunData, label: str, out: Path) -> Path | None:
     t0, t1 = run.trajectory.span_s
     beams = [b for b in ds.nav_beams() if t0 <= b.t <= t1]
     points, _ = project_beams(
-        beams, ds.config.sonar, ds.config.sonar_mounting, run.trajectory, map_min_intensity(ds)
+        beams, ds.config.sonar, ds.config.sonar_mounting, run.trajectory, map_min_intensity(beams)
     )
     segs, bands = [], []
     for lm in run.landmarks:
@@ -306,8 +277,6 @@ def _map_figure(run: RunData, label: str, out: Path) -> Path | None:
 
 
 def _trajectory_figure(runs: list[RunData], labels: dict[str, str], out: Path) -> Path:
-    from slam.io.plots import plot_trajectories
-
     longest = max(runs, key=lambda r: r.ground_truth.t_s.size)
     trajectories: dict[str, Trajectory] = {"gps": longest.ground_truth}
     errors = {}
@@ -420,6 +389,38 @@ def _consistency(runs: list[RunData], period_s: float = 1.0) -> list[str]:
     return lines + [""]
 
 
+def _rows(runs: list[RunData], rpe_delta_m: float, align: bool) -> list[dict[str, Any]]:
+    """The table's rows: every run, then the published ones."""
+    rows: list[dict[str, Any]] = []
+    for run in runs:
+        ev = evaluate_run(run, rpe_delta_m, align)
+        m = run.metrics
+        row = {
+            "method": DISPLAY_NAMES.get(run.backend, run.backend) + " (ours)",
+            "run": run.name,
+            "dataset": run.dataset_name,
+            **{k: m.get(k) for k in ("ate_mean_m", "ate_sd_m", "ate_min_m", "ate_max_m")},
+            **{k: m.get(k) for k in ("ate_rmse_m", "ate_n", "realtime_factor")},
+            **ev,
+            "evo_rpe_rmse_m": ev.get(f"evo_rpe_{rpe_delta_m:g}m_rmse_m"),
+            "evo_rpe_mean_m": ev.get(f"evo_rpe_{rpe_delta_m:g}m_mean_m"),
+        }
+        rows.append(row)
+    for r in PUBLISHED:
+        rows.append(
+            {
+                "method": r["method"],
+                "run": "published (Mallios 2014, Table 2)",
+                "dataset": "marina",
+                "ate_mean_m": r["mean"],
+                "ate_sd_m": r["sd"],
+                "ate_min_m": r["min"],
+                "ate_max_m": r["max"],
+            }
+        )
+    return rows
+
+
 def report(
     run_dirs: list[str | Path],
     out_dir: str | Path,
@@ -449,34 +450,8 @@ def report(
     out.mkdir(parents=True, exist_ok=True)
     runs = [load_run(d, open_source=open_sources) for d in run_dirs]
     labels = {str(r.run_dir): _label(r, runs) for r in runs}
-    rows: list[dict[str, Any]] = []
+    rows = _rows(runs, rpe_delta_m, align)
     figures: list[Path] = []
-    for run in runs:
-        ev = evaluate_run(run, rpe_delta_m, align)
-        m = run.metrics
-        row = {
-            "method": DISPLAY_NAMES.get(run.backend, run.backend) + " (ours)",
-            "run": run.name,
-            "dataset": run.dataset_name,
-            **{k: m.get(k) for k in ("ate_mean_m", "ate_sd_m", "ate_min_m", "ate_max_m")},
-            **{k: m.get(k) for k in ("ate_rmse_m", "ate_n", "realtime_factor")},
-            **ev,
-            "evo_rpe_rmse_m": ev.get(f"evo_rpe_{rpe_delta_m:g}m_rmse_m"),
-            "evo_rpe_mean_m": ev.get(f"evo_rpe_{rpe_delta_m:g}m_mean_m"),
-        }
-        rows.append(row)
-    for r in PUBLISHED:
-        rows.append(
-            {
-                "method": r["method"],
-                "run": "published (Mallios 2014, Table 2)",
-                "dataset": "marina",
-                "ate_mean_m": r["mean"],
-                "ate_sd_m": r["sd"],
-                "ate_min_m": r["min"],
-                "ate_max_m": r["max"],
-            }
-        )
     # figures
     by_dataset: dict[str, list[RunData]] = {}
     for run in runs:

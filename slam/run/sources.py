@@ -1,17 +1,23 @@
-"""Pose sources that need no estimator: GPS + AHRS, dead reckoning, the simulator's truth.
+"""A dataset's start pose, motion noise and the pose sources that need no estimator.
 
-All return a :class:`slam.io.trajectory.Trajectory`, which implements the front end's
-:class:`features.pose_source.PoseSource`.
+GPS + AHRS (``gps``), dead reckoning (``dr``) and the simulator's truth (``truth``) all return a
+:class:`slam.io.trajectory.Trajectory`, which implements the front end's
+:class:`features.pose_source.PoseSource` (:data:`POSE_SOURCES`, :func:`pose_source_by_name`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
+from datasets.records import GpsSeries
 from datasets.source import Dataset
-from features.geometry import wrap_angle
+from features.geometry import FloatArray
+from slam.eval.truth import truth_trajectory
 from slam.io.trajectory import Trajectory
-from slam.model.motion import MotionNoise, body_yaw, dead_reckoning, dvl_scatter
+from slam.model.motion import body_yaw, dead_reckoning
+from slam.model.noise import MotionNoise, dvl_scatter
 
 __all__ = [
     "motion_noise",
@@ -19,7 +25,8 @@ __all__ = [
     "gps_ahrs_trajectory",
     "dead_reckoning_trajectory",
     "dvl_quality",
-    "truth_trajectory",
+    "POSE_SOURCES",
+    "pose_source_by_name",
 ]
 
 
@@ -38,9 +45,9 @@ def motion_noise(dataset: Dataset) -> MotionNoise:
 def dvl_quality(dataset: Dataset) -> dict[str, float]:
     """How the DVL behaved (for ``metrics.json`` and ``sonarslam info``).
 
-    Quantiles (10, 50, 90, 99 %) of its own scatter (:func:`slam.model.motion.dvl_scatter`, m/s,
+    Quantiles (10, 50, 90, 99 %) of its own scatter (:func:`slam.model.noise.dvl_scatter`, m/s,
     over ``[noise] dvl_scatter_window_s``, 60 s when that is off); the time its scatter stayed
-    above the nominal one, when :func:`slam.model.motion.dvl_sample_sigma` added the excess as noise
+    above the nominal one, when :func:`slam.model.noise.dvl_sample_sigma` added the excess as noise
     (s; 0 when off), and the first such time after the start of the logs (s, -1 if none).
     """
     noise = motion_noise(dataset)
@@ -61,13 +68,13 @@ def dvl_quality(dataset: Dataset) -> dict[str, float]:
     return out
 
 
-def _require_gps(dataset: Dataset):  # noqa: ANN202
+def _require_gps(dataset: Dataset) -> GpsSeries:
     if dataset.gps is None:
         raise ValueError(f"{dataset.root}: no *_DGPS.log, so no start pose nor ground truth")
     return dataset.gps
 
 
-def start_pose(dataset: Dataset) -> tuple[float, np.ndarray, np.ndarray]:
+def start_pose(dataset: Dataset) -> tuple[float, FloatArray, FloatArray]:
     """Start time, pose and covariance of every estimator (the ATE protocol).
 
     The start is the first GPS fix inside the navigation span; its position is that fix, its
@@ -124,12 +131,16 @@ def gps_ahrs_trajectory(dataset: Dataset) -> Trajectory:
     return Trajectory(t, np.column_stack([xy, psi]), np.broadcast_to(cov, (t.size, 3, 3)).copy())
 
 
-def truth_trajectory(dataset: Dataset) -> Trajectory:
-    """The simulator's true body poses, shifted into the readers' local frame (first GPS fix)."""
-    if dataset.truth is None:
-        raise ValueError(f"{dataset.root}: no truth.json (only simulated datasets have one)")
-    truth = dataset.truth
-    poses = np.asarray(truth["body_poses"]["rows"], dtype=np.float64)  # t, x, y, yaw (world frame)
-    offset = np.asarray(truth.get("first_fix_enu_m", [0.0, 0.0]), dtype=np.float64)
-    xy = poses[:, 1:3] - offset
-    return Trajectory(poses[:, 0].copy(), np.column_stack([xy, wrap_angle(poses[:, 3])]))
+#: Pose sources by name (``--poses``; ``dr`` and ``gps`` are also ``--backend`` baselines).
+POSE_SOURCES: dict[str, Callable[[Dataset], Trajectory]] = {
+    "gps": gps_ahrs_trajectory,
+    "dr": dead_reckoning_trajectory,
+    "truth": truth_trajectory,
+}
+
+
+def pose_source_by_name(dataset: Dataset, name: str) -> Trajectory:
+    """One of :data:`POSE_SOURCES` built on ``dataset``."""
+    if name not in POSE_SOURCES:
+        raise ValueError(f"--poses must be one of {sorted(POSE_SOURCES)}, got {name!r}")
+    return POSE_SOURCES[name](dataset)

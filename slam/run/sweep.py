@@ -2,28 +2,17 @@
 
 A sweep is the product of seeds, back ends and the grid axes that apply to each back end. Every
 seed's world is simulated once (a Dask task; the folder is cached on disk, so back ends and later
-sweeps share it) and each (seed, back end, parameters) is one task that runs the back end and
-returns one flat row: the seed, back end and parameters, the ATE by the GPS protocol
-(:mod:`slam.eval.ate`), the pose NEES against the simulator's truth (:mod:`slam.eval.consistency`), the
-association counts, and the wall time. The rows make one table (``sweep.csv``); the NEES of every
-run on a common 1 s grid (``nees.npz``) give the ANEES of each configuration with its 95 % band
+sweeps share it) and each (seed, back end, parameters) is one task that runs the back end
+through the one runner (:func:`slam.run.run.run_backend`) and returns one flat row: the seed,
+back end and parameters, the run's metrics (ATE by the GPS protocol, association scores against
+the true walls, timings), the pose NEES against the simulator's truth
+(:mod:`slam.eval.consistency`). The rows make one table (``sweep.csv``); the NEES of every run
+on a common 1 s grid (``nees.npz``) give the ANEES of each configuration with its 95 % band
 (``summary.csv``, ``sweep.png``).
 
-Grid axes are ``<scope>.<field>=v1,v2,...``:
-
-* ``extractor.<field>``: a :class:`features.extractor.ExtractorConfig` field, over the settings
-  the pipeline uses (:func:`slam.run.run.default_extractor_config`); applies to every
-  closed-loop back end;
-* ``<backend>.<field>[.<field>]``: a field of that back end's configuration (``ekf``:
-  :class:`slam.backends.ekf.EkfConfig`; ``isam2``: :class:`slam.backends.isam2.graph.GraphConfig`), nested
-  dataclasses by dots (``ekf.association.gate_probability``); ``<backend>.association`` is short
-  for ``<backend>.association.method``.
-
-Back ends (:func:`run_backend`): ``dr`` and ``gps`` are the pose sources of the pipeline;
-the closed-loop ones of :func:`closed_loop_backends` are run here with
-:func:`slam.run.closed_loop.run_closed_loop` so that their settings can be changed (the pipeline
-runs them with the defaults: the same numbers when no axis is given, see the tests); any other
-name of :data:`slam.run.run.BACKENDS` is run by :func:`slam.run.run.run` (no grid axes).
+Grid axes are ``<scope>.<field>=v1,v2,...`` (:mod:`slam.run.presets`): ``extractor.<field>``
+applies to every closed-loop back end; ``<backend>.<field>[.<field>]`` to that back end. The
+baselines (``dr``, ``gps``) take none.
 """
 
 from __future__ import annotations
@@ -37,36 +26,34 @@ import shutil
 import tempfile
 import time
 import tomllib
-from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
+from dask.distributed import Client, LocalCluster, as_completed
+from tqdm import tqdm
 
-from datasets.source import Dataset, open_dataset
-from slam.eval.ate import ate_against_gps
+from datasets.simulator import simulate
+from datasets.source import open_dataset
+from slam.backends.registry import BACKENDS
 from slam.eval.consistency import NeesSeries, anees, nees_on_grid, nees_series
+from slam.eval.truth import truth_trajectory
+from slam.io.plots import plot_anees, plot_sweep
 from slam.io.trajectory import Trajectory
-from slam.run.presets import apply_overrides, parse_value, split_settings
+from slam.run.presets import parse_value
+from slam.run.run import backend_names, run_backend
 
 __all__ = [
-    "BASELINES",
-    "ClosedLoopBackend",
     "SweepTask",
     "SweepResult",
-    "BackendRun",
-    "closed_loop_backends",
-    "available_backends",
     "parse_seeds",
-    "parse_value",
     "parse_grid",
     "load_grid_toml",
     "axis_applies",
     "expand_tasks",
-    "apply_overrides",
-    "run_backend",
     "simulate_cached",
     "run_task",
     "config_labels",
@@ -75,78 +62,8 @@ __all__ = [
     "sweep",
 ]
 
-#: Back ends that are pose sources, not estimators with settings.
-BASELINES = ("dr", "gps")
-
 #: Step (s) of the common time grid of the NEES series.
 NEES_PERIOD_S = 1.0
-
-
-# -- back ends ------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class ClosedLoopBackend:
-    """How to build a closed-loop back end from its configuration.
-
-    Attributes
-    ----------
-    config_type : type
-        Frozen dataclass of its settings (default-constructible).
-    factory : callable
-        ``(dataset, config) -> make_backend`` for :func:`slam.run.closed_loop.run_closed_loop`.
-    pose_source_of : callable or None
-        ``run_closed_loop``'s ``pose_source_of`` (None: the anchored odometry of filters).
-    """
-
-    config_type: type
-    factory: Callable[[Dataset, Any], Callable[..., Any]]
-    pose_source_of: Callable[..., Any] | None = None
-
-
-def _ekf_factory(dataset: Dataset, config: Any) -> Callable[..., Any]:
-    from slam.backends.ekf import LineEkf
-
-    mounting = dataset.config.sonar_mounting
-
-    def make(t0_s: float, wTb0: np.ndarray, P0: np.ndarray) -> LineEkf:
-        return LineEkf(t0_s, wTb0, P0, mounting, config)
-
-    return make
-
-
-def _isam2_factory(dataset: Dataset, config: Any) -> Callable[..., Any]:
-    from slam.backends.isam2.graph import isam2_backend_factory
-
-    return isam2_backend_factory(dataset.config.sonar_mounting, config)
-
-
-def closed_loop_backends() -> dict[str, ClosedLoopBackend]:
-    """The closed-loop back ends whose settings a sweep can change: ``ekf``, and ``isam2`` when
-    :mod:`slam.backends.isam2.graph` provides ``GraphConfig``, ``isam2_backend_factory`` and
-    ``pose_source_of``. Both are run causally: the trajectory is the filtered pose at every
-    AHRS record, with its covariance (what the NEES needs)."""
-    from slam.backends.ekf import EkfConfig
-
-    specs = {"ekf": ClosedLoopBackend(EkfConfig, _ekf_factory)}
-    try:
-        from slam.backends.isam2.graph import GraphConfig, isam2_backend_factory, pose_source_of  # noqa: F401
-    except ImportError:
-        pass
-    else:
-        specs["isam2"] = ClosedLoopBackend(GraphConfig, _isam2_factory, pose_source_of)
-    return specs
-
-
-def available_backends() -> list[str]:
-    """Every back end name a sweep can run: baselines, closed loops, the pipeline's."""
-    from slam.run.run import BACKENDS
-
-    names = list(BASELINES) + list(closed_loop_backends())
-    return names + [b for b in BACKENDS if b not in names]
-
-
-# -- parsing --------------------------------------------------------------------------------------
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -202,9 +119,6 @@ def load_grid_toml(path: str | Path) -> dict[str, list[Any]]:
     return grid
 
 
-# -- tasks ----------------------------------------------------------------------------------------
-
-
 @dataclass(frozen=True)
 class SweepTask:
     """One run: a seed, a back end and its parameter values (sorted ``(axis, value)`` pairs)."""
@@ -221,8 +135,7 @@ class SweepTask:
 def axis_applies(backend: str, axis: str) -> bool:
     """Whether a grid axis changes ``backend`` (``extractor.*``: every closed loop)."""
     scope = axis.split(".", 1)[0]
-    loops = closed_loop_backends()
-    return backend in loops and scope in ("extractor", backend)
+    return backend in BACKENDS and scope in ("extractor", backend)
 
 
 def expand_tasks(
@@ -233,11 +146,11 @@ def expand_tasks(
     Raises ValueError for an unknown back end, an axis no back end uses, or an axis on a back
     end run by the pipeline (no settings).
     """
-    known = available_backends()
+    known = backend_names()
     for b in backends:
         if b not in known:
             raise ValueError(f"--backend: unknown {b!r}; one of {known}")
-    loops = closed_loop_backends()
+    loops = BACKENDS
     for axis in grid:
         scope = axis.split(".", 1)[0]
         if scope != "extractor" and scope not in loops:
@@ -259,139 +172,8 @@ def expand_tasks(
     return tasks
 
 
-@dataclass
-class BackendRun:
-    """A back end's trajectory and the metrics of its run (the keys of ``metrics.json``)."""
-
-    trajectory: Trajectory
-    metrics: dict[str, Any]
-    backend: Any = None
-    extras: dict[str, Any] = field(default_factory=dict)
-
-
-def run_backend(
-    dataset: Dataset,
-    backend: str,
-    params: dict[str, Any] | None = None,
-    t_end_s: float | None = None,
-    progress: bool = False,
-) -> BackendRun:
-    """Run one back end on a dataset with optional parameter overrides; no file is written.
-
-    Parameters
-    ----------
-    dataset : Dataset
-        With GPS (start pose and ATE).
-    backend : str
-        One of :func:`available_backends`.
-    params : dict, optional
-        Grid values (``"extractor.min_votes": 10``, ``"ekf.association": "nn"``, ...).
-    t_end_s : float, optional
-        Stop at this time (Unix s): a shorter run (the pipeline fallback runs all and clips).
-    progress : bool
-        Progress bar of the closed loop.
-
-    Returns
-    -------
-    BackendRun
-        ``metrics`` has the ATE fields, ``wall_s``, ``data_s``, ``realtime_factor`` and, for
-        closed loops, ``landmarks``, ``line_features``, ``assoc_*``, ``extractor_s``,
-        ``backend_s``, ``beams`` (as :func:`slam.run.run.run`).
-    """
-    from slam.run.run import POSE_SOURCES, default_extractor_config
-
-    if dataset.gps is None:
-        raise ValueError(f"{dataset.root}: runs need *_DGPS.log for the start pose and the ATE")
-    params = dict(params or {})
-    loops = closed_loop_backends()
-    extra: dict[str, Any] = {}
-    backend_obj = None
-    wall0 = time.perf_counter()
-    if backend in BASELINES:
-        if params:
-            raise ValueError(f"back end {backend!r} has no settings, got {sorted(params)}")
-        trajectory = POSE_SOURCES[backend](dataset)
-    elif backend in loops:
-        from slam.run.closed_loop import run_closed_loop
-
-        spec = loops[backend]
-        ext, own = split_settings(params, backend)
-        ext_cfg = default_extractor_config(dataset)
-        if ext:
-            ext_cfg = apply_overrides(ext_cfg, ext)
-        cfg = apply_overrides(spec.config_type(), own)
-        result = run_closed_loop(
-            dataset,
-            spec.factory(dataset, cfg),
-            ext_cfg,
-            pose_source_of=spec.pose_source_of,
-            progress=progress,
-            t_end_s=t_end_s,
-        )
-        trajectory, backend_obj = result.trajectory, result.backend
-        stats = dict(getattr(backend_obj, "stats", {}))
-        n_landmarks = len(getattr(backend_obj, "landmarks", []))
-        extra = {
-            "landmarks": n_landmarks,
-            "line_features": len(result.features),
-            **{f"assoc_{k}": v for k, v in stats.items()},
-            "extractor_s": result.extractor_s,
-            "backend_s": result.backend_s,
-            "beams": result.counts.get("beams", 0),
-        }
-        if dataset.truth is not None and "walls_m" in dataset.truth:
-            extra.update(_association_against_truth(dataset, result))
-    else:
-        from slam.run.run import BACKENDS, run
-
-        if backend not in BACKENDS:
-            raise ValueError(f"unknown back end {backend!r}; one of {available_backends()}")
-        if params:
-            raise ValueError(
-                f"back end {backend!r} is run by slam.run.run.run, which takes no settings"
-            )
-        with tempfile.TemporaryDirectory(prefix=f"sweep-{backend}-") as tmp:
-            res = run(dataset.root, backend, tmp, progress=progress)
-        trajectory = res.trajectory
-        extra = {k: v for k, v in res.metrics.items() if k not in ("source", "backend")}
-    if t_end_s is not None and trajectory.t_s[-1] > t_end_s:
-        trajectory = trajectory.clip(trajectory.t_s[0], t_end_s)
-    wall_s = time.perf_counter() - wall0
-    if "wall_s" in extra:  # the pipeline timed itself
-        wall_s = float(extra.pop("wall_s"))
-    t0, t1 = trajectory.span_s
-    metrics: dict[str, Any] = {
-        "source": str(dataset.root),
-        "backend": backend,
-        **ate_against_gps(trajectory, dataset.gps).as_dict(),
-        "wall_s": wall_s,
-        "data_s": t1 - t0,
-        "realtime_factor": (t1 - t0) / wall_s if wall_s > 0 else float("inf"),
-        **{k: v for k, v in extra.items() if k not in ("data_s", "realtime_factor")},
-    }
-    return BackendRun(trajectory, metrics, backend_obj)
-
-
-def _association_against_truth(dataset: Dataset, result: Any) -> dict[str, Any]:
-    """Association precision and recall against the simulator's walls
-    (:func:`slam.eval.consistency.association_against_truth`), with the counts to pool them over runs."""
-    from slam.eval.consistency import association_against_truth
-
-    s = association_against_truth(dataset, result)
-    return {
-        "truth_precision": s.precision,
-        "truth_recall": s.recall,
-        "truth_associations": s.n_associated,
-        "truth_reobservations": s.n_true_pairs,
-        "truth_seeds": s.n_seeds,
-        "truth_spurious_features": s.n_spurious,
-    }
-
-
 def simulate_cached(world: str, seed: int, duration_s: float | None, cache_dir: str | Path) -> str:
     """The folder of a simulated world and seed, simulated once (atomically) and then reused."""
-    from datasets.simulator import simulate
-
     tag = "default" if duration_s is None else f"{duration_s:g}s"
     folder = Path(cache_dir) / f"{world}_{seed}_{tag}"
     if (folder / "truth.json").is_file():
@@ -440,8 +222,6 @@ def run_task(
         ``nees_pose`` and ``nees_position``: NEES on the grid ``0, period, ...`` s after the
         start (NaN where missing).
     """
-    from slam.run.sources import truth_trajectory
-
     row: dict[str, Any] = {
         "seed": task.seed,
         "backend": task.backend,
@@ -453,7 +233,9 @@ def run_task(
     try:
         dataset = open_dataset(source)
         run = run_backend(dataset, task.backend, task.params_dict)
-        row.update({k: v for k, v in run.metrics.items() if k not in ("source", "backend")})
+        row.update(
+            {k: v for k, v in run.metrics.items() if k not in ("source", "backend", "settings")}
+        )
         nees_pose = nees_position = empty
         if dataset.truth is not None and run.trajectory.covs is not None:
             grid = _nees_grid(run.trajectory, truth_trajectory(dataset), nees_period_s)
@@ -467,9 +249,6 @@ def run_task(
         row["error"] = f"{type(exc).__name__}: {exc}"
         nees_pose = nees_position = empty
     return {"row": row, "nees_pose": nees_pose, "nees_position": nees_position}
-
-
-# -- aggregation ----------------------------------------------------------------------------------
 
 
 def _pad(rows: Sequence[np.ndarray]) -> np.ndarray:
@@ -575,9 +354,7 @@ class SweepResult:
     wall_s: float
 
 
-def _client(scheduler: str | None, n_workers: int):  # noqa: ANN202
-    from dask.distributed import Client, LocalCluster
-
+def _client(scheduler: str | None, n_workers: int) -> tuple[Client, LocalCluster | None]:
     if scheduler:
         return Client(scheduler), None
     cluster = LocalCluster(
@@ -588,6 +365,45 @@ def _client(scheduler: str | None, n_workers: int):  # noqa: ANN202
         silence_logs=logging.ERROR,
     )
     return Client(cluster), cluster
+
+
+def _write(
+    out: Path,
+    table: pd.DataFrame,
+    summary: pd.DataFrame,
+    nees_pose: np.ndarray,
+    nees_position: np.ndarray,
+    t_rel_s: np.ndarray,
+    title: str,
+) -> dict[str, Path]:
+    """The sweep's files (:func:`sweep`), by role."""
+    files = {
+        "table": out / "sweep.csv",
+        "summary": out / "summary.csv",
+        "nees": out / "nees.npz",
+        "plot": out / "sweep.png",
+        "anees_plot": out / "anees.png",
+    }
+    table.to_csv(files["table"], index=False)
+    try:
+        import pyarrow  # noqa: F401  # optional, not a dependency: parquet only when installed
+    except ImportError:
+        pass
+    else:
+        files["parquet"] = out / "sweep.parquet"
+        table.to_parquet(files["parquet"])
+    summary.to_csv(files["summary"], index=False)
+    np.savez_compressed(files["nees"], pose=nees_pose, position=nees_position, t_rel_s=t_rel_s)
+    labels = config_labels(table)
+    plot_sweep(files["plot"], table, labels, title)
+    curves = {}
+    for label in dict.fromkeys(labels):
+        rows = np.flatnonzero((labels == label) & (table["error"].fillna("") == "").to_numpy())
+        X = nees_pose[rows] if nees_pose.size else np.zeros((0, 0))
+        if X.size and np.isfinite(X).any():
+            curves[label] = anees(X, 3, t_rel_s)
+    plot_anees(files["anees_plot"], curves, f"pose ANEES (3 dof) over the runs: {title}")
+    return files
 
 
 def sweep(
@@ -609,7 +425,7 @@ def sweep(
     ----------
     seeds : sequence of int
     backends : sequence of str
-        Names of :func:`available_backends`.
+        Names of :func:`slam.run.run.backend_names`.
     out_dir : str or Path
         Receives ``sweep.csv`` (one row per run), ``summary.csv`` (one per configuration),
         ``nees.npz`` (``pose`` (R, K), ``position`` (R, K), ``t_rel_s`` (K,): row ``i`` is
@@ -632,10 +448,6 @@ def sweep(
     nees_period_s : float
         Step of the NEES grid (s).
     """
-    from tqdm import tqdm
-
-    from slam.io.plots import plot_anees, plot_sweep
-
     wall0 = time.perf_counter()
     grid = dict(grid or {})
     tasks = expand_tasks(seeds, backends, grid)
@@ -650,11 +462,9 @@ def sweep(
             results[i] = run_task(task, sims[task.seed], world, duration_s, nees_period_s)
             bar.update()
     else:
-        from dask.distributed import as_completed
-
         client, cluster = _client(scheduler, n_workers)
         try:
-            sims = {
+            sim_futures = {
                 s: client.submit(
                     simulate_cached, world, s, duration_s, str(cache.resolve()), pure=False
                 )
@@ -664,7 +474,7 @@ def sweep(
                 client.submit(
                     run_task,
                     task,
-                    sims[task.seed],
+                    sim_futures[task.seed],
                     world,
                     duration_s,
                     nees_period_s,
@@ -686,35 +496,10 @@ def sweep(
     nees_position = _pad([r["nees_position"] for r in done])
     t_rel_s = np.arange(nees_pose.shape[1]) * nees_period_s
     summary = summarise(table, nees_pose, nees_position)
-    files = {
-        "table": out / "sweep.csv",
-        "summary": out / "summary.csv",
-        "nees": out / "nees.npz",
-        "plot": out / "sweep.png",
-        "anees_plot": out / "anees.png",
-    }
-    table.to_csv(files["table"], index=False)
-    try:
-        import pyarrow  # noqa: F401
-    except ImportError:
-        pass
-    else:
-        files["parquet"] = out / "sweep.parquet"
-        table.to_parquet(files["parquet"])
-    summary.to_csv(files["summary"], index=False)
-    np.savez_compressed(files["nees"], pose=nees_pose, position=nees_position, t_rel_s=t_rel_s)
-    labels = config_labels(table)
     title = f"{world}, {len(dict.fromkeys(seeds))} seeds" + (
         "" if duration_s is None else f", {duration_s:g} s"
     )
-    plot_sweep(files["plot"], table, labels, title)
-    curves = {}
-    for label in dict.fromkeys(labels):
-        rows = np.flatnonzero((labels == label) & (table["error"].fillna("") == "").to_numpy())
-        X = nees_pose[rows] if nees_pose.size else np.zeros((0, 0))
-        if X.size and np.isfinite(X).any():
-            curves[label] = anees(X, 3, t_rel_s)
-    plot_anees(files["anees_plot"], curves, f"pose ANEES (3 dof) over the runs: {title}")
+    files = _write(out, table, summary, nees_pose, nees_position, t_rel_s, title)
     return SweepResult(
         table, summary, nees_pose, nees_position, out, files, time.perf_counter() - wall0
     )

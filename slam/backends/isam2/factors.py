@@ -5,21 +5,21 @@ Variables (keys from :mod:`gtsam.symbol_shorthand`):
 * ``X(k)``: body pose ``wTb`` of node k, a ``gtsam.Pose2``. GTSAM perturbs it in its *local*
   (body-frame) tangent ``(dx_b, dy_b, dtheta)``: ``wTb.retract(xi) = wTb * Exp(xi)``, so a
   Jacobian in plain world coordinates ``(x, y, yaw)`` is multiplied by
-  :func:`local_to_world` ``= blockdiag(R(yaw), 1)``.
+  :func:`slam.model.lines.local_to_world` ``= blockdiag(R(yaw), 1)``.
 * ``L(j)``: a world line ``(rho_m, theta_rad)``, a 2-vector (a GTSAM ``Vector``: what
   ``Values.insert`` makes of a numpy array, read with ``Values.atVector``). A vector space
   (retract is ``+``) is what a ``(rho, theta)`` pair needs near a solution: ``theta`` enters
   only through ``cos`` and ``sin``, so it needs no wrapping in the state, and a manifold such as
   ``Pose2``/``Rot2`` would add nothing but conversions. The stored pair is not kept normalised
   (the optimiser may leave ``rho < 0`` or ``theta`` outside ``[-pi, pi)``); the factor compares
-  lines through :func:`features.geometry.line_world_to_frame`, which normalises, and
-  :func:`line_residual`, which resolves the sign ambiguity; reports normalise.
+  lines through :func:`slam.model.lines.line_residual`, which normalises and resolves the sign
+  ambiguity; reports normalise.
 * ``B(0)``: the constant AHRS heading bias (rad), a size-1 ``Vector``; the AHRS measures
   ``yaw + b`` (the model of :class:`slam.backends.ekf.LineEkf`).
 * ``D(0)``: optional constant misalignment (rad) of the DVL velocity with the body heading: the
   vehicle moves along ``R(yaw + delta) v_b`` (as :class:`slam.backends.ekf.LineEkf`).
 * ``G(0)``: optional constant scale of the gyro's yaw rate (the odometry's heading change is
-  ``s`` times the gyro's integral; the marina's MTi turns 0.86 times as fast as its heading).
+  ``s`` times the gyro's integral).
 
 Every factor here is a ``gtsam.CustomFactor`` around a plain function that returns the error and
 its analytic Jacobians (``tests/test_factor_graph.py`` checks them against
@@ -34,22 +34,12 @@ import gtsam
 import numpy as np
 import numpy.typing as npt
 
-from features.geometry import (
-    FloatArray,
-    compose,
-    compose_jacobians,
-    line_world_to_frame,
-    wrap_angle,
-)
-from slam.mapping.association import FLIP_RHO
+from features.geometry import FloatArray, wrap_angle
+from slam.model.lines import line_residual
 
 __all__ = [
     "ROBUST_KERNELS",
-    "local_to_world",
     "noise_model",
-    "line_prediction",
-    "line_predictions",
-    "line_residual",
     "line_factor",
     "heading_residual",
     "heading_factor",
@@ -61,12 +51,6 @@ _S = np.array([[0.0, -1.0], [1.0, 0.0]])  # d R(a) / da = R(a) S
 
 ROBUST_KERNELS = ("huber", "cauchy")
 """Robust kernels :func:`noise_model` accepts (``gtsam.noiseModel.mEstimator``)."""
-
-
-def local_to_world(yaw_rad: float) -> FloatArray:
-    """``d (x, y, yaw) / d xi`` of ``Pose2.retract(xi)`` at ``xi = 0``: ``blockdiag(R(yaw), 1)``."""
-    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def noise_model(
@@ -97,103 +81,6 @@ def noise_model(
 
 
 # -- line landmark -----------------------------------------------------------------------------
-
-
-def line_prediction(
-    wTb: FloatArray, line_w: FloatArray, bTs: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """The line ``line_w`` seen by the sonar at ``wTs = wTb * bTs``, and its Jacobians.
-
-    Parameters
-    ----------
-    wTb : ndarray, shape (3,)
-        Body pose ``(x_m, y_m, yaw_rad)``.
-    line_w : ndarray, shape (2,)
-        World line ``(rho_m, theta_rad)`` (need not be normalised).
-    bTs : ndarray, shape (3,)
-        Sonar mounting.
-
-    Returns
-    -------
-    z_hat : ndarray, shape (2,)
-        Normalised line in the sonar frame.
-    H_pose : ndarray, shape (2, 3)
-        ``d z_hat / d xi`` in the *local* tangent of ``wTb`` (GTSAM's Pose2 convention).
-    H_line : ndarray, shape (2, 2)
-        ``d z_hat / d line_w``.
-    """
-    wTs = compose(wTb, bTs)
-    z_hat, H_line, H_sensor = line_world_to_frame(line_w, wTs)
-    J_b, _ = compose_jacobians(wTb, bTs)
-    return z_hat, H_sensor @ J_b @ local_to_world(float(wTb[2])), H_line
-
-
-def line_predictions(
-    wTb: FloatArray, lines_w: FloatArray, bTs: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """:func:`line_prediction` of many lines from one pose (vectorised).
-
-    Parameters
-    ----------
-    wTb : ndarray, shape (3,)
-    lines_w : ndarray, shape (K, 2)
-    bTs : ndarray, shape (3,)
-
-    Returns
-    -------
-    z_hat : ndarray, shape (K, 2)
-    H_pose : ndarray, shape (K, 2, 3)
-        Local tangent of ``wTb``.
-    H_line : ndarray, shape (K, 2, 2)
-    """
-    x, y, psi = compose(wTb, bTs)
-    J_b, _ = compose_jacobians(wTb, bTs)
-    JM = J_b @ local_to_world(float(wTb[2]))
-    lw = np.asarray(lines_w, dtype=np.float64).reshape(-1, 2)
-    c, s = np.cos(lw[:, 1]), np.sin(lw[:, 1])
-    rho_r = lw[:, 0] - x * c - y * s
-    sign = np.where(rho_r < 0.0, -1.0, 1.0)
-    k = lw.shape[0]
-    H_line = np.zeros((k, 2, 2))
-    H_line[:, 0, 0] = sign
-    H_line[:, 0, 1] = sign * (x * s - y * c)
-    H_line[:, 1, 1] = 1.0
-    H_sensor = np.zeros((k, 2, 3))
-    H_sensor[:, 0, 0] = -sign * c
-    H_sensor[:, 0, 1] = -sign * s
-    H_sensor[:, 1, 2] = -1.0
-    z_hat = np.column_stack(
-        [np.abs(rho_r), wrap_angle(lw[:, 1] - psi + np.where(rho_r < 0.0, np.pi, 0.0))]
-    )
-    return z_hat, H_sensor @ JM, H_line
-
-
-def line_residual(
-    z: FloatArray, wTb: FloatArray, line_w: FloatArray, bTs: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Error of a line observation: measured minus predicted, in the sonar frame R.
-
-    ``e = z - z_hat``, the angle wrapped, with ``z_hat`` taken in the representation nearest
-    ``z`` (``(rho, theta)`` or ``(-rho, theta + pi)``): the sign ambiguity of lines near
-    ``rho = 0`` handled as :func:`slam.mapping.association.line_innovation` does, but by flipping the
-    prediction rather than the measurement, so that ``e ~ N(0, R)`` with the measurement's own
-    covariance ``R`` (flipping ``z`` would change ``R`` to ``diag(-1, 1) R diag(-1, 1)``).
-
-    Returns
-    -------
-    e : ndarray, shape (2,)
-    H_pose : ndarray, shape (2, 3)
-        ``d e / d xi`` (local tangent of ``wTb``).
-    H_line : ndarray, shape (2, 2)
-        ``d e / d line_w``.
-    """
-    z_hat, H_pose, H_line = line_prediction(wTb, line_w, bTs)
-    d_theta = float(wrap_angle(z[1] - z_hat[1]))
-    if abs(d_theta) <= 0.5 * np.pi:
-        return np.array([z[0] - z_hat[0], d_theta]), -H_pose, -H_line
-    # z_hat as (-rho, theta + pi): e = (z_rho + rho_hat, z_theta - theta_hat - pi)
-    e = np.array([z[0] + z_hat[0], float(wrap_angle(z[1] - z_hat[1] - np.pi))])
-    return e, -FLIP_RHO @ H_pose, -FLIP_RHO @ H_line
 
 
 def line_factor(

@@ -1,0 +1,200 @@
+"""Settings of the line extractor (:class:`features.extractor.LineExtractor`), with units in
+the names, loadable from TOML."""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import asdict, dataclass, fields, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["ExtractorConfig"]
+
+_DEG = float(np.pi / 180.0)
+
+
+@dataclass(frozen=True)
+class ExtractorConfig:
+    """Settings of :class:`LineExtractor`, with units in the names.
+
+    Defaults marked *paper* are those of the seed paper (Song et al. 2010, section 3: sector,
+    beta, min votes, confidence); the others are this project's choices, stated here. Settings
+    for particular sonars and data (the marina's thresholded keyframes, the seed paper's pool)
+    are presets, decided in :mod:`slam.run.presets`.
+
+    Attributes
+    ----------
+    intensity_threshold : float
+        Segmentation (a): threshold bins have intensity ``>=`` this (0-255). 80.
+    max_intensity_difference : float
+        Segmentation (b): keep bins within this of the beam's strongest (0-255). 40.
+    min_distance_m : float
+        Segmentation (c): of two kept bins closer than this, drop the weaker (m). 0.5.
+    min_range_m : float
+        Near-field dead zone (m). 0.5.
+    max_range_m : float or None
+        Bins beyond this range (m) take no part (None: the head's range). On thick echo bands
+        a wall seen far off and at a slant gives a line metres off the wall.
+    sector_deg : float
+        Angular span of the stored beams (deg): 180 (*paper*); 270 and 360 are settings.
+    beam_width_rad : float or None
+        Horizontal beam width ``alpha`` (rad); None takes the head's.
+    incidence_beta_rad : float
+        Largest incidence that still returns, ``beta`` (rad): 25 deg (*paper*).
+    vote_model : {"arc", "samples"}
+        How eqs. 2-4 cast votes (see :mod:`features.hough`): "arc" (continuous arc, default) or
+        "samples" (the ``h x p`` samples literally).
+    h_bearings, p_angles : int or None
+        Samples of eqs. 2 and 3 for ``vote_model="samples"``; None chooses them from the
+        resolution (:func:`~features.hough.auto_h_bearings`, :func:`~features.hough.auto_p_angles`).
+    theta_res_rad : float or None
+        Voting-space cell in ``theta`` (rad); None takes the head's step (paper 2.4).
+    rho_res_m : float or None
+        Voting-space cell in ``rho`` (m); None takes the bin size (paper 2.4).
+    min_votes : int
+        Votes needed by a line: 15 (*paper*, pool test).
+    max_lines_per_vote : int
+        Most lines per vote. 16.
+    suppress_theta_cells, suppress_rho_cells : int
+        Half sizes of the window around a winner whose voters are removed with it (cells). 1, 1.
+    vote_every_n_beams : int
+        Beams between votes once the store holds a full sector. 10.
+    requery_poses : bool
+        Re-query the pose source for every stored beam at each vote (smoothing back ends). True.
+    covariance_method : {"fit", "seed"}
+        :mod:`features.uncertainty` method: "fit" (weighted least squares) or "seed" (the
+        paper's overlap-ratio ellipse; its line is the ellipse centre).
+    confidence : float
+        Probability of the seed ellipse: 0.95 (*paper*).
+    overlap_similarity : float
+        Seed: similar cells have an overlap ratio ``>=`` this times the winner's. 0.8.
+    seed_window_theta_cells, seed_window_rho_cells : int
+        Seed: half sizes of the searched neighbourhood (cells). 20, 10: the similar-overlap
+        region of a wall is long in theta (the beam width hides small rotations).
+    return_model : {"axis", "first_return"}
+        Fit: where in the beam a final bin's echo comes from. "axis" for raw intensities (the
+        strongest bin), "first_return" for thresholded masks (the nearest bin of a run).
+    range_sigma_m : float or None
+        Fit: range noise of a bin (m); None: ``bin_size / sqrt(12)``.
+    bearing_sigma_rad : float or None
+        Fit: bearing noise across the beam (rad); None: ``beam_width / sqrt(12)``.
+    range_offset_sigma_m : float or None
+        Fit: range error common to all the bins (m): where the wall is inside the bin of an
+        echo's peak or first return, which does not average down with the number of voters
+        (:mod:`features.uncertainty`); None: ``bin_size / sqrt(12)``; 0 leaves it out.
+    pose_uncertainty : bool
+        Fit: add the relative pose uncertainty from ``PoseSource.covariance``. False.
+    fit_iterations : int
+        Fit: Gauss-Newton iterations. 5.
+    fit_gate_sigma : float
+        Fit: after fitting the winner's voters, the fit is redone on every stored final bin
+        whose echo lies within this many sigmas of the line (from a beam that sees it), so
+        that the voters' truncation to one rho cell does not bias it; 0 fits the voters only. 3.
+    fit_gate_iterations : int
+        Fit: rounds of gathering the support and refitting. 2.
+    endpoint_trim_fraction : float
+        Segment ends are the ``f`` and ``1 - f`` quantiles of the voters along the line. 0.05.
+    remove_on_line_sigma : float
+        After a line is found, the stored final bins whose echoes lie within this many sigmas of
+        it are removed with its voters, *at any incidence* (from every beam that faces it). A wall
+        also returns echoes beyond ``beta`` (the simulator's walls return up to ~60 deg); the
+        sonar model cannot give them to the wall's line, so left in the store they voted for
+        spurious lines a few degrees off the wall (3-4 per 270 deg pool scan, 3-30 deg off).
+        Not in the paper (it removes the voters only); 0 disables. 3.
+    """
+
+    intensity_threshold: float = 80.0
+    max_intensity_difference: float = 40.0
+    min_distance_m: float = 0.5
+    min_range_m: float = 0.5
+    max_range_m: float | None = None
+    sector_deg: float = 180.0
+    beam_width_rad: float | None = None
+    incidence_beta_rad: float = 25.0 * _DEG
+    vote_model: str = "arc"
+    h_bearings: int | None = None
+    p_angles: int | None = None
+    theta_res_rad: float | None = None
+    rho_res_m: float | None = None
+    min_votes: int = 15
+    max_lines_per_vote: int = 16
+    suppress_theta_cells: int = 1
+    suppress_rho_cells: int = 1
+    vote_every_n_beams: int = 10
+    requery_poses: bool = True
+    covariance_method: str = "fit"
+    confidence: float = 0.95
+    overlap_similarity: float = 0.8
+    seed_window_theta_cells: int = 20
+    seed_window_rho_cells: int = 10
+    return_model: str = "axis"
+    range_sigma_m: float | None = None
+    bearing_sigma_rad: float | None = None
+    range_offset_sigma_m: float | None = None
+    pose_uncertainty: bool = False
+    fit_iterations: int = 5
+    fit_gate_sigma: float = 3.0
+    fit_gate_iterations: int = 2
+    endpoint_trim_fraction: float = 0.05
+    remove_on_line_sigma: float = 3.0
+
+    def __post_init__(self) -> None:
+        if self.vote_model not in ("arc", "samples"):
+            raise ValueError(f"vote_model must be 'arc' or 'samples', got {self.vote_model!r}")
+        if self.covariance_method not in ("fit", "seed"):
+            raise ValueError(
+                f"covariance_method must be 'fit' or 'seed', got {self.covariance_method!r}"
+            )
+        if self.return_model not in ("axis", "first_return"):
+            raise ValueError(
+                f"return_model must be 'axis' or 'first_return', got {self.return_model!r}"
+            )
+        if not 0.0 < self.sector_deg <= 360.0:
+            raise ValueError(f"sector_deg must be in (0, 360], got {self.sector_deg}")
+        if self.vote_every_n_beams < 1 or self.min_votes < 1:
+            raise ValueError("vote_every_n_beams and min_votes must be >= 1")
+        if not 0.0 < self.confidence < 1.0:
+            raise ValueError(f"confidence must be in (0, 1), got {self.confidence}")
+        if not 0.0 <= self.endpoint_trim_fraction < 0.5:
+            raise ValueError("endpoint_trim_fraction must be in [0, 0.5)")
+        if not 0.0 < self.incidence_beta_rad < 0.5 * np.pi:
+            raise ValueError("incidence_beta_rad must be in (0, pi/2)")
+        if self.remove_on_line_sigma < 0.0:
+            raise ValueError("remove_on_line_sigma must be >= 0")
+        if self.max_range_m is not None and not self.max_range_m > self.min_range_m:
+            raise ValueError(
+                f"max_range_m must be > min_range_m ({self.min_range_m}), got {self.max_range_m}"
+            )
+        if self.range_offset_sigma_m is not None and self.range_offset_sigma_m < 0.0:
+            raise ValueError("range_offset_sigma_m must be >= 0 (or None)")
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> ExtractorConfig:
+        """Config from a mapping of field names (unknown names are an error)."""
+        known = {f.name for f in fields(cls)}
+        unknown = set(values) - known
+        if unknown:
+            raise ValueError(f"unknown ExtractorConfig fields: {sorted(unknown)}")
+        return cls(**values)
+
+    @classmethod
+    def from_toml(cls, path: str | Path, table: str | None = "extractor") -> ExtractorConfig:
+        """Load from a TOML file: the ``[extractor]`` table if present, else the top level.
+
+        Fields left out take their defaults; ``None`` fields are left out to stay None.
+        """
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+        if table is not None and table in data:
+            data = data[table]
+        return cls.from_dict(data)
+
+    def to_dict(self) -> dict[str, Any]:
+        """All fields, ``None`` ones included (TOML has no null: drop them to write TOML)."""
+        return asdict(self)
+
+    def replace(self, **changes: Any) -> ExtractorConfig:
+        """A copy with some fields changed."""
+        return replace(self, **changes)

@@ -1,0 +1,191 @@
+"""The seam between the driver and a SLAM back end: the settings every back end shares and the
+typed :class:`Backend` protocol.
+
+A back end estimates the vehicle pose from the motion steps (:class:`slam.model.motion.MotionStep`),
+the AHRS headings and the front end's lines, and in return gives the front end the pose of every
+beam through a :class:`features.pose_source.PoseSource`. Its landmarks are managed by the shared
+landmark layer (:class:`slam.mapping.landmarks.LandmarkMap`), which calls back into the back end
+through :class:`slam.mapping.landmarks.LineEstimator`. Both back ends here (the EKF,
+:mod:`slam.backends.ekf`, and iSAM2, :mod:`slam.backends.isam2`) implement both protocols; a new
+back end registers in :mod:`slam.backends.registry`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+from features.geometry import FloatArray, compose, inverse
+from features.line import LineFeature
+from features.pose_source import PoseSource
+from slam.io.trajectory import Trajectory
+from slam.mapping.landmarks import LandmarkConfig, LandmarkMap
+from slam.model.motion import MotionStep, OdometryChain
+
+__all__ = ["BackendConfig", "Backend", "AnchoredOdometry"]
+
+
+@dataclass(frozen=True)
+class BackendConfig(LandmarkConfig):
+    """Settings every back end shares: the landmark layer's (:class:`LandmarkConfig`) and the
+    heading and motion models'.
+
+    Attributes
+    ----------
+    ahrs_white_sigma_deg : float
+        White noise of one AHRS heading (deg).
+    ahrs_bias_sigma_deg : float
+        Prior 1-sigma of the constant AHRS heading bias ``b`` (deg): the AHRS measures
+        ``yaw + b``. Modelled so that an estimator never believes its heading better than the
+        compass can tell it (a white-noise model at 1 Hz would, and would be inconsistent).
+        Nothing else observes it: line landmarks, DVL and gyro are blind to a rotation of the
+        whole map and trajectory about the start position, which is what the bias does.
+    ahrs_period_s : float
+        An AHRS heading is used at most this often (s); the AHRS errors are not white.
+    gyro_sigma_radps : float
+        Heading process noise of the motion model, as a yaw-rate noise (rad/s), added as
+        ``(dt * sigma)**2`` per motion step.
+    estimate_misalignment : bool
+        Estimate the misalignment ``delta`` of the DVL velocity with the body heading (rad): the
+        vehicle moves along ``R(psi + delta) v_b``. Line landmarks make it observable; it
+        absorbs the error of a GPS-free DVL/AHRS calibration.
+    misalignment_sigma_deg : float
+        Its prior 1-sigma (deg).
+    """
+
+    ahrs_white_sigma_deg: float = 1.0
+    ahrs_bias_sigma_deg: float = 2.0
+    ahrs_period_s: float = 1.0
+    gyro_sigma_radps: float = 0.005
+    estimate_misalignment: bool = False
+    misalignment_sigma_deg: float = 5.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if min(self.ahrs_white_sigma_deg, self.ahrs_bias_sigma_deg, self.gyro_sigma_radps) <= 0:
+            raise ValueError("AHRS and gyro sigmas must be > 0")
+        if not self.ahrs_period_s > 0.0:
+            raise ValueError(f"ahrs_period_s must be > 0, got {self.ahrs_period_s}")
+        if not self.misalignment_sigma_deg > 0.0:
+            raise ValueError(
+                f"misalignment_sigma_deg must be > 0, got {self.misalignment_sigma_deg}"
+            )
+
+
+class Backend(Protocol):
+    """What the driver (:func:`slam.run.closed_loop.run_closed_loop`) and the runner need from
+    a SLAM back end."""
+
+    @property
+    def config(self) -> BackendConfig:
+        """Its settings."""
+        ...
+
+    @property
+    def map(self) -> LandmarkMap:
+        """Its landmarks (the shared landmark layer)."""
+        ...
+
+    @property
+    def pose(self) -> FloatArray:
+        """Current body pose ``wTb`` ``(x_m, y_m, yaw_rad)``, shape (3,)."""
+        ...
+
+    @property
+    def pose_cov(self) -> FloatArray:
+        """Its covariance, shape (3, 3)."""
+        ...
+
+    @property
+    def stats(self) -> dict[str, int]:
+        """Counters of the run (the landmark layer's and the back end's own)."""
+        ...
+
+    def predict(self, step: MotionStep) -> FloatArray:
+        """Integrate one motion step; returns the relative motion ``bTb'`` it applied (the
+        odometry the driver chains for the front end)."""
+        ...
+
+    def update_heading(self, t_s: float, yaw_body_rad: float) -> bool:
+        """An AHRS body heading; False when skipped (``ahrs_period_s``)."""
+        ...
+
+    def update_lines(self, features: list[LineFeature]) -> list[int | None]:
+        """The lines of one vote; the landmark id of each (None: not associated)."""
+        ...
+
+    def pose_source(self, odometry: AnchoredOdometry) -> PoseSource:
+        """The front end's poses: a filter gives the driver's anchored odometry back, a
+        smoother its own smoothed trajectory."""
+        ...
+
+    def finish(self) -> None:
+        """End of the run: everything pending goes into the estimate."""
+        ...
+
+    def map_records(self) -> list[dict[str, object]]:
+        """``map.json``'s landmarks (:meth:`slam.mapping.landmarks.LandmarkMap.records`)."""
+        ...
+
+    def trajectories(self, batch: bool = False) -> dict[str, Trajectory]:
+        """Trajectories beside the causal one (a smoother's smoothed one, and with ``batch`` a
+        final batch optimisation's), by name; empty for a filter."""
+        ...
+
+    def metrics(self) -> dict[str, float | int]:
+        """Figures of the run beyond :attr:`stats` (timings), for ``metrics.json``."""
+        ...
+
+    def save(self, out_dir: Path) -> list[Path]:
+        """Write what the back end has beyond trajectories and map (a graph); the files."""
+        ...
+
+
+class AnchoredOdometry:
+    """PoseSource of a filter: past poses from the odometry chain, anchored at the current estimate.
+
+    ``wTb(t) = wTb_now * inverse(O(t_now)) * O(t)``, where ``O`` chains the relative motions of
+    the filter's predictions (:class:`slam.model.motion.OdometryChain`). After a correction the
+    whole stored sector moves rigidly with the current estimate, so the motion-distortion
+    correction uses the (locally accurate) odometry and the absolute pose comes from the filter.
+
+    :meth:`covariance` is the chain's own position variance accumulated from the DVL noise on
+    top of the anchor's covariance: the extractor takes only its differences between beams
+    (``ExtractorConfig.pose_uncertainty``), which are the odometry's uncertainty over the sector
+    and so grow when the DVL degrades.
+    """
+
+    def __init__(self, t0_s: float, wTb0: FloatArray, capacity: int = 4096) -> None:
+        self.chain = OdometryChain(t0_s, capacity)
+        self._anchor_t = t0_s
+        self._anchor = np.asarray(wTb0, dtype=np.float64).copy()
+        self._anchor_cov: FloatArray | None = None
+
+    def append(self, t_s: float, bTb_next: FloatArray, var_step_m2: float = 0.0) -> None:
+        """Chain one step of relative motion ending at ``t_s``, whose position variance per
+        axis is ``var_step_m2``."""
+        self.chain.append(t_s, bTb_next, var_step_m2)
+
+    def set_anchor(self, t_s: float, wTb: FloatArray, cov: FloatArray | None = None) -> None:
+        """The filter's estimate at ``t_s`` (and its covariance)."""
+        self._anchor_t = t_s
+        self._anchor = np.asarray(wTb, dtype=np.float64).copy()
+        self._anchor_cov = cov
+
+    def poses(self, t_s: npt.ArrayLike) -> FloatArray:
+        """Body poses ``wTb`` at ``t_s`` (Unix s), shape (N, 3)."""
+        tq = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+        chain = self.chain.at(np.append(tq, self._anchor_t))
+        o_t, o_now = chain[:-1], chain[-1]
+        return compose(compose(self._anchor, inverse(o_now)), o_t)
+
+    def covariance(self, t_s: float) -> FloatArray | None:
+        """The anchor's covariance plus the chain's position variance up to ``t_s``."""
+        if self._anchor_cov is None:
+            return None
+        v = self.chain.variance_at(t_s)
+        return np.asarray(self._anchor_cov) + np.diag([v, v, 0.0])

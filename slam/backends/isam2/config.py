@@ -1,0 +1,87 @@
+"""Settings of the factor-graph back end (:class:`slam.backends.isam2.graph.LineIsam2`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from slam.backends.base import BackendConfig
+
+__all__ = ["GraphConfig"]
+
+
+@dataclass(frozen=True)
+class GraphConfig(BackendConfig):
+    """Settings of the factor graph: :class:`slam.backends.base.BackendConfig`'s and
+
+    Attributes
+    ----------
+    ahrs_bias_prior_deg : float
+        Prior mean of the constant AHRS bias ``B(0)`` (deg).
+    dvl_noise : {"hold", "white"}
+        How the velocity noise adds up. ``"hold"``: the error of a held DVL sample is one draw
+        for the whole hold (:func:`slam.model.noise.held_velocity_variance_step`, the EKF's
+        model). ``"white"``: independent per motion step, ``(dt * sigma)**2`` each, which with a
+        1.5 Hz DVL and 20 records a second makes the position variance ~20x too small.
+    node_period_s : float
+        A pose node at least this often (s); votes with lines add theirs.
+    min_node_gap_s : float
+        An observation this close (s) after the newest node goes on that node, carried by the
+        odometry since it (:meth:`LineIsam2.begin_vote`), instead of on a new node.
+    update_period_s : float
+        Pending odometry and heading factors go into iSAM2 at most this often (s) between
+        votes with lines (which always update).
+    estimate_gyro_scale : bool
+        Estimate the scale ``G(0)`` of the gyro's yaw rate: the odometry's heading change is
+        ``s`` times the gyro's integral. The AHRS headings make it observable.
+    gyro_scale_sigma : float
+        Prior 1-sigma of ``s`` around 1.
+    robust : {None, "huber", "cauchy"}
+        Robust kernel on the line factors (heavy-tailed line errors on thick echo bands).
+    robust_k : float
+        Its width (sigmas).
+    relinearize_threshold : float
+        iSAM2 relinearises a variable whose delta exceeds this (m, rad). GTSAM's default: a
+        lower threshold relinearises most of the graph when line loops pull the trajectory by
+        metres, at many times the cost.
+    relinearize_skip : int
+        iSAM2 checks for relinearisation every this many updates (GTSAM's default).
+    extra_iterations : int
+        Extra ``ISAM2.update()`` calls (no new factors) after a vote with associated lines,
+        so that loop closures converge.
+    candidate_gate_probability : float
+        Loose individual gate, with cached marginals and no cross-covariances, that selects the
+        landmarks whose joint marginal is computed for the association.
+    max_candidates : int
+        At most this many candidate landmarks per vote (the nearest by that distance).
+    pose_window_s : float
+        After an update, the smoothed poses of the nodes this recent (s) are refreshed for the
+        pose source when it is next asked (the front end's stored sector spans seconds); all of
+        them for :meth:`LineIsam2.smoothed_trajectory`.
+    """
+
+    ahrs_bias_prior_deg: float = 0.0
+    dvl_noise: str = "hold"
+    node_period_s: float = 5.0
+    min_node_gap_s: float = 0.1
+    update_period_s: float = 5.0
+    estimate_gyro_scale: bool = False
+    gyro_scale_sigma: float = 0.2
+    robust: str | None = "huber"
+    robust_k: float = 1.345
+    relinearize_threshold: float = 0.1
+    relinearize_skip: int = 10
+    extra_iterations: int = 1
+    candidate_gate_probability: float = 0.9999
+    max_candidates: int = 8
+    pose_window_s: float = 30.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.dvl_noise not in ("hold", "white"):
+            raise ValueError(f"dvl_noise must be 'hold' or 'white', got {self.dvl_noise!r}")
+        if self.robust not in (None, "huber", "cauchy"):
+            raise ValueError(f"robust must be None, 'huber' or 'cauchy', got {self.robust!r}")
+        if self.node_period_s <= 0 or self.update_period_s < 0:
+            raise ValueError("node_period_s must be > 0, update_period_s >= 0")
+        if self.max_candidates < 1:
+            raise ValueError("max_candidates must be >= 1")

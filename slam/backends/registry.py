@@ -1,0 +1,76 @@
+"""The back ends by name: what ``--backend``, the sweep and the notebooks choose from.
+
+A new back end implements :class:`slam.backends.base.Backend` (and, for its landmarks,
+:class:`slam.mapping.landmarks.LineEstimator`), takes a configuration that extends
+:class:`slam.backends.base.BackendConfig`, and is added to :data:`BACKENDS` here; the runner,
+the CLI's ``--set``, the sweep's grid and the reports then take it as they take these two.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from features.geometry import FloatArray
+from slam.backends.base import Backend, BackendConfig
+from slam.backends.ekf import EkfConfig, LineEkf
+from slam.backends.isam2.graph import GraphConfig, LineIsam2
+from sonar.beam import Mounting
+
+__all__ = ["BackendSpec", "BACKENDS", "backend_spec"]
+
+
+@dataclass(frozen=True)
+class BackendSpec:
+    """A SLAM back end the closed loop can run.
+
+    Attributes
+    ----------
+    name : str
+        Its ``--backend`` name, also the scope of its ``--set`` settings.
+    config_type : type
+        Its frozen configuration dataclass (default-constructible).
+    make : callable
+        ``(t0_s, wTb0 (3,), P0 (3, 3), sonar_mounting, config) -> Backend``.
+    smoother : bool
+        It has a smoothed trajectory and a final batch optimisation (``--batch``).
+    summary : str
+        One line for ``--help``.
+    """
+
+    name: str
+    config_type: type[BackendConfig]
+    make: Callable[[float, FloatArray, FloatArray, Mounting, BackendConfig], Backend]
+    smoother: bool
+    summary: str
+
+
+def _make_ekf(
+    t0_s: float, wTb0: FloatArray, P0: FloatArray, mounting: Mounting, config: BackendConfig
+) -> Backend:
+    if not isinstance(config, EkfConfig):
+        raise TypeError(f"the EKF takes an EkfConfig, got {type(config).__name__}")
+    return LineEkf(t0_s, wTb0, P0, mounting, config)
+
+
+def _make_isam2(
+    t0_s: float, wTb0: FloatArray, P0: FloatArray, mounting: Mounting, config: BackendConfig
+) -> Backend:
+    if not isinstance(config, GraphConfig):
+        raise TypeError(f"iSAM2 takes a GraphConfig, got {type(config).__name__}")
+    return LineIsam2(t0_s, wTb0, P0, mounting, config)
+
+
+BACKENDS: dict[str, BackendSpec] = {
+    "ekf": BackendSpec("ekf", EkfConfig, _make_ekf, False, "EKF-SLAM with line landmarks"),
+    "isam2": BackendSpec(
+        "isam2", GraphConfig, _make_isam2, True, "GTSAM iSAM2 factor graph with line landmarks"
+    ),
+}
+
+
+def backend_spec(name: str) -> BackendSpec:
+    """The back end called ``name``; ValueError naming the known ones otherwise."""
+    if name not in BACKENDS:
+        raise ValueError(f"unknown back end {name!r}; one of {sorted(BACKENDS)}")
+    return BACKENDS[name]

@@ -1,0 +1,88 @@
+"""``sonarslam calibrate``: GPS-free calibrations (sonar yaw, AHRS yaw, AHRS deviation)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from datasets.source import open_dataset
+from slam.cli.common import EPILOG, Subparsers
+from slam.run.calibration import calibrate_ahrs_deviation, calibrate_ahrs_yaw, calibrate_sonar_yaw
+from slam.run.sources import POSE_SOURCES, pose_source_by_name
+
+
+def add_parser(sub: Subparsers) -> None:
+    p = sub.add_parser(
+        "calibrate",
+        help="sonar mounting yaw by map sharpness; --ahrs: AHRS yaw from the DVL compass",
+        epilog=EPILOG,
+    )
+    p.add_argument("source", help="dataset directory or 'marina'")
+    p.add_argument(
+        "--poses",
+        default="dr",
+        choices=sorted(POSE_SOURCES),
+        help="pose source (default dr: GPS-free)",
+    )
+    p.add_argument("--window", type=float, default=120.0, help="entropy window (s, default 120)")
+    p.add_argument(
+        "--ahrs",
+        action="store_true",
+        help="the AHRS mounting yaw from the DVL's own compass instead (GPS-free)",
+    )
+    p.add_argument(
+        "--ahrs-deviation",
+        action="store_true",
+        help="the AHRS heading's deviation B sin(yaw) + C cos(yaw) from the sonar lines of EKF"
+        " closed loops instead (GPS-free, ~20 s per iteration on the marina)",
+    )
+    p.add_argument(
+        "--iterations", type=int, default=4, help="closed loops for --ahrs-deviation (default 4)"
+    )
+    p.set_defaults(func=command)
+
+
+def _ahrs_deviation(args: argparse.Namespace) -> int:
+    dataset = open_dataset(args.source)
+    b0, c0 = (math.degrees(v) for v in dataset.config.ahrs_deviation_rad)
+    print(
+        f"AHRS deviation from the EKF's line re-observations (GPS-free), from [{b0:.2f}, {c0:.2f}] deg:"
+    )
+
+    def progress(k: int, n: int) -> None:
+        print(f"  calibrate ahrs-deviation {k}/{n}: EKF closed loop ...", flush=True)
+
+    steps = calibrate_ahrs_deviation(dataset, iterations=args.iterations, progress=progress)
+    for k, (dev, n) in enumerate(steps, start=1):
+        print(
+            f"  iteration {k}: [{math.degrees(dev[0]):.2f}, {math.degrees(dev[1]):.2f}] deg ({n} lines)"
+        )
+    b, c = (math.degrees(v) for v in steps[-1][0])
+    print(f"put it under [motion] as ahrs_deviation_deg = [{b:.2f}, {c:.2f}]")
+    return 0
+
+
+def command(args: argparse.Namespace) -> int:
+    if args.ahrs_deviation:
+        return _ahrs_deviation(args)
+    dataset = open_dataset(args.source)
+    if args.ahrs:
+        fit = calibrate_ahrs_yaw(dataset)
+        amp = math.degrees(math.hypot(*fit.harmonics_rad[:2]))
+        print(
+            f"AHRS mounting yaw from the DVL compass (GPS-free): "
+            f"{math.degrees(fit.ahrs_yaw_rad):.2f} deg (configured: "
+            f"{math.degrees(dataset.config.ahrs_mounting.yaw_rad):.2f} deg); DVL compass - AHRS "
+            f"yaw = {math.degrees(fit.offset_rad):.2f} deg over headings (time mean "
+            f"{math.degrees(fit.time_mean_rad):.2f} deg), deviation {amp:.1f} deg, residual sd "
+            f"{math.degrees(fit.residual_sd_rad):.2f} deg; put it under [mounting.ahrs] yaw_deg"
+        )
+        return 0
+    poses = pose_source_by_name(dataset, args.poses)
+    result = calibrate_sonar_yaw(dataset, poses, window_s=args.window)
+    current = math.degrees(dataset.config.sonar_mounting.yaw_rad)
+    print(
+        f"sonar mounting yaw with {args.poses} poses: {math.degrees(result.best_yaw_rad):.2f} deg "
+        f"(configured: {current:.2f} deg); put it under [mounting.sonar] yaw_deg in sonarslam.toml"
+    )
+    return 0

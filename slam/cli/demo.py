@@ -1,0 +1,35 @@
+"""``sonarslam demo``: the main job of ``make run``."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from slam.cli.common import EPILOG, Subparsers
+from slam.run.demo import main_job
+from slam.run.run import summary_line
+
+
+def add_parser(sub: Subparsers) -> None:
+    p = sub.add_parser(
+        "demo",
+        help="the main job (make run): both closed loops and dead reckoning on the marina or a simulated harbour",
+        epilog=EPILOG,
+    )
+    p.add_argument("--out", default="out", help="output directory (default out)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=command)
+
+
+def command(args: argparse.Namespace) -> int:
+    results = main_job(args.out, progress=not args.quiet)
+    print("\nResults (ATE against GPS, no alignment):")
+    for r in results:
+        print("  " + summary_line(r.metrics))
+    print("\nOutputs and pictures:")
+    print(f"  {Path(args.out).resolve()}  (*_scans_gps.png: the sonar map with GPS poses)")
+    for r in results:
+        if r.out_dir is not None:
+            pics = ", ".join(p.name for p in sorted(r.out_dir.glob("*.png")))
+            print(f"  {r.out_dir.resolve()}  ({pics})")
+    return 0

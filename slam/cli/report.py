@@ -1,0 +1,50 @@
+"""``sonarslam report``: run directories side by side."""
+
+from __future__ import annotations
+
+import argparse
+
+from slam.cli.common import EPILOG, Subparsers
+from slam.run.report import report
+
+
+def add_parser(sub: Subparsers) -> None:
+    p = sub.add_parser(
+        "report",
+        help="side-by-side report of run directories: table, maps, errors, NEES",
+        epilog=EPILOG,
+    )
+    p.add_argument("dirs", nargs="+", help="run directories written by 'sonarslam run'")
+    p.add_argument("--out", required=True, help="output directory (report.md and PNGs)")
+    p.add_argument(
+        "--rpe-delta", type=float, default=10.0, help="path length of evo's RPE (m, default 10)"
+    )
+    p.add_argument(
+        "--align", action="store_true", help="Umeyama-align before evo's APE/RPE (default none)"
+    )
+    p.add_argument(
+        "--no-source",
+        action="store_true",
+        help="do not re-open the runs' datasets (no reprojected map, no truth)",
+    )
+    p.set_defaults(func=command)
+
+
+def command(args: argparse.Namespace) -> int:
+    result = report(
+        args.dirs,
+        args.out,
+        rpe_delta_m=args.rpe_delta,
+        align=args.align,
+        open_sources=not args.no_source,
+    )
+    for row in result.rows:
+        if row.get("ate_n") is not None:
+            nees = row.get("nees_mean")
+            print(
+                f"{row['method']} [{row['run']}, {row['dataset']}]: ATE mean {row['ate_mean_m']:.2f} m, "
+                f"rmse {row['ate_rmse_m']:.2f}; evo APE rmse {row['evo_ape_rmse_m']:.2f} m"
+                + (f"; pose NEES mean {nees:.2f}" if nees is not None else "")
+            )
+    print(f"report: {result.path.resolve()} ({len(result.figures)} figures)")
+    return 0

@@ -1,0 +1,29 @@
+"""``sonarslam simulate``: a simulated run written in the marina layout."""
+
+from __future__ import annotations
+
+import argparse
+
+from datasets.simulator import simulate
+from slam.cli.common import EPILOG, Subparsers
+
+
+def add_parser(sub: Subparsers) -> None:
+    p = sub.add_parser("simulate", help="simulate a run in the marina layout", epilog=EPILOG)
+    p.add_argument(
+        "kind",
+        choices=["pool", "harbour", "random"],
+        help="world: seed pool, harbour, random harbour",
+    )
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument(
+        "--duration", type=float, default=None, help="seconds of simulated time (default per world)"
+    )
+    p.set_defaults(func=command)
+
+
+def command(args: argparse.Namespace) -> int:
+    out = simulate(args.kind, seed=args.seed, out_dir=args.out, duration_s=args.duration)
+    print(f"simulated {args.kind} (seed {args.seed}) written to {out}")
+    return 0

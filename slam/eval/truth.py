@@ -1,0 +1,263 @@
+"""The simulator's truth for evaluation: true poses, true walls and their lines, and the
+association scores and landmark extents of a closed loop against them.
+
+The readers put every dataset in the local frame of its first GPS fix; the simulator's truth is
+in its own world frame, so everything here is shifted by ``first_fix_enu_m`` (``truth.json``).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from datasets.source import Dataset
+from features.geometry import (
+    FloatArray,
+    compose,
+    line_difference,
+    line_world_to_frame,
+    normalize_line,
+    wrap_angle,
+)
+from features.line import LineFeature
+from slam.io.trajectory import Trajectory
+
+__all__ = [
+    "truth_trajectory",
+    "truth_walls",
+    "wall_lines_world",
+    "wall_lines",
+    "AssociationScores",
+    "association_scores",
+    "association_against_truth",
+    "landmark_overshoot_m",
+]
+
+
+def truth_trajectory(dataset: Dataset) -> Trajectory:
+    """The simulator's true body poses, shifted into the readers' local frame (first GPS fix)."""
+    if dataset.truth is None:
+        raise ValueError(f"{dataset.root}: no truth.json (only simulated datasets have one)")
+    truth = dataset.truth
+    poses = np.asarray(truth["body_poses"]["rows"], dtype=np.float64)  # t, x, y, yaw (world frame)
+    offset = np.asarray(truth.get("first_fix_enu_m", [0.0, 0.0]), dtype=np.float64)
+    xy = poses[:, 1:3] - offset
+    return Trajectory(poses[:, 0].copy(), np.column_stack([xy, wrap_angle(poses[:, 3])]))
+
+
+def truth_walls(dataset: Dataset) -> FloatArray:
+    """The simulator's wall segments (W, 2, 2) in the readers' frame (world minus the first fix)."""
+    if dataset.truth is None or "walls_m" not in dataset.truth:
+        raise ValueError(
+            f"{dataset.root}: no walls in truth.json (only simulated datasets have them)"
+        )
+    offset = np.asarray(dataset.truth.get("first_fix_enu_m", [0.0, 0.0]), dtype=np.float64)
+    return np.asarray(dataset.truth["walls_m"], dtype=np.float64) - offset
+
+
+def wall_lines_world(walls_m: npt.ArrayLike) -> FloatArray:
+    """Normalised world lines of wall segments.
+
+    Parameters
+    ----------
+    walls_m : array_like, shape (S, 2, 2)
+        Segments ``[[x0, y0], [x1, y1]]`` (world, m).
+
+    Returns
+    -------
+    ndarray, shape (S, 2)
+        ``(rho_m, theta_rad)`` with ``rho >= 0`` and ``theta`` in ``[-pi, pi)``.
+    """
+    w = np.asarray(walls_m, dtype=np.float64)
+    d = w[:, 1] - w[:, 0]
+    normal = np.stack([d[:, 1], -d[:, 0]], axis=-1) / np.linalg.norm(d, axis=-1, keepdims=True)
+    rho = np.einsum("ij,ij->i", normal, w[:, 0])
+    theta = np.arctan2(normal[:, 1], normal[:, 0])
+    rho_n, theta_n = normalize_line(rho, theta)
+    return np.stack([rho_n, theta_n], axis=-1)
+
+
+def wall_lines(
+    walls_w: FloatArray, rho_tol_m: float = 1e-3, theta_tol_rad: float = 1e-4
+) -> tuple[FloatArray, np.ndarray]:
+    """The distinct lines ``(rho, theta)`` of wall segments and each wall's line index.
+
+    Parameters
+    ----------
+    walls_w : ndarray, shape (W, 2, 2)
+        Wall segments (m).
+    rho_tol_m, theta_tol_rad : float
+        Two walls are on one line when their normalised lines differ by less than these.
+
+    Returns
+    -------
+    lines : ndarray, shape (K, 2)
+        Distinct lines (m, rad), normalised (:func:`features.geometry.normalize_line`).
+    line_of_wall : ndarray of int, shape (W,)
+    """
+    lines: list[FloatArray] = []
+    line_of_wall = []
+    for line in wall_lines_world(walls_w):
+        same = [
+            k
+            for k, other in enumerate(lines)
+            if abs(other[0] - line[0]) < rho_tol_m
+            and abs(float(wrap_angle(other[1] - line[1]))) < theta_tol_rad
+        ]
+        if same:
+            line_of_wall.append(same[0])
+        else:
+            line_of_wall.append(len(lines))
+            lines.append(line)
+    return np.array(lines).reshape(-1, 2), np.array(line_of_wall, dtype=np.int64)
+
+
+@dataclass(frozen=True)
+class AssociationScores:
+    """Association quality against the simulator's walls.
+
+    The truth unit is a wall's *line*: collinear wall segments (two quays on one line) are one
+    line, because a line landmark ``(rho, theta)`` is the infinite line and pairing both with it
+    is right. An observation's true line is the one it matches within ``gate_rho_m`` and
+    ``gate_theta_rad`` in its own frame, with the true pose; observations matching none are
+    spurious. A landmark's line is the true line most of its observations come from.
+
+    ``precision``: of the observations associated with a landmark, the fraction whose true line
+    is the landmark's. ``recall``: of the observations of a line that has a landmark, excluding
+    the ones that seeded a landmark as tentative lines (the creation rule, not an association
+    decision), the fraction associated with a landmark of that line. ``seed_precision``: of the
+    seeding observations, the fraction whose line is their landmark's.
+    """
+
+    precision: float
+    recall: float
+    n_associated: int
+    n_true_pairs: int
+    n_spurious: int
+    n_seeds: int = 0
+    seed_precision: float = float("nan")
+
+
+def association_scores(
+    features: list[LineFeature],
+    feature_landmarks: list[int | None],
+    walls_w: FloatArray,
+    truth: Trajectory,
+    bTs: FloatArray,
+    gate_rho_m: float = 1.0,
+    gate_theta_rad: float = float(np.deg2rad(5.0)),
+    feature_seeds: list[int | None] | None = None,
+) -> AssociationScores:
+    """Precision and recall of a run's associations (see :class:`AssociationScores`).
+
+    Parameters
+    ----------
+    features, feature_landmarks : list
+        The run's line features and the landmark id each was associated with (None: not).
+    walls_w : ndarray, shape (W, 2, 2)
+        True wall segments in the run's frame (reader frame: world minus ``first_fix_enu_m``).
+    truth : Trajectory
+        True body poses.
+    bTs : ndarray, shape (3,)
+        Sonar mounting.
+    gate_rho_m, gate_theta_rad : float
+        How close (m, rad) an observation must be to a true line to be of it.
+    feature_seeds : list, optional
+        The landmark each feature seeded as a tentative line (None: none), as
+        :attr:`slam.run.closed_loop.ClosedLoopResult.feature_seeds`.
+    """
+    lines, _ = wall_lines(walls_w)
+    seeds = feature_seeds if feature_seeds is not None else [None] * len(features)
+    true_line: list[int | None] = []
+    for f in features:
+        wTs = compose(truth.poses([f.t])[0], bTs)
+        best: int | None = None
+        best_cost = np.inf
+        for k, lw in enumerate(lines):
+            nu, _ = line_difference(f.z, line_world_to_frame(lw, wTs)[0])
+            if abs(nu[0]) <= gate_rho_m and abs(nu[1]) <= gate_theta_rad:
+                cost = abs(nu[0]) / gate_rho_m + abs(nu[1]) / gate_theta_rad
+                if cost < best_cost:
+                    best, best_cost = k, cost
+        true_line.append(best)
+    by_landmark: dict[int, Counter[int | None]] = {}
+    for w, lm, sd in zip(true_line, feature_landmarks, seeds, strict=True):
+        owner = lm if lm is not None else sd
+        if owner is not None:
+            by_landmark.setdefault(owner, Counter())[w] += 1
+    line_of = {lm: c.most_common(1)[0][0] for lm, c in by_landmark.items()}
+    mapped = {w for w in line_of.values() if w is not None}
+    associated = [
+        (w, lm) for w, lm in zip(true_line, feature_landmarks, strict=True) if lm is not None
+    ]
+    correct = sum(1 for w, lm in associated if w is not None and line_of[lm] == w)
+    of_mapped = [
+        (w, lm)
+        for w, lm, sd in zip(true_line, feature_landmarks, seeds, strict=True)
+        if w in mapped and sd is None
+    ]
+    found = sum(1 for w, lm in of_mapped if lm is not None and line_of[lm] == w)
+    seeding = [(w, sd) for w, sd in zip(true_line, seeds, strict=True) if sd is not None]
+    return AssociationScores(
+        precision=correct / len(associated) if associated else float("nan"),
+        recall=found / len(of_mapped) if of_mapped else float("nan"),
+        n_associated=len(associated),
+        n_true_pairs=len(of_mapped),
+        n_spurious=sum(1 for w in true_line if w is None),
+        n_seeds=len(seeding),
+        seed_precision=(
+            sum(1 for w, sd in seeding if w is not None and line_of[sd] == w) / len(seeding)
+            if seeding
+            else float("nan")
+        ),
+    )
+
+
+def association_against_truth(
+    dataset: Dataset,
+    features: list[LineFeature],
+    feature_landmarks: list[int | None],
+    feature_seeds: list[int | None],
+) -> AssociationScores:
+    """:func:`association_scores` of a closed-loop run on a simulated dataset: its features,
+    pairings and seeds (:class:`slam.run.closed_loop.ClosedLoopResult`) against the true walls
+    and poses."""
+    return association_scores(
+        features,
+        feature_landmarks,
+        truth_walls(dataset),
+        truth_trajectory(dataset),
+        dataset.config.sonar_mounting.as_pose(),
+        feature_seeds=feature_seeds,
+    )
+
+
+def landmark_overshoot_m(landmarks: list[dict[str, Any]], walls_w: FloatArray) -> FloatArray:
+    """How far each landmark's end points lie from the nearest true wall segment (m).
+
+    Parameters
+    ----------
+    landmarks : list of dict
+        ``map.json`` records (``endpoints``: two world points).
+    walls_w : ndarray, shape (W, 2, 2)
+        True wall segments in the run's frame (m).
+
+    Returns
+    -------
+    ndarray, shape (L,)
+        Per landmark, the larger of its two end points' distances to the walls.
+    """
+    w = np.asarray(walls_w, dtype=np.float64)
+    a, d = w[:, 0], w[:, 1] - w[:, 0]
+    out = []
+    for lm in landmarks:
+        worst = 0.0
+        for p in np.asarray(lm["endpoints"], dtype=np.float64):
+            t = np.clip(np.einsum("wi,wi->w", p - a, d) / np.einsum("wi,wi->w", d, d), 0.0, 1.0)
+            worst = max(worst, float(np.min(np.linalg.norm(a + t[:, None] * d - p, axis=1))))
+        out.append(worst)
+    return np.array(out)

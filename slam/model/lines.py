@@ -1,0 +1,215 @@
+"""The line observation model shared by every back end (design.md conventions).
+
+A world line ``L = (rho_w, theta_w)`` seen by the sonar at ``wTs = wTb * bTs`` is
+``z = line_world_to_frame(L, wTs)`` (:mod:`features.geometry`), normalised. This module gives
+that prediction with its Jacobians for one line (:func:`line_prediction`) or many
+(:func:`line_predictions`), the residual of a measured line against it with the sign ambiguity
+resolved (:func:`line_residual`, the factor graph's error), the world line an observation
+stands for with its covariance (:func:`world_observation`, a new landmark's estimate), and which
+side of a line the sonar is on (:func:`sonar_side`).
+
+Jacobians with respect to the pose are in plain ``(x, y, yaw)`` coordinates, except
+:func:`line_residual`'s, which are in the local tangent of ``wTb`` (GTSAM's ``Pose2``
+convention, :func:`local_to_world`). All are checked numerically in the tests.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from features.geometry import (
+    FLIP_RHO,
+    FloatArray,
+    compose,
+    compose_jacobians,
+    line_difference,
+    line_frame_to_world,
+    line_world_to_frame,
+    transform_points,
+    wrap_angle,
+)
+from features.line import LineFeature
+
+__all__ = [
+    "local_to_world",
+    "line_prediction",
+    "line_predictions",
+    "line_residual",
+    "WorldObservation",
+    "world_observation",
+    "sonar_side",
+]
+
+
+def local_to_world(yaw_rad: float) -> FloatArray:
+    """``d (x, y, yaw) / d xi`` of ``Pose2.retract(xi)`` at ``xi = 0``: ``blockdiag(R(yaw), 1)``."""
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def line_prediction(
+    wTb: FloatArray, line_w: FloatArray, bTs: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The line ``line_w`` seen by the sonar at ``wTs = wTb * bTs``, and its Jacobians.
+
+    Parameters
+    ----------
+    wTb : ndarray, shape (3,)
+        Body pose ``(x_m, y_m, yaw_rad)``.
+    line_w : ndarray, shape (2,)
+        World line ``(rho_m, theta_rad)`` (need not be normalised).
+    bTs : ndarray, shape (3,)
+        Sonar mounting.
+
+    Returns
+    -------
+    z_hat : ndarray, shape (2,)
+        Normalised line in the sonar frame.
+    H_pose : ndarray, shape (2, 3)
+        ``d z_hat / d wTb`` in ``(x, y, yaw)``.
+    H_line : ndarray, shape (2, 2)
+        ``d z_hat / d line_w``.
+    """
+    wTs = compose(wTb, bTs)
+    z_hat, H_line, H_sensor = line_world_to_frame(line_w, wTs)
+    J_b, _ = compose_jacobians(wTb, bTs)
+    return z_hat, H_sensor @ J_b, H_line
+
+
+def line_predictions(
+    wTb: FloatArray, lines_w: FloatArray, bTs: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """:func:`line_prediction` of many lines from one pose (vectorised).
+
+    Parameters
+    ----------
+    wTb : ndarray, shape (3,)
+    lines_w : ndarray, shape (K, 2)
+    bTs : ndarray, shape (3,)
+
+    Returns
+    -------
+    z_hat : ndarray, shape (K, 2)
+    H_pose : ndarray, shape (K, 2, 3)
+        In ``(x, y, yaw)``.
+    H_line : ndarray, shape (K, 2, 2)
+    """
+    x, y, psi = compose(wTb, bTs)
+    J_b, _ = compose_jacobians(wTb, bTs)
+    lw = np.asarray(lines_w, dtype=np.float64).reshape(-1, 2)
+    c, s = np.cos(lw[:, 1]), np.sin(lw[:, 1])
+    rho_r = lw[:, 0] - x * c - y * s
+    sign = np.where(rho_r < 0.0, -1.0, 1.0)
+    k = lw.shape[0]
+    H_line = np.zeros((k, 2, 2))
+    H_line[:, 0, 0] = sign
+    H_line[:, 0, 1] = sign * (x * s - y * c)
+    H_line[:, 1, 1] = 1.0
+    H_sensor = np.zeros((k, 2, 3))
+    H_sensor[:, 0, 0] = -sign * c
+    H_sensor[:, 0, 1] = -sign * s
+    H_sensor[:, 1, 2] = -1.0
+    z_hat = np.column_stack(
+        [np.abs(rho_r), wrap_angle(lw[:, 1] - psi + np.where(rho_r < 0.0, np.pi, 0.0))]
+    )
+    return z_hat, H_sensor @ J_b, H_line
+
+
+def line_residual(
+    z: FloatArray, wTb: FloatArray, line_w: FloatArray, bTs: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Error of a line observation: measured minus predicted, in the sonar frame R.
+
+    ``e = z - z_hat`` with ``z_hat`` in the representation nearest ``z``
+    (:func:`features.geometry.line_difference`, with the prediction flipped rather than the
+    measurement, so that ``e ~ N(0, R)`` with the measurement's own covariance ``R``).
+
+    Returns
+    -------
+    e : ndarray, shape (2,)
+    H_pose : ndarray, shape (2, 3)
+        ``d e / d xi`` (local tangent of ``wTb``).
+    H_line : ndarray, shape (2, 2)
+        ``d e / d line_w``.
+    """
+    z_hat, H_pose, H_line = line_prediction(wTb, line_w, bTs)
+    H_local = H_pose @ local_to_world(float(wTb[2]))
+    nu, flipped = line_difference(z, z_hat)
+    if not flipped:
+        return nu, -H_local, -H_line
+    # z was taken as (-rho, theta + pi): flipping z_hat instead is FLIP_RHO on the difference
+    return FLIP_RHO @ nu, -FLIP_RHO @ H_local, -FLIP_RHO @ H_line
+
+
+@dataclass(frozen=True, eq=False)
+class WorldObservation:
+    """A line observation expressed in the world, with its first-order uncertainty.
+
+    Attributes
+    ----------
+    line_w : ndarray, shape (2,)
+        Normalised world line ``(rho_m, theta_rad)``.
+    cov_w : ndarray, shape (2, 2)
+        Its covariance: the observation's and the pose's, ``G_z R G_z^T + G_pose P G_pose^T``.
+    ends_w : ndarray, shape (2, 2)
+        The observed segment's end points in the world (m).
+    G_z : ndarray, shape (2, 2)
+        ``d line_w / d z``.
+    G_pose : ndarray, shape (2, 3)
+        ``d line_w / d wTb`` in ``(x, y, yaw)``.
+    """
+
+    line_w: FloatArray
+    cov_w: FloatArray
+    ends_w: FloatArray
+    G_z: FloatArray
+    G_pose: FloatArray
+
+
+def world_observation(
+    feature: LineFeature,
+    wTb: FloatArray,
+    P_pose: FloatArray,
+    bTs: FloatArray,
+    cov_scale: float = 1.0,
+) -> WorldObservation:
+    """The world line of an observation made from body pose ``wTb`` (covariance ``P_pose``).
+
+    ``cov_scale`` multiplies the observation's covariance (the back ends' ``line_cov_scale``).
+    """
+    wTs = compose(wTb, bTs)
+    line_w, G_z, G_sensor = line_frame_to_world(feature.z, wTs)
+    J_pose, _ = compose_jacobians(wTb, bTs)
+    G_pose = G_sensor @ J_pose
+    R = np.asarray(feature.cov) if cov_scale == 1.0 else cov_scale * np.asarray(feature.cov)
+    cov_w = G_pose @ P_pose @ G_pose.T + G_z @ R @ G_z.T
+    return WorldObservation(line_w, cov_w, transform_points(wTs, feature.endpoints_r), G_z, G_pose)
+
+
+def sonar_side(wTb: FloatArray, lines_w: npt.ArrayLike, bTs: FloatArray) -> FloatArray:
+    """Which side of each world line the sonar is on: ``sign(rho_w - n_w . p_sonar)``.
+
+    A wall is seen from its water side only, so an observation from the other side of a
+    landmark's line is another wall (the two faces of a jetty, parallel a few metres apart,
+    are one line each with the same ``theta``: only this tells them apart when the pose is
+    uncertain by metres).
+
+    Parameters
+    ----------
+    wTb : ndarray, shape (3,)
+    lines_w : ndarray, shape (K, 2)
+        World lines as stored (not necessarily normalised).
+    bTs : ndarray, shape (3,)
+
+    Returns
+    -------
+    ndarray, shape (K,)
+        +1 or -1.
+    """
+    x, y, _ = compose(wTb, bTs)
+    lw = np.asarray(lines_w, dtype=np.float64).reshape(-1, 2)
+    raw = lw[:, 0] - x * np.cos(lw[:, 1]) - y * np.sin(lw[:, 1])
+    return np.where(raw < 0.0, -1.0, 1.0)

@@ -1,0 +1,118 @@
+"""Noise of the navigation sensors as the estimators model it: the DVL velocity (held between
+samples, inflated when its own scatter rises) and the AHRS heading.
+
+Used by the motion model (:mod:`slam.model.motion`), hence by dead reckoning, the EKF, the
+factor graph's odometry and the front end's odometry chain alike.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from features.geometry import FloatArray
+
+__all__ = [
+    "MotionNoise",
+    "held_velocity_variance_step",
+    "dvl_scatter",
+    "dvl_sample_sigma",
+]
+
+
+@dataclass(frozen=True)
+class MotionNoise:
+    """Noise of the motion model.
+
+    Attributes
+    ----------
+    dvl_sigma_mps : float
+        1-sigma of a valid DVL velocity, per axis (m/s).
+    ahrs_sigma_rad : float
+        1-sigma of the AHRS heading (rad).
+    dvl_max_gap_s : float
+        A DVL dropout up to this long holds the last valid velocity; longer, the velocity is
+        taken as zero with ``gap_sigma_mps``.
+    gap_sigma_mps : float
+        Velocity 1-sigma added during a dropout (grows linearly to this at ``dvl_max_gap_s``).
+    dvl_scatter_window_s : float
+        Window (s) of the DVL's own scatter (:func:`dvl_scatter`); 0 turns the excess-scatter
+        noise off.
+    dvl_nominal_scatter_mps : float
+        The scatter of the DVL when it works as usual (m/s): its excess over this is white
+        velocity noise added to ``dvl_sigma_mps`` (:func:`dvl_sample_sigma`).
+    """
+
+    dvl_sigma_mps: float = 0.05
+    ahrs_sigma_rad: float = float(np.deg2rad(2.0))
+    dvl_max_gap_s: float = 10.0
+    gap_sigma_mps: float = 0.3
+    dvl_scatter_window_s: float = 0.0
+    dvl_nominal_scatter_mps: float = 0.0
+
+
+def held_velocity_variance_step(
+    held_s: npt.ArrayLike, dt_s: npt.ArrayLike, sigma_mps: npt.ArrayLike
+) -> FloatArray:
+    """Position variance (m^2, per axis) added by one step while one DVL sample is held.
+
+    The error of a held velocity sample is the same at every step of the hold, so the position
+    error over a hold of ``T`` seconds is ``T * sigma`` (variance ``T^2 sigma^2``), not
+    ``sqrt(sum dt^2) * sigma``. A step of ``dt`` that ends ``held_s`` after the sample adds
+    ``(held_s^2 - (held_s - dt)^2) sigma^2 = (2 held_s - dt) dt sigma^2``.
+    """
+    T = np.asarray(held_s, dtype=np.float64)
+    dt = np.asarray(dt_s, dtype=np.float64)
+    return np.asarray((2.0 * T - dt) * dt * np.asarray(sigma_mps, dtype=np.float64) ** 2)
+
+
+def dvl_scatter(t_s: FloatArray, v_mps: FloatArray, window_s: float) -> FloatArray:
+    """Causal scatter of DVL velocities (m/s, per axis) at each sample: the root mean square of
+    ``|v_k - v_{k-1}| / 2`` over the samples of the last ``window_s`` seconds.
+
+    For white noise of 1-sigma ``s`` per axis, ``E |v_k - v_{k-1}|^2 = 4 s^2``, so this
+    estimates ``s`` (the Allan deviation at one sample); the vehicle's own accelerations add
+    little at ~1 Hz. The first sample has no difference and takes the second's value.
+
+    Parameters
+    ----------
+    t_s : ndarray, shape (N,)
+        Times of the valid samples (s), increasing.
+    v_mps : ndarray, shape (N, 2)
+        Their velocities (m/s).
+    window_s : float
+        Averaging window (s), > 0.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+    """
+    n = t_s.size
+    if n < 2:
+        return np.zeros(n)
+    d2 = np.concatenate([[np.nan], 0.25 * np.sum(np.diff(v_mps, axis=0) ** 2, axis=1)])
+    d2[0] = d2[1]
+    csum = np.concatenate([[0.0], np.cumsum(d2)])
+    first = np.searchsorted(t_s, t_s - window_s, side="right")
+    count = np.arange(1, n + 1) - first
+    return np.asarray(np.sqrt((csum[1:] - csum[first]) / count))
+
+
+def dvl_sample_sigma(t_s: FloatArray, v_mps: FloatArray, noise: MotionNoise) -> FloatArray:
+    """1-sigma (m/s, per axis) of each valid DVL sample: ``dvl_sigma_mps``, plus the excess of
+    the DVL's own scatter over its nominal scatter taken as white noise,
+    ``sqrt(dvl_sigma^2 + max(0, scatter^2 - nominal^2))``.
+
+    ``dvl_sigma_mps`` is the error that accumulates into drift when the DVL works as usual; its
+    scatter then is mostly the vehicle's real wobble, which integrates to nothing. When the
+    scatter rises above that (the DVL near a bottom it barely locks on), the excess does
+    integrate, and the estimators must know.
+    """
+    base = np.full(t_s.size, noise.dvl_sigma_mps)
+    if noise.dvl_scatter_window_s <= 0.0:
+        return base
+    s = dvl_scatter(t_s, v_mps, noise.dvl_scatter_window_s)
+    excess = np.maximum(s**2 - noise.dvl_nominal_scatter_mps**2, 0.0)
+    return np.asarray(np.sqrt(base**2 + excess))

@@ -1,0 +1,109 @@
+"""The architecture, enforced: data flows one way (datasets -> sonar -> features -> slam), the
+layers inside ``slam`` import only downwards, and no import hides inside a function.
+
+Every module of the four packages is parsed (not imported); every ``import``/``from ... import``
+of a project package is an edge. The allowed edges:
+
+* ``sonar`` imports nothing of the project but itself;
+* ``features`` imports ``sonar`` and itself;
+* ``datasets`` imports ``sonar``, ``features.geometry`` and itself;
+* nothing outside ``slam`` imports ``slam``;
+* inside ``slam``, a module imports its own layer or lower ones, in this order:
+  ``io`` < ``model`` < ``mapping`` < ``backends`` < ``eval`` < ``run`` < ``cli``.
+
+An import inside a function hides an edge from the reader: none of a project package is
+allowed there; a third-party one only with a comment on its line saying why it is lazy.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGES = ("sonar", "features", "datasets", "slam")
+SLAM_LAYERS = ("io", "model", "mapping", "backends", "eval", "run", "cli")
+
+
+def _modules() -> list[tuple[str, Path]]:
+    out = []
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            parts = path.relative_to(ROOT).with_suffix("").parts
+            name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+            out.append((name, path))
+    return out
+
+
+def _imports(path: Path) -> list[tuple[str, int, bool]]:
+    """``(imported module, line, inside a function)`` of every import of the file."""
+    tree = ast.parse(path.read_text(), str(path))
+    found: list[tuple[str, int, bool]] = []
+
+    def visit(node: ast.AST, in_function: bool) -> None:
+        for child in ast.iter_child_nodes(node):
+            inner = in_function or isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef)
+            if isinstance(child, ast.Import):
+                found.extend((a.name, child.lineno, in_function) for a in child.names)
+            elif isinstance(child, ast.ImportFrom) and child.module and child.level == 0:
+                found.append((child.module, child.lineno, in_function))
+            visit(child, inner)
+
+    visit(tree, False)
+    return found
+
+
+def _allowed(importer: str, imported: str) -> bool:
+    top = imported.split(".")[0]
+    if top not in PACKAGES:
+        return True
+    own = importer.split(".")[0]
+    if own == "sonar":
+        return top == "sonar"
+    if own == "features":
+        return top in ("sonar", "features")
+    if own == "datasets":
+        return top in ("sonar", "datasets") or imported == "features.geometry"
+    # slam: anything below it, and its own layers downwards
+    if top != "slam":
+        return True
+    parts, target = importer.split("."), imported.split(".")
+    if len(parts) < 2 or len(target) < 2:
+        return len(target) >= 2  # slam/__init__ may import nothing; nobody imports bare slam
+    mine, theirs = parts[1], target[1]
+    if mine not in SLAM_LAYERS or theirs not in SLAM_LAYERS:
+        return False
+    return SLAM_LAYERS.index(theirs) <= SLAM_LAYERS.index(mine)
+
+
+MODULES = _modules()
+
+
+def test_every_package_module_is_in_a_layer():
+    names = [n for n, _ in MODULES]
+    assert len(names) > 60
+    slam_modules = [n for n in names if n.startswith("slam.")]
+    assert all(n.split(".")[1] in SLAM_LAYERS for n in slam_modules), slam_modules
+
+
+@pytest.mark.parametrize("name,path", MODULES, ids=[n for n, _ in MODULES])
+def test_imports_flow_one_way_and_none_hides_in_a_function(name: str, path: Path):
+    lines = path.read_text().splitlines()
+    for imported, lineno, in_function in _imports(path):
+        where = f"{path.relative_to(ROOT)}:{lineno}"
+        assert _allowed(name, imported), f"{where}: {name} must not import {imported}"
+        if in_function:
+            project = imported.split(".")[0] in PACKAGES
+            assert not project, f"{where}: import of {imported} inside a function hides an edge"
+            assert "#" in lines[lineno - 1], f"{where}: a lazy import says why on its line"
+
+
+def test_the_rules_catch_a_wrong_edge():
+    assert not _allowed("sonar.store", "features.geometry")
+    assert not _allowed("features.extractor", "slam.run.presets")
+    assert not _allowed("datasets.source", "features.extractor")
+    assert not _allowed("slam.model.motion", "slam.backends.ekf")
+    assert not _allowed("slam.eval.truth", "slam.run.sources")
+    assert _allowed("slam.run.run", "slam.eval.ate") and _allowed("datasets.marina", "numpy")
