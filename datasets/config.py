@@ -86,9 +86,8 @@ class NoiseConfig:
 
 #: What turns the estimators' heading between AHRS samples (``[motion] yaw_rate_source``):
 #: ``"gyro"``, the logged yaw rate; ``"heading"``, the change of the AHRS heading since its
-#: previous sample (causal). The marina's MTi gyro has a bias of ~0.6 deg/s (its integral drifts
-#: off the MTi's own heading by that much), which the estimators do not model: with it, the
-#: closed-loop heading ran ~10 deg off the compass between heading updates.
+#: previous sample (causal). A gyro bias the estimators do not model (the marina's MTi, README
+#: "Calibration") runs the closed-loop heading off the compass between heading updates.
 YAW_RATE_SOURCES = ("gyro", "heading")
 
 
@@ -132,15 +131,14 @@ MARINA_CONFIG = DatasetConfig(
     ),
     ahrs_mounting=Mounting(
         yaw_rad=math.radians(-114.5),
-        source="DVL compass minus MTi yaw, constant term of a fit over heading (its 5.3 deg"
-        " deviation averages out over headings, not over the run's time), minus 90 deg of DVL"
-        " mount (GPS-free, sonarslam calibrate --ahrs)",
+        source="DVL compass minus MTi yaw, constant term of a fit over heading (its deviation"
+        " averages out over headings, not over the run's time), minus 90 deg of DVL mount"
+        " (GPS-free, sonarslam calibrate --ahrs)",
     ),
-    # dvl_sigma_mps is the drift-causing part: the DVL's scatter over 60 s (successive
-    # differences) has median 0.15 m/s while the DR drifts as if 0.05 (the rest is the
-    # vehicle's wobble). Nominal scatter 0.2: the 99th percentile of the first 2,600 s. In the
-    # last ~700 s (bottom at 1.3 m) it is 0.35, white to a minute: that excess is added
-    # (slam.model.motion.dvl_sample_sigma; sonarslam info prints the quantiles; GPS-free).
+    # dvl_sigma_mps is the drift-causing part of the DVL's error (most of its scatter is the
+    # vehicle's wobble); the nominal scatter is its usual level, the excess over it is added
+    # (slam.model.noise.dvl_sample_sigma; sonarslam info prints the quantiles; GPS-free; the
+    # figures are in README.md, "Calibration").
     noise=NoiseConfig(
         dvl_sigma_mps=0.05,
         ahrs_sigma_deg=2.0,
@@ -149,7 +147,7 @@ MARINA_CONFIG = DatasetConfig(
         dvl_nominal_scatter_mps=0.2,
     ),
     keyframe_scan_direction=-1,
-    # map entropy over DR poses, 60 s windows: 384.4 at 0 s, 381.4 at 0.75 s (GPS-free)
+    # the sharpest map over dead-reckoning poses (benchmarks/marina_sonar_timing.py, GPS-free)
     sonar_time_offset_s=0.75,
     yaw_rate_source="heading",
     # the MTi yaw's hard-iron deviation, from the sonar lines of EKF closed loops (GPS-free):

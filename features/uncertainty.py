@@ -53,14 +53,10 @@ echo by ``c`` along its bearing, its residual by ``a_i c`` with ``a_i = cos(thet
     P <- P + sigma_c^2 g g^T,   g = P J^T W a
 
 (the line moves by about ``c`` in ``rho``). The extractor's default is ``sigma_c = bin_size /
-sqrt(12)`` (the wall is known to be somewhere in its bin, uniformly). Measured on the simulator
-with truth poses (``benchmarks/extractor_consistency.py``): the peak bin of a raw echo lies
-0.1-0.3 bins beyond the wall (0.1 with the harbour's 10 cm bins, 0.2-0.3 with the pool's 1.2 cm
-bins, whose echo tail is longer in bins), and the fitted ``rho`` of the well-seen walls is biased
-by about +0.1 bin. Without the term the mean NEES of the fit is 11.6 over 800 pool lines and 3.4
-over 524 harbour lines (95 % bands about [1.85, 2.15]); with it, 1.87 (consistent) and 1.27
-(conservative: the harbour's offset, 0.1 bin, is smaller than the prior's 0.29 bin; a calibrated
-``sigma_c`` of 1 cm gives 2.20).
+sqrt(12)`` (the wall is known to be somewhere in its bin, uniformly): the peak bin of a raw echo
+lies a fraction of a bin beyond the wall, which does not average down with the number of
+voters. ``benchmarks/extractor_consistency.py`` measures the NEES with and without the term
+(README, "Results on the simulator").
 
 Optionally the pose uncertainty is added: the relative pose of each beam with respect to R is
 taken as a random walk backwards from R, ``Cov(d_k, d_l) = Q(t_max(k, l))`` with

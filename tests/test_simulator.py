@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from datasets.config import load_dataset_config
+from datasets.geodesy import ddmm_to_degrees, degrees_to_ddmm
 from datasets.islog import read_is_log
 from datasets.logfile import read_table
 from datasets.records import Attitude, DvlVelocity, GpsFix
@@ -31,7 +32,7 @@ from datasets.simulator import (
 )
 from datasets.simulator.msis import transducer_angles
 from datasets.simulator.world import HARBOUR_ROTATION_RAD, clearance_m, inside, rotate_points
-from datasets.simulator.writer import TRUTH_SCHEMA, from_ddmm, to_ddmm
+from datasets.simulator.writer import TRUTH_SCHEMA
 from features.geometry import wrap_angle
 from features.pose_source import PoseSource
 from sonar.beam import Mounting, SonarBeam, SonarHead
@@ -368,7 +369,7 @@ def test_gps_first_fix_and_local_frame(harbour_dir: Path, harbour_sim) -> None:
     truth = json.loads((harbour_dir / "truth.json").read_text())
     g = read_table(harbour_dir / "sim_harbour_1_DGPS.log", n_columns=10).data
     o = truth["geodetic_origin"]
-    lat, lon = from_ddmm(g[:, 1]), from_ddmm(g[:, 2])
+    lat, lon = ddmm_to_degrees(g[:, 1]), ddmm_to_degrees(g[:, 2])
     e, n, _ = pymap3d.geodetic2enu(lat, lon, 0.0, o["lat_deg"], o["lon_deg"], o["h_m"])
     enu = np.column_stack([e, n])
     np.testing.assert_allclose(enu[0], truth["first_fix_enu_m"], atol=1e-6)
@@ -386,7 +387,7 @@ def test_gps_first_fix_and_local_frame(harbour_dir: Path, harbour_sim) -> None:
     )
     # ddmm.mmmmmm: the marina's origin writes as 4212.225 / 306.2832
     np.testing.assert_allclose(
-        to_ddmm(np.array([o["lat_deg"], o["lon_deg"]])), [4212.225, 306.2832], atol=1e-9
+        degrees_to_ddmm(np.array([o["lat_deg"], o["lon_deg"]])), [4212.225, 306.2832], atol=1e-9
     )
 
 

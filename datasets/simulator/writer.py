@@ -37,6 +37,7 @@ import numpy as np
 import pymap3d
 
 from datasets.config import dump_dataset_config
+from datasets.geodesy import ddmm_to_degrees, degrees_to_ddmm
 from datasets.islog import write_is_log
 from datasets.simulator.scenario import Simulation, make_scenario, simulate_records
 from features.geometry import FloatArray
@@ -44,8 +45,6 @@ from sonar.beam import Mounting
 
 __all__ = [
     "TRUTH_SCHEMA",
-    "to_ddmm",
-    "from_ddmm",
     "first_fix_enu_m",
     "write_dataset",
     "simulate",
@@ -53,20 +52,6 @@ __all__ = [
 
 TRUTH_SCHEMA = "sonarslam.simulator.truth/1"
 _CRLF = "\r\n"
-
-
-def to_ddmm(angle_deg: np.ndarray) -> FloatArray:
-    """Degrees to the NMEA-like ``ddmm.mmmm`` number (degrees * 100 + minutes), sign kept."""
-    a = np.asarray(angle_deg, dtype=np.float64)
-    whole = np.trunc(np.abs(a))
-    return np.asarray(np.sign(a) * (whole * 100.0 + (np.abs(a) - whole) * 60.0))
-
-
-def from_ddmm(value: np.ndarray) -> FloatArray:
-    """Inverse of :func:`to_ddmm`."""
-    v = np.asarray(value, dtype=np.float64)
-    whole = np.trunc(np.abs(v) / 100.0)
-    return np.asarray(np.sign(v) * (whole + (np.abs(v) - whole * 100.0) / 60.0))
 
 
 def _write_lines(path: Path, lines: list[str], newline: str) -> None:
@@ -145,8 +130,8 @@ def _write_mti(path: Path, sim: Simulation) -> None:
 
 def _gps_ddmm(sim: Simulation) -> tuple[FloatArray, FloatArray]:
     """Latitude and longitude as written (ddmm with 6 decimals of minutes)."""
-    lat = np.round(to_ddmm(sim.gps.lat_deg), 6)
-    lon = np.round(to_ddmm(sim.gps.lon_deg), 6)
+    lat = np.round(degrees_to_ddmm(sim.gps.lat_deg), 6)
+    lon = np.round(degrees_to_ddmm(sim.gps.lon_deg), 6)
     return lat, lon
 
 
@@ -197,7 +182,12 @@ def first_fix_enu_m(sim: Simulation) -> FloatArray:
     lat, lon = _gps_ddmm(sim)
     o = sim.scenario.origin
     e, n, _ = pymap3d.geodetic2enu(
-        float(from_ddmm(lat[0])), float(from_ddmm(lon[0])), 0.0, o.lat_deg, o.lon_deg, o.h_m
+        float(ddmm_to_degrees(lat[0])),
+        float(ddmm_to_degrees(lon[0])),
+        0.0,
+        o.lat_deg,
+        o.lon_deg,
+        o.h_m,
     )
     return np.array([float(e), float(n)])
 

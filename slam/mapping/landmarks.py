@@ -74,9 +74,7 @@ class LandmarkConfig:
     extent_margin_m : float or None
         A landmark is paired only with observations whose world segment reaches its extent
         within this margin (m), :func:`slam.mapping.association.extent_allowed`; None: no extent
-        gate. 10 m: on the marina it keeps a landmark from spanning the gap to a collinear wall
-        of the other basin (extents of 200-490 m without it); on the simulated harbours
-        precision and recall do not move.
+        gate. It keeps a landmark from spanning the gap to a collinear wall further on.
     side_gate : bool
         A landmark (or tentative line) is paired only with observations made from the side of
         its line it was first seen from (:func:`slam.model.lines.sonar_side`).

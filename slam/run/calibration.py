@@ -1,10 +1,10 @@
-"""Sonar mounting calibration by map sharpness, with any pose source (GPS-free with dead reckoning).
+"""GPS-free calibrations: the sonar's mounting yaw by map sharpness, the AHRS mounting yaw from the
+DVL's own compass, the AHRS heading's deviation from the sonar lines of closed loops.
 
 The sonar's yaw in the body frame is the one that makes the projected scans sharpest: the sum,
 over time windows short enough for dead reckoning to drift little, of the Shannon entropy of the
-2D histogram of the projected bins. The marina README's finding (93 deg from the MTi yaw, with
-GPS poses) is the same search with GPS poses; here the default is dead reckoning, so the
-ground truth is not used to calibrate.
+2D histogram of the projected bins. The same search with GPS poses is a diagnostic only; the
+default is dead reckoning, so the ground truth is not used to calibrate.
 """
 
 from __future__ import annotations
@@ -159,8 +159,7 @@ def calibrate_ahrs_yaw(dataset: Dataset, harmonics: int = 1) -> CompassFit:
     errs by ``B sin psi + C cos psi`` around the heading ``psi``, which averages to zero over
     *all headings*, not over the run's time (a run spends unequal time at each heading). So the
     constant is fitted together with ``harmonics`` harmonics of the AHRS heading, least
-    squares over every DVL row: on the marina the constant is 24.50 deg with a 5.3 deg
-    deviation, where the time mean is 25.31 deg.
+    squares over every DVL row (the marina's figures: README, "Calibration").
 
     Parameters
     ----------
