@@ -441,24 +441,42 @@ def test_between_nodes_the_pose_is_the_ekf_prediction():
 # -- the pose source ---------------------------------------------------------------------------
 
 
+def test_the_odometry_chain_interpolates_its_steps_and_holds_past_its_ends():
+    from slam.model.motion import OdometryChain
+
+    chain = OdometryChain(0.0, capacity=2)  # forces buffer growth
+    for k in range(1, 50):
+        chain.append(0.1 * k, np.array([0.1, 0.0, 0.02]), 0.001)
+    assert len(chain) == 50
+    odo = chain.at(chain.t_s)
+    np.testing.assert_allclose(odo[1], [0.1, 0.0, 0.02], atol=1e-12)
+    mid = chain.at([0.15])[0]
+    np.testing.assert_allclose(mid, 0.5 * (odo[1] + odo[2]), atol=1e-12)
+    np.testing.assert_allclose(chain.at([-5.0, 99.0]), odo[[0, -1]], atol=1e-12)
+    assert chain.variance_at(0.25) == pytest.approx(0.0025, rel=1e-9)
+    np.testing.assert_allclose(chain.now, odo[-1], atol=1e-12)
+    chain.append(4.9, np.zeros(3))  # records may share a time: a step of zero
+    assert chain.variance_at(4.9) == pytest.approx(0.049, rel=1e-9)
+    np.testing.assert_allclose(chain.at([4.9])[0], odo[-1], atol=1e-12)
+
+
 def test_smoothed_poses_pass_through_nodes_and_follow_the_odometry():
     # odometry: a constant-rate arc, sampled every 0.1 s, in its own frame
     t = np.arange(0.0, 10.0 + 1e-9, 0.1)
     odo = np.column_stack([np.sin(0.2 * t) / 0.2, (1 - np.cos(0.2 * t)) / 0.2, 0.2 * t])
-    chain = np.column_stack([t, odo])
     node_idx = np.array([0, 40, 70])
     node_t = t[node_idx]
     wTo = np.array([5.0, -3.0, 0.7])  # the world pose of the odometry frame
     agree = compose(wTo, odo[node_idx])
     # 1. nodes that agree with the odometry: the pose source is the odometry itself
-    out = smoothed_poses(t, node_t, agree, odo[node_idx], chain)
+    out = smoothed_poses(t, node_t, agree, odo[node_idx], odo)
     expected = compose(wTo, odo)
     assert np.allclose(out[:, :2], expected[:, :2], atol=1e-9)
     assert np.allclose(wrap_angle(out[:, 2] - expected[:, 2]), 0.0, atol=1e-9)
     # 2. nodes moved by the smoother: through each node, the correction blended in between
     shift = np.array([[0.0, 0.0, 0.0], [0.4, -0.2, 0.02], [1.0, 0.3, -0.03]])
     nodes = agree + shift
-    out = smoothed_poses(t, node_t, nodes, odo[node_idx], chain)
+    out = smoothed_poses(t, node_t, nodes, odo[node_idx], odo)
     assert np.allclose(out[node_idx], nodes, atol=1e-9)
     mid = 55  # 15/30 of the way from node 1 to node 2
     carried_1 = compose(nodes[1], between(odo[40], odo[mid]))
@@ -466,7 +484,7 @@ def test_smoothed_poses_pass_through_nodes_and_follow_the_odometry():
     blend = carried_1 + 0.5 * (carried_2 - carried_1)
     assert np.allclose(out[mid], blend, atol=1e-9)
     # 3. past the newest node: that node carried by the odometry
-    late = smoothed_poses([9.5], node_t, nodes, odo[node_idx], chain)[0]
+    late = smoothed_poses([9.5], node_t, nodes, odo[node_idx], odo[[95]])[0]
     assert np.allclose(late, compose(nodes[2], between(odo[70], odo[95])), atol=1e-9)
 
 

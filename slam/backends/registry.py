@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 from features.geometry import FloatArray
 from slam.backends.base import Backend, BackendConfig
@@ -45,26 +46,32 @@ class BackendSpec:
     summary: str
 
 
-def _make_ekf(
-    t0_s: float, wTb0: FloatArray, P0: FloatArray, mounting: Mounting, config: BackendConfig
-) -> Backend:
-    if not isinstance(config, EkfConfig):
-        raise TypeError(f"the EKF takes an EkfConfig, got {type(config).__name__}")
-    return LineEkf(t0_s, wTb0, P0, mounting, config)
+def _maker(
+    backend: Callable[[float, FloatArray, FloatArray, Mounting, Any], Backend],
+    config_type: type[BackendConfig],
+) -> Callable[[float, FloatArray, FloatArray, Mounting, BackendConfig], Backend]:
+    """A ``make`` that refuses a configuration of another back end."""
 
+    def make(
+        t0_s: float, wTb0: FloatArray, P0: FloatArray, mounting: Mounting, config: BackendConfig
+    ) -> Backend:
+        if not isinstance(config, config_type):
+            raise TypeError(f"{config_type.__name__} expected, got {type(config).__name__}")
+        return backend(t0_s, wTb0, P0, mounting, config)
 
-def _make_isam2(
-    t0_s: float, wTb0: FloatArray, P0: FloatArray, mounting: Mounting, config: BackendConfig
-) -> Backend:
-    if not isinstance(config, GraphConfig):
-        raise TypeError(f"iSAM2 takes a GraphConfig, got {type(config).__name__}")
-    return LineIsam2(t0_s, wTb0, P0, mounting, config)
+    return make
 
 
 BACKENDS: dict[str, BackendSpec] = {
-    "ekf": BackendSpec("ekf", EkfConfig, _make_ekf, False, "EKF-SLAM with line landmarks"),
+    "ekf": BackendSpec(
+        "ekf", EkfConfig, _maker(LineEkf, EkfConfig), False, "EKF-SLAM with line landmarks"
+    ),
     "isam2": BackendSpec(
-        "isam2", GraphConfig, _make_isam2, True, "GTSAM iSAM2 factor graph with line landmarks"
+        "isam2",
+        GraphConfig,
+        _maker(LineIsam2, GraphConfig),
+        True,
+        "GTSAM iSAM2 factor graph with line landmarks",
     ),
 }
 

@@ -6,9 +6,9 @@ import argparse
 import math
 
 from datasets.source import open_dataset
-from slam.cli.common import EPILOG, Subparsers
+from slam.cli.common import EPILOG, Subparsers, add_poses, add_source
 from slam.run.calibration import calibrate_ahrs_deviation, calibrate_ahrs_yaw, calibrate_sonar_yaw
-from slam.run.sources import POSE_SOURCES, pose_source_by_name
+from slam.run.sources import pose_source_by_name
 
 
 def add_parser(sub: Subparsers) -> None:
@@ -17,13 +17,8 @@ def add_parser(sub: Subparsers) -> None:
         help="sonar mounting yaw by map sharpness; --ahrs: AHRS yaw from the DVL compass",
         epilog=EPILOG,
     )
-    p.add_argument("source", help="dataset directory or 'marina'")
-    p.add_argument(
-        "--poses",
-        default="dr",
-        choices=sorted(POSE_SOURCES),
-        help="pose source (default dr: GPS-free)",
-    )
+    add_source(p)
+    add_poses(p, "dr", ": GPS-free")
     p.add_argument("--window", type=float, default=120.0, help="entropy window (s, default 120)")
     p.add_argument(
         "--ahrs",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from slam.cli.common import EPILOG, Subparsers
+from slam.cli.common import EPILOG, Subparsers, add_quiet
 from slam.run.demo import main_job
 from slam.run.run import summary_line
 
@@ -17,7 +17,7 @@ def add_parser(sub: Subparsers) -> None:
         epilog=EPILOG,
     )
     p.add_argument("--out", default="out", help="output directory (default out)")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_quiet(p)
     p.set_defaults(func=command)
 
 

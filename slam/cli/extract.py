@@ -5,23 +5,17 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from slam.cli.common import EPILOG, Subparsers
+from slam.cli.common import EPILOG, Subparsers, add_poses, add_quiet, add_source
 from slam.run.extraction import extract
 from slam.run.presets import EXTRACTOR_PRESETS
-from slam.run.sources import POSE_SOURCES
 
 
 def add_parser(sub: Subparsers) -> None:
     p = sub.add_parser(
         "extract", help="extract line features with a pose source and draw them", epilog=EPILOG
     )
-    p.add_argument("source", help="dataset directory or 'marina'")
-    p.add_argument(
-        "--poses",
-        default="gps",
-        choices=sorted(POSE_SOURCES),
-        help="pose source: gps (GPS+AHRS, default), dr, truth (simulated only)",
-    )
+    add_source(p)
+    add_poses(p, "gps")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument(
         "--config", default=None, help="TOML of extractor settings over the preset ([extractor])"
@@ -33,7 +27,7 @@ def add_parser(sub: Subparsers) -> None:
         help="extractor preset (slam/run/presets.py; default: marina for thresholded beams, "
         "default for raw ones, as the closed loops)",
     )
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_quiet(p)
     p.set_defaults(func=command)
 
 

@@ -6,13 +6,13 @@ import argparse
 import math
 
 from datasets.source import open_dataset
-from slam.cli.common import EPILOG, Subparsers
+from slam.cli.common import EPILOG, Subparsers, add_source
 from slam.run.sources import dvl_quality
 
 
 def add_parser(sub: Subparsers) -> None:
     p = sub.add_parser("info", help="what a dataset holds", epilog=EPILOG)
-    p.add_argument("source", help="dataset directory or 'marina'")
+    add_source(p)
     p.set_defaults(func=command)
 
 

@@ -7,23 +7,18 @@ from pathlib import Path
 
 from datasets.source import open_dataset
 from features.projection import project_beams
-from slam.cli.common import EPILOG, Subparsers
+from slam.cli.common import EPILOG, Subparsers, add_poses, add_source
 from slam.io.plots import plot_scans
 from slam.run.presets import map_min_intensity
-from slam.run.sources import POSE_SOURCES, pose_source_by_name
+from slam.run.sources import pose_source_by_name
 
 
 def add_parser(sub: Subparsers) -> None:
     p = sub.add_parser(
         "plot-scans", help="project the sonar bins into the world and draw them", epilog=EPILOG
     )
-    p.add_argument("source", help="dataset directory or 'marina'")
-    p.add_argument(
-        "--poses",
-        default="gps",
-        choices=sorted(POSE_SOURCES),
-        help="pose source: gps (GPS+AHRS), dr, truth (simulated only)",
-    )
+    add_source(p)
+    add_poses(p, "gps")
     p.add_argument("--out", default="out/scans.png", help="PNG file (default out/scans.png)")
     p.add_argument(
         "--min-intensity",

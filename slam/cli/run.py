@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import argparse
 
-from slam.cli.common import EPILOG, Subparsers
+from slam.cli.common import EPILOG, Subparsers, add_quiet, add_source
 from slam.run.presets import parse_settings
 from slam.run.run import backend_names, run, summary_line
 
 
 def add_parser(sub: Subparsers) -> None:
     p = sub.add_parser("run", help="run a back end and evaluate it against GPS", epilog=EPILOG)
-    p.add_argument("source", help="dataset directory or 'marina'")
+    add_source(p)
     p.add_argument(
         "--backend",
         default="dr",
@@ -19,7 +19,7 @@ def add_parser(sub: Subparsers) -> None:
         help="dr (dead reckoning), gps (GPS+AHRS), ekf, isam2 (default dr)",
     )
     p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_quiet(p)
     p.add_argument(
         "--batch",
         action="store_true",

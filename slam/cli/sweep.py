@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from slam.cli.common import EPILOG, Subparsers
+from slam.cli.common import EPILOG, Subparsers, add_quiet
 from slam.run.sweep import format_summary, load_grid_toml, parse_grid, parse_seeds, sweep
 
 
@@ -43,7 +43,7 @@ def add_parser(sub: Subparsers) -> None:
         help="address of a Dask scheduler (default: a local cluster; 'synchronous': no Dask)",
     )
     p.add_argument("--workers", type=int, default=2, help="local cluster processes (default 2)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_quiet(p)
     p.set_defaults(func=command)
 
 

@@ -208,56 +208,73 @@ class RelativeMotion:
 class OdometryChain:
     """The odometry ``O(t)``: the relative motions of a run chained in their own frame.
 
-    Rows ``(t_s, x_m, y_m, yaw_rad)`` with the yaw unwrapped, and the position variance per
-    axis accumulated from the velocity noise (isotropic, so frame-free). Growing buffers
-    (amortised doubling); a query interpolates only over the rows spanning it (a sector of
-    beams), so it costs the same at the end of a long run as at its start.
+    ``(x_m, y_m, yaw_rad)`` at every step's time with the yaw unwrapped, and the position
+    variance per axis accumulated from the velocity noise (isotropic, so frame-free). Growing
+    contiguous buffers (amortised doubling); a query searches the times and interpolates only
+    over the steps spanning it (a sector of beams), so it costs the same at the end of a long
+    run as at its start.
     """
 
     def __init__(self, t0_s: float, capacity: int = 4096) -> None:
-        self._rows = np.empty((max(capacity, 1), 4))  # t, x, y, unwrapped yaw
-        self._var = np.empty(max(capacity, 1))
-        self._rows[0] = (t0_s, 0.0, 0.0, 0.0)
+        cap = max(capacity, 1)
+        self._t = np.empty(cap)
+        self._odo = np.empty((cap, 3))  # x, y, unwrapped yaw
+        self._var = np.empty(cap)
+        self._t[0] = t0_s
+        self._odo[0] = 0.0
         self._var[0] = 0.0
         self._n = 1
         self._x = self._y = self._yaw = self._v = 0.0
 
+    def __len__(self) -> int:
+        return self._n
+
     def append(self, t_s: float, bTb_next: FloatArray, var_step_m2: float = 0.0) -> None:
         """Chain one step of relative motion ``(dx_b, dy_b, dyaw)`` ending at ``t_s``."""
-        if self._n == self._var.size:
-            self._rows = np.concatenate([self._rows, np.empty_like(self._rows)])
+        if self._n == self._t.size:
+            self._t = np.concatenate([self._t, np.empty_like(self._t)])
+            self._odo = np.concatenate([self._odo, np.empty_like(self._odo)])
             self._var = np.concatenate([self._var, np.empty_like(self._var)])
         dx, dy = step_displacement(self._yaw, float(bTb_next[0]), float(bTb_next[1]))
         self._x += dx
         self._y += dy
         self._yaw += float(bTb_next[2])
         self._v += var_step_m2
-        self._rows[self._n] = (t_s, self._x, self._y, self._yaw)
-        self._var[self._n] = self._v
+        n = self._n
+        self._t[n] = t_s
+        self._odo[n] = (self._x, self._y, self._yaw)
+        self._var[n] = self._v
         self._n += 1
 
     @property
-    def rows(self) -> FloatArray:
-        """``(t_s, x_m, y_m, yaw_rad)`` of every step so far, yaw unwrapped, shape (K, 4)."""
-        return self._rows[: self._n]
+    def t_s(self) -> FloatArray:
+        """Times of the chain's steps (Unix s), shape (K,)."""
+        return self._t[: self._n]
 
     @property
     def now(self) -> FloatArray:
         """The chain's newest ``(x_m, y_m, yaw_rad)``, yaw unwrapped."""
         return np.array([self._x, self._y, self._yaw])
 
-    def at(self, t_s: FloatArray) -> FloatArray:
+    def _span(self, t_s: FloatArray) -> slice:
+        """The steps that bracket the query times, never empty (steps may share a time)."""
+        t = self._t[: self._n]
+        lo = max(int(np.searchsorted(t, t_s.min(), side="left")) - 1, 0)
+        hi = min(int(np.searchsorted(t, t_s.max(), side="right")) + 1, self._n)
+        return slice(lo, hi)
+
+    def at(self, t_s: npt.ArrayLike) -> FloatArray:
         """``O(t)`` interpolated linearly (held past the ends), shape (M, 3), yaw unwrapped."""
-        rows = self.rows
-        t = rows[:, 0]
-        lo = max(int(np.searchsorted(t, t_s.min(), side="right")) - 1, 0)
-        hi = min(int(np.searchsorted(t, t_s.max(), side="left")) + 1, self._n)
-        part = rows[lo:hi]
-        return np.column_stack([np.interp(t_s, part[:, 0], part[:, k]) for k in (1, 2, 3)])
+        tq = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+        part = self._span(tq)
+        t, odo = self._t[part], self._odo[part]
+        return np.column_stack([np.interp(tq, t, odo[:, k]) for k in range(3)])
 
     def variance_at(self, t_s: float) -> float:
         """Accumulated position variance per axis at ``t_s`` (m^2), interpolated."""
-        return float(np.interp(t_s, self._rows[: self._n, 0], self._var[: self._n]))
+        tq = np.array([t_s], dtype=np.float64)
+        part = self._span(tq)
+        return float(np.interp(t_s, self._t[part], self._var[part]))
 
 
 @dataclass(frozen=True)

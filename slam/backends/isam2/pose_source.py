@@ -100,7 +100,7 @@ def smoothed_poses(
     node_t_s: FloatArray,
     node_wTb: FloatArray,
     node_odo: FloatArray,
-    chain: FloatArray,
+    odo_t: FloatArray,
 ) -> FloatArray:
     """Poses between smoothed nodes, shaped by the odometry (the pose source's rule).
 
@@ -120,19 +120,16 @@ def smoothed_poses(
         Smoothed node poses.
     node_odo : ndarray, shape (N, 3)
         Odometry chain ``O`` at the node times, yaw unwrapped.
-    chain : ndarray, shape (K, 4)
-        Rows ``(t_s, x, y, yaw)`` of the odometry chain in its own frame, yaw unwrapped,
-        interpolated linearly (held past its ends).
+    odo_t : ndarray, shape (M, 3)
+        The odometry chain at the query times, yaw unwrapped
+        (:meth:`slam.model.motion.OdometryChain.at`).
 
     Returns
     -------
     ndarray, shape (M, 3)
     """
     t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
-    # only the stretch of the chain around the queries (it grows with every record)
-    lo, hi = np.searchsorted(chain[:, 0], [t.min(), t.max()])
-    part = chain[max(lo - 1, 0) : hi + 1]
-    o_t = np.column_stack([np.interp(t, part[:, 0], part[:, c]) for c in (1, 2, 3)])
+    o_t = np.asarray(odo_t, dtype=np.float64).reshape(-1, 3)
     n = node_t_s.size
     i = np.clip(np.searchsorted(node_t_s, t, side="right") - 1, 0, n - 1)
     j = np.minimum(i + 1, n - 1)
@@ -178,7 +175,8 @@ class SmoothedPoseSource:
         """Body poses ``wTb`` at ``t_s`` (Unix s), shape (N, 3)."""
         self._refresh()
         n = self.nodes
-        return smoothed_poses(t_s, n.t_s, n.poses, n.odo, self.chain.rows)
+        t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+        return smoothed_poses(t, n.t_s, n.poses, n.odo, self.chain.at(t))
 
     def covariance(self, t_s: float) -> FloatArray | None:
         """The filtered covariance at ``t_s``: the current one past the newest optimised node,
