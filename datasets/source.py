@@ -63,6 +63,13 @@ class Dataset:
             min(float(self.dvl.t[-1]), float(self.attitude.t[-1])),
         )
 
+    @property
+    def sonar_span_s(self) -> tuple[float, float] | None:
+        """First and last sonar beam inside :attr:`nav_span_s` (Unix s), None without beams
+        there: where line features can correct the navigation."""
+        beams = self.nav_beams()
+        return (float(beams[0].t), float(beams[-1].t)) if beams else None
+
     def nav_beams(self) -> list[SonarBeam]:
         """The beams inside :attr:`nav_span_s` (the marina sonar starts ~183 s earlier)."""
         t0, t1 = self.nav_span_s

@@ -76,6 +76,13 @@ def test_run_dr_writes_what_it_measured(short_harbour, tmp_path):
     ds = open_dataset(short_harbour)
     expected = ate_against_gps(dead_reckoning_trajectory(ds), ds.gps)
     assert metrics["ate_mean_m"] == pytest.approx(expected.ate_mean_m, rel=1e-9)
+    # the sonar span (first to last beam) beside the whole run; the simulator's truth too
+    span = ds.sonar_span_s
+    assert metrics["sonar_span_s"] == pytest.approx(list(span), abs=1e-9)
+    sonar = ate_against_gps(dead_reckoning_trajectory(ds), ds.gps, span)
+    assert metrics["ate_sonar_mean_m"] == pytest.approx(sonar.ate_mean_m, rel=1e-9)
+    assert metrics["ate_sonar_n"] <= metrics["ate_n"]
+    assert 0.0 < metrics["ate_truth_aligned_mean_m"] <= metrics["ate_truth_mean_m"]
     # the TUM file holds the same trajectory (to the file's precision)
     tum = read_tum(out / "trajectory.tum")
     dr = dead_reckoning_trajectory(ds)

@@ -296,3 +296,26 @@ def test_association_scores_collinear_walls_are_one_line_and_seeds_are_not_misse
     assert s.precision == pytest.approx(1.0)
     assert s.n_true_pairs == 18 and s.recall == pytest.approx(17 / 18)
     assert s.seed_precision == pytest.approx(0.5)
+
+
+def test_ate_over_a_span_and_against_the_truth_aligned_or_not():
+    """The sonar-span ATE is the ATE of the fixes inside the span only; against the truth, a
+    rigidly moved copy of the truth has the move's error, and none once aligned."""
+    from slam.eval.ate import ate_against_truth
+
+    t = np.arange(0.0, 100.0, 1.0)
+    truth = Trajectory(t, np.column_stack([np.cos(0.05 * t) * 20, np.sin(0.05 * t) * 10, 0 * t]))
+    err = np.where(t < 50.0, 1.0, 3.0)  # 1 m off in the first half, 3 m in the second
+    est = Trajectory(t, truth.poses_wTb + np.column_stack([err, 0 * t, 0 * t]))
+    gps = GpsSeries(t, truth.poses_wTb[:, :2].copy(), (0.0, 0.0))
+    assert ate_against_gps(est, gps).ate_mean_m == pytest.approx(2.0, abs=1e-12)
+    first = ate_against_gps(est, gps, span_s=(0.0, 49.0))
+    assert (first.ate_mean_m, first.ate_n) == (pytest.approx(1.0, abs=1e-12), 50)
+    assert first.as_dict("ate_sonar")["ate_sonar_mean_m"] == first.ate_mean_m
+    with pytest.raises(ValueError, match="no reference"):
+        ate_against_gps(est, gps, span_s=(200.0, 300.0))
+    c, s = np.cos(0.1), np.sin(0.1)
+    xy = truth.poses_wTb[:, :2] @ np.array([[c, s], [-s, c]]) + [5.0, -2.0]
+    moved = Trajectory(t, np.column_stack([xy, truth.poses_wTb[:, 2] + 0.1]))
+    assert ate_against_truth(moved, truth).ate_mean_m > 3.0
+    assert ate_against_truth(moved, truth, align=True).ate_max_m == pytest.approx(0.0, abs=1e-9)

@@ -1,7 +1,15 @@
-"""Absolute trajectory error by the protocol of Mallios et al. 2014 (the marina's published table).
+"""Absolute trajectory error.
 
-At every GPS fix inside the trajectory's time span, the distance between the GPS position and
-the estimate interpolated at that time; no alignment of any kind.
+* Against GPS, by the protocol of Mallios et al. 2014 (the marina's published table): at every GPS
+  fix inside the trajectory's time span, the distance between the GPS position and the estimate
+  interpolated at that time; no alignment of any kind (:func:`ate_against_gps`).
+* Against the simulator's truth: the same at every true pose inside the span, optionally after
+  a rigid alignment of the estimate onto the truth (:func:`ate_against_truth`, Umeyama 1991 by
+  evo), which leaves the shape error only.
+
+Either can be restricted to a time span: the **sonar span** (first to last sonar beam inside the
+navigation span, :attr:`datasets.source.Dataset.sonar_span_s`) is where line landmarks can act;
+after the sonar stops every method is dead reckoning.
 """
 
 from __future__ import annotations
@@ -9,17 +17,18 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from evo.core.geometry import umeyama_alignment
 
 from datasets.records import GpsSeries
 from features.geometry import FloatArray
 from slam.io.trajectory import Trajectory
 
-__all__ = ["AteResult", "ate_against_gps", "ate_errors"]
+__all__ = ["AteResult", "ate_against_gps", "ate_against_truth", "ate_errors", "ate_of_errors"]
 
 
 @dataclass(frozen=True)
 class AteResult:
-    """ATE statistics (m) over ``n`` GPS fixes."""
+    """ATE statistics (m) over ``n`` reference positions."""
 
     ate_mean_m: float
     ate_sd_m: float
@@ -28,23 +37,35 @@ class AteResult:
     ate_rmse_m: float
     ate_n: int
 
-    def as_dict(self) -> dict[str, float | int]:
-        return asdict(self)
+    def as_dict(self, prefix: str = "ate") -> dict[str, float | int]:
+        """``{prefix}_mean_m``, ``{prefix}_sd_m``, ... (``ate_mean_m`` by default)."""
+        return {prefix + k[3:]: v for k, v in asdict(self).items()}
 
 
-def ate_errors(trajectory: Trajectory, gps: GpsSeries) -> tuple[FloatArray, FloatArray]:
-    """Times (s) and position errors (m) at the GPS fixes inside the trajectory's span."""
+def _inside(
+    t_s: FloatArray, trajectory: Trajectory, span_s: tuple[float, float] | None
+) -> np.ndarray:
     t0, t1 = trajectory.span_s
-    inside = (gps.t >= t0) & (gps.t <= t1)
+    if span_s is not None:
+        t0, t1 = max(t0, span_s[0]), min(t1, span_s[1])
+    return np.asarray((t_s >= t0) & (t_s <= t1))
+
+
+def ate_errors(
+    trajectory: Trajectory, gps: GpsSeries, span_s: tuple[float, float] | None = None
+) -> tuple[FloatArray, FloatArray]:
+    """Times (s) and position errors (m) at the GPS fixes inside the trajectory's span (and
+    inside ``span_s`` when given)."""
+    inside = _inside(gps.t, trajectory, span_s)
     est = trajectory.poses(gps.t[inside])[:, :2]
     return gps.t[inside], np.hypot(*(est - gps.en_m[inside]).T)
 
 
-def ate_against_gps(trajectory: Trajectory, gps: GpsSeries) -> AteResult:
-    """The ATE of ``trajectory`` against ``gps``; raises ValueError when no fix is inside."""
-    _, e = ate_errors(trajectory, gps)
+def ate_of_errors(errors_m: FloatArray) -> AteResult:
+    """The statistics of position errors (m); ValueError when there are none."""
+    e = np.asarray(errors_m, dtype=np.float64)
     if e.size == 0:
-        raise ValueError("no GPS fix inside the trajectory's time span")
+        raise ValueError("no reference position inside the trajectory's time span")
     return AteResult(
         ate_mean_m=float(e.mean()),
         ate_sd_m=float(e.std(ddof=1)) if e.size > 1 else 0.0,
@@ -53,3 +74,31 @@ def ate_against_gps(trajectory: Trajectory, gps: GpsSeries) -> AteResult:
         ate_rmse_m=float(np.sqrt(np.mean(e**2))),
         ate_n=int(e.size),
     )
+
+
+def ate_against_gps(
+    trajectory: Trajectory, gps: GpsSeries, span_s: tuple[float, float] | None = None
+) -> AteResult:
+    """The ATE of ``trajectory`` against ``gps`` (over ``span_s`` when given); raises
+    ValueError when no fix is inside."""
+    return ate_of_errors(ate_errors(trajectory, gps, span_s)[1])
+
+
+def ate_against_truth(
+    trajectory: Trajectory,
+    truth: Trajectory,
+    span_s: tuple[float, float] | None = None,
+    align: bool = False,
+) -> AteResult:
+    """The ATE of ``trajectory`` at the true poses inside its span (and ``span_s``).
+
+    ``align``: first a rigid (rotation and translation, no scale) least-squares alignment of
+    the estimate's positions onto the true ones (``evo.core.geometry.umeyama_alignment``).
+    """
+    inside = _inside(truth.t_s, trajectory, span_s)
+    ref = truth.poses_wTb[inside, :2]
+    est = trajectory.poses(truth.t_s[inside])[:, :2]
+    if align and est.shape[0] >= 2:
+        r, t, _ = umeyama_alignment(est.T, ref.T, False)
+        est = (r @ est.T).T + t
+    return ate_of_errors(np.hypot(*(est - ref).T))

@@ -21,8 +21,8 @@ import numpy as np
 
 from datasets.source import Dataset, open_dataset
 from slam.backends.registry import BACKENDS, backend_spec
-from slam.eval.ate import ate_against_gps
-from slam.eval.truth import association_against_truth
+from slam.eval.ate import ate_against_gps, ate_against_truth
+from slam.eval.truth import association_against_truth, truth_trajectory
 from slam.io.trajectory import Trajectory
 from slam.run.closed_loop import ClosedLoopResult, run_closed_loop
 from slam.run.outputs import write_run
@@ -98,7 +98,9 @@ def run_backend(
     Returns
     -------
     RunResult
-        ``metrics`` has ``source``, ``backend``, the ATE fields, ``wall_s`` (the estimation),
+        ``metrics`` has ``source``, ``backend``, the ATE fields over the whole navigation span
+        (``ate_*``) and over the sonar span (``ate_sonar_*``, ``sonar_span_s``), on simulated
+        data against the truth too (``ate_truth_*``, ``ate_truth_aligned_*``), ``wall_s`` (the estimation),
         ``data_s``, ``realtime_factor``, the DVL's quality and, for closed loops, the settings,
         the extractor preset, ``landmarks``, ``line_features``, ``assoc_*``, ``extractor_s``,
         ``backend_s``, ``beams``, the back end's own figures, the ATE of its other
@@ -147,6 +149,7 @@ def run_backend(
         "source": str(dataset.root),
         "backend": backend,
         **ate_against_gps(trajectory, dataset.gps).as_dict(),
+        **_span_metrics(dataset, trajectory, ""),
         "wall_s": wall_s,
         "data_s": t1 - t0,
         "realtime_factor": (t1 - t0) / wall_s if wall_s > 0 else float("inf"),
@@ -159,7 +162,36 @@ def run_backend(
         ate = ate_against_gps(tr, dataset.gps)
         metrics[f"ate_mean_{name}_m"] = ate.ate_mean_m
         metrics[f"ate_max_{name}_m"] = ate.ate_max_m
+        metrics.update(_span_metrics(dataset, tr, f"_{name}"))
     return RunResult(backend, trajectory, metrics, result, config, trajectories)
+
+
+def _span_metrics(dataset: Dataset, trajectory: Trajectory, suffix: str) -> dict[str, Any]:
+    """The ATE over the sonar span (``ate_sonar_*``, with ``sonar_span_s``) and, on simulated
+    data, against the truth over the whole run, as it is and rigidly aligned (``ate_truth_*``,
+    ``ate_truth_aligned_*``); ``suffix`` names another trajectory of the run
+    (``ate_sonar_smoothed_mean_m``)."""
+    assert dataset.gps is not None
+    out: dict[str, Any] = {}
+    span = dataset.sonar_span_s
+    inside = span is not None and bool(np.any(_in(dataset.gps.t, span, trajectory.span_s)))
+    if span is not None and inside:
+        if not suffix:
+            out["sonar_span_s"] = [span[0], span[1]]
+        out.update(ate_against_gps(trajectory, dataset.gps, span).as_dict(f"ate_sonar{suffix}"))
+    if dataset.truth is not None:
+        truth = truth_trajectory(dataset)
+        out.update(ate_against_truth(trajectory, truth).as_dict(f"ate_truth{suffix}"))
+        aligned = ate_against_truth(trajectory, truth, align=True)
+        out.update(aligned.as_dict(f"ate_truth_aligned{suffix}"))
+    return out
+
+
+def _in(t_s: np.ndarray, *spans: tuple[float, float]) -> np.ndarray:
+    keep = np.ones(t_s.shape, dtype=bool)
+    for a, b in spans:
+        keep &= (t_s >= a) & (t_s <= b)
+    return keep
 
 
 def _closed_loop_metrics(
@@ -232,10 +264,17 @@ def run(
 
 
 def summary_line(metrics: dict[str, Any]) -> str:
-    """One line of a run's figures for the terminal."""
+    """One line of a run's figures for the terminal: the sonar span first, then the whole run."""
+    m = metrics
+    sonar = ""
+    if "ate_sonar_mean_m" in m:
+        sonar = (
+            f"ATE over the sonar span mean {m['ate_sonar_mean_m']:.2f} m, max "
+            f"{m['ate_sonar_max_m']:.2f} ({m['ate_sonar_n']} fixes); whole run "
+        )
     return (
-        f"{metrics['backend']}: ATE mean {metrics['ate_mean_m']:.2f} m, sd {metrics['ate_sd_m']:.2f}, "
-        f"min {metrics['ate_min_m']:.2f}, max {metrics['ate_max_m']:.2f}, rmse {metrics['ate_rmse_m']:.2f} "
-        f"over {metrics['ate_n']} fixes; {metrics['data_s']:.0f} s of data in {metrics['wall_s']:.2f} s "
-        f"({metrics['realtime_factor']:.0f}x real time)"
+        f"{m['backend']}: {sonar}ATE mean {m['ate_mean_m']:.2f} m, sd {m['ate_sd_m']:.2f}, "
+        f"min {m['ate_min_m']:.2f}, max {m['ate_max_m']:.2f}, rmse {m['ate_rmse_m']:.2f} "
+        f"over {m['ate_n']} fixes; {m['data_s']:.0f} s of data in {m['wall_s']:.2f} s "
+        f"({m['realtime_factor']:.0f}x real time)"
     )
