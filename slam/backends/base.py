@@ -55,6 +55,13 @@ class BackendConfig(LandmarkConfig):
         absorbs the error of a GPS-free DVL/AHRS calibration.
     misalignment_sigma_deg : float
         Its prior 1-sigma (deg).
+    robust : {None, "huber", "cauchy"}
+        Robust kernel on the line observations, so that one bad line cannot drag the pose: the
+        factor graph's on the whitened residual (``gtsam.noiseModel.Robust``), the EKF's on the
+        innovation's Mahalanobis distance ``d`` (the observation's covariance divided by the
+        kernel's weight ``w(d)`` before the update: an innovation gate that bends, not breaks).
+    robust_k : float
+        The kernel's width (sigmas; Huber 1.345 is 95 % efficient on Gaussian data).
     """
 
     ahrs_white_sigma_deg: float = 1.0
@@ -63,9 +70,15 @@ class BackendConfig(LandmarkConfig):
     gyro_sigma_radps: float = 0.005
     estimate_misalignment: bool = False
     misalignment_sigma_deg: float = 5.0
+    robust: str | None = None
+    robust_k: float = 1.345
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        if self.robust not in (None, "huber", "cauchy"):
+            raise ValueError(f"robust must be None, 'huber' or 'cauchy', got {self.robust!r}")
+        if not self.robust_k > 0.0:
+            raise ValueError(f"robust_k must be > 0, got {self.robust_k}")
         if min(self.ahrs_white_sigma_deg, self.ahrs_bias_sigma_deg, self.gyro_sigma_radps) <= 0:
             raise ValueError("AHRS and gyro sigmas must be > 0")
         if not self.ahrs_period_s > 0.0:

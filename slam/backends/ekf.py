@@ -7,8 +7,9 @@ State ``x = [x, y, psi, b, delta, rho_1, theta_1, ..., rho_L, theta_L]``:
   measures ``psi + b`` (:class:`slam.backends.base.BackendConfig`);
 * ``delta``: the misalignment of the DVL velocity with the body heading (rad), a constant with
   prior ``misalignment_sigma_deg`` when ``estimate_misalignment``, else held at 0;
-* world lines ``(rho_w, theta_w)`` (:mod:`features.geometry` conventions), landmark ``j`` at
-  ``N_VEHICLE + 2 j``; kept normalised.
+* world lines ``(rho_w, theta_w)`` (:mod:`features.geometry` conventions), one per active
+  landmark (:meth:`LineEkf.index`); kept normalised. A landmark merged into another (the landmark
+  layer found them one wall) is tied to it by an exact update and leaves the state.
 
 Prediction integrates the motion model (:mod:`slam.model.motion`) on the pose block only (the
 landmarks are static, so only the pose rows and columns of P change). Updates are filterpy's
@@ -43,6 +44,7 @@ from slam.mapping.association import AssociationProblem
 from slam.mapping.landmarks import Landmark, LandmarkMap
 from slam.model.lines import line_prediction, world_observation
 from slam.model.motion import MotionStep, step_displacement
+from slam.model.noise import robust_kernel
 from sonar.beam import Mounting
 
 __all__ = ["EkfConfig", "LineEkf", "POSE", "N_VEHICLE"]
@@ -111,7 +113,9 @@ class LineEkf:
         kf.P = P
         self.kf = kf
         self.map = LandmarkMap(config, self.bTs)
-        self._first_line_w: list[FloatArray] = []  # each landmark's first estimate (FEJ)
+        self._index: dict[int, int] = {}  # landmark id -> index of its rho in the state
+        self._first_line_w: dict[int, FloatArray] = {}  # each landmark's first estimate (FEJ)
+        self._kernel = robust_kernel(config.robust, config.robust_k)
         self._pose_lin = np.zeros(3)  # the pose the vote's Jacobians are taken at (FEJ)
         self._last_ahrs_t = -np.inf
         self._own_stats = {"ahrs_updates": 0}
@@ -138,10 +142,9 @@ class LineEkf:
     def stats(self) -> dict[str, int]:
         return {**self.map.stats, **self._own_stats}
 
-    @staticmethod
-    def index(landmark_id: int) -> int:
-        """Index of landmark ``landmark_id``'s ``rho`` in the state."""
-        return N_VEHICLE + 2 * landmark_id
+    def index(self, landmark_id: int) -> int:
+        """Index of landmark ``landmark_id``'s ``rho`` in the state (active landmarks only)."""
+        return self._index[landmark_id]
 
     def landmark_line(self, landmark_id: int) -> FloatArray:
         i = self.index(landmark_id)
@@ -191,8 +194,7 @@ class LineEkf:
         n = self.kf.x.size
         self.kf.update(z, lambda _x: H, lambda _x: hx, R=R, residual=residual)
         self.kf.x[2] = wrap_angle(self.kf.x[2])
-        for j in range(len(self.map)):  # keep landmarks normalised, the covariance alike
-            i = self.index(j)
+        for i in self._index.values():  # keep landmarks normalised, the covariance alike
             if self.kf.x[i] < 0.0:
                 J = np.eye(n)
                 J[i : i + 2, i : i + 2] = FLIP_RHO
@@ -252,8 +254,8 @@ class LineEkf:
     def association_problem(
         self, z: FloatArray, R: FloatArray, lines: list[LineFeature], anchor: Any
     ) -> tuple[list[Landmark], AssociationProblem | None]:
-        """Every landmark, predicted from the whole state."""
-        cands = list(self.map.landmarks)
+        """Every active landmark, predicted from the whole state."""
+        cands = self.map.active()
         preds = [self.predict_line(lm.id) for lm in cands]
         z_hat = np.array([p[0] for p in preds]).reshape(-1, 2)
         H = np.array([p[1] for p in preds]).reshape(-1, 2, self.x.size)
@@ -262,13 +264,18 @@ class LineEkf:
         return cands, AssociationProblem(z, R, z_hat, H, self.P, allowed)
 
     def add_observations(self, pairs: list[tuple[Landmark, LineFeature]], anchor: Any) -> None:
-        """Sequential updates, each re-linearised at the state the previous one left."""
+        """Sequential updates, each re-linearised at the state the previous one left; with a
+        robust kernel each observation's covariance is divided by the kernel's weight of its
+        innovation's Mahalanobis distance (:class:`slam.backends.base.BackendConfig`)."""
         scale = self.config.line_cov_scale
         for lm, f in pairs:
             z_hat, H = self.predict_line(lm.id)
-            _, flipped = line_difference(f.z, z_hat)
+            nu, flipped = line_difference(f.z, z_hat)
             R = np.asarray(f.cov) * scale
             R = FLIP_RHO @ R @ FLIP_RHO if flipped else R
+            if self._kernel is not None:
+                d = float(np.sqrt(nu @ np.linalg.solve(H @ self.P @ H.T + R, nu)))
+                R = R / self._kernel.weight(d)
             self._update(f.z, H, z_hat, R, lambda a, b: line_difference(a, b)[0])
 
     def add_landmark(
@@ -280,7 +287,6 @@ class LineEkf:
         obs = world_observation(f, self.x[POSE], self.P[POSE, POSE], self.bTs)
         x, P = self.x, self.P
         n = x.size
-        assert n == self.index(landmark.id), "landmarks are augmented in id order"
         P_new = np.zeros((n + 2, n + 2))
         P_new[:n, :n] = P
         cross = obs.G_pose @ P[POSE, :]  # (2, n)
@@ -293,8 +299,33 @@ class LineEkf:
         kf.P = P_new
         kf.dim_x = n + 2
         kf._I = np.eye(n + 2)
-        self._first_line_w.append(obs.line_w.copy())
+        self._index[landmark.id] = n
+        self._first_line_w[landmark.id] = obs.line_w.copy()
         return 1
+
+    def landmark_covariance(self, landmark_ids: list[int]) -> FloatArray:
+        """Joint covariance of these landmarks' lines, shape (2k, 2k)."""
+        idx = np.concatenate([[self.index(j), self.index(j) + 1] for j in landmark_ids])
+        return self.P[np.ix_(idx, idx)].copy()
+
+    def merge_landmarks(self, keep: Landmark, drop: Landmark) -> None:
+        """Tie ``drop`` to ``keep`` by an exact update on their difference, then take ``drop``
+        out of the state (its information is in ``keep`` and the cross-covariances now)."""
+        ik, idr = self.index(keep.id), self.index(drop.id)
+        nu, flipped = line_difference(self.x[idr : idr + 2], self.x[ik : ik + 2])
+        H = np.zeros((2, self.x.size))
+        H[:, ik : ik + 2] = -np.eye(2)
+        H[:, idr : idr + 2] = FLIP_RHO if flipped else np.eye(2)
+        R = np.eye(2) * 1e-10
+        self._update(np.zeros(2), H, nu, R, lambda a, b: a - b)
+        keep_rows = np.r_[0:idr, idr + 2 : self.x.size]
+        kf = self.kf
+        kf.x = self.x[keep_rows].copy()
+        kf.P = self.P[np.ix_(keep_rows, keep_rows)].copy()
+        kf.dim_x = kf.x.size
+        kf._I = np.eye(kf.dim_x)
+        del self._index[drop.id], self._first_line_w[drop.id]
+        self._index = {j: i - 2 if i > idr else i for j, i in self._index.items()}
 
     def end_vote(self, associated: bool) -> None:
         pass
@@ -309,11 +340,10 @@ class LineEkf:
         pass
 
     def map_records(self) -> list[dict[str, object]]:
-        """Per landmark: id, rho, theta, cov, world endpoints, observation count."""
-        ids = range(len(self.map))
-        lines = np.array([self.landmark_line(j) for j in ids]).reshape(-1, 2)
-        covs = np.array([self.P[self.index(j) :, self.index(j) :][:2, :2] for j in ids])
-        return self.map.records(lines, covs.reshape(-1, 2, 2))
+        """Per active landmark: id, rho, theta, cov, world endpoints, observation count."""
+        return self.map.records(
+            {j: (self.landmark_line(j), self.landmark_covariance([j])) for j in self._index}
+        )
 
     def trajectories(self, batch: bool = False) -> dict[str, Trajectory]:
         return {}

@@ -28,6 +28,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from features.geometry import (
+    FLIP_RHO,
     FloatArray,
     along_line,
     compose,
@@ -80,6 +81,11 @@ class LandmarkConfig:
         its line it was first seen from (:func:`slam.model.lines.sonar_side`).
     line_cov_scale : float
         The extractor's line covariances are multiplied by this (1: taken as they are).
+    merge_gate_probability : float or None
+        Two landmarks seen from the same side whose extents overlap or lie within
+        ``extent_margin_m`` are one wall when their lines are jointly compatible at this
+        probability (chi2(2) on their difference with the joint covariance): the newer is merged
+        into the older (:meth:`LandmarkMap.merge_duplicates`). None: never merged.
     """
 
     association: AssociationConfig = field(default_factory=AssociationConfig)
@@ -89,6 +95,7 @@ class LandmarkConfig:
     extent_margin_m: float | None = 10.0
     side_gate: bool = True
     line_cov_scale: float = 1.0
+    merge_gate_probability: float | None = None
 
     def __post_init__(self) -> None:
         if self.tentative_observations < 1:
@@ -101,6 +108,9 @@ class LandmarkConfig:
             raise ValueError(f"line_cov_scale must be > 0, got {self.line_cov_scale}")
         if self.extent_margin_m is not None and not self.extent_margin_m >= 0.0:
             raise ValueError(f"extent_margin_m must be >= 0 or None, got {self.extent_margin_m}")
+        p = self.merge_gate_probability
+        if p is not None and not 0.0 < p < 1.0:
+            raise ValueError(f"merge_gate_probability must be in (0, 1) or None, got {p}")
 
 
 @dataclass
@@ -111,6 +121,7 @@ class Landmark:
     with ``theta = theta_ref_rad``, the direction when the landmark was created; an estimate in
     the other representation ``(-rho, theta + pi)`` reverses that axis (:meth:`extent_on`).
     ``side`` is the side of the line the sonar saw it from (+1: ``rho_w > n . p_sonar``).
+    ``merged_into`` is the landmark it was found to be a duplicate of (None while active).
     """
 
     id: int
@@ -119,6 +130,11 @@ class Landmark:
     s_max_m: float
     theta_ref_rad: float
     side: float = 1.0
+    merged_into: int | None = None
+
+    @property
+    def active(self) -> bool:
+        return self.merged_into is None
 
     def _reversed(self, line_w: FloatArray) -> bool:
         return bool(np.cos(float(line_w[1]) - self.theta_ref_rad) < 0.0)
@@ -128,6 +144,10 @@ class Landmark:
         if self._reversed(line_w):
             return -self.s_max_m, -self.s_min_m
         return self.s_min_m, self.s_max_m
+
+    def ends_w(self, line_w: FloatArray) -> FloatArray:
+        """The extent's two end points on ``line_w`` (world, m), shape (2, 2)."""
+        return segment_on_line(line_w, *self.extent_on(line_w))
 
     def grow(self, line_w: FloatArray, points_w: FloatArray) -> None:
         """Extend the extent to the projections of world points on ``line_w``."""
@@ -202,6 +222,15 @@ class LineEstimator(Protocol):
         """Current estimate of a landmark's world line, as stored (may be unnormalised)."""
         ...
 
+    def landmark_covariance(self, landmark_ids: list[int]) -> FloatArray:
+        """Joint covariance of these landmarks' lines as stored, shape (2k, 2k)."""
+        ...
+
+    def merge_landmarks(self, keep: Landmark, drop: Landmark) -> None:
+        """``drop`` is the same wall as ``keep``: tie their estimates; only ``keep`` is used
+        from now on."""
+        ...
+
 
 class LandmarkMap:
     """The landmarks of one back end and the rules that make and associate them (module doc).
@@ -225,6 +254,7 @@ class LandmarkMap:
             "new_landmarks": 0,
             "tentative_dropped": 0,
             "rejected_near": 0,
+            "merged": 0,
         }
         #: (t, observation index in its vote, landmark id or None) of every used observation
         self.association_log: list[tuple[float, int, int | None]] = []
@@ -235,6 +265,10 @@ class LandmarkMap:
 
     def __len__(self) -> int:
         return len(self.landmarks)
+
+    def active(self) -> list[Landmark]:
+        """The landmarks not merged into another one."""
+        return [lm for lm in self.landmarks if lm.active]
 
     # -- gates -----------------------------------------------------------------------------
 
@@ -323,6 +357,9 @@ class LandmarkMap:
             wTs = compose(estimator.pose, self.bTs)
             for lm, f in pairs:
                 lm.grow(estimator.landmark_line(lm.id), transform_points(wTs, f.endpoints_r))
+        touched = {i for i in ids if i is not None}
+        if cfg.merge_gate_probability is not None and touched:
+            self.merge_duplicates(estimator, sorted(touched))
         for i, f in enumerate(use):
             self.association_log.append((f.t, i, ids[i]))
         by_feature = {id(f): ids[i] for i, f in enumerate(use)}
@@ -376,17 +413,71 @@ class LandmarkMap:
         self.stats["new_landmarks"] += 1
         return lm.id
 
+    # -- duplicates ------------------------------------------------------------------------
+
+    def merge_duplicates(self, estimator: LineEstimator, landmark_ids: list[int]) -> None:
+        """Merge each of these landmarks with an older one of the same wall, if any.
+
+        Two active landmarks are of the same wall when they were seen from the same side, their
+        extents overlap or lie within ``extent_margin_m`` of each other along the line, and their
+        lines are jointly compatible: ``d2 = nu^T S^-1 nu <= chi2_2(merge_gate_probability)``
+        with ``nu`` their sign-free difference (:func:`features.geometry.line_difference`) and
+        ``S`` its covariance from the back end's joint covariance of the two lines (the
+        joint-compatibility test of Neira & Tardos 2001 on the pair). The newer is merged into
+        the older: the back end ties their estimates, observation counts add up and the extent
+        becomes the union.
+        """
+        assert self.config.merge_gate_probability is not None
+        gate = float(chi2.ppf(self.config.merge_gate_probability, 2))
+        margin = self.config.extent_margin_m or 0.0
+        for j in landmark_ids:
+            lm_j = self.landmarks[j]
+            if not lm_j.active:
+                continue
+            line_j = estimator.landmark_line(j)
+            for lm_i in self.active():
+                if lm_i.id == j or lm_i.side != lm_j.side:
+                    continue
+                line_i = estimator.landmark_line(lm_i.id)
+                if _extent_gap_m(lm_i, line_i, lm_j, line_j) > margin:
+                    continue
+                nu, flipped = line_difference(line_j, line_i)
+                A = np.hstack([-np.eye(2), FLIP_RHO if flipped else np.eye(2)])
+                S = A @ estimator.landmark_covariance([lm_i.id, j]) @ A.T
+                if nu @ np.linalg.solve(S, nu) <= gate:
+                    keep, drop = (lm_i, lm_j) if lm_i.id < j else (lm_j, lm_i)
+                    self._merge(estimator, keep, drop)
+                    break
+
+    def _merge(self, estimator: LineEstimator, keep: Landmark, drop: Landmark) -> None:
+        line_keep = estimator.landmark_line(keep.id)
+        drop_ends = drop.ends_w(estimator.landmark_line(drop.id))
+        estimator.merge_landmarks(keep, drop)
+        keep.grow(line_keep, drop_ends)
+        keep.n_obs += drop.n_obs
+        drop.merged_into = keep.id
+        self.stats["merged"] += 1
+
     # -- results ---------------------------------------------------------------------------
 
-    def records(self, lines_w: FloatArray, covs: FloatArray) -> list[dict[str, Any]]:
-        """``map.json``'s landmarks from the back end's current lines (k, 2) and covariances
-        (k, 2, 2), as stored: normalised here (:func:`landmark_record`)."""
+    def records(self, estimates: dict[int, tuple[FloatArray, FloatArray]]) -> list[dict[str, Any]]:
+        """``map.json``'s landmarks from the back end's estimates of the active ones: id ->
+        (line as stored (2,), its covariance (2, 2)), normalised here (:func:`landmark_record`);
+        merged landmarks are counted in the one they were merged into."""
         out = []
-        for lm, line, cov in zip(self.landmarks, lines_w, covs, strict=True):
-            line_n, cov_n = normalize_line_cov(line, cov)
+        for lm in self.active():
+            line_n, cov_n = normalize_line_cov(*estimates[lm.id])
             s_min, s_max = lm.extent_on(line_n)
             out.append(landmark_record(lm.id, line_n, cov_n, s_min, s_max, lm.n_obs))
         return out
+
+
+def _extent_gap_m(a: Landmark, line_a: FloatArray, b: Landmark, line_b: FloatArray) -> float:
+    """The gap (m, negative when they overlap) between two landmarks' extents along ``a``'s
+    line, ``b``'s projected onto it."""
+    s_b = along_line(line_a, b.ends_w(line_b))
+    lo_a, hi_a = a.extent_on(line_a)
+    return float(max(lo_a, s_b.min()) - min(hi_a, s_b.max()))
 
 
 def landmark_record(

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import gtsam
 import numpy as np
 import numpy.typing as npt
 
@@ -19,7 +20,12 @@ __all__ = [
     "held_velocity_variance_step",
     "dvl_scatter",
     "dvl_sample_sigma",
+    "ROBUST_KERNELS",
+    "robust_kernel",
 ]
+
+ROBUST_KERNELS = ("huber", "cauchy")
+"""Robust kernels of the line observations (GTSAM's ``noiseModel.mEstimator``)."""
 
 
 @dataclass(frozen=True)
@@ -116,3 +122,18 @@ def dvl_sample_sigma(t_s: FloatArray, v_mps: FloatArray, noise: MotionNoise) -> 
     s = dvl_scatter(t_s, v_mps, noise.dvl_scatter_window_s)
     excess = np.maximum(s**2 - noise.dvl_nominal_scatter_mps**2, 0.0)
     return np.asarray(np.sqrt(base**2 + excess))
+
+
+def robust_kernel(
+    name: str | None, k: float
+) -> gtsam.noiseModel.mEstimator.Huber | gtsam.noiseModel.mEstimator.Cauchy | None:
+    """GTSAM's m-estimator ``name`` of width ``k`` (sigmas), None for none: the one definition of
+    the kernels, for the factor graph's noise models and the EKF's weighted updates
+    (``weight(d)`` of a Mahalanobis distance ``d``)."""
+    if name is None:
+        return None
+    if name == "huber":
+        return gtsam.noiseModel.mEstimator.Huber.Create(k)
+    if name == "cauchy":
+        return gtsam.noiseModel.mEstimator.Cauchy.Create(k)
+    raise ValueError(f"robust must be None or one of {ROBUST_KERNELS}, got {name!r}")

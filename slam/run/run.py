@@ -201,7 +201,7 @@ def _closed_loop_metrics(
     out: dict[str, Any] = {
         "settings": dict(config.settings),
         "extractor_preset": config.preset,
-        "landmarks": len(backend.map),
+        "landmarks": len(backend.map.active()),
         "line_features": len(result.features),
         **{f"assoc_{k}": v for k, v in backend.stats.items()},
         "extractor_s": result.extractor_s,

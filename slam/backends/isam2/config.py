@@ -36,9 +36,8 @@ class GraphConfig(BackendConfig):
     gyro_scale_sigma : float
         Prior 1-sigma of ``s`` around 1.
     robust : {None, "huber", "cauchy"}
-        Robust kernel on the line factors (heavy-tailed line errors on thick echo bands).
-    robust_k : float
-        Its width (sigmas).
+        As :class:`slam.backends.base.BackendConfig`; Huber by default here (heavy-tailed line
+        errors on thick echo bands).
     relinearize_threshold : float
         iSAM2 relinearises a variable whose delta exceeds this (m, rad). GTSAM's default: a
         lower threshold relinearises most of the graph when line loops pull the trajectory by
@@ -67,7 +66,6 @@ class GraphConfig(BackendConfig):
     estimate_gyro_scale: bool = False
     gyro_scale_sigma: float = 0.2
     robust: str | None = "huber"
-    robust_k: float = 1.345
     relinearize_threshold: float = 0.1
     relinearize_skip: int = 10
     extra_iterations: int = 1
@@ -79,8 +77,6 @@ class GraphConfig(BackendConfig):
         super().__post_init__()
         if self.dvl_noise not in ("hold", "white"):
             raise ValueError(f"dvl_noise must be 'hold' or 'white', got {self.dvl_noise!r}")
-        if self.robust not in (None, "huber", "cauchy"):
-            raise ValueError(f"robust must be None, 'huber' or 'cauchy', got {self.robust!r}")
         if self.node_period_s <= 0 or self.update_period_s < 0:
             raise ValueError("node_period_s must be > 0, update_period_s >= 0")
         if self.max_candidates < 1:

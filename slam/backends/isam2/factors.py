@@ -36,11 +36,13 @@ import numpy.typing as npt
 
 from features.geometry import FloatArray, wrap_angle
 from slam.model.lines import line_residual
+from slam.model.noise import robust_kernel
 
 __all__ = [
-    "ROBUST_KERNELS",
     "noise_model",
     "line_factor",
+    "line_equality_residual",
+    "line_equality_factor",
     "heading_residual",
     "heading_factor",
     "odometry_residual",
@@ -48,9 +50,6 @@ __all__ = [
 ]
 
 _S = np.array([[0.0, -1.0], [1.0, 0.0]])  # d R(a) / da = R(a) S
-
-ROBUST_KERNELS = ("huber", "cauchy")
-"""Robust kernels :func:`noise_model` accepts (``gtsam.noiseModel.mEstimator``)."""
 
 
 def noise_model(
@@ -63,21 +62,13 @@ def noise_model(
     cov : array_like, shape (n, n)
         Covariance of the factor's error, in its units.
     robust : {None, "huber", "cauchy"}
-        Robust kernel (``gtsam.noiseModel.Robust``) on the whitened error.
+        Robust kernel (:func:`slam.model.noise.robust_kernel`) on the whitened error.
     robust_k : float
         Kernel width in sigmas (Huber: 1.345 is 95 % efficient on Gaussian data).
     """
     base = gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, dtype=np.float64))
-    if robust is None:
-        return base
-    kernel: gtsam.noiseModel.mEstimator.Base
-    if robust == "huber":
-        kernel = gtsam.noiseModel.mEstimator.Huber.Create(robust_k)
-    elif robust == "cauchy":
-        kernel = gtsam.noiseModel.mEstimator.Cauchy.Create(robust_k)
-    else:
-        raise ValueError(f"robust must be None or one of {ROBUST_KERNELS}, got {robust!r}")
-    return gtsam.noiseModel.Robust.Create(kernel, base)
+    kernel = robust_kernel(robust, robust_k)
+    return base if kernel is None else gtsam.noiseModel.Robust.Create(kernel, base)
 
 
 # -- line landmark -----------------------------------------------------------------------------
@@ -121,6 +112,49 @@ def line_factor(
         return e
 
     return gtsam.CustomFactor(noise_model(cov, robust, robust_k), [pose_key, line_key], error)
+
+
+def line_equality_residual(
+    line_keep: FloatArray, line_drop: FloatArray, flipped: bool
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The difference of two landmarks found to be one wall: ``line_drop`` in the
+    representation chosen when they were merged (``(-rho, theta + pi)`` when ``flipped``) minus
+    ``line_keep``, the angle wrapped.
+
+    Returns
+    -------
+    e : ndarray, shape (2,)
+    H_keep, H_drop : ndarray, shape (2, 2)
+    """
+    s = -1.0 if flipped else 1.0
+    e = np.array(
+        [
+            s * line_drop[0] - line_keep[0],
+            float(wrap_angle(line_drop[1] + (np.pi if flipped else 0.0) - line_keep[1])),
+        ]
+    )
+    return e, -np.eye(2), np.diag([s, 1.0])
+
+
+def line_equality_factor(
+    keep_key: int, drop_key: int, flipped: bool, sigmas: npt.ArrayLike
+) -> gtsam.CustomFactor:
+    """Factor tying ``L(drop)`` to ``L(keep)`` (:func:`line_equality_residual`) with standard
+    deviations ``sigmas`` ``(m, rad)``."""
+    flip = bool(flipped)
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> FloatArray:
+        keys = this.keys()
+        e, H_keep, H_drop = line_equality_residual(
+            values.atVector(keys[0]), values.atVector(keys[1]), flip
+        )
+        if H is not None:
+            H[0] = H_keep
+            H[1] = H_drop
+        return e
+
+    noise = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigmas, dtype=np.float64))
+    return gtsam.CustomFactor(noise, [keep_key, drop_key], error)
 
 
 # -- AHRS heading with a constant bias --------------------------------------------------------

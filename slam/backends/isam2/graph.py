@@ -46,7 +46,7 @@ import numpy as np
 from gtsam.symbol_shorthand import B, D, G, L, X
 from scipy.stats import chi2
 
-from features.geometry import FloatArray, compose
+from features.geometry import FloatArray, compose, line_difference
 from features.line import LineFeature
 from features.pose_source import PoseSource
 from slam.backends.base import AnchoredOdometry
@@ -368,11 +368,12 @@ class LineIsam2:
     ) -> list[Landmark]:
         """Landmarks individually compatible with some observation under the loose gate, on
         the side of their line they were seen from, nearest first, at most ``max_candidates``."""
-        landmarks = self.map.landmarks
+        landmarks = self.map.active()
         if not landmarks:
             return []
-        lines = np.array(self._lm_est)
-        best = loose_distances(z, R, pose_w, P_pose_w, lines, np.array(self._lm_cov), self.bTs)
+        lines = np.array([self._lm_est[lm.id] for lm in landmarks])
+        covs = np.array([self._lm_cov[lm.id] for lm in landmarks])
+        best = loose_distances(z, R, pose_w, P_pose_w, lines, covs, self.bTs)
         if self.config.side_gate:
             sides = np.array([lm.side for lm in landmarks])
             best = np.where(sonar_side(pose_w, lines, self.bTs) == sides, best, np.inf)
@@ -423,6 +424,21 @@ class LineIsam2:
         self._lm_cov.append(np.eye(2) * 1e6)
         self._new_landmarks.append(j)
         return len(observations)
+
+    def landmark_covariance(self, landmark_ids: list[int]) -> FloatArray:
+        """iSAM2's joint marginal of these landmarks' lines, shape (2k, 2k)."""
+        keys = [L(j) for j in landmark_ids]
+        return np.asarray(self.isam.jointMarginalCovariance(keys).fullMatrix())
+
+    def merge_landmarks(self, keep: Landmark, drop: Landmark) -> None:
+        """A stiff ``LineEquality`` factor ties ``L(drop)`` to ``L(keep)`` (next update);
+        ``drop`` takes no more observations."""
+        _, flipped = line_difference(self._lm_est[drop.id], self._lm_est[keep.id])
+        sigmas = [1e-3, 1e-5]  # m, rad: the same line
+        record = factor_record(
+            "LineEquality", [L(keep.id), L(drop.id)], [float(flipped)], np.diag(np.square(sigmas))
+        )
+        self._add_factor(record)
 
     def end_vote(self, associated: bool) -> None:
         self.timing_s["association"] += time.perf_counter() - self._vote_t0
@@ -492,9 +508,9 @@ class LineIsam2:
         """Per landmark: id, rho, theta, cov, world endpoints, observation count."""
         self.refresh()
         marginal = self._marginals()
-        covs = [marginal(L(lm.id)) for lm in self.map.landmarks]
-        lines = np.array(self._lm_est).reshape(-1, 2)
-        return self.map.records(lines, np.array(covs).reshape(-1, 2, 2))
+        return self.map.records(
+            {lm.id: (self._lm_est[lm.id], marginal(L(lm.id))) for lm in self.map.active()}
+        )
 
     def trajectories(self, batch: bool = False) -> dict[str, Trajectory]:
         """The smoothed trajectory (``"smoothed"``) and with ``batch`` the one after a final

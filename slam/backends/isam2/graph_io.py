@@ -20,7 +20,13 @@ from gtsam.symbol_shorthand import B, D, G, X
 
 from features.geometry import FloatArray
 from slam.backends.isam2.config import GraphConfig
-from slam.backends.isam2.factors import heading_factor, line_factor, noise_model, odometry_factor
+from slam.backends.isam2.factors import (
+    heading_factor,
+    line_equality_factor,
+    line_factor,
+    noise_model,
+    odometry_factor,
+)
 
 __all__ = [
     "GRAPH_FORMAT",
@@ -122,6 +128,8 @@ def factor_from_record(record: dict[str, Any]) -> gtsam.NonlinearFactor:
             d_t_d_scale=record["d_t_d_scale"],
             scale0=float(record["scale0"]),
         )
+    if kind == "LineEquality":
+        return line_equality_factor(keys[0], keys[1], bool(z[0]), np.sqrt(np.diag(cov)))
     if kind == "LineObservation":
         robust = record.get("robust")
         return line_factor(
@@ -178,7 +186,9 @@ def save_graph(
       ``"d_t_d_scale"`` ``[dx/ds, dy/ds]`` (:func:`slam.backends.isam2.factors.odometry_residual`);
     * ``LineObservation`` on ``(x, l)``: ``[rho, theta]`` in the sonar frame, plus ``"bTs"``
       ``[x, y, yaw]`` and ``"robust"`` (``null`` or ``{"kernel": "huber", "k": 1.345}``);
-      error :func:`slam.model.lines.line_residual`.
+      error :func:`slam.model.lines.line_residual`;
+    * ``LineEquality`` on ``(l_keep, l_drop)``: ``[flipped]`` (0 or 1), a diagonal covariance;
+      two landmarks found to be one wall (:func:`slam.backends.isam2.factors.line_equality_residual`).
 
     ``meta`` holds what is not a factor: node times, the sonar mounting, the settings.
     """
