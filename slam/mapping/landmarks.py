@@ -44,12 +44,14 @@ from slam.mapping.association import (
     associate,
     extent_allowed,
 )
+from slam.mapping.duplicates import duplicate_of
 from slam.model.lines import sonar_side, world_observation
 
 __all__ = [
     "LandmarkConfig",
     "Landmark",
     "Tentative",
+    "Innovation",
     "LineEstimator",
     "LandmarkMap",
     "landmark_record",
@@ -174,6 +176,18 @@ class Tentative:
     side: float = 1.0
 
 
+@dataclass(frozen=True, eq=False)
+class Innovation:
+    """A pairing's innovation: time (Unix s), landmark id, ``nu = z - z_hat`` (2,) sign-free,
+    its predicted covariance ``S = H P H^T + R`` (2, 2) and the observation's ``R`` (2, 2)."""
+
+    t_s: float
+    landmark: int
+    nu: FloatArray
+    S: FloatArray
+    R: FloatArray
+
+
 class LineEstimator(Protocol):
     """What the landmark layer needs from a back end, for one vote of lines.
 
@@ -262,6 +276,8 @@ class LandmarkMap:
         self.seed_log: list[tuple[LineFeature, int]] = []
         #: wall time of each :meth:`update_lines` (s): the back end's cost per vote of lines
         self.vote_wall_s: list[float] = []
+        #: every pairing's innovation (:class:`Innovation`), for the NIS
+        self.innovations: list[Innovation] = []
 
     def __len__(self) -> int:
         return len(self.landmarks)
@@ -342,6 +358,7 @@ class LandmarkMap:
         pairing: list[int | None] = [None] * len(use)
         if problem is not None and candidates:
             pairing = associate(problem, cfg.association)
+            self._log_innovations(problem, pairing, candidates, use)
         pairs = [(candidates[j], use[i]) for i, j in enumerate(pairing) if j is not None]
         ids: list[int | None] = [None if j is None else candidates[j].id for j in pairing]
         estimator.add_observations(pairs, anchor)
@@ -364,6 +381,28 @@ class LandmarkMap:
             self.association_log.append((f.t, i, ids[i]))
         by_feature = {id(f): ids[i] for i, f in enumerate(use)}
         return [by_feature.get(id(f)) for f in features]
+
+    def _log_innovations(
+        self,
+        problem: AssociationProblem,
+        pairing: list[int | None],
+        candidates: list[Landmark],
+        use: list[LineFeature],
+    ) -> None:
+        """The innovation of every pairing made, with its predicted covariance (before the
+        update): their NIS is chi2(2) when the line covariances and the back end are honest."""
+        for i, j in enumerate(pairing):
+            if j is None:
+                continue
+            nu, flipped = line_difference(problem.z[i], problem.z_hat[j])
+            R = FLIP_RHO @ problem.R[i] @ FLIP_RHO if flipped else problem.R[i]
+            H = problem.H[j]
+            S = H @ problem.P @ H.T + R
+            self.innovations.append(Innovation(use[i].t, candidates[j].id, nu, S, R))
+
+    def nis(self) -> FloatArray:
+        """NIS ``nu^T S^-1 nu`` of every pairing made so far, shape (K,)."""
+        return np.array([v.nu @ np.linalg.solve(v.S, v.nu) for v in self.innovations])
 
     def _new_line(
         self,
@@ -416,38 +455,17 @@ class LandmarkMap:
     # -- duplicates ------------------------------------------------------------------------
 
     def merge_duplicates(self, estimator: LineEstimator, landmark_ids: list[int]) -> None:
-        """Merge each of these landmarks with an older one of the same wall, if any.
-
-        Two active landmarks are of the same wall when they were seen from the same side, their
-        extents overlap or lie within ``extent_margin_m`` of each other along the line, and their
-        lines are jointly compatible: ``d2 = nu^T S^-1 nu <= chi2_2(merge_gate_probability)``
-        with ``nu`` their sign-free difference (:func:`features.geometry.line_difference`) and
-        ``S`` its covariance from the back end's joint covariance of the two lines (the
-        joint-compatibility test of Neira & Tardos 2001 on the pair). The newer is merged into
-        the older: the back end ties their estimates, observation counts add up and the extent
-        becomes the union.
-        """
+        """Merge each of these landmarks with another one of the same wall, if any
+        (:func:`slam.mapping.duplicates.duplicate_of`): the newer into the older."""
         assert self.config.merge_gate_probability is not None
         gate = float(chi2.ppf(self.config.merge_gate_probability, 2))
-        margin = self.config.extent_margin_m or 0.0
         for j in landmark_ids:
-            lm_j = self.landmarks[j]
-            if not lm_j.active:
+            if not self.landmarks[j].active:
                 continue
-            line_j = estimator.landmark_line(j)
-            for lm_i in self.active():
-                if lm_i.id == j or lm_i.side != lm_j.side:
-                    continue
-                line_i = estimator.landmark_line(lm_i.id)
-                if _extent_gap_m(lm_i, line_i, lm_j, line_j) > margin:
-                    continue
-                nu, flipped = line_difference(line_j, line_i)
-                A = np.hstack([-np.eye(2), FLIP_RHO if flipped else np.eye(2)])
-                S = A @ estimator.landmark_covariance([lm_i.id, j]) @ A.T
-                if nu @ np.linalg.solve(S, nu) <= gate:
-                    keep, drop = (lm_i, lm_j) if lm_i.id < j else (lm_j, lm_i)
-                    self._merge(estimator, keep, drop)
-                    break
+            other = duplicate_of(self, estimator, j, gate)
+            if other is not None:
+                keep, drop = sorted((self.landmarks[j], other), key=lambda lm: lm.id)
+                self._merge(estimator, keep, drop)
 
     def _merge(self, estimator: LineEstimator, keep: Landmark, drop: Landmark) -> None:
         line_keep = estimator.landmark_line(keep.id)
@@ -470,14 +488,6 @@ class LandmarkMap:
             s_min, s_max = lm.extent_on(line_n)
             out.append(landmark_record(lm.id, line_n, cov_n, s_min, s_max, lm.n_obs))
         return out
-
-
-def _extent_gap_m(a: Landmark, line_a: FloatArray, b: Landmark, line_b: FloatArray) -> float:
-    """The gap (m, negative when they overlap) between two landmarks' extents along ``a``'s
-    line, ``b``'s projected onto it."""
-    s_b = along_line(line_a, b.ends_w(line_b))
-    lo_a, hi_a = a.extent_on(line_a)
-    return float(max(lo_a, s_b.min()) - min(hi_a, s_b.max()))
 
 
 def landmark_record(

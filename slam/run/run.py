@@ -209,6 +209,10 @@ def _closed_loop_metrics(
         "beams": result.counts.get("beams", 0),
         **backend.metrics(),
     }
+    nis = backend.map.nis()
+    if nis.size:
+        out["assoc_nis_median"] = float(np.median(nis))
+        out["assoc_nis_mean"] = float(np.mean(nis))
     vote_ms = 1e3 * np.asarray(backend.map.vote_wall_s)
     if vote_ms.size:
         out["line_updates"] = int(vote_ms.size)
