@@ -10,6 +10,7 @@ radians in the objects)::
     beam_width_deg = 3.0    # horizontal beam width alpha (deg)
     angle_sense = -1        # -1: logged transducer angle grows clockwise seen from above
     time_offset_s = 0.75    # added to the sonar's log times to put them on the navigation clock
+    range_offset_m = 0.0    # the kept echo's range minus the wall's (m): subtracted from bin ranges
 
     [mounting.sonar]        # sonar head in the body frame (x forward, y left)
     x_m = 0.0
@@ -195,7 +196,15 @@ def _sonar_table(p: Path, s: dict[str, Any], base: DatasetConfig) -> tuple[Sonar
         p,
         "sonar",
         s,
-        {"n_bins", "bin_size_m", "step_deg", "beam_width_deg", "angle_sense", "time_offset_s"},
+        {
+            "n_bins",
+            "bin_size_m",
+            "step_deg",
+            "beam_width_deg",
+            "angle_sense",
+            "time_offset_s",
+            "range_offset_m",
+        },
     )
     kwargs: dict[str, Any] = {}
     if "n_bins" in s:
@@ -216,6 +225,8 @@ def _sonar_table(p: Path, s: dict[str, Any], base: DatasetConfig) -> tuple[Sonar
         kwargs["angle_sense"] = int(
             _number(p, "sonar", "angle_sense", s["angle_sense"], integer=True)
         )
+    if "range_offset_m" in s:
+        kwargs["range_offset_m"] = _number(p, "sonar", "range_offset_m", s["range_offset_m"])
     time_offset_s = base.sonar_time_offset_s
     if "time_offset_s" in s:
         time_offset_s = _number(p, "sonar", "time_offset_s", s["time_offset_s"])
@@ -341,7 +352,8 @@ def dump_dataset_config(config: DatasetConfig) -> str:
         f"step_deg = {_deg(s.step_rad)!r}\n"
         f"beam_width_deg = {_deg(s.beam_width_rad)!r}\n"
         f"angle_sense = {s.angle_sense}\n"
-        f"time_offset_s = {config.sonar_time_offset_s!r}\n\n"
+        f"time_offset_s = {config.sonar_time_offset_s!r}\n"
+        f"range_offset_m = {s.range_offset_m!r}\n\n"
         + mount("sonar", config.sonar_mounting)
         + "\n"
         + mount("dvl", config.dvl_mounting)

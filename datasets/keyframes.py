@@ -14,6 +14,7 @@ information too), in time order.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -129,6 +130,7 @@ def read_keyframes(
     numbers, begins, _ = read_keyframe_times(times_path)
     beams_per_scan = int(round(2.0 * np.pi / head.step_rad))
     beams: list[SonarBeam] = []
+    raw_head = replace(head, range_offset_m=0.0)
     last_row = -1
     for k, begin in zip(numbers, begins, strict=True):
         row = int(np.searchsorted(is_timestamps_s, begin))
@@ -151,7 +153,7 @@ def read_keyframes(
         j_float = angle / head.step_rad
         j = np.rint(j_float).astype(np.int64) % beams_per_scan
         r = np.hypot(xy[:, 0], xy[:, 1])
-        bin_float = head.range_to_bin_float(r)
+        bin_float = raw_head.range_to_bin_float(r)  # the PCD's points lie at the raw bin ranges
         bins = np.rint(bin_float).astype(np.int64)
         off_grid = (np.abs(j_float - np.rint(j_float)) > _GRID_TOLERANCE) | (
             np.abs(bin_float - bins) > _GRID_TOLERANCE

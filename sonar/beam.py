@@ -24,7 +24,10 @@ class SonarHead:
     """Settings of the sonar head.
 
     Bin ``i`` (0-based) of a beam is the echo at range ``(i + 1) * bin_size_m``, as in the marina
-    keyframes (bin 500 at 50.0 m). The transducer angle ``a`` of a beam, as logged, is turned
+    keyframes (bin 500 at 50.0 m), less the head's calibrated ``range_offset_m`` (how far behind
+    the reflecting surface the echo that is kept lies: the peak of a raw echo, the first bin of
+    a thresholded one): :meth:`bin_range_m` is the range of the surface, the logs' bin indices
+    keep the raw convention. The transducer angle ``a`` of a beam, as logged, is turned
     into a bearing in the right-handed sonar frame as ``angle_sense * a``; ``angle_sense = -1``
     for a head whose logged angle grows clockwise seen from above (the marina's Miniking).
 
@@ -40,6 +43,8 @@ class SonarHead:
         Horizontal beam width alpha (rad), 3 deg for a Miniking.
     angle_sense : int
         +1 or -1, see above.
+    range_offset_m : float
+        The echo's range minus the surface's (m), subtracted from every bin's range.
     """
 
     n_bins: int = 500
@@ -47,6 +52,7 @@ class SonarHead:
     step_rad: float = float(np.deg2rad(1.8))
     beam_width_rad: float = float(np.deg2rad(3.0))
     angle_sense: int = -1
+    range_offset_m: float = 0.0
 
     def __post_init__(self) -> None:
         if self.n_bins <= 0:
@@ -61,6 +67,10 @@ class SonarHead:
             )
         if self.angle_sense not in (-1, 1):
             raise ValueError(f"SonarHead.angle_sense must be +1 or -1, got {self.angle_sense}")
+        if not abs(self.range_offset_m) < self.n_bins * self.bin_size_m:
+            raise ValueError(
+                f"SonarHead.range_offset_m must be finite and inside the range, got {self.range_offset_m}"
+            )
 
     @property
     def range_max_m(self) -> float:
@@ -68,8 +78,9 @@ class SonarHead:
         return self.n_bins * self.bin_size_m
 
     def bin_range_m(self, bin_index: npt.ArrayLike) -> FloatArray:
-        """Range (m) of 0-based bin indices (:func:`bin_range_m`)."""
-        return bin_range_m(bin_index, self.bin_size_m)
+        """Range (m) of the surface behind 0-based bin indices: :func:`bin_range_m` less
+        ``range_offset_m``."""
+        return bin_range_m(bin_index, self.bin_size_m) - self.range_offset_m
 
     def bin_ranges_m(self) -> FloatArray:
         """Range of every bin, shape ``(n_bins,)`` (m)."""
@@ -80,8 +91,10 @@ class SonarHead:
         return np.rint(self.range_to_bin_float(range_m)).astype(np.int64)
 
     def range_to_bin_float(self, range_m: npt.ArrayLike) -> FloatArray:
-        """Fractional 0-based bin index of ranges (m): ``r / bin_size_m - 1``."""
-        return np.asarray(np.asarray(range_m, dtype=np.float64) / self.bin_size_m - 1.0)
+        """Fractional 0-based bin index of surface ranges (m), inverse of :meth:`bin_range_m`:
+        ``(r + range_offset_m) / bin_size_m - 1``."""
+        r = np.asarray(range_m, dtype=np.float64) + self.range_offset_m
+        return np.asarray(r / self.bin_size_m - 1.0)
 
     def bearing_rad(self, transducer_angle_rad: npt.ArrayLike) -> FloatArray:
         """Bearing in the right-handed sonar frame of logged transducer angles (rad)."""

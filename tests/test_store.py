@@ -31,3 +31,18 @@ def test_store_keeps_the_last_sector_oldest_first_with_ranges_in_the_sensor_fram
     store.remove_final_bins(s.final.bin_id[first])
     after = store.stored()
     assert len(after.final.range_m) == 18 and len(after.threshold.range_m) == 20
+
+
+def test_a_calibrated_range_offset_moves_every_bin_to_the_surface(tmp_path) -> None:
+    from datasets.config import DatasetConfig, dump_dataset_config, load_dataset_config
+
+    head = SonarHead(n_bins=50, bin_size_m=0.1, range_offset_m=0.25)
+    np.testing.assert_allclose(head.bin_range_m([9, 19]), [0.75, 1.75], atol=1e-12)
+    assert head.range_to_bin([0.75, 1.75]).tolist() == [9, 19]
+    store = SectorStore(head, sector_rad=np.pi)
+    store.add(0.0, 0.0, _segmented([9]))
+    np.testing.assert_allclose(store.stored().final.range_m, [0.75], atol=1e-12)
+    # [sonar] range_offset_m round-trips through sonarslam.toml
+    path = tmp_path / "sonarslam.toml"
+    path.write_text(dump_dataset_config(DatasetConfig(sonar=head)))
+    assert load_dataset_config(path).sonar.range_offset_m == 0.25

@@ -31,7 +31,7 @@ import numpy.typing as npt
 from datasets.simulator.path import Trajectory
 from datasets.simulator.world import World
 from features.geometry import FloatArray, compose
-from sonar.beam import Mounting, SonarBeam, SonarHead
+from sonar.beam import Mounting, SonarBeam, SonarHead, bin_range_m
 
 __all__ = [
     "EchoModel",
@@ -275,7 +275,7 @@ def _render_chunk(
     echo: EchoModel,
 ) -> npt.NDArray[np.uint8]:
     n_beams, n_bins = wTb.shape[0], head.n_bins
-    r_bins = head.bin_ranges_m()  # (N,)
+    r_bins = bin_range_m(np.arange(n_bins), head.bin_size_m)  # (N,) raw: the echo's own range
     wTs = sonar_poses(wTb, mounting)
     half = head.beam_width_rad / 2.0
     offsets = np.linspace(-half, half, echo.n_rays) if echo.n_rays > 1 else np.zeros(1)
