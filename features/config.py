@@ -86,6 +86,13 @@ class ExtractorConfig:
         (:mod:`features.uncertainty`); None: ``bin_size / sqrt(12)``; 0 leaves it out.
     pose_uncertainty : bool
         Fit: add the relative pose uncertainty from ``PoseSource.covariance``. False.
+    line_sigma_rho_m, line_sigma_theta_rad : float
+        Systematic error of a line, added to every line's covariance as
+        ``diag(line_sigma_rho_m^2, line_sigma_theta_rad^2)`` (m, rad): what neither the echoes'
+        noise nor the poses explain (a wall that is not straight, an echo band's structure, the
+        sector's rotation between beams); it does not shrink with the number of voters. A
+        dataset calibration (``[noise] line_sigma_rho_m``, ``line_sigma_theta_deg``, GPS-free:
+        ``sonarslam calibrate --line-noise``). 0, 0.
     fit_iterations : int
         Fit: Gauss-Newton iterations. 5.
     fit_gate_sigma : float
@@ -134,6 +141,8 @@ class ExtractorConfig:
     bearing_sigma_rad: float | None = None
     range_offset_sigma_m: float | None = None
     pose_uncertainty: bool = False
+    line_sigma_rho_m: float = 0.0
+    line_sigma_theta_rad: float = 0.0
     fit_iterations: int = 5
     fit_gate_sigma: float = 3.0
     fit_gate_iterations: int = 2
@@ -169,6 +178,8 @@ class ExtractorConfig:
             )
         if self.range_offset_sigma_m is not None and self.range_offset_sigma_m < 0.0:
             raise ValueError("range_offset_sigma_m must be >= 0 (or None)")
+        if not (self.line_sigma_rho_m >= 0.0 and self.line_sigma_theta_rad >= 0.0):
+            raise ValueError("line_sigma_rho_m and line_sigma_theta_rad must be >= 0")
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> ExtractorConfig:

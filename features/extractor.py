@@ -131,6 +131,8 @@ class LineExtractor:
             if cfg.bearing_sigma_rad is not None
             else self.beam_width_rad / np.sqrt(12)
         )
+        #: the systematic part of every line's covariance (``line_sigma_*``)
+        self.line_systematic_cov = np.diag([cfg.line_sigma_rho_m, cfg.line_sigma_theta_rad]) ** 2
         self._since_vote = 0
         self.n_votes = 0
 
@@ -240,7 +242,7 @@ class LineExtractor:
                     wTr=snap.wTr.copy(),
                     rho_m=est.rho_m,
                     theta_rad=est.theta_rad,
-                    cov=est.cov,
+                    cov=est.cov + self.line_systematic_cov,
                     votes=w.votes,
                     endpoints_r=self._endpoints(used, est.rho_m, est.theta_rad),
                     n_voters=int(support.size),
