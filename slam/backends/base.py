@@ -44,6 +44,10 @@ class BackendConfig(LandmarkConfig):
         compass can tell it (a white-noise model at 1 Hz would, and would be inconsistent).
         Nothing else observes it: line landmarks, DVL and gyro are blind to a rotation of the
         whole map and trajectory about the start position, which is what the bias does.
+    ahrs_bias_walk_deg_per_sqrt_s : float
+        The bias's random walk (deg/sqrt(s)): ``b`` drifts by ``N(0, walk**2 dt)`` over ``dt``
+        (a compass near steel, a gyro-based heading). 0: a constant bias. Its changes since a
+        wall was mapped are what re-observing the wall corrects.
     ahrs_period_s : float
         An AHRS heading is used at most this often (s); the AHRS errors are not white.
     gyro_sigma_radps : float
@@ -66,6 +70,7 @@ class BackendConfig(LandmarkConfig):
 
     ahrs_white_sigma_deg: float = 1.0
     ahrs_bias_sigma_deg: float = 2.0
+    ahrs_bias_walk_deg_per_sqrt_s: float = 0.0
     ahrs_period_s: float = 1.0
     gyro_sigma_radps: float = 0.005
     estimate_misalignment: bool = False
@@ -81,6 +86,11 @@ class BackendConfig(LandmarkConfig):
             raise ValueError(f"robust_k must be > 0, got {self.robust_k}")
         if min(self.ahrs_white_sigma_deg, self.ahrs_bias_sigma_deg, self.gyro_sigma_radps) <= 0:
             raise ValueError("AHRS and gyro sigmas must be > 0")
+        if not self.ahrs_bias_walk_deg_per_sqrt_s >= 0.0:
+            raise ValueError(
+                "ahrs_bias_walk_deg_per_sqrt_s must be >= 0, got "
+                f"{self.ahrs_bias_walk_deg_per_sqrt_s}"
+            )
         if not self.ahrs_period_s > 0.0:
             raise ValueError(f"ahrs_period_s must be > 0, got {self.ahrs_period_s}")
         if not self.misalignment_sigma_deg > 0.0:

@@ -3,8 +3,9 @@
 State ``x = [x, y, psi, b, delta, rho_1, theta_1, ..., rho_L, theta_L]``:
 
 * ``x, y, psi``: the body pose ``wTb`` (m, m, rad);
-* ``b``: the AHRS heading bias (rad), a constant with prior ``ahrs_bias_sigma_deg``: the AHRS
-  measures ``psi + b`` (:class:`slam.backends.base.BackendConfig`);
+* ``b``: the AHRS heading bias (rad) with prior ``ahrs_bias_sigma_deg``, constant or a random
+  walk (``ahrs_bias_walk_deg_per_sqrt_s``): the AHRS measures ``psi + b``
+  (:class:`slam.backends.base.BackendConfig`);
 * ``delta``: the misalignment of the DVL velocity with the body heading (rad), a constant with
   prior ``misalignment_sigma_deg`` when ``estimate_misalignment``, else held at 0;
 * world lines ``(rho_w, theta_w)`` (:mod:`features.geometry` conventions), one per active
@@ -116,6 +117,7 @@ class LineEkf:
         self._index: dict[int, int] = {}  # landmark id -> index of its rho in the state
         self._first_line_w: dict[int, FloatArray] = {}  # each landmark's first estimate (FEJ)
         self._kernel = robust_kernel(config.robust, config.robust_k)
+        self._var_walk = np.deg2rad(config.ahrs_bias_walk_deg_per_sqrt_s) ** 2  # rad^2/s
         self._pose_lin = np.zeros(3)  # the pose the vote's Jacobians are taken at (FEJ)
         self._last_ahrs_t = -np.inf
         self._own_stats = {"ahrs_updates": 0}
@@ -173,6 +175,7 @@ class LineEkf:
         Q = np.zeros((N_VEHICLE, N_VEHICLE))
         Q[0, 0] = Q[1, 1] = step.var_xy_m2
         Q[2, 2] = (step.dt_s * self.config.gyro_sigma_radps) ** 2
+        Q[3, 3] = self._var_walk * step.dt_s
         V = slice(0, N_VEHICLE)
         P[V, :] = F @ P[V, :]
         P[:, V] = P[:, V] @ F.T

@@ -11,13 +11,16 @@ The graph (factors in :mod:`slam.backends.isam2.factors`, records in
   translation rotated by the DVL misalignment ``D(0)`` and its heading change scaled by the
   gyro scale ``G(0)``);
 * AHRS heading ``z = yaw + b`` on ``(X(k), B(0))``, ``B(0)`` the constant AHRS bias with a prior
-  (as the EKF). The AHRS headings taken since the previous node are carried to the node by the
+  (as the EKF); with a bias random walk (``ahrs_bias_walk_deg_per_sqrt_s``) one bias ``B(k)``
+  per node, tied to the previous node's by ``BetweenFactorVector`` with variance
+  ``walk**2 dt``. The AHRS headings taken since the previous node are carried to the node by the
   gyro and averaged into one factor;
 * a prior on the start position (``PoseTranslationPrior2D``), and the start heading as an AHRS
   heading factor on ``X(0)`` (the start yaw came from the AHRS, so it carries the bias);
 * line observations on ``(X(k), L(j))``, ``L(j)`` a world line ``(rho, theta)``.
 
-Nothing observes the AHRS bias or the start position beyond their priors (a test checks it).
+Nothing observes the AHRS bias or the start position beyond their priors (a test checks it);
+with a random walk, line landmarks observe the bias's changes.
 
 iSAM2 is updated in batches: the factors of every vote with lines go in one update (after the
 association), and between votes the pending odometry and heading factors are added at most
@@ -115,6 +118,8 @@ class LineIsam2:
         self.timing_s = {"isam_update": 0.0, "marginals": 0.0, "association": 0.0}
         self.update_log: list[tuple[float, float, int]] = []  # (t, wall s, new factors)
         self._n_nodes = 0
+        self._var_walk = np.deg2rad(config.ahrs_bias_walk_deg_per_sqrt_s) ** 2  # rad^2/s
+        self._bias_estimate = float(np.deg2rad(config.ahrs_bias_prior_deg))  # the newest node's
         self._last_node_t = -np.inf
         self._last_heading_t = -np.inf
         self._last_update_t = -np.inf
@@ -216,11 +221,20 @@ class LineIsam2:
         self.odometry.start_node()
         self._own_stats["pose_nodes"] += 1
 
+    def _bias_key(self, k: int) -> int:
+        """The AHRS bias at node ``k``: ``B(k)`` with a random walk, else the constant ``B(0)``."""
+        return int(B(k)) if self._var_walk > 0.0 else int(B(0))
+
     def _add_node(self) -> int:
-        """A node at the current time: its odometry factor and its AHRS heading factor."""
+        """A node at the current time: its odometry factor, its AHRS heading factor and, with a
+        bias random walk, its bias tied to the previous node's."""
         k = self._n_nodes
         rel = self.odometry.since_node
         cfg = self.config
+        if self._var_walk > 0.0:
+            var = max(self._var_walk * (self.t_s - self._last_node_t), 1e-12)
+            self._add_factor(factor_record("BetweenFactorVector", [B(k - 1), B(k)], [0.0], [[var]]))
+            self._pending_values.insert(B(k), np.array([self._bias_estimate]))
         if cfg.estimate_misalignment or cfg.estimate_gyro_scale:
             keys = [X(k - 1), X(k)]
             keys += [D(0)] if cfg.estimate_misalignment else []
@@ -244,7 +258,7 @@ class LineIsam2:
         if heading is not None:
             z, var = heading
             var += np.deg2rad(cfg.ahrs_white_sigma_deg) ** 2 / n_headings
-            self._add_factor(factor_record("HeadingBias", [X(k), B(0)], [z], [[var]]))
+            self._add_factor(factor_record("HeadingBias", [X(k), self._bias_key(k)], [z], [[var]]))
         self._pending_values.insert(X(k), gtsam.Pose2(*self.pose))
         self._register_node(k, self.t_s)
         return k
@@ -288,6 +302,7 @@ class LineIsam2:
         if self.config.estimate_gyro_scale:
             scale = float(self.isam.calculateEstimateVector(G(0))[0])
         self.odometry.re_anchor(delta, scale)
+        self._bias_estimate = float(self.isam.calculateEstimateVector(self._bias_key(k))[0])
         self._stale = True
         for j in self._new_landmarks:  # marginals for the loose gate
             self._lm_cov[j] = self.isam.marginalCovariance(L(j))

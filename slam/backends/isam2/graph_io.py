@@ -113,6 +113,8 @@ def factor_from_record(record: dict[str, Any]) -> gtsam.NonlinearFactor:
         return gtsam.BetweenFactorPose2(keys[0], keys[1], gtsam.Pose2(*z), noise_model(cov))
     if kind == "PriorFactorVector":
         return gtsam.PriorFactorVector(keys[0], z, noise_model(cov))
+    if kind == "BetweenFactorVector":
+        return gtsam.BetweenFactorVector(keys[0], keys[1], z, noise_model(cov))
     if kind == "HeadingBias":
         return heading_factor(keys[0], keys[1], float(z[0]), float(np.sqrt(cov[0, 0])))
     if kind == "DvlGyroOdometry":
@@ -179,7 +181,8 @@ def save_graph(
     * ``PoseTranslationPrior2D`` ``[x, y]`` (GTSAM's: the position of a Pose2, covariance in
       the world frame), ``PriorFactorPose2`` and ``BetweenFactorPose2`` ``[x, y, yaw]``
       (GTSAM's, covariance in the local tangent);
-    * ``PriorFactorVector``: GTSAM's;
+    * ``PriorFactorVector``, ``BetweenFactorVector``: GTSAM's (the latter ties the AHRS bias
+      of consecutive nodes, ``b_j - b_i``, when it is a random walk);
     * ``HeadingBias`` on ``(x, b)``: ``[yaw_meas]``, error ``wrap(yaw + b - yaw_meas)``;
     * ``DvlGyroOdometry`` on ``(x_i, x_j[, d][, g])``: ``[x, y, yaw]`` integrated with
       ``delta = 0`` and scale ``"scale0"``, plus ``"yaw_raw"`` (the gyro's integral) and
