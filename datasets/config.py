@@ -38,6 +38,9 @@ radians in the objects)::
     dvl_scatter_window_s = 60.0     # the DVL's own scatter over this window (0: off) ...
     dvl_nominal_scatter_mps = 0.2   # ... beyond its usual scatter is white noise added to
                             # dvl_sigma_mps (sonarslam info prints the scatter's quantiles)
+    ahrs_bias_walk_deg_per_sqrt_s = 0.0  # the AHRS bias's random walk (0: a constant bias)
+    line_sigma_rho_m = 0.0  # a line's systematic error, added to every line's covariance
+    line_sigma_theta_deg = 0.0      # (sonarslam calibrate --line-noise, GPS-free)
 
     [motion]
     yaw_rate_source = "heading"  # what turns the heading between AHRS samples: "gyro" (the
@@ -83,6 +86,11 @@ class NoiseConfig:
     #: 0 turns the excess-scatter DVL noise off (slam.model.motion.dvl_sample_sigma)
     dvl_scatter_window_s: float = 0.0
     dvl_nominal_scatter_mps: float = 0.0
+    #: the AHRS heading bias's random walk (deg/sqrt(s)), 0: constant (the back ends' state)
+    ahrs_bias_walk_deg_per_sqrt_s: float = 0.0
+    #: a line's systematic error (m, deg), added to every line's covariance by the extractor
+    line_sigma_rho_m: float = 0.0
+    line_sigma_theta_deg: float = 0.0
 
 
 #: What turns the estimators' heading between AHRS samples (``[motion] yaw_rate_source``):
@@ -239,7 +247,13 @@ def _sonar_table(p: Path, s: dict[str, Any], base: DatasetConfig) -> tuple[Sonar
 def _noise_table(p: Path, table: dict[str, Any], base: NoiseConfig) -> NoiseConfig:
     """``[noise]`` over ``base``: finite, positive (the scatter settings may be 0)."""
     _check_keys(p, "noise", table, {f.name for f in fields(NoiseConfig)})
-    may_be_zero = {"dvl_scatter_window_s", "dvl_nominal_scatter_mps"}
+    may_be_zero = {
+        "dvl_scatter_window_s",
+        "dvl_nominal_scatter_mps",
+        "ahrs_bias_walk_deg_per_sqrt_s",
+        "line_sigma_rho_m",
+        "line_sigma_theta_deg",
+    }
     values = {}
     for k, v in table.items():
         values[k] = _number(p, "noise", k, v, positive=k not in may_be_zero)
@@ -363,7 +377,10 @@ def dump_dataset_config(config: DatasetConfig) -> str:
         + f"[noise]\ndvl_sigma_mps = {n.dvl_sigma_mps!r}\nahrs_sigma_deg = {n.ahrs_sigma_deg!r}\n"
         f"gps_sigma_m = {n.gps_sigma_m!r}\ndvl_max_gap_s = {n.dvl_max_gap_s!r}\n"
         f"dvl_scatter_window_s = {n.dvl_scatter_window_s!r}\n"
-        f"dvl_nominal_scatter_mps = {n.dvl_nominal_scatter_mps!r}\n\n"
+        f"dvl_nominal_scatter_mps = {n.dvl_nominal_scatter_mps!r}\n"
+        f"ahrs_bias_walk_deg_per_sqrt_s = {n.ahrs_bias_walk_deg_per_sqrt_s!r}\n"
+        f"line_sigma_rho_m = {n.line_sigma_rho_m!r}\n"
+        f"line_sigma_theta_deg = {n.line_sigma_theta_deg!r}\n\n"
         f"[keyframes]\nscan_direction = {config.keyframe_scan_direction}\n\n"
         f"[motion]\nyaw_rate_source = {config.yaw_rate_source!r}\n"
         f"ahrs_deviation_deg = [{_deg(config.ahrs_deviation_rad[0])!r},"

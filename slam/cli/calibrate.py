@@ -1,4 +1,5 @@
-"""``sonarslam calibrate``: GPS-free calibrations (sonar yaw, AHRS yaw, AHRS deviation)."""
+"""``sonarslam calibrate``: GPS-free calibrations (sonar yaw, AHRS yaw, AHRS deviation, the
+sonar's range offset, a line's systematic error)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import math
 from datasets.source import open_dataset
 from slam.cli.common import EPILOG, Subparsers, add_poses, add_source
 from slam.run.calibration import calibrate_ahrs_deviation, calibrate_ahrs_yaw, calibrate_sonar_yaw
+from slam.run.sonar_calibration import calibrate_line_noise, calibrate_range_offset
 from slam.run.sources import pose_source_by_name
 
 
@@ -34,6 +36,19 @@ def add_parser(sub: Subparsers) -> None:
     p.add_argument(
         "--iterations", type=int, default=4, help="closed loops for --ahrs-deviation (default 4)"
     )
+    p.add_argument(
+        "--range-offset",
+        action="store_true",
+        help="the range offset of the kept echoes from the beams' rising edges instead"
+        " (GPS-free; [sonar] range_offset_m)",
+    )
+    p.add_argument(
+        "--line-noise",
+        action="store_true",
+        help="a line's systematic error from pairs of lines of one wall seen 5-20 s apart with"
+        " dead-reckoning poses instead (GPS-free; [noise] line_sigma_rho_m, line_sigma_theta_deg;"
+        " calibrate --range-offset first)",
+    )
     p.set_defaults(func=command)
 
 
@@ -57,9 +72,39 @@ def _ahrs_deviation(args: argparse.Namespace) -> int:
     return 0
 
 
+def _range_offset(args: argparse.Namespace) -> int:
+    dataset = open_dataset(args.source)
+    fit = calibrate_range_offset(dataset)
+    print(
+        f"range offset of the kept echoes (GPS-free, {fit.method}): {fit.offset_m:.3f} m "
+        f"(IQR {fit.iqr_m:.3f} m, {fit.n} echoes; configured "
+        f"{dataset.config.sonar.range_offset_m:.3f} m); put it under [sonar] range_offset_m"
+    )
+    return 0
+
+
+def _line_noise(args: argparse.Namespace) -> int:
+    dataset = open_dataset(args.source)
+    fit = calibrate_line_noise(dataset)
+    n = dataset.config.noise
+    print(
+        f"a line's systematic error (GPS-free, {fit.n_pairs} pairs of {fit.n_lines} lines): "
+        f"sigma rho {fit.sigma_rho_m:.3f} m, sigma theta {math.degrees(fit.sigma_theta_rad):.2f}"
+        f" deg (configured {n.line_sigma_rho_m:.3f} m, {n.line_sigma_theta_deg:.2f} deg); pair "
+        f"NEES median {fit.nees_median_before:.2f} -> {fit.nees_median_after:.2f} (chi2(2): "
+        f"1.39), {100 * fit.outside_99_after:.1f} % outside the 99 % gate; put them under "
+        f"[noise] as line_sigma_rho_m and line_sigma_theta_deg"
+    )
+    return 0
+
+
 def command(args: argparse.Namespace) -> int:
     if args.ahrs_deviation:
         return _ahrs_deviation(args)
+    if args.range_offset:
+        return _range_offset(args)
+    if args.line_noise:
+        return _line_noise(args)
     dataset = open_dataset(args.source)
     if args.ahrs:
         fit = calibrate_ahrs_yaw(dataset)

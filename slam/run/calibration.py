@@ -258,7 +258,7 @@ def heading_deviation_from_lines(
 def ekf_closed_loop(dataset: Dataset) -> ClosedLoopResult:
     """The EKF closed loop with its default settings and the beams' extractor preset (what
     :func:`calibrate_ahrs_deviation` iterates); GPS gives only the start position."""
-    config = run_config(dataset.beams, "ekf")
+    config = run_config(dataset.beams, "ekf", noise=dataset.config.noise)
     spec = backend_spec("ekf")
     mounting = dataset.config.sonar_mounting
     return run_closed_loop(

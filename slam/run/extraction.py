@@ -156,7 +156,7 @@ def extract(
     if not beams:
         raise ValueError(f"{dataset.root}: no sonar beam inside the span of the {poses} poses")
     preset_name = preset if preset is not None else preset_for(beams)
-    config = extractor_config(preset_name, config_path)
+    config = extractor_config(preset_name, config_path, noise=dataset.config.noise)
     head, mounting = dataset.config.sonar, dataset.config.sonar_mounting
     extractor = LineExtractor(config, head, mounting, pose_source)
     lines, beam_time_s, wall_s = extract_lines(beams, extractor, progress=progress)

@@ -7,6 +7,11 @@
   the benchmarks and notebooks) takes them from here and records the preset's name.
 * Back-end configurations: each back end's defaults (:mod:`slam.backends.registry`), with
   settings over them.
+* A dataset's calibration of the sensors' noise (``[noise]`` of its ``sonarslam.toml``,
+  :class:`datasets.config.NoiseConfig`) goes over the preset and the defaults, under a TOML
+  file's and the settings: a line's systematic error (``line_sigma_rho_m``,
+  ``line_sigma_theta_deg``) into the extractor, the AHRS bias's random walk into the back end
+  (:func:`noise_settings`).
 * Settings given as ``SCOPE.FIELD=VALUE`` (``sonarslam run --set``, ``sonarslam sweep --grid``):
   ``SCOPE`` is ``extractor`` (:class:`features.extractor.ExtractorConfig`) or a back end's name
   (``ekf``: :class:`slam.backends.ekf.EkfConfig`, ``isam2``:
@@ -27,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from datasets.config import NoiseConfig
 from features.config import ExtractorConfig
 from slam.backends.base import BackendConfig
 from slam.backends.registry import backend_spec
@@ -105,13 +111,26 @@ def _read_table(path: str | Path, table: str) -> dict[str, Any]:
     return inner
 
 
+def noise_settings(noise: NoiseConfig | None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """``(extractor fields, back-end fields)`` a dataset's ``[noise]`` calibration sets."""
+    if noise is None:
+        return {}, {}
+    ext = {
+        "line_sigma_rho_m": noise.line_sigma_rho_m,
+        "line_sigma_theta_rad": math.radians(noise.line_sigma_theta_deg),
+    }
+    return ext, {"ahrs_bias_walk_deg_per_sqrt_s": noise.ahrs_bias_walk_deg_per_sqrt_s}
+
+
 def extractor_config(
     preset: str,
     config_path: str | Path | None = None,
     overrides: dict[str, Any] | None = None,
+    noise: NoiseConfig | None = None,
 ) -> ExtractorConfig:
-    """A preset, with the fields of a TOML file (``[extractor]`` table or top level) and then
-    ``overrides`` (dotted names, :func:`apply_overrides`) over it.
+    """A preset, with a dataset's ``noise`` calibration (:func:`noise_settings`), the fields of a
+    TOML file (``[extractor]`` table or top level) and then ``overrides`` (dotted names,
+    :func:`apply_overrides`) over it.
 
     Raises ValueError for an unknown preset or field.
     """
@@ -119,7 +138,7 @@ def extractor_config(
         raise ValueError(
             f"extractor preset must be one of {sorted(EXTRACTOR_PRESETS)}, got {preset!r}"
         )
-    config = EXTRACTOR_PRESETS[preset]
+    config = EXTRACTOR_PRESETS[preset].replace(**noise_settings(noise)[0])
     if config_path is not None:
         data = _read_table(config_path, "extractor")
         unknown = set(data) - {f.name for f in dataclasses.fields(ExtractorConfig)}
@@ -153,9 +172,13 @@ def map_min_intensity(beams: Sequence[SonarBeam], config: ExtractorConfig | None
     return max(int(np.ceil(threshold)), 1)
 
 
-def backend_config(name: str, overrides: dict[str, Any] | None = None) -> BackendConfig:
-    """Back end ``name``'s default configuration with ``overrides`` (dotted names) over it."""
-    return apply_overrides(backend_spec(name).config_type(), overrides or {})
+def backend_config(
+    name: str, overrides: dict[str, Any] | None = None, noise: NoiseConfig | None = None
+) -> BackendConfig:
+    """Back end ``name``'s default configuration with a dataset's ``noise`` calibration
+    (:func:`noise_settings`) and ``overrides`` (dotted names) over it."""
+    defaults = dataclasses.replace(backend_spec(name).config_type(), **noise_settings(noise)[1])
+    return apply_overrides(defaults, overrides or {})
 
 
 @dataclass(frozen=True)
@@ -181,16 +204,20 @@ class RunConfig:
 
 
 def run_config(
-    beams: Sequence[SonarBeam], backend: str, settings: dict[str, Any] | None = None
+    beams: Sequence[SonarBeam],
+    backend: str,
+    settings: dict[str, Any] | None = None,
+    noise: NoiseConfig | None = None,
 ) -> RunConfig:
-    """The extractor and back-end configurations of a closed loop of ``backend`` on these beams,
-    with ``settings`` (``{"isam2.robust": "cauchy", "extractor.min_votes": 12}``) applied."""
+    """The extractor and back-end configurations of a closed loop of ``backend`` on these beams
+    and a dataset's ``noise`` calibration, with ``settings`` (``{"isam2.robust": "cauchy",
+    "extractor.min_votes": 12}``) applied."""
     ext, own = split_settings(settings or {}, backend)
     preset = preset_for(beams)
     return RunConfig(
         preset,
-        extractor_config(preset, overrides=ext),
-        backend_config(backend, own),
+        extractor_config(preset, overrides=ext, noise=noise),
+        backend_config(backend, own, noise),
         dict(settings or {}),
     )
 

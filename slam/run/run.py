@@ -126,7 +126,7 @@ def run_backend(
         spec = backend_spec(backend)
         if batch and not spec.smoother:
             raise ValueError(f"--batch: back end {backend!r} does not smooth")
-        config = run_config(dataset.beams, backend, settings)
+        config = run_config(dataset.beams, backend, settings, dataset.config.noise)
         mounting = dataset.config.sonar_mounting
         cfg = config.backend
         result = run_closed_loop(

@@ -1,0 +1,231 @@
+"""GPS-free calibrations of the sonar's line model: the range offset of the kept echoes and the
+systematic error of a line.
+
+* **Range offset** (:func:`calibrate_range_offset`, ``[sonar] range_offset_m``): the extractor
+  keeps one bin per echo, the strongest of a raw echo or the first of a thresholded run. The
+  wall's face is where the echo rises: the echo-band model is that the rising edge crosses half
+  the peak's intensity at the face (a pulse's leading edge; the tail behind it is the pulse's
+  length, the beam's vertical footprint, a rough face). So the offset of a raw echo's peak is
+  measured on the beams themselves as the median of ``r_peak - r_half-rise`` over the kept
+  echoes. A thresholded run's first bin is its leading edge: its offset is zero by construction
+  (the threshold's own delay cannot be seen in a 0/255 mask).
+* **Line noise** (:func:`calibrate_line_noise`, ``[noise] line_sigma_rho_m``,
+  ``line_sigma_theta_deg``): lines extracted with dead-reckoning poses, and pairs of lines of one
+  wall seen within a short time of each other (dead reckoning drifts little and its relative
+  uncertainty is in the lines' covariances through ``pose_uncertainty``). Their sign-free
+  difference in the world should be chi2(2)-distributed with the pair's covariance; the
+  systematic error ``diag(s_rho^2, s_theta^2)`` added to every line is the one that brings the
+  median of the pairs' squared distances to chi2(2)'s median (1.386), with the ratio of the two
+  sigmas chosen so that both components are consistent.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.optimize import brentq
+from scipy.stats import chi2
+
+from datasets.source import Dataset
+from features.extractor import LineExtractor
+from features.geometry import (
+    FLIP_RHO,
+    FloatArray,
+    along_line,
+    line_difference,
+    line_frame_to_world,
+    line_world_to_frame,
+)
+from features.line import LineFeature
+from slam.run.presets import extractor_config, preset_for
+from slam.run.sources import dead_reckoning_trajectory
+from sonar.segmentation import segment_intensities
+
+__all__ = ["RangeOffsetFit", "calibrate_range_offset", "LineNoiseFit", "calibrate_line_noise"]
+
+
+@dataclass(frozen=True)
+class RangeOffsetFit:
+    """The kept echoes' range offset (m): median, interquartile range, echoes used, method."""
+
+    offset_m: float
+    iqr_m: float
+    n: int
+    method: str
+
+
+def calibrate_range_offset(dataset: Dataset, every: int = 1) -> RangeOffsetFit:
+    """The range offset of the echoes the extractor keeps (module docstring), GPS-free.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        Its beams inside the navigation span and the extractor preset for them.
+    every : int
+        Use every ``every``-th beam.
+    """
+    beams = dataset.nav_beams()[::every]
+    if beams and all(b.thresholded for b in beams):
+        n = sum(int(np.count_nonzero(np.diff(np.r_[0, b.intensities > 0]) == 1)) for b in beams)
+        return RangeOffsetFit(0.0, 0.0, n, "thresholded runs: the kept bin is the leading edge")
+    cfg = extractor_config(preset_for(beams))
+    bin_m = dataset.config.sonar.bin_size_m
+    offsets: list[float] = []
+    for b in beams:
+        seg = segment_intensities(
+            b.intensities,
+            bin_m,
+            intensity_threshold=cfg.intensity_threshold,
+            max_intensity_difference=cfg.max_intensity_difference,
+            min_distance_m=cfg.min_distance_m,
+            min_range_m=cfg.min_range_m,
+            thresholded=False,
+            max_range_m=cfg.max_range_m,
+        )
+        intensity = b.intensities.astype(np.float64)
+        for k in seg.final_bins:
+            half = 0.5 * intensity[k]
+            j = int(k)
+            while j > 0 and intensity[j - 1] >= half:
+                j -= 1
+            if j == 0:
+                continue  # the rise is not in the beam
+            frac = (half - intensity[j - 1]) / (intensity[j] - intensity[j - 1])
+            offsets.append((k - (j - 1 + frac)) * bin_m)
+    if not offsets:
+        raise ValueError(f"{dataset.root}: no echo with its rising edge in the beams")
+    o = np.asarray(offsets)
+    q25, q50, q75 = np.percentile(o, [25, 50, 75])
+    return RangeOffsetFit(float(q50), float(q75 - q25), int(o.size), "raw echoes: peak - half-rise")
+
+
+@dataclass(frozen=True)
+class LineNoiseFit:
+    """The systematic error of a line (m, rad), the pairs used and their NEES median before and
+    after it is added."""
+
+    sigma_rho_m: float
+    sigma_theta_rad: float
+    n_lines: int
+    n_pairs: int
+    nees_median_before: float
+    nees_median_after: float
+    outside_99_after: float
+
+
+@dataclass(frozen=True, eq=False)
+class _Seen:
+    """A line as extracted: time, frame R, ``z`` and ``R`` in it, and in the world."""
+
+    t_s: float
+    wTr: FloatArray
+    z: FloatArray
+    R: FloatArray
+    line_w: FloatArray
+    G_z: FloatArray
+    ends_w: FloatArray
+
+
+def _pairs(lines: list[_Seen], window_s: tuple[float, float]) -> list[tuple[int, int]]:
+    """Pairs of lines of one wall: within the time window, seen from the same side, their
+    segments overlapping by 2 m or more, within 3 m and 15 deg of each other in the earlier
+    line's frame (a loose gate: the median, not the gate, decides)."""
+    out = []
+    for i, a in enumerate(lines):
+        n = np.array([np.cos(a.line_w[1]), np.sin(a.line_w[1])])
+        side_a = np.sign(a.line_w[0] - a.wTr[:2] @ n)
+        s_a = along_line(a.line_w, a.ends_w)
+        for j in range(i + 1, len(lines)):
+            b = lines[j]
+            dt = b.t_s - a.t_s
+            if dt > window_s[1]:
+                break
+            if dt < window_s[0] or np.sign(a.line_w[0] - b.wTr[:2] @ n) != side_a:
+                continue
+            nu, _ = _difference(a, b)
+            if abs(nu[0]) > 3.0 or abs(nu[1]) > np.deg2rad(15.0):
+                continue
+            s_b = along_line(a.line_w, b.ends_w)
+            if min(s_a.max(), s_b.max()) - max(s_a.min(), s_b.min()) >= 2.0:
+                out.append((i, j))
+    return out
+
+
+def _difference(a: _Seen, b: _Seen) -> tuple[FloatArray, FloatArray]:
+    """``b``'s line in ``a``'s frame minus ``a``'s (sign-free), and ``d(b in a) / d z_b``."""
+    b_in_a, H_line, _ = line_world_to_frame(b.line_w, a.wTr)
+    nu, flipped = line_difference(b_in_a, a.z)
+    J = H_line @ b.G_z
+    return nu, (FLIP_RHO @ J if flipped else J)
+
+
+def _pair_nees(
+    lines: list[_Seen], pairs: list[tuple[int, int]], sigmas: tuple[float, float]
+) -> FloatArray:
+    Q = np.diag(np.square(sigmas))
+    out = np.empty(len(pairs))
+    for k, (i, j) in enumerate(pairs):
+        a, b = lines[i], lines[j]
+        nu, J = _difference(a, b)
+        S = a.R + Q + J @ (b.R + Q) @ J.T
+        out[k] = nu @ np.linalg.solve(S, nu)
+    return out
+
+
+def calibrate_line_noise(
+    dataset: Dataset, window_s: tuple[float, float] = (5.0, 20.0)
+) -> LineNoiseFit:
+    """The systematic error of a line (module docstring), GPS-free.
+
+    The lines come from the beams' extractor preset (its ``line_sigma_*`` set to 0) with
+    dead-reckoning poses and ``pose_uncertainty`` on. The ratio ``s_rho / s_theta`` is the ratio
+    of the robust spreads (median absolute deviations) of the pairs' differences in the earlier
+    line's frame; the scale is then found by root finding on the NEES median.
+    """
+    poses = dead_reckoning_trajectory(dataset)
+    t0, t1 = poses.span_s
+    beams = [b for b in dataset.nav_beams() if t0 <= b.t <= t1]
+    cfg = replace(
+        extractor_config(preset_for(beams)),
+        line_sigma_rho_m=0.0,
+        line_sigma_theta_rad=0.0,
+        pose_uncertainty=True,
+    )
+    head, mounting = dataset.config.sonar, dataset.config.sonar_mounting
+    extractor = LineExtractor(cfg, head, mounting, poses)
+    features: list[LineFeature] = []
+    for b in beams:
+        features += extractor.add(b)
+    lines = []
+    for f in features:
+        line_w, G_z, _ = line_frame_to_world(f.z, f.wTr)
+        lines.append(
+            _Seen(f.t, np.asarray(f.wTr), f.z, np.asarray(f.cov), line_w, G_z, f.endpoints_world())
+        )
+    pairs = _pairs(lines, window_s)
+    if len(pairs) < 20:
+        raise ValueError(f"{dataset.root}: {len(pairs)} pairs of lines of one wall: too few")
+    before = _pair_nees(lines, pairs, (0.0, 0.0))
+    nus = np.array([_difference(lines[i], lines[j])[0] for i, j in pairs])
+    mad = 1.4826 * np.median(np.abs(nus), axis=0)
+    ratio = float(mad[0] / max(mad[1], 1e-9))
+    target = float(chi2.ppf(0.5, 2))
+    sig = (0.0, 0.0)
+    if np.median(before) > target:
+
+        def excess(s_theta: float) -> float:
+            return float(np.median(_pair_nees(lines, pairs, (ratio * s_theta, s_theta))) - target)
+
+        s_theta = float(brentq(excess, 1e-6, np.deg2rad(30.0), xtol=1e-7))
+        sig = (ratio * s_theta, s_theta)
+    after = _pair_nees(lines, pairs, sig)
+    return LineNoiseFit(
+        sigma_rho_m=float(sig[0]),
+        sigma_theta_rad=float(sig[1]),
+        n_lines=len(lines),
+        n_pairs=len(pairs),
+        nees_median_before=float(np.median(before)),
+        nees_median_after=float(np.median(after)),
+        outside_99_after=float(np.mean(after > chi2.ppf(0.99, 2))),
+    )
