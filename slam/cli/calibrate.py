@@ -5,9 +5,15 @@ from __future__ import annotations
 import argparse
 import math
 
-from datasets.source import open_dataset
-from slam.cli.common import EPILOG, Subparsers, add_poses, add_source
-from slam.run.calibration import calibrate_ahrs_deviation, calibrate_ahrs_yaw, calibrate_sonar_yaw
+from datasets.source import Dataset, open_dataset
+from slam.cli.common import EPILOG, Subparsers, add_poses, add_quiet, add_source
+from slam.run.calibration import (
+    calibrate_ahrs_deviation,
+    calibrate_ahrs_yaw,
+    calibrate_sonar_yaw,
+    ekf_closed_loop,
+)
+from slam.run.closed_loop import ClosedLoopResult
 from slam.run.sources import pose_source_by_name
 
 
@@ -34,6 +40,7 @@ def add_parser(sub: Subparsers) -> None:
     p.add_argument(
         "--iterations", type=int, default=4, help="closed loops for --ahrs-deviation (default 4)"
     )
+    add_quiet(p)
     p.set_defaults(func=command)
 
 
@@ -44,10 +51,17 @@ def _ahrs_deviation(args: argparse.Namespace) -> int:
         f"AHRS deviation from the EKF's line re-observations (GPS-free), from [{b0:.2f}, {c0:.2f}] deg:"
     )
 
-    def progress(k: int, n: int) -> None:
-        print(f"  calibrate ahrs-deviation {k}/{n}: EKF closed loop ...", flush=True)
+    label = ["ekf"]
 
-    steps = calibrate_ahrs_deviation(dataset, iterations=args.iterations, progress=progress)
+    def progress(k: int, n: int) -> None:
+        label[0] = f"calibrate ahrs-deviation {k}/{n} (ekf)"
+
+    def closed_loop(ds: Dataset) -> ClosedLoopResult:
+        return ekf_closed_loop(ds, None if args.quiet else label[0])
+
+    steps = calibrate_ahrs_deviation(
+        dataset, closed_loop, iterations=args.iterations, progress=progress
+    )
     for k, (dev, n) in enumerate(steps, start=1):
         print(
             f"  iteration {k}: [{math.degrees(dev[0]):.2f}, {math.degrees(dev[1]):.2f}] deg ({n} lines)"

@@ -5,7 +5,7 @@ dataset's beams inside the navigation span with one pose source and writes
 
 * ``lines.jsonl``: one :meth:`features.line.LineFeature.to_json` object per line (``t``, the frame
   R ``x, y, yaw``, ``rho, theta`` and ``cov`` in R, ``votes``, ``n_voters``, world ``endpoints``);
-* ``lines_world.png``: every segment with its 95 % band (:func:`slam.io.plots.segment_band_world`) over the
+* ``lines_world.png``: every segment with its 95 % band (:func:`slam.io.maps.segment_band_world`) over the
   density image of the projected threshold bins (intensity at least the extractor's threshold;
   every given bin of thresholded beams);
 * ``extract.json``: counts and timings (``features``, ``beams``, ``beam_time_p50_us``,
@@ -33,7 +33,8 @@ from features.geometry import FloatArray
 from features.line import LineFeature
 from features.pose_source import PoseSource
 from features.projection import project_beams
-from slam.io.plots import plot_lines, segment_band_world
+from slam.eval.truth import truth_walls
+from slam.io.maps import MapLayers, plot_lines, segment_band_world
 from slam.run.presets import extractor_config, map_min_intensity, preset_for
 from slam.run.sources import pose_source_by_name
 from sonar.beam import SonarBeam
@@ -189,12 +190,18 @@ def extract(
     points_w, _ = project_beams(
         beams, head, mounting, pose_source, map_min_intensity(beams, config)
     )
-    plot_lines(
-        out / "lines_world.png",
+    walls = truth_walls(dataset) if dataset.truth and "walls_m" in dataset.truth else None
+    layers = MapLayers(
         points_w,
+        {poses: pose_source},
         [ln.endpoints_world() for ln in lines],
         [segment_band_world(ln) for ln in lines],
+        walls,
+        segment_label="line",
+    )
+    plot_lines(
+        out / "lines_world.png",
+        layers,
         f"{dataset.name}: {len(lines)} lines ({preset_name} preset, {poses} poses), 95 % bands",
-        {poses: pose_source},
     )
     return ExtractionResult(lines, stats, beam_time_s, out)
