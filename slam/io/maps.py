@@ -1,8 +1,8 @@
 """Map pictures: sonar bins projected into the world, trajectories, line segments with their
 95 % bands, and on simulated data the true walls and the true trajectory.
 
-Every map is cropped to the data (the bins' 0.5-99.5 % quantiles, the trajectories and the true
-walls, plus a margin), so a stray bin or a landmark extent reaching past what was observed does
+Every map is cropped to the data (where the bins are dense, and the trajectories, plus a margin),
+so a stray bin or a landmark extent reaching past what was observed does
 not stretch the axes; the figure takes the data's aspect, and the legend sits outside the axes.
 Matplotlib's object interface (``Figure``): importing this module changes no global state.
 """
@@ -77,26 +77,39 @@ class MapLayers:
     segment_label: str = "landmark"
 
 
-def data_box(layers: MapLayers, margin_m: float = 2.0) -> tuple[FloatArray, FloatArray]:
-    """Lower-left and upper-right corners (m) of what a map shows: the bins' 0.5-99.5 %
-    quantiles and the trajectories, with a margin (neither the segments, whose extent may reach
+def _dense_box(points_w: FloatArray, cells: int = 100, share: float = 5e-4) -> FloatArray:
+    """Corners (2, 2) of the cells of a ``cells`` x ``cells`` grid holding at least ``share`` of
+    the bins (and 3): the walls, without the thin spray of noise and multipath around them."""
+    lo, hi = np.quantile(points_w, [0.001, 0.999], axis=0)
+    h, xe, ye = np.histogram2d(
+        points_w[:, 0], points_w[:, 1], bins=cells, range=[[lo[0], hi[0]], [lo[1], hi[1]]]
+    )
+    ix, iy = np.nonzero(h >= max(3.0, share * points_w.shape[0]))
+    if ix.size == 0:
+        return np.stack([lo, hi])
+    return np.array([[xe[ix.min()], ye[iy.min()]], [xe[ix.max() + 1], ye[iy.max() + 1]]])
+
+
+def data_box(layers: MapLayers, margin: float = 0.04) -> tuple[FloatArray, FloatArray]:
+    """Lower-left and upper-right corners (m) of what a map shows: where the bins are dense
+    (:func:`_dense_box`) and the trajectories, with a margin (neither the segments, whose extent may reach
     past what was observed, nor the true walls, which may stand where the run never went)."""
     parts = [tr.poses_wTb[:, :2] for tr in layers.trajectories.values() if tr.t_s.size]
     if layers.points_w.shape[0]:
-        parts.append(np.quantile(layers.points_w, [0.005, 0.995], axis=0))
+        parts.append(_dense_box(layers.points_w))
     if not parts and layers.segments_w:
         parts = [np.concatenate([np.asarray(s) for s in layers.segments_w])]
     if not parts:
         return np.array([-1.0, -1.0]), np.array([1.0, 1.0])
     allp = np.concatenate(parts)
     lo, hi = allp.min(axis=0), allp.max(axis=0)
-    pad = max(margin_m, 0.03 * float(np.max(hi - lo)))
+    pad = max(margin * float(np.max(hi - lo)), 0.1)
     return lo - pad, hi + pad
 
 
 def _draw_points(ax: Axes, points_w: FloatArray, lo: FloatArray, hi: FloatArray) -> None:
     """Projected bins as a density image (log scale): walls are where many bins agree. The cell
-    is 1/700 of the larger side (0.4 m on the marina, 2 cm in a pool)."""
+    is 1/700 of the larger side (0.4 m on the marina, 2 cm in a pool); drawn over the bands."""
     inside = np.all((points_w >= lo) & (points_w <= hi), axis=1)
     if not np.any(inside):
         return
@@ -105,13 +118,17 @@ def _draw_points(ax: Axes, points_w: FloatArray, lo: FloatArray, hi: FloatArray)
     h, xe, ye = np.histogram2d(
         points_w[inside, 0], points_w[inside, 1], bins=bins, range=[[lo[0], hi[0]], [lo[1], hi[1]]]
     )
+    # empty cells transparent: the bands drawn under the bins stay visible in the water and
+    # never hide a wall
     ax.imshow(
-        np.log1p(h.T),
+        np.ma.masked_equal(np.log1p(h.T), 0.0),
         origin="lower",
         extent=(xe[0], xe[-1], ye[0], ye[-1]),
         cmap="Greys",
         interpolation="nearest",
-        vmax=max(float(np.log1p(h).max()) * 0.6, 1e-9),
+        vmin=-0.15 * float(np.log1p(h).max()),
+        vmax=max(float(np.log1p(h).max()) * 0.8, 1e-9),
+        zorder=5,
     )
 
 
@@ -129,7 +146,7 @@ def _draw_trajectories(ax: Axes, trajectories: dict[str, Trajectory]) -> None:
             lw=1.2 if ref else 1.0,
             color=colour,
             label=label,
-            zorder=3 + order.get(name, 3),
+            zorder=10 + order.get(name, 3),
         )
 
 
@@ -146,15 +163,15 @@ def draw_map(ax: Axes, layers: MapLayers, box: tuple[FloatArray, FloatArray]) ->
                 color="tab:cyan",
                 lw=1.3,
                 label="true walls" if k == 0 else None,
-                zorder=2,
+                zorder=6,
             )
     if layers.bands_w:
         bands = PolyCollection(
             list(layers.bands_w),
             fc="tab:orange",
             ec="none",
-            alpha=0.3,
-            zorder=7,
+            alpha=0.35,
+            zorder=1,
             label="95 % band of (ρ, θ)",
         )
         ax.add_collection(bands, autolim=False)

@@ -251,8 +251,7 @@ def _dataset_section(
             ]
     md += [
         "",
-        f"### ATE per {segments.edges_s[1] - segments.edges_s[0]:.0f} s against "
-        f"{segments.reference} (mean / max, m)",
+        f"### ATE per {segments.segment_s:.0f} s against {segments.reference} (mean / max, m)",
         "",
     ]
     if segments.sonar_end_s is not None:

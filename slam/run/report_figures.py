@@ -174,6 +174,8 @@ class SegmentTable:
     reference : str
     sonar_end_s : float or None
         When the sonar stops, seconds since the same start (None: it runs to the end).
+    segment_s : float
+        The segments' length (the last one ends with the data).
     """
 
     edges_s: FloatArray
@@ -181,6 +183,7 @@ class SegmentTable:
     max_m: dict[str, FloatArray]
     reference: str
     sonar_end_s: float | None
+    segment_s: float = SEGMENT_S
 
 
 def segment_table(
@@ -190,9 +193,10 @@ def segment_table(
     errs = {labels[str(r.run_dir)]: run_errors(r) for r in runs}
     t0 = min(float(t[0]) for t, _, _ in errs.values() if t.size)
     t1 = max(float(t[-1]) for t, _, _ in errs.values() if t.size)
-    edges = np.arange(0.0, t1 - t0 + segment_s, segment_s)
-    if edges.size < 2:
-        edges = np.array([0.0, segment_s])
+    # whole segments, the last one ending with the data
+    edges = np.append(np.arange(0.0, t1 - t0, segment_s), t1 - t0)
+    if edges.size < 2 or edges[-1] <= edges[-2]:
+        edges = np.array([0.0, max(t1 - t0, 1e-9)])
     mean_m, max_m = {}, {}
     for lab, (t, e, _) in errs.items():
         k = np.clip(np.searchsorted(edges, t - t0, side="right") - 1, 0, edges.size - 2)
@@ -208,7 +212,7 @@ def segment_table(
     if sonar_end is not None and sonar_end >= t1 - t0 - 1.0:
         sonar_end = None  # the sonar runs to the end
     reference = next(iter(errs.values()))[2]
-    return SegmentTable(edges, mean_m, max_m, reference, sonar_end)
+    return SegmentTable(edges, mean_m, max_m, reference, sonar_end, segment_s)
 
 
 def segment_figure(table: SegmentTable, dataset_name: str, out: Path) -> Path:
@@ -218,8 +222,7 @@ def segment_figure(table: SegmentTable, dataset_name: str, out: Path) -> Path:
         out,
         table.edges_s,
         stats,
-        f"{dataset_name}: ATE per {table.edges_s[1] - table.edges_s[0]:.0f} s against "
-        f"{table.reference}",
+        f"{dataset_name}: ATE per {table.segment_s:.0f} s against {table.reference}",
         table.reference,
         table.sonar_end_s,
     )

@@ -53,6 +53,8 @@ class G2oExport:
         Factors g2o cannot hold, by type.
     approximated : int
         Odometry edges written without their misalignment / gyro-scale variables.
+    whole : str
+        The file that holds the whole graph.
     """
 
     path: Path
@@ -60,6 +62,7 @@ class G2oExport:
     edges: int
     left_out: dict[str, int] = field(default_factory=dict)
     approximated: int = 0
+    whole: str = "graph.json"
 
     def message(self) -> str:
         """One line for the warning and the terminal."""
@@ -70,7 +73,7 @@ class G2oExport:
         )
         if self.approximated:
             text += f"; {self.approximated} odometry edges lost their misalignment/scale terms"
-        return text + f" ({self.path.with_suffix('.json').name} has the whole graph)"
+        return text + f" ({self.whole} has the whole graph)"
 
 
 def _pose_index(name: str) -> int:
@@ -89,7 +92,10 @@ def _edge(record: dict[str, Any]) -> str:
 
 
 def write_g2o(
-    path: str | Path, factors: list[dict[str, Any]], values: dict[str, dict[str, Any]]
+    path: str | Path,
+    factors: list[dict[str, Any]],
+    values: dict[str, dict[str, Any]],
+    whole: str = "graph.json",
 ) -> G2oExport:
     """Write the poses and odometry of a graph (``graph.json``'s ``factors`` and ``values``) as
     g2o; warns (``UserWarning``) naming the factors it left out (module docstring)."""
@@ -111,7 +117,7 @@ def write_g2o(
         lines.append(_edge(record))
         edges += 1
     out.write_text("\n".join(lines) + "\n")
-    result = G2oExport(out, len(poses), edges, dict(left_out), approximated)
+    result = G2oExport(out, len(poses), edges, dict(left_out), approximated, whole)
     if left_out or approximated:
         warnings.warn(result.message(), UserWarning, stacklevel=2)
     return result
@@ -124,4 +130,4 @@ def graph_json_to_g2o(json_path: str | Path, g2o_path: str | Path | None = None)
     doc = json.loads(src.read_text())
     if doc.get("format") != GRAPH_FORMAT:
         raise ValueError(f"{src}: not a {GRAPH_FORMAT} file")
-    return write_g2o(g2o_path or src.with_suffix(".g2o"), doc["factors"], doc["values"])
+    return write_g2o(g2o_path or src.with_suffix(".g2o"), doc["factors"], doc["values"], src.name)
