@@ -262,6 +262,11 @@ def plot_lines(
         mids = mids[inside] if np.any(inside) else mids
         side = zoom_side_m if zoom_side_m is not None else max(float(np.max(hi - lo)) / 6.0, 1.0)
         cx, cy = _densest_window(mids[:2000], side)
+        # the window inside the map when it fits
+        cx, cy = (
+            float(np.clip(c, a + 0.5 * side, max(a + 0.5 * side, b - 0.5 * side)))
+            for c, a, b in zip((cx, cy), lo, hi, strict=True)
+        )
         axes[1].set_xlim(cx - 0.5 * side, cx + 0.5 * side)
         axes[1].set_ylim(cy - 0.5 * side, cy + 0.5 * side)
         axes[1].set_title(
