@@ -12,7 +12,7 @@ SHARED_DATA := $(abspath ../shared/datasets)
 # Data is found through SONARSLAM_DATA; point it at ../shared/datasets when that exists.
 export SONARSLAM_DATA ?= $(if $(wildcard $(SHARED_DATA)/marina),$(SHARED_DATA),)
 export MPLBACKEND := Agg
-PY_VERSION = import sys; print(sys.implementation.name, *sys.version_info[:3])
+PY_VERSION = import sys; print(sys.implementation.name, "%d.%d.%d" % sys.version_info[:3])
 
 .PHONY: venv run test lint bench lock clean help FORCE
 
