@@ -35,6 +35,7 @@ from features.pose_source import PoseSource
 from features.projection import project_beams
 from slam.eval.truth import truth_walls
 from slam.io.maps import MapLayers, plot_lines, segment_band_world
+from slam.io.trajectory import Trajectory
 from slam.run.presets import extractor_config, map_min_intensity, preset_for
 from slam.run.sources import pose_source_by_name
 from sonar.beam import SonarBeam
@@ -190,18 +191,28 @@ def extract(
     points_w, _ = project_beams(
         beams, head, mounting, pose_source, map_min_intensity(beams, config)
     )
+    title = f"{dataset.name}: {len(lines)} lines ({preset_name} preset, {poses} poses), 95 % bands"
+    _draw(out / "lines_world.png", dataset, lines, points_w, {poses: pose_source}, title)
+    return ExtractionResult(lines, stats, beam_time_s, out)
+
+
+def _draw(
+    path: Path,
+    dataset: Dataset,
+    lines: list[LineFeature],
+    points_w: FloatArray,
+    trajectories: dict[str, Trajectory],
+    title: str,
+) -> None:
+    """lines_world.png: the lines with their 95 % bands over the bins (the true walls of a
+    simulated dataset)."""
     walls = truth_walls(dataset) if dataset.truth and "walls_m" in dataset.truth else None
     layers = MapLayers(
         points_w,
-        {poses: pose_source},
+        trajectories,
         [ln.endpoints_world() for ln in lines],
         [segment_band_world(ln) for ln in lines],
         walls,
         segment_label="line",
     )
-    plot_lines(
-        out / "lines_world.png",
-        layers,
-        f"{dataset.name}: {len(lines)} lines ({preset_name} preset, {poses} poses), 95 % bands",
-    )
-    return ExtractionResult(lines, stats, beam_time_s, out)
+    plot_lines(path, layers, title)
