@@ -63,6 +63,8 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+import tomli_w
+
 from datasets.errors import DataError
 from sonar.beam import Mounting, SonarHead
 
@@ -71,6 +73,7 @@ __all__ = [
     "DatasetConfig",
     "MARINA_CONFIG",
     "load_dataset_config",
+    "config_tables",
     "dump_dataset_config",
 ]
 
@@ -350,39 +353,44 @@ def _deg(angle_rad: float) -> float:
     return float(f"{math.degrees(angle_rad):.12g}")
 
 
-def dump_dataset_config(config: DatasetConfig) -> str:
-    """The TOML text of ``config`` (what the simulator writes beside its logs)."""
+def config_tables(config: DatasetConfig) -> dict[str, dict[str, Any]]:
+    """The ``sonarslam.toml`` tables of ``config``: ``{"sonar": {...}, "mounting.sonar": {...},
+    ...}``, every key with its value in the file's units (what :func:`dump_dataset_config`
+    writes and ``sonarslam info`` prints)."""
 
-    def mount(name: str, m: Mounting) -> str:
-        return (
-            f"[mounting.{name}]\nx_m = {m.x_m!r}\ny_m = {m.y_m!r}\n"
-            f"yaw_deg = {_deg(m.yaw_rad)!r}\nsource = {m.source!r}\n"
-        )
+    def mount(m: Mounting) -> dict[str, Any]:
+        return {"x_m": m.x_m, "y_m": m.y_m, "yaw_deg": _deg(m.yaw_rad), "source": m.source}
 
     s = config.sonar
-    n = config.noise
-    return (
-        f"[sonar]\nn_bins = {s.n_bins}\nbin_size_m = {s.bin_size_m!r}\n"
-        f"step_deg = {_deg(s.step_rad)!r}\n"
-        f"beam_width_deg = {_deg(s.beam_width_rad)!r}\n"
-        f"angle_sense = {s.angle_sense}\n"
-        f"time_offset_s = {config.sonar_time_offset_s!r}\n"
-        f"range_offset_m = {s.range_offset_m!r}\n\n"
-        + mount("sonar", config.sonar_mounting)
-        + "\n"
-        + mount("dvl", config.dvl_mounting)
-        + "\n"
-        + mount("ahrs", config.ahrs_mounting)
-        + "\n"
-        + f"[noise]\ndvl_sigma_mps = {n.dvl_sigma_mps!r}\nahrs_sigma_deg = {n.ahrs_sigma_deg!r}\n"
-        f"gps_sigma_m = {n.gps_sigma_m!r}\ndvl_max_gap_s = {n.dvl_max_gap_s!r}\n"
-        f"dvl_scatter_window_s = {n.dvl_scatter_window_s!r}\n"
-        f"dvl_nominal_scatter_mps = {n.dvl_nominal_scatter_mps!r}\n"
-        f"ahrs_bias_walk_deg_per_sqrt_s = {n.ahrs_bias_walk_deg_per_sqrt_s!r}\n"
-        f"line_sigma_rho_m = {n.line_sigma_rho_m!r}\n"
-        f"line_sigma_theta_deg = {n.line_sigma_theta_deg!r}\n\n"
-        f"[keyframes]\nscan_direction = {config.keyframe_scan_direction}\n\n"
-        f"[motion]\nyaw_rate_source = {config.yaw_rate_source!r}\n"
-        f"ahrs_deviation_deg = [{_deg(config.ahrs_deviation_rad[0])!r},"
-        f" {_deg(config.ahrs_deviation_rad[1])!r}]\n"
-    )
+    return {
+        "sonar": {
+            "n_bins": s.n_bins,
+            "bin_size_m": s.bin_size_m,
+            "step_deg": _deg(s.step_rad),
+            "beam_width_deg": _deg(s.beam_width_rad),
+            "angle_sense": s.angle_sense,
+            "time_offset_s": config.sonar_time_offset_s,
+            "range_offset_m": s.range_offset_m,
+        },
+        "mounting.sonar": mount(config.sonar_mounting),
+        "mounting.dvl": mount(config.dvl_mounting),
+        "mounting.ahrs": mount(config.ahrs_mounting),
+        "noise": {f.name: getattr(config.noise, f.name) for f in fields(NoiseConfig)},
+        "keyframes": {"scan_direction": config.keyframe_scan_direction},
+        "motion": {
+            "yaw_rate_source": config.yaw_rate_source,
+            "ahrs_deviation_deg": [_deg(v) for v in config.ahrs_deviation_rad],
+        },
+    }
+
+
+def dump_dataset_config(config: DatasetConfig) -> str:
+    """The TOML text of ``config`` (what the simulator writes beside its logs), by tomli-w."""
+    doc: dict[str, Any] = {}
+    for name, table in config_tables(config).items():
+        head, _, sub = name.partition(".")
+        if sub:
+            doc.setdefault(head, {})[sub] = table
+        else:
+            doc[head] = table
+    return tomli_w.dumps(doc)

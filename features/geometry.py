@@ -1,6 +1,6 @@
 """Planar geometry conventions of the project, one function each.
 
-Conventions (see ``../shared/design.md``):
+Conventions (see ``docs/design.md``):
 
 * A pose is an array ``(x_m, y_m, yaw_rad)`` of frame ``b`` in frame ``a`` (``aTb``); yaw is
   counter-clockwise from the x axis of ``a``, as ``gtsam.Pose2``.

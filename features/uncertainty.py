@@ -73,6 +73,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
+from scipy.stats import chi2
 
 from features.geometry import FloatArray, normalize_line, wrap_angle
 from features.hough import HoughGrid
@@ -80,7 +81,6 @@ from features.sector import BinsInR, SectorSnapshot
 
 __all__ = [
     "LineEstimate",
-    "chi2_2dof",
     "effective_bearings",
     "fit_line",
     "support_mask",
@@ -112,14 +112,6 @@ class LineEstimate:
     cov: FloatArray
     region_cells: npt.NDArray[np.int64] | None = None
     pose_term: FloatArray | None = None
-
-
-def chi2_2dof(confidence: float) -> float:
-    """Quantile of the chi-square law with 2 degrees of freedom: ``-2 ln(1 - confidence)``
-    (5.991 at 0.95)."""
-    if not 0.0 < confidence < 1.0:
-        raise ValueError(f"confidence must be in (0, 1), got {confidence}")
-    return float(-2.0 * np.log1p(-confidence))
 
 
 def _normal_seen_from(
@@ -492,7 +484,7 @@ def seed_ellipse(
     mean = pts.mean(axis=0)
     dev = pts - mean
     moments = dev.T @ dev / pts.shape[0] + np.diag([drho**2, dth**2]) / 12.0
-    cov = 4.0 * moments / chi2_2dof(confidence)  # ellipse E = 4 M is the confidence region
+    cov = 4.0 * moments / chi2.ppf(confidence, 2)  # ellipse E = 4 M is the confidence region
     rho_n, theta_n = normalize_line(mean[0], mean[1])
     jj, ii = np.nonzero(region)
     cells = ((j0 + dj[jj]) % grid.n_theta) * grid.n_rho + (i0 + di[ii])

@@ -84,9 +84,16 @@ def test_run_dr_writes_what_it_measured(short_harbour, tmp_path):
     assert metrics["ate_sonar_n"] <= metrics["ate_n"]
     assert 0.0 < metrics["ate_truth_aligned_mean_m"] <= metrics["ate_truth_mean_m"]
     # the TUM file holds the same trajectory (to the file's precision)
-    tum = read_tum(out / "trajectory.tum")
+    # dr.tum holds the trajectory at its own times and, interpolated, at every GPS fix and
+    # true pose inside it (to the file's precision)
+    tum = read_tum(out / "dr.tum")
     dr = dead_reckoning_trajectory(ds)
-    assert np.allclose(tum.poses_wTb[:, :2], dr.poses_wTb[:, :2], atol=1e-3)
+    own = np.isin(np.round(tum.t_s, 4), np.round(dr.t_s, 4))
+    assert own.sum() == dr.t_s.size
+    assert np.allclose(tum.poses_wTb[own, :2], dr.poses_wTb[:, :2], atol=1e-3)
+    assert np.allclose(tum.poses_wTb[:, :2], dr.poses(tum.t_s)[:, :2], atol=1e-3)
+    gps_t = read_tum(out / "gps.tum").t_s
+    assert np.isin(np.round(gps_t, 4), np.round(tum.t_s, 4)).all()
     assert (out / "report.png").stat().st_size > 10_000
 
 
@@ -119,7 +126,7 @@ def test_run_ekf_maps_the_true_walls(short_harbour, tmp_path):
     assert np.mean(on_wall) >= 0.8
     # and the closed loop stays within a few metres of the truth
     truth = truth_trajectory(ds)
-    ekf = read_tum(out / "trajectory.tum")
+    ekf = read_tum(out / "ekf.tum")
     err = np.hypot(*(ekf.poses(ekf.t_s)[:, :2] - truth.poses(ekf.t_s)[:, :2]).T)
     assert err.mean() < 3.0
 

@@ -18,8 +18,8 @@ from slam.eval.consistency import (
 )
 from slam.eval.evo_metrics import evo_ape, evo_rpe
 from slam.io.trajectory import (
-    COV_FILE,
     Trajectory,
+    cov_file,
     load_run_trajectory,
     write_trajectory_covariances,
     write_tum,
@@ -117,10 +117,10 @@ def test_covariances_round_trip_beside_the_tum(tmp_path):
     A = rng.normal(size=(50, 3, 3))
     covs = A @ A.transpose(0, 2, 1) + 0.1 * np.eye(3)
     tr = Trajectory(tr.t_s, tr.poses_wTb, covs)
-    write_tum(tmp_path / "trajectory.tum", tr)
-    assert load_run_trajectory(tmp_path).covs is None  # absent: handled
-    assert write_trajectory_covariances(tmp_path / COV_FILE, tr) == tmp_path / COV_FILE
-    back = load_run_trajectory(tmp_path)
+    write_tum(tmp_path / "ekf.tum", tr)
+    assert load_run_trajectory(tmp_path, "ekf").covs is None  # absent: handled
+    assert write_trajectory_covariances(tmp_path / cov_file("ekf"), tr) == tmp_path / "ekf_cov.npz"
+    back = load_run_trajectory(tmp_path, "ekf")
     np.testing.assert_array_equal(back.covs, covs)
     np.testing.assert_allclose(back.poses_wTb, tr.poses_wTb, atol=1e-12)
     no_cov = Trajectory(tr.t_s, tr.poses_wTb)
@@ -130,11 +130,11 @@ def test_covariances_round_trip_beside_the_tum(tmp_path):
 
 def test_covariances_of_other_times_are_refused(tmp_path):
     tr = loop_path(n=20)
-    write_tum(tmp_path / "trajectory.tum", tr)
+    write_tum(tmp_path / "ekf.tum", tr)
     other = Trajectory(tr.t_s + 0.25, tr.poses_wTb, np.broadcast_to(np.eye(3), (20, 3, 3)).copy())
-    write_trajectory_covariances(tmp_path / COV_FILE, other)
+    write_trajectory_covariances(tmp_path / cov_file("ekf"), other)
     with pytest.raises(ValueError, match="do not match"):
-        load_run_trajectory(tmp_path)
+        load_run_trajectory(tmp_path, "ekf")
 
 
 # -- NEES, NIS, ANEES -----------------------------------------------------------------------------

@@ -8,16 +8,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.stats import chi2
 
 from datasets.simulator import simulate
 from datasets.source import open_dataset
 from features.config import ExtractorConfig
 from features.geometry import inverse, line_frame_to_world, transform_points
 from features.line import LineFeature
-from features.uncertainty import chi2_2dof
 from slam.cli.main import main
 from slam.eval.lines import GATE_RAD, HARBOUR_GATE_M, match_features
-from slam.io.plots import segment_band_world
+from slam.io.maps import segment_band_world
 from slam.run.presets import EXTRACTOR_PRESETS, extractor_config, preset_for
 from sonar.beam import SonarBeam
 
@@ -81,7 +81,7 @@ def test_band_is_the_envelope_of_the_lines_in_the_95_percent_ellipse() -> None:
     ft = _feature(cov)
     band = segment_band_world(ft, n_along=21)  # 72 points on the ellipse
     z0 = np.array([ft.rho_m, ft.theta_rad])
-    root = np.linalg.cholesky(cov) * np.sqrt(chi2_2dof(0.95))
+    root = np.linalg.cholesky(cov) * np.sqrt(chi2.ppf(0.95, 2))
     rng = np.random.default_rng(7)
     # lines drawn uniformly inside the ellipse stay in the band (up to 1 % of its half width,
     # the chord error of 72 boundary points)
@@ -101,7 +101,7 @@ def test_band_is_the_envelope_of_the_lines_in_the_95_percent_ellipse() -> None:
     # to first order the half width at s along the line is sqrt(chi2 [1, -s] cov [1, -s]^T)
     t = np.array([-np.sin(ft.theta_rad), np.cos(ft.theta_rad)])
     s = np.linspace(ft.endpoints_r[0] @ t, ft.endpoints_r[1] @ t, 21)
-    lin = np.sqrt(chi2_2dof(0.95) * (cov[0, 0] - 2 * s * cov[0, 1] + s**2 * cov[1, 1]))
+    lin = np.sqrt(chi2.ppf(0.95, 2) * (cov[0, 0] - 2 * s * cov[0, 1] + s**2 * cov[1, 1]))
     np.testing.assert_allclose(half, lin, rtol=0.01)
 
 

@@ -1,8 +1,11 @@
-"""slam.run.report: the table holds the runs' own numbers and the published ones; bands and figures."""
+"""slam.run.report: the tables hold the runs' own numbers (both spans, the truth on simulated
+data), the published rows under the marina's table only, the ATE per segment; bands, figures."""
 
 from __future__ import annotations
 
+import json
 import re
+import shutil
 
 import numpy as np
 import pytest
@@ -10,12 +13,15 @@ from scipy.stats import chi2
 
 from datasets.simulator import simulate
 from slam.cli.main import main
+from slam.eval.ate import truth_errors
 from slam.eval.consistency import nees_series
-from slam.eval.evo_metrics import evo_ape, evo_rpe
+from slam.eval.evo_metrics import evo_ape
 from slam.eval.published import PUBLISHED
 from slam.eval.truth import truth_trajectory
-from slam.io.trajectory import COV_FILE, read_tum
-from slam.run.report import landmark_band_world, load_run, report
+from slam.io.maps import landmark_band_world
+from slam.io.trajectory import cov_file, read_tum
+from slam.run.report import report
+from slam.run.report_data import load_run
 from slam.run.run import run
 
 
@@ -27,14 +33,18 @@ def runs(tmp_path_factory):
     source = simulate("harbour", seed=5, out_dir=root / "h5", duration_s=150.0)
     dr = run(source, "dr", root / "h5-dr", progress=False)
     ekf = run(source, "ekf", root / "h5-ekf", progress=False)
-    assert (ekf.out_dir / COV_FILE).is_file()
-    (dr.out_dir / COV_FILE).unlink()
+    assert (ekf.out_dir / cov_file("ekf")).is_file()
+    (dr.out_dir / cov_file("dr")).unlink()
     return {"dr": dr, "ekf": ekf, "source": source}
 
 
-def _row(md: str, run_name: str) -> list[str]:
-    line = next(ln for ln in md.splitlines() if f"| {run_name} |" in ln)
-    return [c.strip() for c in line.strip("|").split("|")]
+def _row(md: str, first: str, column: int = 1) -> list[str]:
+    """The cells of the first table row whose cell ``column`` is ``first``."""
+    for ln in md.splitlines():
+        cells = [c.strip() for c in ln.strip().strip("|").split("|")]
+        if ln.startswith("|") and len(cells) > column and cells[column] == first:
+            return cells
+    raise AssertionError(f"no row {first!r} in the report")
 
 
 def test_band_of_a_landmark_is_the_95_percent_envelope():
@@ -65,37 +75,75 @@ def test_report_table_holds_each_runs_numbers(runs, tmp_path):
     for r, name in ((dr, "h5-dr"), (ekf, "h5-ekf")):
         cells = _row(md, name)
         m = r.metrics
-        assert cells[3:9] == [
+        # simulated: against the truth (as it is, max, aligned), then GPS over both spans
+        assert cells[2:7] == [
+            f"{m['ate_truth_mean_m']:.2f}",
+            f"{m['ate_truth_max_m']:.2f}",
+            f"{m['ate_truth_aligned_mean_m']:.2f}",
+            f"{m['ate_sonar_mean_m']:.2f}",
             f"{m['ate_mean_m']:.2f}",
-            f"{m['ate_sd_m']:.2f}",
-            f"{m['ate_min_m']:.2f}",
-            f"{m['ate_max_m']:.2f}",
-            f"{m['ate_rmse_m']:.2f}",
-            str(m["ate_n"]),
         ]
-        gt = read_tum(r.out_dir / "ground_truth.tum")
-        est = read_tum(r.out_dir / "trajectory.tum")
-        assert cells[10] == f"{evo_ape(gt, est).rmse_m:.2f}"
-        assert cells[12] == f"{evo_rpe(gt, est, delta_m=10.0).rmse_m:.2f}"
+        gps = read_tum(r.out_dir / "gps.tum")
+        est = read_tum(r.out_dir / f"{r.backend}.tum")
+        assert cells[8] == f"{evo_ape(gps, est).rmse_m:.2f}"
     # NEES only where the covariances were saved; it is the NEES against the simulator's truth
     nees = nees_series(ekf.trajectory, truth_trajectory(load_run(ekf.out_dir).dataset))
-    assert _row(md, "h5-ekf")[14] == f"{nees.mean:.2f}"
-    assert _row(md, "h5-dr")[14] == ""
-    assert f"no {COV_FILE}" in md
-    for p in PUBLISHED:
-        assert f"| {p['mean']:.2f} | {p['sd']:.2f} | {p['min']:.2f} | {p['max']:.2f} |" in md
-    assert "| 17.46 | 11.47 | 0.09 | 45.42 |" in md
-    assert re.search(r"\| EKF-SLAM \| 1 \| [0-9.]+ \| 0\.22 - 9\.35 \|", md)
+    assert _row(md, "h5-ekf")[9] == f"{nees.mean:.2f}"
+    assert _row(md, "h5-dr")[9] == ""
+    assert f"no {cov_file('dr')}" in md
+    # no published figure under a simulated table
+    assert "Mallios 2014, Table 2" not in md and "17.46" not in md
+    assert re.search(r"\| EKF-SLAM\s*\|\s*1 \|\s*[0-9.]+ \|\s*0\.22 - 9\.35 \|", md)
+    # the ATE per 300 s against the truth: the mean and max of the ATE's own errors
+    t, e = truth_errors(ekf.trajectory, truth_trajectory(load_run(ekf.out_dir).dataset))
+    first = (t - t[0]) < 300.0
+    assert _row(md, "ekf", column=0)[1] == f"{e[first].mean():.2f} / {e[first].max():.2f}"
     names = sorted(p.name for p in res.figures)
     assert names == [
         "errors_h5-dr.png",
         "errors_h5-ekf.png",
         "map_h5-ekf.png",
         "nees_h5-ekf.png",
+        "segments_h5.png",
         "trajectories_h5.png",
     ]
     for p in res.figures:
         assert p.stat().st_size > 10_000 and f"({p.name})" in md
+
+
+def test_published_rows_stand_under_the_marina_table_only(runs, tmp_path):
+    """A run of a dataset named marina, reported without its dataset (as a real run): both
+    spans side by side and the published rows under the sonar span; the simulated one beside it
+    gets none."""
+    marina = tmp_path / "marina-ekf"
+    shutil.copytree(runs["ekf"].out_dir, marina)
+    metrics = json.loads((marina / "metrics.json").read_text())
+    metrics["source"] = str(tmp_path / "marina")
+    (marina / "metrics.json").write_text(json.dumps(metrics))
+    res = report([marina], tmp_path / "rep", open_sources=False)
+    md = res.path.read_text()
+    m = metrics
+    cells = _row(md, "marina-ekf")
+    assert cells[2:12] == [
+        f"{m['ate_sonar_mean_m']:.2f}",
+        f"{m['ate_sonar_sd_m']:.2f}",
+        f"{m['ate_sonar_max_m']:.2f}",
+        str(m["ate_sonar_n"]),
+        f"{m['ate_mean_m']:.2f}",
+        f"{m['ate_sd_m']:.2f}",
+        f"{m['ate_min_m']:.2f}",
+        f"{m['ate_max_m']:.2f}",
+        f"{m['ate_rmse_m']:.2f}",
+        str(m["ate_n"]),
+    ]
+    for p in PUBLISHED:
+        cells = _row(md, p["method"], column=0)
+        assert cells[2:5] == [f"{p['mean']:.2f}", f"{p['sd']:.2f}", f"{p['max']:.2f}"]
+        assert cells[6] == ""  # not under the whole run
+    both = report([marina, runs["dr"].out_dir], tmp_path / "rep2", open_sources=False)
+    text = both.path.read_text()
+    marina_part, _, h5_part = text.partition("## h5")
+    assert "Mallios 2014, Table 2" in marina_part and "Mallios 2014, Table 2" not in h5_part
 
 
 def test_report_without_the_dataset_reuses_the_runs_map(runs, tmp_path, capsys):
@@ -103,7 +151,7 @@ def test_report_without_the_dataset_reuses_the_runs_map(runs, tmp_path, capsys):
     out = tmp_path / "rep2"
     assert main(["report", str(ekf.out_dir), "--out", str(out), "--no-source"]) == 0
     printed = capsys.readouterr().out
-    assert f"ATE mean {ekf.metrics['ate_mean_m']:.2f} m" in printed
+    assert f"whole run ATE mean {ekf.metrics['ate_mean_m']:.2f} m" in printed
     assert (out / "map_h5-ekf.png").read_bytes() == (ekf.out_dir / "map.png").read_bytes()
     assert not (out / "nees_h5-ekf.png").exists()  # no truth without the dataset
 

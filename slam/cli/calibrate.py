@@ -6,9 +6,15 @@ from __future__ import annotations
 import argparse
 import math
 
-from datasets.source import open_dataset
-from slam.cli.common import EPILOG, Subparsers, add_poses, add_source
-from slam.run.calibration import calibrate_ahrs_deviation, calibrate_ahrs_yaw, calibrate_sonar_yaw
+from datasets.source import Dataset, open_dataset
+from slam.cli.common import EPILOG, Subparsers, add_poses, add_quiet, add_source
+from slam.run.calibration import (
+    calibrate_ahrs_deviation,
+    calibrate_ahrs_yaw,
+    calibrate_sonar_yaw,
+    ekf_closed_loop,
+)
+from slam.run.closed_loop import ClosedLoopResult
 from slam.run.sonar_calibration import calibrate_line_noise, calibrate_range_offset
 from slam.run.sources import pose_source_by_name
 
@@ -49,6 +55,7 @@ def add_parser(sub: Subparsers) -> None:
         " dead-reckoning poses instead (GPS-free; [noise] line_sigma_rho_m, line_sigma_theta_deg;"
         " calibrate --range-offset first)",
     )
+    add_quiet(p)
     p.set_defaults(func=command)
 
 
@@ -59,10 +66,17 @@ def _ahrs_deviation(args: argparse.Namespace) -> int:
         f"AHRS deviation from the EKF's line re-observations (GPS-free), from [{b0:.2f}, {c0:.2f}] deg:"
     )
 
-    def progress(k: int, n: int) -> None:
-        print(f"  calibrate ahrs-deviation {k}/{n}: EKF closed loop ...", flush=True)
+    label = ["ekf"]
 
-    steps = calibrate_ahrs_deviation(dataset, iterations=args.iterations, progress=progress)
+    def progress(k: int, n: int) -> None:
+        label[0] = f"calibrate ahrs-deviation {k}/{n} (ekf)"
+
+    def closed_loop(ds: Dataset) -> ClosedLoopResult:
+        return ekf_closed_loop(ds, None if args.quiet else label[0])
+
+    steps = calibrate_ahrs_deviation(
+        dataset, closed_loop, iterations=args.iterations, progress=progress
+    )
     for k, (dev, n) in enumerate(steps, start=1):
         print(
             f"  iteration {k}: [{math.degrees(dev[0]):.2f}, {math.degrees(dev[1]):.2f}] deg ({n} lines)"

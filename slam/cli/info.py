@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 import argparse
-import math
 
 from datasets.source import open_dataset
 from slam.cli.common import EPILOG, Subparsers, add_source
+from slam.run.settings import Setting, dataset_settings, run_settings
 from slam.run.sources import dvl_quality
 
 
 def add_parser(sub: Subparsers) -> None:
-    p = sub.add_parser("info", help="what a dataset holds", epilog=EPILOG)
+    p = sub.add_parser(
+        "info", help="what a dataset holds, every setting with its unit and source", epilog=EPILOG
+    )
     add_source(p)
     p.set_defaults(func=command)
 
@@ -23,17 +25,13 @@ def command(args: argparse.Namespace) -> int:
     print(f"  sonar beams {len(d.beams)} ({len(d.nav_beams())} inside the navigation span)")
     print(f"  DVL rows {d.dvl.t.size} ({int((~d.dvl.valid).sum())} without bottom lock)")
     print(f"  AHRS rows {d.attitude.t.size}; GPS fixes {0 if d.gps is None else d.gps.t.size}")
-    print(f"  navigation span {t1 - t0:.1f} s; head {d.config.sonar}")
-    for name in ("sonar", "dvl", "ahrs"):
-        m = getattr(d.config, f"{name}_mounting")
+    print(f"  navigation span {t1 - t0:.1f} s")
+    span = d.sonar_span_s
+    if span is not None:
         print(
-            f"  {name} mounting x={m.x_m} m y={m.y_m} m yaw={math.degrees(m.yaw_rad):.2f} deg ({m.source})"
+            f"  sonar span {span[1] - span[0]:.1f} s (first to last beam inside the navigation;"
+            f" the line landmarks act there): {span[0] - t0:.1f} s to {span[1] - t0:.1f} s"
         )
-    b, c = (math.degrees(v) for v in d.config.ahrs_deviation_rad)
-    print(
-        f"  AHRS deviation B={b:.2f} C={c:.2f} deg (taken off: B sin(yaw) + C cos(yaw)); heading"
-        f" between AHRS samples from the {d.config.yaw_rate_source}"
-    )
     n, dq = d.config.noise, dvl_quality(d)
     print(
         f"  DVL scatter over {n.dvl_scatter_window_s or 60.0:g} s (m/s): "
@@ -48,4 +46,14 @@ def command(args: argparse.Namespace) -> int:
         )
     else:
         print(f"  DVL sigma {n.dvl_sigma_mps} m/s (the scatter's excess is not added)")
+    _print_settings("dataset settings (sonarslam.toml keys)", dataset_settings(d))
+    _print_settings("run settings (sonarslam run --set NAME=VALUE)", run_settings(d))
     return 0
+
+
+def _print_settings(title: str, settings: list[Setting]) -> None:
+    print(f"{title}:")
+    width = max(len(s.name) for s in settings)
+    for s in settings:
+        value = f"{s.value} {s.unit}" if s.unit and s.value is not None else f"{s.value}"
+        print(f"  {s.name:<{width}}  {value:<24}  {s.source}")

@@ -8,7 +8,8 @@ from pathlib import Path
 from datasets.source import open_dataset
 from features.projection import project_beams
 from slam.cli.common import EPILOG, Subparsers, add_poses, add_source
-from slam.io.plots import plot_scans
+from slam.eval.truth import truth_walls
+from slam.io.maps import plot_scans
 from slam.run.presets import map_min_intensity
 from slam.run.sources import pose_source_by_name
 
@@ -45,6 +46,7 @@ def command(args: argparse.Namespace) -> int:
         points,
         {args.poses: poses},
         f"{dataset.name}: sonar bins projected with {args.poses} poses",
+        truth_walls(dataset) if dataset.truth and "walls_m" in dataset.truth else None,
     )
     print(f"{points.shape[0]} bins projected; picture: {out.resolve()}")
     return 0

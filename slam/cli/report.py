@@ -39,12 +39,24 @@ def command(args: argparse.Namespace) -> int:
         open_sources=not args.no_source,
     )
     for row in result.rows:
-        if row.get("ate_n") is not None:
-            nees = row.get("nees_mean")
-            print(
-                f"{row['method']} [{row['run']}, {row['dataset']}]: ATE mean {row['ate_mean_m']:.2f} m, "
-                f"rmse {row['ate_rmse_m']:.2f}; evo APE rmse {row['evo_ape_rmse_m']:.2f} m"
-                + (f"; pose NEES mean {nees:.2f}" if nees is not None else "")
-            )
+        if row.get("ate_n") is None:
+            continue  # a published row
+        sonar = (
+            f"sonar span ATE mean {row['ate_sonar_mean_m']:.2f} m, max {row['ate_sonar_max_m']:.2f}; "
+            if row.get("ate_sonar_mean_m") is not None
+            else ""
+        )
+        truth = (
+            f"; against the truth mean {row['ate_truth_mean_m']:.2f} m"
+            if row.get("ate_truth_mean_m") is not None
+            else ""
+        )
+        nees = row.get("nees_mean")
+        print(
+            f"{row['method']} [{row['run']}, {row['dataset']}]: {sonar}whole run ATE mean "
+            f"{row['ate_mean_m']:.2f} m, max {row['ate_max_m']:.2f}{truth}; evo APE rmse "
+            f"{row['evo_ape_rmse_m']:.2f} m"
+            + (f"; pose NEES mean {nees:.2f}" if nees is not None else "")
+        )
     print(f"report: {result.path.resolve()} ({len(result.figures)} figures)")
     return 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from slam.cli.common import EPILOG, Subparsers, add_quiet, add_source
 from slam.run.presets import parse_settings
@@ -57,6 +58,6 @@ def command(args: argparse.Namespace) -> int:
     if "extractor_preset" in m:
         print(f"extractor preset: {m['extractor_preset']} (slam/run/presets.py)")
     print(summary_line(m))
-    out = result.out_dir.resolve() if result.out_dir else args.out
-    print(f"outputs: {out} (trajectory.tum, ground_truth.tum, metrics.json, report.png)")
+    out = result.out_dir.resolve() if result.out_dir else Path(args.out)
+    print(f"outputs: {out} ({', '.join(sorted(p.name for p in out.iterdir()))})")
     return 0

@@ -23,7 +23,14 @@ from datasets.records import GpsSeries
 from features.geometry import FloatArray
 from slam.io.trajectory import Trajectory
 
-__all__ = ["AteResult", "ate_against_gps", "ate_against_truth", "ate_errors", "ate_of_errors"]
+__all__ = [
+    "AteResult",
+    "ate_against_gps",
+    "ate_against_truth",
+    "ate_errors",
+    "ate_of_errors",
+    "truth_errors",
+]
 
 
 @dataclass(frozen=True)
@@ -84,6 +91,23 @@ def ate_against_gps(
     return ate_of_errors(ate_errors(trajectory, gps, span_s)[1])
 
 
+def truth_errors(
+    trajectory: Trajectory,
+    truth: Trajectory,
+    span_s: tuple[float, float] | None = None,
+    align: bool = False,
+) -> tuple[FloatArray, FloatArray]:
+    """Times (s) and position errors (m) of ``trajectory`` at the true poses inside its span
+    (and ``span_s``); ``align``: see :func:`ate_against_truth`."""
+    inside = _inside(truth.t_s, trajectory, span_s)
+    ref = truth.poses_wTb[inside, :2]
+    est = trajectory.poses(truth.t_s[inside])[:, :2]
+    if align and est.shape[0] >= 2:
+        r, t, _ = umeyama_alignment(est.T, ref.T, False)
+        est = (r @ est.T).T + t
+    return truth.t_s[inside], np.hypot(*(est - ref).T)
+
+
 def ate_against_truth(
     trajectory: Trajectory,
     truth: Trajectory,
@@ -95,10 +119,4 @@ def ate_against_truth(
     ``align``: first a rigid (rotation and translation, no scale) least-squares alignment of
     the estimate's positions onto the true ones (``evo.core.geometry.umeyama_alignment``).
     """
-    inside = _inside(truth.t_s, trajectory, span_s)
-    ref = truth.poses_wTb[inside, :2]
-    est = trajectory.poses(truth.t_s[inside])[:, :2]
-    if align and est.shape[0] >= 2:
-        r, t, _ = umeyama_alignment(est.T, ref.T, False)
-        est = (r @ est.T).T + t
-    return ate_of_errors(np.hypot(*(est - ref).T))
+    return ate_of_errors(truth_errors(trajectory, truth, span_s, align)[1])

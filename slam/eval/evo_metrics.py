@@ -23,7 +23,7 @@ from evo.core.sync_method import SyncMethod
 from evo.core.trajectory import PoseTrajectory3D
 from evo.core.units import Unit
 
-from slam.io.trajectory import Trajectory, read_tum, to_evo
+from slam.io.trajectory import GPS_FILE, Trajectory, read_tum, to_evo
 
 __all__ = ["MAX_DIFF_S", "ErrorStats", "evo_ape", "evo_rpe", "evo_metrics_of_run"]
 
@@ -153,11 +153,13 @@ def evo_rpe(
 
 def evo_metrics_of_run(
     run_dir: str | Path,
+    stem: str,
     rpe_delta_m: float = 10.0,
     align: bool = False,
     max_diff_s: float = MAX_DIFF_S,
 ) -> dict[str, float | int]:
-    """evo's APE and RPE of a run directory's ``trajectory.tum`` against its ``ground_truth.tum``.
+    """evo's APE and RPE of a run directory's ``<stem>.tum`` (``ekf.tum``) against its
+    ``gps.tum`` (:mod:`slam.run.outputs`).
 
     Returns
     -------
@@ -167,8 +169,8 @@ def evo_metrics_of_run(
         ``rpe_delta_m``.
     """
     run = Path(run_dir)
-    ref = read_tum(run / "ground_truth.tum")
-    est = read_tum(run / "trajectory.tum")
+    ref = read_tum(run / GPS_FILE)
+    est = read_tum(run / f"{stem}.tum")
     out: dict[str, float | int] = dict(
         evo_ape(ref, est, max_diff_s=max_diff_s, align=align).as_dict("evo_ape")
     )

@@ -1,4 +1,5 @@
-"""Pictures: projected scans, trajectories against GPS, lines with 95 % bands, errors and NEES.
+"""Evaluation pictures: trajectories and their ATE against the reference, the ATE per time
+segment, errors with their bounds, NEES, ANEES and the sweep (maps: :mod:`slam.io.maps`).
 
 Matplotlib's object interface (``Figure``), so that importing this module changes no global
 state (no backend switch, no pyplot figure registry): every function draws into its own figure
@@ -7,7 +8,7 @@ and writes a PNG.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -17,18 +18,15 @@ import numpy.typing as npt
 import pandas as pd
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
-from matplotlib.patches import Rectangle
-from scipy.stats import chi2
+from matplotlib.ticker import FuncFormatter
 
-from features.geometry import FloatArray, transform_points
-from features.line import LineFeature
+from features.geometry import FloatArray
+from slam.io.maps import TRAJECTORY_STYLES, MapLayers, data_box, draw_map
 from slam.io.trajectory import Trajectory
 
 __all__ = [
-    "plot_scans",
     "plot_trajectories",
-    "plot_lines",
-    "segment_band_world",
+    "plot_segment_ate",
     "plot_error_bounds",
     "plot_nees",
     "AneesCurve",
@@ -36,66 +34,40 @@ __all__ = [
     "plot_sweep",
 ]
 
-_COLOURS = {"gps": "k", "dr": "tab:red", "ekf": "tab:blue", "isam2": "tab:green", "truth": "k"}
+
+def _plain_log_label(value: float, _pos: float) -> str:
+    return f"{value:g}"
 
 
-def _draw_points(ax: Axes, points_w: FloatArray, cell_m: float = 0.25) -> None:
-    """Projected bins as a density image (log scale): walls are where many bins agree."""
-    if points_w.shape[0] == 0:
+def _plain_minor_label(value: float, _pos: float) -> str:
+    """Label the 2 and 5 of each decade only: 0.2, 0.5, 2, 5, 20, ..."""
+    if value <= 0:
+        return ""
+    mantissa = value / 10.0 ** np.floor(np.log10(value))
+    return (
+        f"{value:g}" if round(mantissa) in (2, 5) and abs(mantissa - round(mantissa)) < 1e-6 else ""
+    )
+
+
+def _plain_log_axis(ax: Axes) -> None:
+    """Plain numbers on a log y axis (0.5, 1, 2, 5, 10), not 2x10^0."""
+    ax.yaxis.set_major_formatter(FuncFormatter(_plain_log_label))
+    ax.yaxis.set_minor_formatter(FuncFormatter(_plain_minor_label))
+
+
+def _time_axis(
+    ax: Axes, t0_s: float, sonar_span_s: tuple[float, float] | None, t1_s: float
+) -> None:
+    """Shade the times outside the sonar span (every method is dead reckoning there)."""
+    if sonar_span_s is None:
         return
-    lo = points_w.min(axis=0) - 1.0
-    hi = points_w.max(axis=0) + 1.0
-    bins = np.maximum(((hi - lo) / cell_m).astype(int), 1)
-    h, xe, ye = np.histogram2d(
-        points_w[:, 0], points_w[:, 1], bins=bins, range=[[lo[0], hi[0]], [lo[1], hi[1]]]
-    )
-    ax.imshow(
-        np.log1p(h.T),
-        origin="lower",
-        extent=(xe[0], xe[-1], ye[0], ye[-1]),
-        cmap="Greys",
-        interpolation="nearest",
-        vmax=max(np.log1p(h).max() * 0.8, 1e-9),
-    )
-
-
-def _draw_trajectories(ax: Axes, trajectories: dict[str, Trajectory]) -> None:
-    for name, tr in trajectories.items():
-        ax.plot(
-            tr.poses_wTb[:, 0],
-            tr.poses_wTb[:, 1],
-            "-",
-            lw=1.0,
-            color=_COLOURS.get(name),
-            label=name,
-        )
-
-
-def plot_scans(
-    path: str | Path,
-    points_w: FloatArray,
-    trajectories: dict[str, Trajectory],
-    title: str,
-    segments_w: Sequence[FloatArray] = (),
-) -> Path:
-    """Projected sonar bins (grey), trajectories and optional segments (rows of 2 points)."""
-    fig = Figure(figsize=(9, 9), dpi=130)
-    ax = fig.subplots()
-    _draw_points(ax, points_w)
-    for seg in segments_w:
-        ax.plot(seg[:, 0], seg[:, 1], "m-", lw=1.2)
-    _draw_trajectories(ax, trajectories)
-    ax.set_aspect("equal")
-    ax.set_xlabel("East (m)")
-    ax.set_ylabel("North (m)")
-    ax.set_title(title)
-    if trajectories:
-        ax.legend(loc="best")
-    ax.grid(True, lw=0.3)
-    out = Path(path)
-    fig.tight_layout()
-    fig.savefig(out)
-    return out
+    a, b = sonar_span_s[0] - t0_s, sonar_span_s[1] - t0_s
+    label: str | None = "no sonar (dead reckoning only)"
+    if a > 0:
+        ax.axvspan(0.0, a, color="0.5", alpha=0.15, lw=0, label=label)
+        label = None
+    if b < t1_s - t0_s:
+        ax.axvspan(b, t1_s - t0_s, color="0.5", alpha=0.15, lw=0, label=label)
 
 
 def plot_trajectories(
@@ -103,187 +75,94 @@ def plot_trajectories(
     trajectories: dict[str, Trajectory],
     errors: dict[str, tuple[FloatArray, FloatArray]],
     title: str,
+    reference: str = "GPS",
+    sonar_span_s: tuple[float, float] | None = None,
+    walls_w: FloatArray | None = None,
 ) -> Path:
-    """Trajectories in the plane (left) and their ATE against time (right)."""
-    fig = Figure(figsize=(14, 6.5), dpi=110)
-    (ax, ax2) = fig.subplots(1, 2)
-    _draw_trajectories(ax, trajectories)
-    ax.set_aspect("equal")
-    ax.set_xlabel("East (m)")
-    ax.set_ylabel("North (m)")
-    ax.legend()
-    ax.grid(True, lw=0.3)
-    for name, (t, e) in errors.items():
+    """Trajectories in the plane (left, cropped to them; the true walls of a simulated run) and
+    their position error against ``reference`` in time (right), the times outside the sonar span
+    shaded; one legend below both.
+
+    ``trajectories`` holds the reference (``"gps"`` or ``"truth"``) and the estimates by name
+    (:data:`slam.io.maps.TRAJECTORY_STYLES`); ``errors`` maps an estimate's name to its times
+    (Unix s) and errors (m).
+    """
+    fig = Figure(figsize=(13, 6.8), dpi=110, layout="constrained")
+    (ax, ax2) = fig.subplots(1, 2, width_ratios=[1.0, 1.3])
+    layers = MapLayers(np.zeros((0, 2)), trajectories, walls_w=walls_w)
+    draw_map(ax, layers, data_box(layers))
+    t0 = min((float(t[0]) for t, _ in errors.values() if t.size), default=0.0)
+    t1 = max((float(t[-1]) for t, _ in errors.values() if t.size), default=t0)
+    _time_axis(ax2, t0, sonar_span_s, t1)
+    order = {"dr": 0}
+    for name in sorted(errors, key=lambda n: order.get(n, 1)):
+        t, e = errors[name]
+        colour, label = TRAJECTORY_STYLES.get(name, (None, name))
         ax2.plot(
-            t - t[0], e, lw=1.0, color=_COLOURS.get(name), label=f"{name}: mean {e.mean():.2f} m"
+            t - t0,
+            e,
+            lw=1.0,
+            color=colour,
+            label=f"{label}: mean {e.mean():.2f} m, max {e.max():.2f} m",
         )
-    ax2.set_xlabel("time (s)")
-    ax2.set_ylabel("position error against GPS (m)")
-    ax2.legend()
+    ax2.set_xlabel("time since the start (s)")
+    ax2.set_ylabel(f"position error against {reference} (m)")
+    ax2.set_ylim(bottom=0.0)
     ax2.grid(True, lw=0.3)
+    # the references and walls from the plane, the estimates with their figures from the errors
+    estimates = {TRAJECTORY_STYLES.get(n, (None, n))[1] for n in errors}
+    left = [(h, lab) for h, lab in zip(*ax.get_legend_handles_labels(), strict=True)]
+    handles = [(h, lab) for h, lab in left if lab not in estimates]
+    handles += list(zip(*ax2.get_legend_handles_labels(), strict=True))
+    fig.legend(*zip(*handles, strict=True), loc="outside lower center", ncols=3, fontsize="small")
     fig.suptitle(title)
-    fig.tight_layout()
     out = Path(path)
-    fig.savefig(out)
+    fig.savefig(out, bbox_inches="tight")
     return out
 
 
-def _densest_window(points_w: FloatArray, side_m: float) -> tuple[float, float]:
-    """Centre of the ``side_m`` square (on a grid of half steps) holding most of ``points_w``."""
-    lo = points_w.min(axis=0)
-    cells = np.floor((points_w - lo) / (0.5 * side_m)).astype(np.int64)
-    keys, counts = np.unique(cells, axis=0, return_counts=True)
-    # a window is 2 x 2 half cells: sum the counts of each 2 x 2 block
-    table = {tuple(k): int(c) for k, c in zip(keys, counts, strict=True)}
-    best, best_n = keys[0], -1
-    for k in keys:
-        n = sum(table.get((int(k[0]) + a, int(k[1]) + b), 0) for a in (0, 1) for b in (0, 1))
-        if n > best_n:
-            best, best_n = k, n
-    centre = lo + (best + 1.0) * 0.5 * side_m
-    return float(centre[0]), float(centre[1])
-
-
-def _draw_lines(
-    ax: Axes,
-    segments_w: Sequence[FloatArray],
-    bands_w: Sequence[FloatArray],
-    lw: float,
-) -> None:
-    for band in bands_w:
-        ax.fill(band[:, 0], band[:, 1], fc="tab:orange", ec="darkorange", alpha=0.45, lw=0.3)
-    for k, seg in enumerate(segments_w):
-        ax.plot(
-            seg[:, 0],
-            seg[:, 1],
-            "-",
-            color="tab:red",
-            lw=lw,
-            label="line segment, 95 % band in orange" if k == 0 else None,
-        )
-
-
-def segment_band_world(
-    feature: LineFeature,
-    confidence: float = 0.95,
-    n_along: int = 25,
-    n_boundary: int = 72,
-) -> FloatArray:
-    """Polygon of the lines within the ``confidence`` ellipse of ``(rho, theta)``, over the segment.
-
-    The ellipse is ``{z : (z - z0)^T cov^-1 (z - z0) <= chi2_2(confidence)}`` in R. Along the
-    segment (``n_along`` points ``q(s) = rho n + s t`` between its ends, ``n`` the normal and ``t``
-    the tangent), every line ``(rho_k, theta_k)`` of ``n_boundary`` samples of the ellipse's
-    boundary meets the normal through ``q(s)`` at the signed offset
-    ``lambda_k = (rho_k - q . n_k) / (n . n_k)``; the band is ``[min_k lambda_k, max_k lambda_k]``
-    (exact, no linearisation; to first order its half width is
-    ``sqrt(chi2 [1, -s] cov [1, -s]^T)``).
-
-    Parameters
-    ----------
-    feature : LineFeature
-    confidence : float
-        Probability of the ellipse (0.95: ``chi2_2 = 5.991``).
-    n_along, n_boundary : int
-        Samples along the segment and on the ellipse boundary.
-
-    Returns
-    -------
-    ndarray, shape (2 n_along, 2)
-        Polygon in the world (m): one side of the band from the first end to the second,
-        then the other side back.
-    """
-    rho, theta = feature.rho_m, feature.theta_rad
-    n = np.array([np.cos(theta), np.sin(theta)])
-    t = np.array([-n[1], n[0]])
-    ends = np.asarray(feature.endpoints_r, dtype=np.float64)
-    s = np.linspace(float(ends[0] @ t), float(ends[1] @ t), n_along)
-    q = rho * n[None, :] + s[:, None] * t[None, :]  # (A, 2) points of the segment in R
-    cov = 0.5 * (feature.cov + feature.cov.T)
-    w, v = np.linalg.eigh(cov)
-    root = v * np.sqrt(np.clip(w, 0.0, None))[None, :]  # cov = root root^T
-    phi = np.linspace(0.0, 2.0 * np.pi, n_boundary, endpoint=False)
-    u = np.stack([np.cos(phi), np.sin(phi)])  # (2, K)
-    z = np.array([rho, theta])[:, None] + np.sqrt(chi2.ppf(confidence, 2)) * root @ u  # (2, K)
-    nk = np.stack([np.cos(z[1]), np.sin(z[1])], axis=-1)  # (K, 2)
-    denom = nk @ n  # (K,)
-    lam = (z[0][None, :] - q @ nk.T) / denom[None, :]  # (A, K)
-    lo, hi = lam.min(axis=1), lam.max(axis=1)
-    side_a = q + hi[:, None] * n[None, :]
-    side_b = q + lo[:, None] * n[None, :]
-    poly_r = np.concatenate([side_a, side_b[::-1]])
-    return transform_points(feature.wTr, poly_r)
-
-
-def plot_lines(
+def plot_segment_ate(
     path: str | Path,
-    points_w: FloatArray,
-    segments_w: Sequence[FloatArray],
-    bands_w: Sequence[FloatArray],
+    edges_s: FloatArray,
+    stats: dict[str, tuple[FloatArray, FloatArray]],
     title: str,
-    trajectories: dict[str, Trajectory] | None = None,
-    zoom_side_m: float | None = None,
+    reference: str = "GPS",
+    sonar_end_s: float | None = None,
 ) -> Path:
-    """Line segments with their confidence bands over the density image of projected bins.
-
-    The left panel shows everything; the right one zooms on the square of side ``zoom_side_m``
-    (default: an eighth of the larger extent of the points) holding most segment midpoints, where
-    the bands are wide enough to see.
+    """The ATE per time segment: one bar per method (its mean), a dot for its max.
 
     Parameters
     ----------
-    path : str or Path
-        PNG file.
-    points_w : ndarray, shape (N, 2)
-        Projected bins, world East-North (m).
-    segments_w : sequence of ndarray, shape (2, 2)
-        Segment ends, world (m).
-    bands_w : sequence of ndarray, shape (M, 2)
-        Band polygons, world (m), e.g. :func:`slam.run.extraction.segment_band_world`.
-    title : str
-    trajectories : dict of str to Trajectory, optional
-        Drawn thin, under the lines.
-    zoom_side_m : float, optional
-        Side of the zoomed square (m).
+    edges_s : ndarray, shape (K + 1,)
+        Segment edges, seconds since the start.
+    stats : dict of str to (ndarray (K,), ndarray (K,))
+        A method's name (:data:`slam.io.maps.TRAJECTORY_STYLES`) to the mean and max error (m)
+        of each segment (NaN: no fix there).
+    sonar_end_s : float, optional
+        When the sonar stops, seconds since the start (a dashed line).
     """
-    fig = Figure(figsize=(16, 9), dpi=90)
-    axes = fig.subplots(1, 2)
-    for ax, lw in zip(axes, (0.6, 1.0), strict=True):
-        _draw_points(ax, points_w)
-        for name, tr in (trajectories or {}).items():
-            ax.plot(
-                tr.poses_wTb[:, 0],
-                tr.poses_wTb[:, 1],
-                "-",
-                lw=0.6,
-                alpha=0.7,
-                color="tab:blue",
-                label=f"{name} trajectory",
-            )
-        _draw_lines(ax, segments_w, bands_w, lw)
-        ax.set_aspect("equal")
-        ax.set_xlabel("East (m)")
-        ax.set_ylabel("North (m)")
-        ax.grid(True, lw=0.3)
-    axes[0].set_title(title)
-    if segments_w or trajectories:
-        axes[0].legend(loc="best", fontsize="small")
-    if segments_w:
-        mids = np.array([0.5 * (seg[0] + seg[1]) for seg in segments_w])
-        ext = np.ptp(points_w, axis=0).max() if points_w.shape[0] else np.ptp(mids, axis=0).max()
-        side = zoom_side_m if zoom_side_m is not None else max(float(ext) / 8.0, 1.0)
-        cx, cy = _densest_window(mids, side)
-        axes[1].set_xlim(cx - 0.5 * side, cx + 0.5 * side)
-        axes[1].set_ylim(cy - 0.5 * side, cy + 0.5 * side)
-        axes[1].set_title(f"zoom: {side:.0f} m x {side:.0f} m with the most segments")
-        axes[0].add_patch(
-            Rectangle(
-                (cx - 0.5 * side, cy - 0.5 * side), side, side, fill=False, ec="tab:blue", lw=0.8
-            )
-        )
+    k = edges_s.size - 1
+    fig = Figure(figsize=(max(7.0, 0.9 * k + 3.0), 4.8), dpi=110, layout="constrained")
+    ax = fig.subplots()
+    width = 0.8 / max(len(stats), 1)
+    x = np.arange(k)
+    for i, (name, (mean, peak)) in enumerate(stats.items()):
+        colour, label = TRAJECTORY_STYLES.get(name, (None, name))
+        xs = x - 0.4 + (i + 0.5) * width
+        ax.bar(xs, mean, width * 0.9, color=colour, alpha=0.8, label=f"{label}: mean")
+        ax.plot(xs, peak, "_", color=colour, ms=10, mew=2)
+    ax.plot([], [], "_", color="k", ms=10, mew=2, label="max of the segment")
+    if sonar_end_s is not None and sonar_end_s < edges_s[-1]:
+        pos = float(np.interp(sonar_end_s, edges_s, np.arange(k + 1) - 0.5))
+        ax.axvline(pos, color="0.3", ls="--", lw=1.0, label="the sonar stops")
+    ax.set_xticks(x, [f"{a:.0f}-{b:.0f}" for a, b in zip(edges_s[:-1], edges_s[1:], strict=True)])
+    ax.set_xlabel("time since the start (s)")
+    ax.set_ylabel(f"position error against {reference} (m)")
+    ax.grid(True, axis="y", lw=0.3)
+    fig.legend(loc="outside right upper", fontsize="small")
+    ax.set_title(title, fontsize="medium")
     out = Path(path)
-    fig.tight_layout()
-    fig.savefig(out)
+    fig.savefig(out, bbox_inches="tight")
     return out
 
 
@@ -317,7 +196,7 @@ def plot_error_bounds(
     n = errors.shape[1]
     names = ["East error (m)", "North error (m)", "heading error (deg)"][:n]
     scale = np.array([1.0, 1.0, np.rad2deg(1.0)])[:n]
-    fig = Figure(figsize=(11, 2.6 * n + 0.8), dpi=100)
+    fig = Figure(figsize=(12, 2.6 * n + 0.8), dpi=100, layout="constrained")
     axes = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
     t = t_s - t_s[0] if t_s.size else t_s
     for k, ax in enumerate(axes):
@@ -338,12 +217,11 @@ def plot_error_bounds(
         ax.axhline(0.0, color="k", lw=0.5)
         ax.set_ylabel(names[k])
         ax.grid(True, lw=0.3)
-        ax.legend(loc="upper left", fontsize="small")
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
     axes[-1].set_xlabel("time (s)")
     axes[0].set_title(title)
-    fig.tight_layout()
     out = Path(path)
-    fig.savefig(out)
+    fig.savefig(out, bbox_inches="tight")
     return out
 
 
@@ -359,7 +237,7 @@ def plot_nees(
     ``probability`` (:func:`slam.eval.consistency.chi2_band`).
     """
     n = max(len(series), 1)
-    fig = Figure(figsize=(11, 2.8 * n + 0.8), dpi=100)
+    fig = Figure(figsize=(12, 2.8 * n + 0.8), dpi=100, layout="constrained")
     axes = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
     for ax, (label, (t, v, dof, (lo, hi))) in zip(axes, series.items(), strict=False):
         tt = t - t[0] if t.size else t
@@ -379,14 +257,14 @@ def plot_nees(
             label=f"{100 * probability:.0f} % band of chi2({dof}): {100 * inside:.1f} % inside",
         )
         ax.axhline(dof, color="tab:green", lw=0.8)
+        _plain_log_axis(ax)
         ax.set_ylabel(f"NEES ({dof} dof)")
         ax.grid(True, which="both", lw=0.3)
-        ax.legend(loc="upper left", fontsize="small")
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
     axes[-1].set_xlabel("time (s)")
     axes[0].set_title(title)
-    fig.tight_layout()
     out = Path(path)
-    fig.savefig(out)
+    fig.savefig(out, bbox_inches="tight")
     return out
 
 
@@ -417,7 +295,7 @@ class AneesCurve(Protocol):
 
 def plot_anees(path: str | Path, curves: Mapping[str, AneesCurve], title: str) -> Path:
     """ANEES against time with the band of its number of runs, one curve per configuration."""
-    fig = Figure(figsize=(11, 5), dpi=100)
+    fig = Figure(figsize=(12, 5), dpi=100, layout="constrained")
     ax = fig.subplots()
     colours = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     for k, (label, res) in enumerate(curves.items()):
@@ -438,10 +316,10 @@ def plot_anees(path: str | Path, curves: Mapping[str, AneesCurve], title: str) -
     ax.set_ylabel("ANEES (mean NEES over the runs)")
     ax.set_title(title + "\n(shaded: two-sided 95 % band of the mean of N chi2)")
     ax.grid(True, which="both", lw=0.3)
-    ax.legend(loc="best", fontsize="small")
-    fig.tight_layout()
+    _plain_log_axis(ax)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
     out = Path(path)
-    fig.savefig(out)
+    fig.savefig(out, bbox_inches="tight")
     return out
 
 
@@ -457,11 +335,13 @@ def plot_sweep(path: str | Path, table: pd.DataFrame, labels: npt.NDArray[Any], 
     )
     names = list(dict.fromkeys(labels))
     panels = [
-        ("ate_mean_m", "ATE mean against GPS (m)", False),
+        ("ate_truth_mean_m", "ATE mean against the truth (m)", False)
+        if "ate_truth_mean_m" in table
+        else ("ate_mean_m", "ATE mean against GPS (m)", False),
         ("nees_mean", "pose NEES mean over time (3 dof)", True),
         ("wall_s", "wall time (s)", False),
     ]
-    fig = Figure(figsize=(5 * len(panels), 5), dpi=100)
+    fig = Figure(figsize=(5 * len(panels), 5), dpi=100, layout="constrained")
     axes = fig.subplots(1, len(panels))
     rng = np.random.default_rng(0)  # jitter of the dots only
     for ax, (col, ylabel, log) in zip(axes, panels, strict=True):
@@ -478,11 +358,11 @@ def plot_sweep(path: str | Path, table: pd.DataFrame, labels: npt.NDArray[Any], 
             ax.legend(fontsize="small")
         if log:
             ax.set_yscale("log")
+            _plain_log_axis(ax)
         ax.set_xticks(range(1, len(names) + 1), names, rotation=20, ha="right", fontsize="small")
         ax.set_ylabel(ylabel)
         ax.grid(True, which="both", lw=0.3)
     fig.suptitle(title)
-    fig.tight_layout()
     out = Path(path)
-    fig.savefig(out)
+    fig.savefig(out, bbox_inches="tight")
     return out

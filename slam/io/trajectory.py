@@ -1,6 +1,7 @@
 """A timed sequence of poses with covariances (the output of every estimator, and a PoseSource),
-and its files: TUM trajectories (``t x y z qx qy qz qw``, evo's reader and writer) with the pose
-covariances beside them in ``trajectory_cov.npz``.
+and its files: TUM trajectories (``t x y z qx qy qz qw``, evo's reader and writer) named by what
+they are (``ekf.tum``, ``isam2_smoothed.tum``, ``gps.tum``: :func:`trajectory_stem`) with the
+pose covariances beside them (``ekf_cov.npz``: :func:`cov_file`).
 
 Yaw and quaternions convert here only (:func:`yaw_to_quat_wxyz`, :func:`quat_wxyz_to_yaw`,
 scipy's ``Rotation``).
@@ -26,7 +27,11 @@ __all__ = [
     "to_evo",
     "write_tum",
     "read_tum",
-    "COV_FILE",
+    "GPS_FILE",
+    "TRUTH_FILE",
+    "trajectory_stem",
+    "cov_file",
+    "with_samples_at",
     "write_trajectory_covariances",
     "read_trajectory_covariances",
     "with_covariances",
@@ -123,8 +128,46 @@ def read_tum(path: str | Path) -> Trajectory:
     )
 
 
-#: File of the pose covariances beside ``trajectory.tum``.
-COV_FILE = "trajectory_cov.npz"
+#: A run's reference: the GPS fixes inside the run with the AHRS heading (the ATE's reference).
+GPS_FILE = "gps.tum"
+#: A simulated run's true body poses inside the run.
+TRUTH_FILE = "truth.tum"
+
+
+def trajectory_stem(backend: str, name: str | None = None) -> str:
+    """File stem of a run's trajectory: the back end's name (``ekf``), ``gps_ahrs`` for the
+    ``gps`` baseline (``gps`` is the reference's), and ``<backend>_<name>`` for a back end's
+    other trajectories (``isam2_smoothed``)."""
+    stem = "gps_ahrs" if backend == "gps" else backend
+    return stem if name is None else f"{stem}_{name}"
+
+
+def cov_file(stem: str) -> str:
+    """File of the pose covariances beside ``<stem>.tum``: ``<stem>_cov.npz``."""
+    return f"{stem}_cov.npz"
+
+
+def with_samples_at(trajectory: Trajectory, t_s: npt.ArrayLike) -> Trajectory:
+    """``trajectory`` with poses added at the times ``t_s`` inside its span that it lacks.
+
+    The added poses are the trajectory's own interpolation there (:meth:`Trajectory.poses`, as
+    the ATE takes them), their covariances those of the sample before (as
+    :meth:`Trajectory.covariance`). A file of it gives any tool that associates poses by
+    timestamp (evo's ``evo_ape tum gps.tum ekf.tum``, 10 ms) the same pairs as the ATE.
+    """
+    t = np.unique(np.asarray(t_s, dtype=np.float64))
+    t0, t1 = trajectory.span_s
+    t = t[(t >= t0) & (t <= t1) & ~np.isin(t, trajectory.t_s)]
+    if t.size == 0:
+        return trajectory
+    t_all = np.concatenate([trajectory.t_s, t])
+    order = np.argsort(t_all, kind="stable")
+    poses = np.concatenate([trajectory.poses_wTb, trajectory.poses(t)])[order]
+    covs = None
+    if trajectory.covs is not None:
+        before = np.searchsorted(trajectory.t_s, t, side="right") - 1
+        covs = np.concatenate([trajectory.covs, trajectory.covs[before]])[order]
+    return Trajectory(t_all[order], poses, covs)
 
 
 def write_trajectory_covariances(path: str | Path, trajectory: Trajectory) -> Path | None:
@@ -166,11 +209,11 @@ def with_covariances(
     return Trajectory(trajectory.t_s, trajectory.poses_wTb, covs[i])
 
 
-def load_run_trajectory(run_dir: str | Path) -> Trajectory:
-    """``trajectory.tum`` of a run, with its ``trajectory_cov.npz`` covariances when present."""
+def load_run_trajectory(run_dir: str | Path, stem: str) -> Trajectory:
+    """``<stem>.tum`` of a run directory, with its ``<stem>_cov.npz`` covariances when present."""
     run = Path(run_dir)
-    tr = read_tum(run / "trajectory.tum")
-    cov_path = run / COV_FILE
+    tr = read_tum(run / f"{stem}.tum")
+    cov_path = run / cov_file(stem)
     if cov_path.is_file():
         tr = with_covariances(tr, *read_trajectory_covariances(cov_path))
     return tr

@@ -255,9 +255,10 @@ def heading_deviation_from_lines(
     return coef, int(keep.sum())
 
 
-def ekf_closed_loop(dataset: Dataset) -> ClosedLoopResult:
+def ekf_closed_loop(dataset: Dataset, label: str | None = None) -> ClosedLoopResult:
     """The EKF closed loop with its default settings and the beams' extractor preset (what
-    :func:`calibrate_ahrs_deviation` iterates); GPS gives only the start position."""
+    :func:`calibrate_ahrs_deviation` iterates); GPS gives only the start position. ``label``:
+    a progress bar of that name."""
     config = run_config(dataset.beams, "ekf", noise=dataset.config.noise)
     spec = backend_spec("ekf")
     mounting = dataset.config.sonar_mounting
@@ -265,7 +266,8 @@ def ekf_closed_loop(dataset: Dataset) -> ClosedLoopResult:
         dataset,
         lambda t0, pose0, cov0: spec.make(t0, pose0, cov0, mounting, config.backend),
         config.extractor,
-        progress=False,
+        progress=label is not None,
+        label=label or "ekf",
     )
 
 

@@ -9,7 +9,8 @@ from pathlib import Path
 from datasets.simulator import simulate
 from datasets.source import data_root, open_dataset
 from features.projection import project_beams
-from slam.io.plots import plot_scans
+from slam.eval.truth import truth_walls
+from slam.io.maps import plot_scans
 from slam.run.presets import map_min_intensity
 from slam.run.run import RunResult, run
 from slam.run.sources import gps_ahrs_trajectory
@@ -43,5 +44,6 @@ def main_job(out_dir: str | Path, progress: bool = True) -> list[RunResult]:
         points,
         {"gps": gps},
         f"{name}: sonar bins projected with GPS poses",
+        truth_walls(dataset) if dataset.truth and "walls_m" in dataset.truth else None,
     )
     return results

@@ -5,7 +5,7 @@ dataset's beams inside the navigation span with one pose source and writes
 
 * ``lines.jsonl``: one :meth:`features.line.LineFeature.to_json` object per line (``t``, the frame
   R ``x, y, yaw``, ``rho, theta`` and ``cov`` in R, ``votes``, ``n_voters``, world ``endpoints``);
-* ``lines_world.png``: every segment with its 95 % band (:func:`slam.io.plots.segment_band_world`) over the
+* ``lines_world.png``: every segment with its 95 % band (:func:`slam.io.maps.segment_band_world`) over the
   density image of the projected threshold bins (intensity at least the extractor's threshold;
   every given bin of thresholded beams);
 * ``extract.json``: counts and timings (``features``, ``beams``, ``beam_time_p50_us``,
@@ -33,7 +33,9 @@ from features.geometry import FloatArray
 from features.line import LineFeature
 from features.pose_source import PoseSource
 from features.projection import project_beams
-from slam.io.plots import plot_lines, segment_band_world
+from slam.eval.truth import truth_walls
+from slam.io.maps import MapLayers, plot_lines, segment_band_world
+from slam.io.trajectory import Trajectory
 from slam.run.presets import extractor_config, map_min_intensity, preset_for
 from slam.run.sources import pose_source_by_name
 from sonar.beam import SonarBeam
@@ -189,12 +191,28 @@ def extract(
     points_w, _ = project_beams(
         beams, head, mounting, pose_source, map_min_intensity(beams, config)
     )
-    plot_lines(
-        out / "lines_world.png",
+    title = f"{dataset.name}: {len(lines)} lines ({preset_name} preset, {poses} poses), 95 % bands"
+    _draw(out / "lines_world.png", dataset, lines, points_w, {poses: pose_source}, title)
+    return ExtractionResult(lines, stats, beam_time_s, out)
+
+
+def _draw(
+    path: Path,
+    dataset: Dataset,
+    lines: list[LineFeature],
+    points_w: FloatArray,
+    trajectories: dict[str, Trajectory],
+    title: str,
+) -> None:
+    """lines_world.png: the lines with their 95 % bands over the bins (the true walls of a
+    simulated dataset)."""
+    walls = truth_walls(dataset) if dataset.truth and "walls_m" in dataset.truth else None
+    layers = MapLayers(
         points_w,
+        trajectories,
         [ln.endpoints_world() for ln in lines],
         [segment_band_world(ln) for ln in lines],
-        f"{dataset.name}: {len(lines)} lines ({preset_name} preset, {poses} poses), 95 % bands",
-        {poses: pose_source},
+        walls,
+        segment_label="line",
     )
-    return ExtractionResult(lines, stats, beam_time_s, out)
+    plot_lines(path, layers, title)

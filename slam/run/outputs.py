@@ -1,12 +1,18 @@
-"""The files of a run directory (``sonarslam run --out DIR``).
+"""The files of a run directory (``sonarslam run --out DIR``; the README's table of outputs).
 
-* ``trajectory.tum`` (and its covariances ``trajectory_cov.npz``), ``ground_truth.tum`` (the GPS
-  fixes inside the run with the AHRS heading), ``metrics.json``, ``config_used.toml`` (the
-  dataset configuration used), ``report.png`` (trajectories against GPS beside dead reckoning);
+* ``<backend>.tum`` (``dr.tum``, ``ekf.tum``, ``isam2.tum``; ``gps_ahrs.tum`` for the ``gps``
+  baseline) and its covariances ``<backend>_cov.npz``; ``gps.tum`` (the GPS fixes inside the
+  run with the AHRS heading: the ATE's reference); on simulated data ``truth.tum`` (the true
+  poses inside the run); ``metrics.json``, ``config_used.toml`` (the dataset configuration
+  used), ``report.png`` (trajectories against the reference beside dead reckoning).
+  Every estimate is written at its own times and, interpolated, at the reference's times inside
+  its span (:func:`slam.io.trajectory.with_samples_at`): ``evo_ape tum gps.tum ekf.tum`` pairs
+  the same poses as ``metrics.json``'s ATE and prints its figures;
 * closed loops also ``map.json`` (the landmarks), ``lines.jsonl`` (every line with the landmark
-  it was associated with), ``map.png`` (the landmarks over the sonar bins projected with the
-  run's trajectory), one ``trajectory_<name>.tum`` per other trajectory of the back end
-  (``smoothed``, ``batch``) and whatever the back end saves (``graph.json``).
+  it was associated with), ``map.png`` (the landmarks with their 95 % bands over the sonar bins
+  projected with the run's trajectory), one ``<backend>_<name>.tum`` per other trajectory of the
+  back end (``isam2_smoothed.tum``, ``isam2_batch.tum``) and whatever the back end saves
+  (``graph.json``, and its poses and odometry as ``graph.g2o``: :mod:`slam.backends.isam2.g2o`).
 """
 
 from __future__ import annotations
@@ -20,9 +26,21 @@ import numpy as np
 from datasets.config import dump_dataset_config
 from datasets.source import Dataset
 from features.projection import project_beams
-from slam.eval.ate import ate_errors
-from slam.io.plots import plot_scans, plot_trajectories
-from slam.io.trajectory import COV_FILE, Trajectory, write_trajectory_covariances, write_tum
+from slam.backends.isam2.g2o import graph_json_to_g2o
+from slam.eval.ate import ate_errors, truth_errors
+from slam.eval.truth import truth_trajectory, truth_walls
+from slam.io.maps import MapLayers, landmark_layers, plot_map
+from slam.io.plots import plot_trajectories
+from slam.io.trajectory import (
+    GPS_FILE,
+    TRUTH_FILE,
+    Trajectory,
+    cov_file,
+    trajectory_stem,
+    with_samples_at,
+    write_trajectory_covariances,
+    write_tum,
+)
 from slam.run.closed_loop import ClosedLoopResult
 from slam.run.presets import map_min_intensity
 from slam.run.sources import dead_reckoning_trajectory, gps_ahrs_trajectory
@@ -43,44 +61,85 @@ def write_run(
     assert dataset.gps is not None, "a run has GPS (checked by run_backend)"
     out.mkdir(parents=True, exist_ok=True)
     (out / "config_used.toml").write_text(dump_dataset_config(dataset.config))
-    write_tum(out / "trajectory.tum", trajectory)
-    write_trajectory_covariances(out / COV_FILE, trajectory)  # no-op without covariances
     t0, t1 = trajectory.span_s
     gps = dataset.gps
     gps_tr = gps_ahrs_trajectory(dataset)
     gps_in = (gps.t >= t0) & (gps.t <= t1)
     # the raw fixes (the ATE reference), with the AHRS heading for a full pose
     gps_pose = np.column_stack([gps.en_m[gps_in], gps_tr.poses(gps.t[gps_in])[:, 2]])
-    write_tum(out / "ground_truth.tum", Trajectory(gps.t[gps_in], gps_pose))
-    for name, tr in trajectories.items():
-        write_tum(out / f"trajectory_{name}.tum", tr)
+    write_tum(out / GPS_FILE, Trajectory(gps.t[gps_in], gps_pose))
+    reference_t = gps.t
+    if dataset.truth is not None:
+        truth = truth_trajectory(dataset)
+        write_tum(out / TRUTH_FILE, truth.clip(t0, t1))
+        reference_t = np.concatenate([gps.t, truth.t_s])
+    for name, tr in [(None, trajectory), *trajectories.items()]:
+        stem = trajectory_stem(backend, name)
+        dense = with_samples_at(tr, reference_t)
+        write_tum(out / f"{stem}.tum", dense)
+        write_trajectory_covariances(out / cov_file(stem), dense)  # no-op without covariances
     if closed_loop is not None:
-        _write_closed_loop(out, dataset, closed_loop, gps_tr)
+        _write_closed_loop(out, dataset, backend, closed_loop)
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
-    drawn = {"gps": gps_tr, backend: trajectory}
-    if backend != "dr":  # dead reckoning beside every other back end, as the reference
-        drawn["dr"] = dead_reckoning_trajectory(dataset)
-    errors = {name: ate_errors(tr, gps) for name, tr in drawn.items() if name != "gps"}
-    plot_trajectories(
-        out / "report.png",
-        drawn,
-        errors,
-        f"{dataset.name}: {backend}, ATE mean {metrics['ate_mean_m']:.2f} m, "
-        f"max {metrics['ate_max_m']:.2f} m",
-    )
+    _report_figure(out / "report.png", dataset, backend, trajectory, metrics)
     return out
 
 
-def _write_closed_loop(
-    out: Path, dataset: Dataset, result: ClosedLoopResult, gps_tr: Trajectory
+def _reference(dataset: Dataset) -> tuple[str, Trajectory]:
+    """The reference of a run's pictures: the simulator's truth, else GPS + AHRS."""
+    if dataset.truth is not None:
+        return "truth", truth_trajectory(dataset)
+    return "gps", gps_ahrs_trajectory(dataset)
+
+
+def _walls(dataset: Dataset) -> np.ndarray | None:
+    return truth_walls(dataset) if dataset.truth and "walls_m" in dataset.truth else None
+
+
+def _report_figure(
+    path: Path, dataset: Dataset, backend: str, trajectory: Trajectory, metrics: dict[str, Any]
 ) -> None:
+    """report.png: the run beside dead reckoning against its reference, in the plane and in time."""
+    assert dataset.gps is not None
+    ref_name, ref = _reference(dataset)
+    t0, t1 = trajectory.span_s
+    drawn = {ref_name: ref.clip(t0, t1), backend: trajectory}
+    if backend != "dr":  # dead reckoning beside every other back end, as the baseline
+        drawn["dr"] = dead_reckoning_trajectory(dataset)
+    errors = {
+        name: truth_errors(tr, ref) if ref_name == "truth" else ate_errors(tr, dataset.gps)
+        for name, tr in drawn.items()
+        if name != ref_name
+    }
+    m, key = metrics, "ate_truth" if ref_name == "truth" else "ate"
+    spans = f"whole run mean {m[key + '_mean_m']:.2f} m, max {m[key + '_max_m']:.2f} m"
+    if "ate_sonar_mean_m" in m and ref_name == "gps":
+        spans = (
+            f"sonar span mean {m['ate_sonar_mean_m']:.2f} m, max {m['ate_sonar_max_m']:.2f} m; "
+            + spans
+        )
+    reference = "the truth" if ref_name == "truth" else "GPS"
+    plot_trajectories(
+        path,
+        drawn,
+        errors,
+        f"{dataset.name}: {backend} against {reference}: {spans}",
+        reference,
+        dataset.sonar_span_s,
+        _walls(dataset),
+    )
+
+
+def _write_closed_loop(out: Path, dataset: Dataset, backend: str, result: ClosedLoopResult) -> None:
     """map.json, lines.jsonl, the back end's files and map.png of a closed loop."""
     landmarks = result.backend.map_records()
     (out / "map.json").write_text(json.dumps({"landmarks": landmarks}, indent=1) + "\n")
     with (out / "lines.jsonl").open("w") as fh:
         for f, lm in zip(result.features, result.feature_landmarks, strict=True):
             fh.write(json.dumps({**f.to_json(), "landmark": lm}) + "\n")
-    result.backend.save(out)
+    for saved in result.backend.save(out):
+        if saved.name == "graph.json":
+            graph_json_to_g2o(saved)
     t0, t1 = result.trajectory.span_s
     beams = [b for b in dataset.nav_beams() if t0 <= b.t <= t1]
     points, _ = project_beams(
@@ -90,10 +149,18 @@ def _write_closed_loop(
         result.trajectory,
         map_min_intensity(beams),
     )
-    plot_scans(
-        out / "map.png",
+    ref_name, ref = _reference(dataset)
+    segments, bands = landmark_layers(landmarks)
+    layers = MapLayers(
         points,
-        {"gps": gps_tr, "est": result.trajectory},
-        f"{dataset.name}: map and trajectory, sonar bins projected with the estimate",
-        [np.asarray(lm["endpoints"]) for lm in landmarks],
+        {ref_name: ref.clip(t0, t1), backend: result.trajectory},
+        segments,
+        bands,
+        _walls(dataset),
+    )
+    plot_map(
+        out / "map.png",
+        layers,
+        f"{dataset.name}: {backend}, {len(landmarks)} landmarks with 95 % bands over the sonar"
+        " bins projected with its trajectory",
     )

@@ -268,7 +268,8 @@ def run(
 
 
 def summary_line(metrics: dict[str, Any]) -> str:
-    """One line of a run's figures for the terminal: the sonar span first, then the whole run."""
+    """One line of a run's figures for the terminal: against the truth (simulated runs), then
+    against GPS over the sonar span and over the whole run."""
     m = metrics
     sonar = ""
     if "ate_sonar_mean_m" in m:
@@ -276,8 +277,15 @@ def summary_line(metrics: dict[str, Any]) -> str:
             f"ATE over the sonar span mean {m['ate_sonar_mean_m']:.2f} m, max "
             f"{m['ate_sonar_max_m']:.2f} ({m['ate_sonar_n']} fixes); whole run "
         )
+    truth = ""
+    if "ate_truth_mean_m" in m:
+        truth = (
+            f"against the truth ATE mean {m['ate_truth_mean_m']:.2f} m, max "
+            f"{m['ate_truth_max_m']:.2f} (rigidly aligned {m['ate_truth_aligned_mean_m']:.2f}); "
+            "against the simulated GPS: "
+        )
     return (
-        f"{m['backend']}: {sonar}ATE mean {m['ate_mean_m']:.2f} m, sd {m['ate_sd_m']:.2f}, "
+        f"{m['backend']}: {truth}{sonar}ATE mean {m['ate_mean_m']:.2f} m, sd {m['ate_sd_m']:.2f}, "
         f"min {m['ate_min_m']:.2f}, max {m['ate_max_m']:.2f}, rmse {m['ate_rmse_m']:.2f} "
         f"over {m['ate_n']} fixes; {m['data_s']:.0f} s of data in {m['wall_s']:.2f} s "
         f"({m['realtime_factor']:.0f}x real time)"

@@ -1,0 +1,123 @@
+"""A run directory read back for ``sonarslam report`` (:mod:`slam.run.report`): its
+``metrics.json``, its trajectory ``<backend>.tum`` (with ``<backend>_cov.npz``), ``gps.tum``,
+``map.json``, and the run's dataset when it can still be opened (GPS fixes, beams, truth)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from datasets.errors import DataError
+from datasets.source import Dataset, open_dataset
+from slam.eval.consistency import nees_series
+from slam.eval.evo_metrics import evo_metrics_of_run
+from slam.eval.truth import truth_trajectory
+from slam.io.trajectory import (
+    GPS_FILE,
+    Trajectory,
+    cov_file,
+    load_run_trajectory,
+    read_tum,
+    trajectory_stem,
+)
+
+__all__ = ["DISPLAY_NAMES", "RunData", "load_run", "evaluate_run"]
+
+#: Names of the back ends in the tables.
+DISPLAY_NAMES = {"dr": "dead reckoning", "gps": "GPS + AHRS", "ekf": "EKF-SLAM", "isam2": "iSAM2"}
+
+
+@dataclass
+class RunData:
+    """One run directory, read.
+
+    Attributes
+    ----------
+    run_dir : Path
+    metrics : dict
+        ``metrics.json``.
+    trajectory : Trajectory
+        ``<backend>.tum``, with the covariances of ``<backend>_cov.npz`` when present.
+    gps : Trajectory
+        ``gps.tum`` (the GPS fixes inside the run, with the AHRS heading).
+    landmarks : list of dict or None
+        ``map.json``'s landmarks (closed loops).
+    dataset : Dataset or None
+        The run's dataset, when its ``source`` can still be opened.
+    truth : Trajectory or None
+        The simulator's truth (simulated datasets).
+    notes : list of str
+        What the report could not do for this run, and why.
+    """
+
+    run_dir: Path
+    metrics: dict[str, Any]
+    trajectory: Trajectory
+    gps: Trajectory
+    landmarks: list[dict[str, Any]] | None = None
+    dataset: Dataset | None = None
+    truth: Trajectory | None = None
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def backend(self) -> str:
+        return str(self.metrics.get("backend", self.run_dir.name))
+
+    @property
+    def stem(self) -> str:
+        """File stem of the run's trajectory (``ekf``)."""
+        return trajectory_stem(self.backend)
+
+    @property
+    def dataset_name(self) -> str:
+        return Path(str(self.metrics.get("source", "unknown"))).name
+
+    @property
+    def name(self) -> str:
+        return self.run_dir.name
+
+
+def load_run(run_dir: str | Path, open_source: bool = True) -> RunData:
+    """Read a run directory; open its dataset unless ``open_source`` is False (or it is gone)."""
+    run = Path(run_dir)
+    if not (run / "metrics.json").is_file():
+        raise FileNotFoundError(f"{run}: no metrics.json (not a run directory of sonarslam run)")
+    metrics = json.loads((run / "metrics.json").read_text())
+    stem = trajectory_stem(str(metrics.get("backend", "")))
+    for name in (f"{stem}.tum", GPS_FILE):
+        if not (run / name).is_file():
+            raise FileNotFoundError(f"{run}: no {name} (not a run directory of sonarslam run)")
+    data = RunData(run, metrics, load_run_trajectory(run, stem), read_tum(run / GPS_FILE))
+    if (run / "map.json").is_file():
+        data.landmarks = json.loads((run / "map.json").read_text()).get("landmarks", [])
+    if data.trajectory.covs is None:
+        data.notes.append(f"no {cov_file(stem)}: no covariance bounds nor NEES")
+    source = metrics.get("source")
+    if open_source and source:
+        try:
+            data.dataset = open_dataset(source)
+        except (DataError, OSError) as exc:
+            data.notes.append(f"dataset not opened ({exc}): no reprojected map, GPS from gps.tum")
+    if data.dataset is not None and data.dataset.truth is not None:
+        data.truth = truth_trajectory(data.dataset)
+    return data
+
+
+def evaluate_run(run: RunData, rpe_delta_m: float = 10.0, align: bool = False) -> dict[str, Any]:
+    """evo's APE/RPE on the run's TUM files and, with truth and covariances, the NEES.
+
+    Returns
+    -------
+    dict
+        :func:`slam.eval.evo_metrics.evo_metrics_of_run`'s keys, and ``nees_mean``,
+        ``nees_in_band_fraction`` (pose, 3 dof), ``nees_position_mean`` when available.
+    """
+    out: dict[str, Any] = dict(evo_metrics_of_run(run.run_dir, run.stem, rpe_delta_m, align=align))
+    if run.truth is not None and run.trajectory.covs is not None:
+        pose = nees_series(run.trajectory, run.truth, "pose")
+        out["nees_mean"] = pose.mean
+        out["nees_in_band_fraction"] = pose.in_band_fraction()
+        out["nees_position_mean"] = nees_series(run.trajectory, run.truth, "position").mean
+    return out

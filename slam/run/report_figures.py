@@ -1,0 +1,228 @@
+"""The figures of ``sonarslam report`` (:mod:`slam.run.report`): trajectories and their error in
+time, the ATE per time segment, each run's map, error bounds and NEES.
+
+The reference of a simulated run is the simulator's truth (its GPS is simulated, noisy); of a
+real run, the GPS fixes.
+"""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from features.projection import project_beams
+from slam.eval.ate import ate_errors, truth_errors
+from slam.eval.consistency import chi2_band, nees_series, pose_errors
+from slam.eval.truth import truth_walls
+from slam.io.maps import MapLayers, landmark_layers, plot_map
+from slam.io.plots import plot_error_bounds, plot_nees, plot_segment_ate, plot_trajectories
+from slam.io.trajectory import FloatArray, Trajectory, cov_file
+from slam.run.presets import map_min_intensity
+from slam.run.report_data import RunData
+
+__all__ = [
+    "SEGMENT_S",
+    "SegmentTable",
+    "run_errors",
+    "segment_table",
+    "error_figure",
+    "nees_figure",
+    "map_figure",
+    "trajectory_figure",
+    "segment_figure",
+]
+
+#: Length of the time segments of the per-segment ATE (s).
+SEGMENT_S = 300.0
+
+
+def run_errors(run: RunData) -> tuple[FloatArray, FloatArray, str]:
+    """Times (Unix s) and position errors (m) of a run against its reference, and its name
+    (``"truth"``, ``"GPS"``): the ATE's own errors (:mod:`slam.eval.ate`)."""
+    if run.truth is not None:
+        t, e = truth_errors(run.trajectory, run.truth)
+        return t, e, "truth"
+    if run.dataset is not None and run.dataset.gps is not None:
+        t, e = ate_errors(run.trajectory, run.dataset.gps)
+        return t, e, "GPS"
+    gps = run.gps
+    return (
+        gps.t_s,
+        np.hypot(*(run.trajectory.poses(gps.t_s)[:, :2] - gps.poses_wTb[:, :2]).T),
+        "GPS",
+    )
+
+
+def _walls(run: RunData) -> FloatArray | None:
+    ds = run.dataset
+    return truth_walls(ds) if ds is not None and ds.truth and "walls_m" in ds.truth else None
+
+
+def _sigmas_at(trajectory: Trajectory, t_s: FloatArray) -> FloatArray | None:
+    if trajectory.covs is None:
+        return None
+    i = np.clip(np.searchsorted(trajectory.t_s, t_s, side="right") - 1, 0, trajectory.t_s.size - 1)
+    return np.sqrt(np.clip(np.diagonal(trajectory.covs[i], axis1=1, axis2=2), 0.0, None))
+
+
+def error_figure(run: RunData, label: str, out: Path) -> Path:
+    """East, North (and heading, against the truth) errors in time with their 3-sigma bounds
+    (the GPS sigma added against GPS)."""
+    if run.truth is not None:
+        t = run.gps.t_s
+        e = pose_errors(run.trajectory, run.truth, t)
+        ref_name, ref_sigma_m = "truth", 0.0
+    else:
+        if run.dataset is not None and run.dataset.gps is not None:
+            gps = run.dataset.gps
+            t0, t1 = run.trajectory.span_s
+            inside = (gps.t >= t0) & (gps.t <= t1)
+            t, xy = gps.t[inside], gps.en_m[inside]
+            ref_sigma_m = float(run.dataset.config.noise.gps_sigma_m)
+        else:
+            t, xy, ref_sigma_m = run.gps.t_s, run.gps.poses_wTb[:, :2], 0.0
+        e = run.trajectory.poses(t)[:, :2] - xy
+        ref_name = "GPS"
+    s = _sigmas_at(run.trajectory, t)
+    if s is not None:
+        s = s[:, : e.shape[1]].copy()
+        s[:, :2] = np.sqrt(s[:, :2] ** 2 + ref_sigma_m**2)
+    gps_note = f", bounds include the GPS sigma {ref_sigma_m:g} m" if ref_sigma_m > 0 else ""
+    title = f"{run.dataset_name}: {label} against {ref_name}{gps_note}" + (
+        "" if s is not None else f" (no {cov_file(run.stem)}: no bounds)"
+    )
+    return plot_error_bounds(out, t, e, s, title, ref_name)
+
+
+def nees_figure(run: RunData, label: str, out: Path) -> Path:
+    """Pose and position NEES against the simulator's truth, with their chi2 bands."""
+    assert run.truth is not None
+    series = {}
+    for comp in ("pose", "position"):
+        s = nees_series(run.trajectory, run.truth, comp)
+        series[f"{comp} NEES"] = (s.t_s, s.nees, s.dof, chi2_band(s.dof))
+    return plot_nees(
+        out, series, f"{run.dataset_name}: {label}, NEES against the simulator's truth"
+    )
+
+
+def map_figure(run: RunData, label: str, out: Path) -> Path | None:
+    """The run's landmarks with their 95 % bands over the bins projected with its trajectory,
+    its reference (GPS or the truth) and the true walls; the run's own ``map.png`` when the
+    dataset is gone."""
+    assert run.landmarks is not None
+    if run.dataset is None:
+        if (run.run_dir / "map.png").is_file():
+            shutil.copyfile(run.run_dir / "map.png", out)
+            return out
+        return None
+    ds = run.dataset
+    t0, t1 = run.trajectory.span_s
+    beams = [b for b in ds.nav_beams() if t0 <= b.t <= t1]
+    points, _ = project_beams(
+        beams, ds.config.sonar, ds.config.sonar_mounting, run.trajectory, map_min_intensity(beams)
+    )
+    segments, bands = landmark_layers(run.landmarks)
+    ref = {"truth": run.truth.clip(t0, t1)} if run.truth is not None else {"gps": run.gps}
+    layers = MapLayers(points, {**ref, run.backend: run.trajectory}, segments, bands, _walls(run))
+    return plot_map(
+        out,
+        layers,
+        f"{run.dataset_name}: {label}, {len(segments)} landmarks with 95 % bands over the bins"
+        " projected with its trajectory",
+    )
+
+
+def trajectory_figure(runs: list[RunData], labels: dict[str, str], out: Path) -> Path:
+    """The runs of one dataset against their reference, in the plane and in time."""
+    longest = max(runs, key=lambda r: r.gps.t_s.size)
+    ref_name = "truth" if longest.truth is not None else "gps"
+    reference = longest.truth if longest.truth is not None else longest.gps
+    trajectories: dict[str, Trajectory] = {ref_name: reference.clip(*longest.trajectory.span_s)}
+    errors = {}
+    for run in runs:
+        lab = labels[str(run.run_dir)]
+        trajectories[lab] = run.trajectory
+        t, e, _ = run_errors(run)
+        errors[lab] = (t, e)
+    span = longest.metrics.get("sonar_span_s")
+    name = "the truth" if ref_name == "truth" else "GPS"
+    return plot_trajectories(
+        out,
+        trajectories,
+        errors,
+        f"{runs[0].dataset_name}: trajectories against {name}",
+        name,
+        None if span is None else (float(span[0]), float(span[1])),
+        _walls(longest),
+    )
+
+
+@dataclass(frozen=True)
+class SegmentTable:
+    """The ATE per time segment of the runs of one dataset.
+
+    Attributes
+    ----------
+    edges_s : ndarray, shape (K + 1,)
+        Segment edges, seconds since the first reference time of the runs.
+    mean_m, max_m : dict of str to ndarray, shape (K,)
+        Per run label: the mean and max error of each segment (NaN: no fix there).
+    reference : str
+    sonar_end_s : float or None
+        When the sonar stops, seconds since the same start (None: it runs to the end).
+    segment_s : float
+        The segments' length (the last one ends with the data).
+    """
+
+    edges_s: FloatArray
+    mean_m: dict[str, FloatArray]
+    max_m: dict[str, FloatArray]
+    reference: str
+    sonar_end_s: float | None
+    segment_s: float = SEGMENT_S
+
+
+def segment_table(
+    runs: list[RunData], labels: dict[str, str], segment_s: float = SEGMENT_S
+) -> SegmentTable:
+    """Mean and max error per ``segment_s`` of each run of one dataset (:func:`run_errors`)."""
+    errs = {labels[str(r.run_dir)]: run_errors(r) for r in runs}
+    t0 = min(float(t[0]) for t, _, _ in errs.values() if t.size)
+    t1 = max(float(t[-1]) for t, _, _ in errs.values() if t.size)
+    # whole segments, the last one ending with the data
+    edges = np.append(np.arange(0.0, t1 - t0, segment_s), t1 - t0)
+    if edges.size < 2 or edges[-1] <= edges[-2]:
+        edges = np.array([0.0, max(t1 - t0, 1e-9)])
+    mean_m, max_m = {}, {}
+    for lab, (t, e, _) in errs.items():
+        k = np.clip(np.searchsorted(edges, t - t0, side="right") - 1, 0, edges.size - 2)
+        counts = np.bincount(k, minlength=edges.size - 1)
+        sums = np.bincount(k, weights=e, minlength=edges.size - 1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean_m[lab] = np.where(counts > 0, sums / counts, np.nan)
+        peak = np.full(edges.size - 1, np.nan)
+        np.fmax.at(peak, k, e)
+        max_m[lab] = peak
+    span = runs[0].metrics.get("sonar_span_s")
+    sonar_end = None if span is None else float(span[1]) - t0
+    if sonar_end is not None and sonar_end >= t1 - t0 - 1.0:
+        sonar_end = None  # the sonar runs to the end
+    reference = next(iter(errs.values()))[2]
+    return SegmentTable(edges, mean_m, max_m, reference, sonar_end, segment_s)
+
+
+def segment_figure(table: SegmentTable, dataset_name: str, out: Path) -> Path:
+    """:func:`slam.io.plots.plot_segment_ate` of a :class:`SegmentTable`."""
+    stats = {lab: (table.mean_m[lab], table.max_m[lab]) for lab in table.mean_m}
+    return plot_segment_ate(
+        out,
+        table.edges_s,
+        stats,
+        f"{dataset_name}: ATE per {table.segment_s:.0f} s against {table.reference}",
+        table.reference,
+        table.sonar_end_s,
+    )

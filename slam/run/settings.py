@@ -1,0 +1,152 @@
+"""Every setting of a dataset and of its runs, with its unit and where its value comes from
+(``sonarslam info``).
+
+* The dataset's settings (``sonarslam.toml``'s keys, :func:`datasets.config.config_tables`): from
+  the dataset's own ``sonarslam.toml``, else its ``*_SETUP.log`` (the head) and the marina
+  calibration (``datasets.config.MARINA_CONFIG``, README "Calibration"); keys a
+  ``sonarslam.toml`` leaves out take the neutral defaults of ``DatasetConfig``.
+* The run settings (``--set SCOPE.FIELD=VALUE``, :mod:`slam.run.presets`): the extractor preset
+  of the dataset's beams and each back end's defaults.
+
+Units are read off the names (``_m``: metres, ``_deg``, ``_rad``, ``_s``, ``_mps``: m/s, ...).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from datasets.config import config_tables
+from datasets.source import Dataset
+from slam.backends.registry import BACKENDS
+from slam.run.presets import backend_config, extractor_config, noise_settings, preset_for
+
+__all__ = ["Setting", "unit_of", "dataset_settings", "run_settings"]
+
+_UNITS = [
+    ("_deg_per_sqrt_s", "deg/sqrt(s)"),
+    ("_mps", "m/s"),
+    ("_radps", "rad/s"),
+    ("_m", "m"),
+    ("_deg", "deg"),
+    ("_rad", "rad"),
+    ("_s", "s"),
+    ("_ms", "ms"),
+    ("_hz", "Hz"),
+]
+_NAMED_UNITS = {
+    "n_bins": "bins",
+    "angle_sense": "+1 / -1",
+    "scan_direction": "+1 / -1",
+    "ahrs_deviation_deg": "deg (B, C)",
+}
+
+
+def unit_of(name: str) -> str:
+    """The unit of a setting from its name (``range_sigma_m``: ``m``); ``""`` when it has none
+    (counts, ratios, choices)."""
+    key = name.rsplit(".", 1)[-1]
+    if key in _NAMED_UNITS:
+        return _NAMED_UNITS[key]
+    for suffix, unit in _UNITS:
+        if key.endswith(suffix):
+            return unit
+    return ""
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One setting: its name (``[table] key`` or ``SCOPE.FIELD``), value, unit and source."""
+
+    name: str
+    value: Any
+    unit: str
+    source: str
+
+
+def _file_keys(root: Path) -> tuple[Path | None, dict[str, set[str]]]:
+    found = sorted(set(root.glob("sonarslam.toml")) | set(root.glob("*/sonarslam.toml")))
+    if not found:
+        return None, {}
+    with open(found[0], "rb") as f:
+        data = tomllib.load(f)
+    keys: dict[str, set[str]] = {}
+    for table, inner in data.items():
+        if table == "mounting" and isinstance(inner, dict):
+            for sub, items in inner.items():
+                keys[f"mounting.{sub}"] = set(items)
+        elif isinstance(inner, dict):
+            keys[table] = set(inner)
+    return found[0], keys
+
+
+def dataset_settings(dataset: Dataset) -> list[Setting]:
+    """The dataset's settings, each with its unit and source (module docstring)."""
+    toml, in_file = _file_keys(dataset.root)
+    setup = sorted(dataset.root.glob("*_SETUP.log")) + sorted(dataset.root.glob("*/*_SETUP.log"))
+    out = []
+    for table, items in config_tables(dataset.config).items():
+        mounting_source = items.get("source") if table.startswith("mounting.") else None
+        for key, value in items.items():
+            if key == "source":
+                continue
+            if toml is not None:
+                source = (
+                    toml.name if key in in_file.get(table, set()) else "default (DatasetConfig)"
+                )
+            elif table == "sonar" and key in ("n_bins", "bin_size_m", "step_deg") and setup:
+                source = setup[0].name
+            else:
+                source = "marina calibration (MARINA_CONFIG)"
+            if mounting_source and key == "yaw_deg":
+                source += f": {mounting_source}"
+            out.append(Setting(f"[{table}] {key}", value, unit_of(key), source))
+    return out
+
+
+def _flatten(prefix: str, config: Any) -> list[tuple[str, Any]]:
+    out: list[tuple[str, Any]] = []
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            out += _flatten(f"{prefix}.{f.name}", value)
+        else:
+            out.append((f"{prefix}.{f.name}", value))
+    return out
+
+
+def run_settings(dataset: Dataset) -> list[Setting]:
+    """The extractor preset of the dataset's beams and every back end's defaults, by their
+    ``--set`` names (``extractor.min_votes``, ``ekf.association.gate_probability``)."""
+    preset = preset_for(dataset.beams)
+    noise = dataset.config.noise
+    from_noise = {f"extractor.{k}" for k in noise_settings(noise)[0]}
+    from_noise |= {f"{b}.{k}" for b in BACKENDS for k in noise_settings(noise)[1]}
+
+    def source_of(name: str, default: str) -> str:
+        return (
+            "the dataset's [noise] (slam/run/presets.py: noise_settings)"
+            if name in from_noise
+            else default
+        )
+
+    out = [
+        Setting(
+            name,
+            value,
+            unit_of(name),
+            source_of(name, f"extractor preset {preset!r} (slam/run/presets.py)"),
+        )
+        for name, value in _flatten("extractor", extractor_config(preset, noise=noise))
+    ]
+    for backend in BACKENDS:
+        config = backend_config(backend, noise=noise)
+        default = f"{type(config).__name__} default"
+        out += [
+            Setting(name, value, unit_of(name), source_of(name, default))
+            for name, value in _flatten(backend, config)
+        ]
+    return out

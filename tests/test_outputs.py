@@ -1,0 +1,179 @@
+"""The run directory as other tools read it: evo's own CLI scores the TUM files exactly as
+metrics.json, GTSAM's readG2o loads graph.g2o, every file is in the README's table, and the
+README's Python examples run as typed."""
+
+from __future__ import annotations
+
+import fnmatch
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import gtsam
+import numpy as np
+import pytest
+
+from datasets.simulator import simulate
+from slam.backends.isam2.g2o import G2O_EDGE_TYPES, graph_json_to_g2o
+from slam.backends.isam2.graph_io import factor_from_record, key_of, load_graph
+from slam.run.run import run
+
+ROOT = Path(__file__).resolve().parents[1]
+EVO_APE = Path(sys.executable).parent / "evo_ape"
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """dr and isam2 on a short simulated harbour (isam2 also writes its smoothed trajectory and
+    its graph)."""
+    root = tmp_path_factory.mktemp("outputs")
+    source = simulate("harbour", seed=3, out_dir=root / "h3", duration_s=150.0)
+    with pytest.warns(UserWarning, match="g2o cannot hold"):
+        isam2 = run(source, "isam2", root / "isam2", progress=False)
+    return {"dr": run(source, "dr", root / "dr", progress=False), "isam2": isam2}
+
+
+def _evo_ape(run_dir: Path, reference: str, estimate: str) -> dict[str, float]:
+    """``evo_ape tum REFERENCE ESTIMATE`` as typed (no option), its statistics parsed."""
+    out = subprocess.run(
+        [str(EVO_APE), "tum", reference, estimate],
+        cwd=run_dir,
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=120,
+    ).stdout
+    return {
+        k: float(v) for k, v in re.findall(r"^\s*(max|mean|min|rmse|std)\s+([0-9.]+)", out, re.M)
+    }
+
+
+@pytest.mark.skipif(not EVO_APE.is_file(), reason="evo's CLI is not installed beside python")
+@pytest.mark.parametrize(
+    ("backend", "estimate", "key"),
+    [
+        ("dr", "dr.tum", "ate_{}_m"),
+        ("isam2", "isam2.tum", "ate_{}_m"),
+        ("isam2", "isam2_smoothed.tum", "ate_{}_smoothed_m"),
+    ],
+)
+def test_plain_evo_ape_prints_the_metrics_ate(runs, backend, estimate, key):
+    """Against gps.tum, evo's default association (10 ms) pairs every GPS fix with the estimate
+    interpolated there: the whole-run ATE of metrics.json to well under 1 cm."""
+    r = runs[backend]
+    stats = _evo_ape(r.out_dir, "gps.tum", estimate)
+    assert stats["mean"] == pytest.approx(r.metrics[key.format("mean")], abs=1e-4)
+    assert stats["max"] == pytest.approx(r.metrics[key.format("max")], abs=1e-4)
+    if key == "ate_{}_m":
+        assert stats["rmse"] == pytest.approx(r.metrics["ate_rmse_m"], abs=1e-4)
+        assert stats["min"] == pytest.approx(r.metrics["ate_min_m"], abs=1e-4)
+
+
+@pytest.mark.skipif(not EVO_APE.is_file(), reason="evo's CLI is not installed beside python")
+def test_plain_evo_ape_against_the_truth(runs):
+    r = runs["isam2"]
+    stats = _evo_ape(r.out_dir, "truth.tum", "isam2.tum")
+    assert stats["mean"] == pytest.approx(r.metrics["ate_truth_mean_m"], abs=1e-4)
+
+
+def test_read_g2o_loads_the_pose_graph(runs):
+    """graph.g2o: every pose at the estimate and every odometry factor as a BetweenFactorPose2
+    whose error at the estimate is the odometry factor's (first-order equivalent)."""
+    out = runs["isam2"].out_dir
+    doc = json.loads((out / "graph.json").read_text())
+    graph, values = gtsam.readG2o(str(out / "graph.g2o"), False)
+    poses = {k: v for k, v in doc["values"].items() if v["type"] == "Pose2"}
+    odometry = [f for f in doc["factors"] if f["type"] in G2O_EDGE_TYPES]
+    assert values.size() == len(poses) >= 20
+    assert graph.size() == len(odometry)
+    for name, item in poses.items():
+        p = values.atPose2(int(name[1:]))
+        np.testing.assert_allclose([p.x(), p.y(), p.theta()], item["value"], atol=1e-9)
+    _, json_values = load_graph(out / "graph.json")
+    ours = sum(factor_from_record(f).error(json_values) for f in odometry)
+    assert graph.error(values) == pytest.approx(ours, rel=1e-3)
+    # a GTSAM user's re-optimisation: fix the first pose and run Levenberg-Marquardt
+    graph.add(
+        gtsam.PriorFactorPose2(0, values.atPose2(0), gtsam.noiseModel.Isotropic.Sigma(3, 1e-3))
+    )
+    result = gtsam.LevenbergMarquardtOptimizer(graph, values).optimize()
+    assert graph.error(result) <= graph.error(values) + 1e-9
+    assert key_of("x0") == gtsam.symbol("x", 0)
+
+
+def test_g2o_export_warns_what_it_leaves_out(runs, tmp_path):
+    out = runs["isam2"].out_dir
+    with pytest.warns(UserWarning, match=r"g2o cannot hold .*LineObservation") as record:
+        export = graph_json_to_g2o(out / "graph.json", tmp_path / "g.g2o")
+    assert "graph.json has the whole graph" in str(record[0].message)
+    assert export.left_out["LineObservation"] > 0 and export.edges > 0
+
+
+def _readme() -> str:
+    return (ROOT / "README.md").read_text()
+
+
+def test_every_output_file_is_in_the_readme_table(runs):
+    """Each file a run writes matches a name of the README's table of outputs (``<backend>``
+    stands for the back end's name)."""
+    text = _readme()
+    table = text[text.index("## Outputs") :]
+    names = re.findall(r"^\| `([^`]+)`", table, re.M)
+    patterns = [re.sub(r"<[^>]+>", "*", n) for n in names]
+    for r in runs.values():
+        for f in r.out_dir.iterdir():
+            assert any(fnmatch.fnmatch(f.name, p) for p in patterns), f"{f.name} not in README"
+    # and every key of metrics.json is in its table (``*``, ``<name>``, ``{a,b}`` as patterns)
+    keys_part = table[table.index("`metrics.json` (one object") : table.index("### With evo")]
+    key_patterns = []
+    for token in re.findall(r"`([^`]+)`", keys_part):
+        token = re.sub(r"<[^>]+>", "*", token)
+        alts = re.match(r"(.*)\{([^}]+)\}(.*)", token)
+        if alts:
+            key_patterns += [alts[1] + a + alts[3] for a in alts[2].split(",")]
+        else:
+            key_patterns.append(token)
+    for r in runs.values():
+        for key in r.metrics:
+            assert any(fnmatch.fnmatch(key, p) for p in key_patterns), f"{key} not in README"
+
+
+def _example(marker: str) -> str:
+    text = _readme()
+    start = text.index(marker)
+    block = text[text.index("```python", start) + len("```python") :]
+    return block[: block.index("```")]
+
+
+def test_readme_python_api_example_runs(tmp_path):
+    code = _example("<!-- example: api -->")
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
+    assert out.returncode == 0, out.stderr
+    rows = [ln for ln in out.stdout.splitlines() if "rho" in ln]
+    assert len(rows) >= 4, out.stdout
+
+
+def test_readme_reoptimisation_example_runs(runs, tmp_path):
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "isam2").symlink_to(runs["isam2"].out_dir)
+    code = _example("<!-- example: load_graph -->")
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
+    assert out.returncode == 0, out.stderr
+    assert "error" in out.stdout

@@ -1,0 +1,65 @@
+"""Packaging: the lock pins every dependency inside pyproject.toml's ranges, the supported
+Pythons are declared, the packages ship ``py.typed``, and ``sonarslam --version`` answers."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+from packaging.requirements import Requirement
+from packaging.utils import canonicalize_name
+
+from slam.cli.main import build_parser
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _lock() -> dict[str, str]:
+    pins = {}
+    for line in (ROOT / "requirements.lock").read_text().splitlines():
+        if line.strip() and not line.startswith("#"):
+            name, sep, ver = line.partition("==")
+            assert sep, f"requirements.lock: not an exact pin: {line!r}"
+            pins[canonicalize_name(name)] = ver.strip()
+    return pins
+
+
+def test_lock_pins_every_dependency_inside_its_range() -> None:
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    pins = _lock()
+    reqs = [*project["dependencies"], *project["optional-dependencies"]["dev"]]
+    assert len(reqs) >= 20
+    for text in reqs:
+        req = Requirement(text)
+        name = canonicalize_name(req.name)
+        assert name in pins, f"{req.name} is not in requirements.lock"
+        assert req.specifier.contains(pins[name]), (
+            f"{req.name}=={pins[name]} outside {req.specifier}"
+        )
+
+
+def test_supported_pythons_declared() -> None:
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert project["requires-python"] == ">=3.11,<3.14"
+    for minor in (11, 12, 13):
+        assert f"Programming Language :: Python :: 3.{minor}" in project["classifiers"]
+    assert sys.version_info[:2] >= (3, 11)
+
+
+def test_packages_are_typed() -> None:
+    for package in ("sonar", "features", "slam", "datasets"):
+        assert (ROOT / package / "py.typed").is_file(), package
+
+
+def test_version_flag() -> None:
+    out = subprocess.run(
+        [sys.executable, "-m", "slam.cli.main", "--version"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        check=True,
+    ).stdout
+    assert out.startswith("sonarslam ")
+    assert build_parser().prog == "sonarslam"
