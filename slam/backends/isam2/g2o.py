@@ -8,8 +8,9 @@ odometry; a g2o file cannot hold:
 
 * the line landmarks ``L(j)`` and their ``LineObservation`` factors (g2o's 2D types have points
   and poses, no line through a sonar mounting),
-* the AHRS ``HeadingBias`` factors and the bias ``B(0)`` (g2o has no unary heading factor nor a
-  scalar variable),
+* the AHRS ``HeadingBias`` factors and the bias ``B(0)`` (or ``B(k)`` per node tied by
+  ``BetweenFactorVector`` when it is a random walk): g2o has no unary heading factor nor a
+  scalar variable,
 * the priors (``PoseTranslationPrior2D``, ``PriorFactorVector``, ``PriorFactorPose2``): GTSAM's
   reader adds none, so fix ``X(0)`` with a prior before optimising,
 * the DVL misalignment ``D(0)`` and gyro scale ``G(0)`` of a ``DvlGyroOdometry`` that estimates
