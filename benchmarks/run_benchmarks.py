@@ -11,7 +11,9 @@
 * ``marina_heading.py``: how much of the marina ATE is the absolute heading (skipped without
   the marina);
 * ``marina_sonar_timing.py``: the sonar clock offset and keyframe scan direction by map
-  sharpness (skipped without the marina).
+  sharpness (skipped without the marina);
+* ``marina_line_quality.py``: lines extracted with GPS and with dead-reckoning poses against
+  wall references fitted through the GPS-projected leading edges (skipped without the marina).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ SCRIPTS = (
     ("association_quality.py", "out/association_quality.json"),
     ("marina_heading.py", "out/marina_heading.json"),
     ("marina_sonar_timing.py", "out/marina_sonar_timing.json"),
+    ("marina_line_quality.py", "out/marina_line_quality.json"),
 )
 
 

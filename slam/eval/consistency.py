@@ -4,6 +4,8 @@
   (:func:`features.geometry.wrap_angle`), chi2 with 3 degrees of freedom when consistent (2 for
   the position only, 1 for the heading only);
 * NIS of the innovations when a back end logs them (:func:`nis`);
+* the one-sided gate of one chi2 value (:func:`chi2_gate`), whose exceedances a consistent
+  estimator has with the gate's complement probability;
 * ANEES over N Monte Carlo runs: at each time the mean of the N NEES, whose two-sided 95 %
   band is ``chi2.ppf([0.025, 0.975], N dof) / N`` (Bar-Shalom, Li, Kirubarajan 2001, 5.4.2).
 
@@ -34,6 +36,7 @@ __all__ = [
     "nees_series",
     "nis",
     "chi2_band",
+    "chi2_gate",
     "mean_nees_band",
     "nees_on_grid",
     "anees",
@@ -143,6 +146,14 @@ def nis(
 def chi2_band(dof: int, probability: float = NEES_PROBABILITY) -> tuple[float, float]:
     """Two-sided ``probability`` interval of one chi2(``dof``) value."""
     return mean_nees_band(1, dof, probability)
+
+
+def chi2_gate(dof: int, probability: float) -> float:
+    """One-sided gate ``chi2.ppf(probability, dof)``: a consistent NEES with ``dof`` degrees of
+    freedom lies beyond it with probability ``1 - probability`` (9.210 at 0.99 and 2 dof)."""
+    if dof < 1 or not 0.0 < probability < 1.0:
+        raise ValueError(f"need dof >= 1 and 0 < probability < 1, got {dof}, {probability}")
+    return float(stats.chi2.ppf(probability, dof))
 
 
 def mean_nees_band(
