@@ -10,7 +10,7 @@ import slam.run.sweep as sweep_mod
 from datasets.source import open_dataset
 from slam.backends.ekf import EkfConfig
 from slam.cli.main import main
-from slam.eval.ate import ate_against_gps
+from slam.eval.ate import ate_against_gps, ate_against_truth
 from slam.eval.consistency import anees, nees_on_grid, nees_series
 from slam.eval.truth import truth_trajectory
 from slam.run.presets import apply_overrides, parse_value
@@ -19,9 +19,11 @@ from slam.run.sources import dead_reckoning_trajectory
 from slam.run.sweep import (
     expand_tasks,
     load_grid_toml,
+    pair_with_baseline,
     parse_grid,
     parse_seeds,
     simulate_cached,
+    summarise,
     sweep,
 )
 
@@ -184,3 +186,67 @@ def test_synchronous_sweep_equals_the_cluster_one(cache, tmp_path):
     assert res.table.loc[0, "nees_mean"] == pytest.approx(expected_nees.mean, rel=1e-12)
     on_grid = nees_on_grid(expected_nees, dr.t_s[0], np.arange(res.nees_pose.shape[1]))
     np.testing.assert_allclose(res.nees_pose[0], on_grid, rtol=1e-12)
+
+
+def test_runs_are_paired_with_dead_reckoning_by_seed():
+    """Share of seeds beating DR and gain in the mean, by hand: seeds 0-3 paired (EKF beats DR on
+    0, 2, 3 by the ATE, on 0, 1, 3 aligned); seed 4 has no DR run, seed 5's EKF run failed."""
+    table = pd.DataFrame(
+        {
+            "seed": [0, 0, 1, 1, 2, 2, 3, 3, 4, 5, 5],
+            "backend": ["dr", "ekf"] * 4 + ["ekf", "dr", "ekf"],
+            "ate_truth_mean_m": [2.0, 1.0, 2.0, 3.0, 4.0, 1.0, 4.0, 2.0, 9.0, 2.0, np.nan],
+            "ate_truth_aligned_mean_m": [1.0, 0.5, 1.0, 0.5, 2.0, 2.5, 2.0, 1.0, 9.0, 1.0, np.nan],
+            "wall_s": 1.0,
+            "error": [""] * 10 + ["RuntimeError: lost"],
+        }
+    )
+    paired = pair_with_baseline(table)
+    ekf = paired[paired.backend == "ekf"].set_index("seed")
+    np.testing.assert_array_equal(ekf.loc[[0, 1, 2, 3], "beats_dr"], [1.0, 0.0, 1.0, 1.0])
+    np.testing.assert_allclose(ekf.loc[[0, 1, 2, 3], "gain_over_dr"], [0.5, -0.5, 0.75, 0.5])
+    np.testing.assert_array_equal(ekf.loc[[0, 1, 2, 3], "beats_dr_aligned"], [1, 1, 0, 1])
+    assert ekf.loc[[4, 5], ["beats_dr", "gain_over_dr", "dr_ate_m"]].isna().all().all()
+    assert paired.loc[paired.backend == "dr", "beats_dr"].isna().all()
+    empty = np.zeros((len(table), 0))
+    summary = summarise(paired, empty, empty).set_index("config")
+    assert (summary.loc["ekf", "runs"], summary.loc["ekf", "failed"]) == (5, 1)
+    assert summary.loc["ekf", "dr_pairs"] == 4 and summary.loc["ekf", "beats_dr_seeds"] == 3
+    assert summary.loc["ekf", "beats_dr_share"] == pytest.approx(0.75, abs=1e-12)
+    assert summary.loc["ekf", "gain_over_dr"] == pytest.approx(1.0 - 7.0 / 12.0, abs=1e-12)
+    assert summary.loc["ekf", "beats_dr_aligned_share"] == pytest.approx(0.75, abs=1e-12)
+    assert summary.loc["ekf", "gain_over_dr_aligned"] == pytest.approx(0.25, abs=1e-12)
+    # the baseline's own row: its truth ATE, no pairing
+    assert summary.loc["dr", "ate_truth_mean_m"] == pytest.approx(2.8, abs=1e-12)
+    assert np.isnan(summary.loc["dr", "beats_dr_share"])
+
+
+def test_sweep_on_the_drift_world_scores_against_the_truth(tmp_path, capsys):
+    """A tiny sweep of the drift world through the CLI: each run's ATE is against the true poses
+    (DR's equals a direct evaluation), the summary pairs the EKF with DR seed by seed."""
+    out, cache = tmp_path / "sweep", tmp_path / "sim"
+    argv = ["sweep", "--world", "drift", "--seeds", "0-1", "--backend", "dr,ekf"]
+    argv += ["--duration", "120", "--scheduler", "synchronous", "--out", str(out)]
+    assert main(argv + ["--cache", str(cache), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "beats_dr_share" in printed and "4 runs (0 failed)" in printed
+    table = pd.read_csv(out / "sweep.csv")
+    for seed in (0, 1):
+        dataset = open_dataset(cache / f"drift_{seed}_120s")
+        assert dataset.truth is not None and dataset.truth["kind"] == "drift"
+        dr = table[(table.seed == seed) & (table.backend == "dr")].iloc[0]
+        expected = ate_against_truth(dead_reckoning_trajectory(dataset), truth_trajectory(dataset))
+        assert dr["ate_truth_mean_m"] == pytest.approx(expected.ate_mean_m, rel=1e-12)
+        ekf = table[(table.seed == seed) & (table.backend == "ekf")].iloc[0]
+        assert ekf["dr_ate_m"] == pytest.approx(dr["ate_truth_mean_m"], rel=1e-12)
+        assert ekf["beats_dr"] == float(ekf["ate_truth_mean_m"] < dr["ate_truth_mean_m"])
+    summary = pd.read_csv(out / "summary.csv").set_index("config")
+    ekf_rows = table[table.backend == "ekf"]
+    assert summary.loc["ekf", "beats_dr_share"] == pytest.approx(ekf_rows["beats_dr"].mean())
+    assert summary.loc["ekf", "gain_over_dr"] == pytest.approx(
+        1.0 - ekf_rows["ate_truth_mean_m"].mean() / ekf_rows["dr_ate_m"].mean(), rel=1e-9
+    )
+    assert summary.loc["ekf", "ate_truth_aligned_mean_m"] == pytest.approx(
+        ekf_rows["ate_truth_aligned_mean_m"].mean(), rel=1e-9
+    )
+    assert (out / "sweep.png").stat().st_size > 10_000

@@ -1,7 +1,8 @@
 """The MSIS simulator: the runs whose right answer is known.
 
-``simulate(kind, seed, out_dir)`` writes a run in the marina layout with its ``truth.json``;
-``simulate_records(make_scenario(kind, seed))`` gives the same run in memory.
+``simulate(kind, seed, out_dir)`` writes a run in the marina layout with its ``truth.json``
+(kinds: :data:`KINDS`); ``simulate_records(make_scenario(kind, seed))`` gives the same run in
+memory.
 
 Modules: ``world`` (walls), ``path`` (true motion), ``msis`` (the sonar beam model),
 ``sensors`` (DVL, AHRS, GPS), ``scenario`` (what is simulated, in memory), ``writer`` (files).
@@ -13,16 +14,24 @@ from datasets.simulator.scenario import (
     KINDS,
     Scenario,
     Simulation,
+    draw_drift_errors,
     make_scenario,
     make_world,
     simulate_records,
 )
-from datasets.simulator.sensors import GeodeticOrigin, SensorNoise
-from datasets.simulator.world import World, harbour_world, pool_world, random_harbour_world
+from datasets.simulator.sensors import DriftErrors, GeodeticOrigin, SensorNoise
+from datasets.simulator.world import (
+    World,
+    drift_world,
+    harbour_world,
+    pool_world,
+    random_harbour_world,
+)
 from datasets.simulator.writer import simulate, write_dataset
 
 __all__ = [
     "KINDS",
+    "DriftErrors",
     "EchoModel",
     "GeodeticOrigin",
     "Scenario",
@@ -32,6 +41,8 @@ __all__ = [
     "World",
     "beam_axis_hits",
     "cast_rays",
+    "draw_drift_errors",
+    "drift_world",
     "free_path",
     "harbour_world",
     "make_scenario",

@@ -13,7 +13,13 @@ incidence ``phi`` (angle between the ray and the wall normal) returns
 where ``fade`` goes smoothly from 1 at ``incidence_fade_start_rad`` to 0 at
 ``incidence_cutoff_rad`` (grazing walls return nothing). ``A`` is spread over the bins as a
 Gaussian pulse of ``pulse_sigma_bins`` plus a short exponential tail behind the wall (the vertical
-beam meeting the wall at longer slant ranges). Walls closer than ``dead_zone_m`` return nothing:
+beam meeting the wall at longer slant ranges). With a range offset ``d > 0`` (a real head's echo
+peaks behind the wall face: pulse length, rough faces) the profile at ``delta = range - r`` is
+
+    (1 + tail_fraction) exp(-(delta - d)^2 / (2 s^2)),  s = d / sqrt(2 ln 2),   delta < d
+    exp(-(delta - d)^2 / (2 sigma^2)) + tail_fraction exp(-(delta - d) / tail_m), delta >= d
+
+so it peaks ``d`` behind the wall and its leading edge (half the peak, rising) is on the wall face. Walls closer than ``dead_zone_m`` return nothing:
 those bins hold the transducer's ringing, decaying from ``ringing_level`` at range 0 to a few
 counts at ``dead_zone_m``. The echo and the ringing are multiplied by unit-mean Rayleigh speckle
 (independent per bin); Rayleigh background noise whose mean grows linearly with range (the
@@ -234,6 +240,7 @@ def render_intensities(
     transducer_angle_rad: npt.ArrayLike,
     rng: np.random.Generator,
     echo: EchoModel | None = None,
+    range_offset_m: float = 0.0,
 ) -> npt.NDArray[np.uint8]:
     """Raw intensities of beams (see the module docstring for the model).
 
@@ -250,19 +257,41 @@ def render_intensities(
     rng : numpy.random.Generator
         Source of all noise; the same draws for the same inputs.
     echo : EchoModel, optional
+    range_offset_m : float
+        How far behind the wall face the echo peaks (m, >= 0; see the module docstring).
 
     Returns
     -------
     ndarray of uint8, shape (B, n_bins)
     """
+    if range_offset_m < 0.0:
+        raise ValueError(f"range_offset_m must be >= 0, got {range_offset_m}")
     echo = echo if echo is not None else EchoModel()
     poses = np.atleast_2d(np.asarray(wTb, dtype=np.float64))
     angles = np.atleast_1d(np.asarray(transducer_angle_rad, dtype=np.float64))
     out = np.empty((poses.shape[0], head.n_bins), dtype=np.uint8)
     for i in range(0, poses.shape[0], _CHUNK_BEAMS):
         sl = slice(i, i + _CHUNK_BEAMS)
-        out[sl] = _render_chunk(world, head, mounting, poses[sl], angles[sl], rng, echo)
+        out[sl] = _render_chunk(
+            world, head, mounting, poses[sl], angles[sl], rng, echo, range_offset_m
+        )
     return out
+
+
+def _offset_profile(
+    delta_m: FloatArray, offset_m: float, sigma_m: float, echo: EchoModel
+) -> FloatArray:
+    """The echo profile that peaks ``offset_m`` behind the wall face, with its leading edge (half
+    the peak) on it (module docstring); ``delta_m`` is bin range minus wall range (m)."""
+    peak = 1.0 + echo.tail_fraction
+    rise_sigma_m = offset_m / np.sqrt(2.0 * np.log(2.0))
+    after = delta_m - offset_m
+    behind = np.maximum(after, 0.0)
+    fall = np.exp(-0.5 * (behind / sigma_m) ** 2) + echo.tail_fraction * np.exp(
+        -behind / echo.tail_m
+    )
+    rise = peak * np.exp(-0.5 * (np.minimum(after, 0.0) / rise_sigma_m) ** 2)
+    return np.asarray(np.where(after < 0.0, rise, fall))
 
 
 def _render_chunk(
@@ -273,6 +302,7 @@ def _render_chunk(
     angles: FloatArray,
     rng: np.random.Generator,
     echo: EchoModel,
+    range_offset_m: float,
 ) -> npt.NDArray[np.uint8]:
     n_beams, n_bins = wTb.shape[0], head.n_bins
     r_bins = bin_range_m(np.arange(n_bins), head.bin_size_m)  # (N,) raw: the echo's own range
@@ -300,10 +330,15 @@ def _render_chunk(
 
     delta = r_bins[None, None, :] - r[..., None]  # (B, R, N), m
     sigma_m = echo.pulse_sigma_bins * head.bin_size_m
-    profile = np.exp(-0.5 * (delta / sigma_m) ** 2)
-    if echo.tail_fraction > 0.0:
-        behind = np.maximum(delta, 0.0)
-        profile += np.where(delta > 0.0, echo.tail_fraction * np.exp(-behind / echo.tail_m), 0.0)
+    if range_offset_m > 0.0:
+        profile = _offset_profile(delta, range_offset_m, sigma_m, echo)
+    else:
+        profile = np.exp(-0.5 * (delta / sigma_m) ** 2)
+        if echo.tail_fraction > 0.0:
+            behind = np.maximum(delta, 0.0)
+            profile += np.where(
+                delta > 0.0, echo.tail_fraction * np.exp(-behind / echo.tail_m), 0.0
+            )
     signal = np.einsum("brn,br->bn", profile, amp)
 
     if echo.dead_zone_m > 0.0:
@@ -337,6 +372,7 @@ def simulate_msis(
     start_rad: float = 0.0,
     sector_rad: float | None = None,
     echo: EchoModel | None = None,
+    range_offset_m: float = 0.0,
 ) -> list[SonarBeam]:
     """All beams of a run: times, head angles and raw intensities.
 
@@ -354,6 +390,8 @@ def simulate_msis(
     start_rad, sector_rad : float
         See :func:`transducer_angles`.
     echo : EchoModel, optional
+    range_offset_m : float
+        How far behind the wall face the echo peaks (m; see the module docstring).
 
     Returns
     -------
@@ -364,7 +402,9 @@ def simulate_msis(
     n = int(np.floor((trajectory.duration_s - 0.01) * rate_hz))
     t = beam_times(n, rate_hz, t0, rng)
     a = transducer_angles(n, head.step_rad, start_rad, sector_rad)
-    intensities = render_intensities(world, head, mounting, trajectory.poses(t), a, rng, echo)
+    intensities = render_intensities(
+        world, head, mounting, trajectory.poses(t), a, rng, echo, range_offset_m
+    )
     return [
         SonarBeam(t=float(t[k]), transducer_angle_rad=float(a[k]), intensities=intensities[k])
         for k in range(n)

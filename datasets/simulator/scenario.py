@@ -1,8 +1,15 @@
 """Scenarios (what is simulated) and their in-memory simulation (what the sensors saw, and truth).
 
 A scenario is fully determined by its kind and seed: every random draw comes from
-``numpy.random.SeedSequence([seed, kind index])``, spawned into one independent stream per component (world,
-path, sonar, DVL, AHRS, GPS), so the same seed always gives the same run, bit for bit.
+``numpy.random.SeedSequence([seed, kind index])``, spawned into one independent stream per
+component (world, path, sonar, DVL, AHRS, GPS, then the drift errors and the heading walk), so the
+same seed always gives the same run, bit for bit, and a component's draws never shift another's.
+
+Kinds: ``pool`` (the seed paper's pool test), ``harbour`` (a marina-like survey, 600 s),
+``random`` (a free path in a random rectilinear harbour, 600 s) and ``drift``
+(:func:`~datasets.simulator.world.drift_world`, 1,800 s, with the systematic sensor errors of a
+real vehicle, :class:`~datasets.simulator.sensors.DriftErrors`, drawn per seed by
+:func:`draw_drift_errors`).
 """
 
 from __future__ import annotations
@@ -19,6 +26,7 @@ from datasets.simulator.path import T0_S, Trajectory, free_path, stationary, sur
 from datasets.simulator.sensors import (
     MARINA_ORIGIN,
     AhrsSamples,
+    DriftErrors,
     DvlSamples,
     GeodeticOrigin,
     GpsSamples,
@@ -27,7 +35,13 @@ from datasets.simulator.sensors import (
     simulate_dvl,
     simulate_gps,
 )
-from datasets.simulator.world import World, harbour_world, pool_world, random_harbour_world
+from datasets.simulator.world import (
+    World,
+    drift_world,
+    harbour_world,
+    pool_world,
+    random_harbour_world,
+)
 from features.geometry import FloatArray, compose, inverse, wrap_angle
 from sonar.beam import Mounting, SonarBeam, SonarHead
 
@@ -40,12 +54,17 @@ __all__ = [
     "AHRS_MOUNTING",
     "Scenario",
     "Simulation",
+    "DRIFT_DVL_SCALE_RANGE",
+    "DRIFT_DVL_BIAS_MAX_MPS",
+    "DRIFT_HEADING_WALK_DEG_PER_SQRT_S",
+    "DRIFT_ECHO_RANGE_OFFSET_M",
+    "draw_drift_errors",
     "make_scenario",
     "make_world",
     "simulate_records",
 ]
 
-KINDS = ("pool", "harbour", "random")
+KINDS = ("pool", "harbour", "random", "drift")
 
 #: The marina's Miniking: 500 bins of 0.1 m (50 m), 1.8 deg step, 3 deg beam, clockwise angles.
 MARINA_HEAD = SonarHead(
@@ -64,7 +83,17 @@ SONAR_MOUNTING = Mounting(x_m=0.3, y_m=0.0, yaw_rad=math.pi, source="simulator t
 DVL_MOUNTING = Mounting(yaw_rad=math.radians(-90.0), source="simulator truth")
 AHRS_MOUNTING = Mounting(yaw_rad=0.0, source="simulator truth (the heading bias is in the noise)")
 
-_DEFAULT_DURATION_S = {"pool": 165.0, "harbour": 600.0, "random": 600.0}
+_DEFAULT_DURATION_S = {"pool": 165.0, "harbour": 600.0, "random": 600.0, "drift": 1800.0}
+
+#: Drift world: magnitude range of the DVL scale factor, drawn per seed with a random sign.
+DRIFT_DVL_SCALE_RANGE = (0.01, 0.02)
+#: Drift world: each component of the DVL bias is uniform in +- this (m/s), per seed.
+DRIFT_DVL_BIAS_MAX_MPS = 0.005
+#: Drift world: intensity of the AHRS heading's random walk (deg/sqrt(s)): a standard deviation
+#: of 6.4 deg after 1,800 s, a magnetic heading among steel walls and hulls.
+DRIFT_HEADING_WALK_DEG_PER_SQRT_S = 0.15
+#: Drift world: the echo peaks this far behind the wall face (m).
+DRIFT_ECHO_RANGE_OFFSET_M = 0.25
 
 
 @dataclass(frozen=True)
@@ -75,7 +104,8 @@ class Scenario:
     ----------
     kind : str
         ``"pool"`` (stationary sonar in the seed paper's pool), ``"harbour"`` (survey of a
-        marina-like harbour) or ``"random"`` (free path in a random rectilinear harbour).
+        marina-like harbour), ``"random"`` (free path in a random rectilinear harbour) or
+        ``"drift"`` (long survey of :func:`~datasets.simulator.world.drift_world`).
     seed : int
         Seed of every random draw (with the kind, see the module docstring).
     duration_s : float
@@ -90,6 +120,9 @@ class Scenario:
     sonar_mounting, dvl_mounting, ahrs_mounting : Mounting
         True ``bTs`` of each sensor (written to ``sonarslam.toml``).
     noise : SensorNoise
+    errors : DriftErrors or None
+        Systematic sensor errors (DVL scale factor and bias, AHRS heading walk, echo range
+        offset); None: none (the pool, harbour and random kinds).
     echo : EchoModel
     speed_mps : float
         Mean speed of the vehicle (m/s); unused for the pool.
@@ -112,6 +145,7 @@ class Scenario:
     dvl_mounting: Mounting = DVL_MOUNTING
     ahrs_mounting: Mounting = AHRS_MOUNTING
     noise: SensorNoise = field(default_factory=SensorNoise)
+    errors: DriftErrors | None = None
     echo: EchoModel = field(default_factory=EchoModel)
     speed_mps: float = 0.45
     pool_sonar_yaw_rad: float = math.radians(10.0)
@@ -153,14 +187,32 @@ class Scenario:
         )
 
 
+def draw_drift_errors(rng: np.random.Generator) -> DriftErrors:
+    """The drift world's systematic errors of one seed: a DVL scale factor of 1-2 % with a random
+    sign, a DVL bias uniform in +-5 mm/s per axis, the heading walk and the echo offset of this
+    module's ``DRIFT_*`` constants."""
+    lo, hi = DRIFT_DVL_SCALE_RANGE
+    sign = 1.0 if rng.random() < 0.5 else -1.0
+    scale = sign * float(rng.uniform(lo, hi))
+    bias = rng.uniform(-DRIFT_DVL_BIAS_MAX_MPS, DRIFT_DVL_BIAS_MAX_MPS, 2)
+    return DriftErrors(
+        dvl_scale_factor=scale,
+        dvl_bias_mps=(float(bias[0]), float(bias[1])),
+        ahrs_heading_walk_deg_per_sqrt_s=DRIFT_HEADING_WALK_DEG_PER_SQRT_S,
+        echo_range_offset_m=DRIFT_ECHO_RANGE_OFFSET_M,
+    )
+
+
 def make_scenario(kind: str, seed: int, duration_s: float | None = None) -> Scenario:
     """The default scenario of a kind.
 
     Parameters
     ----------
-    kind : {"pool", "harbour", "random"}
+    kind : {"pool", "harbour", "random", "drift"}
         Pool: stationary sonar at the world origin, 6 m range, 0.45 deg step, 0.5 m dead zone,
         165 s (three full turns at 14.7 beams/s). Harbour and random: the marina's head, 600 s.
+        Drift: the marina's head, 1,800 s, the drift errors of the seed
+        (:func:`draw_drift_errors`).
     seed : int
     duration_s : float, optional
         Overrides the default length (s).
@@ -180,15 +232,23 @@ def make_scenario(kind: str, seed: int, duration_s: float | None = None) -> Scen
             head=POOL_HEAD,
             echo=EchoModel(dead_zone_m=0.5, range_decay_per_m=0.02),
         )
+    if kind == "drift":
+        errors = draw_drift_errors(_seed_streams(seed, kind)["errors"])
+        return Scenario(kind=kind, seed=seed, duration_s=duration, errors=errors)
     return Scenario(kind=kind, seed=seed, duration_s=duration)
 
 
-def _streams(scenario: Scenario) -> dict[str, np.random.Generator]:
+def _seed_streams(seed: int, kind: str) -> dict[str, np.random.Generator]:
     """One independent generator per component, from the seed and the kind (so that two kinds
-    with the same seed do not share their noise)."""
-    names = ("world", "path", "sonar", "dvl", "ahrs", "gps")
-    root = np.random.SeedSequence([scenario.seed, KINDS.index(scenario.kind)])
+    with the same seed do not share their noise). Names are only ever appended: spawning more
+    children leaves the earlier ones, and so the older kinds' runs, as they were."""
+    names = ("world", "path", "sonar", "dvl", "ahrs", "gps", "errors", "heading_walk")
+    root = np.random.SeedSequence([seed, KINDS.index(kind)])
     return {n: np.random.default_rng(c) for n, c in zip(names, root.spawn(len(names)), strict=True)}
+
+
+def _streams(scenario: Scenario) -> dict[str, np.random.Generator]:
+    return _seed_streams(scenario.seed, scenario.kind)
 
 
 def make_world(scenario: Scenario) -> World:
@@ -197,6 +257,8 @@ def make_world(scenario: Scenario) -> World:
         return pool_world()
     if scenario.kind == "harbour":
         return harbour_world()
+    if scenario.kind == "drift":
+        return drift_world()
     return random_harbour_world(_streams(scenario)["world"])
 
 
@@ -275,7 +337,7 @@ def _trajectory(scenario: Scenario, world: World, rng: np.random.Generator) -> T
         wTs = np.array([0.0, 0.0, scenario.pool_sonar_yaw_rad])
         wTb = compose(wTs, inverse(scenario.sonar_mounting.as_pose()))
         return stationary(wTb, scenario.duration_s, scenario.path_rate_hz, scenario.t0_s)
-    if scenario.kind == "harbour":
+    if scenario.kind in ("harbour", "drift"):
         return survey(
             world, scenario.duration_s, scenario.speed_mps, scenario.path_rate_hz, scenario.t0_s
         )
@@ -303,6 +365,7 @@ def simulate_records(scenario: Scenario) -> Simulation:
     rngs = _streams(scenario)
     world = make_world(scenario)
     trajectory = _trajectory(scenario, world, rngs["path"])
+    errors = scenario.errors
     beams = simulate_msis(
         world,
         scenario.head,
@@ -312,6 +375,7 @@ def simulate_records(scenario: Scenario) -> Simulation:
         rate_hz=scenario.beam_rate_hz,
         sector_rad=scenario.sector_rad,
         echo=scenario.echo,
+        range_offset_m=0.0 if errors is None else errors.echo_range_offset_m,
     )
     t_beam = np.array([b.t for b in beams])
     a_beam = np.array([b.transducer_angle_rad for b in beams])
@@ -326,9 +390,17 @@ def simulate_records(scenario: Scenario) -> Simulation:
         beams=beams,
         beam_axis_range_m=r_axis,
         beam_axis_incidence_rad=inc_axis,
-        dvl=simulate_dvl(trajectory, scenario.dvl_mounting, n, rngs["dvl"], scenario.dvl_rate_hz),
+        dvl=simulate_dvl(
+            trajectory, scenario.dvl_mounting, n, rngs["dvl"], scenario.dvl_rate_hz, errors=errors
+        ),
         ahrs=simulate_ahrs(
-            trajectory, scenario.ahrs_mounting, n, rngs["ahrs"], scenario.ahrs_rate_hz
+            trajectory,
+            scenario.ahrs_mounting,
+            n,
+            rngs["ahrs"],
+            scenario.ahrs_rate_hz,
+            errors=errors,
+            walk_rng=rngs["heading_walk"],
         ),
         gps=simulate_gps(trajectory, scenario.origin, n, rngs["gps"], scenario.gps_rate_hz),
     )

@@ -11,6 +11,10 @@ Conventions (the marina's logs):
   ``rate_z`` is minus the counter-clockwise yaw rate, and at rest it measures ``acc_z = -g``.
 * GPS: fixes of the body origin (the antenna), local East-North metres around the geodetic origin,
   converted to latitude and longitude with ``pymap3d.enu2geodetic``.
+
+Beside the white noise (:class:`SensorNoise`), a scenario may give the systematic errors that make
+a real vehicle's dead reckoning drift (:class:`DriftErrors`): a DVL scale factor and bias, and a
+random walk of the AHRS heading on top of its constant bias and deviation.
 """
 
 from __future__ import annotations
@@ -26,12 +30,14 @@ from sonar.beam import Mounting
 
 __all__ = [
     "SensorNoise",
+    "DriftErrors",
     "GeodeticOrigin",
     "MARINA_ORIGIN",
     "DvlSamples",
     "AhrsSamples",
     "GpsSamples",
     "sample_times",
+    "heading_random_walk",
     "simulate_dvl",
     "simulate_ahrs",
     "simulate_gps",
@@ -107,6 +113,46 @@ class SensorNoise:
 
 
 @dataclass(frozen=True)
+class DriftErrors:
+    """Systematic sensor errors of a real vehicle: what makes its dead reckoning drift.
+
+    None of them is in the ``sonarslam.toml`` the simulator writes (the estimators are not told);
+    ``truth.json`` holds them (``errors``) with the realised heading walk.
+
+    Attributes
+    ----------
+    dvl_scale_factor : float
+        ``k``: the DVL measures ``(1 + k) v + b`` (plus its white noise) for the true velocity
+        ``v`` of its point in its own frame; a sound-speed or beam-angle error, 0.2-2 % on real
+        DVLs.
+    dvl_bias_mps : tuple of float
+        ``b = (b_x, b_y)``: constant bias of the DVL velocity in the DVL frame (m/s).
+    ahrs_heading_walk_deg_per_sqrt_s : float
+        ``sigma``: a random walk added to the AHRS heading (:func:`heading_random_walk`), on top
+        of its constant bias and deviation: the increment over ``dt`` is ``N(0, sigma^2 dt)``
+        (deg/sqrt(s)), zero at the first AHRS sample.
+    echo_range_offset_m : float
+        How far behind the wall face the sonar's echo peaks (m); its leading edge (half the
+        peak, rising) stays on the wall face (:mod:`datasets.simulator.msis`).
+    """
+
+    dvl_scale_factor: float = 0.0
+    dvl_bias_mps: tuple[float, float] = (0.0, 0.0)
+    ahrs_heading_walk_deg_per_sqrt_s: float = 0.0
+    echo_range_offset_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not -0.5 < self.dvl_scale_factor < 0.5:
+            raise ValueError(
+                f"DriftErrors.dvl_scale_factor must be in (-0.5, 0.5), got {self.dvl_scale_factor}"
+            )
+        if self.ahrs_heading_walk_deg_per_sqrt_s < 0.0 or self.echo_range_offset_m < 0.0:
+            raise ValueError(
+                "DriftErrors.ahrs_heading_walk_deg_per_sqrt_s and echo_range_offset_m must be >= 0"
+            )
+
+
+@dataclass(frozen=True)
 class GeodeticOrigin:
     """Geodetic point of the world origin (WGS84): latitude, longitude (deg), height (m)."""
 
@@ -163,6 +209,8 @@ class AhrsSamples:
         Angular rates about the MTi x, y, z axes (rad/s); ``rate_z`` is positive clockwise.
     acc_mps2 : ndarray, shape (N, 3)
         Specific force along the MTi axes (m/s^2); ``acc_z`` is about ``-9.81``.
+    heading_walk_deg : ndarray, shape (N,) or None
+        The random walk in ``heading_deg`` (deg, clockwise like the heading); None without one.
     """
 
     t_s: FloatArray = field(repr=False)
@@ -171,6 +219,7 @@ class AhrsSamples:
     heading_deg: FloatArray = field(repr=False)
     rate_radps: FloatArray = field(repr=False)
     acc_mps2: FloatArray = field(repr=False)
+    heading_walk_deg: FloatArray | None = field(default=None, repr=False)
 
 
 @dataclass(frozen=True, eq=False)
@@ -219,6 +268,19 @@ def sample_times(
     return t[(t >= t0) & (t <= t1)]
 
 
+def heading_random_walk(
+    t_s: FloatArray, sigma_deg_per_sqrt_s: float, rng: np.random.Generator
+) -> FloatArray:
+    """A Wiener process of intensity ``sigma_deg_per_sqrt_s`` (deg/sqrt(s)) at the increasing times
+    ``t_s`` (s, shape (N,)): zero at the first, increments ``N(0, sigma^2 (t_k - t_{k-1}))``;
+    shape (N,), deg."""
+    t = np.asarray(t_s, dtype=np.float64)
+    if t.size == 0:
+        return np.zeros(0)
+    steps = sigma_deg_per_sqrt_s * np.sqrt(np.diff(t)) * rng.normal(0.0, 1.0, t.size - 1)
+    return np.concatenate([[0.0], np.cumsum(steps)])
+
+
 def _dropouts(t0_s: float, t1_s: float, noise: SensorNoise, rng: np.random.Generator) -> FloatArray:
     out: list[tuple[float, float]] = []
     if noise.dvl_dropout_rate_per_s <= 0.0:
@@ -238,8 +300,13 @@ def simulate_dvl(
     rng: np.random.Generator,
     rate_hz: float = 1.5,
     altitude_m: float = 1.85,
+    errors: DriftErrors | None = None,
 ) -> DvlSamples:
     """Bottom-track velocities of a DVL mounted at ``mounting`` (``bTd``).
+
+    The measured velocity in the DVL frame is ``(1 + k) v + b + n``: ``v`` the true velocity of
+    the DVL point, ``k`` and ``b`` the scale factor and bias of ``errors`` (none without),
+    ``n`` the white noise of ``noise``.
 
     Parameters
     ----------
@@ -253,6 +320,8 @@ def simulate_dvl(
         Ping rate (Hz), about 1.5 for the marina's Argonaut.
     altitude_m : float
         Height of the DVL over the bottom (m).
+    errors : DriftErrors, optional
+        Scale factor and bias (its other fields are not the DVL's).
 
     Returns
     -------
@@ -267,6 +336,8 @@ def simulate_dvl(
     v_d = np.column_stack(
         [c * v_point[:, 0] + s * v_point[:, 1], -s * v_point[:, 0] + c * v_point[:, 1]]
     )
+    if errors is not None:
+        v_d = (1.0 + errors.dvl_scale_factor) * v_d + np.asarray(errors.dvl_bias_mps)
     sigma = np.full(t.size, noise.dvl_sigma_mps)
     if noise.dvl_degraded_from_s is not None:
         late = t >= float(trajectory.t_s[0]) + noise.dvl_degraded_from_s
@@ -306,8 +377,14 @@ def simulate_ahrs(
     rate_hz: float = 10.0,
     roll_deg: float = 0.5,
     pitch_deg: float = -2.5,
+    errors: DriftErrors | None = None,
+    walk_rng: np.random.Generator | None = None,
 ) -> AhrsSamples:
     """MTi output for an AHRS mounted with yaw ``mounting.yaw_rad`` in the body.
+
+    The logged heading (clockwise from North) is the true one plus the constant bias, minus the
+    deviation (``noise``), plus the random walk of ``errors`` (:func:`heading_random_walk`),
+    plus white noise.
 
     Parameters
     ----------
@@ -321,6 +398,11 @@ def simulate_ahrs(
         Output rate (Hz).
     roll_deg, pitch_deg : float
         Constant attitude of the vehicle (deg).
+    errors : DriftErrors, optional
+        Its ``ahrs_heading_walk_deg_per_sqrt_s`` (its other fields are not the AHRS's).
+    walk_rng : numpy.random.Generator, optional
+        Source of the heading walk (its own stream, so that the walk leaves every other draw
+        as it is); required when the walk is on.
 
     Returns
     -------
@@ -333,6 +415,12 @@ def simulate_ahrs(
     b_deg, c_deg = noise.ahrs_deviation_deg
     heading = 90.0 - np.rad2deg(yaw_ahrs) + noise.ahrs_bias_deg
     heading = heading - (b_deg * np.sin(psi) + c_deg * np.cos(psi))  # yaw CCW = 90 - heading
+    walk: FloatArray | None = None
+    if errors is not None and errors.ahrs_heading_walk_deg_per_sqrt_s > 0.0:
+        if walk_rng is None:
+            raise ValueError("simulate_ahrs: a heading random walk needs walk_rng")
+        walk = heading_random_walk(t, errors.ahrs_heading_walk_deg_per_sqrt_s, walk_rng)
+        heading = heading + walk
     heading = heading + rng.normal(0.0, noise.ahrs_sigma_deg, n)
     heading = np.rad2deg(wrap_angle(np.deg2rad(heading)))
     w = trajectory.yaw_rate_at(t)
@@ -353,6 +441,7 @@ def simulate_ahrs(
         heading_deg=heading,
         rate_radps=rate + rng.normal(0.0, noise.ahrs_rate_sigma_radps, (n, 3)),
         acc_mps2=acc + rng.normal(0.0, noise.ahrs_acc_sigma_mps2, (n, 3)),
+        heading_walk_deg=walk,
     )
 
 

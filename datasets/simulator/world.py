@@ -21,6 +21,7 @@ __all__ = [
     "World",
     "pool_world",
     "harbour_world",
+    "drift_world",
     "random_harbour_world",
     "loop_segments",
     "rotate_points",
@@ -196,6 +197,61 @@ def harbour_world(rotation_rad: float = HARBOUR_ROTATION_RAD) -> World:
     ]  # fmt: skip
     return World(
         name="harbour",
+        walls_m=rotate_points(walls, rotation_rad),
+        route_m=rotate_points(np.array(route), rotation_rad),
+        route_turn_radius_m=4.0,
+    )
+
+
+#: Rotation of the drift world from its own frame (rad).
+DRIFT_ROTATION_RAD = math.radians(-30.0)
+
+
+def drift_world(rotation_rad: float = DRIFT_ROTATION_RAD) -> World:
+    """A harbour of another layout than :func:`harbour_world`, for long surveys that drift.
+
+    In its own frame (then rotated by ``rotation_rad`` about the origin, its south-west corner),
+    one basin ``[0, 130] x [0, 85]`` m with:
+
+    * a **breakwater** 5 m thick from the east quay, ``[70, 130] x [32, 37]`` m: two parallel
+      60 m faces 5 m apart, each seen from its own side of the basin, and a 5 m tip;
+    * a north quay of three **collinear pieces** (``x`` in 0-30, 40-75, 85-130 m) between two
+      10 m x 12 m docks (the gaps);
+    * three **short finger piers** 2 m x 6 m off the west quay (at ``y`` = 15, 30, 45 m), which
+      split it in four collinear pieces, and a 4 m x 8 m pier off the south quay (``x`` = 95 m);
+    * a **moored hull** 20 m x 5 m, ``[25, 45] x [3, 8]`` m, 3 m off the south quay.
+
+    The route (422 m: 15.6 min a lap at 0.45 m/s) runs east past the hull and the south quay,
+    west along the breakwater's south face, round its tip, east along its north face, west along
+    the north quay and south past the finger piers, at least 7 m from every wall: in a 1,800 s
+    survey every wall is seen again about a quarter of an hour after it was first seen.
+
+    Parameters
+    ----------
+    rotation_rad : float
+        Counter-clockwise rotation of the whole world (rad).
+
+    Returns
+    -------
+    World
+    """
+    outline = [
+        [0.0, 0.0], [95.0, 0.0], [95.0, 8.0], [99.0, 8.0], [99.0, 0.0],  # south pier
+        [130.0, 0.0], [130.0, 32.0], [70.0, 32.0], [70.0, 37.0], [130.0, 37.0],  # breakwater
+        [130.0, 85.0], [85.0, 85.0], [85.0, 97.0], [75.0, 97.0], [75.0, 85.0],  # dock
+        [40.0, 85.0], [40.0, 97.0], [30.0, 97.0], [30.0, 85.0],  # dock
+        [0.0, 85.0], [0.0, 47.0], [6.0, 47.0], [6.0, 45.0], [0.0, 45.0],  # finger piers
+        [0.0, 32.0], [6.0, 32.0], [6.0, 30.0], [0.0, 30.0],
+        [0.0, 17.0], [6.0, 17.0], [6.0, 15.0], [0.0, 15.0],
+    ]  # fmt: skip
+    hull = _rectangle(25.0, 3.0, 45.0, 8.0)
+    walls = np.concatenate([loop_segments(outline), hull])
+    route = [
+        [13.0, 15.0], [118.0, 15.0], [118.0, 24.0], [60.0, 24.0], [60.0, 48.0],
+        [118.0, 48.0], [118.0, 70.0], [13.0, 70.0],
+    ]  # fmt: skip
+    return World(
+        name="drift",
         walls_m=rotate_points(walls, rotation_rad),
         route_m=rotate_points(np.array(route), rotation_rad),
         route_turn_radius_m=4.0,

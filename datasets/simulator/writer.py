@@ -21,7 +21,11 @@ GPS fix instead, so ``reader_local = world - first_fix_enu_m`` (to a few 1e-5 of
 from the first fix: the two tangent planes differ by that much). Keys: ``schema, kind, seed,
 prefix, frames, scenario, geodetic_origin, first_fix_t, first_fix_enu_m, head, mountings,
 noise, walls_m, route_m, body_poses {columns, rate_hz, rows}, beams {columns, rows},
-dvl_dropouts_s``; NaN is written as null.
+dvl_dropouts_s``; NaN is written as null. A scenario with systematic sensor errors (the ``drift``
+kind) adds ``errors`` (:class:`~datasets.simulator.sensors.DriftErrors`: ``dvl_scale_factor,
+dvl_bias_mps, ahrs_heading_walk_deg_per_sqrt_s, echo_range_offset_m``) and, with a heading walk,
+``ahrs_heading_walk {columns: [t, walk_deg], rate_hz, rows}``: the walk in the logged MTi heading
+(clockwise, deg) at every tenth AHRS sample.
 """
 
 from __future__ import annotations
@@ -206,63 +210,72 @@ def _truth(sim: Simulation) -> dict[str, Any]:
         ]
     )
     h = s.head
-    return _clean(
-        {
-            "schema": TRUTH_SCHEMA,
-            "kind": s.kind,
-            "seed": s.seed,
-            "prefix": s.prefix,
-            "frames": {
-                "world": "local East-North (x east, y north, m), origin at geodetic_origin",
-                "body": "x forward, y left; yaw counter-clockwise from East (rad)",
-                "reader_local": "the readers' frame, origin at the first GPS fix: "
-                "reader_local = world - first_fix_enu_m",
-                "sonar_bearing": "bearing in the sonar frame = angle_sense * transducer angle; "
-                "wTs = compose(wTb, bTs)",
-            },
-            "scenario": {
-                "duration_s": s.duration_s,
-                "t0_s": s.t0_s,
-                "beam_rate_hz": s.beam_rate_hz,
-                "sector_rad": s.sector_rad,
-                "speed_mps": s.speed_mps,
-                "path_rate_hz": s.path_rate_hz,
-                "dvl_rate_hz": s.dvl_rate_hz,
-                "ahrs_rate_hz": s.ahrs_rate_hz,
-                "gps_rate_hz": s.gps_rate_hz,
-                "echo": asdict(s.echo),
-            },
-            "geodetic_origin": asdict(s.origin),
-            "first_fix_t": float(sim.gps.t_s[0]),
-            "first_fix_enu_m": first_fix_enu_m(sim),
-            "head": {
-                "n_bins": h.n_bins,
-                "bin_size_m": h.bin_size_m,
-                "step_rad": h.step_rad,
-                "beam_width_rad": h.beam_width_rad,
-                "angle_sense": h.angle_sense,
-                "range_max_m": h.range_max_m,
-            },
-            "mountings": {
-                "sonar": _mounting(s.sonar_mounting),
-                "dvl": _mounting(s.dvl_mounting),
-                "ahrs": _mounting(s.ahrs_mounting),
-            },
-            "noise": asdict(s.noise),
-            "walls_m": sim.world.walls_m,
-            "route_m": sim.world.route_m,
-            "body_poses": {
-                "columns": ["t", "x_m", "y_m", "yaw_rad"],
-                "rate_hz": s.path_rate_hz / step,
-                "rows": poses,
-            },
-            "beams": {
-                "columns": ["t", "transducer_angle_rad", "axis_range_m", "axis_incidence_rad"],
-                "rows": beams,
-            },
-            "dvl_dropouts_s": sim.dvl.dropouts_s,
+    truth: dict[str, Any] = {
+        "schema": TRUTH_SCHEMA,
+        "kind": s.kind,
+        "seed": s.seed,
+        "prefix": s.prefix,
+        "frames": {
+            "world": "local East-North (x east, y north, m), origin at geodetic_origin",
+            "body": "x forward, y left; yaw counter-clockwise from East (rad)",
+            "reader_local": "the readers' frame, origin at the first GPS fix: "
+            "reader_local = world - first_fix_enu_m",
+            "sonar_bearing": "bearing in the sonar frame = angle_sense * transducer angle; "
+            "wTs = compose(wTb, bTs)",
+        },
+        "scenario": {
+            "duration_s": s.duration_s,
+            "t0_s": s.t0_s,
+            "beam_rate_hz": s.beam_rate_hz,
+            "sector_rad": s.sector_rad,
+            "speed_mps": s.speed_mps,
+            "path_rate_hz": s.path_rate_hz,
+            "dvl_rate_hz": s.dvl_rate_hz,
+            "ahrs_rate_hz": s.ahrs_rate_hz,
+            "gps_rate_hz": s.gps_rate_hz,
+            "echo": asdict(s.echo),
+        },
+        "geodetic_origin": asdict(s.origin),
+        "first_fix_t": float(sim.gps.t_s[0]),
+        "first_fix_enu_m": first_fix_enu_m(sim),
+        "head": {
+            "n_bins": h.n_bins,
+            "bin_size_m": h.bin_size_m,
+            "step_rad": h.step_rad,
+            "beam_width_rad": h.beam_width_rad,
+            "angle_sense": h.angle_sense,
+            "range_max_m": h.range_max_m,
+        },
+        "mountings": {
+            "sonar": _mounting(s.sonar_mounting),
+            "dvl": _mounting(s.dvl_mounting),
+            "ahrs": _mounting(s.ahrs_mounting),
+        },
+        "noise": asdict(s.noise),
+        "walls_m": sim.world.walls_m,
+        "route_m": sim.world.route_m,
+        "body_poses": {
+            "columns": ["t", "x_m", "y_m", "yaw_rad"],
+            "rate_hz": s.path_rate_hz / step,
+            "rows": poses,
+        },
+        "beams": {
+            "columns": ["t", "transducer_angle_rad", "axis_range_m", "axis_incidence_rad"],
+            "rows": beams,
+        },
+        "dvl_dropouts_s": sim.dvl.dropouts_s,
+    }
+    if s.errors is not None:  # absent for the kinds without: their truth.json is unchanged
+        truth["errors"] = asdict(s.errors)
+    walk = sim.ahrs.heading_walk_deg
+    if walk is not None:
+        every = max(int(round(s.ahrs_rate_hz)), 1)
+        truth["ahrs_heading_walk"] = {
+            "columns": ["t", "walk_deg"],
+            "rate_hz": s.ahrs_rate_hz / every,
+            "rows": np.column_stack([sim.ahrs.t_s, walk])[::every],
         }
-    )
+    return _clean(truth)
 
 
 def write_dataset(sim: Simulation, out_dir: str | Path) -> Path:
@@ -302,7 +315,7 @@ def simulate(kind: str, seed: int, out_dir: str | Path, duration_s: float | None
 
     Parameters
     ----------
-    kind : {"pool", "harbour", "random"}
+    kind : {"pool", "harbour", "random", "drift"}
     seed : int
     out_dir : str or Path
     duration_s : float, optional

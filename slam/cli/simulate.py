@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from datasets.simulator import simulate
+from datasets.simulator import KINDS, simulate
 from slam.cli.common import EPILOG, Subparsers
 
 
@@ -12,8 +12,8 @@ def add_parser(sub: Subparsers) -> None:
     p = sub.add_parser("simulate", help="simulate a run in the marina layout", epilog=EPILOG)
     p.add_argument(
         "kind",
-        choices=["pool", "harbour", "random"],
-        help="world: seed pool, harbour, random harbour",
+        choices=list(KINDS),
+        help="world: seed pool, harbour, random harbour, drift (1,800 s, drifting sensors)",
     )
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--out", required=True, help="output directory")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from datasets.simulator import KINDS
 from slam.cli.common import EPILOG, Subparsers, add_quiet
 from slam.run.sweep import format_summary, load_grid_toml, parse_grid, parse_seeds, sweep
 
@@ -16,7 +17,10 @@ def add_parser(sub: Subparsers) -> None:
     )
     p.add_argument("--seeds", default="0-9", help="seeds: 0-49, 3, or 0,2,5-7 (default 0-9)")
     p.add_argument(
-        "--world", default="harbour", choices=["harbour", "random", "pool"], help="simulated world"
+        "--world",
+        default="harbour",
+        choices=list(KINDS),
+        help="simulated world (drift: 1,800 s surveys with drifting sensors)",
     )
     p.add_argument(
         "--backend",
@@ -63,7 +67,7 @@ def command(args: argparse.Namespace) -> int:
         progress=not args.quiet,
     )
     failed = int((result.table["error"].fillna("") != "").sum()) if len(result.table) else 0
-    print(format_summary(result.summary))
+    print(format_summary(result.summary, brief=True))
     print(
         f"{len(result.table)} runs ({failed} failed) in {result.wall_s:.1f} s; "
         f"outputs: {result.out_dir.resolve()} ({', '.join(p.name for p in result.files.values())})"

@@ -323,10 +323,21 @@ def plot_anees(path: str | Path, curves: Mapping[str, AneesCurve], title: str) -
     return out
 
 
-def plot_sweep(path: str | Path, table: pd.DataFrame, labels: npt.NDArray[Any], title: str) -> Path:
-    """Per configuration: the ATE mean of each run, its pose NEES mean (log), its wall time.
+def plot_sweep(
+    path: str | Path,
+    table: pd.DataFrame,
+    labels: npt.NDArray[Any],
+    title: str,
+    notes: Mapping[str, str] | None = None,
+) -> Path:
+    """Per configuration, one dot per run: its ATE against the truth, as it is and rigidly
+    aligned, its gain over dead reckoning on the same seed (``1 - ATE / ATE_dr``), its pose and
+    position NEES means (log) and its wall time.
 
-    ``table`` is the sweep's DataFrame; ``labels`` (R,) names each row's configuration.
+    ``table`` is the sweep's DataFrame (``gain_over_dr`` from
+    :func:`slam.run.sweep_summary.pair_with_baseline`); ``labels`` (R,) names each row's
+    configuration; ``notes`` maps a configuration to a line under its name in the gain panel
+    (the share of seeds on which it beats dead reckoning).
     """
     ok = (
         (table["error"].fillna("") == "").to_numpy()
@@ -338,13 +349,21 @@ def plot_sweep(path: str | Path, table: pd.DataFrame, labels: npt.NDArray[Any], 
         ("ate_truth_mean_m", "ATE mean against the truth (m)", False)
         if "ate_truth_mean_m" in table
         else ("ate_mean_m", "ATE mean against GPS (m)", False),
+        ("ate_truth_aligned_mean_m", "ATE mean after rigid alignment (m)", False),
+        ("gain_over_dr", "gain over DR, same seed (1 - ATE / ATE_DR)", False),
         ("nees_mean", "pose NEES mean over time (3 dof)", True),
+        ("nees_position_mean", "position NEES mean over time (2 dof)", True),
         ("wall_s", "wall time (s)", False),
     ]
-    fig = Figure(figsize=(5 * len(panels), 5), dpi=100, layout="constrained")
-    axes = fig.subplots(1, len(panels))
+    panels = [p for p in panels if p[0] in table]
+    n_cols = min(3, len(panels))
+    n_rows = -(-len(panels) // n_cols)
+    fig = Figure(figsize=(5 * n_cols, 5 * n_rows), dpi=100, layout="constrained")
+    axes = np.atleast_1d(fig.subplots(n_rows, n_cols)).ravel()
+    for ax in axes[len(panels) :]:
+        ax.set_visible(False)
     rng = np.random.default_rng(0)  # jitter of the dots only
-    for ax, (col, ylabel, log) in zip(axes, panels, strict=True):
+    for ax, (col, ylabel, log) in zip(axes, panels, strict=False):
         data = []
         for name in names:
             sel = (labels == name) & ok
@@ -353,13 +372,18 @@ def plot_sweep(path: str | Path, table: pd.DataFrame, labels: npt.NDArray[Any], 
         ax.boxplot([d if d.size else [np.nan] for d in data], showfliers=False)
         for i, d in enumerate(data):
             ax.plot(i + 1 + rng.uniform(-0.15, 0.15, d.size), d, ".", ms=4, alpha=0.6)
-        if col == "nees_mean":
-            ax.axhline(3.0, color="tab:green", lw=0.8, label="dof = 3")
+        if col in ("nees_mean", "nees_position_mean"):
+            dof = 3.0 if col == "nees_mean" else 2.0
+            ax.axhline(dof, color="tab:green", lw=0.8, label=f"dof = {dof:g}")
             ax.legend(fontsize="small")
+        ticks = names
+        if col == "gain_over_dr":
+            ax.axhline(0.0, color="tab:red", lw=0.8)
+            ticks = [f"{n}\n{(notes or {}).get(n, '')}" for n in names]
         if log:
             ax.set_yscale("log")
             _plain_log_axis(ax)
-        ax.set_xticks(range(1, len(names) + 1), names, rotation=20, ha="right", fontsize="small")
+        ax.set_xticks(range(1, len(names) + 1), ticks, rotation=20, ha="right", fontsize="small")
         ax.set_ylabel(ylabel)
         ax.grid(True, which="both", lw=0.3)
     fig.suptitle(title)

@@ -4,11 +4,13 @@ A sweep is the product of seeds, back ends and the grid axes that apply to each 
 seed's world is simulated once (a Dask task; the folder is cached on disk, so back ends and later
 sweeps share it) and each (seed, back end, parameters) is one task that runs the back end
 through the one runner (:func:`slam.run.run.run_backend`) and returns one flat row: the seed,
-back end and parameters, the run's metrics (ATE by the GPS protocol, association scores against
-the true walls, timings), the pose NEES against the simulator's truth
-(:mod:`slam.eval.consistency`). The rows make one table (``sweep.csv``); the NEES of every run
-on a common 1 s grid (``nees.npz``) give the ANEES of each configuration with its 95 % band
-(``summary.csv``, ``sweep.png``).
+back end and parameters, the run's metrics (the ATE against the truth, as it is and rigidly
+aligned, beside the GPS protocol's; association scores against the true walls; timings), the
+pose NEES against the simulator's truth (:mod:`slam.eval.consistency`). The rows make one table
+(``sweep.csv``), each run paired with dead reckoning on its seed; the NEES of every run on a
+common 1 s grid (``nees.npz``) give the ANEES of each configuration with its 95 % band. The
+scores against the truth and dead reckoning are :mod:`slam.run.sweep_summary`'s (``summary.csv``,
+``sweep.png``).
 
 Grid axes are ``<scope>.<field>=v1,v2,...`` (:mod:`slam.run.presets`): ``extractor.<field>``
 applies to every closed-loop back end; ``<backend>.<field>[.<field>]`` to that back end. The
@@ -19,7 +21,6 @@ from __future__ import annotations
 
 import itertools
 import logging
-import math
 import os
 import re
 import shutil
@@ -45,6 +46,13 @@ from slam.io.plots import plot_anees, plot_sweep
 from slam.io.trajectory import Trajectory
 from slam.run.presets import parse_value
 from slam.run.run import backend_names, run_backend
+from slam.run.sweep_summary import (
+    config_columns,
+    config_labels,
+    format_summary,
+    pair_with_baseline,
+    summarise,
+)
 
 __all__ = [
     "SweepTask",
@@ -58,6 +66,7 @@ __all__ = [
     "run_task",
     "config_labels",
     "format_summary",
+    "pair_with_baseline",
     "summarise",
     "sweep",
 ]
@@ -259,86 +268,13 @@ def _pad(rows: Sequence[np.ndarray]) -> np.ndarray:
     return out
 
 
-def _config_columns(table: pd.DataFrame) -> list[str]:
-    return ["backend"] + sorted(c for c in table.columns if "." in c)
-
-
 def _ordered(table: pd.DataFrame) -> pd.DataFrame:
     """Columns: seed, backend, the parameters, the rest, error last."""
     if table.empty:
         return table
-    first = ["seed"] + _config_columns(table)
+    first = ["seed"] + config_columns(table)
     rest = [c for c in table.columns if c not in first and c != "error"]
     return table[first + rest + (["error"] if "error" in table else [])]
-
-
-def _missing(v: Any) -> bool:
-    return v is None or (isinstance(v, float) and math.isnan(v)) or v is pd.NA
-
-
-def config_labels(table: pd.DataFrame) -> np.ndarray:
-    """A label per row naming its configuration: ``"ekf association=nn"`` (the back end, then
-    the parameter values that apply to it, scope dropped)."""
-    params = _config_columns(table)[1:]
-    out = []
-    for _, row in table.iterrows():
-        parts = [str(row["backend"])]
-        for c in params:
-            if not _missing(row[c]):
-                parts.append(f"{c.split('.', 1)[1]}={row[c]}")
-        out.append(" ".join(parts))
-    return np.array(out, dtype=object)
-
-
-def summarise(
-    table: pd.DataFrame, nees_pose: np.ndarray, nees_position: np.ndarray
-) -> pd.DataFrame:
-    """One row per configuration (back end and parameter values) over its seeds.
-
-    Columns: the configuration, ``runs``, ``failed``, ``ate_mean_m`` (mean over the runs of
-    their ATE mean), ``ate_mean_sd_m``, ``ate_rmse_m`` (mean), ``anees`` (pose, 3 dof: mean over
-    time of the mean over runs), ``anees_in_band_fraction`` (times whose ANEES is inside the
-    95 % band of that many runs), ``anees_band_lo/hi`` (for all the runs), ``anees_position``
-    (2 dof) and its band, ``wall_s`` (mean); for closed loops on simulated data,
-    ``assoc_precision`` and ``assoc_recall`` against the true walls, pooled over the runs, and
-    ``assoc_pairings``.
-    """
-    cols = _config_columns(table)
-    key = config_labels(table)
-    out = []
-    for k in dict.fromkeys(key):
-        idx = np.flatnonzero(key == k)
-        sub = table.iloc[idx]
-        ok = idx[(sub["error"].fillna("") == "").to_numpy()]
-        good = table.iloc[ok]
-        rec: dict[str, Any] = {"config": k, **{c: sub.iloc[0][c] for c in cols}}
-        rec.update(runs=int(ok.size), failed=int(idx.size - ok.size))
-        if ok.size:
-            rec["ate_mean_m"] = float(good["ate_mean_m"].mean())
-            rec["ate_mean_sd_m"] = float(good["ate_mean_m"].std(ddof=1)) if ok.size > 1 else 0.0
-            rec["ate_rmse_m"] = float(good["ate_rmse_m"].mean())
-            rec["wall_s"] = float(good["wall_s"].mean())
-            if "truth_precision" in good and good["truth_associations"].fillna(0).sum() > 0:
-                # pooled over the runs: every pairing (re-observation) weighs the same
-                n = good["truth_associations"].fillna(0)
-                m = good["truth_reobservations"].fillna(0)
-                rec["assoc_precision"] = float(
-                    (good["truth_precision"].fillna(0) * n).sum() / n.sum()
-                )
-                rec["assoc_recall"] = float(
-                    (good["truth_recall"].fillna(0) * m).sum() / max(m.sum(), 1)
-                )
-                rec["assoc_pairings"] = int(n.sum())
-            for name, arr, dof in (("anees", nees_pose, 3), ("anees_position", nees_position, 2)):
-                X = arr[ok] if arr.size else np.zeros((0, 0))
-                if X.size and np.isfinite(X).any():
-                    s = anees(X, dof).summary()
-                    rec[name] = s["anees"]
-                    rec[f"{name}_in_band_fraction"] = s["anees_in_band_fraction"]
-                    rec[f"{name}_band_lo"] = s["anees_band_lo"]
-                    rec[f"{name}_band_hi"] = s["anees_band_hi"]
-        out.append(rec)
-    return pd.DataFrame(out)
 
 
 @dataclass
@@ -395,7 +331,13 @@ def _write(
     summary.to_csv(files["summary"], index=False)
     np.savez_compressed(files["nees"], pose=nees_pose, position=nees_position, t_rel_s=t_rel_s)
     labels = config_labels(table)
-    plot_sweep(files["plot"], table, labels, title)
+    beats = {}
+    for _, rec in summary.iterrows():
+        if rec.get("dr_pairs", 0) > 0:  # iterrows makes every number a float
+            beats[rec["config"]] = (
+                f"beats DR on {int(rec['beats_dr_seeds'])}/{int(rec['dr_pairs'])} seeds"
+            )
+    plot_sweep(files["plot"], table, labels, title, beats)
     curves = {}
     for label in dict.fromkeys(labels):
         rows = np.flatnonzero((labels == label) & (table["error"].fillna("") == "").to_numpy())
@@ -427,15 +369,16 @@ def sweep(
     backends : sequence of str
         Names of :func:`slam.run.run.backend_names`.
     out_dir : str or Path
-        Receives ``sweep.csv`` (one row per run), ``summary.csv`` (one per configuration),
+        Receives ``sweep.csv`` (one row per run, paired with dead reckoning on its seed:
+        :func:`pair_with_baseline`), ``summary.csv`` (one per configuration, :func:`summarise`),
         ``nees.npz`` (``pose`` (R, K), ``position`` (R, K), ``t_rel_s`` (K,): row ``i`` is
         ``sweep.csv``'s), ``anees.png`` and ``sweep.png``.
     grid : dict of str to list, optional
         Axes (see the module docstring).
-    world : {"harbour", "random", "pool"}
-        Simulated world.
+    world : {"harbour", "random", "pool", "drift"}
+        Simulated world (:data:`datasets.simulator.KINDS`).
     duration_s : float, optional
-        Simulated length (s); default the world's (600 s for the harbours).
+        Simulated length (s); default the world's (600 s for the harbours, 1,800 s for drift).
     cache_dir : str or Path, optional
         Simulated folders, one per world, seed and length; default ``out_dir/sim``.
     scheduler : str, optional
@@ -491,7 +434,7 @@ def sweep(
                 cluster.close()
     bar.close()
     done = [r for r in results if r is not None]
-    table = _ordered(pd.DataFrame([r["row"] for r in done]))
+    table = pair_with_baseline(_ordered(pd.DataFrame([r["row"] for r in done])))
     nees_pose = _pad([r["nees_pose"] for r in done])
     nees_position = _pad([r["nees_position"] for r in done])
     t_rel_s = np.arange(nees_pose.shape[1]) * nees_period_s
@@ -503,14 +446,3 @@ def sweep(
     return SweepResult(
         table, summary, nees_pose, nees_position, out, files, time.perf_counter() - wall0
     )
-
-
-def format_summary(summary: pd.DataFrame) -> str:
-    """The summary as aligned text for the terminal."""
-    if summary.empty:
-        return "(no runs)"
-    show = summary.copy()
-    for c in show.columns:
-        if show[c].dtype.kind == "f":
-            show[c] = show[c].map(lambda v: "" if math.isnan(v) else f"{v:.3g}")
-    return show.to_string(index=False)
