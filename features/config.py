@@ -63,9 +63,11 @@ class ExtractorConfig:
         Beams between votes once the store holds a full sector. 10.
     requery_poses : bool
         Re-query the pose source for every stored beam at each vote (smoothing back ends). True.
-    covariance_method : {"fit", "seed"}
+    covariance_method : {"fit", "seed", "seed-at-fit"}
         :mod:`features.uncertainty` method: "fit" (weighted least squares) or "seed" (the
-        paper's overlap-ratio ellipse; its line is the ellipse centre).
+        paper's overlap-ratio ellipse; its line is the ellipse centre), or "seed-at-fit": the
+        seed ellipse's covariance about the least-squares line of the same voters (on thick
+        echo bands the ellipse's centre sits inside the band, the fit on its leading edge).
     confidence : float
         Probability of the seed ellipse: 0.95 (*paper*).
     overlap_similarity : float
@@ -152,9 +154,10 @@ class ExtractorConfig:
     def __post_init__(self) -> None:
         if self.vote_model not in ("arc", "samples"):
             raise ValueError(f"vote_model must be 'arc' or 'samples', got {self.vote_model!r}")
-        if self.covariance_method not in ("fit", "seed"):
+        if self.covariance_method not in ("fit", "seed", "seed-at-fit"):
             raise ValueError(
-                f"covariance_method must be 'fit' or 'seed', got {self.covariance_method!r}"
+                "covariance_method must be 'fit', 'seed' or 'seed-at-fit', got "
+                f"{self.covariance_method!r}"
             )
         if self.return_model not in ("axis", "first_return"):
             raise ValueError(

@@ -322,7 +322,7 @@ class LineExtractor:
         pose_cov: FloatArray | None,
     ) -> LineEstimate:
         cfg = self.config
-        if cfg.covariance_method == "seed":
+        if cfg.covariance_method in ("seed", "seed-at-fit"):
             seed = seed_ellipse(
                 cell,
                 self.grid,
@@ -337,12 +337,16 @@ class LineExtractor:
                 window_theta_cells=cfg.seed_window_theta_cells,
                 window_rho_cells=cfg.seed_window_rho_cells,
             )
+            if pose_cov is None and cfg.covariance_method == "seed":
+                return seed
+            fit = self._fit(voters, seed.rho_m, seed.theta_rad, pose_cov)
+            if cfg.covariance_method == "seed-at-fit":
+                seed = replace(seed, rho_m=fit.rho_m, theta_rad=fit.theta_rad)
             if pose_cov is None:
                 return seed
             # the ellipse knows nothing of the poses: add the fit's first-order pose term
-            term = self._fit(voters, seed.rho_m, seed.theta_rad, pose_cov).pose_term
-            assert term is not None
-            return replace(seed, cov=seed.cov + term)
+            assert fit.pose_term is not None
+            return replace(seed, cov=seed.cov + fit.pose_term)
         return self._fit(voters, rho_m, theta_rad, pose_cov)
 
     def _fit(

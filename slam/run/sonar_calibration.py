@@ -28,6 +28,7 @@ from scipy.optimize import brentq
 from scipy.stats import chi2
 
 from datasets.source import Dataset
+from features.config import ExtractorConfig
 from features.extractor import LineExtractor
 from features.geometry import (
     FLIP_RHO,
@@ -174,7 +175,9 @@ def _pair_nees(
 
 
 def calibrate_line_noise(
-    dataset: Dataset, window_s: tuple[float, float] = (5.0, 20.0)
+    dataset: Dataset,
+    window_s: tuple[float, float] = (5.0, 20.0),
+    config: ExtractorConfig | None = None,
 ) -> LineNoiseFit:
     """The systematic error of a line (module docstring), GPS-free.
 
@@ -187,7 +190,7 @@ def calibrate_line_noise(
     t0, t1 = poses.span_s
     beams = [b for b in dataset.nav_beams() if t0 <= b.t <= t1]
     cfg = replace(
-        extractor_config(preset_for(beams)),
+        config or extractor_config(preset_for(beams)),
         line_sigma_rho_m=0.0,
         line_sigma_theta_rad=0.0,
         pose_uncertainty=True,
