@@ -8,14 +8,15 @@ from dataclasses import dataclass, replace
 import gtsam
 import numpy as np
 import pytest
-from gtsam.symbol_shorthand import B, D, G, L, X
+from gtsam.symbol_shorthand import B, D, G, K, L, X
 from gtsam.utils.numerical_derivative import (
     numericalDerivative21,
     numericalDerivative22,
-    numericalDerivative41,
-    numericalDerivative42,
-    numericalDerivative43,
-    numericalDerivative44,
+    numericalDerivative51,
+    numericalDerivative52,
+    numericalDerivative53,
+    numericalDerivative54,
+    numericalDerivative55,
 )
 from scipy.stats import chi2
 
@@ -128,9 +129,10 @@ def test_heading_and_odometry_jacobians_match_numerical_derivatives():
         )
         assert np.allclose(A * 0.02, H_num, atol=1e-6)
 
-        # odometry with the DVL misalignment D(0) and the gyro scale G(0)
+        # odometry with the DVL misalignment D(0), the gyro scale G(0), the DVL scale K(0)
         delta = np.array([rng.uniform(-0.3, 0.3)])
         scale = np.array([rng.uniform(0.7, 1.3)])
+        dvl_k = np.array([rng.uniform(-0.05, 0.05)])
         measured = np.array([*rng.uniform(-3, 3, 2), rng.uniform(-1, 1)])
         of = odometry_factor(
             X(0),
@@ -142,14 +144,16 @@ def test_heading_and_odometry_jacobians_match_numerical_derivatives():
             yaw_raw_rad=rng.uniform(-1, 1),
             d_t_d_scale=rng.uniform(-2, 2, 2),
             scale0=rng.uniform(0.8, 1.2),
+            dvl_scale_key=K(0),
         )
 
-        def o_err(a, b_, d, g, f=of):
+        def o_err(a, b_, d, g, k, f=of):
             vv = gtsam.Values()
             vv.insert(X(0), a)
             vv.insert(X(1), b_)
             vv.insert(D(0), d)
             vv.insert(G(0), g)
+            vv.insert(K(0), k)
             return f.unwhitenedError(vv)
 
         vv = gtsam.Values()
@@ -157,13 +161,16 @@ def test_heading_and_odometry_jacobians_match_numerical_derivatives():
         vv.insert(X(1), wTj)
         vv.insert(D(0), delta)
         vv.insert(G(0), scale)
+        vv.insert(K(0), dvl_k)
         A, _ = of.linearize(vv).jacobian()
+        args = (o_err, wTi, wTj, delta, scale, dvl_k, 1e-6)
         H_num = np.hstack(
             [
-                numericalDerivative41(o_err, wTi, wTj, delta, scale, 1e-6),
-                numericalDerivative42(o_err, wTi, wTj, delta, scale, 1e-6),
-                numericalDerivative43(o_err, wTi, wTj, delta, scale, 1e-6),
-                numericalDerivative44(o_err, wTi, wTj, delta, scale, 1e-6),
+                numericalDerivative51(*args),
+                numericalDerivative52(*args),
+                numericalDerivative53(*args),
+                numericalDerivative54(*args),
+                numericalDerivative55(*args),
             ]
         )
         assert np.allclose(A, H_num, atol=1e-6)

@@ -59,6 +59,10 @@ class BackendConfig(LandmarkConfig):
         absorbs the error of a GPS-free DVL/AHRS calibration.
     misalignment_sigma_deg : float
         Its prior 1-sigma (deg).
+    dvl_scale_sigma : float
+        Prior 1-sigma of the DVL's scale-factor error ``k`` (a constant: the vehicle moves along
+        ``(1 + k) R(psi + delta) v_b``); 0: not estimated (``k = 0``). Line landmarks observe
+        it (a wall passed at a known distance); a DVL's specification gives its size (0.01-0.02).
     robust : {None, "huber", "cauchy"}
         Robust kernel on the line observations, so that one bad line cannot drag the pose: the
         factor graph's on the whitened residual (``gtsam.noiseModel.Robust``), the EKF's on the
@@ -75,6 +79,7 @@ class BackendConfig(LandmarkConfig):
     gyro_sigma_radps: float = 0.005
     estimate_misalignment: bool = False
     misalignment_sigma_deg: float = 5.0
+    dvl_scale_sigma: float = 0.0
     robust: str | None = None
     robust_k: float = 1.345
 
@@ -93,6 +98,8 @@ class BackendConfig(LandmarkConfig):
             )
         if not self.ahrs_period_s > 0.0:
             raise ValueError(f"ahrs_period_s must be > 0, got {self.ahrs_period_s}")
+        if not 0.0 <= self.dvl_scale_sigma < 0.5:
+            raise ValueError(f"dvl_scale_sigma must be in [0, 0.5), got {self.dvl_scale_sigma}")
         if not self.misalignment_sigma_deg > 0.0:
             raise ValueError(
                 f"misalignment_sigma_deg must be > 0, got {self.misalignment_sigma_deg}"

@@ -1,6 +1,6 @@
 """EKF-SLAM with line landmarks on filterpy's ExtendedKalmanFilter.
 
-State ``x = [x, y, psi, b, delta, rho_1, theta_1, ..., rho_L, theta_L]``:
+State ``x = [x, y, psi, b, delta, k, rho_1, theta_1, ..., rho_L, theta_L]``:
 
 * ``x, y, psi``: the body pose ``wTb`` (m, m, rad);
 * ``b``: the AHRS heading bias (rad) with prior ``ahrs_bias_sigma_deg``, constant or a random
@@ -8,6 +8,7 @@ State ``x = [x, y, psi, b, delta, rho_1, theta_1, ..., rho_L, theta_L]``:
   (:class:`slam.backends.base.BackendConfig`);
 * ``delta``: the misalignment of the DVL velocity with the body heading (rad), a constant with
   prior ``misalignment_sigma_deg`` when ``estimate_misalignment``, else held at 0;
+* ``k``: the DVL's scale-factor error, a constant with prior ``dvl_scale_sigma`` (0: held at 0);
 * world lines ``(rho_w, theta_w)`` (:mod:`features.geometry` conventions), one per active
   landmark (:meth:`LineEkf.index`); kept normalised. A landmark merged into another (the landmark
   layer found them one wall) is tied to it by an exact update and leaves the state.
@@ -51,7 +52,7 @@ from sonar.beam import Mounting
 __all__ = ["EkfConfig", "LineEkf", "POSE", "N_VEHICLE"]
 
 POSE = slice(0, 3)
-N_VEHICLE = 5  # x, y, psi, b, delta
+N_VEHICLE = 6  # x, y, psi, b, delta, k
 
 
 @dataclass(frozen=True)
@@ -111,6 +112,7 @@ class LineEkf:
         P[4, 4] = (
             np.deg2rad(config.misalignment_sigma_deg) ** 2 if config.estimate_misalignment else 0.0
         )
+        P[5, 5] = config.dvl_scale_sigma**2
         kf.P = P
         self.kf = kf
         self.map = LandmarkMap(config, self.bTs)
@@ -163,15 +165,18 @@ class LineEkf:
             return np.zeros(3)
         x, P = self.kf.x, self.kf.P
         dx, dy = step_displacement(float(x[2] + x[4]), step.dx_m, step.dy_m)
-        x[0] += dx
-        x[1] += dy
+        gain = 1.0 + float(x[5])
+        x[0] += gain * dx
+        x[1] += gain * dy
         x[2] = wrap_angle(x[2] + step.dyaw_rad)
         F = np.eye(N_VEHICLE)
-        F[0, 2] = -dy
-        F[1, 2] = dx
+        F[0, 2] = -gain * dy
+        F[1, 2] = gain * dx
         if self.config.estimate_misalignment:
-            F[0, 4] = -dy
-            F[1, 4] = dx
+            F[0, 4] = -gain * dy
+            F[1, 4] = gain * dx
+        F[0, 5] = dx
+        F[1, 5] = dy
         Q = np.zeros((N_VEHICLE, N_VEHICLE))
         Q[0, 0] = Q[1, 1] = step.var_xy_m2
         Q[2, 2] = (step.dt_s * self.config.gyro_sigma_radps) ** 2
@@ -181,8 +186,8 @@ class LineEkf:
         P[:, V] = P[:, V] @ F.T
         P[V, V] += Q
         self.t_s = step.t_s
-        bx, by = step_displacement(float(x[4]), step.dx_m, step.dy_m)  # the misalignment
-        return np.array([bx, by, step.dyaw_rad])
+        bx, by = step_displacement(float(x[4]), step.dx_m, step.dy_m)  # delta and k
+        return np.array([gain * bx, gain * by, step.dyaw_rad])
 
     # -- updates ---------------------------------------------------------------------------
 

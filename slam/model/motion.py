@@ -184,13 +184,18 @@ class RelativeMotion:
         self.y += dy
         self.yaw += syaw
 
-    def copy_from(self, other: RelativeMotion, rotate_rad: float = 0.0) -> None:
-        """Take another motion, its translation rotated by ``rotate_rad`` (the misalignment)."""
-        c, s = math.cos(rotate_rad), math.sin(rotate_rad)
+    def copy_from(self, other: RelativeMotion, rotate_rad: float = 0.0, gain: float = 1.0) -> None:
+        """Take another motion, its translation rotated by ``rotate_rad`` (the misalignment) and
+        scaled by ``gain`` (the DVL's scale, ``1 + k``); the covariance alike."""
+        c, s = gain * math.cos(rotate_rad), gain * math.sin(rotate_rad)
         self.x, self.y = c * other.x - s * other.y, s * other.x + c * other.y
         self.yaw = other.yaw
-        self.a, self.b, self.c = other.a, other.b, other.c
-        self.d, self.e, self.f = other.d, other.e, other.f
+        a, b, cc, d, e = other.a, other.b, other.c, other.d, other.e
+        # [x y] <- M [x y] with M = [[c, -s], [s, c]]: M P M^T and M p_xy,yaw
+        self.a = c * c * a - 2.0 * c * s * b + s * s * cc
+        self.b = c * s * (a - cc) + (c * c - s * s) * b
+        self.c = s * s * a + 2.0 * c * s * b + c * c * cc
+        self.d, self.e, self.f = c * d - s * e, s * d + c * e, other.f
         self.yaw_raw, self.jx, self.jy = other.yaw_raw, other.jx, other.jy
 
     @property

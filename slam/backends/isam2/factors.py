@@ -209,13 +209,15 @@ def odometry_residual(
     yaw_raw_rad: float = 0.0,
     d_t_d_scale: FloatArray | None = None,
     scale0: float = 1.0,
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Error of a relative motion integrated with a DVL misalignment and a gyro scale.
+    dvl_scale: float = 0.0,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Error of a relative motion integrated with a DVL misalignment, a gyro scale and a DVL
+    scale-factor error ``k``.
 
     The motion model integrates ``R(yaw + delta) v_b`` with ``yaw`` the gyro's integral times
     its scale ``s``. Between two nodes, integrated with ``delta = 0`` and ``s = s0``, it gives
     ``measured = (t, yaw)``; for other values, to first order in ``s - s0``, the translation is
-    ``R(delta) (t + (s - s0) dt/ds)`` and the heading change ``s * yaw_raw`` (``yaw_raw`` the
+    ``(1 + k) R(delta) (t + (s - s0) dt/ds)`` and the heading change ``s * yaw_raw`` (``yaw_raw`` the
     gyro's own integral). With ``m`` that motion and ``r = wTi^-1 wTj`` the error is ``m^-1 r``
     in ``(x, y, yaw)``: ``(R(yaw_m)^T (r_t - m_t), wrap(r_yaw - yaw_m))``, the first-order
     equivalent of ``BetweenFactorPose2``'s. ``scale=None``: no scale, ``m_yaw = measured[2]``.
@@ -225,7 +227,7 @@ def odometry_residual(
     e : ndarray, shape (3,)
     H_i, H_j : ndarray, shape (3, 3)
         Jacobians in the local tangents of ``wTi`` and ``wTj``.
-    H_delta, H_scale : ndarray, shape (3, 1)
+    H_delta, H_scale, H_k : ndarray, shape (3, 1)
     """
     ci, si = np.cos(wTi[2]), np.sin(wTi[2])
     Ri = np.array([[ci, -si], [si, ci]])
@@ -237,9 +239,10 @@ def odometry_residual(
     if scale is not None:
         q = q + (scale - scale0) * J
         yaw_m = scale * yaw_raw_rad
+    gain = 1.0 + dvl_scale
     cd, sd = np.cos(delta_rad), np.sin(delta_rad)
     Rd = np.array([[cd, -sd], [sd, cd]])
-    m_t = Rd @ q
+    m_t = gain * (Rd @ q)
     cm, sm = np.cos(yaw_m), np.sin(yaw_m)
     RmT = np.array([[cm, sm], [-sm, cm]])
     e = np.empty(3)
@@ -257,9 +260,11 @@ def odometry_residual(
     H_d[:2, 0] = RmT @ (-_S @ m_t)
     H_s = np.zeros((3, 1))
     if scale is not None:
-        H_s[:2, 0] = -RmT @ (Rd @ J) - yaw_raw_rad * (_S @ e[:2])
+        H_s[:2, 0] = -gain * (RmT @ (Rd @ J)) - yaw_raw_rad * (_S @ e[:2])
         H_s[2, 0] = -yaw_raw_rad
-    return e, H_i, H_j, H_d, H_s
+    H_k = np.zeros((3, 1))
+    H_k[:2, 0] = -RmT @ (Rd @ q)
+    return e, H_i, H_j, H_d, H_s, H_k
 
 
 def odometry_factor(
@@ -272,9 +277,11 @@ def odometry_factor(
     yaw_raw_rad: float = 0.0,
     d_t_d_scale: npt.ArrayLike | None = None,
     scale0: float = 1.0,
+    dvl_scale_key: int | None = None,
 ) -> gtsam.CustomFactor:
-    """Odometry between ``X(i)`` and ``X(j)`` with the DVL misalignment ``D(0)`` and/or the gyro
-    scale ``G(0)`` (size-1 Vectors); see :func:`odometry_residual`.
+    """Odometry between ``X(i)`` and ``X(j)`` with the DVL misalignment ``D(0)``, the gyro
+    scale ``G(0)`` and/or the DVL's scale-factor error ``K(0)`` (size-1 Vectors); see
+    :func:`odometry_residual`.
 
     Parameters
     ----------
@@ -290,16 +297,23 @@ def odometry_factor(
         Derivative of the translation with respect to the scale (m).
     scale0 : float
         The scale ``measured`` was integrated with.
+    dvl_scale_key : int or None
+        Key of ``K(0)``; None: ``k = 0``.
     """
     m = np.asarray(measured, dtype=np.float64).copy()
     J = None if d_t_d_scale is None else np.asarray(d_t_d_scale, dtype=np.float64).copy()
     keys = [key_i, key_j]
     if misalignment_key is not None:
         keys.append(misalignment_key)
+    i_delta = i_scale = i_k = None
+    if misalignment_key is not None:
+        i_delta = len(keys) - 1
     if scale_key is not None:
         keys.append(scale_key)
-    i_delta = 2 if misalignment_key is not None else None
-    i_scale = len(keys) - 1 if scale_key is not None else None
+        i_scale = len(keys) - 1
+    if dvl_scale_key is not None:
+        keys.append(dvl_scale_key)
+        i_k = len(keys) - 1
     yaw_raw, s0 = float(yaw_raw_rad), float(scale0)
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> FloatArray:
@@ -307,7 +321,8 @@ def odometry_factor(
         pi, pj = values.atPose2(k[0]), values.atPose2(k[1])
         delta = 0.0 if i_delta is None else float(values.atVector(k[i_delta])[0])
         scale = None if i_scale is None else float(values.atVector(k[i_scale])[0])
-        e, H_i, H_j, H_d, H_s = odometry_residual(
+        dvl_k = 0.0 if i_k is None else float(values.atVector(k[i_k])[0])
+        e, H_i, H_j, H_d, H_s, H_k = odometry_residual(
             m,
             np.array([pi.x(), pi.y(), pi.theta()]),
             np.array([pj.x(), pj.y(), pj.theta()]),
@@ -316,6 +331,7 @@ def odometry_factor(
             yaw_raw,
             J,
             s0,
+            dvl_k,
         )
         if H is not None:
             H[0] = H_i
@@ -324,6 +340,8 @@ def odometry_factor(
                 H[i_delta] = H_d
             if i_scale is not None:
                 H[i_scale] = H_s
+            if i_k is not None:
+                H[i_k] = H_k
         return e
 
     return gtsam.CustomFactor(noise_model(cov), keys, error)

@@ -7,9 +7,9 @@ The graph (factors in :mod:`slam.backends.isam2.factors`, records in
   one every ``node_period_s`` otherwise;
 * odometry between consecutive nodes: the motion model integrated between them with its
   covariance (:class:`slam.backends.isam2.odometry.NodeOdometry`), as a ``BetweenFactorPose2``
-  (or, with ``estimate_misalignment`` / ``estimate_gyro_scale``, the same motion with its
-  translation rotated by the DVL misalignment ``D(0)`` and its heading change scaled by the
-  gyro scale ``G(0)``);
+  (or, with ``estimate_misalignment`` / ``estimate_gyro_scale`` / ``dvl_scale_sigma``, the same
+  motion with its translation rotated by the DVL misalignment ``D(0)`` and scaled by the DVL's
+  ``1 + K(0)``, and its heading change scaled by the gyro scale ``G(0)``);
 * AHRS heading ``z = yaw + b`` on ``(X(k), B(0))``, ``B(0)`` the constant AHRS bias with a prior
   (as the EKF); with a bias random walk (``ahrs_bias_walk_deg_per_sqrt_s``) one bias ``B(k)``
   per node, tied to the previous node's by ``BetweenFactorVector`` with variance
@@ -46,7 +46,7 @@ from typing import Any
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, D, G, L, X
+from gtsam.symbol_shorthand import B, D, G, K, L, X
 from scipy.stats import chi2
 
 from features.geometry import FloatArray, compose, line_difference
@@ -235,10 +235,11 @@ class LineIsam2:
             var = max(self._var_walk * (self.t_s - self._last_node_t), 1e-12)
             self._add_factor(factor_record("BetweenFactorVector", [B(k - 1), B(k)], [0.0], [[var]]))
             self._pending_values.insert(B(k), np.array([self._bias_estimate]))
-        if cfg.estimate_misalignment or cfg.estimate_gyro_scale:
+        if cfg.estimate_misalignment or cfg.estimate_gyro_scale or cfg.dvl_scale_sigma > 0.0:
             keys = [X(k - 1), X(k)]
             keys += [D(0)] if cfg.estimate_misalignment else []
             keys += [G(0)] if cfg.estimate_gyro_scale else []
+            keys += [K(0)] if cfg.dvl_scale_sigma > 0.0 else []
             record = factor_record(
                 "DvlGyroOdometry",
                 keys,
@@ -301,7 +302,10 @@ class LineIsam2:
         scale = self.odometry.scale
         if self.config.estimate_gyro_scale:
             scale = float(self.isam.calculateEstimateVector(G(0))[0])
-        self.odometry.re_anchor(delta, scale)
+        gain = 1.0
+        if self.config.dvl_scale_sigma > 0.0:
+            gain += float(self.isam.calculateEstimateVector(K(0))[0])
+        self.odometry.re_anchor(delta, scale, gain)
         self._bias_estimate = float(self.isam.calculateEstimateVector(self._bias_key(k))[0])
         self._stale = True
         for j in self._new_landmarks:  # marginals for the loose gate

@@ -16,7 +16,7 @@ from typing import Any
 import gtsam
 import numpy as np
 import numpy.typing as npt
-from gtsam.symbol_shorthand import B, D, G, X
+from gtsam.symbol_shorthand import B, D, G, K, X
 
 from features.geometry import FloatArray
 from slam.backends.isam2.config import GraphConfig
@@ -76,7 +76,7 @@ def start_records(
     wTb0: FloatArray, P0: FloatArray, config: GraphConfig
 ) -> tuple[list[dict[str, Any]], gtsam.Values]:
     """The factors and initial values of a graph's start: a prior on the start position,
-    the AHRS bias ``B(0)`` (and ``D(0)``, ``G(0)`` when estimated) with their priors, and the
+    the AHRS bias ``B(0)`` (and ``D(0)``, ``G(0)``, ``K(0)`` when estimated) with their priors, and the
     start heading as an AHRS heading factor on ``X(0)`` (the start yaw came from the AHRS, so it
     carries the bias); ``P0[2, 2]`` is that heading's white noise."""
     records = [factor_record("PoseTranslationPrior2D", [X(0)], wTb0[:2], P0[:2, :2])]
@@ -94,6 +94,11 @@ def start_records(
             factor_record("PriorFactorVector", [G(0)], [1.0], [[config.gyro_scale_sigma**2]])
         )
         values.insert(G(0), np.ones(1))
+    if config.dvl_scale_sigma > 0.0:
+        records.append(
+            factor_record("PriorFactorVector", [K(0)], [0.0], [[config.dvl_scale_sigma**2]])
+        )
+        values.insert(K(0), np.zeros(1))
     values.insert(X(0), gtsam.Pose2(*wTb0))
     records.append(factor_record("HeadingBias", [X(0), B(0)], [wTb0[2]], [[max(P0[2, 2], 1e-12)]]))
     return records, values
@@ -129,6 +134,7 @@ def factor_from_record(record: dict[str, Any]) -> gtsam.NonlinearFactor:
             yaw_raw_rad=float(record["yaw_raw"]),
             d_t_d_scale=record["d_t_d_scale"],
             scale0=float(record["scale0"]),
+            dvl_scale_key=keys[chars.index("k")] if "k" in chars else None,
         )
     if kind == "LineEquality":
         return line_equality_factor(keys[0], keys[1], bool(z[0]), np.sqrt(np.diag(cov)))
@@ -184,8 +190,8 @@ def save_graph(
     * ``PriorFactorVector``, ``BetweenFactorVector``: GTSAM's (the latter ties the AHRS bias
       of consecutive nodes, ``b_j - b_i``, when it is a random walk);
     * ``HeadingBias`` on ``(x, b)``: ``[yaw_meas]``, error ``wrap(yaw + b - yaw_meas)``;
-    * ``DvlGyroOdometry`` on ``(x_i, x_j[, d][, g])``: ``[x, y, yaw]`` integrated with
-      ``delta = 0`` and scale ``"scale0"``, plus ``"yaw_raw"`` (the gyro's integral) and
+    * ``DvlGyroOdometry`` on ``(x_i, x_j[, d][, g][, k])``: ``[x, y, yaw]`` integrated with
+      ``delta = 0``, gyro scale ``"scale0"`` and no DVL scale error, plus ``"yaw_raw"`` (the gyro's integral) and
       ``"d_t_d_scale"`` ``[dx/ds, dy/ds]`` (:func:`slam.backends.isam2.factors.odometry_residual`);
     * ``LineObservation`` on ``(x, l)``: ``[rho, theta]`` in the sonar frame, plus ``"bTs"``
       ``[x, y, yaw]`` and ``"robust"`` (``null`` or ``{"kernel": "huber", "k": 1.345}``);

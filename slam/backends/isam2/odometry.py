@@ -5,7 +5,8 @@ between nodes the motion steps (:class:`slam.model.motion.MotionStep`) are integ
 motion model (:class:`slam.model.motion.RelativeMotion`) three ways at once:
 
 * since the newest node: the measurement and covariance of the next node's odometry factor
-  (with the gyro scale the node started with and no misalignment, which the factor applies);
+  (with the gyro scale the node started with, no misalignment and no DVL scale error, which
+  the factor applies);
 * since the newest optimised node: the current pose is that node composed with it;
 * the chain ``O(t)`` of the whole run (:class:`slam.model.motion.OdometryChain`): the shape of
   the trajectory between nodes, for the front end's pose source.
@@ -92,6 +93,7 @@ class NodeOdometry:
         self.delta_rad = 0.0  # the DVL misalignment used to integrate (the newest estimate)
         self.scale = 1.0  # the gyro scale used to integrate (the newest estimate)
         self.node_scale = 1.0  # the gyro scale of the newest node's start
+        self.dvl_gain = 1.0  # 1 + the DVL scale error used to integrate (the newest estimate)
         self.headings = HeadingMean()
 
     def step(self, step: MotionStep) -> FloatArray:
@@ -101,7 +103,7 @@ class NodeOdometry:
         syaw = self.scale * step.dyaw_rad
         # the odometry factor's measurement: delta = 0, the gyro scale of the node's start
         self.since_node.step(step.dx_m, step.dy_m, syaw, qv, qr, step.dyaw_rad)
-        sx, sy = step.dx_m, step.dy_m
+        sx, sy = self.dvl_gain * step.dx_m, self.dvl_gain * step.dy_m
         if self.delta_rad != 0.0:
             sx, sy = step_displacement(self.delta_rad, sx, sy)
         self.since_anchor.step(sx, sy, syaw, qv, qr)
@@ -125,12 +127,14 @@ class NodeOdometry:
         self.since_node.reset()
         self.node_scale = self.scale
 
-    def re_anchor(self, delta_rad: float, scale: float) -> None:
+    def re_anchor(self, delta_rad: float, scale: float, dvl_gain: float = 1.0) -> None:
         """The newest node was optimised: the current pose is it composed with the motion since
-        it (rotated by the misalignment used so far); integrate with the new estimates on."""
-        self.since_anchor.copy_from(self.since_node, self.delta_rad)
+        it (rotated by the misalignment and scaled by the DVL gain used so far); integrate with
+        the new estimates on."""
+        self.since_anchor.copy_from(self.since_node, self.delta_rad, self.dvl_gain)
         self.delta_rad = delta_rad
         self.scale = scale
+        self.dvl_gain = dvl_gain
 
     def carried(self, anchor_xyyaw: tuple[float, float, float]) -> FloatArray:
         """``anchor * (motion since the anchor)``: the current pose, in floats."""
