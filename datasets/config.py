@@ -39,6 +39,7 @@ radians in the objects)::
     dvl_nominal_scatter_mps = 0.2   # ... beyond its usual scatter is white noise added to
                             # dvl_sigma_mps (sonarslam info prints the scatter's quantiles)
     ahrs_bias_walk_deg_per_sqrt_s = 0.0  # the AHRS bias's random walk (0: a constant bias)
+    dvl_scale_sigma = 0.0   # 1-sigma of the DVL's scale-factor error (0: none)
     line_sigma_rho_m = 0.0  # a line's systematic error, added to every line's covariance
     line_sigma_theta_deg = 0.0      # (sonarslam calibrate --line-noise, GPS-free)
 
@@ -91,6 +92,8 @@ class NoiseConfig:
     dvl_nominal_scatter_mps: float = 0.0
     #: the AHRS heading bias's random walk (deg/sqrt(s)), 0: constant (the back ends' state)
     ahrs_bias_walk_deg_per_sqrt_s: float = 0.0
+    #: 1-sigma of the DVL's scale-factor error (a ratio), 0: none (estimated by the back ends)
+    dvl_scale_sigma: float = 0.0
     #: a line's systematic error (m, deg), added to every line's covariance by the extractor
     line_sigma_rho_m: float = 0.0
     line_sigma_theta_deg: float = 0.0
@@ -254,6 +257,7 @@ def _noise_table(p: Path, table: dict[str, Any], base: NoiseConfig) -> NoiseConf
         "dvl_scatter_window_s",
         "dvl_nominal_scatter_mps",
         "ahrs_bias_walk_deg_per_sqrt_s",
+        "dvl_scale_sigma",
         "line_sigma_rho_m",
         "line_sigma_theta_deg",
     }

@@ -29,6 +29,7 @@ from datasets.simulator import (
 from datasets.simulator.msis import render_intensities
 from datasets.simulator.path import Trajectory
 from datasets.simulator.scenario import (
+    DRIFT_DVL_SCALE_SIGMA,
     DRIFT_ECHO_RANGE_OFFSET_M,
     DRIFT_HEADING_WALK_DEG_PER_SQRT_S,
     _seed_streams,
@@ -163,15 +164,24 @@ def test_heading_random_walk_is_in_the_mti_log(quiet) -> None:
     assert np.abs(walk[:, 1]).max() > 3.0 * sigma  # it wanders
 
 
-def test_truth_json_records_the_errors_and_the_estimators_are_not_told(noisy) -> None:
+def test_truth_json_records_the_errors_and_the_estimators_are_told_only_the_specifications(
+    noisy,
+) -> None:
     sim, folder = noisy
     truth = json.loads((folder / "truth.json").read_text())
     assert sim.scenario.errors is not None
     assert truth["errors"] == json.loads(json.dumps(asdict(sim.scenario.errors)))
     assert (truth["kind"], truth["prefix"]) == ("drift", "sim_drift_1")
-    # sonarslam.toml holds what the harbour's holds: the white noise and the constant bias only
+    # sonarslam.toml holds what the harbour's holds plus the sensors' specifications: the rate of
+    # the heading walk and the size of the DVL's scale error, not their realisations, not the
+    # DVL's bias nor the echo's offset
     written = load_dataset_config(folder / "sonarslam.toml")
-    assert written.noise == make_scenario("harbour", 1).dataset_config().noise
+    assert written.noise == replace(
+        make_scenario("harbour", 1).dataset_config().noise,
+        ahrs_bias_walk_deg_per_sqrt_s=DRIFT_HEADING_WALK_DEG_PER_SQRT_S,
+        dvl_scale_sigma=DRIFT_DVL_SCALE_SIGMA,
+    )
+    assert written.sonar.range_offset_m == 0.0
     assert written.ahrs_deviation_rad == (0.0, 0.0) and written.sonar_time_offset_s == 0.0
 
 

@@ -55,6 +55,7 @@ __all__ = [
     "Scenario",
     "Simulation",
     "DRIFT_DVL_SCALE_RANGE",
+    "DRIFT_DVL_SCALE_SIGMA",
     "DRIFT_DVL_BIAS_MAX_MPS",
     "DRIFT_HEADING_WALK_DEG_PER_SQRT_S",
     "DRIFT_ECHO_RANGE_OFFSET_M",
@@ -87,6 +88,8 @@ _DEFAULT_DURATION_S = {"pool": 165.0, "harbour": 600.0, "random": 600.0, "drift"
 
 #: Drift world: magnitude range of the DVL scale factor, drawn per seed with a random sign.
 DRIFT_DVL_SCALE_RANGE = (0.01, 0.02)
+#: ... and the 1-sigma the estimators are told (the specification's "1-2 %").
+DRIFT_DVL_SCALE_SIGMA = 0.02
 #: Drift world: each component of the DVL bias is uniform in +- this (m/s), per seed.
 DRIFT_DVL_BIAS_MAX_MPS = 0.005
 #: Drift world: intensity of the AHRS heading's random walk (deg/sqrt(s)): a standard deviation
@@ -183,6 +186,13 @@ class Scenario:
                 # a DVL that degrades: its usual scatter is its white noise (slam.model.motion)
                 dvl_scatter_window_s=0.0 if n.dvl_degraded_from_s is None else 60.0,
                 dvl_nominal_scatter_mps=n.dvl_sigma_mps,
+                # the sensors' specifications: the rate of the AHRS's heading walk and the size
+                # of the DVL's scale error (their realisations, the DVL's bias and the echo's
+                # offset are not told)
+                ahrs_bias_walk_deg_per_sqrt_s=(
+                    0.0 if self.errors is None else self.errors.ahrs_heading_walk_deg_per_sqrt_s
+                ),
+                dvl_scale_sigma=0.0 if self.errors is None else DRIFT_DVL_SCALE_SIGMA,
             ),
         )
 

@@ -10,8 +10,8 @@
 * A dataset's calibration of the sensors' noise (``[noise]`` of its ``sonarslam.toml``,
   :class:`datasets.config.NoiseConfig`) goes over the preset and the defaults, under a TOML
   file's and the settings: a line's systematic error (``line_sigma_rho_m``,
-  ``line_sigma_theta_deg``) into the extractor, the AHRS bias's random walk into the back end
-  (:func:`noise_settings`).
+  ``line_sigma_theta_deg``) into the extractor, the AHRS bias's random walk and the DVL's
+  scale-factor error into the back end (:func:`noise_settings`).
 * Settings given as ``SCOPE.FIELD=VALUE`` (``sonarslam run --set``, ``sonarslam sweep --grid``):
   ``SCOPE`` is ``extractor`` (:class:`features.extractor.ExtractorConfig`) or a back end's name
   (``ekf``: :class:`slam.backends.ekf.EkfConfig`, ``isam2``:
@@ -119,7 +119,11 @@ def noise_settings(noise: NoiseConfig | None) -> tuple[dict[str, Any], dict[str,
         "line_sigma_rho_m": noise.line_sigma_rho_m,
         "line_sigma_theta_rad": math.radians(noise.line_sigma_theta_deg),
     }
-    return ext, {"ahrs_bias_walk_deg_per_sqrt_s": noise.ahrs_bias_walk_deg_per_sqrt_s}
+    backend = {
+        "ahrs_bias_walk_deg_per_sqrt_s": noise.ahrs_bias_walk_deg_per_sqrt_s,
+        "dvl_scale_sigma": noise.dvl_scale_sigma,
+    }
+    return ext, backend
 
 
 def extractor_config(
