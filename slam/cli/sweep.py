@@ -47,6 +47,12 @@ def add_parser(sub: Subparsers) -> None:
         help="address of a Dask scheduler (default: a local cluster; 'synchronous': no Dask)",
     )
     p.add_argument("--workers", type=int, default=2, help="local cluster processes (default 2)")
+    p.add_argument(
+        "--calibrate",
+        action="store_true",
+        help="calibrate each seed's sonar GPS-free first (range offset, a line's systematic error:"
+        " calibrate --range-offset, --line-noise) and run with it",
+    )
     add_quiet(p)
     p.set_defaults(func=command)
 
@@ -65,6 +71,7 @@ def command(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         n_workers=args.workers,
         progress=not args.quiet,
+        calibrate=args.calibrate,
     )
     failed = int((result.table["error"].fillna("") != "").sum()) if len(result.table) else 0
     print(format_summary(result.summary, brief=True))

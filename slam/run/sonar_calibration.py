@@ -21,13 +21,18 @@ systematic error of a line.
 
 from __future__ import annotations
 
+import math
+import os
+import tempfile
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
+import tomli_w
 from scipy.optimize import brentq
 from scipy.stats import chi2
 
-from datasets.source import Dataset
+from datasets.source import Dataset, open_dataset
 from features.config import ExtractorConfig
 from features.extractor import LineExtractor
 from features.geometry import (
@@ -43,7 +48,13 @@ from slam.run.presets import extractor_config, preset_for
 from slam.run.sources import dead_reckoning_trajectory
 from sonar.segmentation import segment_intensities
 
-__all__ = ["RangeOffsetFit", "calibrate_range_offset", "LineNoiseFit", "calibrate_line_noise"]
+__all__ = [
+    "RangeOffsetFit",
+    "calibrate_range_offset",
+    "LineNoiseFit",
+    "calibrate_line_noise",
+    "write_sonar_calibration",
+]
 
 
 @dataclass(frozen=True)
@@ -232,3 +243,27 @@ def calibrate_line_noise(
         nees_median_after=float(np.median(after)),
         outside_99_after=float(np.mean(after > chi2.ppf(0.99, 2))),
     )
+
+
+def write_sonar_calibration(source: str | Path, out_path: str | Path) -> Path:
+    """Both calibrations of a dataset, GPS-free, as a partial ``sonarslam.toml`` at ``out_path``
+    (``[sonar] range_offset_m``, ``[noise] line_sigma_rho_m``, ``line_sigma_theta_deg``) for
+    ``open_dataset(source, config_override=out_path)``; the line noise is calibrated with the
+    range offset found first. Written atomically (the sweep's workers may race)."""
+    dataset = open_dataset(source)
+    offset = calibrate_range_offset(dataset)
+    sonar = replace(dataset.config.sonar, range_offset_m=offset.offset_m)
+    noise = calibrate_line_noise(replace(dataset, config=replace(dataset.config, sonar=sonar)))
+    doc = {
+        "sonar": {"range_offset_m": offset.offset_m},
+        "noise": {
+            "line_sigma_rho_m": noise.sigma_rho_m,
+            "line_sigma_theta_deg": math.degrees(noise.sigma_theta_rad),
+        },
+    }
+    out = Path(out_path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}-", dir=out.parent)
+    with os.fdopen(fd, "wb") as f:
+        tomli_w.dump(doc, f)
+    os.replace(tmp, out)
+    return out

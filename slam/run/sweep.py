@@ -46,6 +46,7 @@ from slam.io.plots import plot_anees, plot_sweep
 from slam.io.trajectory import Trajectory
 from slam.run.presets import parse_value
 from slam.run.run import backend_names, run_backend
+from slam.run.sonar_calibration import write_sonar_calibration
 from slam.run.sweep_summary import (
     config_columns,
     config_labels,
@@ -63,6 +64,7 @@ __all__ = [
     "axis_applies",
     "expand_tasks",
     "simulate_cached",
+    "calibrate_cached",
     "run_task",
     "config_labels",
     "format_summary",
@@ -201,6 +203,16 @@ def simulate_cached(world: str, seed: int, duration_s: float | None, cache_dir: 
     return str(folder)
 
 
+def calibrate_cached(folder: str) -> str:
+    """The GPS-free sonar calibration of a simulated folder (range offset, a line's systematic
+    error: :func:`slam.run.sonar_calibration.write_sonar_calibration`), written once beside its
+    logs as ``calibration.toml``; returns its path."""
+    path = Path(folder) / "calibration.toml"
+    if not path.is_file():
+        write_sonar_calibration(folder, path)
+    return str(path)
+
+
 def _nees_grid(
     trajectory: Trajectory, truth: Trajectory, period_s: float
 ) -> dict[str, tuple[NeesSeries, np.ndarray]]:
@@ -219,8 +231,10 @@ def run_task(
     world: str | None = None,
     duration_s: float | None = None,
     nees_period_s: float = NEES_PERIOD_S,
+    config_override: str | None = None,
 ) -> dict[str, Any]:
-    """Run one task on a simulated folder; a failed run is a row with its ``error``.
+    """Run one task on a simulated folder (with a partial ``sonarslam.toml`` over its own, e.g.
+    its calibration); a failed run is a row with its ``error``.
 
     Returns
     -------
@@ -237,10 +251,11 @@ def run_task(
         **task.params_dict,
         "world": world,
         "duration_s": duration_s,
+        "calibrated": config_override is not None,
     }
     empty = np.zeros(0)
     try:
-        dataset = open_dataset(source)
+        dataset = open_dataset(source, config_override)
         run = run_backend(dataset, task.backend, task.params_dict)
         row.update(
             {k: v for k, v in run.metrics.items() if k not in ("source", "backend", "settings")}
@@ -360,6 +375,7 @@ def sweep(
     n_workers: int = 2,
     progress: bool = True,
     nees_period_s: float = NEES_PERIOD_S,
+    calibrate: bool = False,
 ) -> SweepResult:
     """Run a Monte Carlo sweep on Dask and write its table, summary and plot.
 
@@ -390,6 +406,10 @@ def sweep(
         A progress bar over the finished tasks.
     nees_period_s : float
         Step of the NEES grid (s).
+    calibrate : bool
+        Calibrate each seed's sonar GPS-free first (:func:`calibrate_cached`: the echoes' range
+        offset and a line's systematic error, as ``sonarslam calibrate --range-offset`` and
+        ``--line-noise``) and run with it, as a user would on a new dataset.
     """
     wall0 = time.perf_counter()
     grid = dict(grid or {})
@@ -401,8 +421,11 @@ def sweep(
     bar = tqdm(total=len(tasks), desc="sweep", unit="run", disable=not progress)
     if scheduler == "synchronous":
         sims = {s: simulate_cached(world, s, duration_s, cache) for s in dict.fromkeys(seeds)}
+        cals = {s: calibrate_cached(f) if calibrate else None for s, f in sims.items()}
         for i, task in enumerate(tasks):
-            results[i] = run_task(task, sims[task.seed], world, duration_s, nees_period_s)
+            results[i] = run_task(
+                task, sims[task.seed], world, duration_s, nees_period_s, cals[task.seed]
+            )
             bar.update()
     else:
         client, cluster = _client(scheduler, n_workers)
@@ -413,6 +436,10 @@ def sweep(
                 )
                 for s in dict.fromkeys(seeds)
             }
+            cal_futures = {
+                s: client.submit(calibrate_cached, f, pure=False) if calibrate else None
+                for s, f in sim_futures.items()
+            }
             futures = {
                 client.submit(
                     run_task,
@@ -421,6 +448,7 @@ def sweep(
                     world,
                     duration_s,
                     nees_period_s,
+                    cal_futures[task.seed],
                     pure=False,
                 ): i
                 for i, task in enumerate(tasks)
