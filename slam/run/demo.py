@@ -9,6 +9,7 @@ from pathlib import Path
 from datasets.simulator import simulate
 from datasets.source import data_root, open_dataset
 from features.projection import project_beams
+from slam.io.files import write_atomic
 from slam.io.plots import plot_scans
 from slam.run.presets import map_min_intensity
 from slam.run.run import RunResult, run
@@ -38,10 +39,8 @@ def main_job(out_dir: str | Path, progress: bool = True) -> list[RunResult]:
     points, _ = project_beams(
         beams, dataset.config.sonar, dataset.config.sonar_mounting, gps, map_min_intensity(beams)
     )
-    plot_scans(
-        out / f"{name}_scans_gps.png",
-        points,
-        {"gps": gps},
-        f"{name}: sonar bins projected with GPS poses",
+    title = f"{name}: sonar bins projected with GPS poses"
+    write_atomic(
+        out / f"{name}_scans_gps.png", lambda p: plot_scans(p, points, {"gps": gps}, title)
     )
     return results

@@ -12,13 +12,15 @@
   (``ekf``: :class:`slam.backends.ekf.EkfConfig`, ``isam2``:
   :class:`slam.backends.isam2.graph.GraphConfig`); ``FIELD`` is a field of that frozen
   dataclass, nested by dots (``ekf.association.gate_probability``); ``<backend>.association``
-  is short for ``<backend>.association.method``.
+  is short for ``<backend>.association.method``. Every value is checked against the field's
+  type and the dataclass's ranges (:mod:`datasets.settings`, the mechanism that also checks
+  ``sonarslam.toml``): a wrong one is a :class:`datasets.settings.SettingError` naming it.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
+import re
 import tomllib
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -27,6 +29,9 @@ from typing import Any
 
 import numpy as np
 
+from datasets.errors import DataError
+from datasets.logfile import read_text
+from datasets.settings import SettingError, parse_text, replace_checked
 from features.config import ExtractorConfig
 from slam.backends.base import BackendConfig
 from slam.backends.registry import backend_spec
@@ -46,6 +51,7 @@ __all__ = [
     "parse_settings",
     "apply_overrides",
     "split_settings",
+    "check_settings",
 ]
 
 _DEG = math.pi / 180.0
@@ -97,11 +103,18 @@ def preset_for(beams: Sequence[SonarBeam]) -> str:
 
 
 def _read_table(path: str | Path, table: str) -> dict[str, Any]:
-    with open(path, "rb") as f:
-        data = tomllib.load(f)
+    """The ``[table]`` of a TOML file (or its top level when it has none); DataError for a
+    file that cannot be read, is not UTF-8 or not TOML, or whose ``[table]`` is no table."""
+    p = Path(path)
+    try:
+        data = tomllib.loads(read_text(p, "utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        found = re.search(r"at line (\d+)", str(exc))
+        line = int(found.group(1)) if found else None
+        raise DataError(p, line, f"TOML syntax error: {exc}") from exc
     inner = data.get(table, data)
     if not isinstance(inner, dict):
-        raise ValueError(f"{path}: [{table}] must be a table")
+        raise DataError(p, None, f"[{table}] must be a table, got {inner!r}")
     return inner
 
 
@@ -113,20 +126,21 @@ def extractor_config(
     """A preset, with the fields of a TOML file (``[extractor]`` table or top level) and then
     ``overrides`` (dotted names, :func:`apply_overrides`) over it.
 
-    Raises ValueError for an unknown preset or field.
+    Raises SettingError for an unknown preset or a wrong override, DataError for a wrong
+    file or a wrong value in it (naming the file and the key).
     """
     if preset not in EXTRACTOR_PRESETS:
-        raise ValueError(
-            f"extractor preset must be one of {sorted(EXTRACTOR_PRESETS)}, got {preset!r}"
+        raise SettingError(
+            "extractor preset", f"must be one of {sorted(EXTRACTOR_PRESETS)}, got {preset!r}"
         )
     config = EXTRACTOR_PRESETS[preset]
     if config_path is not None:
         data = _read_table(config_path, "extractor")
-        unknown = set(data) - {f.name for f in dataclasses.fields(ExtractorConfig)}
-        if unknown:
-            raise ValueError(f"{config_path}: unknown ExtractorConfig fields: {sorted(unknown)}")
-        config = config.replace(**data)
-    return apply_overrides(config, overrides or {})
+        try:
+            config = replace_checked(config, data, prefix="[extractor] ")
+        except SettingError as exc:
+            raise DataError(config_path, None, str(exc)) from None
+    return apply_overrides(config, overrides or {}, prefix="extractor.")
 
 
 def pool_preset(step_rad: float, covariance_method: str = "fit") -> ExtractorConfig:
@@ -155,7 +169,7 @@ def map_min_intensity(beams: Sequence[SonarBeam], config: ExtractorConfig | None
 
 def backend_config(name: str, overrides: dict[str, Any] | None = None) -> BackendConfig:
     """Back end ``name``'s default configuration with ``overrides`` (dotted names) over it."""
-    return apply_overrides(backend_spec(name).config_type(), overrides or {})
+    return apply_overrides(backend_spec(name).config_type(), overrides or {}, prefix=f"{name}.")
 
 
 @dataclass(frozen=True)
@@ -197,58 +211,34 @@ def run_config(
 
 _ALIASES = {"association": "association.method"}
 
-
-def parse_value(text: str) -> Any:
-    """A setting value: int, float, true/false, none, else the string itself."""
-    t = text.strip()
-    low = t.lower()
-    if low in ("true", "false"):
-        return low == "true"
-    if low in ("none", "null"):
-        return None
-    for kind in (int, float):
-        try:
-            return kind(t)
-        except ValueError:
-            pass
-    return t
+#: A setting's value as typed on the command line (:func:`datasets.settings.parse_text`).
+parse_value = parse_text
 
 
 def parse_settings(specs: Iterable[str]) -> dict[str, Any]:
-    """``{"ekf.extent_margin_m": 10.0}`` from ``["ekf.extent_margin_m=10"]``."""
+    """``{"ekf.extent_margin_m": 10}`` from ``["ekf.extent_margin_m=10"]``; the values are
+    checked against their fields when applied (:func:`apply_overrides`)."""
     out: dict[str, Any] = {}
     for spec in specs:
         name, sep, value = spec.partition("=")
         name = name.strip()
         if not sep or "." not in name or not value.strip():
-            raise ValueError(f"--set: expected SCOPE.FIELD=VALUE, got {spec!r}")
+            raise SettingError("--set", f"expected SCOPE.FIELD=VALUE, got {spec!r}")
         out[name] = parse_value(value)
     return out
 
 
-def _set_path(config: Any, path: Sequence[str], value: Any) -> Any:
-    if not dataclasses.is_dataclass(config) or isinstance(config, type):
-        raise ValueError(f"cannot set {'.'.join(path)} on a {type(config).__name__}")
-    names = [f.name for f in dataclasses.fields(config)]
-    if path[0] not in names:
-        raise ValueError(f"unknown field {path[0]!r} of {type(config).__name__}; one of {names}")
-    if len(path) == 1:
-        return dataclasses.replace(config, **{path[0]: value})
-    inner = _set_path(getattr(config, path[0]), path[1:], value)
-    return dataclasses.replace(config, **{path[0]: inner})
-
-
-def apply_overrides(config: Any, overrides: dict[str, Any]) -> Any:
-    """``config`` with dotted fields (``"association.method"``, aliases too) replaced."""
-    for name, value in overrides.items():
-        path = _ALIASES.get(name, name).split(".")
-        config = _set_path(config, path, value)
-    return config
+def apply_overrides(config: Any, overrides: dict[str, Any], prefix: str = "") -> Any:
+    """``config`` with dotted fields (``"association.method"``, aliases too) replaced, each
+    value checked against its field (:func:`datasets.settings.replace_checked`); ``prefix``
+    names the scope in messages. Raises SettingError."""
+    resolved = {_ALIASES.get(name, name): value for name, value in overrides.items()}
+    return replace_checked(config, resolved, prefix=prefix)
 
 
 def split_settings(params: dict[str, Any], backend: str) -> tuple[dict[str, Any], dict[str, Any]]:
     """``(extractor settings, back-end settings)`` of ``params`` for ``backend``; a setting of
-    another scope is an error naming it."""
+    another scope is a SettingError naming it."""
     ext: dict[str, Any] = {}
     own: dict[str, Any] = {}
     for name, value in params.items():
@@ -258,5 +248,14 @@ def split_settings(params: dict[str, Any], backend: str) -> tuple[dict[str, Any]
         elif scope == backend:
             own[rest] = value
         else:
-            raise ValueError(f"parameter {name!r} does not apply to back end {backend!r}")
+            raise SettingError(name, f"does not apply to back end {backend!r}")
     return ext, own
+
+
+def check_settings(backend: str, settings: dict[str, Any]) -> None:
+    """Check settings before anything is read or run: their scope, fields, types and ranges
+    over the default configurations (with the preset the beams choose, :func:`run_config`
+    checks them again). Raises SettingError."""
+    ext, own = split_settings(settings, backend)
+    extractor_config("default", overrides=ext)
+    backend_config(backend, own)
