@@ -192,11 +192,13 @@ class DatasetConfig:
             )
         if self.keyframe_scan_direction not in (-1, 1):
             raise ValueError(
-                f"scan_direction must be +1 or -1, got {self.keyframe_scan_direction!r}"
+                f"keyframe_scan_direction must be +1 or -1, got {self.keyframe_scan_direction!r}"
             )
-        _within("time_offset_s", self.sonar_time_offset_s, -MAX_TIME_OFFSET_S, MAX_TIME_OFFSET_S)
+        _within(
+            "sonar_time_offset_s", self.sonar_time_offset_s, -MAX_TIME_OFFSET_S, MAX_TIME_OFFSET_S
+        )
         for v in self.ahrs_deviation_rad:
-            _within("ahrs_deviation (rad)", v, -math.pi / 2, math.pi / 2)
+            _within("ahrs_deviation_rad", v, -math.pi / 2, math.pi / 2)
 
 
 #: The abandoned marina (Ribas et al. 2008). How each mounting was calibrated is in README.md.

@@ -124,6 +124,21 @@ def _warn(path: Path | None, sensor: str, message: str) -> None:
     warnings.warn(f"{path or sensor}: {message}", DataWarning, stacklevel=3)
 
 
+def _warn_gaps(path: Path | None, sensor: str, gaps: Gaps, what: str) -> Gaps:
+    """One warning naming the sensor's gaps (count, total, the longest and where)."""
+    if gaps.count:
+        longest = int(np.argmax(gaps.spans_s[:, 1] - gaps.spans_s[:, 0]))
+        a, b = gaps.spans_s[longest]
+        _warn(
+            path,
+            sensor,
+            f"{gaps.count} gap(s) of the {sensor} longer than {gaps.threshold_s:.3g} s"
+            f" ({gaps.total_s:.1f} s in all; the longest {b - a:.1f} s from t={a:.3f} s):"
+            f" {what}",
+        )
+    return gaps
+
+
 def _later_repeats(t_s: FloatArray) -> np.ndarray:
     """(N,) bool: rows whose stamp equals the previous row's (time never decreases)."""
     return np.concatenate([[False], np.diff(t_s) == 0.0])
@@ -149,7 +164,12 @@ def gate_dvl(dvl: DvlSeries, gates: GateConfig, report: SensorReport) -> DvlSeri
             f" without bottom lock (first at t={first:.3f} s)",
         )
     out = DvlSeries(t.copy(), v.copy(), valid & ~fast, heading.copy(), dvl.path)
-    report.gaps["dvl"] = find_gaps(out.t[out.valid], gates)
+    report.gaps["dvl"] = _warn_gaps(
+        dvl.path,
+        "DVL",
+        find_gaps(out.t[out.valid], gates),
+        "its velocity is held with a growing uncertainty, then taken as unknown",
+    )
     return out
 
 
@@ -188,7 +208,12 @@ def gate_attitude(att: AttitudeSeries, gates: GateConfig, report: SensorReport) 
         if n:
             _warn(att.path, "AHRS", f"dropped {n} sample(s) {what}")
     out = AttitudeSeries(t[good].copy(), yaw[good].copy(), rate[good].copy(), att.path)
-    report.gaps["ahrs"] = find_gaps(out.t, gates)
+    report.gaps["ahrs"] = _warn_gaps(
+        att.path,
+        "AHRS",
+        find_gaps(out.t, gates),
+        "the heading is held with a growing uncertainty",
+    )
     return out
 
 
@@ -220,7 +245,9 @@ def gate_gps(gps: GpsSeries, gates: GateConfig, report: SensorReport) -> GpsSeri
         origin = (float(lat[0]), float(lon[0]))
         en = en - en[0]
     out = GpsSeries(t.copy(), en.copy(), origin, None, gps.path)
-    report.gaps["gps"] = find_gaps(out.t, gates)
+    report.gaps["gps"] = _warn_gaps(
+        gps.path, "GPS", find_gaps(out.t, gates), "the ATE has no reference there"
+    )
     return out
 
 
@@ -243,6 +270,9 @@ def _outliers(t_s: FloatArray, en_m: FloatArray, gates: GateConfig) -> np.ndarra
     return out
 
 
-def gate_beams(t_s: FloatArray, gates: GateConfig, report: SensorReport) -> None:
+def gate_beams(
+    t_s: FloatArray, gates: GateConfig, report: SensorReport, path: Path | None = None
+) -> None:
     """The sonar's gaps (its beams are not gated: a beam is evidence, not a state)."""
-    report.gaps["sonar"] = find_gaps(t_s, gates) if t_s.size else Gaps(0.0, np.zeros((0, 2)))
+    gaps = find_gaps(t_s, gates) if t_s.size else Gaps(0.0, np.zeros((0, 2)))
+    report.gaps["sonar"] = _warn_gaps(path, "sonar", gaps, "no line can correct the navigation")

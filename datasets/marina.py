@@ -165,7 +165,7 @@ def read_setup(path: str | Path) -> tuple[float, float, float]:
             table.path, line, f"range {range_m:g} m is not a whole number of {bin_m:g} m bins"
         )
     beams = 2.0 * math.pi / step_rad
-    if not (beams < 2**31 and abs(beams - round(beams)) <= _TURN_TOLERANCE):
+    if not (2 <= round(beams) < 2**31 and abs(beams - round(beams)) <= _TURN_TOLERANCE):
         raise DataError(
             table.path, line, f"step {step_rad:.6g} rad is not a whole division of the turn"
         )

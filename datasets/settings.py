@@ -73,6 +73,8 @@ def _describe(value: Any) -> str:
 def _number(value: Any, key: str) -> float:
     if isinstance(value, str):
         value = parse_text(value)
+    if isinstance(value, str):
+        raise SettingError(key, f"must be a finite number, got {value!r}")
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise SettingError(key, f"must be a number, got {_describe(value)}")
     if isinstance(value, int) and abs(value) > MAX_INT:

@@ -175,8 +175,8 @@ def open_dataset(source: str | Path, config_override: str | Path | None = None) 
         )
     gps_path = _find_one(root, "*_DGPS.log", required=False)
     gps = gate_gps(read_dgps(gps_path), gates, report) if gps_path is not None else None
-    beams = _beams(root, config)
-    gate_beams(np.array([b.t for b in beams]), gates, report)
+    beams, sonar_path = _beams(root, config)
+    gate_beams(np.array([b.t for b in beams]), gates, report, sonar_path)
     truth_path = _find_one(root, "truth.json", required=False)
     return Dataset(
         name=root.name,
@@ -210,11 +210,13 @@ def _config(root: Path, config_override: str | Path | None) -> DatasetConfig:
     return config
 
 
-def _beams(root: Path, config: DatasetConfig) -> list[SonarBeam]:
-    """The sonar beams on the navigation clock: a raw ``*_IS.log`` or the marina keyframes."""
+def _beams(root: Path, config: DatasetConfig) -> tuple[list[SonarBeam], Path]:
+    """The sonar beams on the navigation clock, from a raw ``*_IS.log`` or the marina
+    keyframes; and the file that gave their times."""
     is_log = _find_one(root, "*_IS.log", required=False)
     if is_log is not None:
         beams = read_is_log(is_log, n_bins=config.sonar.n_bins)
+        source = is_log
     else:
         times_csv = _find_one(root, "keyFrameTimeStamps.csv", required=False)
         stamps = _find_one(root, "*_IS_timestamps.log", required=False)
@@ -231,9 +233,10 @@ def _beams(root: Path, config: DatasetConfig) -> list[SonarBeam]:
             config.sonar,
             config.keyframe_scan_direction,
         )
+        source = stamps
     if config.sonar_time_offset_s:
         beams = [replace(b, t=b.t + config.sonar_time_offset_s) for b in beams]
-    return beams
+    return beams, source
 
 
 def _reject_constant(name: str) -> Any:
@@ -244,7 +247,7 @@ def _finite_array(path: Path, data: Any, key: str, shape: tuple[int | None, ...]
     """DataError unless ``data`` is an array of finite numbers of ``shape`` (None: any)."""
     try:
         a = np.asarray(data, dtype=np.float64)
-    except (ValueError, TypeError):
+    except (ValueError, TypeError, OverflowError):
         raise DataError(path, None, f"{key} is not an array of numbers") from None
     if a.ndim != len(shape) or any(
         n is not None and n != m for n, m in zip(shape, a.shape, strict=True)

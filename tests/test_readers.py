@@ -198,7 +198,7 @@ def test_config_errors_name_file_and_key(tmp_path):
     path = tmp_path / "sonarslam.toml"
     path.write_text("[sonar]\nn_bins = 500\nstep_deg = 'x'\n")
     with pytest.raises(
-        DataError, match=r"sonarslam.toml: \[sonar\] step_deg: must be a number, got 'x'"
+        DataError, match=r"sonarslam.toml: \[sonar\] step_deg: must be a finite number, got 'x'"
     ):
         load_dataset_config(path)
     path.write_text("[mounting.sonar]\nyaw = 3\n")
