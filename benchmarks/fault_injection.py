@@ -34,7 +34,7 @@ from datasets.simulator import simulate  # noqa: E402
 from datasets.source import data_root  # noqa: E402
 from slam.cli.main import main  # noqa: E402
 from slam.io.trajectory import read_tum  # noqa: E402
-from tests.fuzzing import marina_window  # noqa: E402
+from tests.fuzzing import edit_log_rows, marina_window  # noqa: E402
 
 Edit = Callable[[Path], list[str]]
 
@@ -62,26 +62,9 @@ def _log(folder: Path, suffix: str) -> Path:
     return next(folder.rglob(f"*_{suffix}.log"))
 
 
-def _edit_rows(path: Path, edit: Callable[[float, list[str]], list[list[str]]]) -> None:
-    """Rewrite the data rows of a log: ``edit(t - t_first, fields)`` returns the rows to
-    write in its place (none to drop it)."""
-    raw = path.read_bytes().decode("latin-1").splitlines()
-    t_first = None
-    out = []
-    for line in raw:
-        if not line.strip() or line.startswith("%"):
-            out.append(line)
-            continue
-        fields = line.split()
-        t = float(fields[0])
-        t_first = t if t_first is None else t_first
-        out += ["\t".join(f) for f in edit(t - t_first, fields)]
-    path.write_bytes(("\r\n".join(out) + "\r\n").encode("latin-1"))
-
-
 def _drop(suffix: str, a: float, b: float) -> Edit:
     def edit(folder: Path) -> list[str]:
-        _edit_rows(_log(folder, suffix), lambda t, f: [] if a <= t <= b else [f])
+        edit_log_rows(_log(folder, suffix), lambda t, f: [] if a <= t <= b else [f])
         return []
 
     return edit
@@ -97,7 +80,7 @@ def _set_once(suffix: str, at_s: float, changes: dict[int, str]) -> Edit:
                 f = [changes.get(i, v) for i, v in enumerate(f)]
             return [f]
 
-        _edit_rows(_log(folder, suffix), change)
+        edit_log_rows(_log(folder, suffix), change)
         return []
 
     return edit
@@ -111,7 +94,7 @@ def _mti_jump_duplicates(folder: Path) -> list[str]:
             return [f, jumped]
         return [f]
 
-    _edit_rows(_log(folder, "MTi"), dup)
+    edit_log_rows(_log(folder, "MTi"), dup)
     return []
 
 
@@ -126,7 +109,7 @@ def _config(text: str) -> Edit:
 
 def _every(suffix: str, fn: Callable[[float, list[str]], list[list[str]]]) -> Edit:
     def edit(folder: Path) -> list[str]:
-        _edit_rows(_log(folder, suffix), fn)
+        edit_log_rows(_log(folder, suffix), fn)
         return []
 
     return edit

@@ -71,6 +71,7 @@ __all__ = [
     "summarise",
     "marina_window",
     "check_dataset",
+    "edit_log_rows",
 ]
 
 # --- the reference tokenizer: the rules of datasets/logfile.py, written again, plainly --------
@@ -238,8 +239,9 @@ def _simulated_seeds(work: Path) -> dict[str, Seed]:
     def log(suffix: str, rows: int) -> bytes:
         return _slice_log(src / f"{prefix}_{suffix}.log", rows)
 
-    ds = open_dataset(src)
-    head = ds.config.sonar
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)  # its DVL dropout is simulated
+        head = open_dataset(src).config.sonar
     stamps = read_is_timestamps(src / f"{prefix}_IS_timestamps.log")
     n = int(round(2 * math.pi / head.step_rad))
     pts = [
@@ -291,7 +293,7 @@ def build_seeds(work: Path) -> dict[str, Seed]:
     seeds = dict(sim)
     if root is not None and (root / "marina").is_dir():
         seeds.update(_marina_seeds(root / "marina"))
-        seeds["sim_dataset"] = sim["dataset"]
+        seeds.update({f"sim_{k}": v for k, v in sim.items() if k in seeds and seeds[k] is not v})
     seeds["toml"] = Seed(
         "sonarslam.toml",
         {"sonarslam.toml": dump_dataset_config(MARINA_CONFIG).encode()},
@@ -309,6 +311,23 @@ def build_seeds(work: Path) -> dict[str, Seed]:
         "x.toml",
     )
     return seeds
+
+
+def edit_log_rows(path: Path, edit: Callable[[float, list[str]], list[list[str]]]) -> None:
+    """Rewrite the data rows of a log in place: ``edit(t - t_first, fields)`` returns the rows
+    (lists of fields) to write instead of the row (none: drop it); headers kept, CRLF ends."""
+    raw = path.read_bytes().decode("latin-1").splitlines()
+    t_first = None
+    out = []
+    for line in raw:
+        if not line.strip() or line.startswith("%"):
+            out.append(line)
+            continue
+        fields = line.split()
+        t = float(fields[0])
+        t_first = t if t_first is None else t_first
+        out += ["\t".join(f) for f in edit(t - t_first, fields)]
+    path.write_bytes(("\r\n".join(out) + "\r\n").encode("latin-1"))
 
 
 # --- mutations --------------------------------------------------------------------------------
@@ -442,8 +461,12 @@ def _line_mutation(data: bytes, rng: random.Random, file: str) -> Mutation:
     lines = data.splitlines(keepends=True)
     i = rng.randrange(len(lines))
     op = rng.choice(
-        ("duplicate", "delete", "swap", "blank", "comment", "crlf", "lone_cr", "header_dup")
+        ("duplicate", "delete", "swap", "blank", "comment", "crlf", "lone_cr", "header_dup", "gap")
     )
+    if op == "gap":  # a sensor silent for a while
+        n = rng.randrange(2, max(len(lines) // 2, 3))
+        del lines[i : i + n]
+        return Mutation("lines", f"delete lines {i + 1}-{i + n}", b"".join(lines), file)
     if op == "duplicate":
         lines.insert(i, lines[i])
     elif op == "delete":
@@ -972,7 +995,7 @@ def random_setting(rng: random.Random) -> str:
 def check_setting(spec: str) -> Outcome:
     """``--set SPEC`` for ``ekf`` and ``isam2``: a SettingError naming the key, or a config
     whose field holds exactly the typed value."""
-    out = Outcome("--set", "accepted", spec)
+    out = Outcome("--set", "accepted", f"set: {spec}")
     try:
         with _time_limit(10.0):
             settings = parse_settings([spec])
@@ -1049,8 +1072,8 @@ def fuzz(
 ) -> list[Outcome]:
     """``cases`` seeded cases spread over the targets (and ``--set``); the outcomes.
 
-    For ``open_dataset`` the mutated file is any file of the dataset; with the marina and the
-    simulated datasets both present, cases alternate between them.
+    For ``open_dataset`` the mutated file is any file of the dataset. With the marina present,
+    cases alternate between its slices and the simulated ones.
     """
     rng = random.Random(seed)
     names = targets or [*TARGETS, "--set"]
@@ -1062,8 +1085,8 @@ def fuzz(
         else:
             spec = TARGETS[name]
             s = seeds[spec.seed]
-            if name == "open_dataset" and "sim_dataset" in seeds and i % 2:
-                s = seeds["sim_dataset"]
+            if f"sim_{spec.seed}" in seeds and (i // len(names)) % 2:  # marina and simulated
+                s = seeds[f"sim_{spec.seed}"]
             file = rng.choice(sorted(s.files)) if name == "open_dataset" else s.primary
             m = mutate(s.files[file], rng, file)
             if name == "open_dataset" and m.special is not None and rng.random() < 0.5:

@@ -90,6 +90,9 @@ class MotionStep:
         1-sigma of the held velocity, per axis (m/s).
     held_s : float
         How long the velocity sample has been held at the end of the step (s), >= ``dt_s``.
+    var_yaw_gap_rad2 : float
+        Heading variance the step adds because the AHRS is silent (rad^2): the growth of
+        :meth:`slam.model.noise.MotionNoise.gap_heading_variance` over the step; 0 otherwise.
     """
 
     t_s: float
@@ -99,6 +102,12 @@ class MotionStep:
     dyaw_rad: float
     sigma_v_mps: float
     held_s: float
+    var_yaw_gap_rad2: float = 0.0
+
+    def var_yaw_rad2(self, gyro_sigma_radps: float) -> float:
+        """Heading variance of the step (rad^2): a yaw-rate noise ``(dt sigma)^2`` (the back
+        end's) plus the AHRS gap's (:attr:`var_yaw_gap_rad2`)."""
+        return (self.dt_s * gyro_sigma_radps) ** 2 + self.var_yaw_gap_rad2
 
     @property
     def var_xy_m2(self) -> float:
@@ -118,11 +127,13 @@ def motion_step(
     sigma_v_mps: float,
     yaw_rate_radps: float,
     held_from_s: float,
+    var_yaw_gap_rad2: float = 0.0,
 ) -> MotionStep:
     """The step from ``t_prev_s`` to ``t_s`` with a body velocity and a yaw rate held over it.
 
     ``held_from_s`` is when the velocity sample started to be held (its DVL time, or the start
     of the integration if later): the step's share of the sample's error grows with it.
+    ``var_yaw_gap_rad2``: the heading variance an AHRS gap adds over the step (rad^2).
     """
     dt = max(t_s - t_prev_s, 0.0)
     v = np.asarray(v_b_mps, dtype=np.float64)
@@ -134,6 +145,7 @@ def motion_step(
         dyaw_rad=dt * float(yaw_rate_radps),
         sigma_v_mps=float(sigma_v_mps),
         held_s=max(t_s - held_from_s, dt),
+        var_yaw_gap_rad2=float(var_yaw_gap_rad2),
     )
 
 

@@ -41,7 +41,8 @@ class ClosedLoopResult:
     Attributes
     ----------
     trajectory : Trajectory
-        The causal (filtered) pose at the start and at every AHRS record, with covariances.
+        The causal (filtered) pose at the start and at every AHRS record (and at every DVL
+        record inside an AHRS gap), with covariances.
     backend : Backend
         The back end at the end of the run (its map, smoothed trajectory, graph...).
     features : list of LineFeature
@@ -120,8 +121,14 @@ def run_closed_loop(
         tqdm(records, disable=not progress, unit="rec", desc=label, mininterval=1.0)
     ):
         tb = time.perf_counter()
-        rate = yaw_rate if t_prev - t_ahrs <= noise.ahrs_stale_s else 0.0  # AHRS gap: no turn
-        step = motion_step(t_prev, rec.t, v_prev, s_prev, rate, held_from)
+        # an AHRS gap: no turn, and the heading's variance grows with the gap
+        stale_s = t_prev - t_ahrs - noise.ahrs_stale_s
+        rate = yaw_rate if stale_s <= 0.0 else 0.0
+        var_gap = float(
+            noise.gap_heading_variance(rec.t - t_prev + stale_s)
+            - noise.gap_heading_variance(stale_s)
+        )
+        step = motion_step(t_prev, rec.t, v_prev, s_prev, rate, held_from, var_gap)
         odometry.append(rec.t, backend.predict(step), step.var_xy_m2)
         v_prev, s_prev = vin.v_b_mps[k], float(vin.sigma_mps[k])
         t_prev, held_from = rec.t, max(float(vin.sample_t_s[k]), t0)
@@ -142,7 +149,7 @@ def run_closed_loop(
             backend_s += time.perf_counter() - tb
         elif isinstance(rec, DvlVelocity):
             counts["dvl"] += 1
-            if rec.t - traj_t[-1] > noise.ahrs_stale_s:  # an AHRS gap: the poses go on
+            if rec.t - t_ahrs > noise.ahrs_stale_s:  # an AHRS gap: the poses go on
                 traj_t.append(rec.t)
                 traj_p.append(backend.pose)
                 traj_c.append(backend.pose_cov)
