@@ -399,7 +399,14 @@ def dump_dataset_config(config: DatasetConfig) -> str:
         f"[keyframes]\nscan_direction = {config.keyframe_scan_direction}\n\n"
         f"[motion]\nyaw_rate_source = {config.yaw_rate_source!r}\n"
         f"ahrs_deviation_deg = [{_deg(config.ahrs_deviation_rad[0])!r},"
-        f" {_deg(config.ahrs_deviation_rad[1])!r}]\n\n"
-        "[gates]\n"
-        + "".join(f"{f.name} = {getattr(config.gates, f.name)!r}\n" for f in fields(GateConfig))
+        f" {_deg(config.ahrs_deviation_rad[1])!r}]\n" + _gates_table(config.gates)
+    )
+
+
+def _gates_table(gates: GateConfig) -> str:
+    """``[gates]`` when it differs from the defaults (the file stays what it was otherwise)."""
+    if gates == GateConfig():
+        return ""
+    return "\n[gates]\n" + "".join(
+        f"{f.name} = {getattr(gates, f.name)!r}\n" for f in fields(gates)
     )

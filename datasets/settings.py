@@ -28,13 +28,29 @@ from typing import Any
 
 from datasets.logfile import NUMBER
 
-__all__ = ["SettingError", "parse_text", "coerce", "field_types", "replace_checked"]
+__all__ = [
+    "SettingError",
+    "parse_text",
+    "coerce",
+    "field_types",
+    "replace_checked",
+    "check_ranges",
+]
 
 _NUMBER_RE = re.compile(NUMBER)
 _INT_RE = re.compile(r"[+-]?[0-9]+")
 _NONE_TEXT = ("none", "null")
 #: Whole numbers beyond this are no setting of this project (counts, cells, iterations).
 MAX_INT = 10**9
+
+
+def check_ranges(obj: Any, bounds: Mapping[str, tuple[float, float]]) -> None:
+    """For a dataclass's ``__post_init__``: ValueError unless each named field is None or in
+    ``[low, high]`` (the ranges :func:`replace_checked` reports with the key)."""
+    for name, (low, high) in bounds.items():
+        value = getattr(obj, name)
+        if value is not None and not low <= value <= high:
+            raise ValueError(f"{name} must be in [{low:g}, {high:g}], got {value!r}")
 
 
 class SettingError(ValueError):
