@@ -7,6 +7,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import os
 import re
 import tomllib
 import zlib
@@ -35,8 +36,11 @@ from tests.fuzzing import (
     summarise,
 )
 
+#: Hypothesis examples per property (``FUZZ_EXAMPLES=3000`` for a long run).
 FUZZ = settings(
-    max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+    max_examples=int(os.environ.get("FUZZ_EXAMPLES", "150")),
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
 )
 
 

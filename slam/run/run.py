@@ -317,8 +317,12 @@ def run(
     check_output_dir(out_dir)
     if backend not in backend_names():
         raise SettingError("--backend", f"must be one of {backend_names()}, got {backend!r}")
-    if settings and backend not in BASELINES:
+    if settings and backend in BASELINES:
+        raise SettingError("--set", f"back end {backend!r} has no settings, got {sorted(settings)}")
+    if settings:
         check_settings(backend, settings)
+    if batch and (backend in BASELINES or not backend_spec(backend).smoother):
+        raise SettingError("--batch", f"back end {backend!r} does not smooth")
     dataset = open_dataset(source, config_override=config)
     result = run_backend(dataset, backend, settings, progress=progress, batch=batch)
     result.out_dir = write_run(
