@@ -34,7 +34,7 @@ from datasets.simulator import simulate  # noqa: E402
 from datasets.source import data_root  # noqa: E402
 from slam.cli.main import main  # noqa: E402
 from slam.io.trajectory import read_tum  # noqa: E402
-from tests.fuzzing import edit_log_rows, marina_window  # noqa: E402
+from tests.fuzz_inputs import edit_log_rows, marina_window  # noqa: E402
 
 Edit = Callable[[Path], list[str]]
 

@@ -18,7 +18,7 @@ from datasets.source import open_dataset
 from slam.cli.main import main
 from slam.io.files import atomic_path, write_json
 from slam.run.run import run_backend
-from tests.fuzzing import edit_log_rows
+from tests.fuzz_inputs import edit_log_rows
 
 GAP = (30.0, 60.0)  # s after the first row
 

@@ -17,24 +17,15 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from datasets.config import _SCHEMA as TOML_SCHEMA  # what each key of the file sets
 from datasets.config import load_dataset_config
 from datasets.errors import DataError
 from datasets.logfile import NUMBER, read_table
 from datasets.settings import SettingError
 from slam.run.presets import parse_settings
-from tests.fuzzing import (
-    TARGETS,
-    TOML_SCHEMA,
-    Mutation,
-    _check_toml,
-    _match_rows,
-    build_seeds,
-    check_setting,
-    fuzz,
-    ref_lines,
-    run_case,
-    summarise,
-)
+from tests.fuzz_inputs import Mutation, build_seeds, ref_lines
+from tests.fuzz_oracles import check_toml, match_rows
+from tests.fuzzing import TARGETS, check_setting, fuzz, run_case, summarise
 
 #: Hypothesis examples per property (``FUZZ_EXAMPLES=3000`` for a long run).
 FUZZ = settings(
@@ -138,7 +129,7 @@ def test_read_table_is_the_reference_tokenizer_or_names_the_line(tmp_path, data)
         return
     assert np.all(np.isfinite(table.data))
     m = Mutation("none", "", data, "x.log")
-    assert not _match_rows(table.data, data, data, m, 3, (0, 1, 2), lambda e: e)
+    assert not match_rows(table.data, data, data, m, 3, (0, 1, 2), lambda e: e)
 
 
 _TOML_TABLES = [*TOML_SCHEMA, "mounting.x", "extra"]
@@ -192,7 +183,7 @@ def test_toml_values_are_taken_exactly_or_named(tmp_path, text):
         return
     tomllib.loads(text)  # what was accepted is TOML
     m = Mutation("none", "", text.encode(), "sonarslam.toml")
-    assert not _check_toml(config, text.encode(), b"", m, tmp_path)
+    assert not check_toml(config, text.encode(), b"", m, tmp_path)
 
 
 _FIELDS = st.sampled_from(

@@ -66,6 +66,13 @@ class MotionNoise:
     ahrs_stale_s: float = float("inf")
     gap_yaw_rate_sigma_radps: float = float(np.deg2rad(1.0))
 
+    def ahrs_gap_variance(self, t_prev_s: float, t_s: float, t_ahrs_s: float) -> float:
+        """Heading variance (rad^2) a step from ``t_prev_s`` to ``t_s`` adds when the newest
+        AHRS sample is from ``t_ahrs_s``: the growth of :meth:`gap_heading_variance`."""
+        stale = t_prev_s - t_ahrs_s - self.ahrs_stale_s
+        grown = self.gap_heading_variance(stale + t_s - t_prev_s)
+        return float(grown - self.gap_heading_variance(stale))
+
     def gap_heading_variance(self, stale_for_s: npt.ArrayLike) -> FloatArray:
         """Heading variance (rad^2) added after an AHRS sample has been held ``stale_for_s``
         seconds past :attr:`ahrs_stale_s` (0 before)."""

@@ -122,12 +122,8 @@ def run_closed_loop(
     ):
         tb = time.perf_counter()
         # an AHRS gap: no turn, and the heading's variance grows with the gap
-        stale_s = t_prev - t_ahrs - noise.ahrs_stale_s
-        rate = yaw_rate if stale_s <= 0.0 else 0.0
-        var_gap = float(
-            noise.gap_heading_variance(rec.t - t_prev + stale_s)
-            - noise.gap_heading_variance(stale_s)
-        )
+        rate = yaw_rate if t_prev - t_ahrs <= noise.ahrs_stale_s else 0.0
+        var_gap = noise.ahrs_gap_variance(t_prev, rec.t, t_ahrs)
         step = motion_step(t_prev, rec.t, v_prev, s_prev, rate, held_from, var_gap)
         odometry.append(rec.t, backend.predict(step), step.var_xy_m2)
         v_prev, s_prev = vin.v_b_mps[k], float(vin.sigma_mps[k])

@@ -132,14 +132,7 @@ def run_backend(
         spec = backend_spec(backend)
         if batch and not spec.smoother:
             raise SettingError("--batch", f"back end {backend!r} does not smooth")
-        if dataset.sonar_span_s is None:
-            raise DataError(
-                dataset.root,
-                None,
-                f"no sonar beam inside the navigation span {_span(dataset.nav_span_s)}"
-                f" (the {len(dataset.beams)} beams: {_beam_span(dataset)}; [sonar]"
-                " time_offset_s?): a closed loop would be dead reckoning",
-            )
+        _require_beams(dataset)
         config = run_config(dataset.beams, backend, settings)
         mounting = dataset.config.sonar_mounting
         cfg = config.backend
@@ -188,10 +181,18 @@ def _span(span: tuple[float, float]) -> str:
     return f"{span[0]:.3f}-{span[1]:.3f} s"
 
 
-def _beam_span(dataset: Dataset) -> str:
-    if not dataset.beams:
-        return "none"
-    return _span((dataset.beams[0].t, dataset.beams[-1].t))
+def _require_beams(dataset: Dataset) -> None:
+    """A closed loop without a beam inside the navigation span would be dead reckoning."""
+    if dataset.sonar_span_s is not None:
+        return
+    beams = _span((dataset.beams[0].t, dataset.beams[-1].t)) if dataset.beams else "none"
+    raise DataError(
+        dataset.root,
+        None,
+        f"no sonar beam inside the navigation span {_span(dataset.nav_span_s)} (the"
+        f" {len(dataset.beams)} beams: {beams}; [sonar] time_offset_s?): a closed loop would"
+        " be dead reckoning",
+    )
 
 
 def _check_finite(dataset: Dataset, backend: str, trajectory: Trajectory) -> None:
