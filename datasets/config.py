@@ -65,14 +65,19 @@ from __future__ import annotations
 
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 from datasets.errors import DataError
-from datasets.logfile import read_text
-from datasets.settings import SettingError, coerce, field_types, replace_checked
+from datasets.settings import (
+    SettingError,
+    coerce,
+    field_types,
+    read_toml,
+    replace_checked,
+    toml_line,
+)
 from sonar.beam import Mounting, SonarHead
 
 __all__ = [
@@ -286,35 +291,31 @@ def _field_type(path: str) -> Any:
     return field_types(cls)[name]
 
 
-def _tables(p: Path, data: dict[str, Any]) -> dict[str, dict[str, Any]]:
+def _tables(p: Path, text: str, data: dict[str, Any]) -> dict[str, dict[str, Any]]:
     """The file's tables by dotted name (``mounting.sonar``); a key or a table that is not in
-    the schema, or a value where a table belongs, is a DataError."""
+    the schema, or a value where a table belongs, is a DataError (with its line when found)."""
     out: dict[str, dict[str, Any]] = {}
     for name, table in data.items():
-        if name == "mounting":
-            if not isinstance(table, dict):
-                raise DataError(
-                    p, None, f"[mounting] must be a table, got {table!r} ({type(table).__name__})"
-                )
+        if name == "mounting" and isinstance(table, dict):
             for sub, inner in table.items():
-                out.update(_tables(p, {f"mounting.{sub}": inner}))
+                out.update(_tables(p, text, {f"mounting.{sub}": inner}))
             continue
-        if name not in _SCHEMA:
+        outer, _, last = name.rpartition(".")
+        line = toml_line(text, outer, last) or toml_line(text, name)
+        if name not in _SCHEMA and name != "mounting":
             tops = sorted({k.split(".")[0] for k in _SCHEMA})
-            where = f"[{name.rsplit('.', 1)[0]}]" if "." in name else "top level"
-            raise DataError(
-                p, None, f"unknown key {name.rsplit('.', 1)[-1]!r} in {where}; allowed: {tops}"
-            )
+            where = f"[{outer}]" if outer else "top level"
+            raise DataError(p, line, f"unknown key {last!r} in {where}; allowed: {tops}")
         if not isinstance(table, dict):
             raise DataError(
-                p, None, f"[{name}] must be a table, got {table!r} ({type(table).__name__})"
+                p, line, f"[{name}] must be a table, got {table!r} ({type(table).__name__})"
             )
-        unknown = set(table) - set(_SCHEMA[name])
+        unknown = sorted(set(table) - set(_SCHEMA[name]))
         if unknown:
             raise DataError(
                 p,
-                None,
-                f"unknown key(s) {sorted(unknown)} in [{name}]; allowed: {sorted(_SCHEMA[name])}",
+                toml_line(text, name, unknown[0]),
+                f"unknown key(s) {unknown} in [{name}]; allowed: {sorted(_SCHEMA[name])}",
             )
         out[name] = table
     return out
@@ -328,27 +329,20 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
     DataError
         A file that cannot be read or is not UTF-8 (with its line), a TOML syntax error (with
         its line), a table that is not one, an unknown key, a value of the wrong type,
-        non-finite or out of range (naming the key, :mod:`datasets.settings`).
+        non-finite or out of range (naming the key, and its line when written ``key = ...``;
+        :mod:`datasets.settings`).
     """
     p = Path(path)
     base = base if base is not None else DatasetConfig()
-    text = read_text(p, "utf-8")
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        found = re.search(r"at line (\d+)", str(exc))
-        raise DataError(
-            p, int(found.group(1)) if found else None, f"TOML syntax error: {exc}"
-        ) from exc
+    data, text = read_toml(p)
     changes: dict[str, Any] = {}
-    keys: dict[str, str] = {}  # field path -> the file's key, for messages
+    keys: dict[str, tuple[str, str]] = {}  # field path -> the file's table and key
     try:
-        for table, values in _tables(p, data).items():
+        for table, values in _tables(p, text, data).items():
             for key, value in values.items():
                 target, unit = _SCHEMA[table][key]
-                name = f"[{table}] {key}"
-                keys[target] = name
-                typed = coerce(_field_type(target), value, name)
+                keys[target] = (table, key)
+                typed = coerce(_field_type(target), value, f"[{table}] {key}")
                 if unit == _DEGREES:
                     typed = (
                         tuple(math.radians(v) for v in typed)
@@ -360,8 +354,18 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
                 changes[f"{table.split('.')[1]}_mounting.source"] = str(p)
         return replace_checked(base, changes)  # type: ignore[no-any-return]
     except SettingError as exc:
-        named = ", ".join(keys.get(k.strip(), k.strip()) for k in exc.key.split(","))
-        raise DataError(p, None, f"{named}: {exc.message}") from None
+        named = [keys.get(k.strip()) for k in exc.key.split(",")]
+        where = [f"[{t}] {k}" for t, k in (n for n in named if n is not None)]
+        line = toml_line(text, *named[0]) if len(named) == 1 and named[0] is not None else None
+        if not where:  # a type error, already named by the file's key
+            where, line = [exc.key], _line_of_key(text, exc.key)
+        raise DataError(p, line, f"{', '.join(where)}: {exc.message}") from None
+
+
+def _line_of_key(text: str, key: str) -> int | None:
+    """The line of a ``"[table] key"`` name."""
+    found = re.fullmatch(r"\[(.+)\] (.+)", key)
+    return toml_line(text, found.group(1), found.group(2)) if found else None
 
 
 def _deg(angle_rad: float) -> float:

@@ -20,13 +20,16 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+import tomllib
 import types
 import typing
 from collections.abc import Mapping
 from functools import cache
+from pathlib import Path
 from typing import Any
 
-from datasets.logfile import NUMBER
+from datasets.errors import DataError
+from datasets.logfile import NUMBER, read_text, split_lines
 
 __all__ = [
     "SettingError",
@@ -35,6 +38,8 @@ __all__ = [
     "field_types",
     "replace_checked",
     "check_ranges",
+    "read_toml",
+    "toml_line",
 ]
 
 _NUMBER_RE = re.compile(NUMBER)
@@ -42,6 +47,43 @@ _INT_RE = re.compile(r"[+-]?[0-9]+")
 _NONE_TEXT = ("none", "null")
 #: Whole numbers beyond this are no setting of this project (counts, cells, iterations).
 MAX_INT = 10**9
+
+
+def read_toml(path: str | Path) -> tuple[dict[str, Any], str]:
+    """A TOML file (UTF-8, :func:`datasets.logfile.read_text`) and its text; a syntax error is
+    a :class:`DataError` with its line (the last line when the parser ran out of document)."""
+    p = Path(path)
+    text = read_text(p, "utf-8")
+    try:
+        return tomllib.loads(text), text
+    except tomllib.TOMLDecodeError as exc:
+        found = re.search(r"at line (\d+)", str(exc))
+        line = int(found.group(1)) if found else None
+        if line is None and "end of document" in str(exc):
+            line = max(len(split_lines(text)[0]), 1)
+        raise DataError(p, line, f"TOML syntax error: {exc}") from None
+
+
+_TABLE_HEADER = re.compile(r"\[\s*([^\[\]]+?)\s*\]\s*(?:#.*)?")
+_KEY = re.compile(r"\s*\"?([A-Za-z0-9_.-]+)\"?\s*=")
+
+
+def toml_line(text: str, table: str, key: str | None = None) -> int | None:
+    """The physical line of ``key = ...`` in ``[table]`` of a TOML text (``table`` dotted,
+    ``""`` for the top level), or of the ``[table]`` header when ``key`` is None; None when not
+    written that way (an inline table, a dotted key)."""
+    current = ""
+    for number, raw in enumerate(split_lines(text)[0], start=1):
+        header = _TABLE_HEADER.fullmatch(raw.strip())
+        if header is not None:
+            current = re.sub(r"\s*\.\s*", ".", header.group(1)).replace('"', "")
+            if key is None and current == table:
+                return number
+            continue
+        found = _KEY.match(raw)
+        if key is not None and found is not None and current == table and found.group(1) == key:
+            return number
+    return None
 
 
 def check_ranges(obj: Any, bounds: Mapping[str, tuple[float, float]]) -> None:
@@ -206,8 +248,11 @@ def _apply(obj: Any, tree: dict[str, Any], prefix: str) -> Any:
         return dataclasses.replace(obj, **kwargs)
     except (ValueError, TypeError) as exc:
         message = str(exc)
-        if len(kwargs) == 1:  # "min_votes must be >= 1" -> "must be >= 1" after the key
-            message = re.sub(rf"^(\w+\.)?{re.escape(next(iter(kwargs)))} ", "", message)
+        # "min_votes must be >= 1": the key it names alone, and the message after it
+        for name, key in zip(kwargs, keys, strict=True):
+            stripped = re.sub(rf"^(\w+\.)?{re.escape(name)} ", "", message)
+            if stripped != message:
+                raise SettingError(key, stripped) from None
         raise SettingError(", ".join(keys), message) from None
 
 

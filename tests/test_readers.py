@@ -198,7 +198,7 @@ def test_config_errors_name_file_and_key(tmp_path):
     path = tmp_path / "sonarslam.toml"
     path.write_text("[sonar]\nn_bins = 500\nstep_deg = 'x'\n")
     with pytest.raises(
-        DataError, match=r"sonarslam.toml: \[sonar\] step_deg: must be a finite number, got 'x'"
+        DataError, match=r"sonarslam.toml:3: \[sonar\] step_deg: must be a finite number, got 'x'"
     ):
         load_dataset_config(path)
     path.write_text("[mounting.sonar]\nyaw = 3\n")
@@ -230,7 +230,9 @@ def test_config_errors_name_file_and_key(tmp_path):
     path.write_text("[noise]\ndvl_scatter_window_s = 0\n")  # 0: off, allowed
     assert load_dataset_config(path).noise.dvl_scatter_window_s == 0.0
     path.write_text("[motion]\nyaw_rate_source = 'compass'\n")
-    with pytest.raises(DataError, match=r"sonarslam.toml: \[motion\] yaw_rate_source: must be one"):
+    with pytest.raises(
+        DataError, match=r"sonarslam.toml:2: \[motion\] yaw_rate_source: must be one"
+    ):
         load_dataset_config(path)
     path.write_text("[motion]\nyaw_rate_source = 'heading'\n")
     assert load_dataset_config(path).yaw_rate_source == "heading"

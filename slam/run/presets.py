@@ -20,8 +20,6 @@
 from __future__ import annotations
 
 import math
-import re
-import tomllib
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,8 +28,7 @@ from typing import Any
 import numpy as np
 
 from datasets.errors import DataError
-from datasets.logfile import read_text
-from datasets.settings import SettingError, parse_text, replace_checked
+from datasets.settings import SettingError, parse_text, read_toml, replace_checked, toml_line
 from features.config import ExtractorConfig
 from slam.backends.base import BackendConfig
 from slam.backends.registry import backend_spec
@@ -102,20 +99,16 @@ def preset_for(beams: Sequence[SonarBeam]) -> str:
     return "marina" if beams and all(b.thresholded for b in beams) else "default"
 
 
-def _read_table(path: str | Path, table: str) -> dict[str, Any]:
-    """The ``[table]`` of a TOML file (or its top level when it has none); DataError for a
-    file that cannot be read, is not UTF-8 or not TOML, or whose ``[table]`` is no table."""
+def _read_table(path: str | Path, table: str) -> tuple[dict[str, Any], str]:
+    """The ``[table]`` of a TOML file (or its top level when it has none) and the file's text;
+    DataError for a file that cannot be read, is not UTF-8 or not TOML, or whose ``[table]``
+    is no table."""
     p = Path(path)
-    try:
-        data = tomllib.loads(read_text(p, "utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        found = re.search(r"at line (\d+)", str(exc))
-        line = int(found.group(1)) if found else None
-        raise DataError(p, line, f"TOML syntax error: {exc}") from exc
+    data, text = read_toml(p)
     inner = data.get(table, data)
     if not isinstance(inner, dict):
-        raise DataError(p, None, f"[{table}] must be a table, got {inner!r}")
-    return inner
+        raise DataError(p, toml_line(text, "", table), f"[{table}] must be a table, got {inner!r}")
+    return inner, text
 
 
 def extractor_config(
@@ -135,11 +128,14 @@ def extractor_config(
         )
     config = EXTRACTOR_PRESETS[preset]
     if config_path is not None:
-        data = _read_table(config_path, "extractor")
+        data, text = _read_table(config_path, "extractor")
         try:
             config = replace_checked(config, data, prefix="[extractor] ")
         except SettingError as exc:
-            raise DataError(config_path, None, str(exc)) from None
+            keys = exc.key.replace("[extractor] ", "").split(", ")
+            table = "extractor" if toml_line(text, "extractor") is not None else ""
+            line = toml_line(text, table, keys[0].split(".")[0]) if len(keys) == 1 else None
+            raise DataError(config_path, line, str(exc)) from None
     return apply_overrides(config, overrides or {}, prefix="extractor.")
 
 

@@ -25,7 +25,6 @@ import re
 import shutil
 import tempfile
 import time
-import tomllib
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,8 +36,7 @@ from dask.distributed import Client, LocalCluster, as_completed
 from tqdm import tqdm
 
 from datasets.errors import DataError
-from datasets.logfile import read_text
-from datasets.settings import SettingError
+from datasets.settings import SettingError, read_toml
 from datasets.simulator import simulate
 from datasets.source import open_dataset
 from slam.backends.registry import BACKENDS
@@ -103,10 +101,7 @@ def parse_grid(specs: Iterable[str]) -> dict[str, list[Any]]:
 def load_grid_toml(path: str | Path) -> dict[str, list[Any]]:
     """Grid axes from a TOML file: a ``[grid]`` table (or the top level) of arrays, flat
     (``"ekf.association" = ["jcbb", "nn"]``) or nested (``[grid.extractor] min_votes = [10]``)."""
-    try:
-        data = tomllib.loads(read_text(path, "utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise DataError(path, None, f"TOML syntax error: {exc}") from exc
+    data = read_toml(path)[0]
     data = data.get("grid", data)
     if not isinstance(data, dict):
         raise DataError(path, None, f"[grid] must be a table, got {data!r}")
