@@ -49,7 +49,19 @@ radians in the objects)::
     ahrs_deviation_deg = [-2.01, 2.57]  # the AHRS yaw errs by B sin(yaw) + C cos(yaw) (deg):
                             # taken off (sonarslam calibrate --ahrs-deviation)
 
-Keys a file leaves out take the neutral defaults of :class:`DatasetConfig` (no clock offset,
+    [gates]                 # plausibility of the sensors' samples (datasets/gates.py)
+    dvl_max_speed_mps = 3.0 # a faster DVL velocity is a spike: the row counts as no lock
+    ahrs_max_jump_deg = 10.0      # a heading change the gyro does not explain by more ...
+    ahrs_jump_drift_dps = 1.0     # ... (plus this per second since the last good sample)
+    ahrs_max_rate_dps = 600.0     # a faster gyro rate is a spike: the sample is dropped
+    gps_max_jump_m = 20.0   # a fix this far (plus dvl_max_speed_mps per s) from its
+                            # neighbours' median is an outlier, dropped from the evaluation
+    gap_periods = 5.0       # a sensor gap: no sample for this many of its median periods,
+    min_gap_s = 1.0         # and at least this long
+
+Every value is checked against the field it sets (type, finite, range: :mod:`datasets.settings`);
+a wrong one is a ``DataError`` naming the file and the key. Keys a file leaves out take the
+neutral defaults of :class:`DatasetConfig` (no clock offset,
 identity mountings); the simulator writes every key. Without a file, a dataset gets the marina's
 calibration (see ``MARINA_CONFIG`` and the
 README's "Calibration" section for how each number was found and whether GPS was used).
@@ -59,23 +71,31 @@ from __future__ import annotations
 
 import math
 import re
-import tomllib
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 import tomli_w
 
 from datasets.errors import DataError
+from datasets.settings import (
+    SettingError,
+    coerce,
+    field_types,
+    read_toml,
+    replace_checked,
+    toml_line,
+)
 from sonar.beam import Mounting, SonarHead
 
 __all__ = [
     "NoiseConfig",
+    "GateConfig",
     "DatasetConfig",
     "MARINA_CONFIG",
     "load_dataset_config",
-    "config_tables",
     "dump_dataset_config",
+    "config_tables",
 ]
 
 
@@ -98,12 +118,81 @@ class NoiseConfig:
     line_sigma_rho_m: float = 0.0
     line_sigma_theta_deg: float = 0.0
 
+    def __post_init__(self) -> None:
+        _within("dvl_sigma_mps", self.dvl_sigma_mps, 0.0, 10.0, low_open=True)
+        _within("ahrs_sigma_deg", self.ahrs_sigma_deg, 0.0, 180.0, low_open=True)
+        _within("gps_sigma_m", self.gps_sigma_m, 0.0, 1e4, low_open=True)
+        _within("dvl_max_gap_s", self.dvl_max_gap_s, 0.0, 3600.0, low_open=True)
+        _within("dvl_scatter_window_s", self.dvl_scatter_window_s, 0.0, 3600.0)
+        _within("dvl_nominal_scatter_mps", self.dvl_nominal_scatter_mps, 0.0, 10.0)
+        _within("ahrs_bias_walk_deg_per_sqrt_s", self.ahrs_bias_walk_deg_per_sqrt_s, 0.0, 10.0)
+        _within("dvl_scale_sigma", self.dvl_scale_sigma, 0.0, 0.5, low_open=False)
+        _within("line_sigma_rho_m", self.line_sigma_rho_m, 0.0, 100.0)
+        _within("line_sigma_theta_deg", self.line_sigma_theta_deg, 0.0, 90.0)
+
+
+@dataclass(frozen=True)
+class GateConfig:
+    """Plausibility gates of the sensors' samples (:mod:`datasets.gates`).
+
+    Attributes
+    ----------
+    dvl_max_speed_mps : float
+        A DVL bottom velocity faster than this (m/s, horizontal) is a spike: the row is taken
+        as one without bottom lock (the motion model holds the last good velocity).
+    ahrs_max_jump_deg : float
+        An AHRS heading that differs from the last good one turned by the gyro's integral by
+        more than this (deg), plus ``ahrs_jump_drift_dps`` per second since that sample, is a
+        jump the gyro does not explain: dropped.
+    ahrs_jump_drift_dps : float
+        The allowance for the gyro's bias (deg/s).
+    ahrs_max_rate_dps : float
+        A gyro yaw rate beyond this (deg/s) is a spike: the sample is dropped.
+    gps_max_jump_m : float
+        A GPS fix farther than this (m), plus ``dvl_max_speed_mps`` times the time to its
+        neighbours, from the median of its neighbours within 10 s is an outlier: dropped from the
+        evaluation.
+    gap_periods : float
+        A sensor's gap is a time without a (valid) sample longer than this many of its median
+        sampling periods ...
+    min_gap_s : float
+        ... and than this (s). The motion model takes a DVL or AHRS sample as stale from then
+        on (:mod:`slam.model.motion`), so the covariance grows with the gap.
+    """
+
+    dvl_max_speed_mps: float = 3.0
+    ahrs_max_jump_deg: float = 10.0
+    ahrs_jump_drift_dps: float = 1.0
+    ahrs_max_rate_dps: float = 600.0
+    gps_max_jump_m: float = 20.0
+    gap_periods: float = 5.0
+    min_gap_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        _within("dvl_max_speed_mps", self.dvl_max_speed_mps, 0.0, 100.0, low_open=True)
+        _within("ahrs_max_jump_deg", self.ahrs_max_jump_deg, 0.0, 180.0, low_open=True)
+        _within("ahrs_jump_drift_dps", self.ahrs_jump_drift_dps, 0.0, 360.0)
+        _within("ahrs_max_rate_dps", self.ahrs_max_rate_dps, 0.0, 1e4, low_open=True)
+        _within("gps_max_jump_m", self.gps_max_jump_m, 0.0, 1e5, low_open=True)
+        _within("gap_periods", self.gap_periods, 1.0, 1e4)
+        _within("min_gap_s", self.min_gap_s, 0.0, 3600.0, low_open=True)
+
+
+def _within(name: str, value: float, low: float, high: float, low_open: bool = False) -> None:
+    """ValueError unless ``low <= value <= high`` (``low < value`` when ``low_open``)."""
+    ok = (value > low if low_open else value >= low) and value <= high
+    if not ok:
+        bracket = "(" if low_open else "["
+        raise ValueError(f"{name} must be in {bracket}{low:g}, {high:g}], got {value!r}")
+
 
 #: What turns the estimators' heading between AHRS samples (``[motion] yaw_rate_source``):
 #: ``"gyro"``, the logged yaw rate; ``"heading"``, the change of the AHRS heading since its
 #: previous sample (causal). A gyro bias the estimators do not model (the marina's MTi, README
 #: "Calibration") runs the closed-loop heading off the compass between heading updates.
 YAW_RATE_SOURCES = ("gyro", "heading")
+#: Largest clock offset of the sonar (s): a day.
+MAX_TIME_OFFSET_S = 86400.0
 
 
 @dataclass(frozen=True)
@@ -119,12 +208,22 @@ class DatasetConfig:
     sonar_time_offset_s: float = 0.0
     yaw_rate_source: str = "gyro"
     ahrs_deviation_rad: tuple[float, float] = (0.0, 0.0)
+    gates: GateConfig = field(default_factory=GateConfig)
 
     def __post_init__(self) -> None:
         if self.yaw_rate_source not in YAW_RATE_SOURCES:
             raise ValueError(
                 f"yaw_rate_source must be one of {YAW_RATE_SOURCES}, got {self.yaw_rate_source!r}"
             )
+        if self.keyframe_scan_direction not in (-1, 1):
+            raise ValueError(
+                f"keyframe_scan_direction must be +1 or -1, got {self.keyframe_scan_direction!r}"
+            )
+        _within(
+            "sonar_time_offset_s", self.sonar_time_offset_s, -MAX_TIME_OFFSET_S, MAX_TIME_OFFSET_S
+        )
+        for v in self.ahrs_deviation_rad:
+            _within("ahrs_deviation_rad", v, -math.pi / 2, math.pi / 2)
 
 
 #: The abandoned marina (Ribas et al. 2008). How each mounting was calibrated is in README.md.
@@ -171,129 +270,76 @@ MARINA_CONFIG = DatasetConfig(
 )
 
 
-def _check_keys(path: Path, table: str, data: dict[str, Any], allowed: set[str]) -> None:
-    unknown = set(data) - allowed
-    if unknown:
-        raise DataError(
-            path, None, f"unknown key(s) {sorted(unknown)} in [{table}]; allowed: {sorted(allowed)}"
-        )
+_DEGREES = "deg"
+
+#: ``sonarslam.toml``: each table's keys and the :class:`DatasetConfig` field each sets
+#: (dotted), with ``"deg"`` for the keys in degrees (fields in rad).
+_SCHEMA: dict[str, dict[str, tuple[str, str | None]]] = {
+    "sonar": {
+        "n_bins": ("sonar.n_bins", None),
+        "bin_size_m": ("sonar.bin_size_m", None),
+        "step_deg": ("sonar.step_rad", _DEGREES),
+        "beam_width_deg": ("sonar.beam_width_rad", _DEGREES),
+        "angle_sense": ("sonar.angle_sense", None),
+        "time_offset_s": ("sonar_time_offset_s", None),
+        "range_offset_m": ("sonar.range_offset_m", None),
+    },
+    **{
+        f"mounting.{name}": {
+            "x_m": (f"{name}_mounting.x_m", None),
+            "y_m": (f"{name}_mounting.y_m", None),
+            "yaw_deg": (f"{name}_mounting.yaw_rad", _DEGREES),
+            "source": (f"{name}_mounting.source", None),
+        }
+        for name in ("sonar", "dvl", "ahrs")
+    },
+    "noise": {f.name: (f"noise.{f.name}", None) for f in fields(NoiseConfig)},
+    "keyframes": {"scan_direction": ("keyframe_scan_direction", None)},
+    "motion": {
+        "yaw_rate_source": ("yaw_rate_source", None),
+        "ahrs_deviation_deg": ("ahrs_deviation_rad", _DEGREES),
+    },
+    "gates": {f.name: (f"gates.{f.name}", None) for f in fields(GateConfig)},
+}
 
 
-def _number(
-    path: Path, table: str, key: str, value: Any, *, positive: bool = False, integer: bool = False
-) -> float:
-    """A finite number from a TOML value (optionally > 0, optionally whole), else DataError."""
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise DataError(path, None, f"[{table}] {key} must be a finite number, got {value!r}")
-    if integer and float(value) != int(value):
-        raise DataError(path, None, f"[{table}] {key} must be a whole number, got {value!r}")
-    if positive and not value > 0:
-        raise DataError(path, None, f"[{table}] {key} must be > 0, got {value!r}")
-    return float(value)
+def _field_type(path: str) -> Any:
+    """The annotated type of a dotted :class:`DatasetConfig` field."""
+    cls: Any = DatasetConfig
+    *outer, name = path.split(".")
+    for part in outer:
+        cls = field_types(cls)[part]
+    return field_types(cls)[name]
 
 
-def _mounting(path: Path, table: str, data: dict[str, Any], default: Mounting) -> Mounting:
-    _check_keys(path, table, data, {"x_m", "y_m", "yaw_deg", "source"})
-    kwargs: dict[str, Any] = {}
-    for key in ("x_m", "y_m"):
-        if key in data:
-            kwargs[key] = _number(path, table, key, data[key])
-    if "yaw_deg" in data:
-        kwargs["yaw_rad"] = math.radians(_number(path, table, "yaw_deg", data["yaw_deg"]))
-    kwargs["source"] = str(data.get("source", f"{path}"))
-    return replace(default, **kwargs)
-
-
-def _sonar_table(p: Path, s: dict[str, Any], base: DatasetConfig) -> tuple[SonarHead, float]:
-    """``[sonar]`` over ``base``: the head and the clock offset."""
-    _check_keys(
-        p,
-        "sonar",
-        s,
-        {
-            "n_bins",
-            "bin_size_m",
-            "step_deg",
-            "beam_width_deg",
-            "angle_sense",
-            "time_offset_s",
-            "range_offset_m",
-        },
-    )
-    kwargs: dict[str, Any] = {}
-    if "n_bins" in s:
-        kwargs["n_bins"] = int(
-            _number(p, "sonar", "n_bins", s["n_bins"], positive=True, integer=True)
-        )
-    if "bin_size_m" in s:
-        kwargs["bin_size_m"] = _number(p, "sonar", "bin_size_m", s["bin_size_m"], positive=True)
-    if "step_deg" in s:
-        kwargs["step_rad"] = math.radians(
-            _number(p, "sonar", "step_deg", s["step_deg"], positive=True)
-        )
-    if "beam_width_deg" in s:
-        kwargs["beam_width_rad"] = math.radians(
-            _number(p, "sonar", "beam_width_deg", s["beam_width_deg"], positive=True)
-        )
-    if "angle_sense" in s:
-        kwargs["angle_sense"] = int(
-            _number(p, "sonar", "angle_sense", s["angle_sense"], integer=True)
-        )
-    if "range_offset_m" in s:
-        kwargs["range_offset_m"] = _number(p, "sonar", "range_offset_m", s["range_offset_m"])
-    time_offset_s = base.sonar_time_offset_s
-    if "time_offset_s" in s:
-        time_offset_s = _number(p, "sonar", "time_offset_s", s["time_offset_s"])
-    try:
-        return replace(base.sonar, **kwargs), time_offset_s
-    except ValueError as exc:
-        raise DataError(p, None, f"[sonar] {exc}") from exc
-
-
-def _noise_table(p: Path, table: dict[str, Any], base: NoiseConfig) -> NoiseConfig:
-    """``[noise]`` over ``base``: finite, positive (the scatter settings may be 0)."""
-    _check_keys(p, "noise", table, {f.name for f in fields(NoiseConfig)})
-    may_be_zero = {
-        "dvl_scatter_window_s",
-        "dvl_nominal_scatter_mps",
-        "ahrs_bias_walk_deg_per_sqrt_s",
-        "dvl_scale_sigma",
-        "line_sigma_rho_m",
-        "line_sigma_theta_deg",
-    }
-    values = {}
-    for k, v in table.items():
-        values[k] = _number(p, "noise", k, v, positive=k not in may_be_zero)
-        if values[k] < 0:
-            raise DataError(p, None, f"[noise] {k} must be >= 0, got {v!r}")
-    return replace(base, **values)
-
-
-def _motion_table(
-    p: Path, table: dict[str, Any], base: DatasetConfig
-) -> tuple[str, tuple[float, float]]:
-    """``[motion]`` over ``base``: the yaw-rate source and the AHRS deviation (rad)."""
-    _check_keys(p, "motion", table, {"yaw_rate_source", "ahrs_deviation_deg"})
-    yaw_rate_source = base.yaw_rate_source
-    if "yaw_rate_source" in table:
-        yaw_rate_source = table["yaw_rate_source"]
-        if yaw_rate_source not in YAW_RATE_SOURCES:
+def _tables(p: Path, text: str, data: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """The file's tables by dotted name (``mounting.sonar``); a key or a table that is not in
+    the schema, or a value where a table belongs, is a DataError (with its line when found)."""
+    out: dict[str, dict[str, Any]] = {}
+    for name, table in data.items():
+        if name == "mounting" and isinstance(table, dict):
+            for sub, inner in table.items():
+                out.update(_tables(p, text, {f"mounting.{sub}": inner}))
+            continue
+        outer, _, last = name.rpartition(".")
+        line = toml_line(text, outer, last) or toml_line(text, name)
+        if name not in _SCHEMA and name != "mounting":
+            tops = sorted({k.split(".")[0] for k in _SCHEMA})
+            where = f"[{outer}]" if outer else "top level"
+            raise DataError(p, line, f"unknown key {last!r} in {where}; allowed: {tops}")
+        if not isinstance(table, dict):
+            raise DataError(
+                p, line, f"[{name}] must be a table, got {table!r} ({type(table).__name__})"
+            )
+        unknown = sorted(set(table) - set(_SCHEMA[name]))
+        if unknown:
             raise DataError(
                 p,
-                None,
-                f"[motion] yaw_rate_source must be one of {YAW_RATE_SOURCES},"
-                f" got {yaw_rate_source!r}",
+                toml_line(text, name, unknown[0]),
+                f"unknown key(s) {unknown} in [{name}]; allowed: {sorted(_SCHEMA[name])}",
             )
-    deviation = base.ahrs_deviation_rad
-    if "ahrs_deviation_deg" in table:
-        dev = table["ahrs_deviation_deg"]
-        if not isinstance(dev, list) or len(dev) != 2:
-            raise DataError(
-                p, None, f"[motion] ahrs_deviation_deg must be [B, C] (deg), got {dev!r}"
-            )
-        b_deg, c_deg = (_number(p, "motion", "ahrs_deviation_deg", v) for v in dev)
-        deviation = (math.radians(b_deg), math.radians(c_deg))
-    return yaw_rate_source, deviation
+        out[name] = table
+    return out
 
 
 def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> DatasetConfig:
@@ -302,54 +348,45 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
     Raises
     ------
     DataError
-        On a TOML syntax error (with its line), an unknown key or a value of the wrong type.
+        A file that cannot be read or is not UTF-8 (with its line), a TOML syntax error (with
+        its line), a table that is not one, an unknown key, a value of the wrong type,
+        non-finite or out of range (naming the key, and its line when written ``key = ...``;
+        :mod:`datasets.settings`).
     """
     p = Path(path)
     base = base if base is not None else DatasetConfig()
+    data, text = read_toml(p)
+    changes: dict[str, Any] = {}
+    keys: dict[str, tuple[str, str]] = {}  # field path -> the file's table and key
     try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        found = re.search(r"at line (\d+)", str(exc))
-        raise DataError(
-            p, int(found.group(1)) if found else None, f"TOML syntax error: {exc}"
-        ) from exc
-    except OSError as exc:
-        raise DataError(p, None, f"cannot read: {exc.strerror}") from exc
-    _check_keys(p, "top level", data, {"sonar", "mounting", "noise", "keyframes", "motion"})
+        for table, values in _tables(p, text, data).items():
+            for key, value in values.items():
+                target, unit = _SCHEMA[table][key]
+                keys[target] = (table, key)
+                typed = coerce(_field_type(target), value, f"[{table}] {key}")
+                if unit == _DEGREES:
+                    typed = (
+                        tuple(math.radians(v) for v in typed)
+                        if isinstance(typed, tuple)
+                        else math.radians(typed)
+                    )
+                changes[target] = typed
+            if table.startswith("mounting.") and "source" not in values:
+                changes[f"{table.split('.')[1]}_mounting.source"] = str(p)
+        return replace_checked(base, changes)  # type: ignore[no-any-return]
+    except SettingError as exc:
+        named = [keys.get(k.strip()) for k in exc.key.split(",")]
+        where = [f"[{t}] {k}" for t, k in (n for n in named if n is not None)]
+        line = toml_line(text, *named[0]) if len(named) == 1 and named[0] is not None else None
+        if not where:  # a type error, already named by the file's key
+            where, line = [exc.key], _line_of_key(text, exc.key)
+        raise DataError(p, line, f"{', '.join(where)}: {exc.message}") from None
 
-    sonar, time_offset_s = base.sonar, base.sonar_time_offset_s
-    if "sonar" in data:
-        sonar, time_offset_s = _sonar_table(p, data["sonar"], base)
-    mountings = {"sonar": base.sonar_mounting, "dvl": base.dvl_mounting, "ahrs": base.ahrs_mounting}
-    if "mounting" in data:
-        _check_keys(p, "mounting", data["mounting"], set(mountings))
-        for name, table in data["mounting"].items():
-            mountings[name] = _mounting(p, f"mounting.{name}", table, mountings[name])
-    noise = _noise_table(p, data["noise"], base.noise) if "noise" in data else base.noise
-    scan_direction = base.keyframe_scan_direction
-    if "keyframes" in data:
-        _check_keys(p, "keyframes", data["keyframes"], {"scan_direction"})
-        scan_direction = int(
-            _number(p, "keyframes", "scan_direction", data["keyframes"]["scan_direction"])
-        )
-        if scan_direction not in (-1, 1):
-            raise DataError(
-                p, None, f"[keyframes] scan_direction must be +1 or -1, got {scan_direction}"
-            )
-    yaw_rate_source, ahrs_deviation_rad = base.yaw_rate_source, base.ahrs_deviation_rad
-    if "motion" in data:
-        yaw_rate_source, ahrs_deviation_rad = _motion_table(p, data["motion"], base)
-    return DatasetConfig(
-        sonar=sonar,
-        sonar_mounting=mountings["sonar"],
-        dvl_mounting=mountings["dvl"],
-        ahrs_mounting=mountings["ahrs"],
-        noise=noise,
-        keyframe_scan_direction=scan_direction,
-        sonar_time_offset_s=time_offset_s,
-        yaw_rate_source=yaw_rate_source,
-        ahrs_deviation_rad=ahrs_deviation_rad,
-    )
+
+def _line_of_key(text: str, key: str) -> int | None:
+    """The line of a ``"[table] key"`` name."""
+    found = re.fullmatch(r"\[(.+)\] (.+)", key)
+    return toml_line(text, found.group(1), found.group(2)) if found else None
 
 
 def _deg(angle_rad: float) -> float:
@@ -385,16 +422,30 @@ def config_tables(config: DatasetConfig) -> dict[str, dict[str, Any]]:
             "yaw_rate_source": config.yaw_rate_source,
             "ahrs_deviation_deg": [_deg(v) for v in config.ahrs_deviation_rad],
         },
+        "gates": {f.name: getattr(config.gates, f.name) for f in fields(GateConfig)},
     }
 
 
 def dump_dataset_config(config: DatasetConfig) -> str:
-    """The TOML text of ``config`` (what the simulator writes beside its logs), by tomli-w."""
+    """The TOML text of ``config`` (what the simulator writes beside its logs), by tomli-w;
+    ``[gates]`` only when it differs from the defaults (the file stays what it was otherwise).
+    Arrays of numbers stay on their key's line (``ahrs_deviation_deg = [-2.01, 2.57]``), so
+    that an error in one names the line that holds it."""
     doc: dict[str, Any] = {}
     for name, table in config_tables(config).items():
+        if name == "gates" and config.gates == GateConfig():
+            continue
         head, _, sub = name.partition(".")
         if sub:
             doc.setdefault(head, {})[sub] = table
         else:
             doc[head] = table
-    return tomli_w.dumps(doc)
+    return _ONE_LINE_ARRAY.sub(_join_array, tomli_w.dumps(doc))
+
+
+#: tomli-w's multi-line array of plain numbers: ``key = [\n    1.0,\n    2.0,\n]``
+_ONE_LINE_ARRAY = re.compile(r"= \[\n((?:    [-+0-9.eE]+,\n)+)\]")
+
+
+def _join_array(match: re.Match[str]) -> str:
+    return "= [" + ", ".join(v.strip().rstrip(",") for v in match.group(1).splitlines()) + "]"

@@ -19,6 +19,8 @@ from sonar.beam import SonarBeam
 
 __all__ = ["read_is_log", "write_is_log"]
 
+_TURN_RAD = 2.0 * np.pi + 1e-6  # the log writes angles to 1e-6 rad
+
 _HEADER = [
     "% ----------------------------------------------------------------------",
     "% MSIS raw log written by sonarslam",
@@ -48,16 +50,26 @@ def read_is_log(path: str | Path, n_bins: int | None = None) -> list[SonarBeam]:
     Raises
     ------
     DataError
-        Missing file, non-numeric field, intensity outside 0-255, time going backwards.
-        Rows with a wrong bin count (e.g. a truncated last row) are skipped with a warning.
+        Bad input by :mod:`datasets.logfile` (missing or special file, non-numeric or
+        non-finite field, time going backwards), an intensity that is not a whole number in
+        0-255, a transducer angle beyond +-2 pi rad. Rows with a wrong bin count, or a last
+        line without a line end that may be cut, are skipped with a warning.
     """
     table = read_table(path, n_columns=None if n_bins is None else n_bins + 3, min_columns=4)
     bins = table.data[:, 3:]
-    out_of_range = np.flatnonzero(np.any((bins < 0.0) | (bins > 255.0), axis=1))
-    if out_of_range.size:
-        i = int(out_of_range[0])
-        raise DataError(table.path, int(table.line_numbers[i]), "intensity outside 0-255")
-    intensities = np.rint(bins).astype(np.uint8)
+    bad = np.any((bins < 0.0) | (bins > 255.0) | (bins != np.rint(bins)), axis=1)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise DataError(
+            table.path, int(table.line_numbers[i]), "intensity not a whole number in 0-255"
+        )
+    bad = np.abs(table.data[:, 2]) > _TURN_RAD
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise DataError(
+            table.path, int(table.line_numbers[i]), "transducer angle beyond +-2 pi rad"
+        )
+    intensities = bins.astype(np.uint8)
     return [
         SonarBeam(t=float(row[0]), transducer_angle_rad=float(row[2]), intensities=intensities[i])
         for i, row in enumerate(table.data)

@@ -14,85 +14,134 @@ information too), in time order.
 
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from datasets.errors import DataError
-from datasets.logfile import is_number
+from datasets.logfile import MAX_UNIX_TIME_S, Table, parse_table, text_lines
 from features.geometry import FloatArray
 from sonar.beam import SonarBeam, SonarHead
 
-__all__ = ["read_pcd_xy", "read_keyframe_times", "read_keyframes"]
+__all__ = ["read_pcd", "read_pcd_xy", "read_keyframe_times", "read_keyframes"]
 
 _MATCH_TOLERANCE_S = 0.001  # keyFrameBeginning equals an IS_timestamps row to < 1 ms (README)
 _GRID_TOLERANCE = 0.01  # points must lie within 1 % of a step / bin of the polar grid
 
 
-def read_pcd_xy(path: str | Path) -> FloatArray:
-    """Read an ASCII PCD with fields ``x y z``; returns the points' ``(x, y)``, shape (N, 2)."""
+_INT_RE = re.compile(r"[0-9]+")
+_SPACES = re.compile(r"[ \t]+")
+#: The header line of ``keyFrameTimeStamps.csv``.
+KEYFRAME_CSV_HEADER = ("keyFrame", "keyFrameBeginning", "keyFrameEnd")
+
+
+def read_pcd(path: str | Path) -> Table:
+    """Read an ASCII PCD with fields starting ``x y``: the points (N, n_fields) with the
+    physical line of each (:class:`datasets.logfile.Table`; the header's length is the file's).
+
+    Raises
+    ------
+    DataError
+        No ``DATA ascii`` line, FIELDS not starting with ``x y``, POINTS not a whole number or
+        not the count of point rows, a row with another number of fields, a field that is not a
+        finite number (the strict tokenizer, :mod:`datasets.logfile`).
+    """
     p = Path(path)
-    try:
-        lines = p.read_text(encoding="ascii").splitlines()
-    except FileNotFoundError as exc:
-        raise DataError(p, None, "file not found") from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DataError(p, None, f"cannot read as ASCII PCD: {exc}") from exc
+    lines, terminated = text_lines(p)
     header: dict[str, str] = {}
     data_line = None
-    for number, line in enumerate(lines, start=1):
-        key, _, value = line.strip().partition(" ")
-        header[key] = value.strip()
+    for number, raw in enumerate(lines, start=1):
+        line = raw.strip(" \t")
+        if not line or line.startswith("#"):
+            continue
+        key, *value = _SPACES.split(line, maxsplit=1)
+        header[key] = value[0] if value else ""
         if key == "DATA":
             data_line = number
             break
     if data_line is None or header.get("DATA") != "ascii":
         raise DataError(p, None, "no 'DATA ascii' header line")
-    if header.get("FIELDS", "").split()[:2] != ["x", "y"]:
+    names = _SPACES.split(header.get("FIELDS", ""))
+    if names[:2] != ["x", "y"]:
         raise DataError(p, None, f"FIELDS must start with 'x y', got {header.get('FIELDS')!r}")
-    try:
-        n_points = int(header.get("POINTS", ""))
-    except ValueError:
-        raise DataError(p, None, "POINTS header missing or not an integer") from None
-    n_fields = len(header["FIELDS"].split())
-    body = lines[data_line:]
-    rows = [(i, line.split()) for i, line in enumerate(body, start=data_line + 1) if line.strip()]
-    if len(rows) != n_points:
-        raise DataError(p, None, f"POINTS says {n_points} but the file has {len(rows)} point rows")
-    for number, fields in rows:
-        if len(fields) != n_fields:
-            raise DataError(p, number, f"expected {n_fields} fields, got {len(fields)}")
-    try:
-        xyz = np.array([f for _, f in rows], dtype=np.float64).reshape(-1, n_fields)
-    except ValueError:
-        number = next(n for n, f in rows if not all(is_number(v) for v in f))
-        raise DataError(p, number, "non-numeric field") from None
-    return xyz[:, :2].copy()
+    points = header.get("POINTS", "")
+    if not _INT_RE.fullmatch(points):
+        raise DataError(p, None, "POINTS header missing or not a whole number")
+    n_points = int(points)
+    numbered = [
+        (number, line.strip(" \t"))
+        for number, line in enumerate(lines[data_line:], start=data_line + 1)
+        if line.strip(" \t")
+    ]
+    if not numbered:
+        if n_points:
+            raise DataError(p, None, f"POINTS says {n_points} but the file has no point rows")
+        return Table(p, np.zeros((0, len(names))), np.zeros(0, dtype=np.int64), 0)
+    table = parse_table(
+        p,
+        numbered,
+        None if terminated else len(lines),
+        n_columns=len(names),
+        time_column=None,
+        used_columns=(0, 1),
+        skip_wrong_columns=False,
+    )
+    if table.data.shape[0] != n_points:
+        raise DataError(
+            p, None, f"POINTS says {n_points} but the file has {table.data.shape[0]} point rows"
+        )
+    return table
 
 
-def read_keyframe_times(path: str | Path) -> tuple[np.ndarray, FloatArray, FloatArray]:
-    """Read ``keyFrameTimeStamps.csv``: ``(keyframe numbers, begin times, end times)``."""
+def read_pcd_xy(path: str | Path) -> FloatArray:
+    """Read an ASCII PCD with fields ``x y z``; returns the points' ``(x, y)``, shape (N, 2)."""
+    return read_pcd(path).data[:, :2].copy()
+
+
+def read_keyframe_times(path: str | Path) -> tuple[np.ndarray, FloatArray, FloatArray, np.ndarray]:
+    """Read ``keyFrameTimeStamps.csv``: ``(keyframe numbers, begin times, end times, lines)``.
+
+    The first line must be the header ``keyFrame,keyFrameBeginning,keyFrameEnd`` (a file
+    without it would lose its first keyframe); keyframe numbers are whole, increasing numbers;
+    times are Unix times, each scan ending after it begins and beginning no earlier than the
+    previous one. ``lines`` (K,) are the physical line numbers of the rows.
+    """
     p = Path(path)
-    try:
-        text = p.read_text(encoding="ascii")
-    except FileNotFoundError as exc:
-        raise DataError(p, None, "file not found") from exc
-    rows = []
-    for number, line in enumerate(text.splitlines(), start=1):
-        if number == 1 or not line.strip():
-            continue
-        fields = line.split(",")
-        if len(fields) != 3:
-            raise DataError(p, number, f"expected 3 comma-separated fields, got {len(fields)}")
-        try:
-            rows.append((float(fields[0]), float(fields[1]), float(fields[2])))
-        except ValueError:
-            raise DataError(p, number, "non-numeric field") from None
-    if not rows:
+    lines, terminated = text_lines(p)
+    names = tuple(f.strip(" \t") for f in lines[0].split(",")) if lines else ()
+    if names != KEYFRAME_CSV_HEADER:
+        raise DataError(p, 1, f"expected the header line {','.join(KEYFRAME_CSV_HEADER)!r}")
+    numbered = [
+        (number, line.strip(" \t"))
+        for number, line in enumerate(lines[1:], start=2)
+        if line.strip(" \t")
+    ]
+    if not numbered:
         raise DataError(p, None, "no data rows")
-    a = np.array(rows)
-    return a[:, 0].astype(np.int64), a[:, 1], a[:, 2]
+    table = parse_table(
+        p,
+        numbered,
+        None if terminated else len(lines),
+        n_columns=3,
+        time_column=1,
+        used_columns=(0, 1),
+        delimiter=",",
+        skip_wrong_columns=False,
+    )
+    k, begin, end = table.data.T
+    rows = table.line_numbers
+
+    def first(bad: np.ndarray, message: str) -> None:
+        if np.any(bad):
+            raise DataError(p, int(rows[np.flatnonzero(bad)[0]]), message)
+
+    first((k != np.rint(k)) | (k < 0) | (k >= 2**31), "keyframe number is not a whole number")
+    first(np.concatenate([[False], np.diff(k) <= 0]), "keyframe numbers must increase")
+    first(~(end > begin), "keyframe ends before it begins")
+    first(end >= MAX_UNIX_TIME_S, "keyframe end is not a Unix time")
+    return k.astype(np.int64), begin.copy(), end.copy(), rows.copy()
 
 
 def read_keyframes(
@@ -127,28 +176,27 @@ def read_keyframes(
         raise ValueError(f"scan_direction must be +1 or -1, got {scan_direction}")
     folder = Path(keyframe_dir)
     times_path = folder / "keyFrameTimeStamps.csv"
-    numbers, begins, _ = read_keyframe_times(times_path)
+    numbers, begins, _, csv_lines = read_keyframe_times(times_path)
     beams_per_scan = int(round(2.0 * np.pi / head.step_rad))
     beams: list[SonarBeam] = []
     raw_head = replace(head, range_offset_m=0.0)
     last_row = -1
-    for k, begin in zip(numbers, begins, strict=True):
+    for k, begin, line in zip(numbers, begins, csv_lines.tolist(), strict=True):
         row = int(np.searchsorted(is_timestamps_s, begin))
         candidates = [r for r in (row - 1, row) if 0 <= r < is_timestamps_s.size]
         row = min(candidates, key=lambda r: abs(is_timestamps_s[r] - begin))
         if abs(is_timestamps_s[row] - begin) > _MATCH_TOLERANCE_S:
             raise DataError(
-                times_path, int(k) + 1, f"keyframe {k} start {begin:.3f} is no IS_timestamps row"
+                times_path, line, f"keyframe {k} start {begin:.3f} is no IS_timestamps row"
             )
         if row + beams_per_scan > is_timestamps_s.size:
-            raise DataError(times_path, int(k) + 1, f"keyframe {k} runs past the last IS timestamp")
+            raise DataError(times_path, line, f"keyframe {k} runs past the last IS timestamp")
         if row < last_row:
-            raise DataError(
-                times_path, int(k) + 1, f"keyframe {k} starts before the previous scan ends"
-            )
+            raise DataError(times_path, line, f"keyframe {k} starts before the previous scan ends")
         last_row = row + beams_per_scan
         pcd = folder / f"pclKeyFrame{k}.pcd"
-        xy = read_pcd_xy(pcd)
+        points = read_pcd(pcd)
+        xy = points.data[:, :2]
         angle = np.arctan2(xy[:, 1], xy[:, 0]) % (2.0 * np.pi)
         j_float = angle / head.step_rad
         j = np.rint(j_float).astype(np.int64) % beams_per_scan
@@ -161,7 +209,9 @@ def read_keyframes(
         if np.any(off_grid) or np.any(bins < 0) or np.any(bins >= head.n_bins):
             i = int(np.flatnonzero(off_grid | (bins < 0) | (bins >= head.n_bins))[0])
             raise DataError(
-                pcd, 12 + i, "point is not on the sonar's polar grid (step, bin size, range)"
+                pcd,
+                int(points.line_numbers[i]),
+                "point is not on the sonar's polar grid (step, bin size, range)",
             )
         mask = np.zeros((beams_per_scan, head.n_bins), dtype=np.uint8)
         mask[j, bins] = 255

@@ -1,27 +1,56 @@
-"""Reading whitespace-separated numeric logs with ``%`` headers, strictly.
+"""The one strict tokenizer of the project's text inputs, and the policy for bad input.
 
-The policy for bad input, shared by every reader of the project (README, "Bad input"):
+Every reader of a text file goes through here (the logs, the keyframe CSV and PCDs, the
+``sonarslam.toml`` files, ``truth.json``):
 
-========================================  ============================================
-input                                     result
-========================================  ============================================
-missing or unreadable file                :class:`DataError` naming the file
-non-numeric field                         :class:`DataError` naming file and line
-row with the wrong number of columns      row skipped; one :class:`DataWarning` per file
-(short, long, or a truncated last line)   with the count and the first line numbers
-time going backwards                      :class:`DataError` naming file and line
-no data row at all                        :class:`DataError` naming the file
-========================================  ============================================
+* **Files.** Only regular files are read: a directory, a FIFO, a device or a socket (also
+  behind a symlink) is refused *before* reading (a FIFO would block for ever, ``/dev/zero`` would
+  fill the memory); a symlink loop or an unreadable file is a :class:`DataError`; so is a file
+  over :data:`MAX_FILE_BYTES`.
+* **Encoding.** Stated per format: logs, CSV and PCD are ASCII (their ``%`` header lines may hold
+  any byte: they are read as Latin-1 and never parsed); TOML and JSON are UTF-8. A byte that is
+  not text in the stated encoding is a :class:`DataError` naming its line.
+* **Lines.** Physical lines end at ``\\r\\n``, ``\\r`` or ``\\n`` and nothing else (Python's
+  ``splitlines`` also breaks at ``\\x0b``, ``\\x0c``, ``\\x1c``-``\\x1e`` and ``\\x85``, which
+  shifts every later line number); every message names the 1-based physical line.
+* **Fields.** Separated by runs of spaces and tabs only (``str.split()`` also splits at
+  ``\\xa0``, ``\\x1f``...). A number is ``[+-]digits[.[digits]][e[+-]digits]`` or ``[+-].digits[...]``
+  (:data:`NUMBER`): no ``nan``, ``inf``, ``1_000``, ``0x10``, non-ASCII digits or a dangling
+  ``.`` or ``1e``; and
+  it must be finite as a float64 (``1e999`` is not).
+* **A cut last line.** A last line without a line end may have been cut inside its last field
+  (``0.0314...`` read as ``0.03``). It is taken only when its fields have the shape (decimals,
+  or digits of a whole number) of the same columns in every complete row, or when that column is
+  not used; otherwise it is skipped as cut, with the warning below.
+
+The policy for bad input, shared by every reader (README, "Bad input"):
+
+=========================================  ============================================
+input                                      result
+=========================================  ============================================
+missing, special or unreadable file        :class:`DataError` naming the file
+byte that is not text (stated encoding)    :class:`DataError` naming file and line
+non-numeric or non-finite field            :class:`DataError` naming file and line
+time going backwards or not a Unix time    :class:`DataError` naming file and line
+row with the wrong number of columns       row skipped; one :class:`DataWarning` per file
+(short, long), or a cut last line          with the count and the first line numbers
+no data row at all                         :class:`DataError` naming the file
+=========================================  ============================================
 
 A skipped row is one sample of a sensor that samples many times a second; every estimator
 copes with a missing sample (that is a sensor gap), and the warning says how many there were.
 A non-numeric field or time going backwards means the file is not what we think it is, so
-nothing is guessed.
+nothing is guessed. Implausible values of valid syntax (a DVL speed of 50 m/s, a GPS fix at
+0/0) are the sensors' faults, gated with counted warnings after reading (:mod:`datasets.gates`).
 """
 
 from __future__ import annotations
 
+import os
+import re
+import stat
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,12 +59,170 @@ import numpy as np
 from datasets.errors import DataError, DataWarning
 from features.geometry import FloatArray
 
-__all__ = ["Table", "read_table", "check_time_order", "is_number"]
+__all__ = [
+    "NUMBER",
+    "MAX_FILE_BYTES",
+    "MAX_UNIX_TIME_S",
+    "Table",
+    "read_bytes",
+    "read_text",
+    "split_lines",
+    "text_lines",
+    "data_lines",
+    "read_table",
+    "parse_table",
+    "parse_row",
+    "parse_number",
+    "check_time_order",
+    "check_unix_times",
+    "is_number",
+]
+
+#: The grammar of a number in every text input (and of numbers given on the command line).
+NUMBER = r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
+#: Larger files are refused (they are not logs of this kind; reading them would exhaust memory).
+MAX_FILE_BYTES = 2**31
+#: Times are Unix seconds in ``[0, MAX_UNIX_TIME_S)`` (the year 2286).
+MAX_UNIX_TIME_S = 1e10
+
+_NUMBER_RE = re.compile(NUMBER)
+_ROW_RE = re.compile(rf"{NUMBER}(?:[ \t]+{NUMBER})*")
+_CSV_ROW_RE = re.compile(rf"{NUMBER}(?:[ \t]*,[ \t]*{NUMBER})*")
+_LINE_BREAK = re.compile(r"\r\n|\r|\n")
+_FIELD_SEP = re.compile(r"[ \t]+")
+_NOT_TEXT = re.compile(r"[^\t\x20-\x7e]")
+_TAB_TO_SPACE = bytes.maketrans(b"\t", b" ")
+_NOT_NUMERIC_TEXT = re.compile(r"[^0-9eE+\-. \t\n]")
+_NUMBER_PREFIX = re.compile(r"[+-]?[0-9]*\.?[0-9]*(?:[eE][+-]?)?")
+_SHAPE = re.compile(r"[+-]?([0-9]*)(?:\.([0-9]+))?(?:[eE][+-]?([0-9]+))?")
+_KINDS = (
+    (stat.S_ISFIFO, "a FIFO"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
+
+def read_bytes(path: str | Path) -> bytes:
+    """The bytes of a regular file; anything else is a :class:`DataError` naming it.
+
+    The file is opened without blocking and checked with ``fstat`` before a byte is read, so a
+    FIFO or a device behind a symlink is refused instead of blocking or filling the memory.
+    """
+    p = Path(path)
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        fd = os.open(p, flags)
+    except FileNotFoundError as exc:
+        raise DataError(p, None, "file not found") from exc
+    except OSError as exc:
+        raise DataError(p, None, f"cannot open: {exc.strerror or exc}") from exc
+    try:
+        mode = os.fstat(fd).st_mode
+        if stat.S_ISDIR(mode):
+            raise DataError(p, None, "is a directory, not a file")
+        for test, kind in _KINDS:
+            if test(mode):
+                raise DataError(p, None, f"is {kind}, not a regular file")
+        if not stat.S_ISREG(mode):
+            raise DataError(p, None, "is not a regular file")
+        size = os.fstat(fd).st_size
+        if size > MAX_FILE_BYTES:
+            raise DataError(p, None, f"is {size} bytes, more than the {MAX_FILE_BYTES} accepted")
+        with os.fdopen(fd, "rb", closefd=False) as fh:
+            return fh.read()
+    except OSError as exc:
+        raise DataError(p, None, f"cannot read: {exc.strerror or exc}") from exc
+    finally:
+        os.close(fd)
+
+
+def _line_of(data: bytes, offset: int) -> int:
+    """1-based physical line of a byte offset (breaks ``\\r\\n``, ``\\r``, ``\\n``)."""
+    head = data[:offset]
+    return head.count(b"\n") + head.count(b"\r") - head.count(b"\r\n") + 1
+
+
+def read_text(path: str | Path, encoding: str) -> str:
+    """A regular file (:func:`read_bytes`) decoded strictly with ``encoding``; a byte that is
+    not text in it is a :class:`DataError` naming its line."""
+    p = Path(path)
+    data = read_bytes(p)
+    try:
+        return data.decode(encoding)
+    except UnicodeDecodeError as exc:
+        line = _line_of(data, exc.start)
+        byte = data[exc.start]
+        raise DataError(p, line, f"byte 0x{byte:02X} is not {encoding} text") from None
+
+
+def split_lines(text: str) -> tuple[list[str], bool]:
+    """Physical lines (breaks ``\\r\\n``, ``\\r``, ``\\n`` only) and whether the last one ended
+    with a break (False: it may have been cut). An empty text has no line."""
+    if not text:
+        return [], True
+    lines = _LINE_BREAK.split(text)
+    terminated = lines[-1] == ""
+    if terminated:
+        lines.pop()
+    return lines, terminated
+
+
+def text_lines(path: str | Path, encoding: str = "latin-1") -> tuple[list[str], bool]:
+    """:func:`read_text` then :func:`split_lines`."""
+    return split_lines(read_text(path, encoding))
+
+
+def parse_number(text: str) -> float | None:
+    """The finite float of a field in the grammar :data:`NUMBER`, else None."""
+    if not _NUMBER_RE.fullmatch(text):
+        return None
+    value = float(text)
+    return value if np.isfinite(value) else None
+
+
+def is_number(text: str) -> bool:
+    """True when ``text`` is a finite number in the grammar :data:`NUMBER`."""
+    return parse_number(text) is not None
+
+
+def _check_ascii(path: Path, number: int, line: str) -> None:
+    bad = _NOT_TEXT.search(line)
+    if bad is not None:
+        raise DataError(
+            path,
+            number,
+            f"byte 0x{ord(bad.group()):02X} at column {bad.start() + 1} is not ASCII text",
+        )
+
+
+def parse_row(path: Path, number: int, fields: Sequence[str]) -> FloatArray:
+    """The finite numbers of one row's fields; a :class:`DataError` naming the line and the
+    first field that is not one."""
+    for f in fields:
+        if not _NUMBER_RE.fullmatch(f):
+            raise DataError(path, number, f"non-numeric field {f!r}")
+    values = np.array(fields, dtype=np.float64)
+    if not np.all(np.isfinite(values)):
+        bad = fields[int(np.flatnonzero(~np.isfinite(values))[0])]
+        raise DataError(path, number, f"field {bad!r} is not a finite number")
+    return values
+
+
+def _shape(field: str) -> tuple[int, int, int]:
+    """``(decimals, exponent digits, digits of a whole number)`` of a number's text: what a cut
+    inside the field changes."""
+    m = _SHAPE.fullmatch(field)
+    if m is None:
+        return (-1, -1, -1)
+    whole, decimals, exponent = m.group(1), m.group(2) or "", m.group(3) or ""
+    plain = not decimals and not exponent
+    return (len(decimals), len(exponent), len(whole) if plain else 0)
 
 
 @dataclass(frozen=True)
 class Table:
-    """Numeric rows of a log with the 1-based line number of each row in its file."""
+    """Numeric rows of a log with the 1-based physical line number of each row in its file."""
 
     path: Path
     data: FloatArray  # (N, n_columns)
@@ -43,25 +230,45 @@ class Table:
     skipped: int
 
 
+def data_lines(path: str | Path, comment: str = "%") -> tuple[list[tuple[int, str]], int | None]:
+    """The data lines of a log, ``(physical line number, text stripped of spaces/tabs)``,
+    without blank lines and lines starting with ``comment``; and the number of the file's last
+    line when it has no line end (None otherwise)."""
+    lines, terminated = text_lines(path)
+    numbered = []
+    for number, raw in enumerate(lines, start=1):
+        line = raw.strip(" \t")
+        if line and not line.startswith(comment):
+            numbered.append((number, line))
+    return numbered, None if terminated else len(lines)
+
+
 def read_table(
     path: str | Path,
     n_columns: int | None = None,
     min_columns: int = 1,
     time_column: int | None = 0,
+    used_columns: Sequence[int] | None = None,
+    trust_last_line: bool = False,
 ) -> Table:
-    """Read the numeric rows of a log.
+    """Read the numeric rows of a log (the module docstring's rules).
 
     Parameters
     ----------
     path : str or Path
-        The log file. Lines starting with ``%`` and blank lines are skipped; fields are separated
-        by runs of spaces or tabs; CRLF line ends are accepted.
+        The log file. Lines starting with ``%`` (after spaces/tabs) and blank lines are skipped.
     n_columns : int, optional
         Expected number of fields per row; by default, the count of the first data row.
     min_columns : int
         Smallest acceptable ``n_columns``.
     time_column : int or None
-        Column that must not decrease (Unix s); None to skip the check.
+        Column of Unix times (s) that must not decrease; None to skip the check.
+    used_columns : sequence of int, optional
+        The columns the caller uses (default all): a last line without a line end whose last
+        field is in an unused column is taken as it is.
+    trust_last_line : bool
+        Take a last line without a line end as it is; for callers that check its values
+        themselves (``*_SETUP.log``: its step must divide the turn).
 
     Returns
     -------
@@ -73,58 +280,196 @@ def read_table(
         See the module docstring.
     """
     p = Path(path)
-    try:
-        text = p.read_bytes().decode("latin-1")
-    except FileNotFoundError as exc:
-        raise DataError(p, None, "file not found") from exc
-    except OSError as exc:
-        raise DataError(p, None, f"cannot read: {exc.strerror}") from exc
+    numbered, open_end = data_lines(p)
+    return parse_table(
+        p,
+        numbered,
+        None if trust_last_line else open_end,
+        n_columns=n_columns,
+        min_columns=min_columns,
+        time_column=time_column,
+        used_columns=used_columns,
+    )
 
-    rows: list[FloatArray] = []
-    line_numbers: list[int] = []
-    bad_lines: list[int] = []
+
+def parse_table(
+    path: Path,
+    numbered: Sequence[tuple[int, str]],
+    open_end: int | None,
+    n_columns: int | None = None,
+    min_columns: int = 1,
+    time_column: int | None = 0,
+    used_columns: Sequence[int] | None = None,
+    delimiter: str | None = None,
+    skip_wrong_columns: bool = True,
+) -> Table:
+    """The numeric rows of numbered data lines (:func:`data_lines`); :func:`read_table`'s rules.
+
+    ``open_end``: the number of the file's last line when it has no line end (it may be cut),
+    else None. ``delimiter``: None for runs of spaces and tabs, else one character (``","``)
+    with spaces and tabs around a field ignored. ``skip_wrong_columns``: a row with the wrong
+    number of fields is skipped and counted (True) or a :class:`DataError` (False).
+    """
+    lines = list(numbered)
     expected = n_columns
-    for number, raw in enumerate(text.splitlines(), start=1):
-        line = raw.strip()
-        if not line or line.startswith("%"):
-            continue
-        fields = line.split()
-        if expected is None:
-            if len(fields) < min_columns:
-                bad_lines.append(number)
-                continue
+    fast = _fast_block(lines, expected, open_end, min_columns, delimiter)
+    parts: list[FloatArray] = []
+    line_numbers: list[int] = []
+    if fast is not None:  # every line but an open-ended last one is clean: no loop needed
+        expected, block = fast
+        parts.append(block)
+        line_numbers = [number for number, _ in lines[: block.shape[0]]]
+    rows: list[list[str]] = []  # the rows the loop takes (their fields)
+    bad_lines: list[int] = []
+    cut_line: int | None = None
+    row_re = _ROW_RE if delimiter is None else _CSV_ROW_RE
+    for number, line in lines[len(line_numbers) :]:
+        clean = row_re.fullmatch(line) is not None
+        if not clean:
+            _check_ascii(path, number, line)
+        if delimiter is not None:
+            fields = [f.strip(" \t") for f in line.split(delimiter)]
+        else:  # on a clean line str.split() splits at runs of spaces and tabs only
+            fields = line.split() if clean else _FIELD_SEP.split(line)
+        at_open_end = number == open_end
+        if expected is None and len(fields) >= min_columns and not at_open_end:
             expected = len(fields)
-        if len(fields) != expected:
+        if expected is None or len(fields) != expected:
+            if not skip_wrong_columns:
+                raise DataError(path, number, f"expected {expected} fields, got {len(fields)}")
             bad_lines.append(number)
             continue
-        try:
-            values = np.array(fields, dtype=np.float64)
-        except ValueError:
-            bad = next(f for f in fields if not is_number(f))
-            raise DataError(p, number, f"non-numeric field {bad!r}") from None
-        if not np.all(np.isfinite(values)):
-            raise DataError(p, number, "field is NaN or infinite")
-        rows.append(values)
+        if at_open_end and _cut_inside(fields):
+            cut_line = number
+            continue
+        rows.append(fields)
         line_numbers.append(number)
-
-    if not rows:
-        raise DataError(p, None, "no data rows")
-    if bad_lines:
-        shown = ", ".join(str(n) for n in bad_lines[:5]) + (" ..." if len(bad_lines) > 5 else "")
-        warnings.warn(
-            f"{p}: skipped {len(bad_lines)} row(s) without {expected} columns (lines {shown})",
-            DataWarning,
-            stacklevel=2,
-        )
+    if rows and line_numbers[-1] == open_end and not _vouched(lines, rows, used_columns, delimiter):
+        cut_line = line_numbers.pop()
+        rows.pop()
+    if rows:
+        first = len(line_numbers) - len(rows)
+        for i, fields in enumerate(rows):  # names the first field that is no finite number
+            if not _finite_row(fields):
+                parse_row(path, line_numbers[first + i], fields)
+        parts.append(np.array(rows, dtype=np.float64))
+    if not line_numbers:
+        cut = "" if cut_line is None else f" (line {cut_line} has no line end and may be cut)"
+        raise DataError(path, None, f"no data rows{cut}")
+    _warn_skipped(path, expected, bad_lines, cut_line)
     table = Table(
-        path=p,
-        data=np.vstack(rows),
+        path=path,
+        data=np.vstack(parts),
         line_numbers=np.asarray(line_numbers, dtype=np.int64),
-        skipped=len(bad_lines),
+        skipped=len(bad_lines) + (cut_line is not None),
     )
     if time_column is not None:
+        check_unix_times(table, time_column)
         check_time_order(table, time_column)
     return table
+
+
+def _finite_row(fields: list[str]) -> bool:
+    """Whether every field is a number of the grammar that is finite as a float64."""
+    if not all(_NUMBER_RE.fullmatch(f) for f in fields):
+        return False
+    return bool(np.all(np.isfinite(np.array(fields, dtype=np.float64))))
+
+
+def _fast_block(
+    lines: list[tuple[int, str]],
+    n_columns: int | None,
+    open_end: int | None,
+    min_columns: int,
+    delimiter: str | None,
+) -> tuple[int, FloatArray] | None:
+    """The common case in a few vectorised passes: when every line (but an open-ended last
+    one) holds only ASCII numbers of the grammar, all with the same count of fields, all
+    finite: ``(n_columns, data (N, n_columns))``; else None (the caller's line-by-line loop
+    then finds and names what is wrong)."""
+    if delimiter is not None:
+        return None
+    body = lines[:-1] if lines and lines[-1][0] == open_end else lines
+    if not body:
+        return None
+    block = "\n".join(line for _, line in body)
+    if _NOT_NUMERIC_TEXT.search(block) is not None:
+        return None
+    flat = block.encode("ascii").translate(_TAB_TO_SPACE)
+    code = np.frombuffer(flat, dtype=np.uint8)
+    is_char = (code != 32) & (code != 10)
+    starts = np.cumsum(is_char & ~np.concatenate([[False], is_char[:-1]]))
+    ends = np.flatnonzero(code == 10)
+    per_line = np.diff(np.concatenate([[0], starts[ends], [starts[-1]]]))
+    n = int(per_line[0]) if n_columns is None else n_columns
+    if n < max(min_columns, 1) or np.any(per_line != n):
+        return None
+    # numpy's conversion of ASCII tokens of these characters accepts exactly the grammar
+    # NUMBER (tested exhaustively to 6 characters in tests/test_fuzz_readers.py)
+    try:
+        data = np.array(flat.split(), dtype=np.float64).reshape(len(body), n)
+    except ValueError:
+        return None
+    if not np.all(np.isfinite(data)):
+        return None
+    return n, data
+
+
+def _cut_inside(fields: list[str]) -> bool:
+    """Whether a row's last field is the start of a number cut short (``1.``, ``1e-``, ``-``)
+    while the others are numbers."""
+    last = fields[-1]
+    return (
+        not _NUMBER_RE.fullmatch(last)
+        and _NUMBER_PREFIX.fullmatch(last) is not None
+        and all(_NUMBER_RE.fullmatch(f) for f in fields[:-1])
+    )
+
+
+def _vouched(
+    lines: list[tuple[int, str]],
+    rows: list[list[str]],
+    used_columns: Sequence[int] | None,
+    delimiter: str | None,
+) -> bool:
+    """Whether the last row taken (its line has no line end) is whole: its last field is in an
+    unused column, or has the shape of that column in every other data line."""
+    column = len(rows[-1]) - 1
+    if used_columns is not None and column not in used_columns:
+        return True
+    shape = _shape(rows[-1][-1])
+    others = [
+        line.rsplit(delimiter, 1)[-1].strip(" \t")
+        if delimiter is not None
+        else _FIELD_SEP.split(line)[-1]
+        for _, line in lines[:-1]
+    ]
+    return bool(others) and all(_shape(f) == shape for f in others)
+
+
+def _warn_skipped(path: Path, expected: int | None, bad_lines: list[int], cut: int | None) -> None:
+    parts = []
+    if bad_lines:
+        shown = ", ".join(str(n) for n in bad_lines[:5]) + (" ..." if len(bad_lines) > 5 else "")
+        parts.append(f"skipped {len(bad_lines)} row(s) without {expected} columns (lines {shown})")
+    if cut is not None:
+        parts.append(f"skipped line {cut}: it has no line end and may be cut inside a field")
+    if parts:
+        warnings.warn(f"{path}: {'; '.join(parts)}", DataWarning, stacklevel=4)
+
+
+def check_unix_times(table: Table, column: int = 0) -> None:
+    """Raise :class:`DataError` at the first row whose time is not a Unix time in
+    ``[0, MAX_UNIX_TIME_S)`` s."""
+    t = table.data[:, column]
+    bad = np.flatnonzero((t < 0.0) | (t >= MAX_UNIX_TIME_S))
+    if bad.size:
+        i = int(bad[0])
+        raise DataError(
+            table.path,
+            int(table.line_numbers[i]),
+            f"time {t[i]:.6g} s is not a Unix time (0 to {MAX_UNIX_TIME_S:.0e} s)",
+        )
 
 
 def check_time_order(table: Table, column: int = 0) -> None:
@@ -138,12 +483,3 @@ def check_time_order(table: Table, column: int = 0) -> None:
             int(table.line_numbers[i]),
             f"time goes backwards ({t[i]:.3f} s after {t[i - 1]:.3f} s)",
         )
-
-
-def is_number(text: str) -> bool:
-    """True when ``float(text)`` parses (the readers' test for a non-numeric field)."""
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True

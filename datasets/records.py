@@ -10,6 +10,7 @@ The sonar beam record is :class:`sonar.beam.SonarBeam`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -83,6 +84,7 @@ class DvlSeries:
     v_mps: FloatArray  # (N, 2) vx, vy in the DVL frame
     valid: np.ndarray  # (N,) bool, bottom lock
     heading_rad: FloatArray  # (N,) DVL compass as yaw CCW from East of the DVL x axis
+    path: Path | None = None  # the log it was read from (for messages)
 
     def records(self) -> list[DvlVelocity]:
         return [
@@ -98,6 +100,7 @@ class AttitudeSeries:
     t: FloatArray
     yaw_rad: FloatArray
     yaw_rate_radps: FloatArray
+    path: Path | None = None  # the log it was read from (for messages)
 
     def records(self) -> list[Attitude]:
         return [
@@ -108,11 +111,17 @@ class AttitudeSeries:
 
 @dataclass(frozen=True)
 class GpsSeries:
-    """GPS positions in local East-North (m), origin at ``origin_lat_lon_deg`` (the first fix)."""
+    """GPS positions in local East-North (m), origin at ``origin_lat_lon_deg`` (the first fix).
+
+    ``fix`` flags the rows with a position fix (None: all); rows without one (status 0, or the
+    receiver's 0/0 placeholder) are kept by the reader and dropped by :mod:`datasets.gates`.
+    """
 
     t: FloatArray
     en_m: FloatArray  # (N, 2)
     origin_lat_lon_deg: tuple[float, float]
+    fix: np.ndarray | None = None  # (N,) bool
+    path: Path | None = None  # the log it was read from (for messages)
 
     def records(self) -> list[GpsFix]:
         return [

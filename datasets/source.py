@@ -24,19 +24,23 @@ import heapq
 import json
 import os
 from collections.abc import Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from datasets.config import MARINA_CONFIG, DatasetConfig, load_dataset_config
 from datasets.errors import DataError
+from datasets.gates import SensorReport, gate_attitude, gate_beams, gate_dvl, gate_gps
 from datasets.islog import read_is_log
 from datasets.keyframes import read_keyframes
+from datasets.logfile import read_text
 from datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti, read_setup
 from datasets.records import AttitudeSeries, DvlSeries, GpsSeries, Record
 from sonar.beam import SonarBeam
 
-__all__ = ["Dataset", "open_dataset", "resolve_source", "data_root"]
+__all__ = ["Dataset", "open_dataset", "resolve_source", "data_root", "read_truth"]
 
 ENV_VAR = "SONARSLAM_DATA"
 NAMED_SOURCES = ("marina",)
@@ -44,7 +48,8 @@ NAMED_SOURCES = ("marina",)
 
 @dataclass(frozen=True, eq=False)
 class Dataset:
-    """All the logs of one run, read and checked."""
+    """All the logs of one run, read and checked; ``report`` counts what the gates dropped and
+    lists the sensors' gaps (:mod:`datasets.gates`)."""
 
     name: str
     root: Path
@@ -54,6 +59,7 @@ class Dataset:
     attitude: AttitudeSeries
     gps: GpsSeries | None
     truth: dict[str, Any] | None = None
+    report: SensorReport = field(default_factory=SensorReport)
 
     @property
     def nav_span_s(self) -> tuple[float, float]:
@@ -147,9 +153,47 @@ def open_dataset(source: str | Path, config_override: str | Path | None = None) 
     Raises
     ------
     DataError
-        A missing required file or any bad input (see :mod:`datasets.logfile`).
+        A missing required file or any bad input (see :mod:`datasets.logfile`), DVL and AHRS
+        logs that do not overlap in time, a malformed ``truth.json``. Sensor faults that
+        pass the readers are gated with warnings (:mod:`datasets.gates`).
     """
     root = resolve_source(source)
+    config = _config(root, config_override)
+    report = SensorReport()
+    gates = config.gates
+    dvl_path = _find_one(root, "*_DVL.log", required=True)
+    mti_path = _find_one(root, "*_MTi.log", required=True)
+    assert dvl_path is not None and mti_path is not None
+    dvl = gate_dvl(read_dvl(dvl_path), gates, report)
+    attitude = gate_attitude(read_mti(mti_path), gates, report)
+    if dvl.t[0] > attitude.t[-1] or attitude.t[0] > dvl.t[-1]:
+        raise DataError(
+            root,
+            None,
+            f"the DVL ({dvl.t[0]:.3f}-{dvl.t[-1]:.3f} s) and AHRS ({attitude.t[0]:.3f}-"
+            f"{attitude.t[-1]:.3f} s) logs do not overlap in time",
+        )
+    gps_path = _find_one(root, "*_DGPS.log", required=False)
+    gps = gate_gps(read_dgps(gps_path), gates, report) if gps_path is not None else None
+    beams, sonar_path = _beams(root, config)
+    gate_beams(np.array([b.t for b in beams]), gates, report, sonar_path)
+    truth_path = _find_one(root, "truth.json", required=False)
+    return Dataset(
+        name=root.name,
+        root=root,
+        config=config,
+        beams=beams,
+        dvl=dvl,
+        attitude=attitude,
+        gps=gps,
+        truth=read_truth(truth_path) if truth_path is not None else None,
+        report=report,
+    )
+
+
+def _config(root: Path, config_override: str | Path | None) -> DatasetConfig:
+    """The dataset's configuration: its ``sonarslam.toml`` (else the marina's, with the head
+    of ``*_SETUP.log``), then the override's keys."""
     toml = _find_one(root, "sonarslam.toml", required=False)
     # a sonarslam.toml starts from neutral defaults (no clock offset, identity mountings): a
     # partial file must not inherit the marina's calibration silently
@@ -163,15 +207,16 @@ def open_dataset(source: str | Path, config_override: str | Path | None = None) 
         config = replace(config, sonar=head)
     if config_override is not None:
         config = load_dataset_config(config_override, base=config)
+    return config
 
-    dvl = read_dvl(_find_one(root, "*_DVL.log", required=True))  # type: ignore[arg-type]
-    attitude = read_mti(_find_one(root, "*_MTi.log", required=True))  # type: ignore[arg-type]
-    gps_path = _find_one(root, "*_DGPS.log", required=False)
-    gps = read_dgps(gps_path) if gps_path is not None else None
 
+def _beams(root: Path, config: DatasetConfig) -> tuple[list[SonarBeam], Path]:
+    """The sonar beams on the navigation clock, from a raw ``*_IS.log`` or the marina
+    keyframes; and the file that gave their times."""
     is_log = _find_one(root, "*_IS.log", required=False)
     if is_log is not None:
         beams = read_is_log(is_log, n_bins=config.sonar.n_bins)
+        source = is_log
     else:
         times_csv = _find_one(root, "keyFrameTimeStamps.csv", required=False)
         stamps = _find_one(root, "*_IS_timestamps.log", required=False)
@@ -188,20 +233,53 @@ def open_dataset(source: str | Path, config_override: str | Path | None = None) 
             config.sonar,
             config.keyframe_scan_direction,
         )
-
+        source = stamps
     if config.sonar_time_offset_s:
         beams = [replace(b, t=b.t + config.sonar_time_offset_s) for b in beams]
+    return beams, source
 
-    truth_path = _find_one(root, "truth.json", required=False)
-    truth = json.loads(truth_path.read_text()) if truth_path is not None else None
-    name = root.name
-    return Dataset(
-        name=name,
-        root=root,
-        config=config,
-        beams=beams,
-        dvl=dvl,
-        attitude=attitude,
-        gps=gps,
-        truth=truth,
-    )
+
+def _reject_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a number in strict JSON")
+
+
+def _finite_array(path: Path, data: Any, key: str, shape: tuple[int | None, ...]) -> None:
+    """DataError unless ``data`` is an array of finite numbers of ``shape`` (None: any)."""
+    try:
+        a = np.asarray(data, dtype=np.float64)
+    except (ValueError, TypeError, OverflowError):
+        raise DataError(path, None, f"{key} is not an array of numbers") from None
+    if a.ndim != len(shape) or any(
+        n is not None and n != m for n, m in zip(shape, a.shape, strict=True)
+    ):
+        raise DataError(path, None, f"{key} must have shape {shape}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise DataError(path, None, f"{key} holds a value that is not a finite number")
+
+
+def read_truth(path: str | Path) -> dict[str, Any]:
+    """``truth.json`` of a simulated run (UTF-8, strict JSON: no NaN or Infinity), with the
+    parts the evaluation uses checked: ``body_poses.rows`` (N, 4) finite with non-decreasing
+    times, ``first_fix_enu_m`` (2,) and ``walls_m`` (W, 2, 2) when present."""
+    p = Path(path)
+    text = read_text(p, "utf-8")
+    try:
+        data = json.loads(text, parse_constant=_reject_constant)
+    except json.JSONDecodeError as exc:
+        raise DataError(p, exc.lineno, f"not JSON: {exc.msg}") from None
+    except (ValueError, RecursionError) as exc:
+        raise DataError(p, None, f"not JSON: {exc}") from None
+    if not isinstance(data, dict):
+        raise DataError(p, None, "must be a JSON object")
+    poses = data.get("body_poses")
+    if not isinstance(poses, dict) or "rows" not in poses:
+        raise DataError(p, None, "body_poses.rows missing")
+    _finite_array(p, poses["rows"], "body_poses.rows", (None, 4))
+    t = np.asarray(poses["rows"], dtype=np.float64)[:, 0]
+    if t.size == 0 or np.any(np.diff(t) < 0):
+        raise DataError(p, None, "body_poses.rows: no rows, or times going backwards")
+    if "first_fix_enu_m" in data:
+        _finite_array(p, data["first_fix_enu_m"], "first_fix_enu_m", (2,))
+    if "walls_m" in data:
+        _finite_array(p, data["walls_m"], "walls_m", (None, 2, 2))
+    return data

@@ -181,8 +181,45 @@ class ExtractorConfig:
             )
         if self.range_offset_sigma_m is not None and self.range_offset_sigma_m < 0.0:
             raise ValueError("range_offset_sigma_m must be >= 0 (or None)")
-        if not (self.line_sigma_rho_m >= 0.0 and self.line_sigma_theta_rad >= 0.0):
-            raise ValueError("line_sigma_rho_m and line_sigma_theta_rad must be >= 0")
+        self._check_ranges()
+
+    def _check_ranges(self) -> None:
+        """The ranges of the remaining numeric fields: the settings that size a voting space or
+        a loop are bounded, so that a typo is an error, not an hour of work or a memory error
+        (None means "from the head" where a field allows it)."""
+        bounds: dict[str, tuple[float, float]] = {
+            "intensity_threshold": (0.0, 255.0),
+            "max_intensity_difference": (0.0, 255.0),
+            "min_distance_m": (0.0, 1e3),
+            "min_range_m": (0.0, 1e4),
+            "max_range_m": (0.0, 1e4),
+            "beam_width_rad": (1e-4, 0.5 * np.pi),
+            "h_bearings": (1, 1000),
+            "p_angles": (1, 1000),
+            "theta_res_rad": (0.1 * _DEG, 0.125 * np.pi),
+            "rho_res_m": (0.01, 10.0),
+            "min_votes": (1, 1e9),
+            "max_lines_per_vote": (1, 1000),
+            "suppress_theta_cells": (0, 1000),
+            "suppress_rho_cells": (0, 1000),
+            "vote_every_n_beams": (1, 1e9),
+            "overlap_similarity": (1e-6, 1.0),
+            "seed_window_theta_cells": (0, 1000),
+            "seed_window_rho_cells": (0, 1000),
+            "range_sigma_m": (1e-6, 100.0),
+            "bearing_sigma_rad": (1e-6, np.pi),
+            "range_offset_sigma_m": (0.0, 100.0),
+            "fit_iterations": (1, 100),
+            "fit_gate_sigma": (0.0, 100.0),
+            "fit_gate_iterations": (0, 100),
+            "remove_on_line_sigma": (0.0, 100.0),
+            "line_sigma_rho_m": (0.0, 100.0),
+            "line_sigma_theta_rad": (0.0, 0.5 * np.pi),
+        }
+        for name, (low, high) in bounds.items():
+            value = getattr(self, name)
+            if value is not None and not low <= value <= high:
+                raise ValueError(f"{name} must be in [{low:g}, {high:g}], got {value!r}")
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> ExtractorConfig:

@@ -7,7 +7,15 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["FloatArray", "SonarBeam", "SonarHead", "Mounting", "bin_range_m"]
+__all__ = [
+    "FloatArray",
+    "SonarBeam",
+    "SonarHead",
+    "Mounting",
+    "bin_range_m",
+    "MAX_BINS",
+    "MIN_STEP_RAD",
+]
 
 #: The project's float array type (``features.geometry`` re-exports it).
 FloatArray = npt.NDArray[np.float64]
@@ -17,6 +25,15 @@ def bin_range_m(bin_index: npt.ArrayLike, bin_size_m: float) -> FloatArray:
     """Range (m) of 0-based bin indices: ``(i + 1) * bin_size_m`` (the one place of this rule;
     bin 500 of the marina's 0.1 m bins is at 50.0 m)."""
     return (np.asarray(bin_index, dtype=np.float64) + 1.0) * bin_size_m
+
+
+#: Largest lever arm of a sensor mounting (m).
+MAX_LEVER_M = 100.0
+#: Most bins per beam of a head (MSIS heads log up to ~1,500): more is a corrupt setting that
+#: would allocate a scan of ``n_bins x beams`` for nothing.
+MAX_BINS = 10_000
+#: Smallest mechanical step (rad): 0.1 deg, 3,600 beams per turn (the finest MSIS step is 0.225).
+MIN_STEP_RAD = float(np.deg2rad(0.1))
 
 
 @dataclass(frozen=True)
@@ -55,12 +72,14 @@ class SonarHead:
     range_offset_m: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.n_bins <= 0:
-            raise ValueError(f"SonarHead.n_bins must be positive, got {self.n_bins}")
-        if self.bin_size_m <= 0.0:
+        if not 0 < self.n_bins <= MAX_BINS:
+            raise ValueError(f"SonarHead.n_bins must be in 1-{MAX_BINS}, got {self.n_bins}")
+        if not 0.0 < self.bin_size_m < np.inf:
             raise ValueError(f"SonarHead.bin_size_m must be positive, got {self.bin_size_m}")
-        if not 0.0 < self.step_rad < np.pi:
-            raise ValueError(f"SonarHead.step_rad must be in (0, pi), got {self.step_rad}")
+        if not MIN_STEP_RAD <= self.step_rad < np.pi:
+            raise ValueError(
+                f"SonarHead.step_rad must be in [{MIN_STEP_RAD:.6f}, pi), got {self.step_rad}"
+            )
         if not 0.0 < self.beam_width_rad < np.pi / 2:
             raise ValueError(
                 f"SonarHead.beam_width_rad must be in (0, pi/2), got {self.beam_width_rad}"
@@ -119,6 +138,14 @@ class Mounting:
     y_m: float = 0.0
     yaw_rad: float = 0.0
     source: str = "identity"
+
+    def __post_init__(self) -> None:
+        if not (abs(self.x_m) <= MAX_LEVER_M and abs(self.y_m) <= MAX_LEVER_M):
+            raise ValueError(
+                f"Mounting x_m, y_m must be within +-{MAX_LEVER_M:g} m, got {self.x_m}, {self.y_m}"
+            )
+        if not abs(self.yaw_rad) <= 2.0 * np.pi:
+            raise ValueError(f"Mounting.yaw_rad must be within +-2 pi, got {self.yaw_rad}")
 
     def as_pose(self) -> FloatArray:
         """``bTs`` as an array ``(x_m, y_m, yaw_rad)``."""

@@ -177,7 +177,8 @@ def test_run_set_changes_the_settings_it_names(short_harbour, tmp_path, capsys):
     assert main([*args[:-2], str(tmp_path / "ekf"), "--quiet"]) == 0
     default = json.loads((tmp_path / "ekf" / "metrics.json").read_text())
     assert metrics["line_features"] < default["line_features"]
-    assert main([*args, "--set", "ekf.no_such_field=1"]) == 1
+    # a setting that does not fit its field is a usage error: one line, exit 2
+    assert main([*args, "--set", "ekf.no_such_field=1"]) == 2
     assert "no_such_field" in capsys.readouterr().err
-    assert main([*args, "--set", "isam2.robust=cauchy"]) == 1
+    assert main([*args, "--set", "isam2.robust=cauchy"]) == 2
     assert "does not apply to back end 'ekf'" in capsys.readouterr().err

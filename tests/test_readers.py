@@ -119,7 +119,7 @@ def test_is_log_truncated_last_row_is_skipped_with_warning(tmp_path):
 
 def test_is_log_intensity_out_of_range(tmp_path):
     path = write_lines(tmp_path / "b_IS.log", ["1.0 0 0.0 1 2 3", "2.0 0 0.1 1 300 3"])
-    with pytest.raises(DataError, match=r"b_IS.log:3: intensity outside 0-255"):
+    with pytest.raises(DataError, match=r"b_IS.log:3: intensity not a whole number in 0-255"):
         read_is_log(path)
 
 
@@ -198,7 +198,7 @@ def test_config_errors_name_file_and_key(tmp_path):
     path = tmp_path / "sonarslam.toml"
     path.write_text("[sonar]\nn_bins = 500\nstep_deg = 'x'\n")
     with pytest.raises(
-        DataError, match=r"sonarslam.toml: \[sonar\] step_deg must be a finite number"
+        DataError, match=r"sonarslam.toml:3: \[sonar\] step_deg: must be a finite number, got 'x'"
     ):
         load_dataset_config(path)
     path.write_text("[mounting.sonar]\nyaw = 3\n")
@@ -208,18 +208,21 @@ def test_config_errors_name_file_and_key(tmp_path):
     with pytest.raises(DataError, match=r"sonarslam.toml:1: TOML syntax error"):
         load_dataset_config(path)
     path.write_text("[sonar]\nangle_sense = 2\n")
-    with pytest.raises(DataError, match=r"angle_sense must be \+1 or -1"):
+    with pytest.raises(DataError, match=r"angle_sense: must be \+1 or -1"):
         load_dataset_config(path)
     path.write_text("[mounting.dvl]\nyaw_deg = -90.0\n[noise]\ndvl_sigma_mps = 0.02\n")
     cfg = load_dataset_config(path)
     assert abs(cfg.dvl_mounting.yaw_rad + np.pi / 2) < 1e-12 and cfg.noise.dvl_sigma_mps == 0.02
     assert cfg.yaw_rate_source == "gyro"  # neutral default
     for text, message in (
-        ("[noise]\ndvl_sigma_mps = -1\n", r"\[noise\] dvl_sigma_mps must be > 0, got -1"),
-        ("[mounting.ahrs]\nyaw_deg = nan\n", r"yaw_deg must be a finite number, got nan"),
-        ("[sonar]\nn_bins = 500.5\n", r"n_bins must be a whole number, got 500.5"),
-        ("[sonar]\nbin_size_m = 0\n", r"bin_size_m must be > 0"),
-        ("[noise]\ndvl_scatter_window_s = -60\n", r"dvl_scatter_window_s must be >= 0, got -60"),
+        ("[noise]\ndvl_sigma_mps = -1\n", r"\[noise\] dvl_sigma_mps: must be in \(0, 10\], got -1"),
+        ("[mounting.ahrs]\nyaw_deg = nan\n", r"yaw_deg: must be a finite number, got nan"),
+        ("[sonar]\nn_bins = 500.5\n", r"n_bins: must be a whole number, got 500.5"),
+        ("[sonar]\nbin_size_m = 0\n", r"bin_size_m: must be positive"),
+        (
+            "[noise]\ndvl_scatter_window_s = -60\n",
+            r"dvl_scatter_window_s: must be in \[0, 3600\], got -60",
+        ),
     ):
         path.write_text(text)
         with pytest.raises(DataError, match=message):
@@ -227,7 +230,9 @@ def test_config_errors_name_file_and_key(tmp_path):
     path.write_text("[noise]\ndvl_scatter_window_s = 0\n")  # 0: off, allowed
     assert load_dataset_config(path).noise.dvl_scatter_window_s == 0.0
     path.write_text("[motion]\nyaw_rate_source = 'compass'\n")
-    with pytest.raises(DataError, match=r"sonarslam.toml: \[motion\] yaw_rate_source must be one"):
+    with pytest.raises(
+        DataError, match=r"sonarslam.toml:2: \[motion\] yaw_rate_source: must be one"
+    ):
         load_dataset_config(path)
     path.write_text("[motion]\nyaw_rate_source = 'heading'\n")
     assert load_dataset_config(path).yaw_rate_source == "heading"

@@ -95,7 +95,7 @@ def test_overrides_reach_nested_fields_and_name_the_valid_ones():
     assert cfg.association.method == "nn" and cfg.ahrs_bias_sigma_deg == 3.0
     cfg = apply_overrides(EkfConfig(), {"association.gate_probability": 0.95})
     assert cfg.association.gate_probability == 0.95 and cfg.association.method == "jcbb"
-    with pytest.raises(ValueError, match="unknown field 'gate'.*gate_probability"):
+    with pytest.raises(ValueError, match="association.gate: unknown field.*gate_probability"):
         apply_overrides(EkfConfig(), {"association.gate": 0.9})
     with pytest.raises(ValueError, match="association method"):  # the dataclass's own check
         apply_overrides(EkfConfig(), {"association": "icp"})

@@ -179,8 +179,9 @@ class Scenario:
             dvl_mounting=self.dvl_mounting,
             ahrs_mounting=self.ahrs_mounting,
             noise=NoiseConfig(
-                dvl_sigma_mps=n.dvl_sigma_mps,
-                ahrs_sigma_deg=math.hypot(n.ahrs_sigma_deg, n.ahrs_bias_deg),
+                # a noise-free sensor (tests) still gets a usable sigma: the settings' floor
+                dvl_sigma_mps=max(n.dvl_sigma_mps, 1e-3),
+                ahrs_sigma_deg=max(math.hypot(n.ahrs_sigma_deg, n.ahrs_bias_deg), 1e-3),
                 gps_sigma_m=n.gps_sigma_m,
                 dvl_max_gap_s=10.0,
                 # a DVL that degrades: its usual scatter is its white noise (slam.model.motion)

@@ -19,6 +19,7 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
+from datasets.settings import check_ranges
 from features.geometry import FloatArray, compose, inverse
 from features.line import LineFeature
 from features.pose_source import PoseSource
@@ -104,6 +105,23 @@ class BackendConfig(LandmarkConfig):
             raise ValueError(
                 f"misalignment_sigma_deg must be > 0, got {self.misalignment_sigma_deg}"
             )
+        check_ranges(self, _RANGES)
+
+
+#: Ranges of the shared settings (and the landmark layer's) beyond which a back end's
+#: numerics fail (GTSAM's "indeterminate system") or its loops never end: an error instead.
+_RANGES = {
+    "ahrs_white_sigma_deg": (1e-3, 90.0),
+    "ahrs_bias_sigma_deg": (1e-3, 90.0),
+    "ahrs_period_s": (1e-3, 3600.0),
+    "gyro_sigma_radps": (1e-5, 1.0),
+    "misalignment_sigma_deg": (1e-3, 90.0),
+    "tentative_observations": (1, 1000),
+    "tentative_max_age_s": (1e-3, 1e5),
+    "min_rho_m": (0.0, 1e3),
+    "extent_margin_m": (0.0, 1e4),
+    "line_cov_scale": (1e-2, 1e2),
+}
 
 
 class Backend(Protocol):

@@ -179,7 +179,7 @@ class LineEkf:
         F[1, 5] = dy
         Q = np.zeros((N_VEHICLE, N_VEHICLE))
         Q[0, 0] = Q[1, 1] = step.var_xy_m2
-        Q[2, 2] = (step.dt_s * self.config.gyro_sigma_radps) ** 2
+        Q[2, 2] = step.var_yaw_rad2(self.config.gyro_sigma_radps)
         Q[3, 3] = self._var_walk * step.dt_s
         V = slice(0, N_VEHICLE)
         P[V, :] = F @ P[V, :]

@@ -7,7 +7,7 @@ import argparse
 import math
 
 from datasets.source import Dataset, open_dataset
-from slam.cli.common import EPILOG, Subparsers, add_poses, add_quiet, add_source
+from slam.cli.common import EPILOG, Subparsers, add_poses, add_quiet, add_source, number
 from slam.run.calibration import (
     calibrate_ahrs_deviation,
     calibrate_ahrs_yaw,
@@ -27,7 +27,12 @@ def add_parser(sub: Subparsers) -> None:
     )
     add_source(p)
     add_poses(p, "dr", ": GPS-free")
-    p.add_argument("--window", type=float, default=120.0, help="entropy window (s, default 120)")
+    p.add_argument(
+        "--window",
+        type=number(float, 0.0, 86400.0, low_open=True),
+        default=120.0,
+        help="entropy window (s, default 120)",
+    )
     p.add_argument(
         "--ahrs",
         action="store_true",
@@ -40,7 +45,10 @@ def add_parser(sub: Subparsers) -> None:
         " closed loops instead (GPS-free, ~20 s per iteration on the marina)",
     )
     p.add_argument(
-        "--iterations", type=int, default=4, help="closed loops for --ahrs-deviation (default 4)"
+        "--iterations",
+        type=number(int, 1, 100),
+        default=4,
+        help="closed loops for --ahrs-deviation (default 4)",
     )
     p.add_argument(
         "--range-offset",

@@ -3,11 +3,56 @@
 from __future__ import annotations
 
 import argparse
-from typing import Protocol
+import math
+from collections.abc import Callable
+from typing import NoReturn, Protocol
 
+from datasets.settings import SettingError, coerce
 from slam.run.sources import POSE_SOURCES
 
-__all__ = ["EPILOG", "Subparsers", "add_source", "add_poses", "add_quiet"]
+__all__ = [
+    "EPILOG",
+    "Parser",
+    "Subparsers",
+    "add_source",
+    "add_poses",
+    "add_quiet",
+    "number",
+]
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse's parser whose usage errors are one line (exit 2), as every known error of
+    the command line is."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def number(
+    kind: type, low: float | None = None, high: float | None = None, low_open: bool = False
+) -> Callable[[str], float | int]:
+    """An argparse ``type``: a finite ``float`` or a whole ``int`` (:mod:`datasets.settings`'s
+    grammar: no ``nan``, ``inf``, ``1_0``) within ``[low, high]`` (``(low, ...`` when
+    ``low_open``)."""
+
+    def parse(text: str) -> float | int:
+        try:
+            value = coerce(kind, text, "value")
+        except SettingError as exc:
+            raise argparse.ArgumentTypeError(f"{exc.message}") from None
+        below = low is not None and (value <= low if low_open else value < low)
+        if below or (high is not None and value > high) or not math.isfinite(value):
+            lo = "" if low is None else f"{'>' if low_open else '>='} {low:g}"
+            hi = "" if high is None else f"<= {high:g}"
+            raise argparse.ArgumentTypeError(
+                f"must be {' and '.join(x for x in (lo, hi) if x)}, got {text!r}"
+            )
+        return value  # type: ignore[no-any-return]
+
+    parse.__name__ = kind.__name__  # argparse names the type in its message
+    return parse
+
 
 EPILOG = (
     "Data: a SOURCE is a directory in the marina layout (see README) or the named source 'marina', "

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from slam.cli.common import EPILOG, Subparsers, add_quiet
+from slam.io.files import check_output_dir
 from slam.run.demo import main_job
 from slam.run.run import summary_line
 
@@ -22,6 +23,7 @@ def add_parser(sub: Subparsers) -> None:
 
 
 def command(args: argparse.Namespace) -> int:
+    check_output_dir(args.out)
     results = main_job(args.out, progress=not args.quiet)
     print("\nResults (ATE against GPS, no alignment):")
     for r in results:

@@ -25,6 +25,11 @@ def command(args: argparse.Namespace) -> int:
     print(f"  sonar beams {len(d.beams)} ({len(d.nav_beams())} inside the navigation span)")
     print(f"  DVL rows {d.dvl.t.size} ({int((~d.dvl.valid).sum())} without bottom lock)")
     print(f"  AHRS rows {d.attitude.t.size}; GPS fixes {0 if d.gps is None else d.gps.t.size}")
+    faults = {k: v for k, v in d.report.counts.items() if v}
+    gaps = ", ".join(
+        f"{name} {g.count} (longest {g.longest_s:.1f} s)" for name, g in d.report.gaps.items()
+    )
+    print(f"  gates (datasets/gates.py): {faults or 'nothing dropped'}; gaps: {gaps or 'none'}")
     print(f"  navigation span {t1 - t0:.1f} s")
     span = d.sonar_span_s
     if span is not None:

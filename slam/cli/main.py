@@ -1,5 +1,8 @@
 """The ``sonarslam`` command: builds the parser from the command modules, runs one, and turns
-known errors into one line (exit 1) and usage errors into argparse's (exit 2)."""
+every known error into one line on stderr, no traceback: exit 2 for usage (a wrong option,
+a setting that does not fit its field, an ``--out`` that cannot be written), exit 1 for data
+(:class:`datasets.errors.DataError` naming the file and line, other input that cannot be run,
+a file that cannot be written)."""
 
 from __future__ import annotations
 
@@ -10,8 +13,9 @@ from collections.abc import Sequence
 from importlib.metadata import PackageNotFoundError, version
 
 from datasets.errors import DataError, DataWarning
+from datasets.settings import SettingError
 from slam.cli import calibrate, demo, extract, info, plot_scans, report, run, simulate, sweep
-from slam.cli.common import EPILOG
+from slam.cli.common import EPILOG, Parser
 
 __all__ = ["main", "build_parser"]
 
@@ -27,7 +31,7 @@ def _version() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="sonarslam",
         description="Line features with honest uncertainty from MSIS sonar, and SLAM with them.",
         epilog=EPILOG,
@@ -44,12 +48,36 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     with warnings.catch_warnings():
         warnings.simplefilter("always", DataWarning)
-        warnings.formatwarning = lambda msg, *a, **k: f"warning: {msg}\n"  # type: ignore[assignment]
+        warnings.showwarning = _show_warning
         try:
             return int(args.func(args))
-        except (DataError, ValueError, FileNotFoundError) as exc:
+        except SettingError as exc:
             print(f"sonarslam {args.command}: error: {exc}", file=sys.stderr)
+            return 2
+        except (DataError, ValueError) as exc:
+            print(f"sonarslam {args.command}: error: {_one_line(exc)}", file=sys.stderr)
             return 1
+        except OSError as exc:  # writing the outputs: disk full, permissions
+            where = f"{exc.filename}: " if exc.filename else ""
+            print(f"sonarslam {args.command}: error: {where}{exc.strerror or exc}", file=sys.stderr)
+            return 1
+
+
+def _show_warning(
+    message: Warning | str,
+    category: type[Warning],
+    filename: str,
+    lineno: int,
+    file: object = None,
+    line: str | None = None,
+) -> None:
+    """A warning as one line on stderr: ``warning: <message>``."""
+    print(f"warning: {' '.join(str(message).split())}", file=sys.stderr)
+
+
+def _one_line(exc: Exception) -> str:
+    """The message on one line (a TOML syntax error's own text has several)."""
+    return " ".join(str(exc).split())
 
 
 if __name__ == "__main__":

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from datasets.source import open_dataset
 from features.projection import project_beams
-from slam.cli.common import EPILOG, Subparsers, add_poses, add_source
+from slam.cli.common import EPILOG, Subparsers, add_poses, add_source, number
 from slam.eval.truth import truth_walls
+from slam.io.files import check_output_file, make_output_dir, write_atomic
 from slam.io.maps import plot_scans
 from slam.run.presets import map_min_intensity
 from slam.run.sources import pose_source_by_name
@@ -23,7 +23,7 @@ def add_parser(sub: Subparsers) -> None:
     p.add_argument("--out", default="out/scans.png", help="PNG file (default out/scans.png)")
     p.add_argument(
         "--min-intensity",
-        type=int,
+        type=number(int, 0, 255),
         default=None,
         help="smallest intensity drawn, 0-255 (default: every bin of thresholded beams, the "
         "extractor's threshold for raw beams)",
@@ -32,6 +32,7 @@ def add_parser(sub: Subparsers) -> None:
 
 
 def command(args: argparse.Namespace) -> int:
+    out = check_output_file(args.out, ".png")
     dataset = open_dataset(args.source)
     poses = pose_source_by_name(dataset, args.poses)
     beams = dataset.nav_beams()
@@ -39,14 +40,9 @@ def command(args: argparse.Namespace) -> int:
     points, _ = project_beams(
         beams, dataset.config.sonar, dataset.config.sonar_mounting, poses, min_intensity
     )
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    plot_scans(
-        out,
-        points,
-        {args.poses: poses},
-        f"{dataset.name}: sonar bins projected with {args.poses} poses",
-        truth_walls(dataset) if dataset.truth and "walls_m" in dataset.truth else None,
-    )
+    make_output_dir(out.parent)
+    title = f"{dataset.name}: sonar bins projected with {args.poses} poses"
+    walls = truth_walls(dataset) if dataset.truth and "walls_m" in dataset.truth else None
+    write_atomic(out, lambda p: plot_scans(p, points, {args.poses: poses}, title, walls))
     print(f"{points.shape[0]} bins projected; picture: {out.resolve()}")
     return 0

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from slam.cli.common import EPILOG, Subparsers
+from slam.cli.common import EPILOG, Subparsers, number
+from slam.io.files import check_output_dir
 from slam.run.report import report
 
 
@@ -17,7 +18,10 @@ def add_parser(sub: Subparsers) -> None:
     p.add_argument("dirs", nargs="+", help="run directories written by 'sonarslam run'")
     p.add_argument("--out", required=True, help="output directory (report.md and PNGs)")
     p.add_argument(
-        "--rpe-delta", type=float, default=10.0, help="path length of evo's RPE (m, default 10)"
+        "--rpe-delta",
+        type=number(float, 0.0, 1e6, low_open=True),
+        default=10.0,
+        help="path length of evo's RPE (m, default 10)",
     )
     p.add_argument(
         "--align", action="store_true", help="Umeyama-align before evo's APE/RPE (default none)"
@@ -31,6 +35,7 @@ def add_parser(sub: Subparsers) -> None:
 
 
 def command(args: argparse.Namespace) -> int:
+    check_output_dir(args.out)
     result = report(
         args.dirs,
         args.out,

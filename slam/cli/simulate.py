@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 
 from datasets.simulator import KINDS, simulate
-from slam.cli.common import EPILOG, Subparsers
+from slam.cli.common import EPILOG, Subparsers, number
+from slam.io.files import check_output_dir
 
 
 def add_parser(sub: Subparsers) -> None:
@@ -15,15 +16,21 @@ def add_parser(sub: Subparsers) -> None:
         choices=list(KINDS),
         help="world: seed pool, harbour, random harbour, drift (1,800 s, drifting sensors)",
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument(
+        "--seed", type=number(int, 0, 2**32 - 1), default=0, help="random seed (default 0)"
+    )
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument(
-        "--duration", type=float, default=None, help="seconds of simulated time (default per world)"
+        "--duration",
+        type=number(float, 1.0, 1e6, low_open=True),
+        default=None,
+        help="seconds of simulated time (default per world)",
     )
     p.set_defaults(func=command)
 
 
 def command(args: argparse.Namespace) -> int:
+    check_output_dir(args.out)
     out = simulate(args.kind, seed=args.seed, out_dir=args.out, duration_s=args.duration)
     print(f"simulated {args.kind} (seed {args.seed}) written to {out}")
     return 0

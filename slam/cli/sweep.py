@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from datasets.simulator import KINDS
-from slam.cli.common import EPILOG, Subparsers, add_quiet
+from slam.cli.common import EPILOG, Subparsers, add_quiet, number
 from slam.run.sweep import format_summary, load_grid_toml, parse_grid, parse_seeds, sweep
 
 
@@ -35,7 +35,10 @@ def add_parser(sub: Subparsers) -> None:
     )
     p.add_argument("--grid-file", default=None, help="TOML of grid axes ([grid] table of arrays)")
     p.add_argument(
-        "--duration", type=float, default=None, help="simulated seconds (default per world)"
+        "--duration",
+        type=number(float, 1.0, 1e6, low_open=True),
+        default=None,
+        help="simulated seconds (default per world)",
     )
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument(
@@ -46,7 +49,12 @@ def add_parser(sub: Subparsers) -> None:
         default=None,
         help="address of a Dask scheduler (default: a local cluster; 'synchronous': no Dask)",
     )
-    p.add_argument("--workers", type=int, default=2, help="local cluster processes (default 2)")
+    p.add_argument(
+        "--workers",
+        type=number(int, 1, 256),
+        default=2,
+        help="local cluster processes (default 2)",
+    )
     p.add_argument(
         "--calibrate",
         action="store_true",

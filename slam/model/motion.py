@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from datasets.errors import DataError
 from datasets.records import AttitudeSeries, DvlSeries
 from features.geometry import FloatArray, transform_points, wrap_angle
 from slam.io.trajectory import Trajectory
@@ -89,6 +90,9 @@ class MotionStep:
         1-sigma of the held velocity, per axis (m/s).
     held_s : float
         How long the velocity sample has been held at the end of the step (s), >= ``dt_s``.
+    var_yaw_gap_rad2 : float
+        Heading variance the step adds because the AHRS is silent (rad^2): the growth of
+        :meth:`slam.model.noise.MotionNoise.gap_heading_variance` over the step; 0 otherwise.
     """
 
     t_s: float
@@ -98,6 +102,12 @@ class MotionStep:
     dyaw_rad: float
     sigma_v_mps: float
     held_s: float
+    var_yaw_gap_rad2: float = 0.0
+
+    def var_yaw_rad2(self, gyro_sigma_radps: float) -> float:
+        """Heading variance of the step (rad^2): a yaw-rate noise ``(dt sigma)^2`` (the back
+        end's) plus the AHRS gap's (:attr:`var_yaw_gap_rad2`)."""
+        return (self.dt_s * gyro_sigma_radps) ** 2 + self.var_yaw_gap_rad2
 
     @property
     def var_xy_m2(self) -> float:
@@ -117,11 +127,13 @@ def motion_step(
     sigma_v_mps: float,
     yaw_rate_radps: float,
     held_from_s: float,
+    var_yaw_gap_rad2: float = 0.0,
 ) -> MotionStep:
     """The step from ``t_prev_s`` to ``t_s`` with a body velocity and a yaw rate held over it.
 
     ``held_from_s`` is when the velocity sample started to be held (its DVL time, or the start
     of the integration if later): the step's share of the sample's error grows with it.
+    ``var_yaw_gap_rad2``: the heading variance an AHRS gap adds over the step (rad^2).
     """
     dt = max(t_s - t_prev_s, 0.0)
     v = np.asarray(v_b_mps, dtype=np.float64)
@@ -133,6 +145,7 @@ def motion_step(
         dyaw_rad=dt * float(yaw_rate_radps),
         sigma_v_mps=float(sigma_v_mps),
         held_s=max(t_s - held_from_s, dt),
+        var_yaw_gap_rad2=float(var_yaw_gap_rad2),
     )
 
 
@@ -298,11 +311,25 @@ def velocity_input(
     """Body velocity at times ``t_s``: the last valid DVL sample (zero-order hold).
 
     The 1-sigma of a valid sample is :func:`slam.model.noise.dvl_sample_sigma`. During a
-    bottom-lock dropout the last valid velocity is held and its 1-sigma grows linearly from that
-    to ``gap_sigma_mps`` (or stays, when larger) over ``dvl_max_gap_s``; past that the velocity
-    is zero with ``gap_sigma_mps``, held since the dropout expired. Before the first valid
-    sample it is zero, held since the query time.
+    dropout (the newest DVL row has no bottom lock, or the newest valid sample is older than
+    ``dvl_stale_s``: a gap of the DVL) the last valid velocity is held and its 1-sigma grows
+    linearly from that to ``gap_sigma_mps`` (or stays, when larger) over ``dvl_max_gap_s``;
+    past that the velocity is zero with ``gap_sigma_mps``, held since the dropout expired.
+    Before the first valid sample it is zero, held since the query time.
+
+    Raises
+    ------
+    DataError
+        No DVL row has bottom lock: there is no velocity to navigate with (an AHRS-only mode
+        would stand still with a growing covariance; a clear error is more use).
     """
+    if not dvl.valid.any():
+        raise DataError(
+            dvl.path or "DVL",
+            None,
+            f"none of its {dvl.t.size} rows has a valid bottom lock (or a plausible speed):"
+            " no velocity to navigate with",
+        )
     valid_t = dvl.t[dvl.valid]
     v_valid = body_velocity(dvl.v_mps[dvl.valid], dvl_mounting)
     sigma_valid = dvl_sample_sigma(valid_t, v_valid, noise)
@@ -311,9 +338,9 @@ def velocity_input(
     have = last_valid >= 0
     v = np.where(have[:, None], v_valid[np.clip(last_valid, 0, None)], 0.0)
     age = np.where(have, t_s - valid_t[np.clip(last_valid, 0, None)], np.inf)
-    # In dropout when the newest DVL row at t is an invalid one.
+    # In dropout when the newest DVL row at t is an invalid one, or the sample is stale (a gap).
     newest_invalid = (last_any >= 0) & ~dvl.valid[np.clip(last_any, 0, None)]
-    in_dropout = newest_invalid | ~have
+    in_dropout = newest_invalid | ~have | (age > noise.dvl_stale_s)
     frac = np.clip(np.where(in_dropout, age, 0.0) / noise.dvl_max_gap_s, 0.0, 1.0)
     s0 = np.where(have, sigma_valid[np.clip(last_valid, 0, None)], noise.dvl_sigma_mps)
     sigma = np.maximum(s0 + frac * (noise.gap_sigma_mps - s0), s0)
@@ -352,9 +379,17 @@ def dead_reckoning(
     """
     noise = noise or MotionNoise()
     inside = (attitude.t > t0_s) & (attitude.t <= t1_s)
-    t = np.concatenate([[t0_s], attitude.t[inside]])
+    t_ahrs = np.concatenate([[t0_s], attitude.t[inside]])
+    t = _with_gap_times(t_ahrs, dvl.t, noise.ahrs_stale_s)
     yaw_unwrapped = np.unwrap(attitude.yaw_rad)
-    psi = body_yaw(np.interp(t, attitude.t, yaw_unwrapped), ahrs_mounting, ahrs_deviation_rad)
+    yaw = np.interp(t, attitude.t, yaw_unwrapped)
+    # in an AHRS gap (the added times) the last sample's heading is held, causally, with a
+    # variance that grows with the time it has been stale
+    last = np.clip(np.searchsorted(attitude.t, t, side="right") - 1, 0, None)
+    age = np.where(np.isin(t, t_ahrs), 0.0, t - attitude.t[last])
+    yaw = np.where(age > 0.0, yaw_unwrapped[last], yaw)
+    psi = body_yaw(yaw, ahrs_mounting, ahrs_deviation_rad)
+    var_heading = noise.ahrs_sigma_rad**2 + noise.gap_heading_variance(age - noise.ahrs_stale_s)
     vin = velocity_input(t, dvl, dvl_mounting, noise)
     dt = np.diff(t)
     # the steps in the world: R(psi) (dt v_b), the model's translation, all at once
@@ -368,7 +403,7 @@ def dead_reckoning(
     held = np.maximum(t[1:] - np.maximum(vin.sample_t_s[:-1], t0_s), dt)
     var_v = held_velocity_variance_step(held, dt, vin.sigma_mps[:-1])
     jx, jy = -d_w[:, 1], d_w[:, 0]
-    var_h = noise.ahrs_sigma_rad**2
+    var_h = var_heading[:-1]
     q = np.zeros((dt.size, 2, 2))
     q[:, 0, 0] = var_v + var_h * jx * jx
     q[:, 1, 1] = var_v + var_h * jy * jy
@@ -377,5 +412,18 @@ def dead_reckoning(
     covs[:, :2, :2] = np.asarray(start_cov, dtype=np.float64)[:2, :2] + np.concatenate(
         [np.zeros((1, 2, 2)), np.cumsum(q, axis=0)]
     )
-    covs[:, 2, 2] = var_h
+    covs[:, 2, 2] = var_heading
     return Trajectory(t, np.column_stack([xy, psi]), covs)
+
+
+def _with_gap_times(t_ahrs_s: FloatArray, t_dvl_s: FloatArray, stale_s: float) -> FloatArray:
+    """``t_ahrs_s`` (increasing) with the DVL times that fall inside its gaps (two samples
+    more than ``stale_s`` apart), so that dead reckoning steps through a silent AHRS at the
+    DVL's pace instead of in one long step."""
+    if not np.isfinite(stale_s) or t_ahrs_s.size < 2:
+        return t_ahrs_s
+    j = np.searchsorted(t_ahrs_s, t_dvl_s, side="right") - 1
+    inside = (j >= 0) & (j < t_ahrs_s.size - 1)
+    jj = np.clip(j, 0, t_ahrs_s.size - 2)
+    in_gap = inside & (t_ahrs_s[jj + 1] - t_ahrs_s[jj] > stale_s) & (t_dvl_s > t_ahrs_s[jj])
+    return np.union1d(t_ahrs_s, t_dvl_s[in_gap])

@@ -49,6 +49,17 @@ class MotionNoise:
     dvl_nominal_scatter_mps : float
         The scatter of the DVL when it works as usual (m/s): its excess over this is white
         velocity noise added to ``dvl_sigma_mps`` (:func:`dvl_sample_sigma`).
+    dvl_stale_s : float
+        A valid DVL sample older than this (s) is stale: the DVL is in a gap (no rows, or rows
+        without lock), handled as a dropout (:func:`slam.model.motion.velocity_input`). The
+        dataset's DVL gap threshold (:mod:`datasets.gates`); infinite: only rows without
+        bottom lock make a dropout.
+    ahrs_stale_s : float
+        An AHRS sample older than this (s) is stale: the AHRS is in a gap; the heading is held
+        (dead reckoning) or not turned (closed loops), and its variance grows at
+        ``gap_yaw_rate_sigma_radps``.
+    gap_yaw_rate_sigma_radps : float
+        The vehicle's yaw rate nobody measures while the AHRS is silent, as a 1-sigma (rad/s).
     """
 
     dvl_sigma_mps: float = 0.05
@@ -57,6 +68,22 @@ class MotionNoise:
     gap_sigma_mps: float = 0.3
     dvl_scatter_window_s: float = 0.0
     dvl_nominal_scatter_mps: float = 0.0
+    dvl_stale_s: float = float("inf")
+    ahrs_stale_s: float = float("inf")
+    gap_yaw_rate_sigma_radps: float = float(np.deg2rad(1.0))
+
+    def ahrs_gap_variance(self, t_prev_s: float, t_s: float, t_ahrs_s: float) -> float:
+        """Heading variance (rad^2) a step from ``t_prev_s`` to ``t_s`` adds when the newest
+        AHRS sample is from ``t_ahrs_s``: the growth of :meth:`gap_heading_variance`."""
+        stale = t_prev_s - t_ahrs_s - self.ahrs_stale_s
+        grown = self.gap_heading_variance(stale + t_s - t_prev_s)
+        return float(grown - self.gap_heading_variance(stale))
+
+    def gap_heading_variance(self, stale_for_s: npt.ArrayLike) -> FloatArray:
+        """Heading variance (rad^2) added after an AHRS sample has been held ``stale_for_s``
+        seconds past :attr:`ahrs_stale_s` (0 before)."""
+        over = np.maximum(np.asarray(stale_for_s, dtype=np.float64), 0.0)
+        return np.asarray((self.gap_yaw_rate_sigma_radps * over) ** 2)
 
 
 def held_velocity_variance_step(

@@ -2,8 +2,9 @@
 
 The driver walks the merged record stream in time order. Every record first moves the back end
 to its time by one motion step (:func:`slam.model.motion.motion_step`: the DVL velocity held
-since its sample, causal; the yaw rate of the gyro or of the AHRS heading's own change). AHRS
-records update the heading; sonar beams go to the :class:`features.extractor.LineExtractor`,
+since its sample, causal, its noise growing through a DVL gap; the yaw rate of the gyro or of
+the AHRS heading's own change, none through an AHRS gap, where the DVL records carry the
+trajectory on). AHRS records update the heading; sonar beams go to the :class:`features.extractor.LineExtractor`,
 whose only view of the vehicle is the :class:`features.pose_source.PoseSource` the back end
 gives (:meth:`slam.backends.base.Backend.pose_source`); the lines it returns update the back end.
 GPS records are never used here (evaluation only).
@@ -40,7 +41,8 @@ class ClosedLoopResult:
     Attributes
     ----------
     trajectory : Trajectory
-        The causal (filtered) pose at the start and at every AHRS record, with covariances.
+        The causal (filtered) pose at the start and at every AHRS record (and at every DVL
+        record inside an AHRS gap), with covariances.
     backend : Backend
         The back end at the end of the run (its map, smoothed trajectory, graph...).
     features : list of LineFeature
@@ -94,7 +96,8 @@ def run_closed_loop(
     records = [r for r in dataset.stream(t0, t1) if not isinstance(r, GpsFix)]
     times = np.array([r.t for r in records])
     cfg = dataset.config
-    vin = velocity_input(times, dataset.dvl, cfg.dvl_mounting, motion_noise(dataset))
+    noise = motion_noise(dataset)
+    vin = velocity_input(times, dataset.dvl, cfg.dvl_mounting, noise)
     backend = make_backend(t0, pose0, cov0)
     odometry = AnchoredOdometry(t0, pose0)
     extractor = LineExtractor(
@@ -111,13 +114,17 @@ def run_closed_loop(
     prev_yaw: tuple[float, float] | None = None  # (t, body yaw) of the previous AHRS sample
     v_prev, s_prev = np.zeros(2), float(vin.sigma_mps[0]) if len(records) else 0.0
     t_prev, held_from = t0, t0  # previous record; since when its velocity sample is held
+    t_ahrs = t0  # the newest AHRS sample (an AHRS gap: older than noise.ahrs_stale_s)
     extractor_s = backend_s = 0.0
     counts = {"beams": 0, "ahrs": 0, "dvl": 0}
     for k, rec in enumerate(
         tqdm(records, disable=not progress, unit="rec", desc=label, mininterval=1.0)
     ):
         tb = time.perf_counter()
-        step = motion_step(t_prev, rec.t, v_prev, s_prev, yaw_rate, held_from)
+        # an AHRS gap: no turn, and the heading's variance grows with the gap
+        rate = yaw_rate if t_prev - t_ahrs <= noise.ahrs_stale_s else 0.0
+        var_gap = noise.ahrs_gap_variance(t_prev, rec.t, t_ahrs)
+        step = motion_step(t_prev, rec.t, v_prev, s_prev, rate, held_from, var_gap)
         odometry.append(rec.t, backend.predict(step), step.var_xy_m2)
         v_prev, s_prev = vin.v_b_mps[k], float(vin.sigma_mps[k])
         t_prev, held_from = rec.t, max(float(vin.sample_t_s[k]), t0)
@@ -131,12 +138,17 @@ def run_closed_loop(
             else:
                 yaw_rate = rec.yaw_rate_radps
             backend.update_heading(rec.t, yaw_b)
+            t_ahrs = rec.t
             traj_t.append(rec.t)
             traj_p.append(backend.pose)
             traj_c.append(backend.pose_cov)
             backend_s += time.perf_counter() - tb
         elif isinstance(rec, DvlVelocity):
             counts["dvl"] += 1
+            if rec.t - t_ahrs > noise.ahrs_stale_s:  # an AHRS gap: the poses go on
+                traj_t.append(rec.t)
+                traj_p.append(backend.pose)
+                traj_c.append(backend.pose_cov)
             backend_s += time.perf_counter() - tb
         elif isinstance(rec, SonarBeam):
             counts["beams"] += 1

@@ -10,6 +10,7 @@ from datasets.simulator import simulate
 from datasets.source import data_root, open_dataset
 from features.projection import project_beams
 from slam.eval.truth import truth_walls
+from slam.io.files import write_atomic
 from slam.io.maps import plot_scans
 from slam.run.presets import map_min_intensity
 from slam.run.run import RunResult, run
@@ -39,11 +40,10 @@ def main_job(out_dir: str | Path, progress: bool = True) -> list[RunResult]:
     points, _ = project_beams(
         beams, dataset.config.sonar, dataset.config.sonar_mounting, gps, map_min_intensity(beams)
     )
-    plot_scans(
+    title = f"{name}: sonar bins projected with GPS poses"
+    walls = truth_walls(dataset) if dataset.truth and "walls_m" in dataset.truth else None
+    write_atomic(
         out / f"{name}_scans_gps.png",
-        points,
-        {"gps": gps},
-        f"{name}: sonar bins projected with GPS poses",
-        truth_walls(dataset) if dataset.truth and "walls_m" in dataset.truth else None,
+        lambda p: plot_scans(p, points, {"gps": gps}, title, walls),
     )
     return results

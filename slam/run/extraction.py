@@ -34,6 +34,14 @@ from features.line import LineFeature
 from features.pose_source import PoseSource
 from features.projection import project_beams
 from slam.eval.truth import truth_walls
+from slam.io.files import (
+    check_output_dir,
+    json_safe,
+    make_output_dir,
+    write_atomic,
+    write_json,
+    write_text,
+)
 from slam.io.maps import MapLayers, plot_lines, segment_band_world
 from slam.io.trajectory import Trajectory
 from slam.run.presets import extractor_config, map_min_intensity, preset_for
@@ -148,6 +156,9 @@ def extract(
     Only the beams inside both the navigation span and the pose source's span are used (a
     trajectory holds its end poses outside its span, which would smear those beams).
     """
+    check_output_dir(out_dir)  # before any work; created only to write the outputs
+    if config_path is not None:  # the file's errors before the dataset is read
+        extractor_config(preset or "default", config_path)
     dataset = source if isinstance(source, Dataset) else open_dataset(source)
     pose_source = pose_source_by_name(dataset, poses)
     beams = dataset.nav_beams()
@@ -181,18 +192,21 @@ def extract(
         "realtime_factor": data_s / wall_s if wall_s > 0.0 else float("inf"),
         "config": config.to_dict(),
     }
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    with open(out / "lines.jsonl", "w") as f:
-        for ln in lines:
-            f.write(json.dumps(ln.to_json()) + "\n")
-    (out / "extract.json").write_text(json.dumps(stats, indent=2) + "\n")
+    out = make_output_dir(out_dir)
+    write_text(
+        out / "lines.jsonl",
+        "".join(json.dumps(json_safe(ln.to_json()), allow_nan=False) + "\n" for ln in lines),
+    )
+    write_json(out / "extract.json", stats)
     # the picture shows the bins the extractor thresholds (raw beams are mostly noise)
     points_w, _ = project_beams(
         beams, head, mounting, pose_source, map_min_intensity(beams, config)
     )
     title = f"{dataset.name}: {len(lines)} lines ({preset_name} preset, {poses} poses), 95 % bands"
-    _draw(out / "lines_world.png", dataset, lines, points_w, {poses: pose_source}, title)
+    write_atomic(
+        out / "lines_world.png",
+        lambda p: _draw(p, dataset, lines, points_w, {poses: pose_source}, title),
+    )
     return ExtractionResult(lines, stats, beam_time_s, out)
 
 

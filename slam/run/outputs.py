@@ -13,11 +13,15 @@
   projected with the run's trajectory), one ``<backend>_<name>.tum`` per other trajectory of the
   back end (``isam2_smoothed.tum``, ``isam2_batch.tum``) and whatever the back end saves
   (``graph.json``, and its poses and odometry as ``graph.g2o``: :mod:`slam.backends.isam2.g2o`).
+
+Every file is written under a temporary name and renamed when whole (:mod:`slam.io.files`);
+``metrics.json`` is strict JSON (null where a figure is undefined).
 """
 
 from __future__ import annotations
 
 import json
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +33,14 @@ from features.projection import project_beams
 from slam.backends.isam2.g2o import graph_json_to_g2o
 from slam.eval.ate import ate_errors, truth_errors
 from slam.eval.truth import truth_trajectory, truth_walls
+from slam.io.files import (
+    json_safe,
+    make_output_dir,
+    write_atomic,
+    write_files_into,
+    write_json,
+    write_text,
+)
 from slam.io.maps import MapLayers, landmark_layers, plot_map
 from slam.io.plots import plot_trajectories
 from slam.io.trajectory import (
@@ -59,29 +71,36 @@ def write_run(
 ) -> Path:
     """Write a run's files into ``out`` (created); returns ``out``."""
     assert dataset.gps is not None, "a run has GPS (checked by run_backend)"
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "config_used.toml").write_text(dump_dataset_config(dataset.config))
+    make_output_dir(out)
+    write_text(out / "config_used.toml", dump_dataset_config(dataset.config))
     t0, t1 = trajectory.span_s
     gps = dataset.gps
     gps_tr = gps_ahrs_trajectory(dataset)
     gps_in = (gps.t >= t0) & (gps.t <= t1)
     # the raw fixes (the ATE reference), with the AHRS heading for a full pose
     gps_pose = np.column_stack([gps.en_m[gps_in], gps_tr.poses(gps.t[gps_in])[:, 2]])
-    write_tum(out / GPS_FILE, Trajectory(gps.t[gps_in], gps_pose))
+    gps_in_tr = Trajectory(gps.t[gps_in], gps_pose)
+    write_atomic(out / GPS_FILE, lambda p: write_tum(p, gps_in_tr))
     reference_t = gps.t
     if dataset.truth is not None:
-        truth = truth_trajectory(dataset)
-        write_tum(out / TRUTH_FILE, truth.clip(t0, t1))
+        truth = truth_trajectory(dataset).clip(t0, t1)
+        write_atomic(out / TRUTH_FILE, lambda p: write_tum(p, truth))
         reference_t = np.concatenate([gps.t, truth.t_s])
     for name, tr in [(None, trajectory), *trajectories.items()]:
         stem = trajectory_stem(backend, name)
         dense = with_samples_at(tr, reference_t)
-        write_tum(out / f"{stem}.tum", dense)
-        write_trajectory_covariances(out / cov_file(stem), dense)  # no-op without covariances
+        write_atomic(out / f"{stem}.tum", partial(write_tum, trajectory=dense))
+        if dense.covs is not None:  # no file without covariances
+            write_atomic(
+                out / cov_file(stem), partial(write_trajectory_covariances, trajectory=dense)
+            )
     if closed_loop is not None:
         _write_closed_loop(out, dataset, backend, closed_loop)
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
-    _report_figure(out / "report.png", dataset, backend, trajectory, metrics)
+    write_json(out / "metrics.json", metrics)
+    write_atomic(
+        out / "report.png",
+        lambda p: _report_figure(p, dataset, backend, trajectory, metrics),
+    )
     return out
 
 
@@ -133,11 +152,13 @@ def _report_figure(
 def _write_closed_loop(out: Path, dataset: Dataset, backend: str, result: ClosedLoopResult) -> None:
     """map.json, lines.jsonl, the back end's files and map.png of a closed loop."""
     landmarks = result.backend.map_records()
-    (out / "map.json").write_text(json.dumps({"landmarks": landmarks}, indent=1) + "\n")
-    with (out / "lines.jsonl").open("w") as fh:
-        for f, lm in zip(result.features, result.feature_landmarks, strict=True):
-            fh.write(json.dumps({**f.to_json(), "landmark": lm}) + "\n")
-    for saved in result.backend.save(out):
+    write_json(out / "map.json", {"landmarks": landmarks}, indent=1)
+    lines = [
+        json.dumps(json_safe({**f.to_json(), "landmark": lm}), allow_nan=False) + "\n"
+        for f, lm in zip(result.features, result.feature_landmarks, strict=True)
+    ]
+    write_text(out / "lines.jsonl", "".join(lines))
+    for saved in write_files_into(out, result.backend.save):
         if saved.name == "graph.json":
             graph_json_to_g2o(saved)
     t0, t1 = result.trajectory.span_s
@@ -158,9 +179,8 @@ def _write_closed_loop(out: Path, dataset: Dataset, backend: str, result: Closed
         bands,
         _walls(dataset),
     )
-    plot_map(
-        out / "map.png",
-        layers,
+    title = (
         f"{dataset.name}: {backend}, {len(landmarks)} landmarks with 95 % bands over the sonar"
-        " bins projected with its trajectory",
+        " bins projected with its trajectory"
     )
+    write_atomic(out / "map.png", lambda p: plot_map(p, layers, title))

@@ -17,22 +17,24 @@
   (``ekf``: :class:`slam.backends.ekf.EkfConfig`, ``isam2``:
   :class:`slam.backends.isam2.graph.GraphConfig`); ``FIELD`` is a field of that frozen
   dataclass, nested by dots (``ekf.association.gate_probability``); ``<backend>.association``
-  is short for ``<backend>.association.method``.
+  is short for ``<backend>.association.method``. Every value is checked against the field's
+  type and the dataclass's ranges (:mod:`datasets.settings`, the mechanism that also checks
+  ``sonarslam.toml``): a wrong one is a :class:`datasets.settings.SettingError` naming it.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
-import tomllib
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from datasets.config import NoiseConfig
+from datasets.errors import DataError
+from datasets.settings import SettingError, parse_text, read_toml, replace_checked, toml_line
 from features.config import ExtractorConfig
 from slam.backends.base import BackendConfig
 from slam.backends.registry import backend_spec
@@ -52,6 +54,7 @@ __all__ = [
     "parse_settings",
     "apply_overrides",
     "split_settings",
+    "check_settings",
 ]
 
 _DEG = math.pi / 180.0
@@ -102,13 +105,16 @@ def preset_for(beams: Sequence[SonarBeam]) -> str:
     return "marina" if beams and all(b.thresholded for b in beams) else "default"
 
 
-def _read_table(path: str | Path, table: str) -> dict[str, Any]:
-    with open(path, "rb") as f:
-        data = tomllib.load(f)
+def _read_table(path: str | Path, table: str) -> tuple[dict[str, Any], str]:
+    """The ``[table]`` of a TOML file (or its top level when it has none) and the file's text;
+    DataError for a file that cannot be read, is not UTF-8 or not TOML, or whose ``[table]``
+    is no table."""
+    p = Path(path)
+    data, text = read_toml(p)
     inner = data.get(table, data)
     if not isinstance(inner, dict):
-        raise ValueError(f"{path}: [{table}] must be a table")
-    return inner
+        raise DataError(p, toml_line(text, "", table), f"[{table}] must be a table, got {inner!r}")
+    return inner, text
 
 
 def noise_settings(noise: NoiseConfig | None) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -136,20 +142,24 @@ def extractor_config(
     TOML file (``[extractor]`` table or top level) and then ``overrides`` (dotted names,
     :func:`apply_overrides`) over it.
 
-    Raises ValueError for an unknown preset or field.
+    Raises SettingError for an unknown preset or a wrong override, DataError for a wrong
+    file or a wrong value in it (naming the file and the key).
     """
     if preset not in EXTRACTOR_PRESETS:
-        raise ValueError(
-            f"extractor preset must be one of {sorted(EXTRACTOR_PRESETS)}, got {preset!r}"
+        raise SettingError(
+            "extractor preset", f"must be one of {sorted(EXTRACTOR_PRESETS)}, got {preset!r}"
         )
     config = EXTRACTOR_PRESETS[preset].replace(**noise_settings(noise)[0])
     if config_path is not None:
-        data = _read_table(config_path, "extractor")
-        unknown = set(data) - {f.name for f in dataclasses.fields(ExtractorConfig)}
-        if unknown:
-            raise ValueError(f"{config_path}: unknown ExtractorConfig fields: {sorted(unknown)}")
-        config = config.replace(**data)
-    return apply_overrides(config, overrides or {})
+        data, text = _read_table(config_path, "extractor")
+        try:
+            config = replace_checked(config, data, prefix="[extractor] ")
+        except SettingError as exc:
+            keys = exc.key.replace("[extractor] ", "").split(", ")
+            table = "extractor" if toml_line(text, "extractor") is not None else ""
+            line = toml_line(text, table, keys[0].split(".")[0]) if len(keys) == 1 else None
+            raise DataError(config_path, line, str(exc)) from None
+    return apply_overrides(config, overrides or {}, prefix="extractor.")
 
 
 def pool_preset(step_rad: float, covariance_method: str = "fit") -> ExtractorConfig:
@@ -181,8 +191,8 @@ def backend_config(
 ) -> BackendConfig:
     """Back end ``name``'s default configuration with a dataset's ``noise`` calibration
     (:func:`noise_settings`) and ``overrides`` (dotted names) over it."""
-    defaults = dataclasses.replace(backend_spec(name).config_type(), **noise_settings(noise)[1])
-    return apply_overrides(defaults, overrides or {})
+    defaults = replace(backend_spec(name).config_type(), **noise_settings(noise)[1])
+    return apply_overrides(defaults, overrides or {}, prefix=f"{name}.")
 
 
 @dataclass(frozen=True)
@@ -228,58 +238,34 @@ def run_config(
 
 _ALIASES = {"association": "association.method"}
 
-
-def parse_value(text: str) -> Any:
-    """A setting value: int, float, true/false, none, else the string itself."""
-    t = text.strip()
-    low = t.lower()
-    if low in ("true", "false"):
-        return low == "true"
-    if low in ("none", "null"):
-        return None
-    for kind in (int, float):
-        try:
-            return kind(t)
-        except ValueError:
-            pass
-    return t
+#: A setting's value as typed on the command line (:func:`datasets.settings.parse_text`).
+parse_value = parse_text
 
 
 def parse_settings(specs: Iterable[str]) -> dict[str, Any]:
-    """``{"ekf.extent_margin_m": 10.0}`` from ``["ekf.extent_margin_m=10"]``."""
+    """``{"ekf.extent_margin_m": 10}`` from ``["ekf.extent_margin_m=10"]``; the values are
+    checked against their fields when applied (:func:`apply_overrides`)."""
     out: dict[str, Any] = {}
     for spec in specs:
         name, sep, value = spec.partition("=")
         name = name.strip()
         if not sep or "." not in name or not value.strip():
-            raise ValueError(f"--set: expected SCOPE.FIELD=VALUE, got {spec!r}")
+            raise SettingError("--set", f"expected SCOPE.FIELD=VALUE, got {spec!r}")
         out[name] = parse_value(value)
     return out
 
 
-def _set_path(config: Any, path: Sequence[str], value: Any) -> Any:
-    if not dataclasses.is_dataclass(config) or isinstance(config, type):
-        raise ValueError(f"cannot set {'.'.join(path)} on a {type(config).__name__}")
-    names = [f.name for f in dataclasses.fields(config)]
-    if path[0] not in names:
-        raise ValueError(f"unknown field {path[0]!r} of {type(config).__name__}; one of {names}")
-    if len(path) == 1:
-        return dataclasses.replace(config, **{path[0]: value})
-    inner = _set_path(getattr(config, path[0]), path[1:], value)
-    return dataclasses.replace(config, **{path[0]: inner})
-
-
-def apply_overrides(config: Any, overrides: dict[str, Any]) -> Any:
-    """``config`` with dotted fields (``"association.method"``, aliases too) replaced."""
-    for name, value in overrides.items():
-        path = _ALIASES.get(name, name).split(".")
-        config = _set_path(config, path, value)
-    return config
+def apply_overrides(config: Any, overrides: dict[str, Any], prefix: str = "") -> Any:
+    """``config`` with dotted fields (``"association.method"``, aliases too) replaced, each
+    value checked against its field (:func:`datasets.settings.replace_checked`); ``prefix``
+    names the scope in messages. Raises SettingError."""
+    resolved = {_ALIASES.get(name, name): value for name, value in overrides.items()}
+    return replace_checked(config, resolved, prefix=prefix)
 
 
 def split_settings(params: dict[str, Any], backend: str) -> tuple[dict[str, Any], dict[str, Any]]:
     """``(extractor settings, back-end settings)`` of ``params`` for ``backend``; a setting of
-    another scope is an error naming it."""
+    another scope is a SettingError naming it."""
     ext: dict[str, Any] = {}
     own: dict[str, Any] = {}
     for name, value in params.items():
@@ -289,5 +275,14 @@ def split_settings(params: dict[str, Any], backend: str) -> tuple[dict[str, Any]
         elif scope == backend:
             own[rest] = value
         else:
-            raise ValueError(f"parameter {name!r} does not apply to back end {backend!r}")
+            raise SettingError(name, f"does not apply to back end {backend!r}")
     return ext, own
+
+
+def check_settings(backend: str, settings: dict[str, Any]) -> None:
+    """Check settings before anything is read or run: their scope, fields, types and ranges
+    over the default configurations (with the preset the beams choose, :func:`run_config`
+    checks them again). Raises SettingError."""
+    ext, own = split_settings(settings, backend)
+    extractor_config("default", overrides=ext)
+    backend_config(backend, own)

@@ -13,20 +13,24 @@ sensor; the ATE is taken at every GPS fix inside the trajectory's span, with no 
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from datasets.errors import DataError, DataWarning
+from datasets.settings import SettingError
 from datasets.source import Dataset, open_dataset
 from slam.backends.registry import BACKENDS, backend_spec
 from slam.eval.ate import ate_against_gps, ate_against_truth
 from slam.eval.truth import association_against_truth, truth_trajectory
+from slam.io.files import check_output_dir
 from slam.io.trajectory import Trajectory
 from slam.run.closed_loop import ClosedLoopResult, run_closed_loop
 from slam.run.outputs import write_run
-from slam.run.presets import RunConfig, run_config
+from slam.run.presets import RunConfig, check_settings, run_config
 from slam.run.sources import POSE_SOURCES, dvl_quality
 
 __all__ = ["BASELINES", "RunResult", "backend_names", "run_backend", "run", "summary_line"]
@@ -108,9 +112,9 @@ def run_backend(
         scores against the true walls (``truth_*``).
     """
     if dataset.gps is None:
-        raise ValueError(f"{dataset.root}: runs need *_DGPS.log for the start pose and the ATE")
+        raise DataError(dataset.root, None, "runs need *_DGPS.log for the start pose and the ATE")
     if backend not in backend_names():
-        raise ValueError(f"--backend must be one of {backend_names()}, got {backend!r}")
+        raise SettingError("--backend", f"must be one of {backend_names()}, got {backend!r}")
     extra: dict[str, Any] = {}
     result: ClosedLoopResult | None = None
     config: RunConfig | None = None
@@ -118,14 +122,17 @@ def run_backend(
     wall0 = time.perf_counter()
     if backend in BASELINES:
         if settings:
-            raise ValueError(f"back end {backend!r} has no settings, got {sorted(settings)}")
+            raise SettingError(
+                "--set", f"back end {backend!r} has no settings, got {sorted(settings)}"
+            )
         if batch:
-            raise ValueError(f"--batch: back end {backend!r} does not smooth")
+            raise SettingError("--batch", f"back end {backend!r} does not smooth")
         trajectory = POSE_SOURCES[backend](dataset)
     else:
         spec = backend_spec(backend)
         if batch and not spec.smoother:
-            raise ValueError(f"--batch: back end {backend!r} does not smooth")
+            raise SettingError("--batch", f"back end {backend!r} does not smooth")
+        _require_beams(dataset)
         config = run_config(dataset.beams, backend, settings, dataset.config.noise)
         mounting = dataset.config.sonar_mounting
         cfg = config.backend
@@ -144,6 +151,8 @@ def run_backend(
     wall_s = time.perf_counter() - wall0
     if t_end_s is not None and trajectory.t_s[-1] > t_end_s:
         trajectory = trajectory.clip(trajectory.t_s[0], t_end_s)
+    for tr in (trajectory, *trajectories.values()):
+        _check_finite(dataset, backend, tr)
     t0, t1 = trajectory.span_s
     metrics: dict[str, Any] = {
         "source": str(dataset.root),
@@ -156,6 +165,8 @@ def run_backend(
         "dvl_rows": int(dataset.dvl.t.size),
         "dvl_invalid_rows": int((~dataset.dvl.valid).sum()),
         **dvl_quality(dataset),
+        **_gps_coverage(dataset, trajectory),
+        **dataset.report.metrics((t0, t1)),
         **extra,
     }
     for name, tr in trajectories.items():
@@ -164,6 +175,59 @@ def run_backend(
         metrics[f"ate_max_{name}_m"] = ate.ate_max_m
         metrics.update(_span_metrics(dataset, tr, f"_{name}"))
     return RunResult(backend, trajectory, metrics, result, config, trajectories)
+
+
+def _span(span: tuple[float, float]) -> str:
+    return f"{span[0]:.3f}-{span[1]:.3f} s"
+
+
+def _require_beams(dataset: Dataset) -> None:
+    """A closed loop without a beam inside the navigation span would be dead reckoning."""
+    if dataset.sonar_span_s is not None:
+        return
+    beams = _span((dataset.beams[0].t, dataset.beams[-1].t)) if dataset.beams else "none"
+    raise DataError(
+        dataset.root,
+        None,
+        f"no sonar beam inside the navigation span {_span(dataset.nav_span_s)} (the"
+        f" {len(dataset.beams)} beams: {beams}; [sonar] time_offset_s?): a closed loop would"
+        " be dead reckoning",
+    )
+
+
+def _check_finite(dataset: Dataset, backend: str, trajectory: Trajectory) -> None:
+    """The last guard: a trajectory with a pose or covariance that is not finite is an error
+    (a fault the gates let through), never numbers written as if they were."""
+    bad = ~np.all(np.isfinite(trajectory.poses_wTb), axis=1)
+    if trajectory.covs is not None:
+        bad |= ~np.all(np.isfinite(trajectory.covs), axis=(1, 2))
+    if bad.any():
+        t = float(trajectory.t_s[np.flatnonzero(bad)[0]])
+        raise DataError(
+            dataset.root, None, f"the {backend} estimate is not finite from t={t:.3f} s on"
+        )
+
+
+def _gps_coverage(dataset: Dataset, trajectory: Trajectory) -> dict[str, Any]:
+    """How much of the run the GPS covers (``gps_uncovered_s``: the run's time before the
+    first and after the last fix), with a warning naming the span when a gap of the GPS's
+    threshold is left uncovered: the ATE is then over the covered part only."""
+    assert dataset.gps is not None
+    t0, t1 = trajectory.span_s
+    g = dataset.gps.t
+    inside = g[(g >= t0) & (g <= t1)]
+    first, last = (float(inside[0]), float(inside[-1])) if inside.size else (t1, t1)
+    uncovered = max(first - t0, 0.0) + max(t1 - last, 0.0)
+    gaps = dataset.report.gaps.get("gps")
+    threshold = gaps.threshold_s if gaps is not None else 0.0
+    if uncovered > threshold:
+        warnings.warn(
+            f"{dataset.gps.path or dataset.root}: the GPS covers {_span((first, last))} of the"
+            f" run's {_span((t0, t1))}: the ATE is over its {inside.size} fixes only",
+            DataWarning,
+            stacklevel=3,
+        )
+    return {"gps_uncovered_s": uncovered}
 
 
 def _span_metrics(dataset: Dataset, trajectory: Trajectory, suffix: str) -> dict[str, Any]:
@@ -253,6 +317,17 @@ def run(
     ``config_used.toml``. ``settings``: extractor and back-end settings
     (``{"isam2.robust": "cauchy"}``, :mod:`slam.run.presets`), recorded in ``metrics.json``.
     """
+    # everything that can be checked before reading is checked first, and the output
+    # directory is created only when the run has results to write
+    check_output_dir(out_dir)
+    if backend not in backend_names():
+        raise SettingError("--backend", f"must be one of {backend_names()}, got {backend!r}")
+    if settings and backend in BASELINES:
+        raise SettingError("--set", f"back end {backend!r} has no settings, got {sorted(settings)}")
+    if settings:
+        check_settings(backend, settings)
+    if batch and (backend in BASELINES or not backend_spec(backend).smoother):
+        raise SettingError("--batch", f"back end {backend!r} does not smooth")
     dataset = open_dataset(source, config_override=config)
     result = run_backend(dataset, backend, settings, progress=progress, batch=batch)
     result.out_dir = write_run(

@@ -31,14 +31,19 @@ __all__ = [
 
 
 def motion_noise(dataset: Dataset) -> MotionNoise:
-    """The motion-model noise from the dataset's ``[noise]`` settings."""
+    """The motion-model noise from the dataset's ``[noise]`` settings; a DVL or AHRS sample is
+    stale after the sensor's gap threshold (:mod:`datasets.gates`)."""
     n = dataset.config.noise
+    gaps = dataset.report.gaps
+    inf = float("inf")
     return MotionNoise(
         dvl_sigma_mps=n.dvl_sigma_mps,
         ahrs_sigma_rad=float(np.deg2rad(n.ahrs_sigma_deg)),
         dvl_max_gap_s=n.dvl_max_gap_s,
         dvl_scatter_window_s=n.dvl_scatter_window_s,
         dvl_nominal_scatter_mps=n.dvl_nominal_scatter_mps,
+        dvl_stale_s=gaps["dvl"].threshold_s if "dvl" in gaps else inf,
+        ahrs_stale_s=gaps["ahrs"].threshold_s if "ahrs" in gaps else inf,
     )
 
 

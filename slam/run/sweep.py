@@ -26,7 +26,6 @@ import re
 import shutil
 import tempfile
 import time
-import tomllib
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,14 +36,17 @@ import pandas as pd
 from dask.distributed import Client, LocalCluster, as_completed
 from tqdm import tqdm
 
+from datasets.errors import DataError
+from datasets.settings import SettingError, read_toml
 from datasets.simulator import simulate
 from datasets.source import open_dataset
 from slam.backends.registry import BACKENDS
 from slam.eval.consistency import NeesSeries, anees, nees_on_grid, nees_series
 from slam.eval.truth import truth_trajectory
+from slam.io.files import make_output_dir, write_atomic
 from slam.io.plots import plot_anees, plot_sweep
 from slam.io.trajectory import Trajectory
-from slam.run.presets import parse_value
+from slam.run.presets import check_settings, parse_value
 from slam.run.run import backend_names, run_backend
 from slam.run.sonar_calibration import write_sonar_calibration
 from slam.run.sweep_summary import (
@@ -86,12 +88,12 @@ def parse_seeds(text: str) -> list[int]:
         if m:
             a, b = int(m.group(1)), int(m.group(2))
             if b < a:
-                raise ValueError(f"--seeds: empty range {part!r}")
+                raise SettingError("--seeds", f"empty range {part!r}")
             seeds.extend(range(a, b + 1))
         elif re.fullmatch(r"\d+", part):
             seeds.append(int(part))
         else:
-            raise ValueError(f"--seeds: expected N, A-B or a comma list of them, got {text!r}")
+            raise SettingError("--seeds", f"expected N, A-B or a comma list of them, got {text!r}")
     return list(dict.fromkeys(seeds))
 
 
@@ -102,7 +104,7 @@ def parse_grid(specs: Iterable[str]) -> dict[str, list[Any]]:
         name, sep, values = spec.partition("=")
         name = name.strip()
         if not sep or "." not in name or not values.strip():
-            raise ValueError(f"--grid: expected SCOPE.FIELD=V1,V2,..., got {spec!r}")
+            raise SettingError("--grid", f"expected SCOPE.FIELD=V1,V2,..., got {spec!r}")
         grid[name] = [parse_value(v) for v in values.split(",")]
     return grid
 
@@ -110,9 +112,10 @@ def parse_grid(specs: Iterable[str]) -> dict[str, list[Any]]:
 def load_grid_toml(path: str | Path) -> dict[str, list[Any]]:
     """Grid axes from a TOML file: a ``[grid]`` table (or the top level) of arrays, flat
     (``"ekf.association" = ["jcbb", "nn"]``) or nested (``[grid.extractor] min_votes = [10]``)."""
-    with open(path, "rb") as f:
-        data = tomllib.load(f)
+    data = read_toml(path)[0]
     data = data.get("grid", data)
+    if not isinstance(data, dict):
+        raise DataError(path, None, f"[grid] must be a table, got {data!r}")
     grid: dict[str, list[Any]] = {}
 
     def walk(prefix: str, node: dict[str, Any]) -> None:
@@ -126,7 +129,7 @@ def load_grid_toml(path: str | Path) -> dict[str, list[Any]]:
     walk("", data)
     for name in grid:
         if "." not in name:
-            raise ValueError(f"{path}: grid axis {name!r} needs a scope (extractor., ekf., ...)")
+            raise DataError(path, None, f"grid axis {name!r} needs a scope (extractor., ekf., ...)")
     return grid
 
 
@@ -160,20 +163,24 @@ def expand_tasks(
     known = backend_names()
     for b in backends:
         if b not in known:
-            raise ValueError(f"--backend: unknown {b!r}; one of {known}")
+            raise SettingError("--backend", f"unknown {b!r}; one of {known}")
     loops = BACKENDS
     for axis in grid:
         scope = axis.split(".", 1)[0]
         if scope != "extractor" and scope not in loops:
             if scope in known:
-                raise ValueError(
-                    f"--grid {axis}: back end {scope!r} has no settings a sweep can change"
+                raise SettingError(
+                    f"--grid {axis}", f"back end {scope!r} has no settings a sweep can change"
                 )
-            raise ValueError(
-                f"--grid {axis}: unknown scope {scope!r}; extractor or one of {list(loops)}"
+            raise SettingError(
+                f"--grid {axis}", f"unknown scope {scope!r}; extractor or one of {list(loops)}"
             )
         if not any(axis_applies(b, axis) for b in backends):
-            raise ValueError(f"--grid {axis}: no back end of {list(backends)} uses it")
+            raise SettingError(f"--grid {axis}", f"no back end of {list(backends)} uses it")
+        for b in backends:  # every value checked against its field before anything runs
+            if axis_applies(b, axis):
+                for value in grid[axis]:
+                    check_settings(b, {axis: value})
     tasks: list[SweepTask] = []
     for seed in seeds:
         for b in backends:
@@ -258,7 +265,11 @@ def run_task(
         dataset = open_dataset(source, config_override)
         run = run_backend(dataset, task.backend, task.params_dict)
         row.update(
-            {k: v for k, v in run.metrics.items() if k not in ("source", "backend", "settings")}
+            {
+                k: v
+                for k, v in run.metrics.items()
+                if k not in ("source", "backend", "settings", "gap_spans_s")
+            }
         )
         nees_pose = nees_position = empty
         if dataset.truth is not None and run.trajectory.covs is not None:
@@ -335,16 +346,19 @@ def _write(
         "plot": out / "sweep.png",
         "anees_plot": out / "anees.png",
     }
-    table.to_csv(files["table"], index=False)
+    write_atomic(files["table"], lambda p: table.to_csv(p, index=False))
     try:
         import pyarrow  # noqa: F401  # optional, not a dependency: parquet only when installed
     except ImportError:
         pass
     else:
         files["parquet"] = out / "sweep.parquet"
-        table.to_parquet(files["parquet"])
-    summary.to_csv(files["summary"], index=False)
-    np.savez_compressed(files["nees"], pose=nees_pose, position=nees_position, t_rel_s=t_rel_s)
+        write_atomic(files["parquet"], table.to_parquet)
+    write_atomic(files["summary"], lambda p: summary.to_csv(p, index=False))
+    write_atomic(
+        files["nees"],
+        lambda p: np.savez_compressed(p, pose=nees_pose, position=nees_position, t_rel_s=t_rel_s),
+    )
     labels = config_labels(table)
     beats = {}
     for _, rec in summary.iterrows():
@@ -352,14 +366,17 @@ def _write(
             beats[rec["config"]] = (
                 f"beats DR on {int(rec['beats_dr_seeds'])}/{int(rec['dr_pairs'])} seeds"
             )
-    plot_sweep(files["plot"], table, labels, title, beats)
+    write_atomic(files["plot"], lambda p: plot_sweep(p, table, labels, title, beats))
     curves = {}
     for label in dict.fromkeys(labels):
         rows = np.flatnonzero((labels == label) & (table["error"].fillna("") == "").to_numpy())
         X = nees_pose[rows] if nees_pose.size else np.zeros((0, 0))
         if X.size and np.isfinite(X).any():
             curves[label] = anees(X, 3, t_rel_s)
-    plot_anees(files["anees_plot"], curves, f"pose ANEES (3 dof) over the runs: {title}")
+    write_atomic(
+        files["anees_plot"],
+        lambda p: plot_anees(p, curves, f"pose ANEES (3 dof) over the runs: {title}"),
+    )
     return files
 
 
@@ -414,8 +431,9 @@ def sweep(
     wall0 = time.perf_counter()
     grid = dict(grid or {})
     tasks = expand_tasks(seeds, backends, grid)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    if n_workers < 1:
+        raise SettingError("--workers", f"must be at least 1, got {n_workers}")
+    out = make_output_dir(out_dir)
     cache = Path(cache_dir) if cache_dir is not None else out / "sim"
     results: list[dict[str, Any] | None] = [None] * len(tasks)
     bar = tqdm(total=len(tasks), desc="sweep", unit="run", disable=not progress)

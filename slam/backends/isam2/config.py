@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from datasets.settings import check_ranges
 from slam.backends.base import BackendConfig
 
 __all__ = ["GraphConfig"]
@@ -81,3 +82,21 @@ class GraphConfig(BackendConfig):
             raise ValueError("node_period_s must be > 0, update_period_s >= 0")
         if self.max_candidates < 1:
             raise ValueError("max_candidates must be >= 1")
+        check_ranges(self, _RANGES)
+
+
+#: Ranges beyond which the graph's numerics fail or its loops never end: an error instead.
+_RANGES = {
+    "ahrs_bias_prior_deg": (-180.0, 180.0),
+    "node_period_s": (0.1, 3600.0),
+    "min_node_gap_s": (0.0, 60.0),
+    "update_period_s": (0.0, 3600.0),
+    "gyro_scale_sigma": (1e-4, 10.0),
+    "robust_k": (1e-3, 100.0),
+    "relinearize_threshold": (1e-4, 10.0),
+    "relinearize_skip": (1, 1000),
+    "extra_iterations": (0, 100),
+    "candidate_gate_probability": (1e-6, 1.0 - 1e-12),
+    "max_candidates": (1, 1000),
+    "pose_window_s": (0.0, 1e5),
+}

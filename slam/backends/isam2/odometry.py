@@ -99,7 +99,7 @@ class NodeOdometry:
     def step(self, step: MotionStep) -> FloatArray:
         """Integrate one motion step; returns the relative motion ``bTb'`` applied."""
         qv = step.var_xy_m2 if self.dvl_noise == "hold" else step.var_xy_white_m2
-        qr = (step.dt_s * self.gyro_sigma_radps) ** 2
+        qr = step.var_yaw_rad2(self.gyro_sigma_radps)
         syaw = self.scale * step.dyaw_rad
         # the odometry factor's measurement: delta = 0, the gyro scale of the node's start
         self.since_node.step(step.dx_m, step.dy_m, syaw, qv, qr, step.dyaw_rad)

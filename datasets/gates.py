@@ -1,0 +1,278 @@
+"""Sensor faults that pass the readers: implausible samples, repeated stamps and gaps.
+
+The readers (:mod:`datasets.marina`) refuse what is not a log of the kind; what remains can
+still be a fault of the sensor: a spike, a stamp logged twice, a silence. Spikes and gaps are
+normal at sea, so a run survives them and says so: every sample dropped or flagged here is
+counted in :class:`SensorReport` (``metrics.json``: ``fault_*``, ``gap_*``) with one
+:class:`datasets.errors.DataWarning` per kind naming the file. The limits are ``[gates]`` of
+``sonarslam.toml`` (:class:`datasets.config.GateConfig`).
+
+=====================================  =======================================================
+fault                                  what happens
+=====================================  =======================================================
+repeated stamp (DVL, AHRS, GPS)        the later rows of a stamp are dropped
+DVL speed > ``dvl_max_speed_mps``      the row is flagged as without bottom lock
+AHRS rate > ``ahrs_max_rate_dps``      the sample is dropped
+AHRS heading jump the gyro does        the sample is dropped (judged against the last good
+not explain                            sample turned by the gyro's integral since)
+GPS row without a fix, or at 0/0       dropped from the evaluation (the reader flags it)
+GPS fix far from its neighbours        dropped from the evaluation
+no sample for a while (any sensor)     a gap: reported; the motion model takes the DVL or
+                                       AHRS sample as stale (:mod:`slam.model.motion`)
+=====================================  =======================================================
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from datasets.config import GateConfig
+from datasets.errors import DataWarning
+from datasets.geodesy import local_en_to_geodetic
+from datasets.records import AttitudeSeries, DvlSeries, GpsSeries
+from features.geometry import FloatArray
+
+__all__ = [
+    "Gaps",
+    "SensorReport",
+    "find_gaps",
+    "gate_dvl",
+    "gate_attitude",
+    "gate_gps",
+    "gate_beams",
+]
+
+#: Neighbours of a GPS fix: those within this time (s).
+GPS_NEIGHBOUR_WINDOW_S = 10.0
+#: At most this many gap spans are listed per sensor in ``metrics.json`` (all are counted).
+LISTED_GAPS = 20
+
+
+@dataclass(frozen=True)
+class Gaps:
+    """Times without a sample of one sensor.
+
+    Attributes
+    ----------
+    threshold_s : float
+        A gap is longer than this (s): ``gap_periods`` median periods, at least ``min_gap_s``.
+    spans_s : ndarray, shape (K, 2)
+        Start (the last sample before) and end (the first after) of each gap (Unix s).
+    """
+
+    threshold_s: float
+    spans_s: FloatArray
+
+    @property
+    def count(self) -> int:
+        return int(self.spans_s.shape[0])
+
+    @property
+    def total_s(self) -> float:
+        return float(np.sum(self.spans_s[:, 1] - self.spans_s[:, 0]))
+
+    @property
+    def longest_s(self) -> float:
+        return float(np.max(self.spans_s[:, 1] - self.spans_s[:, 0], initial=0.0))
+
+
+def find_gaps(t_s: FloatArray, gates: GateConfig) -> Gaps:
+    """The gaps of a sensor's sample times (s, non-decreasing)."""
+    t = np.asarray(t_s, dtype=np.float64)
+    dt = np.diff(t)
+    positive = dt[dt > 0.0]
+    period = float(np.median(positive)) if positive.size else 0.0
+    threshold = max(gates.gap_periods * period, gates.min_gap_s)
+    i = np.flatnonzero(dt > threshold)
+    return Gaps(threshold, np.column_stack([t[i], t[i + 1]]) if i.size else np.zeros((0, 2)))
+
+
+@dataclass
+class SensorReport:
+    """What the gates found in a dataset: counts of faulty samples and gaps per sensor."""
+
+    counts: dict[str, int] = field(default_factory=dict)
+    gaps: dict[str, Gaps] = field(default_factory=dict)
+
+    def metrics(self, span_s: tuple[float, float] | None = None) -> dict[str, Any]:
+        """Flat entries for ``metrics.json``: ``fault_<kind>`` counts, and per sensor
+        ``gap_<sensor>_count``, ``_total_s``, ``_longest_s`` with ``gap_spans_s`` (the first
+        :data:`LISTED_GAPS` spans per sensor, Unix s); only the gaps overlapping ``span_s``."""
+        out: dict[str, Any] = {f"fault_{k}": v for k, v in self.counts.items()}
+        spans: dict[str, list[list[float]]] = {}
+        for sensor, gaps in self.gaps.items():
+            g = gaps
+            if span_s is not None:
+                inside = (g.spans_s[:, 1] > span_s[0]) & (g.spans_s[:, 0] < span_s[1])
+                g = Gaps(g.threshold_s, g.spans_s[inside])
+            out[f"gap_{sensor}_count"] = g.count
+            out[f"gap_{sensor}_total_s"] = g.total_s
+            out[f"gap_{sensor}_longest_s"] = g.longest_s
+            if g.count:
+                spans[sensor] = g.spans_s[:LISTED_GAPS].tolist()
+        out["gap_spans_s"] = spans
+        return out
+
+
+def _warn(path: Path | None, sensor: str, message: str) -> None:
+    warnings.warn(f"{path or sensor}: {message}", DataWarning, stacklevel=3)
+
+
+def _warn_gaps(path: Path | None, sensor: str, gaps: Gaps, what: str) -> Gaps:
+    """One warning naming the sensor's gaps (count, total, the longest and where)."""
+    if gaps.count:
+        longest = int(np.argmax(gaps.spans_s[:, 1] - gaps.spans_s[:, 0]))
+        a, b = gaps.spans_s[longest]
+        _warn(
+            path,
+            sensor,
+            f"{gaps.count} gap(s) of the {sensor} longer than {gaps.threshold_s:.3g} s"
+            f" ({gaps.total_s:.1f} s in all; the longest {b - a:.1f} s from t={a:.3f} s):"
+            f" {what}",
+        )
+    return gaps
+
+
+def _later_repeats(t_s: FloatArray) -> np.ndarray:
+    """(N,) bool: rows whose stamp equals the previous row's (time never decreases)."""
+    return np.concatenate([[False], np.diff(t_s) == 0.0])
+
+
+def gate_dvl(dvl: DvlSeries, gates: GateConfig, report: SensorReport) -> DvlSeries:
+    """Drop repeated stamps; flag rows faster than ``dvl_max_speed_mps`` as without lock."""
+    repeat = _later_repeats(dvl.t)
+    keep = ~repeat
+    t, v, valid, heading = dvl.t[keep], dvl.v_mps[keep], dvl.valid[keep], dvl.heading_rad[keep]
+    with np.errstate(over="ignore"):
+        fast = valid & ~(np.hypot(v[:, 0], v[:, 1]) <= gates.dvl_max_speed_mps)
+    report.counts["dvl_repeated_stamps"] = int(repeat.sum())
+    report.counts["dvl_speed_spikes"] = int(fast.sum())
+    if repeat.any():
+        _warn(dvl.path, "DVL", f"dropped {int(repeat.sum())} row(s) repeating a stamp")
+    if fast.any():
+        first = float(t[np.flatnonzero(fast)[0]])
+        _warn(
+            dvl.path,
+            "DVL",
+            f"{int(fast.sum())} row(s) faster than {gates.dvl_max_speed_mps:g} m/s taken as"
+            f" without bottom lock (first at t={first:.3f} s)",
+        )
+    out = DvlSeries(t.copy(), v.copy(), valid & ~fast, heading.copy(), dvl.path)
+    report.gaps["dvl"] = _warn_gaps(
+        dvl.path,
+        "DVL",
+        find_gaps(out.t[out.valid], gates),
+        "its velocity is held with a growing uncertainty, then taken as unknown",
+    )
+    return out
+
+
+def _gyro_integral(t_s: FloatArray, rate_radps: FloatArray) -> FloatArray:
+    """Trapezoidal integral of the yaw rate from the first sample (rad), shape (N,)."""
+    steps = 0.5 * (rate_radps[1:] + rate_radps[:-1]) * np.diff(t_s)
+    return np.concatenate([[0.0], np.cumsum(steps)])
+
+
+def gate_attitude(att: AttitudeSeries, gates: GateConfig, report: SensorReport) -> AttitudeSeries:
+    """Drop repeated stamps, rate spikes and heading jumps the gyro does not explain."""
+    repeat = _later_repeats(att.t)
+    spike = ~repeat & ~(np.abs(att.yaw_rate_radps) <= math.radians(gates.ahrs_max_rate_dps))
+    keep = ~(repeat | spike)
+    t, yaw, rate = att.t[keep], att.yaw_rad[keep], att.yaw_rate_radps[keep]
+    gyro = _gyro_integral(t, rate)
+    tol0, drift = math.radians(gates.ahrs_max_jump_deg), math.radians(gates.ahrs_jump_drift_dps)
+    good = np.ones(t.size, dtype=bool)
+    ref = 0
+    ts, ys, gs = t.tolist(), yaw.tolist(), gyro.tolist()  # plain floats: one pass of 10^4-10^5
+    for k in range(1, t.size):
+        miss = (ys[k] - ys[ref] - (gs[k] - gs[ref]) + math.pi) % (2.0 * math.pi) - math.pi
+        if abs(miss) <= tol0 + drift * (ts[k] - ts[ref]):
+            ref = k
+        else:
+            good[k] = False
+    jumps = int((~good).sum())
+    report.counts["ahrs_repeated_stamps"] = int(repeat.sum())
+    report.counts["ahrs_rate_spikes"] = int(spike.sum())
+    report.counts["ahrs_heading_jumps"] = jumps
+    for n, what in (
+        (int(repeat.sum()), "repeating a stamp"),
+        (int(spike.sum()), f"with a yaw rate beyond {gates.ahrs_max_rate_dps:g} deg/s"),
+        (jumps, f"whose heading jumps more than {gates.ahrs_max_jump_deg:g} deg off the gyro's"),
+    ):
+        if n:
+            _warn(att.path, "AHRS", f"dropped {n} sample(s) {what}")
+    out = AttitudeSeries(t[good].copy(), yaw[good].copy(), rate[good].copy(), att.path)
+    report.gaps["ahrs"] = _warn_gaps(
+        att.path,
+        "AHRS",
+        find_gaps(out.t, gates),
+        "the heading is held with a growing uncertainty",
+    )
+    return out
+
+
+def gate_gps(gps: GpsSeries, gates: GateConfig, report: SensorReport) -> GpsSeries | None:
+    """Drop rows without a fix (or at 0/0), repeated stamps and fixes far from their
+    neighbours' median; the origin moves to the first fix kept. None when none is left."""
+    fix = np.ones(gps.t.size, dtype=bool) if gps.fix is None else gps.fix
+    repeat = _later_repeats(gps.t)
+    keep = fix & ~repeat
+    outlier = np.zeros(gps.t.size, dtype=bool)
+    outlier[keep] = _outliers(gps.t[keep], gps.en_m[keep], gates)
+    keep &= ~outlier
+    report.counts["gps_no_fix"] = int((~fix).sum())
+    report.counts["gps_repeated_stamps"] = int((fix & repeat).sum())
+    report.counts["gps_outliers"] = int(outlier.sum())
+    for n, what in (
+        (int((~fix).sum()), "without a fix (status or 0/0)"),
+        (int((fix & repeat).sum()), "repeating a stamp"),
+        (int(outlier.sum()), f"more than {gates.gps_max_jump_m:g} m off their neighbours"),
+    ):
+        if n:
+            _warn(gps.path, "GPS", f"dropped {n} fix(es) {what} from the evaluation")
+    if not keep.any():
+        return None
+    t, en = gps.t[keep], gps.en_m[keep]
+    origin = gps.origin_lat_lon_deg
+    if np.any(en[0] != 0.0):  # the reader's origin fix was dropped: move to the first kept
+        lat, lon = local_en_to_geodetic(en[:1, 0], en[:1, 1], *origin)
+        origin = (float(lat[0]), float(lon[0]))
+        en = en - en[0]
+    out = GpsSeries(t.copy(), en.copy(), origin, None, gps.path)
+    report.gaps["gps"] = _warn_gaps(
+        gps.path, "GPS", find_gaps(out.t, gates), "the ATE has no reference there"
+    )
+    return out
+
+
+def _outliers(t_s: FloatArray, en_m: FloatArray, gates: GateConfig) -> np.ndarray:
+    """(N,) bool: fixes farther than ``gps_max_jump_m`` + ``dvl_max_speed_mps`` x (median
+    time to the neighbours) from the median of their neighbours within 10 s (at least 2)."""
+    n = t_s.size
+    out = np.zeros(n, dtype=bool)
+    lo = np.searchsorted(t_s, t_s - GPS_NEIGHBOUR_WINDOW_S, side="left")
+    hi = np.searchsorted(t_s, t_s + GPS_NEIGHBOUR_WINDOW_S, side="right")
+    for k in range(n):
+        idx = np.concatenate([np.arange(lo[k], k), np.arange(k + 1, hi[k])])
+        if idx.size < 2:
+            continue
+        centre = np.median(en_m[idx], axis=0)
+        allowance = gates.gps_max_jump_m + gates.dvl_max_speed_mps * float(
+            np.median(np.abs(t_s[idx] - t_s[k]))
+        )
+        out[k] = float(np.hypot(*(en_m[k] - centre))) > allowance
+    return out
+
+
+def gate_beams(
+    t_s: FloatArray, gates: GateConfig, report: SensorReport, path: Path | None = None
+) -> None:
+    """The sonar's gaps (its beams are not gated: a beam is evidence, not a state)."""
+    gaps = find_gaps(t_s, gates) if t_s.size else Gaps(0.0, np.zeros((0, 2)))
+    report.gaps["sonar"] = _warn_gaps(path, "sonar", gaps, "no line can correct the navigation")

@@ -1,0 +1,278 @@
+"""Typed settings: every value from a file or the command line checked against the frozen
+dataclass it sets, by one mechanism.
+
+``sonarslam.toml`` and ``run --config`` (:func:`datasets.config.load_dataset_config`),
+``extract --config``, ``run --set SCOPE.FIELD=VALUE`` and the sweep's grid
+(:mod:`slam.run.presets`) all end in :func:`replace_checked`: each dotted name must be a field
+of the dataclass (nested dataclasses by dots); its value must have the field's annotated type
+(:func:`coerce`: a whole number for an ``int``, a finite number for a ``float``, ``true`` /
+``false`` for a ``bool``, a string for a ``str``, ``None`` only where the field allows it, a
+table for a nested dataclass); then the dataclass is built, and its own ``__post_init__``
+checks the ranges. Anything wrong is a :class:`SettingError` naming the key; a file's loader
+turns it into a :class:`datasets.errors.DataError` naming the file too.
+
+Text from the command line is parsed by the same grammar as the logs' numbers
+(:data:`datasets.logfile.NUMBER`): ``nan``, ``inf``, ``1_000`` or ``0x10`` are not numbers.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import tomllib
+import types
+import typing
+from collections.abc import Mapping
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+from datasets.errors import DataError
+from datasets.logfile import NUMBER, read_text, split_lines
+
+__all__ = [
+    "SettingError",
+    "parse_text",
+    "coerce",
+    "field_types",
+    "replace_checked",
+    "check_ranges",
+    "read_toml",
+    "toml_line",
+]
+
+_NUMBER_RE = re.compile(NUMBER)
+_INT_RE = re.compile(r"[+-]?[0-9]+")
+_NONE_TEXT = ("none", "null")
+#: Whole numbers beyond this are no setting of this project (counts, cells, iterations).
+MAX_INT = 10**9
+
+
+def read_toml(path: str | Path) -> tuple[dict[str, Any], str]:
+    """A TOML file (UTF-8, :func:`datasets.logfile.read_text`) and its text; a syntax error is
+    a :class:`DataError` with its line (the last line when the parser ran out of document)."""
+    p = Path(path)
+    text = read_text(p, "utf-8")
+    try:
+        return tomllib.loads(text), text
+    except tomllib.TOMLDecodeError as exc:
+        found = re.search(r"at line (\d+)", str(exc))
+        line = int(found.group(1)) if found else None
+        if line is None and "end of document" in str(exc):
+            line = max(len(split_lines(text)[0]), 1)
+        raise DataError(p, line, f"TOML syntax error: {exc}") from None
+
+
+_TABLE_HEADER = re.compile(r"\[\s*([^\[\]]+?)\s*\]\s*(?:#.*)?")
+_KEY = re.compile(r"\s*\"?([A-Za-z0-9_.-]+)\"?\s*=")
+
+
+def toml_line(text: str, table: str, key: str | None = None) -> int | None:
+    """The physical line of ``key = ...`` in ``[table]`` of a TOML text (``table`` dotted,
+    ``""`` for the top level), or of the ``[table]`` header when ``key`` is None; None when not
+    written that way (an inline table, a dotted key)."""
+    current = ""
+    for number, raw in enumerate(split_lines(text)[0], start=1):
+        header = _TABLE_HEADER.fullmatch(raw.strip())
+        if header is not None:
+            current = re.sub(r"\s*\.\s*", ".", header.group(1)).replace('"', "")
+            if key is None and current == table:
+                return number
+            continue
+        found = _KEY.match(raw)
+        if key is not None and found is not None and current == table and found.group(1) == key:
+            return number
+    return None
+
+
+def check_ranges(obj: Any, bounds: Mapping[str, tuple[float, float]]) -> None:
+    """For a dataclass's ``__post_init__``: ValueError unless each named field is None or in
+    ``[low, high]`` (the ranges :func:`replace_checked` reports with the key)."""
+    for name, (low, high) in bounds.items():
+        value = getattr(obj, name)
+        if value is not None and not low <= value <= high:
+            raise ValueError(f"{name} must be in [{low:g}, {high:g}], got {value!r}")
+
+
+class SettingError(ValueError):
+    """A setting that cannot be used. ``key`` names it (``"extractor.min_votes"``,
+    ``"[sonar] step_deg"``)."""
+
+    def __init__(self, key: str, message: str) -> None:
+        self.key = key
+        self.message = message
+        super().__init__(f"{key}: {message}")
+
+
+def parse_text(text: str) -> Any:
+    """A value typed on the command line, by its look: ``true``/``false``, ``none``/``null``,
+    a whole number, a number (:data:`datasets.logfile.NUMBER`), else the text itself.
+
+    :func:`coerce` then checks it against the field it sets (``"10"`` is fine for a float).
+    """
+    t = text.strip()
+    low = t.lower()
+    if low in ("true", "false"):
+        return low == "true"
+    if low in _NONE_TEXT:
+        return None
+    if _INT_RE.fullmatch(t):
+        return int(t)
+    if _NUMBER_RE.fullmatch(t):
+        return float(t)
+    return t
+
+
+def _describe(value: Any) -> str:
+    return f"{value!r} ({type(value).__name__})"
+
+
+def _number(value: Any, key: str) -> float:
+    if isinstance(value, str):
+        value = parse_text(value)
+    if isinstance(value, str):
+        raise SettingError(key, f"must be a finite number, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise SettingError(key, f"must be a number, got {_describe(value)}")
+    if isinstance(value, int) and abs(value) > MAX_INT:
+        raise SettingError(key, f"must be at most {MAX_INT:.0e} in size, got {value!r}")
+    if not math.isfinite(value):
+        raise SettingError(key, f"must be a finite number, got {value!r}")
+    return float(value)
+
+
+def coerce(annotation: Any, value: Any, key: str) -> Any:
+    """``value`` as the type ``annotation`` of a dataclass field, or :class:`SettingError`.
+
+    Accepted: for ``float`` a finite number (an ``int`` too); for ``int`` a whole number
+    (``500.0`` too, ``1.5`` not) of at most :data:`MAX_INT`; for ``bool`` a boolean; for
+    ``str`` a string; for ``X | None`` also ``None``; for ``tuple[X, ...]`` a list of that
+    length. Strings are parsed first (:func:`parse_text`) unless the field is a string.
+    """
+    origin, args = typing.get_origin(annotation), typing.get_args(annotation)
+    if origin in (typing.Union, types.UnionType):
+        options = [a for a in args if a is not type(None)]
+        if type(None) in args and (
+            value is None or (isinstance(value, str) and value.strip().lower() in _NONE_TEXT)
+        ):
+            return None
+        if len(options) == 1:
+            return coerce(options[0], value, key)
+        errors = []
+        for option in options:
+            try:
+                return coerce(option, value, key)
+            except SettingError as exc:
+                errors.append(exc.message)
+        raise SettingError(key, " or ".join(errors))
+    if value is None:
+        raise SettingError(key, "must be set (None is not allowed here)")
+    if annotation is str:
+        if not isinstance(value, str):
+            raise SettingError(key, f"must be a string, got {_describe(value)}")
+        return value
+    if annotation is bool:
+        if isinstance(value, str) and value.strip().lower() in ("true", "false"):
+            return value.strip().lower() == "true"
+        if not isinstance(value, bool):
+            raise SettingError(key, f"must be true or false, got {_describe(value)}")
+        return value
+    if annotation is float:
+        return _number(value, key)
+    if annotation is int:
+        number = _number(value, key)
+        if number != math.floor(number):
+            raise SettingError(key, f"must be a whole number, got {value!r}")
+        return int(number)
+    if origin is tuple:
+        if isinstance(value, str):
+            value = value.split(",")
+        if not isinstance(value, list | tuple) or len(value) != len(args):
+            raise SettingError(key, f"must be a list of {len(args)}, got {_describe(value)}")
+        return tuple(
+            coerce(a, v, f"{key}[{i}]") for i, (a, v) in enumerate(zip(args, value, strict=True))
+        )
+    raise SettingError(key, f"cannot be set (a {annotation!r})")
+
+
+@cache
+def field_types(cls: type) -> dict[str, Any]:
+    """The resolved annotations of a dataclass's fields."""
+    hints = typing.get_type_hints(cls)
+    return {f.name: hints[f.name] for f in dataclasses.fields(cls)}
+
+
+def _tree(changes: Mapping[str, Any], prefix: str) -> dict[str, Any]:
+    """``{"a.b": 1, "a.c": 2}`` -> ``{"a": {"b": ("a.b", 1), "c": ("a.c", 2)}}`` (the full keys
+    with ``prefix``)."""
+    tree: dict[str, Any] = {}
+    for short, value in changes.items():
+        name = f"{prefix}{short}"
+        parts = short.split(".")
+        node = tree
+        for part in parts[:-1]:
+            child = node.setdefault(part, {})
+            if not isinstance(child, dict):
+                raise SettingError(name, f"{part!r} is set both whole and by its fields")
+            node = child
+        if isinstance(node.get(parts[-1]), dict):
+            raise SettingError(name, "is a table of settings, not one value")
+        node[parts[-1]] = (name, value)
+    return tree
+
+
+def _apply(obj: Any, tree: dict[str, Any], prefix: str) -> Any:
+    cls: type = type(obj)
+    types_ = field_types(cls)
+    kwargs: dict[str, Any] = {}
+    keys: list[str] = []
+    for name, node in tree.items():
+        key = f"{prefix}{name}"
+        if name not in types_:
+            raise SettingError(key, f"unknown field of {cls.__name__}; one of {sorted(types_)}")
+        annotation = types_[name]
+        is_table = dataclasses.is_dataclass(annotation)
+        if isinstance(node, dict):
+            if not is_table:
+                raise SettingError(key, f"is one value ({annotation}), not a table")
+            kwargs[name] = _apply(getattr(obj, name), node, f"{key}.")
+            keys.append(key)
+            continue
+        full_key, value = node
+        if is_table:
+            raise SettingError(full_key, f"is a table of {annotation.__name__} settings")
+        kwargs[name] = coerce(annotation, value, full_key)
+        keys.append(full_key)
+    try:
+        return dataclasses.replace(obj, **kwargs)
+    except (ValueError, TypeError) as exc:
+        message = str(exc)
+        # "min_votes must be >= 1": the key it names alone, and the message after it
+        for name, key in zip(kwargs, keys, strict=True):
+            stripped = re.sub(rf"^(\w+\.)?{re.escape(name)} ", "", message)
+            if stripped != message:
+                raise SettingError(key, stripped) from None
+        raise SettingError(", ".join(keys), message) from None
+
+
+def replace_checked(obj: Any, changes: Mapping[str, Any], prefix: str = "") -> Any:
+    """A frozen dataclass with dotted fields replaced, each checked (module docstring).
+
+    Parameters
+    ----------
+    obj : dataclass instance
+    changes : mapping of str to value
+        ``{"association.method": "nn", "min_votes": "12"}``; values typed or text.
+    prefix : str
+        Put before the names in messages (``"extractor."``).
+
+    Raises
+    ------
+    SettingError
+        An unknown field, a value of the wrong type, non-finite or out of range (the
+        dataclass's own checks), naming the key.
+    """
+    if not changes:
+        return obj
+    return _apply(obj, _tree(changes, prefix), prefix)
