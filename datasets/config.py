@@ -259,6 +259,10 @@ MARINA_CONFIG = DatasetConfig(
         gps_sigma_m=1.0,
         dvl_scatter_window_s=60.0,
         dvl_nominal_scatter_mps=0.2,
+        # a line's systematic error beyond its fit's: pairs of lines of one wall seen 14-30 s
+        # apart with dead reckoning (sonarslam calibrate marina --line-noise, GPS-free)
+        line_sigma_rho_m=0.425,
+        line_sigma_theta_deg=2.35,
     ),
     keyframe_scan_direction=-1,
     # the sharpest map over dead-reckoning poses (benchmarks/marina_sonar_timing.py, GPS-free)

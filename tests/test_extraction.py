@@ -37,13 +37,13 @@ def test_the_preset_follows_the_beams() -> None:
 
 def test_toml_fields_replace_the_preset_s(tmp_path: Path) -> None:
     path = tmp_path / "extractor.toml"
-    path.write_text('[extractor]\nmin_votes = 12\ncovariance_method = "fit"\n')
+    path.write_text('[extractor]\nmin_votes = 12\ncovariance_method = "seed"\n')
     marina = EXTRACTOR_PRESETS["marina"]
     cfg = extractor_config("marina", path)
-    assert (cfg.min_votes, cfg.covariance_method) == (12, "fit")
-    assert cfg.replace(min_votes=marina.min_votes, covariance_method="seed") == marina
+    assert (cfg.min_votes, cfg.covariance_method) == (12, "seed")
+    assert cfg.replace(min_votes=marina.min_votes, covariance_method="fit") == marina
     over = extractor_config("marina", path, {"min_votes": 20, "max_range_m": 25.0})
-    assert (over.min_votes, over.max_range_m, over.covariance_method) == (20, 25.0, "fit")
+    assert (over.min_votes, over.max_range_m, over.covariance_method) == (20, 25.0, "seed")
     assert extractor_config("default") == ExtractorConfig()
     path.write_text("min_vote = 12\n")
     with pytest.raises(ValueError, match="min_vote"):

@@ -59,7 +59,7 @@ def add_parser(sub: Subparsers) -> None:
     p.add_argument(
         "--line-noise",
         action="store_true",
-        help="a line's systematic error from pairs of lines of one wall seen 5-20 s apart with"
+        help="a line's systematic error from pairs of lines of one wall seen 14-30 s apart with"
         " dead-reckoning poses instead (GPS-free; [noise] line_sigma_rho_m, line_sigma_theta_deg;"
         " calibrate --range-offset first)",
     )

@@ -11,8 +11,10 @@ systematic error of a line.
   (the threshold's own delay cannot be seen in a 0/255 mask).
 * **Line noise** (:func:`calibrate_line_noise`, ``[noise] line_sigma_rho_m``,
   ``line_sigma_theta_deg``): lines extracted with dead-reckoning poses, and pairs of lines of one
-  wall seen within a short time of each other (dead reckoning drifts little and its relative
-  uncertainty is in the lines' covariances through ``pose_uncertainty``). Their sign-free
+  wall seen 14-30 s apart: at least one full turn of the head (13.6 s on the marina and the
+  simulator), so that the two share no echo, and soon enough for dead reckoning to drift little
+  (its uncertainty over a scan is in each line's covariance through ``pose_uncertainty``, its
+  position random walk between the two is added to the pair's). Their sign-free
   difference in the world should be chi2(2)-distributed with the pair's covariance; the
   systematic error ``diag(s_rho^2, s_theta^2)`` added to every line is the one that brings the
   median of the pairs' squared distances to chi2(2)'s median (1.386), with the ratio of the two
@@ -44,6 +46,7 @@ from features.geometry import (
     line_world_to_frame,
 )
 from features.line import LineFeature
+from slam.io.trajectory import Trajectory
 from slam.run.presets import extractor_config, preset_for
 from slam.run.sources import dead_reckoning_trajectory
 from sonar.segmentation import segment_intensities
@@ -137,6 +140,13 @@ class _Seen:
     line_w: FloatArray
     G_z: FloatArray
     ends_w: FloatArray
+    P_xy: FloatArray  # dead reckoning's position covariance at t (world), shape (2, 2)
+
+
+def _position_covariance(poses: Trajectory, t_s: float) -> FloatArray:
+    """Dead reckoning's position covariance at ``t_s`` (world, (2, 2)); zero without one."""
+    cov = poses.covariance(t_s)
+    return np.zeros((2, 2)) if cov is None else np.asarray(cov[:2, :2])
 
 
 def _pairs(lines: list[_Seen], window_s: tuple[float, float]) -> list[tuple[int, int]]:
@@ -155,7 +165,7 @@ def _pairs(lines: list[_Seen], window_s: tuple[float, float]) -> list[tuple[int,
                 break
             if dt < window_s[0] or np.sign(a.line_w[0] - b.wTr[:2] @ n) != side_a:
                 continue
-            nu, _ = _difference(a, b)
+            nu = _difference(a, b)[0]
             if abs(nu[0]) > 3.0 or abs(nu[1]) > np.deg2rad(15.0):
                 continue
             s_b = along_line(a.line_w, b.ends_w)
@@ -164,12 +174,15 @@ def _pairs(lines: list[_Seen], window_s: tuple[float, float]) -> list[tuple[int,
     return out
 
 
-def _difference(a: _Seen, b: _Seen) -> tuple[FloatArray, FloatArray]:
-    """``b``'s line in ``a``'s frame minus ``a``'s (sign-free), and ``d(b in a) / d z_b``."""
-    b_in_a, H_line, _ = line_world_to_frame(b.line_w, a.wTr)
+def _difference(a: _Seen, b: _Seen) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``b``'s line in ``a``'s frame minus ``a``'s (sign-free), ``d(b in a) / d z_b`` and
+    ``d(b in a) / d(x, y)`` of ``a``'s frame."""
+    b_in_a, H_line, H_pose = line_world_to_frame(b.line_w, a.wTr)
     nu, flipped = line_difference(b_in_a, a.z)
-    J = H_line @ b.G_z
-    return nu, (FLIP_RHO @ J if flipped else J)
+    J, H_xy = H_line @ b.G_z, H_pose[:, :2]
+    if flipped:
+        J, H_xy = FLIP_RHO @ J, FLIP_RHO @ H_xy
+    return nu, J, H_xy
 
 
 def _pair_nees(
@@ -179,15 +192,16 @@ def _pair_nees(
     out = np.empty(len(pairs))
     for k, (i, j) in enumerate(pairs):
         a, b = lines[i], lines[j]
-        nu, J = _difference(a, b)
-        S = a.R + Q + J @ (b.R + Q) @ J.T
+        nu, J, H_xy = _difference(a, b)
+        drift = b.P_xy - a.P_xy  # dead reckoning's position random walk between the two
+        S = a.R + Q + J @ (b.R + Q) @ J.T + H_xy @ drift @ H_xy.T
         out[k] = nu @ np.linalg.solve(S, nu)
     return out
 
 
 def calibrate_line_noise(
     dataset: Dataset,
-    window_s: tuple[float, float] = (5.0, 20.0),
+    window_s: tuple[float, float] = (14.0, 30.0),
     config: ExtractorConfig | None = None,
 ) -> LineNoiseFit:
     """The systematic error of a line (module docstring), GPS-free.
@@ -215,7 +229,16 @@ def calibrate_line_noise(
     for f in features:
         line_w, G_z, _ = line_frame_to_world(f.z, f.wTr)
         lines.append(
-            _Seen(f.t, np.asarray(f.wTr), f.z, np.asarray(f.cov), line_w, G_z, f.endpoints_world())
+            _Seen(
+                f.t,
+                np.asarray(f.wTr),
+                f.z,
+                np.asarray(f.cov),
+                line_w,
+                G_z,
+                f.endpoints_world(),
+                _position_covariance(poses, f.t),
+            )
         )
     pairs = _pairs(lines, window_s)
     if len(pairs) < 20:

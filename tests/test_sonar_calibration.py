@@ -1,0 +1,75 @@
+"""GPS-free calibrations of the line model (slam.run.sonar_calibration), scored against the
+simulator's true walls: the range offset of the kept echoes and a line's systematic error."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from datasets.simulator import simulate
+from datasets.source import Dataset, open_dataset
+from features.extractor import LineExtractor
+from slam.eval.consistency import mean_nees_band
+from slam.eval.lines import GATE_RAD, HARBOUR_GATE_M, match_features
+from slam.eval.truth import truth_trajectory, truth_walls
+from slam.run.presets import extractor_config
+from slam.run.sonar_calibration import calibrate_line_noise, calibrate_range_offset
+
+
+@pytest.fixture(scope="module")
+def drift(tmp_path_factory: pytest.TempPathFactory) -> Dataset:
+    """900 s of the drift world: its echoes rise on the wall's face and peak 0.25 m behind."""
+    return open_dataset(
+        simulate("drift", seed=2, out_dir=tmp_path_factory.mktemp("d"), duration_s=900)
+    )
+
+
+def _against_truth(
+    ds: Dataset, sigmas: tuple[float, float] = (0.0, 0.0)
+) -> tuple[float, np.ndarray]:
+    """Lines extracted with the true poses: mean rho error (m, > 0 behind the wall), NEES."""
+    cfg = extractor_config("default").replace(
+        line_sigma_rho_m=sigmas[0], line_sigma_theta_rad=sigmas[1]
+    )
+    extractor = LineExtractor(cfg, ds.config.sonar, ds.config.sonar_mounting, truth_trajectory(ds))
+    lines = [f for b in ds.nav_beams() for f in extractor.add(b)]
+    matched = [
+        m for m in match_features(lines, truth_walls(ds), HARBOUR_GATE_M, GATE_RAD) if m.matched
+    ]
+    assert len(matched) > 100
+    return float(np.mean([m.error[0] for m in matched])), np.array([m.nees for m in matched])
+
+
+def _with_offset(ds: Dataset, offset_m: float) -> Dataset:
+    sonar = replace(ds.config.sonar, range_offset_m=offset_m)
+    return replace(ds, config=replace(ds.config, sonar=sonar))
+
+
+def test_the_range_offset_puts_the_lines_on_the_walls(drift: Dataset) -> None:
+    bias_raw, _ = _against_truth(drift)
+    assert bias_raw > 0.08  # the kept peaks lie behind the faces
+    fit = calibrate_range_offset(drift)
+    assert fit.method.startswith("raw echoes") and fit.n > 1000
+    assert 0.05 < fit.offset_m < 0.25
+    bias, _ = _against_truth(_with_offset(drift, fit.offset_m))
+    assert abs(bias) < 0.04
+
+
+def test_the_line_noise_makes_the_lines_no_longer_overconfident(drift: Dataset) -> None:
+    ds = _with_offset(drift, calibrate_range_offset(drift).offset_m)
+    _, nees0 = _against_truth(ds)
+    _, hi = mean_nees_band(nees0.size, 2)
+    assert nees0.mean() > hi  # the fit's covariance alone: the echoes' noise only
+    fit = calibrate_line_noise(ds)
+    assert fit.nees_median_after == pytest.approx(1.386, abs=0.01)
+    assert fit.outside_99_after < 0.05
+    _, nees = _against_truth(ds, (fit.sigma_rho_m, fit.sigma_theta_rad))
+    assert nees.mean() < hi  # against the true walls: cautious, not overconfident
+    assert nees.mean() > 0.3
+
+
+def test_thresholded_runs_have_no_offset(marina: Dataset) -> None:
+    fit = calibrate_range_offset(marina, every=20)
+    assert fit.offset_m == 0.0 and fit.n > 1000 and fit.method.startswith("thresholded")
