@@ -139,6 +139,13 @@ def command(args: argparse.Namespace) -> int:
             f"{math.degrees(fit.time_mean_rad):.2f} deg), deviation {amp:.1f} deg, residual sd "
             f"{math.degrees(fit.residual_sd_rad):.2f} deg; put it under [mounting.ahrs] yaw_deg"
         )
+        change = ", ".join(
+            f"{lag:g} s {math.degrees(v):.2f}" for lag, v in fit.residual_change_rad.items()
+        )
+        print(
+            f"  the residual's RMS change over a lag (deg): {change} (a walking bias grows as"
+            " sqrt(lag): [noise] ahrs_bias_walk_deg_per_sqrt_s)"
+        )
         return 0
     poses = pose_source_by_name(dataset, args.poses)
     result = calibrate_sonar_yaw(dataset, poses, window_s=args.window)

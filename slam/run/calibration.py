@@ -141,6 +141,11 @@ class CompassFit:
     harmonics_rad : ndarray, shape (2 * n,)
         ``sin k psi``, ``cos k psi`` coefficients, ``k = 1..n`` (the compasses' deviation).
     residual_sd_rad : float
+    residual_change_rad : dict of float to float
+        RMS change of the residual over a lag (s) -> (rad): a heading bias that walks (in either
+        compass) grows it as ``sqrt(lag)``; a level curve says the bias does not walk (the
+        back ends' ``ahrs_bias_walk_deg_per_sqrt_s``; a disturbance both compasses share, such
+        as the field of a steel wall, cancels in the difference and is not seen here).
     """
 
     ahrs_yaw_rad: float
@@ -148,6 +153,26 @@ class CompassFit:
     time_mean_rad: float
     harmonics_rad: FloatArray
     residual_sd_rad: float
+    residual_change_rad: dict[float, float]
+
+
+#: Lags (s) of :attr:`CompassFit.residual_change_rad`.
+COMPASS_LAGS_S = (10.0, 30.0, 100.0, 300.0, 1000.0)
+
+
+def _rms_change(t_s: FloatArray, r: FloatArray, lags_s: tuple[float, ...]) -> dict[float, float]:
+    """RMS of ``r(t + lag) - r(t)`` over the samples, ``r`` interpolated at ``t + lag``; NaN
+    for a lag longer than the series."""
+    out = {}
+    for lag in lags_s:
+        later = t_s + lag
+        ok = later <= t_s[-1]
+        out[lag] = (
+            float(np.sqrt(np.mean((np.interp(later[ok], t_s, r) - r[ok]) ** 2)))
+            if ok.any()
+            else float("nan")
+        )
+    return out
 
 
 def calibrate_ahrs_yaw(dataset: Dataset, harmonics: int = 1) -> CompassFit:
@@ -181,8 +206,15 @@ def calibrate_ahrs_yaw(dataset: Dataset, harmonics: int = 1) -> CompassFit:
     offset = float(wrap_angle(mean + coef[0]))
     # DVL compass = yaw of the DVL frame = body yaw + dvl yaw = AHRS yaw - ahrs yaw + dvl yaw
     ahrs_yaw = float(wrap_angle(dataset.config.dvl_mounting.yaw_rad - offset))
-    residual_sd = float(np.std(r - A @ coef))
-    return CompassFit(ahrs_yaw, offset, mean, np.asarray(coef[1:], dtype=np.float64), residual_sd)
+    residual = r - A @ coef
+    return CompassFit(
+        ahrs_yaw,
+        offset,
+        mean,
+        np.asarray(coef[1:], dtype=np.float64),
+        float(np.std(residual)),
+        _rms_change(np.asarray(dvl.t, dtype=np.float64), residual, COMPASS_LAGS_S),
+    )
 
 
 def heading_deviation_from_lines(
