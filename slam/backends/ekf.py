@@ -121,6 +121,7 @@ class LineEkf:
         self._kernel = robust_kernel(config.robust, config.robust_k)
         self._var_walk = np.deg2rad(config.ahrs_bias_walk_deg_per_sqrt_s) ** 2  # rad^2/s
         self._pose_lin = np.zeros(3)  # the pose the vote's Jacobians are taken at (FEJ)
+        self._xy_first = (float(wTb0[0]), float(wTb0[1]))  # the position as first predicted
         self._last_ahrs_t = -np.inf
         self._own_stats = {"ahrs_updates": 0}
 
@@ -169,12 +170,21 @@ class LineEkf:
         x[0] += gain * dx
         x[1] += gain * dy
         x[2] = wrap_angle(x[2] + step.dyaw_rad)
+        # d p' / d psi = J (p' - p): with first-estimate Jacobians, p is the position this step
+        # started from as it was first predicted, not as the updates since have moved it (Huang,
+        # Mourikis & Roumeliotis 2008, eq. 23): the filter then gains no information on the
+        # unobservable rotation of the whole map and trajectory (the AHRS bias's direction)
+        if self.config.first_estimates_jacobians:
+            jx, jy = float(x[0]) - self._xy_first[0], float(x[1]) - self._xy_first[1]
+        else:
+            jx, jy = gain * dx, gain * dy
+        self._xy_first = (float(x[0]), float(x[1]))
         F = np.eye(N_VEHICLE)
-        F[0, 2] = -gain * dy
-        F[1, 2] = gain * dx
+        F[0, 2] = -jy
+        F[1, 2] = jx
         if self.config.estimate_misalignment:
-            F[0, 4] = -gain * dy
-            F[1, 4] = gain * dx
+            F[0, 4] = -jy
+            F[1, 4] = jx
         F[0, 5] = dx
         F[1, 5] = dy
         Q = np.zeros((N_VEHICLE, N_VEHICLE))
