@@ -224,6 +224,13 @@ class DatasetConfig:
         )
         for v in self.ahrs_deviation_rad:
             _within("ahrs_deviation_rad", v, -math.pi / 2, math.pi / 2)
+        if self.yaw_rate_source == "heading" and self.noise.ahrs_bias_walk_deg_per_sqrt_s > 0.0:
+            # the heading between AHRS samples would follow the AHRS's own change, walk and all,
+            # while the back ends' bias state would be told it walks: not one model
+            raise ValueError(
+                "yaw_rate_source 'heading' turns the heading by the AHRS's own change, its bias"
+                " walk included: with ahrs_bias_walk_deg_per_sqrt_s > 0 take 'gyro'"
+            )
 
 
 #: The abandoned marina (Ribas et al. 2008). How each mounting was calibrated is in README.md.

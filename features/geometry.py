@@ -39,6 +39,7 @@ __all__ = [
     "interpolate_poses",
     "along_line",
     "segment_on_line",
+    "line_side",
 ]
 
 
@@ -292,6 +293,30 @@ def line_frame_to_world(
     G_pose[0] *= sign
     rho_n, theta_n = normalize_line(rho_w, theta_w)
     return np.array([float(rho_n), float(theta_n)]), G_line, G_pose
+
+
+def line_side(lines: npt.ArrayLike, points: npt.ArrayLike) -> FloatArray:
+    """Which side of lines points are on: ``+1`` where ``rho - n . p >= 0`` (the side of the
+    line's origin when ``rho > 0``), ``-1`` on the side its normal ``n = (cos theta, sin
+    theta)`` points to. The one side-of-a-line rule (a wall is seen from its water side only).
+
+    Parameters
+    ----------
+    lines : array_like, shape (2,) or (K, 2)
+        ``(rho_m, theta_rad)``, not necessarily normalised.
+    points : array_like, shape (2,) or (K, 2)
+        Points in the lines' frame (m); broadcast against ``lines``.
+
+    Returns
+    -------
+    ndarray, shape () or (K,)
+        +1.0 or -1.0.
+    """
+    ln = np.asarray(lines, dtype=np.float64)
+    p = np.asarray(points, dtype=np.float64)
+    rho, theta = ln[..., 0], ln[..., 1]
+    raw = rho - p[..., 0] * np.cos(theta) - p[..., 1] * np.sin(theta)
+    return np.asarray(np.where(raw < 0.0, -1.0, 1.0))
 
 
 def along_line(line: npt.ArrayLike, points: npt.ArrayLike) -> FloatArray:

@@ -425,9 +425,10 @@ def test_between_nodes_the_pose_is_the_ekf_prediction():
     P0 = np.array([[0.5, 0.1, 0.0], [0.1, 0.3, 0.0], [0.0, 0.0, 0.01]])
     be = LineIsam2(100.0, wTb0, P0, Mounting(*BTS), cfg)
     ekf = LineEkf(100.0, wTb0, P0, Mounting(*BTS), EkfConfig())
-    # X(0)'s marginal: the prior's position, the AHRS start heading plus the bias prior
+    # X(0)'s marginal: the prior's position, the AHRS start heading (its white noise as the
+    # back ends model it, not P0's) plus the bias prior
     P = P0.copy()
-    P[2, 2] += np.deg2rad(cfg.ahrs_bias_sigma_deg) ** 2
+    P[2, 2] = np.deg2rad(cfg.ahrs_white_sigma_deg) ** 2 + np.deg2rad(cfg.ahrs_bias_sigma_deg) ** 2
     assert np.allclose(be.pose_cov, P, atol=1e-9)
     assert np.allclose(ekf.P[POSE, POSE], P, atol=1e-12)
     t, held_from = 100.0, 100.0

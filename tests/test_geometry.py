@@ -14,6 +14,7 @@ from features.geometry import (
     interpolate_poses,
     inverse,
     line_frame_to_world,
+    line_side,
     line_world_to_frame,
     normalize_line,
     segment_on_line,
@@ -136,3 +137,17 @@ def test_segment_on_line_and_along_line_are_inverse(lw, s0, length):
     n = np.array([np.cos(lw[1]), np.sin(lw[1])])
     assert np.allclose(ends @ n, lw[0], atol=1e-9)
     assert np.allclose(along_line(lw, ends), [s0, s0 + length], atol=1e-9)
+
+
+def test_line_side_is_the_one_side_rule():
+    """+1 on the side of the line's origin (rho > 0), -1 beyond it; broadcast over lines."""
+    line = np.array([5.0, 0.3])
+    n = np.array([np.cos(0.3), np.sin(0.3)])
+    assert line_side(line, np.zeros(2)) == 1.0
+    assert line_side(line, 7.0 * n) == -1.0
+    # the same line written (-rho, theta + pi) swaps the signs: +1 is where rho - n.p >= 0
+    flipped = np.array([-5.0, 0.3 + np.pi])
+    pts = np.array([[0.0, 0.0], 7.0 * n, 3.0 * n + [1.0, -2.0]])
+    assert np.all(
+        line_side(np.tile(line, (3, 1)), pts) == -line_side(np.tile(flipped, (3, 1)), pts)
+    )

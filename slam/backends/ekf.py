@@ -82,7 +82,8 @@ class LineEkf:
     wTb0 : ndarray, shape (3,)
         Start pose.
     P0 : ndarray, shape (3, 3)
-        Start pose covariance.
+        Start pose covariance; its position block is used (the heading's is the AHRS's white
+        noise and bias as the configuration models them).
     sonar_mounting : Mounting
         ``bTs`` of the sonar head.
     config : EkfConfig
@@ -103,10 +104,11 @@ class LineEkf:
         kf.x = np.zeros(N_VEHICLE)
         kf.x[POSE] = wTb0
         P = np.zeros((N_VEHICLE, N_VEHICLE))
-        P[POSE, POSE] = P0
+        P[:2, :2] = P0[:2, :2]
         var_b = np.deg2rad(config.ahrs_bias_sigma_deg) ** 2
-        # psi0 came from the AHRS, which measures psi + b: psi and b are anti-correlated.
-        P[2, 2] += var_b
+        # psi0 came from the AHRS, which measures psi + b (white noise and bias as this filter
+        # models them, not P0's heading): psi and b are anti-correlated.
+        P[2, 2] = np.deg2rad(config.ahrs_white_sigma_deg) ** 2 + var_b
         P[3, 3] = var_b
         P[2, 3] = P[3, 2] = -var_b
         P[4, 4] = (
@@ -367,7 +369,21 @@ class LineEkf:
         return {}
 
     def metrics(self) -> dict[str, float | int]:
-        return {}
+        """The final estimates of the vehicle's constants with their sd (``state_*``): the AHRS
+        bias (deg), and when estimated the DVL misalignment (deg) and scale ``k`` (the vehicle
+        moves ``1 + k`` times the DVL's velocity)."""
+        x, P = self.x, self.P
+        out: dict[str, float | int] = {
+            "state_ahrs_bias_deg": float(np.rad2deg(x[3])),
+            "state_ahrs_bias_sd_deg": float(np.rad2deg(np.sqrt(P[3, 3]))),
+        }
+        if self.config.estimate_misalignment:
+            out["state_misalignment_deg"] = float(np.rad2deg(x[4]))
+            out["state_misalignment_sd_deg"] = float(np.rad2deg(np.sqrt(P[4, 4])))
+        if self.config.dvl_scale_sigma > 0.0:
+            out["state_dvl_scale"] = float(x[5])
+            out["state_dvl_scale_sd"] = float(np.sqrt(P[5, 5]))
+        return out
 
     def save(self, out_dir: Path) -> list[Path]:
         return []

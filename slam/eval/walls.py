@@ -48,7 +48,7 @@ import numpy.typing as npt
 from scipy.optimize import least_squares
 
 from datasets.source import Dataset
-from features.geometry import FloatArray, normalize_line, wrap_angle
+from features.geometry import FloatArray, line_side, normalize_line, wrap_angle
 from features.pose_source import PoseSource
 from slam.eval.leading_edges import EdgeConfig, Edges, leading_edge_points
 
@@ -204,11 +204,11 @@ def _normal(line: FloatArray) -> tuple[FloatArray, FloatArray]:
 
 def water_side(line_w: npt.ArrayLike, positions_w: npt.ArrayLike) -> npt.NDArray[np.int64]:
     """Side of a line ``(rho, theta)`` the positions (..., 2) are on: +1 on the side of its
-    normal ``(cos theta, sin theta)`` (``p . n >= rho``), else -1 (:attr:`WallReference.side`)."""
-    line = np.asarray(line_w, dtype=np.float64)
+    normal ``(cos theta, sin theta)`` (``p . n > rho``), else -1 (:attr:`WallReference.side`;
+    :func:`features.geometry.line_side` with the other sign)."""
     p = np.asarray(positions_w, dtype=np.float64)
-    n, _ = _normal(line)
-    return np.where(p @ n - line[0] >= 0.0, 1, -1).astype(np.int64)
+    line = np.broadcast_to(np.asarray(line_w, dtype=np.float64), p.shape)
+    return np.where(line_side(line, p) < 0.0, 1, -1).astype(np.int64)  # the normal's side
 
 
 def robust_line_fit(points_w: FloatArray, line: FloatArray, loss_scale_m: float) -> FloatArray:

@@ -27,6 +27,7 @@ from features.geometry import (
     compose_jacobians,
     line_difference,
     line_frame_to_world,
+    line_side,
     line_world_to_frame,
     transform_points,
     wrap_angle,
@@ -210,6 +211,4 @@ def sonar_side(wTb: FloatArray, lines_w: npt.ArrayLike, bTs: FloatArray) -> Floa
         +1 or -1.
     """
     x, y, _ = compose(wTb, bTs)
-    lw = np.asarray(lines_w, dtype=np.float64).reshape(-1, 2)
-    raw = lw[:, 0] - x * np.cos(lw[:, 1]) - y * np.sin(lw[:, 1])
-    return np.where(raw < 0.0, -1.0, 1.0)
+    return line_side(np.asarray(lines_w, dtype=np.float64).reshape(-1, 2), np.array([x, y]))

@@ -2,13 +2,17 @@
 systematic error of a line.
 
 * **Range offset** (:func:`calibrate_range_offset`, ``[sonar] range_offset_m``): the extractor
-  keeps one bin per echo, the strongest of a raw echo or the first of a thresholded run. The
-  wall's face is where the echo rises: the echo-band model is that the rising edge crosses half
-  the peak's intensity at the face (a pulse's leading edge; the tail behind it is the pulse's
-  length, the beam's vertical footprint, a rough face). So the offset of a raw echo's peak is
-  measured on the beams themselves as the median of ``r_peak - r_half-rise`` over the kept
-  echoes. A thresholded run's first bin is its leading edge: its offset is zero by construction
-  (the threshold's own delay cannot be seen in a 0/255 mask).
+  keeps some bins of each echo (the strongest of a raw echo's run above the threshold, within
+  the intensity band; the first of a thresholded run). The wall's face is where the echo rises:
+  the echo-band model is that the rising edge crosses half the intensity of the kept bin at the
+  face (a pulse's leading edge; the tail behind it is the pulse's length, the beam's vertical
+  footprint, a rough face). So the offset of the kept bins is measured on the beams themselves
+  as the median of ``r_kept - r_half-rise``: it is the kept bins' offset, not the echo peak's
+  (on the drift world, whose echoes peak 0.25 m behind the face, the kept bins sit nearer the
+  rise). A thresholded run's first bin is its leading edge: its offset is zero by construction
+  (the threshold's own delay cannot be seen in a 0/255 mask). The model assumes an echo that
+  starts at the surface (a real sonar's); the default simulated harbour renders a symmetric
+  pulse centred on the wall, for which the right offset is 0.
 * **Line noise** (:func:`calibrate_line_noise`, ``[noise] line_sigma_rho_m``,
   ``line_sigma_theta_deg``): lines extracted with dead-reckoning poses, and pairs of lines of one
   wall seen 14-30 s apart: at least one full turn of the head (13.6 s on the marina and the
@@ -24,8 +28,6 @@ systematic error of a line.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -43,9 +45,11 @@ from features.geometry import (
     along_line,
     line_difference,
     line_frame_to_world,
+    line_side,
     line_world_to_frame,
 )
 from features.line import LineFeature
+from slam.io.files import write_text
 from slam.io.trajectory import Trajectory
 from slam.run.presets import extractor_config, preset_for
 from slam.run.sources import dead_reckoning_trajectory
@@ -155,15 +159,14 @@ def _pairs(lines: list[_Seen], window_s: tuple[float, float]) -> list[tuple[int,
     line's frame (a loose gate: the median, not the gate, decides)."""
     out = []
     for i, a in enumerate(lines):
-        n = np.array([np.cos(a.line_w[1]), np.sin(a.line_w[1])])
-        side_a = np.sign(a.line_w[0] - a.wTr[:2] @ n)
+        side_a = line_side(a.line_w, a.wTr[:2])
         s_a = along_line(a.line_w, a.ends_w)
         for j in range(i + 1, len(lines)):
             b = lines[j]
             dt = b.t_s - a.t_s
             if dt > window_s[1]:
                 break
-            if dt < window_s[0] or np.sign(a.line_w[0] - b.wTr[:2] @ n) != side_a:
+            if dt < window_s[0] or line_side(a.line_w, b.wTr[:2]) != side_a:
                 continue
             nu = _difference(a, b)[0]
             if abs(nu[0]) > 3.0 or abs(nu[1]) > np.deg2rad(15.0):
@@ -284,9 +287,4 @@ def write_sonar_calibration(source: str | Path, out_path: str | Path) -> Path:
             "line_sigma_theta_deg": math.degrees(noise.sigma_theta_rad),
         },
     }
-    out = Path(out_path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}-", dir=out.parent)
-    with os.fdopen(fd, "wb") as f:
-        tomli_w.dump(doc, f)
-    os.replace(tmp, out)
-    return out
+    return write_text(out_path, tomli_w.dumps(doc))

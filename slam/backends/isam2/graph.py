@@ -85,7 +85,8 @@ class LineIsam2:
     wTb0 : ndarray, shape (3,)
         Start pose (the start yaw is the AHRS's).
     P0 : ndarray, shape (3, 3)
-        Its covariance; ``P0[2, 2]`` is taken as the white noise of that AHRS heading.
+        Its covariance; its position block is used (the start heading is an AHRS heading, with
+        ``ahrs_white_sigma_deg`` and the bias).
     sonar_mounting : Mounting
         ``bTs`` of the sonar head.
     config : GraphConfig
@@ -548,6 +549,25 @@ class LineIsam2:
             out["isam2_updates"] = int(update_ms.size)
             out["isam2_update_p50_ms"] = float(np.percentile(update_ms, 50))
             out["isam2_update_p99_ms"] = float(np.percentile(update_ms, 99))
+        return out | self._state_metrics()
+
+    def _state_metrics(self) -> dict[str, float | int]:
+        """The final estimates of the vehicle's constants with their sd (``state_*``, as the
+        EKF's): the newest node's AHRS bias (deg), the DVL misalignment (deg) and scale ``k``."""
+        marginal = self._marginals()
+        values = self.estimate()
+        out: dict[str, float | int] = {}
+        terms = [("ahrs_bias", self._bias_key(self._n_nodes - 1), True)]
+        if self.config.estimate_misalignment:
+            terms.append(("misalignment", int(D(0)), True))
+        if self.config.dvl_scale_sigma > 0.0:
+            terms.append(("dvl_scale", int(K(0)), False))
+        for name, key, degrees in terms:
+            v, sd = float(values.atVector(key)[0]), float(np.sqrt(marginal(key)[0, 0]))
+            unit = "_deg" if degrees else ""
+            scale = float(np.rad2deg(1.0)) if degrees else 1.0
+            out[f"state_{name}{unit}"] = scale * v
+            out[f"state_{name}_sd{unit}"] = scale * sd
         return out
 
     def save(self, out_dir: Path) -> list[Path]:

@@ -78,7 +78,7 @@ def start_records(
     """The factors and initial values of a graph's start: a prior on the start position,
     the AHRS bias ``B(0)`` (and ``D(0)``, ``G(0)``, ``K(0)`` when estimated) with their priors, and the
     start heading as an AHRS heading factor on ``X(0)`` (the start yaw came from the AHRS, so it
-    carries the bias); ``P0[2, 2]`` is that heading's white noise."""
+    carries the bias; its white noise is ``ahrs_white_sigma_deg``'s, P0's heading is not used)."""
     records = [factor_record("PoseTranslationPrior2D", [X(0)], wTb0[:2], P0[:2, :2])]
     values = gtsam.Values()
     b0 = np.deg2rad(config.ahrs_bias_prior_deg)
@@ -100,7 +100,8 @@ def start_records(
         )
         values.insert(K(0), np.zeros(1))
     values.insert(X(0), gtsam.Pose2(*wTb0))
-    records.append(factor_record("HeadingBias", [X(0), B(0)], [wTb0[2]], [[max(P0[2, 2], 1e-12)]]))
+    var_white = np.deg2rad(config.ahrs_white_sigma_deg) ** 2
+    records.append(factor_record("HeadingBias", [X(0), B(0)], [wTb0[2]], [[var_white]]))
     return records, values
 
 
