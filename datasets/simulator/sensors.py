@@ -84,8 +84,8 @@ class SensorNoise:
         White noise of each GPS position component, East and North (m).
     dvl_degraded_from_s : float or None
         From this many seconds after the start, the DVL's white noise is
-        ``dvl_degraded_sigma_mps`` instead (the marina's last ~700 s: bottom at 1.3 m, scatter
-        0.35 against 0.15 m/s); None: never.
+        ``dvl_degraded_sigma_mps`` instead (as the marina's DVL degrades at the end of its run:
+        README); None: never.
     dvl_degraded_sigma_mps : float
         The DVL's white noise once degraded (m/s).
     """

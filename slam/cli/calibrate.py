@@ -22,7 +22,8 @@ from slam.run.sources import pose_source_by_name
 def add_parser(sub: Subparsers) -> None:
     p = sub.add_parser(
         "calibrate",
-        help="sonar mounting yaw by map sharpness; --ahrs: AHRS yaw from the DVL compass",
+        help="GPS-free calibrations: sonar yaw by map sharpness; --ahrs, --ahrs-deviation,"
+        " --range-offset, --line-noise",
         epilog=EPILOG,
     )
     add_source(p)
@@ -42,7 +43,7 @@ def add_parser(sub: Subparsers) -> None:
         "--ahrs-deviation",
         action="store_true",
         help="the AHRS heading's deviation B sin(yaw) + C cos(yaw) from the sonar lines of EKF"
-        " closed loops instead (GPS-free, ~20 s per iteration on the marina)",
+        " closed loops instead (GPS-free; one closed loop per iteration)",
     )
     p.add_argument(
         "--iterations",

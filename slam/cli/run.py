@@ -11,7 +11,11 @@ from slam.run.run import backend_names, run, summary_line
 
 
 def add_parser(sub: Subparsers) -> None:
-    p = sub.add_parser("run", help="run a back end and evaluate it against GPS", epilog=EPILOG)
+    p = sub.add_parser(
+        "run",
+        help="run a back end and evaluate it against GPS (and the truth on simulated data)",
+        epilog=EPILOG,
+    )
     add_source(p)
     p.add_argument(
         "--backend",
@@ -24,7 +28,7 @@ def add_parser(sub: Subparsers) -> None:
     p.add_argument(
         "--batch",
         action="store_true",
-        help="isam2 only: a final batch Levenberg-Marquardt pass (trajectory_batch.tum, ate_*_batch_m)",
+        help="isam2 only: a final batch Levenberg-Marquardt pass (isam2_batch.tum, ate_*_batch_m)",
     )
     p.add_argument(
         "--config",

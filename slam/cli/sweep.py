@@ -20,7 +20,7 @@ def add_parser(sub: Subparsers) -> None:
         "--world",
         default="harbour",
         choices=list(KINDS),
-        help="simulated world (drift: 1,800 s surveys with drifting sensors)",
+        help="simulated world (default harbour; drift: 1,800 s surveys with drifting sensors)",
     )
     p.add_argument(
         "--backend",

@@ -61,7 +61,7 @@ _DEG = math.pi / 180.0
 
 #: The marina keyframes (datasets/marina/README.md): Miniking, 1.8 deg step, 0.1 m bins, 50 m
 #: range, 3 deg beam; beams are 0/255 masks (a third party's threshold, first 10 bins dropped),
-#: with ~0.7 echo runs of ~3 m per beam. The first return of each run votes and the line is
+#: with runs of returns metres thick. The first return of each run votes and the line is
 #: the least-squares fit through those leading edges ("fit": the wall's face; the paper's
 #: overlap-ratio ellipse's centre sits inside the echo band, README "Line features on the
 #: marina"); the fit's covariance describes the echoes' own noise, the rest of a line's error is
@@ -96,7 +96,7 @@ EXTRACTOR_PRESETS: dict[str, ExtractorConfig] = {
     # shorter lines whose covariance describes the sonar's own noise only
     "marina-fit": _MARINA.replace(sector_deg=180.0, min_votes=10, pose_uncertainty=False),
     # the paper's overlap-ratio ellipse and its centre (the closed loops' preset until the
-    # line-quality benchmark found its lines ~1.1 m inside the echo band)
+    # line-quality benchmark found its lines inside the echo band: README)
     "marina-seed": _MARINA.replace(covariance_method="seed"),
 }
 

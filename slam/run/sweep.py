@@ -26,6 +26,7 @@ import re
 import shutil
 import tempfile
 import time
+import warnings
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,7 +37,7 @@ import pandas as pd
 from dask.distributed import Client, LocalCluster, as_completed
 from tqdm import tqdm
 
-from datasets.errors import DataError
+from datasets.errors import DataError, DataWarning
 from datasets.settings import SettingError, read_toml
 from datasets.simulator import simulate
 from datasets.source import open_dataset
@@ -216,7 +217,9 @@ def calibrate_cached(folder: str) -> str:
     logs as ``calibration.toml``; returns its path."""
     path = Path(folder) / "calibration.toml"
     if not path.is_file():
-        write_sonar_calibration(folder, path)
+        with warnings.catch_warnings():  # the runs report the data's warnings
+            warnings.simplefilter("ignore", DataWarning)
+            write_sonar_calibration(folder, path)
     return str(path)
 
 
@@ -248,7 +251,8 @@ def run_task(
     dict
         ``row``: the flat row (``seed``, ``backend``, the parameters by axis name, ``world``,
         ``duration_s``, the ATE fields, ``nees_mean``, ``nees_in_band_fraction``,
-        ``nees_position_mean``, the association counts, ``wall_s``, ..., ``error``);
+        ``nees_position_mean``, the association counts, ``wall_s``, ..., ``warnings`` (how
+        many different data warnings, the first in ``warning_first``), ``error``);
         ``nees_pose`` and ``nees_position``: NEES on the grid ``0, period, ...`` s after the
         start (NaN where missing).
     """
@@ -260,6 +264,27 @@ def run_task(
         "duration_s": duration_s,
         "calibrated": config_override is not None,
     }
+    # the data's warnings go into the row, not to the worker's stderr
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always", DataWarning)
+        row["error"], nees_pose, nees_position = _run_into(
+            row, task, source, config_override, nees_period_s
+        )
+    messages = list(dict.fromkeys(str(w.message) for w in seen))
+    row["warnings"] = len(messages)
+    row["warning_first"] = messages[0] if messages else ""
+    return {"row": row, "nees_pose": nees_pose, "nees_position": nees_position}
+
+
+def _run_into(
+    row: dict[str, Any],
+    task: SweepTask,
+    source: str,
+    config_override: str | None,
+    nees_period_s: float,
+) -> tuple[str, np.ndarray, np.ndarray]:
+    """Run a task, its metrics into ``row``; ``(error, pose NEES, position NEES)`` on the grid
+    (the error ``""`` when it ran)."""
     empty = np.zeros(0)
     try:
         dataset = open_dataset(source, config_override)
@@ -271,19 +296,17 @@ def run_task(
                 if k not in ("source", "backend", "settings", "gap_spans_s")
             }
         )
-        nees_pose = nees_position = empty
-        if dataset.truth is not None and run.trajectory.covs is not None:
-            grid = _nees_grid(run.trajectory, truth_trajectory(dataset), nees_period_s)
-            s_pose, nees_pose = grid["pose"]
-            s_pos, nees_position = grid["position"]
-            row["nees_mean"] = s_pose.mean
-            row["nees_in_band_fraction"] = s_pose.in_band_fraction()
-            row["nees_position_mean"] = s_pos.mean
-        row["error"] = ""
+        if dataset.truth is None or run.trajectory.covs is None:
+            return "", empty, empty
+        grid = _nees_grid(run.trajectory, truth_trajectory(dataset), nees_period_s)
+        s_pose, nees_pose = grid["pose"]
+        s_pos, nees_position = grid["position"]
+        row["nees_mean"] = s_pose.mean
+        row["nees_in_band_fraction"] = s_pose.in_band_fraction()
+        row["nees_position_mean"] = s_pos.mean
+        return "", nees_pose, nees_position
     except Exception as exc:  # one failed run must not stop a 50-seed sweep
-        row["error"] = f"{type(exc).__name__}: {exc}"
-        nees_pose = nees_position = empty
-    return {"row": row, "nees_pose": nees_pose, "nees_position": nees_position}
+        return f"{type(exc).__name__}: {exc}", empty, empty
 
 
 def _pad(rows: Sequence[np.ndarray]) -> np.ndarray:
