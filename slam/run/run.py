@@ -136,6 +136,7 @@ def run_backend(
             progress=progress,
             t_end_s=t_end_s,
             label=backend,
+            scan_config=config.scans,
         )
         trajectory = result.trajectory
         result.backend.finish()
