@@ -80,6 +80,7 @@ def main(argv: list[str] | None = None) -> int:
         "isam_update_ms_max": float(1e3 * log.max()),
         "marginals_s": be.timing_s["marginals"],
         "scans_s": be.timing_s.get("scans", 0.0),
+        "scan_matcher_s": res.scan_matcher_s,
         "settings": run.config.settings,
         "association_s": be.timing_s["association"],
         "pose_nodes": be.n_nodes,

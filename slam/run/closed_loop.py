@@ -54,6 +54,8 @@ class ClosedLoopResult:
         The landmark each was associated with.
     wall_s, extractor_s, backend_s : float
         Time of the whole loop, of the extractor, of the back end (s).
+    scan_matcher_s : float
+        Time of the scan matcher building scans (s); its registrations are the back end's.
     counts : dict
         Records by kind (``beams``, ``ahrs``, ``dvl``).
     feature_seeds : list of int or None
@@ -69,6 +71,7 @@ class ClosedLoopResult:
     backend_s: float
     counts: dict[str, int] = field(default_factory=dict)
     feature_seeds: list[int | None] = field(default_factory=list)
+    scan_matcher_s: float = 0.0
 
 
 def run_closed_loop(
@@ -125,7 +128,7 @@ def run_closed_loop(
     prev_yaw: tuple[float, float] | None = None  # (t, body yaw) of the previous AHRS sample
     v_prev, s_prev = np.zeros(2), float(vin.sigma_mps[0]) if len(records) else 0.0
     t_prev, held_from = t0, t0  # previous record; since when its velocity sample is held
-    extractor_s = backend_s = 0.0
+    extractor_s = backend_s = scan_matcher_s = 0.0
     counts = {"beams": 0, "ahrs": 0, "dvl": 0}
     for k, rec in enumerate(
         tqdm(records, disable=not progress, unit="rec", desc=label, mininterval=1.0)
@@ -158,8 +161,10 @@ def run_closed_loop(
             backend_s += time.perf_counter() - tb
             te = time.perf_counter()
             found = extractor.add(rec) if lines else []
-            scan = matcher.add(rec) if matcher is not None else None
             extractor_s += time.perf_counter() - te
+            te = time.perf_counter()
+            scan = matcher.add(rec) if matcher is not None else None
+            scan_matcher_s += time.perf_counter() - te
             if scan is not None:
                 assert matcher is not None and isinstance(backend, ScanBackend)
                 tb = time.perf_counter()
@@ -183,4 +188,5 @@ def run_closed_loop(
         backend_s=backend_s,
         counts=counts,
         feature_seeds=[seeded.get(id(f)) for f in features],
+        scan_matcher_s=scan_matcher_s,
     )

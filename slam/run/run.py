@@ -207,6 +207,7 @@ def _closed_loop_metrics(
         **{f"assoc_{k}": v for k, v in backend.stats.items()},
         "extractor_s": result.extractor_s,
         "backend_s": result.backend_s,
+        "scan_matcher_s": result.scan_matcher_s,
         "beams": result.counts.get("beams", 0),
         **backend.metrics(),
     }
