@@ -18,6 +18,7 @@ to one thread before numpy loads.
 Usage::
 
     .venv/bin/python benchmarks/isam2_speed.py --out out/isam2_speed.json [--batch]
+    .venv/bin/python benchmarks/isam2_speed.py --set isam2.constraints=lines,scans  # + scans
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ import numpy as np
 
 from slam.backends.isam2.graph import LineIsam2
 from slam.eval.ate import ate_against_gps
+from slam.run.presets import parse_settings
 from slam.run.run import run_backend
 from slam.run.sources import dead_reckoning_trajectory
 
@@ -47,10 +49,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--source", default="marina", help="marina (default) or a dataset dir")
     parser.add_argument("--out", default="out/isam2_speed.json")
     parser.add_argument("--batch", action="store_true", help="also time a final batch LM")
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="SCOPE.FIELD=V", help="a setting (run's)"
+    )
     args = parser.parse_args(argv)
     cpu = pin_one_core()
     label, dataset = open_run(args.source)
-    run = run_backend(dataset, "isam2")
+    run = run_backend(dataset, "isam2", parse_settings(args.set))
     res = run.closed_loop
     assert res is not None and isinstance(res.backend, LineIsam2) and run.config is not None
     be = res.backend
@@ -74,6 +79,9 @@ def main(argv: list[str] | None = None) -> int:
         "isam_update_ms_p99": float(1e3 * np.percentile(log, 99)),
         "isam_update_ms_max": float(1e3 * log.max()),
         "marginals_s": be.timing_s["marginals"],
+        "scans_s": be.timing_s.get("scans", 0.0),
+        "scan_matcher_s": res.scan_matcher_s,
+        "settings": run.config.settings,
         "association_s": be.timing_s["association"],
         "pose_nodes": be.n_nodes,
         "landmarks": len(be.map),

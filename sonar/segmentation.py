@@ -36,7 +36,7 @@ from scipy.ndimage import maximum_filter1d
 
 from sonar.beam import SonarBeam, SonarHead, bin_range_m
 
-__all__ = ["SegmentedBeam", "segment_intensities", "segment_beam"]
+__all__ = ["SegmentedBeam", "segment_intensities", "segment_beam", "leading_edge_bins"]
 
 IntArray = npt.NDArray[np.int64]
 
@@ -165,3 +165,55 @@ def segment_beam(
         thresholded=beam.thresholded,
         max_range_m=max_range_m,
     )
+
+
+def leading_edge_bins(
+    beam: SonarBeam,
+    head: SonarHead,
+    *,
+    run_gap_m: float,
+    min_range_m: float,
+    max_range_m: float | None = None,
+    intensity_threshold: float = 60.0,
+) -> IntArray:
+    """The leading edge of each run of returns of one beam: where a wall's face is.
+
+    A wall's echo is a band of returns metres thick along a beam, its near edge on the wall's
+    face. The returns (a mask's non-zero bins; a raw beam's bins at or above
+    ``intensity_threshold``) are cut into runs, chains whose gaps are shorter than
+    ``run_gap_m``, and the nearest bin of each run is kept: stage (c) of
+    :func:`segment_intensities` with all returns equal (the module docstring). The one rule of
+    the wall references (:mod:`slam.eval.leading_edges`) and the scan matcher
+    (:mod:`features.scans`).
+
+    Parameters
+    ----------
+    beam : SonarBeam
+    head : SonarHead
+    run_gap_m : float
+        Returns closer than this along the beam are one run (m).
+    min_range_m : float
+        Bins nearer than this are ignored (m).
+    max_range_m : float, optional
+        Bins farther than this are ignored (m); None: all.
+    intensity_threshold : float
+        Raw beams: a bin at or above this is a return (masks: every non-zero bin).
+
+    Returns
+    -------
+    ndarray of int64, shape (K,)
+        0-based bin indices of the leading edges, increasing.
+    """
+    inten = beam.intensities
+    given = inten > 0 if beam.thresholded else inten >= intensity_threshold
+    seg = segment_intensities(
+        np.where(given, 255, 0).astype(np.uint8),
+        head.bin_size_m,
+        intensity_threshold=1.0,
+        max_intensity_difference=0.0,
+        min_distance_m=run_gap_m,
+        min_range_m=min_range_m,
+        thresholded=True,  # all returns equal: the sparseness keeps the nearest of each run
+        max_range_m=max_range_m,
+    )
+    return seg.final_bins

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
@@ -23,11 +23,12 @@ from datasets.settings import check_ranges
 from features.geometry import FloatArray, compose, inverse
 from features.line import LineFeature
 from features.pose_source import PoseSource
+from features.scans import Scan, ScanMatcher
 from slam.io.trajectory import Trajectory
 from slam.mapping.landmarks import LandmarkConfig, LandmarkMap
 from slam.model.motion import MotionStep, OdometryChain
 
-__all__ = ["BackendConfig", "Backend", "AnchoredOdometry"]
+__all__ = ["BackendConfig", "Backend", "ScanBackend", "AnchoredOdometry"]
 
 
 @dataclass(frozen=True)
@@ -71,6 +72,10 @@ class BackendConfig(LandmarkConfig):
         kernel's weight ``w(d)`` before the update: an innovation gate that bends, not breaks).
     robust_k : float
         The kernel's width (sigmas; Huber 1.345 is 95 % efficient on Gaussian data).
+    constraints : str
+        What corrects the odometry, comma-separated: ``"lines"`` (line landmarks from the line
+        extractor), ``"scans"`` (relative poses from the scan matcher,
+        :mod:`features.scans`), or ``"lines,scans"``. A back end that cannot take one says so.
     """
 
     ahrs_white_sigma_deg: float = 1.0
@@ -83,9 +88,20 @@ class BackendConfig(LandmarkConfig):
     dvl_scale_sigma: float = 0.0
     robust: str | None = None
     robust_k: float = 1.345
+    constraints: str = "lines"
+
+    @property
+    def constraint_kinds(self) -> frozenset[str]:
+        """The kinds in :attr:`constraints`."""
+        return frozenset(c.strip() for c in self.constraints.split(","))
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        kinds = self.constraint_kinds
+        if not kinds or not kinds <= {"lines", "scans"}:
+            raise ValueError(
+                f"constraints must be 'lines', 'scans' or 'lines,scans', got {self.constraints!r}"
+            )
         if self.robust not in (None, "huber", "cauchy"):
             raise ValueError(f"robust must be None, 'huber' or 'cauchy', got {self.robust!r}")
         if not self.robust_k > 0.0:
@@ -190,6 +206,17 @@ class Backend(Protocol):
 
     def save(self, out_dir: Path) -> list[Path]:
         """Write what the back end has beyond trajectories and map (a graph); the files."""
+        ...
+
+
+@runtime_checkable
+class ScanBackend(Protocol):
+    """A back end that takes the scan matcher's relative poses (``constraints`` with
+    ``"scans"``): the factor graph (:mod:`slam.backends.isam2.scans`)."""
+
+    def update_scan(self, scan: Scan, matcher: ScanMatcher) -> None:
+        """A scan the matcher completed (its newest): the back end's node for it and the
+        registrations it asks ``matcher`` for (consecutive, revisits)."""
         ...
 
 

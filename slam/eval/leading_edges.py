@@ -4,7 +4,7 @@ A wall's echo is a band of returns several metres thick along a beam; its near e
 wall's face is. Each beam's returns (the non-zero bins of a 0/255 mask; raw beams: the bins at
 or above ``intensity_threshold``) are cut into runs, a run being a chain of returns whose gaps
 are shorter than ``run_gap_m``, and the nearest bin of each run is kept: the rule of
-:mod:`sonar.segmentation` for masks, which does it. Second returns and far echoes give leading
+:func:`sonar.segmentation.leading_edge_bins`, which the scan matcher uses too. Second returns and far echoes give leading
 edges too; they lie behind the walls, and the wall fit (:mod:`slam.eval.walls`) treats them as
 outliers.
 """
@@ -20,7 +20,7 @@ from features.geometry import FloatArray, compose
 from features.pose_source import PoseSource
 from features.projection import project_beams
 from sonar.beam import Mounting, SonarBeam, SonarHead
-from sonar.segmentation import segment_intensities
+from sonar.segmentation import leading_edge_bins
 
 __all__ = ["EdgeConfig", "Edges", "leading_edge_beams", "leading_edge_points"]
 
@@ -101,19 +101,16 @@ def leading_edge_beams(
     cfg = config or EdgeConfig()
     out = []
     for b in beams:
-        given = b.intensities > 0 if b.thresholded else b.intensities >= cfg.intensity_threshold
-        seg = segment_intensities(
-            np.where(given, 255, 0).astype(np.uint8),
-            head.bin_size_m,
-            intensity_threshold=1.0,
-            max_intensity_difference=0.0,
-            min_distance_m=cfg.run_gap_m,
+        bins = leading_edge_bins(
+            b,
+            head,
+            run_gap_m=cfg.run_gap_m,
             min_range_m=cfg.min_range_m,
-            thresholded=True,  # all returns equal: the sparseness keeps the nearest of each run
             max_range_m=cfg.max_range_m,
+            intensity_threshold=cfg.intensity_threshold,
         )
         edges = np.zeros(b.intensities.shape, dtype=np.uint8)
-        edges[seg.final_bins] = 255
+        edges[bins] = 255
         out.append(replace(b, intensities=edges, thresholded=True))
     return out
 

@@ -7,6 +7,10 @@ the AHRS heading's own change, none through an AHRS gap, where the DVL records c
 trajectory on). AHRS records update the heading; sonar beams go to the :class:`features.extractor.LineExtractor`,
 whose only view of the vehicle is the :class:`features.pose_source.PoseSource` the back end
 gives (:meth:`slam.backends.base.Backend.pose_source`); the lines it returns update the back end.
+With ``"scans"`` among the back end's ``constraints`` the beams also go to the scan matcher
+(:class:`features.scans.ScanMatcher`, the same seam), and each scan it completes goes to the
+back end (:class:`slam.backends.base.ScanBackend`) with the matcher, which registers the pairs
+the back end asks for; without ``"lines"`` the line extractor does not run.
 GPS records are never used here (evaluation only).
 """
 
@@ -25,7 +29,8 @@ from features.config import ExtractorConfig
 from features.extractor import LineExtractor
 from features.geometry import FloatArray, wrap_angle
 from features.line import LineFeature
-from slam.backends.base import AnchoredOdometry, Backend
+from features.scans import ScanConfig, ScanMatcher
+from slam.backends.base import AnchoredOdometry, Backend, ScanBackend
 from slam.io.trajectory import Trajectory
 from slam.model.motion import body_yaw, motion_step, velocity_input
 from slam.run.sources import motion_noise, start_pose
@@ -51,6 +56,8 @@ class ClosedLoopResult:
         The landmark each was associated with.
     wall_s, extractor_s, backend_s : float
         Time of the whole loop, of the extractor, of the back end (s).
+    scan_matcher_s : float
+        Time of the scan matcher building scans (s); its registrations are the back end's.
     counts : dict
         Records by kind (``beams``, ``ahrs``, ``dvl``).
     feature_seeds : list of int or None
@@ -66,6 +73,7 @@ class ClosedLoopResult:
     backend_s: float
     counts: dict[str, int] = field(default_factory=dict)
     feature_seeds: list[int | None] = field(default_factory=list)
+    scan_matcher_s: float = 0.0
 
 
 def run_closed_loop(
@@ -75,6 +83,7 @@ def run_closed_loop(
     progress: bool = True,
     t_end_s: float | None = None,
     label: str = "closed loop",
+    scan_config: ScanConfig | None = None,
 ) -> ClosedLoopResult:
     """Run a back end in closed loop with the line extractor over a dataset.
 
@@ -89,6 +98,8 @@ def run_closed_loop(
         A progress bar over the records, named ``label``.
     t_end_s : float, optional
         Stop early (for tests and sweeps).
+    scan_config : ScanConfig, optional
+        The scan matcher's settings when the back end takes scans (default: its defaults).
     """
     wall0 = time.perf_counter()
     t0, pose0, cov0 = start_pose(dataset)
@@ -100,9 +111,15 @@ def run_closed_loop(
     vin = velocity_input(times, dataset.dvl, cfg.dvl_mounting, noise)
     backend = make_backend(t0, pose0, cov0)
     odometry = AnchoredOdometry(t0, pose0)
-    extractor = LineExtractor(
-        extractor_config, cfg.sonar, cfg.sonar_mounting, backend.pose_source(odometry)
-    )
+    source = backend.pose_source(odometry)
+    kinds = backend.config.constraint_kinds
+    extractor = LineExtractor(extractor_config, cfg.sonar, cfg.sonar_mounting, source)
+    matcher: ScanMatcher | None = None
+    if "scans" in kinds:
+        if not isinstance(backend, ScanBackend):
+            raise ValueError(f"{type(backend).__name__} does not take scan constraints")
+        matcher = ScanMatcher(scan_config or ScanConfig(), cfg.sonar, cfg.sonar_mounting, source)
+    lines = "lines" in kinds
 
     traj_t: list[float] = [t0]
     traj_p: list[FloatArray] = [backend.pose]
@@ -115,7 +132,7 @@ def run_closed_loop(
     v_prev, s_prev = np.zeros(2), float(vin.sigma_mps[0]) if len(records) else 0.0
     t_prev, held_from = t0, t0  # previous record; since when its velocity sample is held
     t_ahrs = t0  # the newest AHRS sample (an AHRS gap: older than noise.ahrs_stale_s)
-    extractor_s = backend_s = 0.0
+    extractor_s = backend_s = scan_matcher_s = 0.0
     counts = {"beams": 0, "ahrs": 0, "dvl": 0}
     for k, rec in enumerate(
         tqdm(records, disable=not progress, unit="rec", desc=label, mininterval=1.0)
@@ -155,8 +172,16 @@ def run_closed_loop(
             odometry.set_anchor(rec.t, backend.pose, backend.pose_cov)
             backend_s += time.perf_counter() - tb
             te = time.perf_counter()
-            found = extractor.add(rec)
+            found = extractor.add(rec) if lines else []
             extractor_s += time.perf_counter() - te
+            te = time.perf_counter()
+            scan = matcher.add(rec) if matcher is not None else None
+            scan_matcher_s += time.perf_counter() - te
+            if scan is not None:
+                assert matcher is not None and isinstance(backend, ScanBackend)
+                tb = time.perf_counter()
+                backend.update_scan(scan, matcher)
+                backend_s += time.perf_counter() - tb
             if found:
                 tb = time.perf_counter()
                 ids = backend.update_lines(found)
@@ -175,4 +200,5 @@ def run_closed_loop(
         backend_s=backend_s,
         counts=counts,
         feature_seeds=[seeded.get(id(f)) for f in features],
+        scan_matcher_s=scan_matcher_s,
     )

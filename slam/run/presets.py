@@ -13,7 +13,9 @@
   ``line_sigma_theta_deg``) into the extractor, the AHRS bias's random walk and the DVL's
   scale-factor error into the back end (:func:`noise_settings`).
 * Settings given as ``SCOPE.FIELD=VALUE`` (``sonarslam run --set``, ``sonarslam sweep --grid``):
-  ``SCOPE`` is ``extractor`` (:class:`features.extractor.ExtractorConfig`) or a back end's name
+  ``SCOPE`` is ``extractor`` (:class:`features.extractor.ExtractorConfig`), ``scans`` (the scan
+  matcher, :class:`features.scans.ScanConfig`, when the back end's ``constraints`` hold
+  ``scans``) or a back end's name
   (``ekf``: :class:`slam.backends.ekf.EkfConfig`, ``isam2``:
   :class:`slam.backends.isam2.graph.GraphConfig`); ``FIELD`` is a field of that frozen
   dataclass, nested by dots (``ekf.association.gate_probability``); ``<backend>.association``
@@ -36,6 +38,7 @@ from datasets.config import NoiseConfig
 from datasets.errors import DataError
 from datasets.settings import SettingError, parse_text, read_toml, replace_checked, toml_line
 from features.config import ExtractorConfig
+from features.scans import ScanConfig
 from slam.backends.base import BackendConfig
 from slam.backends.registry import backend_spec
 from sonar.beam import SonarBeam
@@ -43,6 +46,7 @@ from sonar.store import sector_beam_count
 
 __all__ = [
     "EXTRACTOR_PRESETS",
+    "SCAN_PRESETS",
     "RunConfig",
     "preset_for",
     "extractor_config",
@@ -98,6 +102,19 @@ EXTRACTOR_PRESETS: dict[str, ExtractorConfig] = {
     # the paper's overlap-ratio ellipse and its centre (the closed loops' preset until the
     # line-quality benchmark found its lines inside the echo band: README)
     "marina-seed": _MARINA.replace(covariance_method="seed"),
+}
+
+
+#: Scan matcher presets by the same names (:func:`preset_for`): the systematic error of a
+#: registration beyond its Hessian (``floor_sigma_m``, ``floor_sigma_deg``). ``default`` (raw
+#: beams): measured on the simulator against its truth (``benchmarks/marina_registration.py
+#: --source DIR``: NEES of revisits in their band); ``marina`` (thresholded keyframes): the
+#: scatter of consecutive registrations about dead reckoning's relative pose, GPS-free (README,
+#: "Scan matching").
+SCAN_PRESETS: dict[str, ScanConfig] = {
+    "default": ScanConfig(),
+    "marina": ScanConfig(floor_sigma_m=0.5, floor_sigma_deg=1.0),
+    "marina-fit": ScanConfig(floor_sigma_m=0.5, floor_sigma_deg=1.0),
 }
 
 
@@ -211,12 +228,16 @@ class RunConfig:
         The back end's defaults with its ``<backend>.*`` settings over them.
     settings : dict
         The settings given (``SCOPE.FIELD`` -> value), for ``metrics.json``.
+    scans : ScanConfig
+        The scan matcher's preset of the same name (:data:`SCAN_PRESETS`) with the ``scans.*``
+        settings over it (used when the back end's ``constraints`` hold ``scans``).
     """
 
     preset: str
     extractor: ExtractorConfig
     backend: BackendConfig
     settings: dict[str, Any]
+    scans: ScanConfig = ScanConfig()
 
 
 def run_config(
@@ -228,13 +249,18 @@ def run_config(
     """The extractor and back-end configurations of a closed loop of ``backend`` on these beams
     and a dataset's ``noise`` calibration, with ``settings`` (``{"isam2.robust": "cauchy",
     "extractor.min_votes": 12}``) applied."""
-    ext, own = split_settings(settings or {}, backend)
+    given = dict(settings or {})
+    scans = {k.partition(".")[2]: v for k, v in given.items() if k.startswith("scans.")}
+    ext, own = split_settings(
+        {k: v for k, v in given.items() if not k.startswith("scans.")}, backend
+    )
     preset = preset_for(beams)
     return RunConfig(
         preset,
         extractor_config(preset, overrides=ext, noise=noise),
         backend_config(backend, own, noise),
-        dict(settings or {}),
+        given,
+        apply_overrides(SCAN_PRESETS[preset], scans),
     )
 
 

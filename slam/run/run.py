@@ -143,6 +143,7 @@ def run_backend(
             progress=progress,
             t_end_s=t_end_s,
             label=backend,
+            scan_config=config.scans,
         )
         trajectory = result.trajectory
         result.backend.finish()
@@ -270,6 +271,7 @@ def _closed_loop_metrics(
         **{f"assoc_{k}": v for k, v in backend.stats.items()},
         "extractor_s": result.extractor_s,
         "backend_s": result.backend_s,
+        "scan_matcher_s": result.scan_matcher_s,
         "beams": result.counts.get("beams", 0),
         **backend.metrics(),
     }

@@ -57,6 +57,34 @@ class GraphConfig(BackendConfig):
         After an update, the smoothed poses of the nodes this recent (s) are refreshed for the
         pose source when it is next asked (the front end's stored sector spans seconds); all of
         them for :meth:`LineIsam2.smoothed_trajectory`.
+
+    Scan constraints (``constraints`` with ``"scans"``, :mod:`slam.backends.isam2.scans`):
+
+    scan_robust : {None, "huber", "cauchy"}
+        Robust kernel of the scan constraints (``BetweenFactorPose2``).
+    scan_robust_k : float
+        Its width (sigmas).
+    scan_consecutive : bool
+        Each scan registered onto the one before it.
+    revisit_radius_m : float
+        Two scans whose reference positions are this close see the same walls (m): a property
+        of the sonar's range and the place, not the gate; the gate is on the relative pose.
+    revisit_gate_probability : float
+        An older scan is a revisit candidate when the distance of the two scans' positions
+        minus ``revisit_radius_m``, in sigmas of the graph's marginal of their relative
+        position along that direction, is inside this chi2(1) quantile.
+    revisit_min_gap_s : float
+        Revisits only between scans at least this far apart in time (s); closer ones are the
+        consecutive chain.
+    revisit_candidates : int
+        At most this many candidates (nearest by that distance under the loose gate, with
+        cached marginals and no cross-covariance) get the joint marginal and the exact gate.
+    revisits_per_scan : int
+        At most this many revisit registrations per new scan (the most likely first, from
+        older scans at least a submap apart).
+    scan_compatibility_probability : float
+        A revisit registration is kept when its relative pose is compatible with the graph's
+        prediction (chi2(3) of the difference with the sum of both covariances) within this.
     """
 
     ahrs_bias_prior_deg: float = 0.0
@@ -73,6 +101,15 @@ class GraphConfig(BackendConfig):
     candidate_gate_probability: float = 0.9999
     max_candidates: int = 8
     pose_window_s: float = 30.0
+    scan_robust: str | None = "cauchy"
+    scan_robust_k: float = 1.0
+    scan_consecutive: bool = True
+    revisit_radius_m: float = 10.0
+    revisit_gate_probability: float = 0.99
+    revisit_min_gap_s: float = 60.0
+    revisit_candidates: int = 4
+    revisits_per_scan: int = 2
+    scan_compatibility_probability: float = 0.999
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -82,6 +119,17 @@ class GraphConfig(BackendConfig):
             raise ValueError("node_period_s must be > 0, update_period_s >= 0")
         if self.max_candidates < 1:
             raise ValueError("max_candidates must be >= 1")
+        if self.scan_robust not in (None, "huber", "cauchy"):
+            raise ValueError(
+                f"scan_robust must be None, 'huber' or 'cauchy', got {self.scan_robust!r}"
+            )
+        if self.revisit_candidates < 0 or self.revisits_per_scan < 0:
+            raise ValueError("revisit_candidates and revisits_per_scan must be >= 0")
+        for name in ("revisit_gate_probability", "scan_compatibility_probability"):
+            if not 0.0 < getattr(self, name) < 1.0:
+                raise ValueError(f"{name} must be in (0, 1), got {getattr(self, name)}")
+        if not (self.scan_robust_k > 0.0 and self.revisit_radius_m >= 0.0):
+            raise ValueError("scan_robust_k must be > 0 and revisit_radius_m >= 0")
         check_ranges(self, _RANGES)
 
 

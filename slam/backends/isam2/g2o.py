@@ -16,6 +16,10 @@ odometry; a g2o file cannot hold:
 * the DVL misalignment ``D(0)`` and gyro scale ``G(0)`` of a ``DvlGyroOdometry`` that estimates
   them: such an edge is written at ``delta = 0``, ``s = scale0``.
 
+The scan matcher's relative poses (``BetweenFactorPose2`` with ``"constraint"``,
+:mod:`slam.backends.isam2.scans`) are ``EDGE_SE2`` too; their robust kernel is not (g2o's file
+format has no kernel: a reader applies its own), which the warning counts.
+
 ``DvlGyroOdometry`` without those variables is ``BetweenFactorPose2`` to first order
 (:func:`slam.backends.isam2.factors.odometry_residual`), so it is written as ``EDGE_SE2``. The
 whole graph is ``graph.json`` (:func:`slam.backends.isam2.graph_io.load_graph`). Vertex ``k`` of
@@ -54,6 +58,10 @@ class G2oExport:
         Factors g2o cannot hold, by type.
     approximated : int
         Odometry edges written without their misalignment / gyro-scale variables.
+    scan_edges : int
+        Of the edges, the scan matcher's relative poses.
+    unkerneled : int
+        Edges whose robust kernel the file cannot hold.
     whole : str
         The file that holds the whole graph.
     """
@@ -64,14 +72,19 @@ class G2oExport:
     left_out: dict[str, int] = field(default_factory=dict)
     approximated: int = 0
     whole: str = "graph.json"
+    scan_edges: int = 0
+    unkerneled: int = 0
 
     def message(self) -> str:
         """One line for the warning and the terminal."""
         gone = ", ".join(f"{n} {kind}" for kind, n in sorted(self.left_out.items()))
         text = (
-            f"{self.path.name} holds the {self.vertices} poses and {self.edges} odometry factors"
-            f" (EDGE_SE2); g2o cannot hold {gone or 'nothing else here'}"
+            f"{self.path.name} holds the {self.vertices} poses and {self.edges} relative-pose"
+            f" factors (EDGE_SE2: {self.edges - self.scan_edges} odometry, {self.scan_edges} scan);"
+            f" g2o cannot hold {gone or 'nothing else here'}"
         )
+        if self.unkerneled:
+            text += f"; {self.unkerneled} edges lost their robust kernel"
         if self.approximated:
             text += f"; {self.approximated} odometry edges lost their misalignment/scale terms"
         return text + f" ({self.whole} has the whole graph)"
@@ -108,18 +121,21 @@ def write_g2o(
     for k, (x, y, yaw) in poses:
         lines.append(f"VERTEX_SE2 {k} {x:.17g} {y:.17g} {yaw:.17g}")
     left_out: Counter[str] = Counter()
-    approximated = 0
-    edges = 0
+    approximated = edges = scan_edges = unkerneled = 0
     for record in factors:
         if record["type"] not in G2O_EDGE_TYPES:
             left_out[record["type"]] += 1
             continue
         approximated += len(record["keys"]) > 2
+        scan_edges += "constraint" in record
+        unkerneled += record.get("robust") is not None
         lines.append(_edge(record))
         edges += 1
     out.write_text("\n".join(lines) + "\n")
-    result = G2oExport(out, len(poses), edges, dict(left_out), approximated, whole)
-    if left_out or approximated:
+    result = G2oExport(
+        out, len(poses), edges, dict(left_out), approximated, whole, scan_edges, unkerneled
+    )
+    if left_out or approximated or unkerneled:
         warnings.warn(result.message(), UserWarning, stacklevel=2)
     return result
 

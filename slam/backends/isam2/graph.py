@@ -52,6 +52,7 @@ from scipy.stats import chi2
 from features.geometry import FloatArray, compose, line_difference
 from features.line import LineFeature
 from features.pose_source import PoseSource
+from features.scans import Scan, ScanMatcher
 from slam.backends.base import AnchoredOdometry
 from slam.backends.isam2.candidates import joint_covariance, loose_distances
 from slam.backends.isam2.config import GraphConfig
@@ -65,6 +66,7 @@ from slam.backends.isam2.graph_io import (
 )
 from slam.backends.isam2.odometry import NodeOdometry, local_covariance
 from slam.backends.isam2.pose_source import NodeTable, SmoothedPoseSource
+from slam.backends.isam2.scans import ScanConstraints
 from slam.io.trajectory import Trajectory
 from slam.mapping.association import AssociationProblem
 from slam.mapping.landmarks import Landmark, LandmarkMap
@@ -136,6 +138,7 @@ class LineIsam2:
         self._anchor_xyyaw = (0.0, 0.0, 0.0)
         self._anchor_cov_rows: tuple[tuple[float, ...], ...] = ((0.0,) * 3,) * 3
 
+        self.scans = ScanConstraints(self, config) if "scans" in config.constraint_kinds else None
         records, values = start_records(np.asarray(wTb0), np.asarray(P0), config)
         for record in records:
             self._add_factor(record)
@@ -357,10 +360,36 @@ class LineIsam2:
         since it folded into the mounting: ``bTs' = (odometry since the node) * bTs``.
         """
         self._vote_t0 = time.perf_counter()
+        k, kTb = self.node_now()
+        return k, compose(kTb, self.bTs)
+
+    def node_now(self) -> tuple[int, FloatArray]:
+        """A node now, or the newest if it is less than ``min_node_gap_s`` old; and the body
+        pose now in that node's frame (the odometry since it, or zero)."""
         self.refresh()
         if self.t_s - self._last_node_t < self.config.min_node_gap_s:
-            return self._n_nodes - 1, compose(self.odometry.since_node.pose, self.bTs)
-        return self._add_node(), self.bTs
+            return self._n_nodes - 1, self.odometry.since_node.pose.copy()
+        return self._add_node(), np.zeros(3)
+
+    # -- scan constraints (slam.backends.isam2.scans) --------------------------------------
+
+    def update_scan(self, scan: Scan, matcher: ScanMatcher) -> None:
+        """A new scan of the scan matcher: its node and constraints
+        (:meth:`slam.backends.isam2.scans.ScanConstraints.add_scan`)."""
+        if self.scans is None:
+            raise ValueError("scans are not among this graph's constraints")
+        t0 = time.perf_counter()
+        self.scans.add_scan(scan, matcher)
+        self.timing_s["scans"] = self.timing_s.get("scans", 0.0) + time.perf_counter() - t0
+
+    def node_estimate(self, k: int) -> FloatArray:
+        return self._node_pose(k)
+
+    def add_scan_factor(self, record: dict[str, Any]) -> None:
+        self._add_factor(record)
+
+    def scan_update(self, extra_iterations: int = 0) -> None:
+        self._update(extra_iterations)
 
     def association_problem(
         self, z: FloatArray, R: FloatArray, lines: list[LineFeature], anchor: Any
@@ -544,6 +573,8 @@ class LineIsam2:
     def metrics(self) -> dict[str, float | int]:
         """iSAM2's time per part (``isam2_*_s``) and per update (p50, p99 in ms)."""
         out: dict[str, float | int] = {f"isam2_{k}_s": float(v) for k, v in self.timing_s.items()}
+        if self.scans is not None:
+            out.update(self.scans.metrics())
         update_ms = 1e3 * np.array([wall for _, wall, _ in self.update_log])
         if update_ms.size:
             out["isam2_updates"] = int(update_ms.size)

@@ -116,7 +116,11 @@ def factor_from_record(record: dict[str, Any]) -> gtsam.NonlinearFactor:
     if kind == "PriorFactorPose2":
         return gtsam.PriorFactorPose2(keys[0], gtsam.Pose2(*z), noise_model(cov))
     if kind == "BetweenFactorPose2":
-        return gtsam.BetweenFactorPose2(keys[0], keys[1], gtsam.Pose2(*z), noise_model(cov))
+        robust = record.get("robust")
+        noise = (
+            noise_model(cov) if robust is None else noise_model(cov, robust["kernel"], robust["k"])
+        )
+        return gtsam.BetweenFactorPose2(keys[0], keys[1], gtsam.Pose2(*z), noise)
     if kind == "PriorFactorVector":
         return gtsam.PriorFactorVector(keys[0], z, noise_model(cov))
     if kind == "BetweenFactorVector":

@@ -1,0 +1,293 @@
+"""Scan constraints in the factor graph: a pose node per scan, relative poses between them.
+
+The scan matcher (:class:`features.scans.matcher.ScanMatcher`, the front end) gives each new
+scan. Here (MSISpIC's pose graph, Mallios et al. 2014, in iSAM2):
+
+1. **A node** at the scan's reference time (the newest node when one is less than
+   ``min_node_gap_s`` old; the odometry since it is then composed onto the measurement).
+2. **Consecutive**: the scan registered onto the one before it, a ``BetweenFactorPose2``.
+3. **Revisits proposed by the graph's own marginals**, not by a fixed radius: an older scan
+   ``j`` is a candidate when the distance ``|d|`` of the two scans' estimated positions minus
+   ``revisit_radius_m`` (how close two scans must be to see the same walls), in sigmas of the
+   marginal of their relative position along ``d``, is inside the chi2(1) gate
+   ``revisit_gate_probability``: ``max(|d| - r, 0)^2 / (u^T S u) <= chi2_1(p)`` with
+   ``u = d / |d|``. A loose pass uses each node's cached marginal and no cross-covariance
+   (conservative: the cross-covariance of two poses of one trajectory is positive); the nearest
+   ``revisit_candidates`` then get the joint marginal ``(X(j), X(k))`` and the exact gate.
+   The most likely ``revisits_per_scan`` are registered (submaps of ``submap_scans`` scans),
+   from the graph's relative pose, and kept when compatible with it (chi2(3) of the difference
+   with both covariances; the directions the registration leaves free carry no information).
+4. Every scan factor has a robust kernel (``scan_robust``, Cauchy by default) and is a record
+   of :mod:`slam.backends.isam2.graph_io` (``BetweenFactorPose2`` with ``"robust"`` and
+   ``"constraint"``: ``"scan-consecutive"`` or ``"scan-revisit"``), so ``graph.json`` holds
+   it and ``graph.g2o`` writes it as ``EDGE_SE2``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import gtsam
+import numpy as np
+from gtsam.symbol_shorthand import X
+from scipy.stats import chi2
+
+from features.geometry import FloatArray, between, compose, compose_jacobians, inverse, wrap_angle
+from features.scans.icp import Registration
+from features.scans.matcher import ScanMatcher
+from features.scans.scan import Scan
+from slam.backends.isam2.config import GraphConfig
+from slam.backends.isam2.graph_io import factor_record
+from slam.model.lines import local_to_world
+
+__all__ = [
+    "ScanGraph",
+    "ScanLog",
+    "ScanConstraints",
+    "relative_pose_covariance",
+    "radial_gate_distance",
+]
+
+
+class ScanGraph(Protocol):
+    """What the scan constraints need of the graph (:class:`slam.backends.isam2.graph.LineIsam2`)."""
+
+    @property
+    def isam(self) -> gtsam.ISAM2: ...
+
+    def node_now(self) -> tuple[int, FloatArray]:
+        """A node now (or the newest) and the body pose now in its frame."""
+        ...
+
+    def node_estimate(self, k: int) -> FloatArray:
+        """The current estimate of node ``k``, ``(x_m, y_m, yaw_rad)``."""
+        ...
+
+    def add_scan_factor(self, record: dict[str, Any]) -> None:
+        """A factor record for the next update."""
+        ...
+
+    def scan_update(self, extra_iterations: int = 0) -> None:
+        """Pending factors into iSAM2."""
+        ...
+
+
+def relative_pose_covariance(wTa: FloatArray, wTb: FloatArray, P: FloatArray) -> FloatArray:
+    """Covariance of ``aTb = inverse(wTa) * wTb`` in ``(x_m, y_m, yaw_rad)``.
+
+    Parameters
+    ----------
+    wTa, wTb : ndarray, shape (3,)
+    P : ndarray, shape (6, 6)
+        Joint covariance of ``(wTa, wTb)`` in plain world ``(x, y, yaw)``.
+    """
+    aTw = inverse(wTa)
+    J_inv_a, J_w = compose_jacobians(aTw, wTb)
+    # d inverse(wTa) / d wTa
+    c, s = np.cos(wTa[2]), np.sin(wTa[2])
+    x, y = wTa[0], wTa[1]
+    J_inv = np.array([[-c, -s, s * x - c * y], [s, -c, c * x + s * y], [0.0, 0.0, -1.0]])
+    J = np.hstack([J_inv_a @ J_inv, J_w])
+    return J @ P @ J.T
+
+
+def radial_gate_distance(d_xy: FloatArray, S_xy: FloatArray, radius_m: float) -> float:
+    """``max(|d| - r, 0)^2 / (u^T S u)``, ``u = d / |d|``: how many sigmas (squared) of the
+    relative position's uncertainty along ``d`` separate the two positions from being within
+    ``r`` of each other (0 inside)."""
+    dist = float(np.hypot(d_xy[0], d_xy[1]))
+    if dist <= radius_m:
+        return 0.0
+    u = np.asarray(d_xy) / dist
+    return (dist - radius_m) ** 2 / max(float(u @ S_xy @ u), 1e-12)
+
+
+@dataclass
+class ScanLog:
+    """What the scan constraints did, for ``metrics.json`` and the registration benchmark.
+
+    Attributes
+    ----------
+    nodes : dict of int to tuple
+        Scan index -> ``(node k, kTref)``: its node and the scan's reference in the node frame.
+    pairs : list of dict
+        Every registration: ``kind`` (``consecutive`` / ``revisit``), scans ``j``, ``k``,
+        ``accepted``, ``reason``, ``z``, ``guess``, ``cov``, ``n_constrained``, ``inlier_share``,
+        ``nis`` (revisits: chi2(3) of the difference with the graph's prediction).
+    """
+
+    nodes: dict[int, tuple[int, FloatArray]] = field(default_factory=dict)
+    pairs: list[dict[str, Any]] = field(default_factory=list)
+
+    def counts(self) -> dict[str, int]:
+        out: dict[str, int] = {"scans": len(self.nodes)}
+        for kind in ("consecutive", "revisit"):
+            rows = [p for p in self.pairs if p["kind"] == kind]
+            out[f"scan_{kind}_tried"] = len(rows)
+            out[f"scan_{kind}_accepted"] = sum(bool(p["accepted"]) for p in rows)
+        return out
+
+
+class ScanConstraints:
+    """The graph's scan constraints (module docstring).
+
+    Parameters
+    ----------
+    graph : ScanGraph
+        The graph they go into (:class:`slam.backends.isam2.graph.LineIsam2`).
+    config : GraphConfig
+    """
+
+    def __init__(self, graph: ScanGraph, config: GraphConfig) -> None:
+        self.graph = graph
+        self.config = config
+        self.log = ScanLog()
+        self._t: list[float] = []  # reference time of each scan
+        self._cov: list[FloatArray] = []  # cached marginal (world) of each scan's node
+        self._gate = float(chi2.ppf(config.revisit_gate_probability, 1))
+        self._compat = float(chi2.ppf(config.scan_compatibility_probability, 3))
+
+    def _robust(self) -> dict[str, Any] | None:
+        cfg = self.config
+        return (
+            None if cfg.scan_robust is None else {"kernel": cfg.scan_robust, "k": cfg.scan_robust_k}
+        )
+
+    def _add_between(self, j: int, k: int, reg: Registration, kind: str) -> None:
+        """``BetweenFactorPose2`` between the nodes of scans ``j`` and ``k`` from ``jTk``."""
+        (nj, jn_T_j), (nk, kn_T_k) = self.log.nodes[j], self.log.nodes[k]
+        a = compose(jn_T_j, reg.z)
+        z = compose(a, inverse(kn_T_k))
+        J1_a, J1_z = compose_jacobians(jn_T_j, reg.z)
+        J2_a, _ = compose_jacobians(a, inverse(kn_T_k))
+        J = J2_a @ J1_z
+        cov = J @ reg.cov @ J.T
+        A = local_to_world(-float(z[2]))  # plain -> the measurement's local tangent
+        record = factor_record(
+            "BetweenFactorPose2",
+            [X(nj), X(nk)],
+            z,
+            A @ cov @ A.T,
+            robust=self._robust(),
+            constraint=f"scan-{kind}",
+        )
+        self.graph.add_scan_factor(record)
+
+    def add_scan(self, scan: Scan, matcher: ScanMatcher) -> None:
+        """A new scan (the newest of ``matcher``): its node, the consecutive constraint, the
+        revisits; one iSAM2 update."""
+        cfg = self.config
+        node, kTref = self.graph.node_now()
+        k = scan.index
+        self.log.nodes[k] = (node, kTref)
+        self._t.append(scan.t_ref_s)
+        self._cov.append(np.full((3, 3), np.inf))
+        if cfg.scan_consecutive and k >= 1 and (k - 1) in self.log.nodes:
+            reg = matcher.consecutive(k)
+            if reg is not None:
+                self._log(reg, "consecutive", k - 1, k)
+                if reg.accepted:
+                    self._add_between(k - 1, k, reg, "consecutive")
+        self.graph.scan_update()
+        self._cov[k] = self._marginal(k)
+        if cfg.revisits_per_scan > 0:
+            self._revisits(k, matcher)
+
+    def _log(self, reg: Registration, kind: str, j: int, k: int, nis: float | None = None) -> None:
+        self.log.pairs.append(
+            {
+                "kind": kind,
+                "j": j,
+                "k": k,
+                "t_j": self._t[j],
+                "t_k": self._t[k],
+                "accepted": reg.accepted,
+                "reason": reg.reason,
+                "z": reg.z.tolist(),
+                "guess": reg.guess.tolist(),
+                "cov": reg.cov.tolist(),
+                "n_constrained": reg.n_constrained,
+                "inlier_share": reg.inlier_share,
+                "nis": nis,
+            }
+        )
+
+    def _pose(self, j: int) -> FloatArray:
+        """The current estimate of scan ``j``'s reference body pose."""
+        node, kTref = self.log.nodes[j]
+        return compose(self.graph.node_estimate(node), kTref)
+
+    def _marginal(self, j: int) -> FloatArray:
+        """iSAM2 marginal of scan ``j``'s node in plain world ``(x, y, yaw)``."""
+        node = self.log.nodes[j][0]
+        M = local_to_world(float(self.graph.node_estimate(node)[2]))
+        return M @ self.graph.isam.marginalCovariance(X(node)) @ M.T
+
+    def _joint(self, j: int, k: int) -> FloatArray:
+        """Joint marginal of the nodes of scans ``j`` and ``k`` in plain world coordinates."""
+        nj, nk = self.log.nodes[j][0], self.log.nodes[k][0]
+        J = self.graph.isam.jointMarginalCovariance([X(nj), X(nk)]).fullMatrix()
+        M = np.zeros((6, 6))
+        M[:3, :3] = local_to_world(float(self.graph.node_estimate(nj)[2]))
+        M[3:, 3:] = local_to_world(float(self.graph.node_estimate(nk)[2]))
+        return M @ J @ M.T
+
+    def _loose(self, k: int, pose_k: FloatArray) -> list[tuple[float, int]]:
+        """Older scans under the loose gate, nearest (in sigmas) first."""
+        cfg = self.config
+        out = []
+        for j in range(k):
+            if self._t[k] - self._t[j] < cfg.revisit_min_gap_s or j not in self.log.nodes:
+                continue
+            d = self._pose(j)[:2] - pose_k[:2]
+            S = self._cov[j][:2, :2] + self._cov[k][:2, :2]
+            g = radial_gate_distance(d, S, cfg.revisit_radius_m)
+            if g <= self._gate:
+                out.append((g, j))
+        return sorted(out)[: cfg.revisit_candidates]
+
+    def _revisits(self, k: int, matcher: ScanMatcher) -> None:
+        cfg = self.config
+        pose_k = self._pose(k)
+        gated: list[tuple[float, int, FloatArray, FloatArray]] = []
+        for _, j in self._loose(k, pose_k):
+            pose_j = self._pose(j)
+            S = relative_pose_covariance(pose_j, pose_k, self._joint(j, k))
+            jTk = between(pose_j, pose_k)
+            # the gate in scan j's frame: d and S of the relative position
+            g = radial_gate_distance(-jTk[:2], S[:2, :2], cfg.revisit_radius_m)
+            if g <= self._gate:
+                gated.append((g, j, jTk, S))
+        chosen: list[int] = []
+        half = matcher.config.submap_scans
+        added = False
+        for _, j, jTk, S in sorted(gated, key=lambda c: c[0]):
+            if len(chosen) >= cfg.revisits_per_scan:
+                break
+            if any(abs(j - c) < half for c in chosen):
+                continue
+            chosen.append(j)
+            reg = matcher.register(j, k, jTk, S)
+            nis = None
+            if reg.accepted:
+                nu = np.array([*(reg.z[:2] - jTk[:2]), wrap_angle(reg.z[2] - jTk[2])])
+                nis = float(nu @ np.linalg.solve(S + reg.cov, nu))
+            ok = reg.accepted and nis is not None and nis <= self._compat
+            self._log(reg, "revisit", j, k, nis)
+            self.log.pairs[-1]["accepted"] = ok
+            if not ok and reg.accepted:
+                self.log.pairs[-1]["reason"] = "incompatible with the graph"
+            if ok:
+                self._add_between(j, k, reg, "revisit")
+                added = True
+        if added:
+            self.graph.scan_update(self.config.extra_iterations)
+            self._cov[k] = self._marginal(k)
+
+    def metrics(self) -> dict[str, float | int]:
+        out: dict[str, float | int] = dict(self.log.counts())
+        nis = [p["nis"] for p in self.log.pairs if p["nis"] is not None and p["accepted"]]
+        if nis:
+            out["scan_revisit_nis_median"] = float(np.median(nis))
+        return out
