@@ -124,12 +124,25 @@ def preset_for(beams: Sequence[SonarBeam]) -> str:
     return "marina" if beams and all(b.thresholded for b in beams) else "default"
 
 
+#: The tables of a dataset's sonarslam.toml (datasets/config.py), told apart from a settings file.
+_DATASET_TABLES = {"sonar", "mounting", "noise", "keyframes", "motion", "gates"}
+
+
 def _read_table(path: str | Path, table: str) -> tuple[dict[str, Any], str]:
     """The ``[table]`` of a TOML file (or its top level when it has none) and the file's text;
     DataError for a file that cannot be read, is not UTF-8 or not TOML, or whose ``[table]``
     is no table."""
     p = Path(path)
     data, text = read_toml(p)
+    dataset_tables = sorted(set(data) & _DATASET_TABLES)
+    if table not in data and dataset_tables:
+        raise DataError(
+            p,
+            toml_line(text, "", dataset_tables[0]),
+            f"[{dataset_tables[0]}] is a table of a dataset's sonarslam.toml (run --config takes"
+            f" those); this file gives [{table}] settings, in an [{table}] table or at the top"
+            " level",
+        )
     inner = data.get(table, data)
     if not isinstance(inner, dict):
         raise DataError(p, toml_line(text, "", table), f"[{table}] must be a table, got {inner!r}")
