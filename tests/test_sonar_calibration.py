@@ -64,10 +64,10 @@ def test_the_line_noise_makes_the_lines_no_longer_overconfident(drift: Dataset) 
     assert nees0.mean() > hi  # the fit's covariance alone: the echoes' noise only
     fit = calibrate_line_noise(ds)
     assert fit.nees_median_after == pytest.approx(1.386, abs=0.01)
-    assert fit.outside_99_after < 0.05
+    assert fit.outside_99_after < 0.10  # the pairs' tails: heavier than chi2(2)'s 1 %
     _, nees = _against_truth(ds, (fit.sigma_rho_m, fit.sigma_theta_rad))
-    assert nees.mean() < hi  # against the true walls: cautious, not overconfident
-    assert nees.mean() > 0.3
+    assert nees.mean() < hi  # against the true walls: not overconfident ...
+    assert 0.9 < np.median(nees) < 1.9  # ... nor padded: chi2(2)'s median is 1.386
 
 
 def test_thresholded_runs_have_no_offset(marina: Dataset) -> None:

@@ -17,8 +17,11 @@ systematic error of a line.
   ``line_sigma_theta_deg``): lines extracted with dead-reckoning poses, and pairs of lines of one
   wall seen 14-30 s apart: at least one full turn of the head (13.6 s on the marina and the
   simulator), so that the two share no echo, and soon enough for dead reckoning to drift little
-  (its uncertainty over a scan is in each line's covariance through ``pose_uncertainty``, its
-  position random walk between the two is added to the pair's). Their sign-free
+  (its uncertainty over a scan is in each line's covariance through ``pose_uncertainty``; its
+  position random walk between the two and the AHRS bias's walk, as the dataset's ``[noise]``
+  states it, are added to the pair's. The DVL's scale error is not: it is one constant of the run,
+  the same in every pair, and counting its prior in each pair's covariance swallowed the lines'
+  own error on the drift world's seeds). Their sign-free
   difference in the world should be chi2(2)-distributed with the pair's covariance; the
   systematic error ``diag(s_rho^2, s_theta^2)`` added to every line is the one that brings the
   median of the pairs' squared distances to chi2(2)'s median (1.386), with the ratio of the two
@@ -179,25 +182,42 @@ def _pairs(lines: list[_Seen], window_s: tuple[float, float]) -> list[tuple[int,
 
 def _difference(a: _Seen, b: _Seen) -> tuple[FloatArray, FloatArray, FloatArray]:
     """``b``'s line in ``a``'s frame minus ``a``'s (sign-free), ``d(b in a) / d z_b`` and
-    ``d(b in a) / d(x, y)`` of ``a``'s frame."""
+    ``d(b in a) / d wTr`` of ``a``'s frame, shape (2, 3)."""
     b_in_a, H_line, H_pose = line_world_to_frame(b.line_w, a.wTr)
     nu, flipped = line_difference(b_in_a, a.z)
-    J, H_xy = H_line @ b.G_z, H_pose[:, :2]
+    J = H_line @ b.G_z
     if flipped:
-        J, H_xy = FLIP_RHO @ J, FLIP_RHO @ H_xy
-    return nu, J, H_xy
+        J, H_pose = FLIP_RHO @ J, FLIP_RHO @ H_pose
+    return nu, J, H_pose
+
+
+@dataclass(frozen=True)
+class _Drift:
+    """What dead reckoning's relative pose between two lines' frames is uncertain by: its
+    position random walk and the AHRS bias's walk (rad^2/s) in the heading."""
+
+    walk_var_rad2ps: float = 0.0
+
+    def covariance(self, a: _Seen, b: _Seen) -> FloatArray:
+        """Of the pose of ``b``'s frame in the world relative to ``a``'s, (3, 3)."""
+        C = np.zeros((3, 3))
+        C[:2, :2] = b.P_xy - a.P_xy
+        C[2, 2] = self.walk_var_rad2ps * abs(b.t_s - a.t_s)
+        return C
 
 
 def _pair_nees(
-    lines: list[_Seen], pairs: list[tuple[int, int]], sigmas: tuple[float, float]
+    lines: list[_Seen],
+    pairs: list[tuple[int, int]],
+    sigmas: tuple[float, float],
+    drift: _Drift,
 ) -> FloatArray:
     Q = np.diag(np.square(sigmas))
     out = np.empty(len(pairs))
     for k, (i, j) in enumerate(pairs):
         a, b = lines[i], lines[j]
-        nu, J, H_xy = _difference(a, b)
-        drift = b.P_xy - a.P_xy  # dead reckoning's position random walk between the two
-        S = a.R + Q + J @ (b.R + Q) @ J.T + H_xy @ drift @ H_xy.T
+        nu, J, H_pose = _difference(a, b)
+        S = a.R + Q + J @ (b.R + Q) @ J.T + H_pose @ drift.covariance(a, b) @ H_pose.T
         out[k] = nu @ np.linalg.solve(S, nu)
     return out
 
@@ -244,9 +264,10 @@ def calibrate_line_noise(
             )
         )
     pairs = _pairs(lines, window_s)
+    drift = _Drift(np.deg2rad(dataset.config.noise.ahrs_bias_walk_deg_per_sqrt_s) ** 2)
     if len(pairs) < 20:
         raise ValueError(f"{dataset.root}: {len(pairs)} pairs of lines of one wall: too few")
-    before = _pair_nees(lines, pairs, (0.0, 0.0))
+    before = _pair_nees(lines, pairs, (0.0, 0.0), drift)
     nus = np.array([_difference(lines[i], lines[j])[0] for i, j in pairs])
     mad = 1.4826 * np.median(np.abs(nus), axis=0)
     ratio = float(mad[0] / max(mad[1], 1e-9))
@@ -255,11 +276,13 @@ def calibrate_line_noise(
     if np.median(before) > target:
 
         def excess(s_theta: float) -> float:
-            return float(np.median(_pair_nees(lines, pairs, (ratio * s_theta, s_theta))) - target)
+            return float(
+                np.median(_pair_nees(lines, pairs, (ratio * s_theta, s_theta), drift)) - target
+            )
 
         s_theta = float(brentq(excess, 1e-6, np.deg2rad(30.0), xtol=1e-7))
         sig = (ratio * s_theta, s_theta)
-    after = _pair_nees(lines, pairs, sig)
+    after = _pair_nees(lines, pairs, sig, drift)
     return LineNoiseFit(
         sigma_rho_m=float(sig[0]),
         sigma_theta_rad=float(sig[1]),
