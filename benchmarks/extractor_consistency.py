@@ -10,6 +10,10 @@ b. Honest covariance: the mean NEES of ``(rho, theta)`` of the pool's features a
    survey's (a vehicle moving at 0.45 m/s, raw beams, the extractor's defaults), against the
    95 % band of the mean of N chi2(2) variables, ``chi2.ppf([0.025, 0.975], 2 N) / N``; for both
    covariance methods, "fit" and "seed".
+c. Honest lines on thick echo bands: the drift world (echoes peak 0.25 m behind the walls), the
+   extractor's defaults, before and after the GPS-free sonar calibration that
+   ``sonarslam sweep --calibrate`` applies (range offset, then the lines' systematic error): their
+   mean rho error and NEES against the true walls, against the same band.
 
 Poses are the simulator's truth, so the NEES measures the front end alone.
 
@@ -35,7 +39,7 @@ from tqdm import tqdm
 
 from features.config import ExtractorConfig
 from slam.eval.consistency import mean_nees_band
-from slam.run.line_trials import TrialResult, harbour_trial, pool_trial
+from slam.run.line_trials import TrialResult, drift_trial, harbour_trial, pool_trial
 
 METHODS = ("fit", "seed")
 POOL_WALL_SEED_FRACTION_MIN = 0.95
@@ -86,9 +90,11 @@ def run(
     harbour_seeds: int,
     harbour_duration_s: float | None,
     config_changes: dict[str, Any] | None = None,
+    drift_seeds: int = 0,
+    drift_duration_s: float | None = None,
 ) -> dict[str, Any]:
     """All trials and their summaries (the JSON written by :func:`main`); ``config_changes``
-    replace fields of the extractor's configuration in both worlds."""
+    replace fields of the extractor's configuration in the pool and the harbour."""
     wall0 = time.perf_counter()
     pool: dict[str, list[TrialResult]] = {m: [] for m in METHODS}
     harbour: dict[str, list[TrialResult]] = {m: [] for m in METHODS}
@@ -120,6 +126,27 @@ def run(
             "harbour_false_features": sum(r.n_false for r in harbour[m]),
             "harbour_mean_rho_error_m": float(h_err[:, 0].mean()) if h.size else None,
         }
+    drift: dict[str, list[TrialResult]] = {"raw": [], "calibrated": []}
+    for seed in tqdm(range(drift_seeds), desc="drift", unit="seed"):
+        for r in drift_trial(seed, drift_duration_s):
+            drift[r.method].append(r)
+    out["drift_seeds"] = drift_seeds
+    out["drift_duration_s"] = drift_duration_s
+    out["drift"] = {
+        m: {
+            **nees_summary(np.concatenate([r.nees for r in rs])),
+            "features": sum(r.n_features for r in rs),
+            "false_features": sum(r.n_false for r in rs),
+            "mean_rho_error_m": float(np.concatenate([r.errors for r in rs])[:, 0].mean()),
+            "seeds_inside_band": sum(
+                bool(mean_nees_band(r.nees.size, 2)[0] <= r.nees.mean())
+                and bool(r.nees.mean() <= mean_nees_band(r.nees.size, 2)[1])
+                for r in rs
+            ),
+        }
+        for m, rs in drift.items()
+        if rs
+    }
     fit = out["pool"]["fit"]
     out["pool_requirements"] = {
         "fraction_seeds_all_walls": fit["fraction_seeds_all_walls"] >= POOL_WALL_SEED_FRACTION_MIN,
@@ -160,6 +187,19 @@ def format_table(res: dict[str, Any]) -> str:
                 f"[{s['band_95'][0]:.2f}, {s['band_95'][1]:.2f}] {s['verdict']:>11s}"
                 f" {s['median']:>6.2f} {s['fraction_above_chi2_95']:>6.3f}"
             )
+    if res["drift"]:
+        rows += [
+            "",
+            f"drift world, {res['drift_seeds']} seeds, truth poses: GPS-free sonar calibration",
+            f"{'lines':10s} {'N':>5s} {'rho err (m)':>11s} {'mean NEES':>9s} {'95 % band':>14s}"
+            f" {'median':>6s} {'P>5.99':>6s} {'seeds in band':>13s}",
+        ]
+        for m, s in res["drift"].items():
+            rows.append(
+                f"{m:10s} {s['n']:>5d} {s['mean_rho_error_m']:>+11.3f} {s['mean']:>9.2f} "
+                f"[{s['band_95'][0]:.2f}, {s['band_95'][1]:.2f}] {s['median']:>6.2f}"
+                f" {s['fraction_above_chi2_95']:>6.3f} {s['seeds_inside_band']:>6d}/{res['drift_seeds']}"
+            )
     rows.append("(consistent: median 1.39, P>5.99 = 0.05)")
     return "\n".join(rows)
 
@@ -186,12 +226,19 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="seconds of harbour survey per seed (default: the scenario's 600 s)",
     )
+    p.add_argument("--drift-seeds", type=int, default=10, help="drift-world seeds (default 10)")
+    p.add_argument(
+        "--drift-duration",
+        type=float,
+        default=None,
+        help="seconds of drift-world survey per seed (default: the scenario's 1,800 s)",
+    )
     p.add_argument(
         "--set",
         action="append",
         default=[],
         metavar="FIELD=VALUE",
-        help="change an ExtractorConfig field in both worlds (TOML value), e.g. "
+        help="change an ExtractorConfig field in the pool and the harbour (TOML value), e.g. "
         "range_offset_sigma_m=0 or remove_on_line_sigma=0; repeatable",
     )
     p.add_argument("--out", default="out/extractor_consistency.json", help="results JSON")
@@ -201,7 +248,14 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     changes = parse_changes(args.set)
-    res = run(args.pool_seeds, args.harbour_seeds, args.harbour_duration, changes or None)
+    res = run(
+        args.pool_seeds,
+        args.harbour_seeds,
+        args.harbour_duration,
+        changes or None,
+        args.drift_seeds,
+        args.drift_duration,
+    )
     print(format_table(res))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

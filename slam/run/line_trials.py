@@ -6,20 +6,25 @@ true walls (:mod:`slam.eval.lines`); ``benchmarks/extractor_consistency.py`` and
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import tempfile
+from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from datasets.simulator import Simulation, make_scenario, simulate_records
+from datasets.simulator import Simulation, make_scenario, simulate, simulate_records
+from datasets.source import Dataset, open_dataset
 from features.config import ExtractorConfig
 from features.extractor import LineExtractor
 from features.geometry import FloatArray
 from features.line import LineFeature
 from slam.eval.lines import GATE_RAD, HARBOUR_GATE_M, POOL_GATE_M, Match, match_features
+from slam.eval.truth import truth_trajectory, truth_walls
 from slam.run.presets import EXTRACTOR_PRESETS, pool_preset
+from slam.run.sonar_calibration import calibrate_line_noise, calibrate_range_offset
 
-__all__ = ["TrialResult", "extract_simulation", "pool_trial", "harbour_trial"]
+__all__ = ["TrialResult", "extract_simulation", "pool_trial", "harbour_trial", "drift_trial"]
 
 
 def extract_simulation(
@@ -49,10 +54,10 @@ class TrialResult:
     Attributes
     ----------
     kind : str
-        ``"pool"`` or ``"harbour"``.
+        ``"pool"``, ``"harbour"`` or ``"drift"``.
     seed : int
     method : str
-        Covariance method.
+        Covariance method (drift: ``"raw"`` or ``"calibrated"``).
     n_features, n_false : int
         All features; those outside the gates.
     errors : ndarray, shape (K, 2)
@@ -151,3 +156,42 @@ def harbour_trial(
             _result("harbour", seed, method, feats, matches, len(sim.world.walls_m), n_votes)
         )
     return out
+
+
+def _dataset_lines(ds: Dataset, config: ExtractorConfig) -> list[LineFeature]:
+    ex = LineExtractor(config, ds.config.sonar, ds.config.sonar_mounting, truth_trajectory(ds))
+    lines: list[LineFeature] = []
+    for beam in ds.nav_beams():
+        lines += ex.add(beam)
+    return lines + ex.flush()
+
+
+def drift_trial(seed: int, duration_s: float | None = None) -> list[TrialResult]:
+    """The drift world (its echoes peak 0.25 m behind the walls), the extractor's defaults with
+    the true poses, before (``"raw"``) and after (``"calibrated"``) the GPS-free sonar
+    calibration that ``sweep --calibrate`` applies: :func:`calibrate_range_offset` then
+    :func:`calibrate_line_noise`, both with dead reckoning's poses."""
+    with tempfile.TemporaryDirectory() as tmp:
+        ds = open_dataset(simulate("drift", seed=seed, out_dir=Path(tmp), duration_s=duration_s))
+        offset = calibrate_range_offset(ds).offset_m
+        sonar = replace(ds.config.sonar, range_offset_m=offset)
+        ds_cal = replace(ds, config=replace(ds.config, sonar=sonar))
+        noise = calibrate_line_noise(ds_cal)
+        cfg = EXTRACTOR_PRESETS["default"]
+        runs = {
+            "raw": (ds, cfg),
+            "calibrated": (
+                ds_cal,
+                cfg.replace(
+                    line_sigma_rho_m=noise.sigma_rho_m, line_sigma_theta_rad=noise.sigma_theta_rad
+                ),
+            ),
+        }
+        walls = truth_walls(ds)
+        out = []
+        for method, (d, c) in runs.items():
+            feats = _dataset_lines(d, c)
+            matches = match_features(feats, walls, HARBOUR_GATE_M, GATE_RAD)
+            n_votes = len({ft.t for ft in feats})
+            out.append(_result("drift", seed, method, feats, matches, len(walls), n_votes))
+        return out
