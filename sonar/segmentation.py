@@ -29,6 +29,7 @@ c. with all intensities equal, the tie rule (keep the nearer) decides every pair
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import numpy.typing as npt
@@ -67,6 +68,19 @@ def _sparse_window_bins(min_distance_m: float, bin_size_m: float) -> int:
     # Two bins k indices apart are closer than min_distance_m iff k < ratio; the tolerance keeps
     # 0.5 m / 0.1 m from counting as 5.000000000000001.
     return max(int(np.ceil(ratio - 1e-9)) - 1, 0)
+
+
+@lru_cache(maxsize=32)
+def _alive_bins(
+    n_bins: int, bin_size_m: float, min_range_m: float, max_range_m: float | None
+) -> npt.NDArray[np.bool_]:
+    """Bins inside ``[min_range_m, max_range_m]`` (read-only; one per beam geometry)."""
+    ranges_m = bin_range_m(np.arange(n_bins), bin_size_m)
+    alive = ranges_m >= min_range_m - 1e-9 * bin_size_m
+    if max_range_m is not None:
+        alive &= ranges_m <= max_range_m + 1e-9 * bin_size_m
+    alive.flags.writeable = False
+    return alive
 
 
 def segment_intensities(
@@ -109,10 +123,7 @@ def segment_intensities(
     """
     inten = np.asarray(intensities)
     n_bins = inten.shape[0]
-    ranges_m = bin_range_m(np.arange(n_bins), bin_size_m)
-    alive = ranges_m >= min_range_m - 1e-9 * bin_size_m
-    if max_range_m is not None:
-        alive &= ranges_m <= max_range_m + 1e-9 * bin_size_m
+    alive = _alive_bins(n_bins, bin_size_m, min_range_m, max_range_m)
     # (a) threshold stage
     if thresholded:
         passed = alive & (inten > 0)
@@ -129,7 +140,12 @@ def segment_intensities(
     # bins closer than min_distance_m. Key = intensity, ties broken towards the nearer bin; keys
     # are unique, so a bin and a stronger neighbour never both survive.
     k = _sparse_window_bins(min_distance_m, bin_size_m)
-    if k > 0 and kept.size > 1:
+    kept_int = inten[kept]
+    if k > 0 and kept.size > 1 and kept_int.min() == kept_int.max():
+        # Equal keys but for the tie-break (a mask): a bin survives iff no kept bin lies
+        # within k bins nearer, i.e. the nearest bin of each chain with gaps <= k.
+        kept = kept[np.diff(kept, prepend=kept[0] - k - 1) > k]
+    elif k > 0 and kept.size > 1:
         key = np.full(n_bins, -1, dtype=np.int64)
         key[kept] = inten[kept].astype(np.int64) * (n_bins + 1) + (n_bins - kept)
         local_max = maximum_filter1d(key, size=2 * k + 1, mode="constant", cval=-1)

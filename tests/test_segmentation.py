@@ -115,11 +115,15 @@ def test_thresholded_mask_keeps_nearest_bin_of_each_run() -> None:
     np.testing.assert_array_equal(seg.final_bins, [20, 37, 60])
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_sparseness_matches_the_pairwise_rule(seed: int) -> None:
-    """Vectorised stage (c) against the pairwise definition, on random beams."""
+@pytest.mark.parametrize(
+    ("seed", "mask"), [(0, False), (1, False), (2, False), (3, True), (4, True)]
+)
+def test_sparseness_matches_the_pairwise_rule(seed: int, mask: bool) -> None:
+    """Vectorised stage (c) against the pairwise definition, on random beams (raw, and masks:
+    all returns equal, the path that keeps the nearest bin of each chain)."""
     rng = np.random.default_rng(seed)
-    b = np.where(rng.random(200) < 0.2, rng.integers(0, 256, 200), 0).astype(np.uint8)
+    values = np.full(200, 255) if mask else rng.integers(0, 256, 200)
+    b = np.where(rng.random(200) < 0.2, values, 0).astype(np.uint8)
     d_m = 0.45
     seg = segment_intensities(
         b, BIN_M, intensity_threshold=60, max_intensity_difference=120, min_distance_m=d_m
