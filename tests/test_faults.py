@@ -238,6 +238,7 @@ def test_a_run_writes_strict_json_and_says_each_fault_on_one_line(harbour, tmp_p
         ),
         (["calibrate", "{src}", "--window", "nan"], 2, "--window"),
         (["calibrate", "{src}", "--window", "0"], 2, "must be > 0"),
+        (["calibrate", "{src}", "--ahrs", "--line-noise"], 2, "one calibration at a time"),
         (["plot-scans", "{src}", "--out", "{tmp}"], 2, "must name a .png file"),
         (["plot-scans", "{src}", "--out", "{tmp}/pics"], 2, "must name a .png file"),
     ],

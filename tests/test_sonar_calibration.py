@@ -11,6 +11,7 @@ import pytest
 from datasets.simulator import simulate
 from datasets.source import Dataset, open_dataset
 from features.extractor import LineExtractor
+from slam.cli.main import main
 from slam.eval.consistency import mean_nees_band
 from slam.eval.lines import GATE_RAD, HARBOUR_GATE_M, match_features
 from slam.eval.truth import truth_trajectory, truth_walls
@@ -68,6 +69,16 @@ def test_the_line_noise_makes_the_lines_no_longer_overconfident(drift: Dataset) 
     _, nees = _against_truth(ds, (fit.sigma_rho_m, fit.sigma_theta_rad))
     assert nees.mean() < hi  # against the true walls: not overconfident ...
     assert 0.9 < np.median(nees) < 1.9  # ... nor padded: chi2(2)'s median is 1.386
+
+
+def test_the_command_measures_the_lines_with_the_offset_it_just_found(
+    drift: Dataset, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["calibrate", str(drift.root), "--range-offset", "--line-noise", "--quiet"]) == 0
+    offset_line, noise_line = capsys.readouterr().out.strip().splitlines()
+    offset = float(offset_line.split("peak - half-rise): ")[1].split(" m")[0])
+    assert 0.05 < offset < 0.25
+    assert f"with range offset {offset:.3f} m" in noise_line
 
 
 def test_thresholded_runs_have_no_offset(marina: Dataset) -> None:

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import argparse
 import math
+from dataclasses import replace
 
+from datasets.settings import SettingError
 from datasets.source import Dataset, open_dataset
 from slam.cli.common import EPILOG, Subparsers, add_poses, add_quiet, add_source, number
 from slam.run.calibration import (
@@ -61,15 +63,21 @@ def add_parser(sub: Subparsers) -> None:
         "--line-noise",
         action="store_true",
         help="a line's systematic error from pairs of lines of one wall seen 14-30 s apart with"
-        " dead-reckoning poses instead (GPS-free; [noise] line_sigma_rho_m, line_sigma_theta_deg;"
-        " calibrate --range-offset first)",
+        " dead-reckoning poses instead (GPS-free; [noise] line_sigma_rho_m, line_sigma_theta_deg);"
+        " with --range-offset too, the lines are measured with the offset just found",
+    )
+    p.add_argument(
+        "--config",
+        metavar="TOML",
+        help="a partial sonarslam.toml over the dataset's own (e.g. [sonar] range_offset_m), as"
+        " for run",
     )
     add_quiet(p)
     p.set_defaults(func=command)
 
 
 def _ahrs_deviation(args: argparse.Namespace) -> int:
-    dataset = open_dataset(args.source)
+    dataset = open_dataset(args.source, config_override=args.config)
     b0, c0 = (math.degrees(v) for v in dataset.config.ahrs_deviation_rad)
     print(
         f"AHRS deviation from the EKF's line re-observations (GPS-free), from [{b0:.2f}, {c0:.2f}] deg:"
@@ -95,40 +103,57 @@ def _ahrs_deviation(args: argparse.Namespace) -> int:
     return 0
 
 
-def _range_offset(args: argparse.Namespace) -> int:
-    dataset = open_dataset(args.source)
-    fit = calibrate_range_offset(dataset)
-    print(
-        f"range offset of the kept echoes (GPS-free, {fit.method}): {fit.offset_m:.3f} m "
-        f"(IQR {fit.iqr_m:.3f} m, {fit.n} echoes; configured "
-        f"{dataset.config.sonar.range_offset_m:.3f} m); put it under [sonar] range_offset_m"
-    )
+def _sonar(args: argparse.Namespace) -> int:
+    """--range-offset and/or --line-noise; with both, the lines see the offset just found."""
+    dataset = open_dataset(args.source, config_override=args.config)
+    if args.range_offset:
+        fit = calibrate_range_offset(dataset)
+        print(
+            f"range offset of the kept echoes (GPS-free, {fit.method}): {fit.offset_m:.3f} m "
+            f"(IQR {fit.iqr_m:.3f} m, {fit.n} echoes; configured "
+            f"{dataset.config.sonar.range_offset_m:.3f} m); put it under [sonar] range_offset_m"
+        )
+        sonar = replace(dataset.config.sonar, range_offset_m=fit.offset_m)
+        dataset = replace(dataset, config=replace(dataset.config, sonar=sonar))
+    if args.line_noise:
+        _line_noise(dataset)
     return 0
 
 
-def _line_noise(args: argparse.Namespace) -> int:
-    dataset = open_dataset(args.source)
+def _line_noise(dataset: Dataset) -> None:
     fit = calibrate_line_noise(dataset)
     n = dataset.config.noise
     print(
-        f"a line's systematic error (GPS-free, {fit.n_pairs} pairs of {fit.n_lines} lines): "
+        f"a line's systematic error (GPS-free, with range offset "
+        f"{dataset.config.sonar.range_offset_m:.3f} m; {fit.n_pairs} pairs of {fit.n_lines} lines): "
         f"sigma rho {fit.sigma_rho_m:.3f} m, sigma theta {math.degrees(fit.sigma_theta_rad):.2f}"
         f" deg (configured {n.line_sigma_rho_m:.3f} m, {n.line_sigma_theta_deg:.2f} deg); pair "
         f"NEES median {fit.nees_median_before:.2f} -> {fit.nees_median_after:.2f} (chi2(2): "
         f"1.39), {100 * fit.outside_99_after:.1f} % outside the 99 % gate; put them under "
         f"[noise] as line_sigma_rho_m and line_sigma_theta_deg"
     )
-    return 0
 
 
 def command(args: argparse.Namespace) -> int:
+    modes = [
+        name
+        for name, on in (
+            ("--ahrs", args.ahrs),
+            ("--ahrs-deviation", args.ahrs_deviation),
+            ("--range-offset/--line-noise", args.range_offset or args.line_noise),
+        )
+        if on
+    ]
+    if len(modes) > 1:
+        raise SettingError(
+            " and ".join(modes),
+            "one calibration at a time (--range-offset and --line-noise may go together)",
+        )
     if args.ahrs_deviation:
         return _ahrs_deviation(args)
-    if args.range_offset:
-        return _range_offset(args)
-    if args.line_noise:
-        return _line_noise(args)
-    dataset = open_dataset(args.source)
+    if args.range_offset or args.line_noise:
+        return _sonar(args)
+    dataset = open_dataset(args.source, config_override=args.config)
     if args.ahrs:
         fit = calibrate_ahrs_yaw(dataset)
         amp = math.degrees(math.hypot(*fit.harmonics_rad[:2]))
