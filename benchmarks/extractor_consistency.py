@@ -192,15 +192,18 @@ def format_table(res: dict[str, Any]) -> str:
             "",
             f"drift world, {res['drift_seeds']} seeds, truth poses: GPS-free sonar calibration",
             f"{'lines':10s} {'N':>5s} {'rho err (m)':>11s} {'mean NEES':>9s} {'95 % band':>14s}"
-            f" {'median':>6s} {'P>5.99':>6s} {'seeds in band':>13s}",
+            f" {'verdict':>11s} {'median':>6s} {'P>5.99':>6s} {'seeds in band':>13s}",
         ]
         for m, s in res["drift"].items():
             rows.append(
                 f"{m:10s} {s['n']:>5d} {s['mean_rho_error_m']:>+11.3f} {s['mean']:>9.2f} "
-                f"[{s['band_95'][0]:.2f}, {s['band_95'][1]:.2f}] {s['median']:>6.2f}"
+                f"[{s['band_95'][0]:.2f}, {s['band_95'][1]:.2f}] {s['verdict']:>11s} {s['median']:>6.2f}"
                 f" {s['fraction_above_chi2_95']:>6.3f} {s['seeds_inside_band']:>6d}/{res['drift_seeds']}"
             )
-    rows.append("(consistent: median 1.39, P>5.99 = 0.05)")
+    rows.append(
+        "(a consistent set would have: mean NEES inside its band, median 1.39, P>5.99 = 0.05;"
+        " pessimistic = cautious)"
+    )
     return "\n".join(rows)
 
 

@@ -7,12 +7,14 @@ true walls (:mod:`slam.eval.lines`); ``benchmarks/extractor_consistency.py`` and
 from __future__ import annotations
 
 import tempfile
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from datasets.errors import DataWarning
 from datasets.simulator import Simulation, make_scenario, simulate, simulate_records
 from datasets.source import Dataset, open_dataset
 from features.config import ExtractorConfig
@@ -171,7 +173,8 @@ def drift_trial(seed: int, duration_s: float | None = None) -> list[TrialResult]
     the true poses, before (``"raw"``) and after (``"calibrated"``) the GPS-free sonar
     calibration that ``sweep --calibrate`` applies: :func:`calibrate_range_offset` then
     :func:`calibrate_line_noise`, both with dead reckoning's poses."""
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)  # the simulated DVL's dropouts, as expected
         ds = open_dataset(simulate("drift", seed=seed, out_dir=Path(tmp), duration_s=duration_s))
         offset = calibrate_range_offset(ds).offset_m
         sonar = replace(ds.config.sonar, range_offset_m=offset)
