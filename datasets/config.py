@@ -374,7 +374,7 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
             for key, value in values.items():
                 target, unit = _SCHEMA[table][key]
                 keys[target] = (table, key)
-                typed = coerce(_field_type(target), value, f"[{table}] {key}")
+                typed = coerce(_field_type(target), value, f"[{table}] {key}", parse_strings=False)
                 if unit == _DEGREES:
                     typed = (
                         tuple(math.radians(v) for v in typed)

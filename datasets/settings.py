@@ -142,14 +142,19 @@ def _number(value: Any, key: str) -> float:
     return float(value)
 
 
-def coerce(annotation: Any, value: Any, key: str) -> Any:
+def coerce(annotation: Any, value: Any, key: str, parse_strings: bool = True) -> Any:
     """``value`` as the type ``annotation`` of a dataclass field, or :class:`SettingError`.
 
     Accepted: for ``float`` a finite number (an ``int`` too); for ``int`` a whole number
     (``500.0`` too, ``1.5`` not) of at most :data:`MAX_INT`; for ``bool`` a boolean; for
     ``str`` a string; for ``X | None`` also ``None``; for ``tuple[X, ...]`` a list of that
-    length. Strings are parsed first (:func:`parse_text`) unless the field is a string.
+    length. Strings are parsed first (:func:`parse_text`, command-line values) unless the
+    field is a string; with ``parse_strings=False`` (a typed file: TOML) a string is taken
+    only by a string field (and "none" by an optional one: TOML has no null).
     """
+    if not parse_strings and isinstance(value, str):
+        if not _takes_text(annotation):
+            raise SettingError(key, f"must be {_expected(annotation)}, got the string {value!r}")
     origin, args = typing.get_origin(annotation), typing.get_args(annotation)
     if origin in (typing.Union, types.UnionType):
         options = [a for a in args if a is not type(None)]
@@ -158,11 +163,11 @@ def coerce(annotation: Any, value: Any, key: str) -> Any:
         ):
             return None
         if len(options) == 1:
-            return coerce(options[0], value, key)
+            return coerce(options[0], value, key, parse_strings)
         errors = []
         for option in options:
             try:
-                return coerce(option, value, key)
+                return coerce(option, value, key, parse_strings)
             except SettingError as exc:
                 errors.append(exc.message)
         raise SettingError(key, " or ".join(errors))
@@ -191,9 +196,23 @@ def coerce(annotation: Any, value: Any, key: str) -> Any:
         if not isinstance(value, list | tuple) or len(value) != len(args):
             raise SettingError(key, f"must be a list of {len(args)}, got {_describe(value)}")
         return tuple(
-            coerce(a, v, f"{key}[{i}]") for i, (a, v) in enumerate(zip(args, value, strict=True))
+            coerce(a, v, f"{key}[{i}]", parse_strings)
+            for i, (a, v) in enumerate(zip(args, value, strict=True))
         )
     raise SettingError(key, f"cannot be set (a {annotation!r})")
+
+
+def _takes_text(annotation: Any) -> bool:
+    """A string field, or an optional one (whose "none" a typed file must write as text)."""
+    args = typing.get_args(annotation)
+    return annotation is str or str in args or type(None) in args
+
+
+def _expected(annotation: Any) -> str:
+    names = {float: "a number", int: "a whole number", bool: "true or false"}
+    if annotation in names:
+        return names[annotation]
+    return "a list" if typing.get_origin(annotation) is tuple else f"a {annotation!r}"
 
 
 @cache
@@ -222,7 +241,7 @@ def _tree(changes: Mapping[str, Any], prefix: str) -> dict[str, Any]:
     return tree
 
 
-def _apply(obj: Any, tree: dict[str, Any], prefix: str) -> Any:
+def _apply(obj: Any, tree: dict[str, Any], prefix: str, parse_strings: bool = True) -> Any:
     cls: type = type(obj)
     types_ = field_types(cls)
     kwargs: dict[str, Any] = {}
@@ -236,13 +255,13 @@ def _apply(obj: Any, tree: dict[str, Any], prefix: str) -> Any:
         if isinstance(node, dict):
             if not is_table:
                 raise SettingError(key, f"is one value ({annotation}), not a table")
-            kwargs[name] = _apply(getattr(obj, name), node, f"{key}.")
+            kwargs[name] = _apply(getattr(obj, name), node, f"{key}.", parse_strings)
             keys.append(key)
             continue
         full_key, value = node
         if is_table:
             raise SettingError(full_key, f"is a table of {annotation.__name__} settings")
-        kwargs[name] = coerce(annotation, value, full_key)
+        kwargs[name] = coerce(annotation, value, full_key, parse_strings)
         keys.append(full_key)
     try:
         return dataclasses.replace(obj, **kwargs)
@@ -256,7 +275,9 @@ def _apply(obj: Any, tree: dict[str, Any], prefix: str) -> Any:
         raise SettingError(", ".join(keys), message) from None
 
 
-def replace_checked(obj: Any, changes: Mapping[str, Any], prefix: str = "") -> Any:
+def replace_checked(
+    obj: Any, changes: Mapping[str, Any], prefix: str = "", parse_strings: bool = True
+) -> Any:
     """A frozen dataclass with dotted fields replaced, each checked (module docstring).
 
     Parameters
@@ -266,6 +287,9 @@ def replace_checked(obj: Any, changes: Mapping[str, Any], prefix: str = "") -> A
         ``{"association.method": "nn", "min_votes": "12"}``; values typed or text.
     prefix : str
         Put before the names in messages (``"extractor."``).
+    parse_strings : bool
+        Text values are parsed (command-line values); False for a typed file (TOML), whose
+        strings only string fields take (:func:`coerce`).
 
     Raises
     ------
@@ -275,4 +299,4 @@ def replace_checked(obj: Any, changes: Mapping[str, Any], prefix: str = "") -> A
     """
     if not changes:
         return obj
-    return _apply(obj, _tree(changes, prefix), prefix)
+    return _apply(obj, _tree(changes, prefix), prefix, parse_strings)

@@ -198,9 +198,14 @@ def test_config_errors_name_file_and_key(tmp_path):
     path = tmp_path / "sonarslam.toml"
     path.write_text("[sonar]\nn_bins = 500\nstep_deg = 'x'\n")
     with pytest.raises(
-        DataError, match=r"sonarslam.toml:3: \[sonar\] step_deg: must be a finite number, got 'x'"
+        DataError,
+        match=r"sonarslam.toml:3: \[sonar\] step_deg: must be a number, got the string 'x'",
     ):
         load_dataset_config(path)
+    for text in ("[sonar]\nn_bins = '500'\n", '[sonar]\nstep_deg = "1"\n'):  # TOML is typed
+        path.write_text(text)
+        with pytest.raises(DataError, match=r"sonarslam.toml:2: .* got the string"):
+            load_dataset_config(path)
     path.write_text("[mounting.sonar]\nyaw = 3\n")
     with pytest.raises(DataError, match=r"unknown key\(s\) \['yaw'\] in \[mounting.sonar\]"):
         load_dataset_config(path)

@@ -185,7 +185,7 @@ def extractor_config(
     if config_path is not None:
         data, text = _read_table(config_path, "extractor")
         try:
-            config = replace_checked(config, data, prefix="[extractor] ")
+            config = replace_checked(config, data, prefix="[extractor] ", parse_strings=False)
         except SettingError as exc:
             keys = exc.key.replace("[extractor] ", "").split(", ")
             table = "extractor" if toml_line(text, "extractor") is not None else ""
