@@ -303,11 +303,11 @@ def write_sonar_calibration(source: str | Path, out_path: str | Path) -> Path:
     offset = calibrate_range_offset(dataset)
     sonar = replace(dataset.config.sonar, range_offset_m=offset.offset_m)
     noise = calibrate_line_noise(replace(dataset, config=replace(dataset.config, sonar=sonar)))
-    doc = {
-        "sonar": {"range_offset_m": offset.offset_m},
+    doc = {  # to a micrometre and a microdegree: what a user would type
+        "sonar": {"range_offset_m": round(offset.offset_m, 6)},
         "noise": {
-            "line_sigma_rho_m": noise.sigma_rho_m,
-            "line_sigma_theta_deg": math.degrees(noise.sigma_theta_rad),
+            "line_sigma_rho_m": round(noise.sigma_rho_m, 6),
+            "line_sigma_theta_deg": round(math.degrees(noise.sigma_theta_rad), 6),
         },
     }
     return write_text(out_path, tomli_w.dumps(doc))
