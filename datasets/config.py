@@ -80,6 +80,7 @@ import tomli_w
 from datasets.errors import DataError
 from datasets.settings import (
     SettingError,
+    check_within,
     coerce,
     field_types,
     read_toml,
@@ -119,16 +120,16 @@ class NoiseConfig:
     line_sigma_theta_deg: float = 0.0
 
     def __post_init__(self) -> None:
-        _within("dvl_sigma_mps", self.dvl_sigma_mps, 0.0, 10.0, low_open=True)
-        _within("ahrs_sigma_deg", self.ahrs_sigma_deg, 0.0, 180.0, low_open=True)
-        _within("gps_sigma_m", self.gps_sigma_m, 0.0, 1e4, low_open=True)
-        _within("dvl_max_gap_s", self.dvl_max_gap_s, 0.0, 3600.0, low_open=True)
-        _within("dvl_scatter_window_s", self.dvl_scatter_window_s, 0.0, 3600.0)
-        _within("dvl_nominal_scatter_mps", self.dvl_nominal_scatter_mps, 0.0, 10.0)
-        _within("ahrs_bias_walk_deg_per_sqrt_s", self.ahrs_bias_walk_deg_per_sqrt_s, 0.0, 10.0)
-        _within("dvl_scale_sigma", self.dvl_scale_sigma, 0.0, 0.5, low_open=False)
-        _within("line_sigma_rho_m", self.line_sigma_rho_m, 0.0, 100.0)
-        _within("line_sigma_theta_deg", self.line_sigma_theta_deg, 0.0, 90.0)
+        check_within("dvl_sigma_mps", self.dvl_sigma_mps, 0.0, 10.0, low_open=True)
+        check_within("ahrs_sigma_deg", self.ahrs_sigma_deg, 0.0, 180.0, low_open=True)
+        check_within("gps_sigma_m", self.gps_sigma_m, 0.0, 1e4, low_open=True)
+        check_within("dvl_max_gap_s", self.dvl_max_gap_s, 0.0, 3600.0, low_open=True)
+        check_within("dvl_scatter_window_s", self.dvl_scatter_window_s, 0.0, 3600.0)
+        check_within("dvl_nominal_scatter_mps", self.dvl_nominal_scatter_mps, 0.0, 10.0)
+        check_within("ahrs_bias_walk_deg_per_sqrt_s", self.ahrs_bias_walk_deg_per_sqrt_s, 0.0, 10.0)
+        check_within("dvl_scale_sigma", self.dvl_scale_sigma, 0.0, 0.5, low_open=False)
+        check_within("line_sigma_rho_m", self.line_sigma_rho_m, 0.0, 100.0)
+        check_within("line_sigma_theta_deg", self.line_sigma_theta_deg, 0.0, 90.0)
 
 
 @dataclass(frozen=True)
@@ -169,21 +170,13 @@ class GateConfig:
     min_gap_s: float = 1.0
 
     def __post_init__(self) -> None:
-        _within("dvl_max_speed_mps", self.dvl_max_speed_mps, 0.0, 100.0, low_open=True)
-        _within("ahrs_max_jump_deg", self.ahrs_max_jump_deg, 0.0, 180.0, low_open=True)
-        _within("ahrs_jump_drift_dps", self.ahrs_jump_drift_dps, 0.0, 360.0)
-        _within("ahrs_max_rate_dps", self.ahrs_max_rate_dps, 0.0, 1e4, low_open=True)
-        _within("gps_max_jump_m", self.gps_max_jump_m, 0.0, 1e5, low_open=True)
-        _within("gap_periods", self.gap_periods, 1.0, 1e4)
-        _within("min_gap_s", self.min_gap_s, 0.0, 3600.0, low_open=True)
-
-
-def _within(name: str, value: float, low: float, high: float, low_open: bool = False) -> None:
-    """ValueError unless ``low <= value <= high`` (``low < value`` when ``low_open``)."""
-    ok = (value > low if low_open else value >= low) and value <= high
-    if not ok:
-        bracket = "(" if low_open else "["
-        raise ValueError(f"{name} must be in {bracket}{low:g}, {high:g}], got {value!r}")
+        check_within("dvl_max_speed_mps", self.dvl_max_speed_mps, 0.0, 100.0, low_open=True)
+        check_within("ahrs_max_jump_deg", self.ahrs_max_jump_deg, 0.0, 180.0, low_open=True)
+        check_within("ahrs_jump_drift_dps", self.ahrs_jump_drift_dps, 0.0, 360.0)
+        check_within("ahrs_max_rate_dps", self.ahrs_max_rate_dps, 0.0, 1e4, low_open=True)
+        check_within("gps_max_jump_m", self.gps_max_jump_m, 0.0, 1e5, low_open=True)
+        check_within("gap_periods", self.gap_periods, 1.0, 1e4)
+        check_within("min_gap_s", self.min_gap_s, 0.0, 3600.0, low_open=True)
 
 
 #: What turns the estimators' heading between AHRS samples (``[motion] yaw_rate_source``):
@@ -219,11 +212,11 @@ class DatasetConfig:
             raise ValueError(
                 f"keyframe_scan_direction must be +1 or -1, got {self.keyframe_scan_direction!r}"
             )
-        _within(
+        check_within(
             "sonar_time_offset_s", self.sonar_time_offset_s, -MAX_TIME_OFFSET_S, MAX_TIME_OFFSET_S
         )
         for v in self.ahrs_deviation_rad:
-            _within("ahrs_deviation_rad", v, -math.pi / 2, math.pi / 2)
+            check_within("ahrs_deviation_rad", v, -math.pi / 2, math.pi / 2)
         if self.yaw_rate_source == "heading" and self.noise.ahrs_bias_walk_deg_per_sqrt_s > 0.0:
             # the heading between AHRS samples would follow the AHRS's own change, walk and all,
             # while the back ends' bias state would be told it walks: not one model

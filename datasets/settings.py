@@ -37,6 +37,7 @@ __all__ = [
     "coerce",
     "field_types",
     "replace_checked",
+    "check_within",
     "check_ranges",
     "read_toml",
     "toml_line",
@@ -86,13 +87,22 @@ def toml_line(text: str, table: str, key: str | None = None) -> int | None:
     return None
 
 
+def check_within(name: str, value: float, low: float, high: float, low_open: bool = False) -> None:
+    """For a dataclass's ``__post_init__``: ValueError unless ``low <= value <= high``
+    (``low < value`` when ``low_open``), in the words :func:`replace_checked` reports with the
+    key."""
+    ok = (value > low if low_open else value >= low) and value <= high
+    if not ok:
+        bracket = "(" if low_open else "["
+        raise ValueError(f"{name} must be in {bracket}{low:g}, {high:g}], got {value!r}")
+
+
 def check_ranges(obj: Any, bounds: Mapping[str, tuple[float, float]]) -> None:
-    """For a dataclass's ``__post_init__``: ValueError unless each named field is None or in
-    ``[low, high]`` (the ranges :func:`replace_checked` reports with the key)."""
+    """:func:`check_within` for each named field of ``obj`` that is not None."""
     for name, (low, high) in bounds.items():
         value = getattr(obj, name)
-        if value is not None and not low <= value <= high:
-            raise ValueError(f"{name} must be in [{low:g}, {high:g}], got {value!r}")
+        if value is not None:
+            check_within(name, value, low, high)
 
 
 class SettingError(ValueError):
