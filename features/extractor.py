@@ -36,11 +36,37 @@ from features.uncertainty import (
     support_mask,
 )
 from sonar.beam import Mounting, SonarBeam, SonarHead
-from sonar.segmentation import segment_intensities
+from sonar.segmentation import SegmentedBeam, segment_intensities
 
-__all__ = ["LineExtractor"]
+__all__ = ["LineExtractor", "segment_with"]
 
 _DEG = float(np.pi / 180.0)
+
+
+def segment_with(
+    config: ExtractorConfig, bin_size_m: float, intensities: npt.ArrayLike, thresholded: bool
+) -> SegmentedBeam:
+    """One beam segmented with the extractor's settings (paper 2.1): the bins it keeps.
+
+    Parameters
+    ----------
+    config : ExtractorConfig
+    bin_size_m : float
+        Range step between bins (m).
+    intensities : array_like, shape (n_bins,)
+    thresholded : bool
+        A 0/255 mask (:attr:`sonar.beam.SonarBeam.thresholded`).
+    """
+    return segment_intensities(
+        intensities,
+        bin_size_m,
+        intensity_threshold=config.intensity_threshold,
+        max_intensity_difference=config.max_intensity_difference,
+        min_distance_m=config.min_distance_m,
+        min_range_m=config.min_range_m,
+        thresholded=thresholded,
+        max_range_m=config.max_range_m,
+    )
 
 
 def _trimmed_extent(t: FloatArray, frac: float) -> tuple[float, float]:
@@ -151,16 +177,7 @@ class LineExtractor:
             Lines of the vote made after this beam (empty if no vote was due).
         """
         cfg = self.config
-        seg = segment_intensities(
-            beam.intensities,
-            self.head.bin_size_m,
-            intensity_threshold=cfg.intensity_threshold,
-            max_intensity_difference=cfg.max_intensity_difference,
-            min_distance_m=cfg.min_distance_m,
-            min_range_m=cfg.min_range_m,
-            thresholded=beam.thresholded,
-            max_range_m=cfg.max_range_m,
-        )
+        seg = segment_with(cfg, self.head.bin_size_m, beam.intensities, beam.thresholded)
         bearing = float(self.head.angle_sense * beam.transducer_angle_rad)
         self.sector.add(float(beam.t), bearing, seg)
         self._since_vote += 1

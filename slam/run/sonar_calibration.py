@@ -41,7 +41,7 @@ from scipy.stats import chi2
 
 from datasets.source import Dataset, open_dataset
 from features.config import ExtractorConfig
-from features.extractor import LineExtractor
+from features.extractor import LineExtractor, segment_with
 from features.geometry import (
     FLIP_RHO,
     FloatArray,
@@ -56,7 +56,6 @@ from slam.io.files import write_text
 from slam.io.trajectory import Trajectory
 from slam.run.presets import extractor_config, preset_for
 from slam.run.sources import dead_reckoning_trajectory
-from sonar.segmentation import segment_intensities
 
 __all__ = [
     "RangeOffsetFit",
@@ -95,16 +94,7 @@ def calibrate_range_offset(dataset: Dataset, every: int = 1) -> RangeOffsetFit:
     bin_m = dataset.config.sonar.bin_size_m
     offsets: list[float] = []
     for b in beams:
-        seg = segment_intensities(
-            b.intensities,
-            bin_m,
-            intensity_threshold=cfg.intensity_threshold,
-            max_intensity_difference=cfg.max_intensity_difference,
-            min_distance_m=cfg.min_distance_m,
-            min_range_m=cfg.min_range_m,
-            thresholded=False,
-            max_range_m=cfg.max_range_m,
-        )
+        seg = segment_with(cfg, bin_m, b.intensities, thresholded=False)
         intensity = b.intensities.astype(np.float64)
         for k in seg.final_bins:
             half = 0.5 * intensity[k]
