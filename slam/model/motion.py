@@ -21,7 +21,7 @@ model with the heading taken from the AHRS instead of integrated, vectorised ove
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -93,6 +93,9 @@ class MotionStep:
     var_yaw_gap_rad2 : float
         Heading variance the step adds because the AHRS is silent (rad^2): the growth of
         :meth:`slam.model.noise.MotionNoise.gap_heading_variance` over the step; 0 otherwise.
+    var_xy_m2 : float
+        Derived: the position variance per axis the step adds, one error per held DVL sample
+        (:func:`slam.model.noise.held_velocity_variance_step`, m^2).
     """
 
     t_s: float
@@ -103,16 +106,17 @@ class MotionStep:
     sigma_v_mps: float
     held_s: float
     var_yaw_gap_rad2: float = 0.0
+    #: computed once: the driver's odometry and the back end both ask
+    var_xy_m2: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        var = float(held_velocity_variance_step(self.held_s, self.dt_s, self.sigma_v_mps))
+        object.__setattr__(self, "var_xy_m2", var)
 
     def var_yaw_rad2(self, gyro_sigma_radps: float) -> float:
         """Heading variance of the step (rad^2): a yaw-rate noise ``(dt sigma)^2`` (the back
         end's) plus the AHRS gap's (:attr:`var_yaw_gap_rad2`)."""
         return (self.dt_s * gyro_sigma_radps) ** 2 + self.var_yaw_gap_rad2
-
-    @property
-    def var_xy_m2(self) -> float:
-        """Position variance per axis this step adds, one error per held DVL sample (m^2)."""
-        return float(held_velocity_variance_step(self.held_s, self.dt_s, self.sigma_v_mps))
 
     @property
     def var_xy_white_m2(self) -> float:

@@ -76,6 +76,8 @@ class MotionNoise:
         """Heading variance (rad^2) a step from ``t_prev_s`` to ``t_s`` adds when the newest
         AHRS sample is from ``t_ahrs_s``: the growth of :meth:`gap_heading_variance`."""
         stale = t_prev_s - t_ahrs_s - self.ahrs_stale_s
+        if stale + t_s - t_prev_s <= 0.0:  # not stale by the step's end: both terms are 0
+            return 0.0
         grown = self.gap_heading_variance(stale + t_s - t_prev_s)
         return float(grown - self.gap_heading_variance(stale))
 
