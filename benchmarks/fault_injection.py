@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the fuzzer's 
 from datasets.simulator import simulate  # noqa: E402
 from datasets.source import data_root  # noqa: E402
 from slam.cli.main import main  # noqa: E402
-from slam.io.trajectory import read_tum  # noqa: E402
+from slam.io.trajectory import read_tum, trajectory_stem  # noqa: E402
 from tests.fuzz_inputs import edit_log_rows, marina_window  # noqa: E402
 
 Edit = Callable[[Path], list[str]]
@@ -171,7 +171,7 @@ def run_fault(name: str, edit: Edit, base: Path, work: Path, backend: str) -> di
     metrics = out / "metrics.json"
     if code == 0 and metrics.is_file():
         m = json.loads(metrics.read_text())
-        tr = read_tum(out / "trajectory.tum")
+        tr = read_tum(out / f"{trajectory_stem(backend)}.tum")
         row["ate"] = f"{m['ate_mean_m']:.2f} / {m['ate_max_m']:.2f}"
         row["finite"] = bool(np.all(np.isfinite(tr.poses_wTb))) and _strict_json(metrics)
         row["counters"] = {
