@@ -319,3 +319,19 @@ def test_ate_over_a_span_and_against_the_truth_aligned_or_not():
     moved = Trajectory(t, np.column_stack([xy, truth.poses_wTb[:, 2] + 0.1]))
     assert ate_against_truth(moved, truth).ate_mean_m > 3.0
     assert ate_against_truth(moved, truth, align=True).ate_max_m == pytest.approx(0.0, abs=1e-9)
+
+
+def test_aligned_ate_against_gps_removes_a_rigid_move_only():
+    """Against GPS, as ``evo_ape -a``: a rigidly moved copy of the GPS track has the move's
+    error unaligned and none once aligned; a shape error stays after the fit."""
+    t = np.arange(0.0, 200.0, 1.0)
+    xy = np.column_stack([np.cos(0.03 * t) * 30, np.sin(0.05 * t) * 15])
+    gps = GpsSeries(t, xy.copy(), (0.0, 0.0))
+    c, s = np.cos(0.05), np.sin(0.05)
+    moved = xy @ np.array([[c, s], [-s, c]]) + [3.0, -1.0]
+    est = Trajectory(t, np.column_stack([moved, 0 * t]))
+    assert ate_against_gps(est, gps).ate_mean_m > 2.0
+    assert ate_against_gps(est, gps, align=True).ate_max_m == pytest.approx(0.0, abs=1e-9)
+    bent = Trajectory(t, np.column_stack([xy[:, 0], xy[:, 1] + np.where(t < 100, 0.0, 2.0), 0 * t]))
+    aligned = ate_against_gps(bent, gps, align=True)
+    assert 0.5 < aligned.ate_mean_m < ate_against_gps(bent, gps).ate_mean_m

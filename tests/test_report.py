@@ -124,11 +124,13 @@ def test_published_rows_stand_under_the_marina_table_only(runs, tmp_path):
     md = res.path.read_text()
     m = metrics
     cells = _row(md, "marina-ekf")
-    assert cells[2:12] == [
+    assert cells[2:14] == [
         f"{m['ate_sonar_mean_m']:.2f}",
         f"{m['ate_sonar_sd_m']:.2f}",
         f"{m['ate_sonar_max_m']:.2f}",
         str(m["ate_sonar_n"]),
+        f"{m['ate_sonar_aligned_mean_m']:.2f}",
+        f"{m['ate_sonar_aligned_max_m']:.2f}",
         f"{m['ate_mean_m']:.2f}",
         f"{m['ate_sd_m']:.2f}",
         f"{m['ate_min_m']:.2f}",
@@ -139,7 +141,7 @@ def test_published_rows_stand_under_the_marina_table_only(runs, tmp_path):
     for p in PUBLISHED:
         cells = _row(md, p["method"], column=0)
         assert cells[2:5] == [f"{p['mean']:.2f}", f"{p['sd']:.2f}", f"{p['max']:.2f}"]
-        assert cells[6] == ""  # not under the whole run
+        assert cells[6] == cells[8] == ""  # neither aligned nor under the whole run
     both = report([marina, runs["dr"].out_dir], tmp_path / "rep2", open_sources=False)
     text = both.path.read_text()
     marina_part, _, h5_part = text.partition("## h5")

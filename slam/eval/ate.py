@@ -2,7 +2,10 @@
 
 * Against GPS, by the protocol of Mallios et al. 2014 (the marina's published table): at every GPS
   fix inside the trajectory's time span, the distance between the GPS position and the estimate
-  interpolated at that time; no alignment of any kind (:func:`ate_against_gps`).
+  interpolated at that time; no alignment of any kind (:func:`ate_against_gps`). Beside it, the
+  same after a rigid SE(2) fit of the estimate's positions onto the fixes (``align=True``, as
+  ``evo_ape -a``): the shape error, without the start pose and heading that no GPS-free
+  estimator observes.
 * Against the simulator's truth: the same at every true pose inside the span, optionally after
   a rigid alignment of the estimate onto the truth (:func:`ate_against_truth`, Umeyama 1991 by
   evo), which leaves the shape error only.
@@ -58,14 +61,29 @@ def _inside(
     return np.asarray((t_s >= t0) & (t_s <= t1))
 
 
+def _rigid_fit(est: FloatArray, ref: FloatArray) -> FloatArray:
+    """``est`` (N, 2) moved by the rotation and translation (no scale) that best fit it onto
+    ``ref`` in least squares (``evo.core.geometry.umeyama_alignment``, Umeyama 1991)."""
+    if est.shape[0] < 2:
+        return est
+    r, t, _ = umeyama_alignment(est.T, ref.T, False)
+    return np.asarray((r @ est.T).T + t)
+
+
 def ate_errors(
-    trajectory: Trajectory, gps: GpsSeries, span_s: tuple[float, float] | None = None
+    trajectory: Trajectory,
+    gps: GpsSeries,
+    span_s: tuple[float, float] | None = None,
+    align: bool = False,
 ) -> tuple[FloatArray, FloatArray]:
     """Times (s) and position errors (m) at the GPS fixes inside the trajectory's span (and
-    inside ``span_s`` when given)."""
+    inside ``span_s`` when given); ``align``: after a rigid fit onto those fixes."""
     inside = _inside(gps.t, trajectory, span_s)
     est = trajectory.poses(gps.t[inside])[:, :2]
-    return gps.t[inside], np.hypot(*(est - gps.en_m[inside]).T)
+    ref = gps.en_m[inside]
+    if align:
+        est = _rigid_fit(est, ref)
+    return gps.t[inside], np.hypot(*(est - ref).T)
 
 
 def ate_of_errors(errors_m: FloatArray) -> AteResult:
@@ -84,11 +102,15 @@ def ate_of_errors(errors_m: FloatArray) -> AteResult:
 
 
 def ate_against_gps(
-    trajectory: Trajectory, gps: GpsSeries, span_s: tuple[float, float] | None = None
+    trajectory: Trajectory,
+    gps: GpsSeries,
+    span_s: tuple[float, float] | None = None,
+    align: bool = False,
 ) -> AteResult:
-    """The ATE of ``trajectory`` against ``gps`` (over ``span_s`` when given); raises
-    ValueError when no fix is inside."""
-    return ate_of_errors(ate_errors(trajectory, gps, span_s)[1])
+    """The ATE of ``trajectory`` against ``gps`` (over ``span_s`` when given; ``align``: after a
+    rigid SE(2) fit onto the fixes, as ``evo_ape -a``); raises ValueError when no fix is
+    inside."""
+    return ate_of_errors(ate_errors(trajectory, gps, span_s, align)[1])
 
 
 def truth_errors(
@@ -102,9 +124,8 @@ def truth_errors(
     inside = _inside(truth.t_s, trajectory, span_s)
     ref = truth.poses_wTb[inside, :2]
     est = trajectory.poses(truth.t_s[inside])[:, :2]
-    if align and est.shape[0] >= 2:
-        r, t, _ = umeyama_alignment(est.T, ref.T, False)
-        est = (r @ est.T).T + t
+    if align:
+        est = _rigid_fit(est, ref)
     return truth.t_s[inside], np.hypot(*(est - ref).T)
 
 

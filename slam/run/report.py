@@ -88,12 +88,15 @@ _REAL_COLUMNS = [
     ("ate_sonar_sd_m", "sd"),
     ("ate_sonar_max_m", "max"),
     ("ate_sonar_n", "fixes"),
+    ("ate_sonar_aligned_mean_m", "sonar span, SE(2)-aligned: mean"),
+    ("ate_sonar_aligned_max_m", "max"),
     ("ate_mean_m", "whole run: ATE mean (m)"),
     ("ate_sd_m", "sd"),
     ("ate_min_m", "min"),
     ("ate_max_m", "max"),
     ("ate_rmse_m", "rmse"),
     ("ate_n", "fixes"),
+    ("ate_aligned_mean_m", "whole run, aligned: mean"),
     ("realtime_factor", "real-time factor"),
     ("evo_ape_rmse_m", "evo APE rmse (m)"),
     ("evo_rpe_rmse_m", "evo RPE rmse (m)"),
@@ -143,6 +146,34 @@ def _run_row(run: RunData, rpe_delta_m: float, align: bool) -> dict[str, Any]:
         "evo_rpe_rmse_m": ev.get(f"evo_rpe_{rpe_delta_m:g}m_rmse_m"),
         "evo_rpe_mean_m": ev.get(f"evo_rpe_{rpe_delta_m:g}m_mean_m"),
     }
+
+
+#: A run's other trajectories (a factor graph's smoothed and batch estimates) by the suffix of
+#: their metrics.json keys, with the keys of the run's own row they take.
+_OTHER_TRAJECTORIES = ("smoothed", "batch")
+
+
+def _other_rows(run: RunData) -> list[dict[str, Any]]:
+    """Rows of the run's other trajectories from its metrics.json (the ATE only: evo's figures
+    are of ``<backend>.tum``)."""
+    m = run.metrics
+    rows = []
+    for name in _OTHER_TRAJECTORIES:
+        if f"ate_mean_{name}_m" not in m:
+            continue
+        row: dict[str, Any] = {
+            "method": DISPLAY_NAMES.get(run.backend, run.backend) + f" (ours), {name}",
+            "run": run.name,
+            "dataset": run.dataset_name,
+            "ate_mean_m": m[f"ate_mean_{name}_m"],
+            "ate_max_m": m.get(f"ate_max_{name}_m"),
+            "ate_aligned_mean_m": m.get(f"ate_aligned_mean_{name}_m"),
+        }
+        for key in ("ate_sonar", "ate_sonar_aligned", "ate_truth", "ate_truth_aligned"):
+            for stat in ("mean_m", "sd_m", "max_m", "n"):
+                row[f"{key}_{stat}"] = m.get(f"{key}_{name}_{stat}")
+        rows.append(row)
+    return rows
 
 
 def _published_rows() -> list[dict[str, Any]]:
@@ -305,7 +336,9 @@ def report(
     ]
     dataset_figs: list[tuple[str, list[Path]]] = []
     for name, group in by_dataset.items():
-        group_rows = [_run_row(r, rpe_delta_m, align) for r in group]
+        group_rows = [
+            row for r in group for row in [_run_row(r, rpe_delta_m, align), *_other_rows(r)]
+        ]
         if name == PUBLISHED_DATASET and not any(r.truth is not None for r in group):
             group_rows += _published_rows()
         rows += group_rows

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from datasets.errors import DataError, DataWarning
 from datasets.settings import SettingError
@@ -33,7 +34,15 @@ from slam.run.outputs import write_run
 from slam.run.presets import RunConfig, check_settings, run_config
 from slam.run.sources import POSE_SOURCES, dvl_quality
 
-__all__ = ["BASELINES", "RunResult", "backend_names", "run_backend", "run", "summary_line"]
+__all__ = [
+    "BASELINES",
+    "RunResult",
+    "backend_names",
+    "run_backend",
+    "run",
+    "summary_line",
+    "results_table",
+]
 
 #: Back ends that are pose sources, not estimators with settings.
 BASELINES = ("dr", "gps")
@@ -103,7 +112,8 @@ def run_backend(
     -------
     RunResult
         ``metrics`` has ``source``, ``backend``, the ATE fields over the whole navigation span
-        (``ate_*``) and over the sonar span (``ate_sonar_*``, ``sonar_span_s``), on simulated
+        (``ate_*``) and over the sonar span (``ate_sonar_*``, ``sonar_span_s``), each also after
+        a rigid SE(2) fit onto the GPS (``ate_aligned_*``, ``ate_sonar_aligned_*``), on simulated
         data against the truth too (``ate_truth_*``, ``ate_truth_aligned_*``), ``wall_s`` (the estimation),
         ``data_s``, ``realtime_factor``, the DVL's quality and, for closed loops, the settings,
         the extractor preset, ``landmarks``, ``line_features``, ``assoc_*``, ``extractor_s``,
@@ -159,6 +169,7 @@ def run_backend(
         "source": str(dataset.root),
         "backend": backend,
         **ate_against_gps(trajectory, dataset.gps).as_dict(),
+        **ate_against_gps(trajectory, dataset.gps, align=True).as_dict("ate_aligned"),
         **_span_metrics(dataset, trajectory, ""),
         "wall_s": wall_s,
         "data_s": t1 - t0,
@@ -174,6 +185,9 @@ def run_backend(
         ate = ate_against_gps(tr, dataset.gps)
         metrics[f"ate_mean_{name}_m"] = ate.ate_mean_m
         metrics[f"ate_max_{name}_m"] = ate.ate_max_m
+        aligned = ate_against_gps(tr, dataset.gps, align=True)
+        metrics[f"ate_aligned_mean_{name}_m"] = aligned.ate_mean_m
+        metrics[f"ate_aligned_max_{name}_m"] = aligned.ate_max_m
         metrics.update(_span_metrics(dataset, tr, f"_{name}"))
     return RunResult(backend, trajectory, metrics, result, config, trajectories)
 
@@ -232,7 +246,8 @@ def _gps_coverage(dataset: Dataset, trajectory: Trajectory) -> dict[str, Any]:
 
 
 def _span_metrics(dataset: Dataset, trajectory: Trajectory, suffix: str) -> dict[str, Any]:
-    """The ATE over the sonar span (``ate_sonar_*``, with ``sonar_span_s``) and, on simulated
+    """The ATE over the sonar span (``ate_sonar_*``, with ``sonar_span_s``; rigidly aligned
+    ``ate_sonar_aligned_*``) and, on simulated
     data, against the truth over the whole run, as it is and rigidly aligned (``ate_truth_*``,
     ``ate_truth_aligned_*``); ``suffix`` names another trajectory of the run
     (``ate_sonar_smoothed_mean_m``)."""
@@ -244,6 +259,8 @@ def _span_metrics(dataset: Dataset, trajectory: Trajectory, suffix: str) -> dict
         if not suffix:
             out["sonar_span_s"] = [span[0], span[1]]
         out.update(ate_against_gps(trajectory, dataset.gps, span).as_dict(f"ate_sonar{suffix}"))
+        aligned = ate_against_gps(trajectory, dataset.gps, span, align=True)
+        out.update(aligned.as_dict(f"ate_sonar_aligned{suffix}"))
     if dataset.truth is not None:
         truth = truth_trajectory(dataset)
         out.update(ate_against_truth(trajectory, truth).as_dict(f"ate_truth{suffix}"))
@@ -367,3 +384,61 @@ def summary_line(metrics: dict[str, Any]) -> str:
         f"over {m['ate_n']} fixes; {m['data_s']:.0f} s of data in {m['wall_s']:.2f} s "
         f"({m['realtime_factor']:.0f}x real time)"
     )
+
+
+def _row_figures(m: dict[str, Any], name: str | None) -> dict[str, float]:
+    """The ATE figures of one trajectory of a run (``name``: ``smoothed``, ``batch`` or None for
+    the run's own) from its ``metrics.json``."""
+    if name is None:
+        keys = {
+            "sonar": "ate_sonar_mean_m",
+            "sonar_max": "ate_sonar_max_m",
+            "sonar_aligned": "ate_sonar_aligned_mean_m",
+            "sonar_aligned_max": "ate_sonar_aligned_max_m",
+            "whole": "ate_mean_m",
+            "whole_max": "ate_max_m",
+            "whole_aligned": "ate_aligned_mean_m",
+        }
+    else:
+        keys = {
+            "sonar": f"ate_sonar_{name}_mean_m",
+            "sonar_max": f"ate_sonar_{name}_max_m",
+            "sonar_aligned": f"ate_sonar_aligned_{name}_mean_m",
+            "sonar_aligned_max": f"ate_sonar_aligned_{name}_max_m",
+            "whole": f"ate_mean_{name}_m",
+            "whole_max": f"ate_max_{name}_m",
+            "whole_aligned": f"ate_aligned_mean_{name}_m",
+        }
+    return {k: float(m.get(v, float("nan"))) for k, v in keys.items()}
+
+
+def results_table(results: list[RunResult]) -> str:
+    """A Markdown table of the runs' ATE against their reference (GPS; the simulator's GPS on
+    simulated data): one row per trajectory (a factor graph's online, smoothed and batch
+    estimates), the sonar span and the whole run, as the published protocol takes it (no
+    alignment) and after a rigid SE(2) fit (``evo_ape -a``)."""
+
+    def pair(a: float, b: float) -> str:
+        return "" if not np.isfinite(a) else f"{a:.2f} / {b:.2f}"
+
+    rows = []
+    for r in results:
+        names: list[str | None] = [None, *r.trajectories]
+        for name in names:
+            f = _row_figures(r.metrics, name)
+            label = r.backend if name is None else f"{r.backend} {name}"
+            if name is None and r.trajectories:
+                label = f"{r.backend} online"
+            rows.append(
+                {
+                    "trajectory": label,
+                    "sonar span mean / max (m)": pair(f["sonar"], f["sonar_max"]),
+                    "aligned": pair(f["sonar_aligned"], f["sonar_aligned_max"]),
+                    "whole run mean / max (m)": pair(f["whole"], f["whole_max"]),
+                    "aligned mean": ""
+                    if not np.isfinite(f["whole_aligned"])
+                    else f"{f['whole_aligned']:.2f}",
+                }
+            )
+    frame = pd.DataFrame(rows)
+    return str(frame.to_markdown(index=False, disable_numparse=True))
