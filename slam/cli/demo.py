@@ -8,7 +8,7 @@ from pathlib import Path
 from slam.cli.common import EPILOG, Subparsers, add_quiet
 from slam.io.files import check_output_dir
 from slam.run.demo import main_job
-from slam.run.run import summary_line
+from slam.run.run import results_table, summary_line
 
 
 def add_parser(sub: Subparsers) -> None:
@@ -28,6 +28,8 @@ def command(args: argparse.Namespace) -> int:
     print("\nResults (ATE against GPS, no alignment):")
     for r in results:
         print("  " + summary_line(r.metrics))
+    print("\nEvery trajectory, as published (no alignment) and after a rigid SE(2) fit:\n")
+    print(results_table(results))
     print("\nOutputs and pictures:")
     print(f"  {Path(args.out).resolve()}  (*_scans_gps.png: the sonar map with GPS poses)")
     for r in results:
