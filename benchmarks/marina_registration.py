@@ -2,7 +2,7 @@
 marina, the simulator's truth on simulated data. The ruler measures only.
 
 python benchmarks/marina_registration.py [--source marina|DIR] [--set scans.FIELD=V ...] \\
-    [--out out/marina_registration.json]
+    [--submaps 1,3,5] [--out out/marina_registration.json]
 
 1. **Scans** (:class:`features.scans.ScanMatcher`): every full turn of the head, leading edges
    motion-corrected with **dead reckoning** (GPS-free, as a closed loop's first pass).
@@ -14,7 +14,10 @@ python benchmarks/marina_registration.py [--source marina|DIR] [--set scans.FIEL
    submap apart), registered as submaps of ``submap_scans`` scans from several starts along
    that covariance (:func:`features.scans.icp.register_from`) - the rule of the factor graph
    (:mod:`slam.backends.isam2.scans`), with dead reckoning in place of its marginals.
-4. **Scores** per kind: pairs, accepted, rejected by reason; of the accepted, the position
+4. With ``--submaps N1,N2,...`` the revisits are registered once per submap size (``1``: scan
+   to scan, one full turn each; ``3``: three consecutive scans each, the factor graph's), the
+   same pairs each time, and a row is printed per size.
+5. **Scores** per kind: pairs, accepted, rejected by reason; of the accepted, the position
    error of the registration and of dead reckoning's guess against the ruler's relative pose
    (p50, p90, share beyond 2 m), the error in the directions the registration constrains, and
    the NEES of the registration (3 dof, its own covariance; the ruler's own error is not added,
@@ -141,6 +144,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--radius", type=float, default=10.0, help="revisit radius (m)")
     ap.add_argument("--min-gap", type=float, default=60.0, help="revisit time gap (s)")
     ap.add_argument("--per-scan", type=int, default=2, help="revisits per scan")
+    ap.add_argument(
+        "--submaps",
+        default=None,
+        help="comma list of submap sizes (odd scans) to register the same revisits with, e.g. 1,3,5",
+    )
     ap.add_argument("--out", type=Path, default=None, help="JSON of the scores")
     args = ap.parse_args(argv)
     try:
@@ -165,11 +173,22 @@ def main(argv: list[str] | None = None) -> int:
     cons_rows = [(r, np.zeros(3)) for r in consecutive if r is not None]
     cons_t = [(scans[k - 1].t_ref_s, scans[k].t_ref_s) for k in range(1, len(scans))]
     pairs = revisit_pairs(matcher, dr, args.radius, args.min_gap, args.per_scan)
-    rev_rows = []
-    for j, k, S in pairs:
-        guess = between(*dr.poses(np.array([scans[j].t_ref_s, scans[k].t_ref_s])))
-        rev_rows.append((matcher.register(j, k, guess, S), S))
     rev_t = [(scans[j].t_ref_s, scans[k].t_ref_s) for j, k, _ in pairs]
+    sizes = (
+        [config.submap_scans] if args.submaps is None else [int(v) for v in args.submaps.split(",")]
+    )
+    by_size: dict[int, dict[str, Any]] = {}
+    for n in sizes:
+        sized = (
+            matcher
+            if n == config.submap_scans
+            else build_scans(ds, config.replace(submap_scans=n), dr)
+        )
+        rows = []
+        for j, k, S in pairs:
+            guess = between(*dr.poses(np.array([scans[j].t_ref_s, scans[k].t_ref_s])))
+            rows.append((sized.register(j, k, guess, S), S))
+        by_size[n] = score(rows, ruler, rev_t)
     wall = time.perf_counter() - wall0
     result = {
         "source": str(ds.root),
@@ -177,7 +196,8 @@ def main(argv: list[str] | None = None) -> int:
         "scans": len(scans),
         "points_per_scan_median": float(np.median([s.points_b.shape[0] for s in scans])),
         "consecutive": score(cons_rows, ruler, cons_t),
-        "revisit": score(rev_rows, ruler, rev_t),
+        "revisit": by_size[sizes[0]],
+        "revisit_by_submap_scans": {str(n): v for n, v in by_size.items()},
         "revisit_rule": {
             "radius_m": args.radius,
             "min_gap_s": args.min_gap,
@@ -195,8 +215,11 @@ def main(argv: list[str] | None = None) -> int:
         " | dead reckoning | NEES mean [95 % band] | rejected |"
     )
     print("|---|---|---|---|---|---|---|---|")
-    for kind in ("consecutive", "revisit"):
-        s = result[kind]
+    rows_out = [("consecutive scans", result["consecutive"])]
+    rows_out += [
+        (f"revisits, submaps of {n} scan{'s' if n > 1 else ''}", v) for n, v in by_size.items()
+    ]
+    for kind, s in rows_out:
         f = "{p50_m:.2f} / {p90_m:.2f} / {beyond_2m:.0%}"
         print(
             f"| {kind} | {s['pairs']} | {s['accepted']} | {f.format(**s['registration'])} | "
