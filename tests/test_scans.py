@@ -277,6 +277,26 @@ def _line_distance(p, a, b):
     return (p - a) @ np.array([-u[1], u[0]])
 
 
+def test_a_complete_submap_keeps_the_relative_poses_it_was_made_with():
+    """A submap is frozen once its scans are all in: a pose source that changes later (a loop
+    closure bending the estimate) leaves it whole; the newest, incomplete one follows it."""
+    head = SonarHead(n_bins=300, bin_size_m=0.1, step_rad=np.deg2rad(1.8))
+    mounting = Mounting()
+    source = _Moving(0.3, np.deg2rad(2.0))
+    matcher = ScanMatcher(ScanConfig(submap_scans=3), head, mounting, source)
+    for i in range(800):
+        t = 0.1 * i
+        matcher.add(
+            _render(head, mounting.as_pose(), source.poses(t)[0], t, i * head.step_rad, ROOM)
+        )
+    assert len(matcher.scans) == 4
+    before = {i: matcher.submap(i).copy() for i in range(4)}
+    matcher.pose_source = _Moving(0.0, 0.0)  # a different estimate of the same past
+    assert np.array_equal(matcher.submap(1), before[1])
+    assert np.array_equal(matcher.submap(2), before[2])
+    assert not np.allclose(matcher.submap(3), before[3])
+
+
 def test_config_rejects_bad_values():
     with pytest.raises(ValueError, match="submap_scans"):
         ScanConfig(submap_scans=2)

@@ -56,12 +56,19 @@ class ScanMatcher:
         self.scans: list[Scan] = []
         self._lines: dict[int, ReferenceLines] = {}  # single scans, by index
         self._submap_lines: dict[int, ReferenceLines] = {}  # old submaps, by centre
+        self._frozen: dict[int, FloatArray] = {}  # complete submaps' points, by centre
 
     def add(self, beam: SonarBeam) -> Scan | None:
         """Take one beam; the scan it completes (kept), else None."""
         scan = self.builder.add(beam)
         if scan is not None:
             self.scans.append(scan)
+            centre = scan.index - self.config.submap_scans // 2
+            if centre >= 0 and centre - self.config.submap_scans // 2 >= 0:
+                # the submap around ``centre`` is complete: its scans placed with the pose
+                # source's relative poses now, while they are recent (the odometry's own,
+                # locally right); later loop closures that bend the estimate leave it whole
+                self._frozen[centre] = self.submap(centre)
         return scan
 
     def _scan_lines(self, i: int) -> ReferenceLines:
@@ -90,7 +97,10 @@ class ScanMatcher:
         return first, min(first + 2 * h, len(self.scans) - 1)
 
     def submap(self, i: int) -> FloatArray:
-        """The submap around scan ``i`` in its reference frame, shape (N, 2)."""
+        """The submap around scan ``i`` in its reference frame, shape (N, 2): frozen when it
+        was complete, else placed with the pose source's current relative poses."""
+        if i in self._frozen:
+            return self._frozen[i]
         first, last = self.submap_window(i)
         return submap_points(self.scans[first : last + 1], i - first, self.pose_source)
 

@@ -233,8 +233,10 @@ class ScanConstraints:
         M[3:, 3:] = local_to_world(float(self.graph.node_estimate(nk)[2]))
         return M @ J @ M.T
 
-    def _loose(self, k: int, pose_k: FloatArray) -> list[tuple[float, int]]:
-        """Older scans under the loose gate, nearest (in sigmas) first."""
+    def _loose(self, k: int, pose_k: FloatArray, spread: int) -> list[tuple[float, int]]:
+        """Older scans under the loose gate, nearest (in metres: the most overlap) first, at
+        most ``revisit_candidates``, each at least ``spread`` scans from the others chosen (a
+        revisit of one place from several passes, not one pass's neighbouring scans)."""
         cfg = self.config
         out = []
         for j in range(k):
@@ -242,25 +244,29 @@ class ScanConstraints:
                 continue
             d = self._pose(j)[:2] - pose_k[:2]
             S = self._cov[j][:2, :2] + self._cov[k][:2, :2]
-            g = radial_gate_distance(d, S, cfg.revisit_radius_m)
-            if g <= self._gate:
-                out.append((g, j))
-        return sorted(out)[: cfg.revisit_candidates]
+            if radial_gate_distance(d, S, cfg.revisit_radius_m) <= self._gate:
+                out.append((float(np.hypot(d[0], d[1])), j))
+        chosen: list[tuple[float, int]] = []
+        for g, j in sorted(out):
+            if len(chosen) >= cfg.revisit_candidates:
+                break
+            if all(abs(j - c) >= spread for _, c in chosen):
+                chosen.append((g, j))
+        return chosen
 
     def _revisits(self, k: int, matcher: ScanMatcher) -> None:
         cfg = self.config
         pose_k = self._pose(k)
         gated: list[tuple[float, int, FloatArray, FloatArray]] = []
-        for _, j in self._loose(k, pose_k):
+        half = matcher.config.submap_scans
+        for _, j in self._loose(k, pose_k, half):
             pose_j = self._pose(j)
             S = relative_pose_covariance(pose_j, pose_k, self._joint(j, k))
             jTk = between(pose_j, pose_k)
             # the gate in scan j's frame: d and S of the relative position
-            g = radial_gate_distance(-jTk[:2], S[:2, :2], cfg.revisit_radius_m)
-            if g <= self._gate:
-                gated.append((g, j, jTk, S))
+            if radial_gate_distance(-jTk[:2], S[:2, :2], cfg.revisit_radius_m) <= self._gate:
+                gated.append((float(np.hypot(jTk[0], jTk[1])), j, jTk, S))
         chosen: list[int] = []
-        half = matcher.config.submap_scans
         added = False
         for _, j, jTk, S in sorted(gated, key=lambda c: c[0]):
             if len(chosen) >= cfg.revisits_per_scan:
