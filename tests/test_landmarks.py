@@ -95,3 +95,16 @@ def test_the_ekf_robust_update_bends_towards_an_outlier_by_less() -> None:
         shifts[robust] = abs(be.pose[0] - x0)
     assert shifts[None] > 1e-3
     assert 0.2 * shifts[None] < shifts["huber"] < 0.8 * shifts[None]
+
+
+@pytest.mark.parametrize("kind", ["ekf", "isam2"])
+def test_reobservations_from_the_same_place_are_counted_once(kind: str) -> None:
+    """With ``reobservation_min_move_m``, a still vehicle's repeated views of a wall are
+    associated but only the first after the landmark's creation is used; without it all are."""
+    walls = [(WALL, _stretch(-5.0, 5.0))]
+    for limit, used in ((None, 6), (2.0, 0)):
+        be = _backend(kind, tentative_observations=2, reobservation_min_move_m=limit)
+        ids = [_see(be, float(t), walls)[0] for t in range(1, 9)]
+        assert ids[2:] == [0] * 6  # associated every time after the two tentative views
+        assert be.map.stats["associated"] - be.map.stats["reobservations_skipped"] == used
+        assert be.map.stats["reobservations_skipped"] == 6 - used

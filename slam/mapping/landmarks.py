@@ -88,6 +88,12 @@ class LandmarkConfig:
         ``extent_margin_m`` are one wall when their lines are jointly compatible at this
         probability (chi2(2) on their difference with the joint covariance): the newer is merged
         into the older (:meth:`LandmarkMap.merge_duplicates`). None: never merged.
+    reobservation_min_move_m : float or None
+        An associated observation of a landmark is used only when the sonar has moved at least
+        this far (m) since the landmark's last used observation: observations of one wall from
+        nearly the same place share their systematic error (the echo band seen at the same
+        incidence and range), which does not average down as independent errors would. None:
+        every associated observation is used.
     """
 
     association: AssociationConfig = field(default_factory=AssociationConfig)
@@ -98,6 +104,7 @@ class LandmarkConfig:
     side_gate: bool = True
     line_cov_scale: float = 1.0
     merge_gate_probability: float | None = None
+    reobservation_min_move_m: float | None = None
 
     def __post_init__(self) -> None:
         if self.tentative_observations < 1:
@@ -133,6 +140,7 @@ class Landmark:
     theta_ref_rad: float
     side: float = 1.0
     merged_into: int | None = None
+    last_used_xy_m: FloatArray | None = None
 
     @property
     def active(self) -> bool:
@@ -269,6 +277,7 @@ class LandmarkMap:
             "tentative_dropped": 0,
             "rejected_near": 0,
             "merged": 0,
+            "reobservations_skipped": 0,
         }
         #: (t, observation index in its vote, landmark id or None) of every used observation
         self.association_log: list[tuple[float, int, int | None]] = []
@@ -359,20 +368,21 @@ class LandmarkMap:
         if problem is not None and candidates:
             pairing = associate(problem, cfg.association)
             self._log_innovations(problem, pairing, candidates, use)
-        pairs = [(candidates[j], use[i]) for i, j in enumerate(pairing) if j is not None]
+        paired = [(candidates[j], use[i]) for i, j in enumerate(pairing) if j is not None]
         ids: list[int | None] = [None if j is None else candidates[j].id for j in pairing]
+        self.stats["associated"] += len(paired)
+        pairs = self._moved_enough(paired, estimator.pose)
         estimator.add_observations(pairs, anchor)
         for lm, _ in pairs:
             lm.n_obs += 1
-        self.stats["associated"] += len(pairs)
         wTb, P_pose = estimator.pose, estimator.pose_cov
         for i, j in enumerate(pairing):
             if j is None:
                 ids[i] = self._new_line(estimator, anchor, use[i], wTb, P_pose)
         estimator.end_vote(bool(pairs))
-        if pairs:
+        if paired:  # a skipped re-observation was still seen: it grows the extent
             wTs = compose(estimator.pose, self.bTs)
-            for lm, f in pairs:
+            for lm, f in paired:
                 lm.grow(estimator.landmark_line(lm.id), transform_points(wTs, f.endpoints_r))
         touched = {i for i in ids if i is not None}
         if cfg.merge_gate_probability is not None and touched:
@@ -381,6 +391,24 @@ class LandmarkMap:
             self.association_log.append((f.t, i, ids[i]))
         by_feature = {id(f): ids[i] for i, f in enumerate(use)}
         return [by_feature.get(id(f)) for f in features]
+
+    def _moved_enough(
+        self, pairs: list[tuple[Landmark, LineFeature]], wTb: FloatArray
+    ) -> list[tuple[Landmark, LineFeature]]:
+        """The pairs to use: all, or (``reobservation_min_move_m``) those whose landmark was last
+        used from at least that far; each kept pair's landmark remembers the sonar's place."""
+        limit = self.config.reobservation_min_move_m
+        if limit is None:
+            return pairs
+        xy = compose(wTb, self.bTs)[:2]
+        kept = []
+        for lm, f in pairs:
+            if lm.last_used_xy_m is not None and np.hypot(*(xy - lm.last_used_xy_m)) < limit:
+                self.stats["reobservations_skipped"] += 1
+                continue
+            lm.last_used_xy_m = xy.copy()
+            kept.append((lm, f))
+        return kept
 
     def _log_innovations(
         self,
@@ -446,6 +474,7 @@ class LandmarkMap:
         lm = Landmark(
             len(self.landmarks), 0, float(s.min()), float(s.max()), float(line_w[1]), side
         )
+        lm.last_used_xy_m = compose(wTb, self.bTs)[:2].copy()
         self.landmarks.append(lm)
         lm.n_obs = estimator.add_landmark(lm, line_w, cand.observations)
         self.seed_log.extend((f, lm.id) for _, f in cand.observations[:-1])
