@@ -93,6 +93,11 @@ class MotionStep:
     var_yaw_gap_rad2 : float
         Heading variance the step adds because the AHRS is silent (rad^2): the growth of
         :meth:`slam.model.noise.MotionNoise.gap_heading_variance` over the step; 0 otherwise.
+    gyro_dt_s : float
+        How much of the step ``dyaw_rad`` integrates the gyro's rate over (s): ``dt_s`` when
+        the rate is the gyro's, 0 when it is the AHRS heading's own change or none (an AHRS
+        gap). A gyro bias ``g`` (rad/s) turns the true heading change into
+        ``dyaw_rad - g * gyro_dt_s``.
     var_xy_m2 : float
         Derived: the position variance per axis the step adds, one error per held DVL sample
         (:func:`slam.model.noise.held_velocity_variance_step`, m^2).
@@ -106,6 +111,7 @@ class MotionStep:
     sigma_v_mps: float
     held_s: float
     var_yaw_gap_rad2: float = 0.0
+    gyro_dt_s: float = 0.0
     #: computed once: the driver's odometry and the back end both ask
     var_xy_m2: float = field(init=False)
 
@@ -132,12 +138,14 @@ def motion_step(
     yaw_rate_radps: float,
     held_from_s: float,
     var_yaw_gap_rad2: float = 0.0,
+    from_gyro: bool = False,
 ) -> MotionStep:
     """The step from ``t_prev_s`` to ``t_s`` with a body velocity and a yaw rate held over it.
 
     ``held_from_s`` is when the velocity sample started to be held (its DVL time, or the start
     of the integration if later): the step's share of the sample's error grows with it.
     ``var_yaw_gap_rad2``: the heading variance an AHRS gap adds over the step (rad^2).
+    ``from_gyro``: the yaw rate is the gyro's (its bias then enters, :attr:`MotionStep.gyro_dt_s`).
     """
     dt = max(t_s - t_prev_s, 0.0)
     v = np.asarray(v_b_mps, dtype=np.float64)
@@ -150,6 +158,7 @@ def motion_step(
         sigma_v_mps=float(sigma_v_mps),
         held_s=max(t_s - held_from_s, dt),
         var_yaw_gap_rad2=float(var_yaw_gap_rad2),
+        gyro_dt_s=dt if from_gyro else 0.0,
     )
 
 
