@@ -34,8 +34,9 @@ from typing import Any
 
 import numpy as np
 
-from datasets.config import NoiseConfig
+from datasets.config import DatasetConfig, NoiseConfig
 from datasets.errors import DataError
+from datasets.records import BeamSeries
 from datasets.settings import SettingError, parse_text, read_toml, replace_checked, toml_line
 from features.config import ExtractorConfig
 from features.scans import ScanConfig
@@ -121,6 +122,8 @@ SCAN_PRESETS: dict[str, ScanConfig] = {
 def preset_for(beams: Sequence[SonarBeam]) -> str:
     """``"marina"`` for thresholded beams (0/255 masks, as the marina keyframes), else
     ``"default"`` (raw intensities)."""
+    if isinstance(beams, BeamSeries):  # one kind of beam by construction
+        return "marina" if len(beams) and beams.thresholded else "default"
     return "marina" if beams and all(b.thresholded for b in beams) else "default"
 
 
@@ -275,6 +278,26 @@ def run_config(
         given,
         apply_overrides(SCAN_PRESETS[preset], scans),
     )
+
+
+def check_combination(dataset: DatasetConfig, backend: str) -> None:
+    """Refuse, before any work, a dataset setting that a back end would silently get wrong.
+
+    The factor graph has no gyro-bias state (the EKF has, :mod:`slam.backends.ekf`): with the
+    gyro's rate and a walking AHRS bias, a gyro bias is taken for the walk and the heading
+    spins away (the marina, walk 0.15 deg/sqrt(s): ATE 97 m, exit 0).
+    """
+    if (
+        backend == "isam2"
+        and dataset.yaw_rate_source == "gyro"
+        and dataset.noise.ahrs_bias_walk_deg_per_sqrt_s > 0.0
+    ):
+        raise SettingError(
+            "[motion] yaw_rate_source",
+            "'gyro' with [noise] ahrs_bias_walk_deg_per_sqrt_s > 0 is refused for isam2: it has"
+            " no gyro-bias state, so a gyro bias would be taken for the AHRS bias's walk (use"
+            " the ekf, which estimates it, or yaw_rate_source = 'heading')",
+        )
 
 
 _ALIASES = {"association": "association.method"}
