@@ -7,7 +7,7 @@ import argparse
 from datasets.source import open_dataset
 from slam.cli.common import EPILOG, Subparsers, add_source
 from slam.run.settings import Setting, dataset_settings, run_settings
-from slam.run.sources import dvl_quality
+from slam.run.sources import DR_IGNORES, dvl_quality
 
 
 def add_parser(sub: Subparsers) -> None:
@@ -52,6 +52,7 @@ def command(args: argparse.Namespace) -> int:
     else:
         print(f"  DVL sigma {n.dvl_sigma_mps} m/s (the scatter's excess is not added)")
     _print_settings("dataset settings (sonarslam.toml keys)", dataset_settings(d))
+    print(f"  dead reckoning (--backend dr) ignores: {', '.join(DR_IGNORES)}")
     _print_settings("run settings (sonarslam run --set NAME=VALUE)", run_settings(d))
     return 0
 

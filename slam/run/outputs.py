@@ -55,7 +55,7 @@ from slam.io.trajectory import (
 )
 from slam.run.closed_loop import ClosedLoopResult
 from slam.run.presets import map_min_intensity
-from slam.run.sources import dead_reckoning_trajectory, gps_ahrs_trajectory
+from slam.run.sources import DR_IGNORES, dead_reckoning_trajectory, gps_ahrs_trajectory
 
 __all__ = ["write_run"]
 
@@ -73,7 +73,10 @@ def write_run(
     was in ``out`` before, another run's files, is not among them)."""
     assert dataset.gps is not None, "a run has GPS (checked by run_backend)"
     make_output_dir(out)
-    files = [write_text(out / "config_used.toml", dump_dataset_config(dataset.config))]
+    used = dump_dataset_config(dataset.config)
+    if backend == "dr":
+        used = "".join(f"# ignored by dead reckoning: {key}\n" for key in DR_IGNORES) + used
+    files = [write_text(out / "config_used.toml", used)]
     t0, t1 = trajectory.span_s
     gps = dataset.gps
     gps_tr = gps_ahrs_trajectory(dataset)

@@ -31,7 +31,7 @@ from slam.io.trajectory import Trajectory
 from slam.run.closed_loop import ClosedLoopResult, run_closed_loop
 from slam.run.health import monitor_run
 from slam.run.outputs import write_run
-from slam.run.presets import RunConfig, check_settings, run_config
+from slam.run.presets import RunConfig, check_combination, check_settings, run_config
 from slam.run.sources import POSE_SOURCES, dvl_quality
 
 __all__ = ["BASELINES", "RunResult", "backend_names", "run_backend", "run", "summary_line"]
@@ -137,6 +137,7 @@ def run_backend(
         if batch and not spec.smoother:
             raise SettingError("--batch", f"back end {backend!r} does not smooth")
         _require_beams(dataset)
+        check_combination(dataset.config, backend)
         config = run_config(dataset.beams, backend, settings, dataset.config.noise)
         mounting = dataset.config.sonar_mounting
         cfg = config.backend
