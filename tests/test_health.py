@@ -163,3 +163,81 @@ def test_the_warnings_name_the_span_and_the_cause() -> None:
 def test_the_config_is_range_checked() -> None:
     with pytest.raises(ValueError, match="false_alarm"):
         HealthConfig(false_alarm=0.9)
+
+
+# -- end to end on the simulator -----------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def gyro_harbour(tmp_path_factory):
+    """300 s of a held-back harbour whose gyro reads the true rate plus the marina MTi's
+    0.01 rad/s; and the same world with a clean gyro."""
+    import warnings
+
+    from datasets.simulator import make_scenario, simulate_records
+    from datasets.simulator.writer import write_dataset
+    from datasets.source import open_dataset
+
+    scenario = make_scenario("harbour", 10001, 300.0)
+    out = {}
+    for name, bias in (("clean", 0.0), ("biased", 0.01)):
+        noise = replace(scenario.noise, ahrs_gyro_bias_radps=bias)
+        sim = simulate_records(replace(scenario, noise=noise))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            out[name] = open_dataset(write_dataset(sim, tmp_path_factory.mktemp(name)))
+    return out
+
+
+def _quiet_run(ds, backend, settings=None):
+    import warnings
+
+    from slam.run.run import run_backend
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return run_backend(ds, backend, settings).metrics
+
+
+@pytest.mark.parametrize("backend", ["ekf", "isam2"])
+def test_clean_simulated_runs_are_healthy(gyro_harbour, backend):
+    m = _quiet_run(gyro_harbour["clean"], backend)
+    assert m["health_ok"], m["health_first_issue"]
+    assert m["health_nis_line_windows"] >= 1 and m["health_departure_windows"] >= 2
+
+
+def test_an_unmodelled_gyro_bias_with_a_walking_ahrs_bias_trips_the_monitor(gyro_harbour):
+    """The marina's failure on the simulator: the EKF's gyro-bias state held at 0 and the AHRS
+    bias allowed to walk. With the state (the default) the same data is healthy."""
+    ds = gyro_harbour["biased"]
+    noise = replace(ds.config.noise, ahrs_bias_walk_deg_per_sqrt_s=0.15)
+    walking = replace(ds, config=replace(ds.config, noise=noise))
+    bad = _quiet_run(walking, "ekf", {"ekf.gyro_bias_sigma_deg_per_s": 1e-6})
+    assert not bad["health_ok"]
+    assert {"heading_bias", "nis_heading"} & set(bad["health_flagged"]), bad["health_flagged"]
+    good = _quiet_run(walking, "ekf")
+    assert good["health_ok"], good["health_first_issue"]
+    assert good["state_gyro_bias_deg_per_s"] == pytest.approx(np.rad2deg(0.01), rel=0.1)
+
+
+def test_isam2_without_a_gyro_bias_state_is_flagged_on_a_biased_gyro(gyro_harbour):
+    """The runner refuses isam2 with the gyro and a walking AHRS bias; run through the closed
+    loop anyway, the monitor flags it."""
+    from slam.backends.registry import backend_spec
+    from slam.run.closed_loop import run_closed_loop
+    from slam.run.health import monitor_run
+    from slam.run.presets import run_config
+
+    ds = gyro_harbour["biased"]
+    noise = replace(ds.config.noise, ahrs_bias_walk_deg_per_sqrt_s=0.15)
+    ds = replace(ds, config=replace(ds.config, noise=noise))
+    config = run_config(ds.beams, "isam2", None, ds.config.noise)
+    mount = ds.config.sonar_mounting
+    result = run_closed_loop(
+        ds,
+        lambda t0, p0, c0: backend_spec("isam2").make(t0, p0, c0, mount, config.backend),
+        config.extractor,
+        progress=False,
+    )
+    report = monitor_run(ds, result)
+    assert not report.ok and "heading_bias" in report.checks_flagged(), report.line()
