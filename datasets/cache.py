@@ -8,7 +8,7 @@ A file whose signature differs, that cannot be read, or that is not a cache of t
 ignored and written anew: the cache can only cost time, never change a result.
 
 Where: beside the data (``.sonarslam-<name>.npz`` in its folder) when that folder can be
-written, else in ``$SONARSLAM_CACHE`` or ``$XDG_CACHE_HOME/sonarslam`` (``~/.cache/sonarslam``),
+written and has a write bit (root may write a folder laid read-only; it is not written), else in ``$SONARSLAM_CACHE`` or ``$XDG_CACHE_HOME/sonarslam`` (``~/.cache/sonarslam``),
 named by the folder's path (the shared datasets are read-only). ``SONARSLAM_CACHE=off`` turns
 the cache off.
 """
@@ -18,6 +18,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import stat
 import uuid
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -39,9 +40,21 @@ def _enabled() -> bool:
     return os.environ.get(ENV_VAR, "").strip().lower() not in ("off", "0", "no", "false")
 
 
+def _writable(folder: Path) -> bool:
+    """Whether the data's folder is meant to be written: its mode has a write bit and we may
+    write it (root may write anything: a folder without write bits, as the shared datasets
+    are laid, is read-only all the same)."""
+    try:
+        mode = folder.stat().st_mode
+    except OSError:
+        return False
+    bits = stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH
+    return bool(mode & bits) and os.access(folder, os.W_OK | os.X_OK)
+
+
 def cache_file(folder: Path, name: str) -> Path:
     """Where the cache ``name`` of the data in ``folder`` lives (module docstring)."""
-    if os.access(folder, os.W_OK | os.X_OK):
+    if _writable(folder):
         return folder / f".sonarslam-{name}.npz"
     base = os.environ.get(ENV_VAR) or os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "sonarslam"

@@ -232,3 +232,62 @@ def test_calibrate_refuses_too_few_beams(harbour, tmp_path, capsys):
     assert main(["calibrate", str(folder), "--poses", "dr"]) == 1
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert "too few to calibrate the sonar yaw: it needs 10 turns of the head" in err
+
+
+# -- the keyframe cache ------------------------------------------------------------------
+
+
+def _keyframes(folder: Path, points: list[tuple[int, int]]) -> np.ndarray:
+    """One keyframe of a 1.8 deg, 500 x 0.1 m head: its CSV, its PCD with the points
+    ``(angle index, bin)``, and the beam times (returned)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    t = 1.7e9 + 0.1 * np.arange(250)
+    (folder / "keyFrameTimeStamps.csv").write_text(
+        f"keyFrame,keyFrameBeginning,keyFrameEnd\n1,{t[10]:.4f},{t[209]:.4f}\n"
+    )
+    rows = []
+    for j, b in points:
+        a, r = np.deg2rad(1.8 * j), 0.1 * (b + 1)
+        rows.append(f"{r * np.cos(a):.6f} {r * np.sin(a):.6f} 0.0")
+    header = f"VERSION 0.7\nFIELDS x y z\nPOINTS {len(rows)}\nDATA ascii\n"
+    (folder / "pclKeyFrame1.pcd").write_text(header + "\n".join(rows) + "\n")
+    return t
+
+
+def test_the_keyframe_cache_is_used_and_rebuilt_when_a_source_changes(tmp_path, monkeypatch):
+    from datasets.cache import cache_file
+    from datasets.keyframes import read_keyframes
+    from sonar.beam import SonarHead
+
+    monkeypatch.delenv("SONARSLAM_CACHE", raising=False)
+    head = SonarHead(n_bins=500, bin_size_m=0.1, step_rad=np.deg2rad(1.8))
+    folder = tmp_path / "kf"
+    t = _keyframes(folder, [(3, 40), (100, 7)])
+    first = read_keyframes(folder, t, head)
+    cached = cache_file(folder, "keyframes")
+    assert cached == folder / ".sonarslam-keyframes.npz" and cached.is_file()
+    again = read_keyframes(folder, t, head)
+    assert np.array_equal(again.intensities, first.intensities)
+    assert np.array_equal(again.t_s, first.t_s) and np.array_equal(
+        again.transducer_angle_rad, first.transducer_angle_rad
+    )
+    assert int((first.intensities == 255).sum()) == 2
+    _keyframes(folder, [(3, 40), (100, 7), (150, 9)])  # one point more: rebuilt
+    assert int((read_keyframes(folder, t, head).intensities == 255).sum()) == 3
+    cached.write_bytes(b"not a cache")  # a damaged cache is parsed again, never trusted
+    assert int((read_keyframes(folder, t, head).intensities == 255).sum()) == 3
+    other = tmp_path / "cache"
+    monkeypatch.setenv("SONARSLAM_CACHE", str(other))
+    ro = tmp_path / "ro"
+    _keyframes(ro, [(1, 1)])
+    ro.chmod(0o555)  # the shared datasets' mode: not written, even by root
+    try:
+        read_keyframes(ro, t, head)
+        assert not (ro / ".sonarslam-keyframes.npz").exists()
+        assert [p.parent for p in other.glob("keyframes-*.npz")] == [other]
+    finally:
+        ro.chmod(0o755)
+    monkeypatch.setenv("SONARSLAM_CACHE", "off")
+    cached.unlink()
+    read_keyframes(folder, t, head)
+    assert not cached.exists()
