@@ -241,3 +241,17 @@ def test_isam2_without_a_gyro_bias_state_is_flagged_on_a_biased_gyro(gyro_harbou
     )
     report = monitor_run(ds, result)
     assert not report.ok and "heading_bias" in report.checks_flagged(), report.line()
+
+
+def test_strict_exits_1_on_an_unhealthy_run_and_still_writes_it(gyro_harbour, tmp_path, capsys):
+    from slam.cli.main import main
+
+    walk = tmp_path / "walk.toml"
+    walk.write_text("[noise]\nahrs_bias_walk_deg_per_sqrt_s = 0.15\n")
+    out = tmp_path / "o"
+    args = ["run", str(gyro_harbour["biased"].root), "--backend", "ekf", "--config", str(walk)]
+    args += ["--set", "ekf.gyro_bias_sigma_deg_per_s=1e-6", "--out", str(out), "--quiet"]
+    assert main([*args, "--strict"]) == 1
+    cap = capsys.readouterr()
+    assert "warning: health: " in cap.err and "error: --strict:" in cap.err.splitlines()[-1]
+    assert "health: " in cap.out and (out / "metrics.json").is_file()
