@@ -291,3 +291,14 @@ def test_the_keyframe_cache_is_used_and_rebuilt_when_a_source_changes(tmp_path, 
     cached.unlink()
     read_keyframes(folder, t, head)
     assert not cached.exists()
+
+
+def test_a_back_ends_write_error_names_the_folder(tmp_path):
+    from slam.io.files import write_files_into
+
+    def full(folder: Path) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    with pytest.raises(OSError) as info:
+        write_files_into(tmp_path, full)
+    assert info.value.filename == str(tmp_path) and list(tmp_path.iterdir()) == []

@@ -131,6 +131,10 @@ def write_files_into(out: str | Path, write: Callable[[Path], object]) -> list[P
             os.replace(f, target / f.name)
             moved.append(target / f.name)
         return moved
+    except OSError as exc:  # a full disk: name where, not only what
+        if exc.filename is None:
+            raise OSError(exc.errno, exc.strerror or str(exc), str(target)) from exc
+        raise
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
