@@ -120,14 +120,28 @@ def test_the_back_ends_take_every_scale_sigma_the_file_takes():
 
 
 def test_isam2_refuses_the_gyro_with_a_walking_bias_up_front(harbour, tmp_path, capsys):
+    """Only when the data show a gyro bias (measured against the AHRS heading's change): the
+    simulated gyro with the marina MTi's 0.01 rad/s is refused, an unbiased one is not."""
+    from dataclasses import replace
+
+    from datasets.simulator import make_scenario, simulate_records
+    from datasets.simulator.writer import write_dataset
+
+    scenario = make_scenario("harbour", 4, 100.0)
+    biased = replace(scenario, noise=replace(scenario.noise, ahrs_gyro_bias_radps=0.01))
+    root = write_dataset(simulate_records(biased), tmp_path / "biased")
     config = tmp_path / "gw.toml"
-    config.write_text(
-        "[motion]\nyaw_rate_source = 'gyro'\n[noise]\nahrs_bias_walk_deg_per_sqrt_s = 0.15\n"
-    )
-    args = ["run", str(harbour), "--backend", "isam2", "--config", str(config), "--quiet"]
+    config.write_text("[noise]\nahrs_bias_walk_deg_per_sqrt_s = 0.15\n")
+    args = ["run", str(root), "--backend", "isam2", "--config", str(config), "--quiet"]
     assert main([*args, "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()[-1]
-    assert "no gyro-bias state" in err and not (tmp_path / "o").exists()
+    assert "the gyro reads +0.5" in err and "no gyro-bias state" in err
+    assert not (tmp_path / "o").exists()
+    from slam.run.presets import check_combination
+
+    unbiased = open_dataset(harbour, config_override=config)
+    assert unbiased.config.yaw_rate_source == "gyro"
+    check_combination(unbiased, "isam2")  # nothing to refuse
 
 
 def test_dead_reckoning_names_the_settings_it_ignores(harbour, tmp_path, capsys):

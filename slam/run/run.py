@@ -137,7 +137,7 @@ def run_backend(
         if batch and not spec.smoother:
             raise SettingError("--batch", f"back end {backend!r} does not smooth")
         _require_beams(dataset)
-        check_combination(dataset.config, backend)
+        check_combination(dataset, backend)
         config = run_config(dataset.beams, backend, settings, dataset.config.noise)
         mounting = dataset.config.sonar_mounting
         cfg = config.backend
