@@ -100,6 +100,11 @@ __all__ = [
 ]
 
 
+#: The DVL scale error's prior sigma stays below this (the back ends' ``1 + k`` must stay
+#: positive well inside 3 sigma): one range, for the file and the back ends alike.
+DVL_SCALE_SIGMA_MAX = 0.5
+
+
 @dataclass(frozen=True)
 class NoiseConfig:
     """1-sigma noise of the navigation sensors, as used by the estimators."""
@@ -127,7 +132,9 @@ class NoiseConfig:
         check_within("dvl_scatter_window_s", self.dvl_scatter_window_s, 0.0, 3600.0)
         check_within("dvl_nominal_scatter_mps", self.dvl_nominal_scatter_mps, 0.0, 10.0)
         check_within("ahrs_bias_walk_deg_per_sqrt_s", self.ahrs_bias_walk_deg_per_sqrt_s, 0.0, 10.0)
-        check_within("dvl_scale_sigma", self.dvl_scale_sigma, 0.0, 0.5, low_open=False)
+        check_within(
+            "dvl_scale_sigma", self.dvl_scale_sigma, 0.0, DVL_SCALE_SIGMA_MAX, high_open=True
+        )
         check_within("line_sigma_rho_m", self.line_sigma_rho_m, 0.0, 100.0)
         check_within("line_sigma_theta_deg", self.line_sigma_theta_deg, 0.0, 90.0)
 
@@ -379,9 +386,10 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
                 changes[f"{table.split('.')[1]}_mounting.source"] = str(p)
         return replace_checked(base, changes)  # type: ignore[no-any-return]
     except SettingError as exc:
-        named = [keys.get(k.strip()) for k in exc.key.split(",")]
-        where = [f"[{t}] {k}" for t, k in (n for n in named if n is not None)]
-        line = toml_line(text, *named[0]) if len(named) == 1 and named[0] is not None else None
+        # the file's keys among those named (a mounting's source is set here, not by the file)
+        named = [n for n in (keys.get(k.strip()) for k in exc.key.split(",")) if n is not None]
+        where = [f"[{t}] {k}" for t, k in named]
+        line = toml_line(text, *named[0]) if len(named) == 1 else None
         if not where:  # a type error, already named by the file's key
             where, line = [exc.key], _line_of_key(text, exc.key)
         raise DataError(p, line, f"{', '.join(where)}: {exc.message}") from None

@@ -12,10 +12,12 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 
 from datasets.errors import DataError
-from datasets.logfile import read_table
-from sonar.beam import SonarBeam
+from datasets.logfile import iter_tables
+from datasets.records import BeamSeries
+from sonar.beam import FloatArray, SonarBeam
 
 __all__ = ["read_is_log", "write_is_log"]
 
@@ -32,8 +34,8 @@ _HEADER = [
 ]
 
 
-def read_is_log(path: str | Path, n_bins: int | None = None) -> list[SonarBeam]:
-    """Read a raw ``_IS.log`` into beams.
+def read_is_log(path: str | Path, n_bins: int | None = None) -> BeamSeries:
+    """Read a raw ``_IS.log`` into beams, a block of rows at a time.
 
     Parameters
     ----------
@@ -44,8 +46,10 @@ def read_is_log(path: str | Path, n_bins: int | None = None) -> list[SonarBeam]:
 
     Returns
     -------
-    list of SonarBeam
-        In file order (time never decreases).
+    BeamSeries
+        In file order (time never decreases); the bins as uint8 rows, so the memory is the
+        beams' bins (one byte each) and one block of text (:func:`datasets.logfile.iter_tables`),
+        not the file's rows as floats and Python objects.
 
     Raises
     ------
@@ -55,25 +59,27 @@ def read_is_log(path: str | Path, n_bins: int | None = None) -> list[SonarBeam]:
         0-255, a transducer angle beyond +-2 pi rad. Rows with a wrong bin count, or a last
         line without a line end that may be cut, are skipped with a warning.
     """
-    table = read_table(path, n_columns=None if n_bins is None else n_bins + 3, min_columns=4)
-    bins = table.data[:, 3:]
-    bad = np.any((bins < 0.0) | (bins > 255.0) | (bins != np.rint(bins)), axis=1)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise DataError(
-            table.path, int(table.line_numbers[i]), "intensity not a whole number in 0-255"
-        )
-    bad = np.abs(table.data[:, 2]) > _TURN_RAD
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise DataError(
-            table.path, int(table.line_numbers[i]), "transducer angle beyond +-2 pi rad"
-        )
-    intensities = bins.astype(np.uint8)
-    return [
-        SonarBeam(t=float(row[0]), transducer_angle_rad=float(row[2]), intensities=intensities[i])
-        for i, row in enumerate(table.data)
-    ]
+    times: list[FloatArray] = []
+    angles: list[FloatArray] = []
+    bins_u8: list[npt.NDArray[np.uint8]] = []
+    for table in iter_tables(path, n_columns=None if n_bins is None else n_bins + 3, min_columns=4):
+        bins = table.data[:, 3:]
+        bad = np.any((bins < 0.0) | (bins > 255.0) | (bins != np.rint(bins)), axis=1)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise DataError(
+                table.path, int(table.line_numbers[i]), "intensity not a whole number in 0-255"
+            )
+        bad = np.abs(table.data[:, 2]) > _TURN_RAD
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise DataError(
+                table.path, int(table.line_numbers[i]), "transducer angle beyond +-2 pi rad"
+            )
+        times.append(table.data[:, 0].copy())
+        angles.append(table.data[:, 2].copy())
+        bins_u8.append(bins.astype(np.uint8))
+    return BeamSeries(np.concatenate(times), np.concatenate(angles), np.concatenate(bins_u8))
 
 
 def write_is_log(path: str | Path, beams: Iterable[SonarBeam]) -> int:

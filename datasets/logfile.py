@@ -50,9 +50,11 @@ import os
 import re
 import stat
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -64,7 +66,12 @@ __all__ = [
     "MAX_FILE_BYTES",
     "MAX_UNIX_TIME_S",
     "Table",
+    "BLOCK_BYTES",
+    "open_regular",
+    "check_ascii",
     "read_bytes",
+    "iter_line_blocks",
+    "iter_tables",
     "read_text",
     "split_lines",
     "text_lines",
@@ -84,6 +91,9 @@ NUMBER = r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
 MAX_FILE_BYTES = 2**31
 #: Times are Unix seconds in ``[0, MAX_UNIX_TIME_S)`` (the year 2286).
 MAX_UNIX_TIME_S = 1e10
+#: Bytes of text the streaming readers parse at a time (:func:`iter_line_blocks`): a few MB
+#: of text become ~10x that in tokens while parsed, whatever the size of the file.
+BLOCK_BYTES = 1 << 21
 
 _NUMBER_RE = re.compile(NUMBER)
 _ROW_RE = re.compile(rf"{NUMBER}(?:[ \t]+{NUMBER})*")
@@ -103,8 +113,10 @@ _KINDS = (
 )
 
 
-def read_bytes(path: str | Path) -> bytes:
-    """The bytes of a regular file; anything else is a :class:`DataError` naming it.
+@contextmanager
+def open_regular(path: str | Path) -> Iterator[BinaryIO]:
+    """A regular file opened for reading in binary; anything else is a :class:`DataError`
+    naming it, and so is an error while reading it.
 
     The file is opened without blocking and checked with ``fstat`` before a byte is read, so a
     FIFO or a device behind a symlink is refused instead of blocking or filling the memory.
@@ -130,11 +142,52 @@ def read_bytes(path: str | Path) -> bytes:
         if size > MAX_FILE_BYTES:
             raise DataError(p, None, f"is {size} bytes, more than the {MAX_FILE_BYTES} accepted")
         with os.fdopen(fd, "rb", closefd=False) as fh:
-            return fh.read()
+            yield fh
     except OSError as exc:
         raise DataError(p, None, f"cannot read: {exc.strerror or exc}") from exc
     finally:
         os.close(fd)
+
+
+def read_bytes(path: str | Path) -> bytes:
+    """The bytes of a regular file (:func:`open_regular`)."""
+    with open_regular(path) as fh:
+        return fh.read()
+
+
+def iter_line_blocks(
+    path: str | Path, block_bytes: int = BLOCK_BYTES
+) -> Iterator[tuple[int, list[str], int | None]]:
+    """The physical lines of a regular file (ASCII or Latin-1 text, :func:`split_lines`'
+    breaks) a block of about ``block_bytes`` at a time, so that a reader holds one block of
+    text, never the file: ``(number of the block's first line, lines, open_end)``, where
+    ``open_end`` is, in the last block only, the number of the file's last line when it has no
+    line end (else None). A file without bytes gives one block without lines."""
+    number = 1
+    carry = b""
+    held: list[str] = []  # the block before: the last block is yielded with it (a cut last
+    # line is judged against the lines before it, :func:`parse_table`)
+    with open_regular(path) as fh:
+        while True:
+            chunk = fh.read(block_bytes)
+            data = carry + chunk
+            if not chunk:  # the end of the file
+                lines, terminated = split_lines(data.decode("latin-1"))
+                lines = held + lines
+                yield number, lines, None if terminated else number + len(lines) - 1
+                return
+            end = len(data) - 1 if data.endswith(b"\r") else len(data)  # \r of a split \r\n
+            cut = max(data.rfind(b"\n", 0, end), data.rfind(b"\r", 0, end))
+            if cut < 0:  # a line longer than the block
+                carry = data
+                continue
+            carry = data[cut + 1 :]
+            lines = _LINE_BREAK.split(data[: cut + 1].decode("latin-1"))
+            lines.pop()  # the empty text after the last break
+            if held:
+                yield number, held, None
+                number += len(held)
+            held = lines
 
 
 def _line_of(data: bytes, offset: int) -> int:
@@ -186,7 +239,9 @@ def is_number(text: str) -> bool:
     return parse_number(text) is not None
 
 
-def _check_ascii(path: Path, number: int, line: str) -> None:
+def check_ascii(path: Path, number: int, line: str) -> None:
+    """A :class:`DataError` naming the line and column of the first byte of ``line`` that is not
+    printable ASCII (or a tab)."""
     bad = _NOT_TEXT.search(line)
     if bad is not None:
         raise DataError(
@@ -228,6 +283,8 @@ class Table:
     data: FloatArray  # (N, n_columns)
     line_numbers: np.ndarray  # (N,) int
     skipped: int
+    skipped_lines: tuple[int, ...] = ()  # rows skipped for their number of columns
+    cut_line: int | None = None  # a last line skipped as cut
 
 
 def data_lines(path: str | Path, comment: str = "%") -> tuple[list[tuple[int, str]], int | None]:
@@ -302,6 +359,8 @@ def parse_table(
     used_columns: Sequence[int] | None = None,
     delimiter: str | None = None,
     skip_wrong_columns: bool = True,
+    warn: bool = True,
+    require_rows: bool = True,
 ) -> Table:
     """The numeric rows of numbered data lines (:func:`data_lines`); :func:`read_table`'s rules.
 
@@ -309,6 +368,9 @@ def parse_table(
     else None. ``delimiter``: None for runs of spaces and tabs, else one character (``","``)
     with spaces and tabs around a field ignored. ``skip_wrong_columns``: a row with the wrong
     number of fields is skipped and counted (True) or a :class:`DataError` (False).
+    ``warn``: warn of skipped rows here (False: the caller, which reads the file in blocks,
+    warns once per file); ``require_rows``: no row at all is a :class:`DataError` (False: an
+    empty table).
     """
     lines = list(numbered)
     expected = n_columns
@@ -326,7 +388,7 @@ def parse_table(
     for number, line in lines[len(line_numbers) :]:
         clean = row_re.fullmatch(line) is not None
         if not clean:
-            _check_ascii(path, number, line)
+            check_ascii(path, number, line)
         if delimiter is not None:
             fields = [f.strip(" \t") for f in line.split(delimiter)]
         else:  # on a clean line str.split() splits at runs of spaces and tabs only
@@ -353,20 +415,82 @@ def parse_table(
             if not _finite_row(fields):
                 parse_row(path, line_numbers[first + i], fields)
         parts.append(np.array(rows, dtype=np.float64))
-    if not line_numbers:
+    if not line_numbers and require_rows:
         cut = "" if cut_line is None else f" (line {cut_line} has no line end and may be cut)"
         raise DataError(path, None, f"no data rows{cut}")
-    _warn_skipped(path, expected, bad_lines, cut_line)
+    if warn:
+        _warn_skipped(path, expected, bad_lines, cut_line)
     table = Table(
         path=path,
-        data=np.vstack(parts),
+        data=np.vstack(parts) if parts else np.zeros((0, expected or 0)),
         line_numbers=np.asarray(line_numbers, dtype=np.int64),
         skipped=len(bad_lines) + (cut_line is not None),
+        skipped_lines=tuple(bad_lines),
+        cut_line=cut_line,
     )
-    if time_column is not None:
+    if time_column is not None and line_numbers:
         check_unix_times(table, time_column)
         check_time_order(table, time_column)
     return table
+
+
+def iter_tables(
+    path: str | Path,
+    n_columns: int | None = None,
+    min_columns: int = 1,
+    time_column: int | None = 0,
+    used_columns: Sequence[int] | None = None,
+    comment: str = "%",
+    block_bytes: int = BLOCK_BYTES,
+) -> Iterator[Table]:
+    """:func:`read_table`'s rows a block at a time (:func:`iter_line_blocks`): the same rules,
+    line numbers and messages, one warning per file for the rows skipped (after the last
+    block), times checked across blocks; memory of one block, not of the file."""
+    p = Path(path)
+    expected = n_columns
+    skipped: list[int] = []
+    cut: int | None = None
+    rows = 0
+    last_t: tuple[float, int] | None = None  # the previous block's last time and its line
+    for first, lines, open_end in iter_line_blocks(p, block_bytes):
+        numbered = []
+        for number, raw in enumerate(lines, start=first):
+            line = raw.strip(" \t")
+            if line and not line.startswith(comment):
+                numbered.append((number, line))
+        if not numbered:
+            continue
+        table = parse_table(
+            p,
+            numbered,
+            open_end,
+            n_columns=expected,
+            min_columns=min_columns,
+            time_column=time_column,
+            used_columns=used_columns,
+            warn=False,
+            require_rows=False,
+        )
+        skipped += table.skipped_lines
+        cut = table.cut_line if table.cut_line is not None else cut
+        if not table.line_numbers.size:
+            continue
+        expected = table.data.shape[1]
+        if time_column is not None:
+            t_first = float(table.data[0, time_column])
+            if last_t is not None and t_first < last_t[0]:
+                raise DataError(
+                    p,
+                    int(table.line_numbers[0]),
+                    f"time goes backwards ({t_first:.3f} s after {last_t[0]:.3f} s)",
+                )
+            last_t = (float(table.data[-1, time_column]), int(table.line_numbers[-1]))
+        rows += table.line_numbers.size
+        yield table
+    if not rows:
+        note = "" if cut is None else f" (line {cut} has no line end and may be cut)"
+        raise DataError(p, None, f"no data rows{note}")
+    _warn_skipped(p, expected, skipped, cut)
 
 
 def _finite_row(fields: list[str]) -> bool:

@@ -87,14 +87,23 @@ def toml_line(text: str, table: str, key: str | None = None) -> int | None:
     return None
 
 
-def check_within(name: str, value: float, low: float, high: float, low_open: bool = False) -> None:
+def check_within(
+    name: str,
+    value: float,
+    low: float,
+    high: float,
+    low_open: bool = False,
+    high_open: bool = False,
+) -> None:
     """For a dataclass's ``__post_init__``: ValueError unless ``low <= value <= high``
-    (``low < value`` when ``low_open``), in the words :func:`replace_checked` reports with the
-    key."""
-    ok = (value > low if low_open else value >= low) and value <= high
+    (``low < value`` when ``low_open``, ``value < high`` when ``high_open``), in the words
+    :func:`replace_checked` reports with the key."""
+    ok = (value > low if low_open else value >= low) and (
+        value < high if high_open else value <= high
+    )
     if not ok:
-        bracket = "(" if low_open else "["
-        raise ValueError(f"{name} must be in {bracket}{low:g}, {high:g}], got {value!r}")
+        lb, rb = "(" if low_open else "[", ")" if high_open else "]"
+        raise ValueError(f"{name} must be in {lb}{low:g}, {high:g}{rb}, got {value!r}")
 
 
 def check_ranges(obj: Any, bounds: Mapping[str, tuple[float, float]]) -> None:

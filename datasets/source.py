@@ -23,7 +23,8 @@ from __future__ import annotations
 import heapq
 import json
 import os
-from collections.abc import Iterator
+import warnings
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -31,14 +32,13 @@ from typing import Any
 import numpy as np
 
 from datasets.config import MARINA_CONFIG, DatasetConfig, load_dataset_config
-from datasets.errors import DataError
+from datasets.errors import DataError, DataWarning
 from datasets.gates import SensorReport, gate_attitude, gate_beams, gate_dvl, gate_gps
 from datasets.islog import read_is_log
 from datasets.keyframes import read_keyframes
 from datasets.logfile import read_text
 from datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti, read_setup
-from datasets.records import AttitudeSeries, DvlSeries, GpsSeries, Record
-from sonar.beam import SonarBeam
+from datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries, Record
 
 __all__ = ["Dataset", "open_dataset", "resolve_source", "data_root", "read_truth"]
 
@@ -54,7 +54,7 @@ class Dataset:
     name: str
     root: Path
     config: DatasetConfig
-    beams: list[SonarBeam]
+    beams: BeamSeries
     dvl: DvlSeries
     attitude: AttitudeSeries
     gps: GpsSeries | None
@@ -76,10 +76,9 @@ class Dataset:
         beams = self.nav_beams()
         return (float(beams[0].t), float(beams[-1].t)) if beams else None
 
-    def nav_beams(self) -> list[SonarBeam]:
+    def nav_beams(self) -> BeamSeries:
         """The beams inside :attr:`nav_span_s` (the marina sonar starts ~183 s earlier)."""
-        t0, t1 = self.nav_span_s
-        return [b for b in self.beams if t0 <= b.t <= t1]
+        return self.beams.between(*self.nav_span_s)
 
     def stream(
         self, t_start_s: float | None = None, t_end_s: float | None = None
@@ -88,7 +87,7 @@ class Dataset:
         lo = -float("inf") if t_start_s is None else t_start_s
         hi = float("inf") if t_end_s is None else t_end_s
 
-        def keyed(records: list[Any], rank: int) -> Iterator[tuple[float, int, int, Any]]:
+        def keyed(records: Sequence[Any], rank: int) -> Iterator[tuple[float, int, int, Any]]:
             for i, r in enumerate(records):
                 if lo <= r.t <= hi:
                     yield (r.t, rank, i, r)
@@ -97,7 +96,7 @@ class Dataset:
             keyed(self.attitude.records(), 0),
             keyed(self.dvl.records(), 1),
             keyed(self.gps.records() if self.gps is not None else [], 2),
-            keyed(self.beams, 3),
+            keyed(self.beams.between(lo, hi), 3),
         ]
         for item in heapq.merge(*streams):
             yield item[3]
@@ -166,17 +165,11 @@ def open_dataset(source: str | Path, config_override: str | Path | None = None) 
     assert dvl_path is not None and mti_path is not None
     dvl = gate_dvl(read_dvl(dvl_path), gates, report)
     attitude = gate_attitude(read_mti(mti_path), gates, report)
-    if dvl.t[0] > attitude.t[-1] or attitude.t[0] > dvl.t[-1]:
-        raise DataError(
-            root,
-            None,
-            f"the DVL ({dvl.t[0]:.3f}-{dvl.t[-1]:.3f} s) and AHRS ({attitude.t[0]:.3f}-"
-            f"{attitude.t[-1]:.3f} s) logs do not overlap in time",
-        )
+    _check_overlap(root, dvl, attitude)
     gps_path = _find_one(root, "*_DGPS.log", required=False)
     gps = gate_gps(read_dgps(gps_path), gates, report) if gps_path is not None else None
     beams, sonar_path = _beams(root, config)
-    gate_beams(np.array([b.t for b in beams]), gates, report, sonar_path)
+    gate_beams(beams.t_s, gates, report, sonar_path)
     truth_path = _find_one(root, "truth.json", required=False)
     return Dataset(
         name=root.name,
@@ -189,6 +182,42 @@ def open_dataset(source: str | Path, config_override: str | Path | None = None) 
         truth=read_truth(truth_path) if truth_path is not None else None,
         report=report,
     )
+
+
+#: DVL and AHRS that overlap for less than this share of their logs' span, or for less than
+#: :data:`MIN_OVERLAP_S`, give a run of that overlap only: a warning says so.
+MIN_OVERLAP_SHARE = 0.5
+MIN_OVERLAP_S = 60.0
+
+
+def _check_overlap(root: Path, dvl: DvlSeries, attitude: AttitudeSeries) -> None:
+    """A log of one row (a span of 0 s), logs that do not overlap: :class:`DataError`; an
+    overlap shorter than a minute or than half their span: a :class:`DataWarning`."""
+    for series, name in ((dvl, "DVL"), (attitude, "AHRS")):
+        if series.t.size < 2 or series.t[-1] <= series.t[0]:
+            raise DataError(
+                series.path or root,
+                None,
+                f"the {name} log has {series.t.size} row(s) spanning"
+                f" {series.t[-1] - series.t[0]:.3f} s: a run needs a time span to navigate",
+            )
+    t0, t1 = max(dvl.t[0], attitude.t[0]), min(dvl.t[-1], attitude.t[-1])
+    if t1 <= t0:
+        raise DataError(
+            root,
+            None,
+            f"the DVL ({dvl.t[0]:.3f}-{dvl.t[-1]:.3f} s) and AHRS ({attitude.t[0]:.3f}-"
+            f"{attitude.t[-1]:.3f} s) logs do not overlap in time",
+        )
+    whole = max(dvl.t[-1], attitude.t[-1]) - min(dvl.t[0], attitude.t[0])
+    if t1 - t0 < MIN_OVERLAP_S or t1 - t0 < MIN_OVERLAP_SHARE * whole:
+        warnings.warn(
+            f"{root}: the DVL and AHRS overlap for {t1 - t0:.1f} s ({t0:.3f}-{t1:.3f} s) of"
+            f" their {whole:.1f} s (less than {MIN_OVERLAP_S:.0f} s or"
+            f" {MIN_OVERLAP_SHARE:.0%}): the run covers that overlap only",
+            DataWarning,
+            stacklevel=3,
+        )
 
 
 def _config(root: Path, config_override: str | Path | None) -> DatasetConfig:
@@ -210,7 +239,7 @@ def _config(root: Path, config_override: str | Path | None) -> DatasetConfig:
     return config
 
 
-def _beams(root: Path, config: DatasetConfig) -> tuple[list[SonarBeam], Path]:
+def _beams(root: Path, config: DatasetConfig) -> tuple[BeamSeries, Path]:
     """The sonar beams on the navigation clock, from a raw ``*_IS.log`` or the marina
     keyframes; and the file that gave their times."""
     is_log = _find_one(root, "*_IS.log", required=False)
@@ -235,7 +264,7 @@ def _beams(root: Path, config: DatasetConfig) -> tuple[list[SonarBeam], Path]:
         )
         source = stamps
     if config.sonar_time_offset_s:
-        beams = [replace(b, t=b.t + config.sonar_time_offset_s) for b in beams]
+        beams = beams.shifted(config.sonar_time_offset_s)
     return beams, source
 
 

@@ -140,10 +140,9 @@ class Mounting:
     source: str = "identity"
 
     def __post_init__(self) -> None:
-        if not (abs(self.x_m) <= MAX_LEVER_M and abs(self.y_m) <= MAX_LEVER_M):
-            raise ValueError(
-                f"Mounting x_m, y_m must be within +-{MAX_LEVER_M:g} m, got {self.x_m}, {self.y_m}"
-            )
+        for name, value in (("x_m", self.x_m), ("y_m", self.y_m)):  # each named alone
+            if not abs(value) <= MAX_LEVER_M:
+                raise ValueError(f"{name} must be within +-{MAX_LEVER_M:g} m, got {value}")
         if not abs(self.yaw_rad) <= 2.0 * np.pi:
             raise ValueError(f"Mounting.yaw_rad must be within +-2 pi, got {self.yaw_rad}")
 

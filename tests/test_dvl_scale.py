@@ -59,10 +59,10 @@ def test_the_dvl_scale_error_is_found(drift: str, name: str) -> None:
 
 
 def test_the_ekf_prediction_jacobian_matches_numerical_derivatives() -> None:
-    """``F`` of :meth:`LineEkf.predict` (pose, misalignment and DVL scale columns) is the
-    derivative of the step it takes: P' = F P F^T + Q with P = eps I and Q subtracted."""
+    """``F`` of :meth:`LineEkf.predict` (pose, misalignment, DVL scale and gyro bias columns)
+    is the derivative of the step it takes: P' = F P F^T + Q with P = eps I and Q subtracted."""
     cfg = EkfConfig(estimate_misalignment=True, dvl_scale_sigma=0.02)
-    step = MotionStep(1.0, 1.0, 0.8, -0.3, 0.05, 0.0, 1.0)
+    step = MotionStep(1.0, 1.0, 0.8, -0.3, 0.05, 0.0, 1.0, gyro_dt_s=1.0)
 
     def propagate(x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         ekf = LineEkf(0.0, x0[:3], np.zeros((3, 3)), Mounting(), cfg)
@@ -71,7 +71,7 @@ def test_the_ekf_prediction_jacobian_matches_numerical_derivatives() -> None:
         ekf.predict(step)
         return ekf.x.copy(), ekf.P.copy()
 
-    x0 = np.array([2.0, -1.0, 0.7, 0.01, 0.05, 0.015])
+    x0 = np.array([2.0, -1.0, 0.7, 0.01, 0.05, 0.015, 0.012])
     _, P1 = propagate(x0)
     eps = 1e-6
     F_num = np.empty((N_VEHICLE, N_VEHICLE))

@@ -19,7 +19,8 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 import numpy.typing as npt
 
-from datasets.settings import check_ranges
+from datasets.config import DVL_SCALE_SIGMA_MAX
+from datasets.settings import check_ranges, check_within
 from features.geometry import FloatArray, compose, inverse
 from features.line import LineFeature
 from features.pose_source import PoseSource
@@ -115,8 +116,9 @@ class BackendConfig(LandmarkConfig):
             )
         if not self.ahrs_period_s > 0.0:
             raise ValueError(f"ahrs_period_s must be > 0, got {self.ahrs_period_s}")
-        if not 0.0 <= self.dvl_scale_sigma < 0.5:
-            raise ValueError(f"dvl_scale_sigma must be in [0, 0.5), got {self.dvl_scale_sigma}")
+        check_within(
+            "dvl_scale_sigma", self.dvl_scale_sigma, 0.0, DVL_SCALE_SIGMA_MAX, high_open=True
+        )
         if not self.misalignment_sigma_deg > 0.0:
             raise ValueError(
                 f"misalignment_sigma_deg must be > 0, got {self.misalignment_sigma_deg}"

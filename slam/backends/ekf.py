@@ -1,6 +1,6 @@
 """EKF-SLAM with line landmarks on filterpy's ExtendedKalmanFilter.
 
-State ``x = [x, y, psi, b, delta, k, rho_1, theta_1, ..., rho_L, theta_L]``:
+State ``x = [x, y, psi, b, delta, k, g, rho_1, theta_1, ..., rho_L, theta_L]``:
 
 * ``x, y, psi``: the body pose ``wTb`` (m, m, rad);
 * ``b``: the AHRS heading bias (rad) with prior ``ahrs_bias_sigma_deg``, constant or a random
@@ -9,6 +9,12 @@ State ``x = [x, y, psi, b, delta, k, rho_1, theta_1, ..., rho_L, theta_L]``:
 * ``delta``: the misalignment of the DVL velocity with the body heading (rad), a constant with
   prior ``misalignment_sigma_deg`` when ``estimate_misalignment``, else held at 0;
 * ``k``: the DVL's scale-factor error, a constant with prior ``dvl_scale_sigma`` (0: held at 0);
+* ``g``: the gyro's yaw-rate bias (rad/s), a constant with prior ``gyro_bias_sigma_deg_per_s``:
+  a step whose heading change integrates the gyro turns by ``dyaw - g dt``
+  (:attr:`slam.model.motion.MotionStep.gyro_dt_s`); the AHRS headings observe it. Left out, a
+  gyro bias (the marina MTi's is -0.66 deg/s) is taken for the AHRS bias's walk when the bias
+  walks, and the heading spins away; with the AHRS heading's own change as the rate
+  (``yaw_rate_source = "heading"``) no step involves it and it stays at its prior;
 * world lines ``(rho_w, theta_w)`` (:mod:`features.geometry` conventions), one per active
   landmark (:meth:`LineEkf.index`); kept normalised. A landmark merged into another (the landmark
   layer found them one wall) is tied to it by an exact update and leaves the state.
@@ -31,6 +37,7 @@ from typing import Any
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
+from datasets.settings import check_ranges
 from features.geometry import (
     FLIP_RHO,
     FloatArray,
@@ -52,7 +59,8 @@ from sonar.beam import Mounting
 __all__ = ["EkfConfig", "LineEkf", "POSE", "N_VEHICLE"]
 
 POSE = slice(0, 3)
-N_VEHICLE = 6  # x, y, psi, b, delta, k
+N_VEHICLE = 7  # x, y, psi, b, delta, k, g
+GYRO_BIAS = 6
 
 
 @dataclass(frozen=True)
@@ -66,10 +74,19 @@ class EkfConfig(BackendConfig):
     first_estimates_jacobians : bool
         FEJ-EKF: line Jacobians at the landmarks' first estimates (consistency; see
         :meth:`LineEkf.predict_line`).
+    gyro_bias_sigma_deg_per_s : float
+        Prior 1-sigma of the gyro's constant yaw-rate bias ``g`` (deg/s); used only on steps
+        that integrate the gyro (``[motion] yaw_rate_source = "gyro"``). An uncalibrated MEMS
+        gyro's bias is up to ~1 deg/s.
     """
 
     side_gate: bool = False
     first_estimates_jacobians: bool = True
+    gyro_bias_sigma_deg_per_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        check_ranges(self, {"gyro_bias_sigma_deg_per_s": (1e-6, 90.0)})
 
 
 class LineEkf:
@@ -115,6 +132,7 @@ class LineEkf:
             np.deg2rad(config.misalignment_sigma_deg) ** 2 if config.estimate_misalignment else 0.0
         )
         P[5, 5] = config.dvl_scale_sigma**2
+        P[GYRO_BIAS, GYRO_BIAS] = np.deg2rad(config.gyro_bias_sigma_deg_per_s) ** 2
         kf.P = P
         self.kf = kf
         self.map = LandmarkMap(config, self.bTs)
@@ -126,6 +144,9 @@ class LineEkf:
         self._xy_first = (float(wTb0[0]), float(wTb0[1]))  # the position as first predicted
         self._last_ahrs_t = -np.inf
         self._own_stats = {"ahrs_updates": 0}
+        self._gyro_s = 0.0  # how long the heading has integrated the gyro
+        #: every AHRS heading update's innovation ``(t_s, nu_rad, S_rad2)`` before the update
+        self.heading_innovations: list[tuple[float, float, float]] = []
 
     # -- state access ----------------------------------------------------------------------
 
@@ -171,7 +192,9 @@ class LineEkf:
         gain = 1.0 + float(x[5])
         x[0] += gain * dx
         x[1] += gain * dy
-        x[2] = wrap_angle(x[2] + step.dyaw_rad)
+        dyaw = step.dyaw_rad - step.gyro_dt_s * float(x[GYRO_BIAS])
+        x[2] = wrap_angle(x[2] + dyaw)
+        self._gyro_s += step.gyro_dt_s
         # d p' / d psi = J (p' - p): with first-estimate Jacobians, p is the position this step
         # started from as it was first predicted, not as the updates since have moved it (Huang,
         # Mourikis & Roumeliotis 2008, eq. 23): the filter then gains no information on the
@@ -189,6 +212,7 @@ class LineEkf:
             F[1, 4] = jx
         F[0, 5] = dx
         F[1, 5] = dy
+        F[2, GYRO_BIAS] = -step.gyro_dt_s
         Q = np.zeros((N_VEHICLE, N_VEHICLE))
         Q[0, 0] = Q[1, 1] = step.var_xy_m2
         Q[2, 2] = step.var_yaw_rad2(self.config.gyro_sigma_radps)
@@ -199,7 +223,7 @@ class LineEkf:
         P[V, V] += Q
         self.t_s = step.t_s
         bx, by = step_displacement(float(x[4]), step.dx_m, step.dy_m)  # delta and k
-        return np.array([gain * bx, gain * by, step.dyaw_rad])
+        return np.array([gain * bx, gain * by, dyaw])
 
     # -- updates ---------------------------------------------------------------------------
 
@@ -232,6 +256,10 @@ class LineEkf:
         H[0, 2] = H[0, 3] = 1.0
         hx = np.array([self.kf.x[2] + self.kf.x[3]])
         R = np.array([[np.deg2rad(self.config.ahrs_white_sigma_deg) ** 2]])
+        nu = float(wrap_angle(yaw_body_rad - hx[0]))
+        P = self.kf.P
+        S = float(P[2, 2] + 2.0 * P[2, 3] + P[3, 3] + R[0, 0])
+        self.heading_innovations.append((t_s, nu, S))
         self.kf.dim_z = 1
         self._update(np.array([yaw_body_rad]), H, hx, R, lambda a, b: wrap_angle(a - b))
         self.kf.dim_z = 2
@@ -383,6 +411,9 @@ class LineEkf:
         if self.config.dvl_scale_sigma > 0.0:
             out["state_dvl_scale"] = float(x[5])
             out["state_dvl_scale_sd"] = float(np.sqrt(P[5, 5]))
+        if self._gyro_s > 0.0:
+            out["state_gyro_bias_deg_per_s"] = float(np.rad2deg(x[GYRO_BIAS]))
+            out["state_gyro_bias_sd_deg_per_s"] = float(np.rad2deg(np.sqrt(P[6, 6])))
         return out
 
     def save(self, out_dir: Path) -> list[Path]:

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import math
 
 from datasets.source import open_dataset
 from slam.cli.common import EPILOG, Subparsers, add_source
+from slam.model.motion import gyro_bias_against_heading
 from slam.run.settings import Setting, dataset_settings, run_settings
-from slam.run.sources import dvl_quality
+from slam.run.sources import DR_IGNORES, dvl_quality
 
 
 def add_parser(sub: Subparsers) -> None:
@@ -31,6 +33,12 @@ def command(args: argparse.Namespace) -> int:
     )
     print(f"  gates (datasets/gates.py): {faults or 'nothing dropped'}; gaps: {gaps or 'none'}")
     print(f"  navigation span {t1 - t0:.1f} s")
+    bias, se = gyro_bias_against_heading(d.attitude)
+    print(
+        f"  gyro against the AHRS heading's change: {math.degrees(bias):+.3f} ±"
+        f" {math.degrees(se):.3f} deg/s (a gyro bias; [motion] yaw_rate_source ="
+        f" {d.config.yaw_rate_source!r})"
+    )
     span = d.sonar_span_s
     if span is not None:
         print(
@@ -52,6 +60,7 @@ def command(args: argparse.Namespace) -> int:
     else:
         print(f"  DVL sigma {n.dvl_sigma_mps} m/s (the scatter's excess is not added)")
     _print_settings("dataset settings (sonarslam.toml keys)", dataset_settings(d))
+    print(f"  dead reckoning (--backend dr) ignores: {', '.join(DR_IGNORES)}")
     _print_settings("run settings (sonarslam run --set NAME=VALUE)", run_settings(d))
     return 0
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from slam.cli.common import EPILOG, Subparsers, add_quiet, add_source
@@ -45,6 +46,12 @@ def add_parser(sub: Subparsers) -> None:
         " ekf.extent_margin_m=10, isam2.robust=cauchy, isam2.association=nn (fields of"
         " ExtractorConfig, EkfConfig, GraphConfig); recorded in metrics.json",
     )
+    p.add_argument(
+        "--strict",
+        action="store_true",
+        help="exit 1 when the health monitor finds the closed loop inconsistent with its own"
+        " model (metrics.json health_*; the outputs are written all the same)",
+    )
     p.set_defaults(func=command)
 
 
@@ -62,6 +69,15 @@ def command(args: argparse.Namespace) -> int:
     if "extractor_preset" in m:
         print(f"extractor preset: {m['extractor_preset']} (slam/run/presets.py)")
     print(summary_line(m))
+    if "health_line" in m:
+        print(m["health_line"])
     out = result.out_dir.resolve() if result.out_dir else Path(args.out)
-    print(f"outputs: {out} ({', '.join(sorted(p.name for p in out.iterdir()))})")
+    print(f"outputs: {out} ({', '.join(sorted(p.name for p in result.files))})")
+    if args.strict and m.get("health_ok") is False:
+        print(
+            f"sonarslam run: error: --strict: {m['health_issues']} health issue(s), first:"
+            f" {m['health_first_issue']}",
+            file=sys.stderr,
+        )
+        return 1
     return 0

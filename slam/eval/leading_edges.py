@@ -11,6 +11,7 @@ outliers.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
@@ -82,7 +83,7 @@ class Edges:
 
 
 def leading_edge_beams(
-    beams: list[SonarBeam], head: SonarHead, config: EdgeConfig | None = None
+    beams: Sequence[SonarBeam], head: SonarHead, config: EdgeConfig | None = None
 ) -> list[SonarBeam]:
     """The beams as 0/255 masks holding only the nearest bin of each run of returns.
 
@@ -116,7 +117,7 @@ def leading_edge_beams(
 
 
 def leading_edge_points(
-    beams: list[SonarBeam],
+    beams: Sequence[SonarBeam],
     head: SonarHead,
     sonar_mounting: Mounting,
     pose_source: PoseSource,

@@ -474,7 +474,7 @@ def ruler_edges(dataset: Dataset, ruler: PoseSource, config: EdgeConfig | None =
     span = getattr(ruler, "span_s", None)
     beams = dataset.nav_beams()
     if span is not None:
-        beams = [b for b in beams if span[0] <= b.t <= span[1]]
+        beams = beams.between(span[0], span[1])
     if not beams:
         raise ValueError(f"{dataset.root}: no sonar beam inside the ruler's span")
     return leading_edge_points(

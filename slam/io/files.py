@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import shutil
 import uuid
 from collections.abc import Callable, Iterator
@@ -37,7 +38,51 @@ __all__ = [
     "check_output_dir",
     "check_output_file",
     "make_output_dir",
+    "remove_stale_temporaries",
 ]
+
+
+#: A temporary of :func:`atomic_path` or :func:`write_files_into`: ``.<name>.<pid>-<random>.part
+#: <suffix>`` or ``.part-<pid>-<random>``, with the writing process's id.
+_TEMPORARY = re.compile(
+    r"\..+\.(?P<pid>[0-9]+)-[0-9a-f]{12}\.part(\.[^.]*)?|\.part-(?P<dpid>[0-9]+)-[0-9a-f]{12}"
+)
+
+
+def _token() -> str:
+    return f"{os.getpid()}-{uuid.uuid4().hex[:12]}"
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process of that id runs (on this machine)."""
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    return True
+
+
+def remove_stale_temporaries(folder: str | Path) -> list[Path]:
+    """Remove the temporaries in ``folder`` that a killed writer left (its process is gone: a
+    SIGKILL or a power cut runs no clean-up); those of a running writer stay. Returns them."""
+    removed: list[Path] = []
+    p = Path(folder)
+    if not p.is_dir():
+        return removed
+    for f in p.iterdir():
+        m = _TEMPORARY.fullmatch(f.name)
+        if m is None or _alive(int(m.group("pid") or m.group("dpid"))):
+            continue
+        if f.is_dir() and not f.is_symlink():
+            shutil.rmtree(f, ignore_errors=True)
+        else:
+            f.unlink(missing_ok=True)
+        removed.append(f)
+    return removed
 
 
 @contextmanager
@@ -45,14 +90,21 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     """A temporary path to write ``path``'s content to; moved onto ``path`` (``os.replace``,
     atomic on one file system) when the block ends, removed when it raises.
 
-    The temporary name is ``.<name>.<random>.part<suffix>`` in the same directory.
+    The temporary name is ``.<name>.<pid>-<random>.part<suffix>`` in the same directory (the
+    process id tells a later run that its writer is gone: :func:`remove_stale_temporaries`).
+    An error of the file system while writing (disk full) names ``path``.
     """
     target = Path(path)
-    tmp = target.with_name(f".{target.name}.{uuid.uuid4().hex[:12]}.part{target.suffix}")
+    tmp = target.with_name(f".{target.name}.{_token()}.part{target.suffix}")
     try:
-        yield tmp
-        if tmp.exists():  # a writer may decide to write nothing
-            os.replace(tmp, target)
+        try:
+            yield tmp
+            if tmp.exists():  # a writer may decide to write nothing
+                os.replace(tmp, target)
+        except OSError as exc:
+            if exc.filename is None or Path(exc.filename) == tmp:
+                raise OSError(exc.errno, exc.strerror or str(exc), str(target)) from exc
+            raise
     finally:
         tmp.unlink(missing_ok=True)
 
@@ -70,7 +122,7 @@ def write_files_into(out: str | Path, write: Callable[[Path], object]) -> list[P
     wrote into ``out`` (atomically, one by one); for writers that choose their own file names
     (a back end's ``save``). Returns the files moved."""
     target = Path(out)
-    tmp = target / f".part-{uuid.uuid4().hex[:12]}"
+    tmp = target / f".part-{_token()}"
     tmp.mkdir()
     try:
         write(tmp)
@@ -79,6 +131,10 @@ def write_files_into(out: str | Path, write: Callable[[Path], object]) -> list[P
             os.replace(f, target / f.name)
             moved.append(target / f.name)
         return moved
+    except OSError as exc:  # a full disk: name where, not only what
+        if exc.filename is None:
+            raise OSError(exc.errno, exc.strerror or str(exc), str(target)) from exc
+        raise
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
@@ -151,7 +207,9 @@ def check_output_file(path: str | Path, suffix: str, option: str = "--out") -> P
 
 
 def make_output_dir(path: str | Path, option: str = "--out") -> Path:
-    """Create the output directory (checked first, :func:`check_output_dir`); returns it."""
+    """Create the output directory (checked first, :func:`check_output_dir`) and remove what
+    killed writers left in it (:func:`remove_stale_temporaries`); returns it."""
     p = check_output_dir(path, option)
     p.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(p)
     return p

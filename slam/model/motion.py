@@ -93,6 +93,11 @@ class MotionStep:
     var_yaw_gap_rad2 : float
         Heading variance the step adds because the AHRS is silent (rad^2): the growth of
         :meth:`slam.model.noise.MotionNoise.gap_heading_variance` over the step; 0 otherwise.
+    gyro_dt_s : float
+        How much of the step ``dyaw_rad`` integrates the gyro's rate over (s): ``dt_s`` when
+        the rate is the gyro's, 0 when it is the AHRS heading's own change or none (an AHRS
+        gap). A gyro bias ``g`` (rad/s) turns the true heading change into
+        ``dyaw_rad - g * gyro_dt_s``.
     var_xy_m2 : float
         Derived: the position variance per axis the step adds, one error per held DVL sample
         (:func:`slam.model.noise.held_velocity_variance_step`, m^2).
@@ -106,6 +111,7 @@ class MotionStep:
     sigma_v_mps: float
     held_s: float
     var_yaw_gap_rad2: float = 0.0
+    gyro_dt_s: float = 0.0
     #: computed once: the driver's odometry and the back end both ask
     var_xy_m2: float = field(init=False)
 
@@ -132,12 +138,14 @@ def motion_step(
     yaw_rate_radps: float,
     held_from_s: float,
     var_yaw_gap_rad2: float = 0.0,
+    from_gyro: bool = False,
 ) -> MotionStep:
     """The step from ``t_prev_s`` to ``t_s`` with a body velocity and a yaw rate held over it.
 
     ``held_from_s`` is when the velocity sample started to be held (its DVL time, or the start
     of the integration if later): the step's share of the sample's error grows with it.
     ``var_yaw_gap_rad2``: the heading variance an AHRS gap adds over the step (rad^2).
+    ``from_gyro``: the yaw rate is the gyro's (its bias then enters, :attr:`MotionStep.gyro_dt_s`).
     """
     dt = max(t_s - t_prev_s, 0.0)
     v = np.asarray(v_b_mps, dtype=np.float64)
@@ -150,6 +158,7 @@ def motion_step(
         sigma_v_mps=float(sigma_v_mps),
         held_s=max(t_s - held_from_s, dt),
         var_yaw_gap_rad2=float(var_yaw_gap_rad2),
+        gyro_dt_s=dt if from_gyro else 0.0,
     )
 
 
@@ -354,6 +363,32 @@ def velocity_input(
     sample_t = np.where(have, t_s - np.where(np.isfinite(age), age, 0.0), t_s)
     sample_t = np.where(expired & have, sample_t + noise.dvl_max_gap_s, sample_t)
     return VelocityInput(v_b_mps=v, sigma_mps=sigma, in_dropout=in_dropout, sample_t_s=sample_t)
+
+
+def gyro_bias_against_heading(
+    attitude: AttitudeSeries, window_s: float = 10.0
+) -> tuple[float, float]:
+    """The gyro's yaw-rate bias measured against the AHRS heading's own change, GPS-free:
+    over windows of ``window_s``, the gyro's integral minus the heading's change (unwrapped)
+    per second; their median and its standard error (from the median absolute deviation),
+    rad/s. A window's heading noise enters once, not at every sample. The marina's MTi:
+    -0.66 deg/s, steady over the run. ``(0, inf)`` with fewer than 5 windows."""
+    t = attitude.t
+    if t.size < 2:
+        return 0.0, float("inf")
+    yaw = np.unwrap(attitude.yaw_rad)
+    turned = np.concatenate([[0.0], np.cumsum(attitude.yaw_rate_radps[:-1] * np.diff(t))])
+    w = np.floor((t - t[0]) / window_s).astype(np.int64)
+    first = np.flatnonzero(np.diff(w, prepend=-1))  # the first sample of each window
+    last = np.append(first[1:] - 1, t.size - 1)
+    span = t[last] - t[first]
+    ok = span > 0.5 * window_s
+    if int(ok.sum()) < 5:
+        return 0.0, float("inf")
+    d = ((turned[last] - turned[first]) - (yaw[last] - yaw[first]))[ok] / span[ok]
+    bias = float(np.median(d))
+    sd = 1.4826 * float(np.median(np.abs(d - bias)))
+    return bias, 1.2533 * sd / math.sqrt(d.size)  # the median's standard error
 
 
 def dead_reckoning(

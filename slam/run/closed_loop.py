@@ -139,9 +139,11 @@ def run_closed_loop(
     ):
         tb = time.perf_counter()
         # an AHRS gap: no turn, and the heading's variance grows with the gap
-        rate = yaw_rate if t_prev - t_ahrs <= noise.ahrs_stale_s else 0.0
+        fresh = t_prev - t_ahrs <= noise.ahrs_stale_s
+        rate = yaw_rate if fresh else 0.0
         var_gap = noise.ahrs_gap_variance(t_prev, rec.t, t_ahrs)
-        step = motion_step(t_prev, rec.t, v_prev, s_prev, rate, held_from, var_gap)
+        gyro = fresh and not heading_rate  # the back end's gyro bias enters this step
+        step = motion_step(t_prev, rec.t, v_prev, s_prev, rate, held_from, var_gap, gyro)
         odometry.append(rec.t, backend.predict(step), step.var_xy_m2)
         v_prev, s_prev = vin.v_b_mps[k], float(vin.sigma_mps[k])
         t_prev, held_from = rec.t, max(float(vin.sample_t_s[k]), t0)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -78,7 +79,7 @@ class ExtractionResult:
 
 
 def extract_lines(
-    beams: list[SonarBeam],
+    beams: Sequence[SonarBeam],
     extractor: LineExtractor,
     progress: bool = False,
 ) -> tuple[list[LineFeature], FloatArray, float]:
@@ -165,7 +166,7 @@ def extract(
     span = _pose_span(pose_source)
     n_nav = len(beams)
     if span is not None:
-        beams = [b for b in beams if span[0] <= b.t <= span[1]]
+        beams = beams.between(span[0], span[1])
     if not beams:
         raise ValueError(f"{dataset.root}: no sonar beam inside the span of the {poses} poses")
     preset_name = preset if preset is not None else preset_for(beams)

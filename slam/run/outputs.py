@@ -55,7 +55,7 @@ from slam.io.trajectory import (
 )
 from slam.run.closed_loop import ClosedLoopResult
 from slam.run.presets import map_min_intensity
-from slam.run.sources import dead_reckoning_trajectory, gps_ahrs_trajectory
+from slam.run.sources import DR_IGNORES, dead_reckoning_trajectory, gps_ahrs_trajectory
 
 __all__ = ["write_run"]
 
@@ -68,11 +68,15 @@ def write_run(
     metrics: dict[str, Any],
     closed_loop: ClosedLoopResult | None,
     trajectories: dict[str, Trajectory],
-) -> Path:
-    """Write a run's files into ``out`` (created); returns ``out``."""
+) -> list[Path]:
+    """Write a run's files into ``out`` (created); returns the files written, in order (what
+    was in ``out`` before, another run's files, is not among them)."""
     assert dataset.gps is not None, "a run has GPS (checked by run_backend)"
     make_output_dir(out)
-    write_text(out / "config_used.toml", dump_dataset_config(dataset.config))
+    used = dump_dataset_config(dataset.config)
+    if backend == "dr":
+        used = "".join(f"# ignored by dead reckoning: {key}\n" for key in DR_IGNORES) + used
+    files = [write_text(out / "config_used.toml", used)]
     t0, t1 = trajectory.span_s
     gps = dataset.gps
     gps_tr = gps_ahrs_trajectory(dataset)
@@ -80,28 +84,29 @@ def write_run(
     # the raw fixes (the ATE reference), with the AHRS heading for a full pose
     gps_pose = np.column_stack([gps.en_m[gps_in], gps_tr.poses(gps.t[gps_in])[:, 2]])
     gps_in_tr = Trajectory(gps.t[gps_in], gps_pose)
-    write_atomic(out / GPS_FILE, lambda p: write_tum(p, gps_in_tr))
+    files.append(write_atomic(out / GPS_FILE, lambda p: write_tum(p, gps_in_tr)))
     reference_t = gps.t
     if dataset.truth is not None:
         truth = truth_trajectory(dataset).clip(t0, t1)
-        write_atomic(out / TRUTH_FILE, lambda p: write_tum(p, truth))
+        files.append(write_atomic(out / TRUTH_FILE, lambda p: write_tum(p, truth)))
         reference_t = np.concatenate([gps.t, truth.t_s])
     for name, tr in [(None, trajectory), *trajectories.items()]:
         stem = trajectory_stem(backend, name)
         dense = with_samples_at(tr, reference_t)
-        write_atomic(out / f"{stem}.tum", partial(write_tum, trajectory=dense))
+        files.append(write_atomic(out / f"{stem}.tum", partial(write_tum, trajectory=dense)))
         if dense.covs is not None:  # no file without covariances
-            write_atomic(
-                out / cov_file(stem), partial(write_trajectory_covariances, trajectory=dense)
-            )
+            covs = partial(write_trajectory_covariances, trajectory=dense)
+            files.append(write_atomic(out / cov_file(stem), covs))
     if closed_loop is not None:
-        _write_closed_loop(out, dataset, backend, closed_loop)
-    write_json(out / "metrics.json", metrics)
-    write_atomic(
-        out / "report.png",
-        lambda p: _report_figure(p, dataset, backend, trajectory, metrics),
+        files += _write_closed_loop(out, dataset, backend, closed_loop)
+    files.append(write_json(out / "metrics.json", metrics))
+    files.append(
+        write_atomic(
+            out / "report.png",
+            lambda p: _report_figure(p, dataset, backend, trajectory, metrics),
+        )
     )
-    return out
+    return files
 
 
 def _reference(dataset: Dataset) -> tuple[str, Trajectory]:
@@ -149,18 +154,21 @@ def _report_figure(
     )
 
 
-def _write_closed_loop(out: Path, dataset: Dataset, backend: str, result: ClosedLoopResult) -> None:
-    """map.json, lines.jsonl, the back end's files and map.png of a closed loop."""
+def _write_closed_loop(
+    out: Path, dataset: Dataset, backend: str, result: ClosedLoopResult
+) -> list[Path]:
+    """map.json, lines.jsonl, the back end's files and map.png of a closed loop; the files."""
     landmarks = result.backend.map_records()
-    write_json(out / "map.json", {"landmarks": landmarks}, indent=1)
+    files = [write_json(out / "map.json", {"landmarks": landmarks}, indent=1)]
     lines = [
         json.dumps(json_safe({**f.to_json(), "landmark": lm}), allow_nan=False) + "\n"
         for f, lm in zip(result.features, result.feature_landmarks, strict=True)
     ]
-    write_text(out / "lines.jsonl", "".join(lines))
+    files.append(write_text(out / "lines.jsonl", "".join(lines)))
     for saved in write_files_into(out, result.backend.save):
+        files.append(saved)
         if saved.name == "graph.json":
-            graph_json_to_g2o(saved)
+            files.append(graph_json_to_g2o(saved).path)
     t0, t1 = result.trajectory.span_s
     beams = [b for b in dataset.nav_beams() if t0 <= b.t <= t1]
     points, _ = project_beams(
@@ -183,4 +191,5 @@ def _write_closed_loop(out: Path, dataset: Dataset, backend: str, result: Closed
         f"{dataset.name}: {backend}, {len(landmarks)} landmarks with 95 % bands over the sonar"
         " bins projected with its trajectory"
     )
-    write_atomic(out / "map.png", lambda p: plot_map(p, layers, title))
+    files.append(write_atomic(out / "map.png", lambda p: plot_map(p, layers, title)))
+    return files

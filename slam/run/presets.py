@@ -36,11 +36,14 @@ import numpy as np
 
 from datasets.config import NoiseConfig
 from datasets.errors import DataError
+from datasets.records import BeamSeries
 from datasets.settings import SettingError, parse_text, read_toml, replace_checked, toml_line
+from datasets.source import Dataset
 from features.config import ExtractorConfig
 from features.scans import ScanConfig
 from slam.backends.base import BackendConfig
 from slam.backends.registry import backend_spec
+from slam.model.motion import gyro_bias_against_heading
 from sonar.beam import SonarBeam
 from sonar.store import sector_beam_count
 
@@ -121,6 +124,8 @@ SCAN_PRESETS: dict[str, ScanConfig] = {
 def preset_for(beams: Sequence[SonarBeam]) -> str:
     """``"marina"`` for thresholded beams (0/255 masks, as the marina keyframes), else
     ``"default"`` (raw intensities)."""
+    if isinstance(beams, BeamSeries):  # one kind of beam by construction
+        return "marina" if len(beams) and beams.thresholded else "default"
     return "marina" if beams and all(b.thresholded for b in beams) else "default"
 
 
@@ -275,6 +280,39 @@ def run_config(
         given,
         apply_overrides(SCAN_PRESETS[preset], scans),
     )
+
+
+#: A gyro bias measured against the AHRS heading's change beyond this (deg/s, and beyond 5
+#: standard errors) is one a back end without a gyro-bias state must not integrate.
+GYRO_BIAS_LIMIT_DEG_PER_S = 0.05
+
+
+def check_combination(dataset: Dataset, backend: str) -> None:
+    """Refuse, before any work, a dataset setting that a back end would silently get wrong.
+
+    The factor graph has no gyro-bias state (the EKF has, :mod:`slam.backends.ekf`): with the
+    gyro's rate and a walking AHRS bias, a gyro bias is taken for the walk and the heading
+    spins away (the marina, walk 0.15 deg/sqrt(s): ATE 97 m, exit 0). Refused when the data
+    show such a bias (:func:`slam.model.motion.gyro_bias_against_heading`, GPS-free); an
+    unbiased gyro (the simulated drift world's) is fine.
+    """
+    cfg = dataset.config
+    if not (
+        backend == "isam2"
+        and cfg.yaw_rate_source == "gyro"
+        and cfg.noise.ahrs_bias_walk_deg_per_sqrt_s > 0.0
+    ):
+        return
+    bias, se = gyro_bias_against_heading(dataset.attitude)
+    deg = math.degrees(bias)
+    if abs(deg) > GYRO_BIAS_LIMIT_DEG_PER_S and abs(bias) > 5.0 * se:
+        raise SettingError(
+            "[motion] yaw_rate_source",
+            f"'gyro' with [noise] ahrs_bias_walk_deg_per_sqrt_s > 0 is refused for isam2: the"
+            f" gyro reads {deg:+.3f} deg/s off the AHRS heading's change and isam2 has no"
+            " gyro-bias state, so the bias would be taken for the AHRS bias's walk (use the"
+            " ekf, which estimates it, or yaw_rate_source = 'heading')",
+        )
 
 
 _ALIASES = {"association": "association.method"}

@@ -287,7 +287,19 @@ def _dataset_section(
     ]
     if segments.sonar_end_s is not None:
         md += [f"The sonar stops {segments.sonar_end_s:.0f} s after the start.", ""]
-    return md + [_segment_markdown(segments), ""]
+    return md + [_segment_markdown(segments), "", *_health(group)]
+
+
+def _health(group: list[RunData]) -> list[str]:
+    """The health monitor's line of each closed loop (:mod:`slam.eval.health`)."""
+    lines = [
+        f"- {_label(r, group)}: {r.metrics['health_line']}"
+        for r in group
+        if isinstance(r.metrics.get("health_line"), str)
+    ]
+    if not lines:
+        return []
+    return ["### Health (GPS-free: each run against its own model)", "", *lines, ""]
 
 
 def report(

@@ -30,8 +30,9 @@ from slam.eval.truth import association_against_truth, truth_trajectory
 from slam.io.files import check_output_dir
 from slam.io.trajectory import Trajectory
 from slam.run.closed_loop import ClosedLoopResult, run_closed_loop
+from slam.run.health import monitor_run
 from slam.run.outputs import write_run
-from slam.run.presets import RunConfig, check_settings, run_config
+from slam.run.presets import RunConfig, check_combination, check_settings, run_config
 from slam.run.sources import POSE_SOURCES, dvl_quality
 
 __all__ = [
@@ -72,6 +73,8 @@ class RunResult:
         The back end's other trajectories (``smoothed``, ``batch``).
     out_dir : Path or None
         Where the files were written (None: nothing written).
+    files : list of Path
+        The files this run wrote there.
     """
 
     backend: str
@@ -81,6 +84,7 @@ class RunResult:
     config: RunConfig | None = None
     trajectories: dict[str, Trajectory] = field(default_factory=dict)
     out_dir: Path | None = None
+    files: list[Path] = field(default_factory=list)
 
 
 def run_backend(
@@ -143,6 +147,7 @@ def run_backend(
         if batch and not spec.smoother:
             raise SettingError("--batch", f"back end {backend!r} does not smooth")
         _require_beams(dataset)
+        check_combination(dataset, backend)
         config = run_config(dataset.beams, backend, settings, dataset.config.noise)
         mounting = dataset.config.sonar_mounting
         cfg = config.backend
@@ -159,6 +164,10 @@ def run_backend(
         result.backend.finish()
         trajectories = result.backend.trajectories(batch)
         extra = _closed_loop_metrics(dataset, result, config)
+        health = monitor_run(dataset, result)  # GPS-free: the run against its own model
+        extra.update(health.metrics())
+        extra["health_line"] = health.line()
+        health.warn()
     wall_s = time.perf_counter() - wall0
     if t_end_s is not None and trajectory.t_s[-1] > t_end_s:
         trajectory = trajectory.clip(trajectory.t_s[0], t_end_s)
@@ -349,7 +358,7 @@ def run(
         raise SettingError("--batch", f"back end {backend!r} does not smooth")
     dataset = open_dataset(source, config_override=config)
     result = run_backend(dataset, backend, settings, progress=progress, batch=batch)
-    result.out_dir = write_run(
+    result.files = write_run(
         Path(out_dir),
         dataset,
         result.backend,
@@ -358,6 +367,7 @@ def run(
         result.closed_loop,
         result.trajectories,
     )
+    result.out_dir = Path(out_dir)
     return result
 
 

@@ -54,6 +54,7 @@ from features.geometry import (
 from features.line import LineFeature
 from slam.io.files import write_text
 from slam.io.trajectory import Trajectory
+from slam.run.calibration import require_turns
 from slam.run.presets import extractor_config, preset_for
 from slam.run.sources import dead_reckoning_trajectory
 
@@ -86,6 +87,7 @@ def calibrate_range_offset(dataset: Dataset, every: int = 1) -> RangeOffsetFit:
     every : int
         Use every ``every``-th beam.
     """
+    require_turns(dataset, len(dataset.nav_beams()), "the echo range offset")
     beams = dataset.nav_beams()[::every]
     if beams and all(b.thresholded for b in beams):
         n = sum(int(np.count_nonzero(np.diff(np.r_[0, b.intensities > 0]) == 1)) for b in beams)
@@ -226,7 +228,8 @@ def calibrate_line_noise(
     """
     poses = dead_reckoning_trajectory(dataset)
     t0, t1 = poses.span_s
-    beams = [b for b in dataset.nav_beams() if t0 <= b.t <= t1]
+    beams = dataset.nav_beams().between(t0, t1)
+    require_turns(dataset, len(beams), "a line's systematic error")
     cfg = replace(
         config or extractor_config(preset_for(beams)),
         line_sigma_rho_m=0.0,

@@ -137,6 +137,17 @@ def gps_ahrs_trajectory(dataset: Dataset) -> Trajectory:
 
 
 #: Pose sources by name (``--poses``; ``dr`` and ``gps`` are also ``--backend`` baselines).
+#: The dataset settings dead reckoning does not use (the closed loops' models alone): it takes
+#: the AHRS heading itself, so nothing turns it between samples and no bias walks or scales;
+#: it has no lines. ``info`` and a ``dr`` run's ``config_used.toml`` name them as ignored.
+DR_IGNORES = (
+    "[motion] yaw_rate_source",
+    "[noise] ahrs_bias_walk_deg_per_sqrt_s",
+    "[noise] dvl_scale_sigma",
+    "[noise] line_sigma_rho_m",
+    "[noise] line_sigma_theta_deg",
+)
+
 POSE_SOURCES: dict[str, Callable[[Dataset], Trajectory]] = {
     "gps": gps_ahrs_trajectory,
     "dr": dead_reckoning_trajectory,

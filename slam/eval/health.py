@@ -1,0 +1,472 @@
+"""The health monitor: is a run still consistent with its own model? GPS-free, both back ends.
+
+A closed loop can go wrong without failing: a gyro bias that the model leaves out is taken for
+the AHRS bias's walk, the heading spins, every wall becomes a new landmark, and the run ends
+with exit 0 and numbers that look like numbers. The monitor reads what a run already logs and
+flags what the model says cannot happen (Bar-Shalom, Li & Kirubarajan 2001, sec. 5.4: the
+innovations of a consistent filter are white with the covariance it predicts):
+
+``nis_<kind>``
+    The NIS of the heading, line and scan updates, in groups of ``nis_window_updates``
+    consecutive updates: a group is flagged when even the lower confidence bound of its median
+    NIS is beyond ``nis_scale_max`` times the chi2 median (the innovations are that many times their predicted variance). A
+    median with a bound, not a mean: the association gate truncates the line NIS, and one
+    outlier must not flag a window.
+``departure``
+    The estimate against dead reckoning (the same sensors without the corrections): the
+    squared Mahalanobis distance of their positions with the *sum* of the two covariances
+    (which they share the odometry of, so the sum is the cautious bound), against chi2(2).
+``heading_bias``
+    The AHRS heading minus the estimate's: the bias the estimate implies, beyond
+    ``bias_sigmas`` times its prior sigma (with the walk's growth) over a window.
+``state``
+    The back end's final constants (AHRS bias, DVL misalignment and scale) beyond
+    ``bias_sigmas`` times their prior sigma, and pose covariances that are not positive
+    definite.
+``landmarks``
+    Landmark count growth: a window in which at least ``landmark_min_new`` landmarks were
+    created and they are more than ``landmark_new_share_max`` of the window's associations
+    (a map that re-observes its walls associates far more lines than it creates landmarks).
+
+The chance thresholds are Bonferroni-corrected over a check's windows, so that a consistent
+run raises a check with probability at most ``false_alarm``. :func:`assess` gives a
+:class:`HealthReport`: its issues (check, cause, time span), ``health_*`` figures for
+``metrics.json``, one warning per issue, and a line for the report.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.stats import binom, chi2
+
+from datasets.errors import DataWarning
+from datasets.settings import check_ranges
+from features.geometry import FloatArray, wrap_angle
+from slam.io.trajectory import Trajectory
+
+__all__ = [
+    "HealthConfig",
+    "NisStream",
+    "StateValue",
+    "HealthInputs",
+    "HealthIssue",
+    "HealthReport",
+    "assess",
+    "median_lower_bound",
+]
+
+
+@dataclass(frozen=True)
+class HealthConfig:
+    """Thresholds of the health monitor (see the module docstring).
+
+    Attributes
+    ----------
+    window_s : float
+        Length of the windows the NIS, heading and landmark checks judge (s).
+    false_alarm : float
+        Probability that one check flags a consistent run (its windows' tests together).
+    min_updates : int
+        Fewest updates of a kind for its NIS to be judged.
+    nis_window_updates : int
+        The NIS is judged in groups of this many consecutive updates (a window of time would
+        hold a handful of line updates when the walls are far apart, too few to judge).
+    nis_scale_max : float
+        Largest factor by which the innovations may exceed their predicted variance.
+    bias_sigmas : float
+        A constant beyond this many prior sigmas is not a bias of the model.
+    landmark_min_new : int
+        Fewest landmarks created in a window for the growth check.
+    landmark_new_share_max : float
+        Largest share of new landmarks among a window's associations and creations.
+    """
+
+    window_s: float = 120.0
+    false_alarm: float = 0.01
+    min_updates: int = 10
+    nis_window_updates: int = 40
+    nis_scale_max: float = 1.5
+    bias_sigmas: float = 10.0
+    landmark_min_new: int = 5
+    landmark_new_share_max: float = 0.5
+
+    def __post_init__(self) -> None:
+        check_ranges(self, _RANGES)
+
+
+_RANGES = {
+    "window_s": (1.0, 1e5),
+    "false_alarm": (1e-9, 0.5),
+    "min_updates": (3, 10_000),
+    "nis_window_updates": (3, 100_000),
+    "nis_scale_max": (1.0, 1e3),
+    "bias_sigmas": (1.0, 1e3),
+    "landmark_min_new": (1, 10_000),
+    "landmark_new_share_max": (0.0, 1.0),
+}
+
+
+@dataclass(frozen=True)
+class NisStream:
+    """The NIS of one kind of update: times (K,) Unix s, values (K,), its degrees of freedom,
+    and the probability of the gate the updates passed (None: not gated)."""
+
+    kind: str
+    t_s: FloatArray
+    nis: FloatArray
+    dof: int
+    gate_probability: float | None = None
+
+
+@dataclass(frozen=True)
+class StateValue:
+    """A constant of the back end's state at the end of the run, with its prior sigma (same
+    unit) and its unit for the message."""
+
+    name: str
+    value: float
+    prior_sigma: float
+    unit: str
+
+
+@dataclass(frozen=True)
+class HealthInputs:
+    """What a run logged, as the monitor reads it.
+
+    Attributes
+    ----------
+    trajectory : Trajectory
+        The causal estimate with covariances.
+    reference : Trajectory or None
+        Dead reckoning from the same sensors, with covariances.
+    ahrs_t_s, ahrs_yaw_rad : ndarray, shape (M,)
+        The AHRS body headings the back end was given (Unix s, rad).
+    ahrs_bias_sigma_rad, ahrs_bias_walk_rad_per_sqrt_s : float
+        The model's prior sigma of the AHRS bias and its walk.
+    nis : list of NisStream
+    landmark_created_s : ndarray, shape (L,)
+        When each landmark was created (Unix s).
+    reobserved_s : ndarray, shape (A,)
+        When a line was associated with an existing landmark (Unix s).
+    states : list of StateValue
+    """
+
+    trajectory: Trajectory
+    reference: Trajectory | None
+    ahrs_t_s: FloatArray
+    ahrs_yaw_rad: FloatArray
+    ahrs_bias_sigma_rad: float
+    ahrs_bias_walk_rad_per_sqrt_s: float
+    nis: Sequence[NisStream] = ()
+    landmark_created_s: FloatArray = field(default_factory=lambda: np.zeros(0))
+    reobserved_s: FloatArray = field(default_factory=lambda: np.zeros(0))
+    states: Sequence[StateValue] = ()
+
+
+@dataclass(frozen=True)
+class HealthIssue:
+    """One inconsistency: the check, its cause in words, the time span (Unix s)."""
+
+    check: str
+    cause: str
+    t0_s: float
+    t1_s: float
+
+    def message(self, t_ref_s: float) -> str:
+        span = f"{self.t0_s - t_ref_s:.0f}-{self.t1_s - t_ref_s:.0f} s"
+        return f"health: {self.check} at {span} into the run: {self.cause}"
+
+
+@dataclass
+class HealthReport:
+    """The monitor's verdict: the issues, and per check how many windows it judged."""
+
+    issues: list[HealthIssue]
+    judged: dict[str, int]
+    t_ref_s: float
+    config: HealthConfig
+
+    @property
+    def ok(self) -> bool:
+        return not self.issues
+
+    def checks_flagged(self) -> list[str]:
+        return sorted({i.check for i in self.issues})
+
+    def metrics(self) -> dict[str, Any]:
+        """``health_*`` keys of ``metrics.json``."""
+        out: dict[str, Any] = {
+            "health_ok": self.ok,
+            "health_issues": len(self.issues),
+            "health_flagged": self.checks_flagged(),
+            "health_false_alarm": self.config.false_alarm,
+        }
+        for check, n in sorted(self.judged.items()):
+            out[f"health_{check}_windows"] = n
+            out[f"health_{check}_flagged"] = sum(i.check == check for i in self.issues)
+        out["health_first_issue"] = self.issues[0].message(self.t_ref_s) if self.issues else None
+        return out
+
+    def warn(self) -> None:
+        """One counted :class:`DataWarning` per issue."""
+        for issue in self.issues:
+            warnings.warn(issue.message(self.t_ref_s), DataWarning, stacklevel=2)
+
+    def line(self) -> str:
+        """One line for the report."""
+        if self.ok:
+            n = sum(self.judged.values())
+            return f"health: consistent ({n} windows and states judged, none flagged)"
+        return (
+            f"health: {len(self.issues)} inconsistencies ({', '.join(self.checks_flagged())});"
+            f" first: {self.issues[0].message(self.t_ref_s).removeprefix('health: ')}"
+        )
+
+
+def median_lower_bound(values: FloatArray, alpha: float) -> float:
+    """A one-sided lower confidence bound, at level ``1 - alpha``, of the median of the
+    distribution ``values`` are drawn from: the order statistic ``x_(k)`` with
+    ``P(Binomial(n, 1/2) < k) <= alpha`` (distribution-free); ``-inf`` when ``n`` is too small."""
+    x = np.sort(np.asarray(values, dtype=np.float64))
+    n = x.size
+    k = int(binom.ppf(alpha, n, 0.5))  # P(B <= k - 1) <= alpha < P(B <= k)
+    while k > 0 and binom.cdf(k - 1, n, 0.5) > alpha:
+        k -= 1
+    if k < 1:
+        return -math.inf
+    return float(x[k - 1])
+
+
+def _windows(t0_s: float, t1_s: float, window_s: float) -> FloatArray:
+    """Window edges covering ``[t0, t1]`` (Unix s), shape (W + 1,)."""
+    n = max(int(math.ceil((t1_s - t0_s) / window_s)), 1)
+    return np.asarray(t0_s + window_s * np.arange(n + 1), dtype=np.float64)
+
+
+def _spans(edges: FloatArray, flagged: np.ndarray) -> list[tuple[float, float, np.ndarray]]:
+    """Runs of flagged windows as ``(t0, t1, window indices)``."""
+    out: list[tuple[float, float, np.ndarray]] = []
+    idx = np.flatnonzero(flagged)
+    if idx.size == 0:
+        return out
+    groups = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
+    for g in groups:
+        out.append((float(edges[g[0]]), float(edges[g[-1] + 1]), g))
+    return out
+
+
+def _groups(n: int, size: int) -> list[np.ndarray]:
+    """Consecutive groups of ``size`` indices of ``range(n)``; a last group shorter than half
+    of it joins the one before."""
+    edges = list(range(0, n, size)) + [n]
+    if len(edges) > 2 and edges[-1] - edges[-2] < size // 2:
+        edges.pop(-2)
+    return [np.arange(a, b) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+
+
+def _check_nis(stream: NisStream, cfg: HealthConfig) -> tuple[list[HealthIssue], int]:
+    """Groups of ``nis_window_updates`` consecutive updates whose median NIS is, with
+    confidence, beyond ``nis_scale_max`` chi2 medians."""
+    p = stream.gate_probability
+    # the median of chi2(dof) truncated at the gate: the quantile p / 2 of the untruncated one
+    median = float(chi2.ppf(0.5 if p is None else p / 2.0, stream.dof))
+    order = np.argsort(stream.t_s, kind="stable")
+    t, nis = stream.t_s[order], stream.nis[order]
+    if t.size < cfg.min_updates:
+        return [], 0
+    groups = _groups(t.size, cfg.nis_window_updates)
+    alpha = cfg.false_alarm / len(groups)
+    flagged = np.zeros(len(groups), dtype=bool)
+    medians = np.zeros(len(groups))
+    for w, g in enumerate(groups):
+        medians[w] = float(np.median(nis[g]))
+        flagged[w] = median_lower_bound(nis[g], alpha) > cfg.nis_scale_max * median
+    edges = np.array([t[g[0]] for g in groups] + [t[-1]])
+    issues = []
+    for _, _, run in _spans(edges, flagged):
+        worst = run[int(np.argmax(medians[run]))]
+        issues.append(
+            HealthIssue(
+                f"nis_{stream.kind}",
+                f"{stream.kind} innovations too large: median NIS {medians[worst]:.2f} over"
+                f" {groups[worst].size} updates (chi2({stream.dof}) median {median:.2f}; limit"
+                f" {cfg.nis_scale_max:g}x)",
+                float(t[groups[run[0]][0]]),
+                float(t[groups[run[-1]][-1]]),
+            )
+        )
+    return issues, len(groups)
+
+
+def _check_departure(
+    trajectory: Trajectory, reference: Trajectory, cfg: HealthConfig
+) -> tuple[list[HealthIssue], int]:
+    """Spans where the estimate's position leaves dead reckoning's beyond their covariances."""
+    assert trajectory.covs is not None and reference.covs is not None
+    t = trajectory.t_s
+    lo, hi = reference.span_s
+    inside = (t >= lo) & (t <= hi)
+    t = t[inside]
+    if t.size == 0:
+        return [], 0
+    d = trajectory.poses_wTb[inside, :2] - reference.poses(t)[:, :2]
+    j = np.clip(np.searchsorted(reference.t_s, t, side="right") - 1, 0, reference.t_s.size - 1)
+    S = trajectory.covs[inside, :2, :2] + reference.covs[j, :2, :2]
+    d2 = np.einsum("ni,ni->n", d, np.linalg.solve(S, d[:, :, None])[:, :, 0])
+    edges = _windows(float(t[0]), float(t[-1]), cfg.window_s)
+    n_windows = edges.size - 1
+    gate = float(chi2.ppf(1.0 - cfg.false_alarm / n_windows, 2))
+    which = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, n_windows - 1)
+    worst = np.full(n_windows, -np.inf)
+    np.maximum.at(worst, which, d2)
+    issues = []
+    for a, b, g in _spans(edges, worst > gate):
+        k = int(np.argmax(np.where(np.isin(which, g), d2, -np.inf)))
+        issues.append(
+            HealthIssue(
+                "departure",
+                f"the estimate is {float(np.hypot(*d[k])):.1f} m from dead reckoning, squared"
+                f" Mahalanobis distance {d2[k]:.1f} with both covariances (limit {gate:.1f})",
+                max(a, float(t[0])),
+                min(b, float(t[-1])),
+            )
+        )
+    return issues, n_windows
+
+
+def _check_heading_bias(inputs: HealthInputs, cfg: HealthConfig) -> tuple[list[HealthIssue], int]:
+    """Windows where the AHRS heading minus the estimate's (the bias the estimate implies) is
+    beyond ``bias_sigmas`` prior sigmas, the walk's growth included."""
+    tr = inputs.trajectory
+    lo, hi = tr.span_s
+    keep = (inputs.ahrs_t_s >= lo) & (inputs.ahrs_t_s <= hi)
+    t = inputs.ahrs_t_s[keep]
+    if t.size == 0:
+        return [], 0
+    # unwrapped: a heading that spins away from the AHRS is thousands of degrees off
+    r = np.unwrap(wrap_angle(inputs.ahrs_yaw_rad[keep] - tr.poses(t)[:, 2]))
+    sigma = np.sqrt(
+        inputs.ahrs_bias_sigma_rad**2 + inputs.ahrs_bias_walk_rad_per_sqrt_s**2 * (t - lo)
+    )
+    edges = _windows(lo, hi, cfg.window_s)
+    which = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, edges.size - 2)
+    flagged = np.zeros(edges.size - 1, dtype=bool)
+    med = np.zeros(edges.size - 1)
+    lim = np.zeros(edges.size - 1)
+    for w in np.unique(which):
+        m = which == w
+        med[w] = float(np.median(r[m]))
+        lim[w] = cfg.bias_sigmas * float(np.max(sigma[m]))
+        flagged[w] = abs(med[w]) > lim[w]
+    issues = []
+    for a, b, g in _spans(edges, flagged):
+        worst = g[int(np.argmax(np.abs(med[g])))]
+        issues.append(
+            HealthIssue(
+                "heading_bias",
+                f"the AHRS heading is {np.rad2deg(med[worst]):.1f} deg off the estimate's"
+                f" (limit {np.rad2deg(lim[worst]):.1f} deg: {cfg.bias_sigmas:g} prior sigmas of"
+                " the AHRS bias)",
+                max(a, lo),
+                min(b, hi),
+            )
+        )
+    return issues, int(np.unique(which).size)
+
+
+def _check_states(inputs: HealthInputs, cfg: HealthConfig) -> tuple[list[HealthIssue], int]:
+    """Final constants beyond ``bias_sigmas`` prior sigmas; covariances not positive definite."""
+    lo, hi = inputs.trajectory.span_s
+    issues = []
+    for s in inputs.states:
+        if s.prior_sigma > 0.0 and not abs(s.value) <= cfg.bias_sigmas * s.prior_sigma:
+            issues.append(
+                HealthIssue(
+                    "state",
+                    f"the final {s.name} is {s.value:.4g} {s.unit}, beyond {cfg.bias_sigmas:g}"
+                    f" times its prior sigma {s.prior_sigma:.4g} {s.unit}",
+                    lo,
+                    hi,
+                )
+            )
+    covs = inputs.trajectory.covs
+    if covs is not None and covs.size:
+        sym = np.abs(covs - np.swapaxes(covs, 1, 2)).max(axis=(1, 2))
+        scale = np.abs(covs).max(axis=(1, 2))
+        ok = np.all(np.isfinite(covs), axis=(1, 2)) & (sym <= 1e-6 * np.maximum(scale, 1e-300))
+        eig = np.full(covs.shape[0], -np.inf)
+        eig[ok] = np.linalg.eigvalsh(covs[ok]).min(axis=1)
+        bad = eig <= 0.0
+        if bad.any():
+            t = inputs.trajectory.t_s
+            i = np.flatnonzero(bad)
+            issues.append(
+                HealthIssue(
+                    "state",
+                    f"{i.size} pose covariances are not positive definite (first smallest"
+                    f" eigenvalue {eig[i[0]]:.3g})",
+                    float(t[i[0]]),
+                    float(t[i[-1]]),
+                )
+            )
+    return issues, len(inputs.states) + 1
+
+
+def _check_landmarks(inputs: HealthInputs, cfg: HealthConfig) -> tuple[list[HealthIssue], int]:
+    """Windows that create many landmarks and re-observe few."""
+    lo, hi = inputs.trajectory.span_s
+    edges = _windows(lo, hi, cfg.window_s)
+    n = edges.size - 1
+
+    def count(t: FloatArray) -> np.ndarray:
+        w = np.searchsorted(edges, t, side="right") - 1
+        return np.bincount(w[(w >= 0) & (w < n)], minlength=n)
+
+    new = count(inputs.landmark_created_s)
+    again = count(inputs.reobserved_s)
+    share = new / np.maximum(new + again, 1)
+    judged = new >= cfg.landmark_min_new
+    flagged = judged & (share > cfg.landmark_new_share_max)
+    issues = []
+    for a, b, g in _spans(edges, flagged):
+        issues.append(
+            HealthIssue(
+                "landmarks",
+                f"{int(new[g].sum())} landmarks created against {int(again[g].sum())}"
+                f" re-observations (share {new[g].sum() / max(new[g].sum() + again[g].sum(), 1):.2f},"
+                f" limit {cfg.landmark_new_share_max:g})",
+                a,
+                b,
+            )
+        )
+    return issues, int(judged.sum())
+
+
+def assess(inputs: HealthInputs, config: HealthConfig | None = None) -> HealthReport:
+    """Run every check on a run's logs (module docstring); the issues in time order."""
+    cfg = config or HealthConfig()
+    lo, _ = inputs.trajectory.span_s
+    issues: list[HealthIssue] = []
+    judged: dict[str, int] = {}
+    for stream in inputs.nis:
+        found, n = _check_nis(stream, cfg)
+        issues += found
+        judged[f"nis_{stream.kind}"] = n
+    if inputs.reference is not None and inputs.trajectory.covs is not None:
+        if inputs.reference.covs is not None:
+            found, judged["departure"] = _check_departure(inputs.trajectory, inputs.reference, cfg)
+            issues += found
+    found, judged["heading_bias"] = _check_heading_bias(inputs, cfg)
+    issues += found
+    found, judged["state"] = _check_states(inputs, cfg)
+    issues += found
+    found, judged["landmarks"] = _check_landmarks(inputs, cfg)
+    issues += found
+    issues.sort(key=lambda i: (i.t0_s, i.check))
+    return HealthReport(issues, judged, lo, cfg)

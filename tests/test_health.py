@@ -1,0 +1,257 @@
+"""The health monitor (slam.eval.health): each check trips on the fault it is for and stays
+quiet on consistent logs; on the simulator, a closed loop with an injected fault is flagged and
+clean runs are not."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from slam.eval.health import (
+    HealthConfig,
+    HealthInputs,
+    NisStream,
+    StateValue,
+    assess,
+    median_lower_bound,
+)
+from slam.io.trajectory import Trajectory
+
+T0 = 1.7e9
+DURATION_S = 1200.0
+
+
+def _trajectory(rng: np.random.Generator, offset_m: float = 0.0) -> Trajectory:
+    """A straight run at 0.5 m/s with a position covariance growing to 1 m^2."""
+    t = T0 + np.arange(0.0, DURATION_S, 1.0)
+    poses = np.column_stack([0.5 * (t - T0) + offset_m, np.zeros_like(t), np.zeros_like(t)])
+    covs = np.zeros((t.size, 3, 3))
+    covs[:, 0, 0] = covs[:, 1, 1] = 0.01 + (t - T0) / DURATION_S
+    covs[:, 2, 2] = 1e-4
+    return Trajectory(t, poses, covs)
+
+
+def _inputs(rng: np.random.Generator, **changes: object) -> HealthInputs:
+    """Consistent logs: the estimate on dead reckoning, the AHRS on the heading with a 1 deg
+    bias and 1 deg noise, chi2 NIS gated at 99 %, landmarks re-observed."""
+    tr = _trajectory(rng)
+    t_ahrs = T0 + np.arange(0.0, DURATION_S, 0.1)
+    yaw = np.deg2rad(1.0 + rng.normal(0.0, 1.0, t_ahrs.size))
+    t_line = np.sort(rng.uniform(T0, T0 + DURATION_S, 600))
+    nis = chi2.rvs(2, size=2000, random_state=rng)
+    nis = nis[nis <= chi2.ppf(0.99, 2)][: t_line.size]
+    t_h = T0 + np.arange(0.0, DURATION_S, 1.0)
+    base = HealthInputs(
+        trajectory=tr,
+        reference=_trajectory(rng),
+        ahrs_t_s=t_ahrs,
+        ahrs_yaw_rad=yaw,
+        ahrs_bias_sigma_rad=np.deg2rad(2.0),
+        ahrs_bias_walk_rad_per_sqrt_s=0.0,
+        nis=[
+            NisStream("line", t_line, nis, 2, 0.99),
+            NisStream("heading", t_h, chi2.rvs(1, size=t_h.size, random_state=rng), 1),
+        ],
+        landmark_created_s=T0 + np.array([10.0, 20.0, 30.0, 400.0, 800.0]),
+        reobserved_s=t_line,
+        states=[StateValue("AHRS bias", 1.2, 2.0, "deg")],
+    )
+    return replace(base, **changes)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_consistent_logs_raise_nothing(seed: int) -> None:
+    report = assess(_inputs(np.random.default_rng(seed)))
+    assert report.ok, [i.message(report.t_ref_s) for i in report.issues]
+    m = report.metrics()
+    assert m["health_ok"] is True and m["health_issues"] == 0
+    assert m["health_nis_line_windows"] == 15 and m["health_departure_windows"] == 10
+    assert "consistent" in report.line()
+
+
+def test_innovations_three_times_their_variance_trip_the_nis_check() -> None:
+    rng = np.random.default_rng(1)
+    inputs = _inputs(rng)
+    line = inputs.nis[0]
+    late = line.t_s > T0 + 600.0
+    inflated = np.where(late, 3.0 * line.nis, line.nis)  # S three times too small after 600 s
+    inflated = np.minimum(inflated, chi2.ppf(0.99, 2))  # the gate still truncates them
+    report = assess(replace(inputs, nis=[replace(line, nis=inflated), inputs.nis[1]]))
+    flagged = [i for i in report.issues if i.check == "nis_line"]
+    assert flagged and {i.check for i in report.issues} == {"nis_line"}
+    assert flagged[0].t0_s >= T0 + 600.0 - 1e-6  # the span where it went wrong
+    assert "line innovations too large" in flagged[0].cause
+
+
+def test_a_departure_from_dead_reckoning_beyond_both_covariances_is_flagged() -> None:
+    rng = np.random.default_rng(2)
+    inputs = _inputs(rng)
+    tr = inputs.trajectory
+    poses = tr.poses_wTb.copy()
+    poses[:, 1] += np.clip((tr.t_s - T0 - 900.0) * 0.05, 0.0, None)  # 15 m off by the end
+    report = assess(replace(inputs, trajectory=Trajectory(tr.t_s, poses, tr.covs)))
+    (issue,) = [i for i in report.issues if i.check == "departure"]
+    assert T0 + 900.0 <= issue.t0_s <= T0 + 1080.0
+    assert "from dead reckoning" in issue.cause
+
+
+def test_a_bias_beyond_ten_prior_sigmas_and_a_spinning_heading_are_flagged() -> None:
+    rng = np.random.default_rng(3)
+    inputs = _inputs(rng)
+    report = assess(replace(inputs, states=[StateValue("AHRS bias", 1835.6, 8.9, "deg")]))
+    assert [i.check for i in report.issues] == ["state"]
+    assert "1836 deg" in report.issues[0].cause
+    # the AHRS 0.66 deg/s away from an estimate that follows a biased gyro: unwrapped
+    tr = inputs.trajectory
+    poses = tr.poses_wTb.copy()
+    poses[:, 2] = np.deg2rad(0.66) * (tr.t_s - T0)
+    spun = replace(inputs, trajectory=Trajectory(tr.t_s, poses, tr.covs))
+    issues = [i for i in assess(spun).issues if i.check == "heading_bias"]
+    assert issues and issues[0].t0_s <= T0 + 240.0
+    assert issues[-1].t1_s == pytest.approx(tr.t_s[-1])
+
+
+def test_a_covariance_that_is_not_positive_definite_is_flagged() -> None:
+    rng = np.random.default_rng(4)
+    inputs = _inputs(rng)
+    tr = inputs.trajectory
+    assert tr.covs is not None
+    covs = tr.covs.copy()
+    covs[500:, 2, 2] = -1e-6
+    report = assess(replace(inputs, trajectory=Trajectory(tr.t_s, tr.poses_wTb, covs)))
+    (issue,) = report.issues
+    assert issue.check == "state" and "not positive definite" in issue.cause
+    assert issue.t0_s == pytest.approx(tr.t_s[500])
+
+
+def test_landmarks_created_instead_of_reobserved_are_flagged() -> None:
+    rng = np.random.default_rng(5)
+    inputs = _inputs(rng)
+    created = np.concatenate([inputs.landmark_created_s, T0 + np.linspace(1000.0, 1150.0, 30)])
+    again = inputs.reobserved_s[inputs.reobserved_s < T0 + 960.0]
+    report = assess(replace(inputs, landmark_created_s=created, reobserved_s=again))
+    assert {i.check for i in report.issues} == {"landmarks"}
+    assert report.issues[0].t0_s >= T0 + 960.0
+
+
+def test_the_median_bound_holds_its_level() -> None:
+    """Distribution-free: the lower bound exceeds the true median in at most alpha of the
+    windows (chi2(2) samples, 2,000 windows of 30)."""
+    rng = np.random.default_rng(6)
+    alpha = 0.05
+    bounds = np.array(
+        [median_lower_bound(chi2.rvs(2, size=30, random_state=rng), alpha) for _ in range(2000)]
+    )
+    exceed = np.mean(bounds > chi2.median(2))
+    assert exceed <= alpha + 0.015, exceed
+    assert median_lower_bound(np.ones(2), 1e-3) == -np.inf  # too few to bound
+
+
+def test_the_warnings_name_the_span_and_the_cause() -> None:
+    from datasets.errors import DataWarning
+
+    rng = np.random.default_rng(7)
+    report = assess(_inputs(rng, states=[StateValue("AHRS bias", 50.0, 2.0, "deg")]))
+    with pytest.warns(DataWarning, match=r"health: state at 0-1199 s into the run: the final"):
+        report.warn()
+    assert report.metrics()["health_flagged"] == ["state"]
+
+
+def test_the_config_is_range_checked() -> None:
+    with pytest.raises(ValueError, match="false_alarm"):
+        HealthConfig(false_alarm=0.9)
+
+
+# -- end to end on the simulator -----------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def gyro_harbour(tmp_path_factory):
+    """300 s of a held-back harbour whose gyro reads the true rate plus the marina MTi's
+    0.01 rad/s; and the same world with a clean gyro."""
+    import warnings
+
+    from datasets.simulator import make_scenario, simulate_records
+    from datasets.simulator.writer import write_dataset
+    from datasets.source import open_dataset
+
+    scenario = make_scenario("harbour", 10001, 300.0)
+    out = {}
+    for name, bias in (("clean", 0.0), ("biased", 0.01)):
+        noise = replace(scenario.noise, ahrs_gyro_bias_radps=bias)
+        sim = simulate_records(replace(scenario, noise=noise))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            out[name] = open_dataset(write_dataset(sim, tmp_path_factory.mktemp(name)))
+    return out
+
+
+def _quiet_run(ds, backend, settings=None):
+    import warnings
+
+    from slam.run.run import run_backend
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return run_backend(ds, backend, settings).metrics
+
+
+@pytest.mark.parametrize("backend", ["ekf", "isam2"])
+def test_clean_simulated_runs_are_healthy(gyro_harbour, backend):
+    m = _quiet_run(gyro_harbour["clean"], backend)
+    assert m["health_ok"], m["health_first_issue"]
+    assert m["health_nis_line_windows"] >= 1 and m["health_departure_windows"] >= 2
+
+
+def test_an_unmodelled_gyro_bias_with_a_walking_ahrs_bias_trips_the_monitor(gyro_harbour):
+    """The marina's failure on the simulator: the EKF's gyro-bias state held at 0 and the AHRS
+    bias allowed to walk. With the state (the default) the same data is healthy."""
+    ds = gyro_harbour["biased"]
+    noise = replace(ds.config.noise, ahrs_bias_walk_deg_per_sqrt_s=0.15)
+    walking = replace(ds, config=replace(ds.config, noise=noise))
+    bad = _quiet_run(walking, "ekf", {"ekf.gyro_bias_sigma_deg_per_s": 1e-6})
+    assert not bad["health_ok"]
+    assert {"heading_bias", "nis_heading"} & set(bad["health_flagged"]), bad["health_flagged"]
+    good = _quiet_run(walking, "ekf")
+    assert good["health_ok"], good["health_first_issue"]
+    assert good["state_gyro_bias_deg_per_s"] == pytest.approx(np.rad2deg(0.01), rel=0.1)
+
+
+def test_isam2_without_a_gyro_bias_state_is_flagged_on_a_biased_gyro(gyro_harbour):
+    """The runner refuses isam2 with the gyro and a walking AHRS bias; run through the closed
+    loop anyway, the monitor flags it."""
+    from slam.backends.registry import backend_spec
+    from slam.run.closed_loop import run_closed_loop
+    from slam.run.health import monitor_run
+    from slam.run.presets import run_config
+
+    ds = gyro_harbour["biased"]
+    noise = replace(ds.config.noise, ahrs_bias_walk_deg_per_sqrt_s=0.15)
+    ds = replace(ds, config=replace(ds.config, noise=noise))
+    config = run_config(ds.beams, "isam2", None, ds.config.noise)
+    mount = ds.config.sonar_mounting
+    result = run_closed_loop(
+        ds,
+        lambda t0, p0, c0: backend_spec("isam2").make(t0, p0, c0, mount, config.backend),
+        config.extractor,
+        progress=False,
+    )
+    report = monitor_run(ds, result)
+    assert not report.ok and "heading_bias" in report.checks_flagged(), report.line()
+
+
+def test_strict_exits_1_on_an_unhealthy_run_and_still_writes_it(gyro_harbour, tmp_path, capsys):
+    from slam.cli.main import main
+
+    walk = tmp_path / "walk.toml"
+    walk.write_text("[noise]\nahrs_bias_walk_deg_per_sqrt_s = 0.15\n")
+    out = tmp_path / "o"
+    args = ["run", str(gyro_harbour["biased"].root), "--backend", "ekf", "--config", str(walk)]
+    args += ["--set", "ekf.gyro_bias_sigma_deg_per_s=1e-6", "--out", str(out), "--quiet"]
+    assert main([*args, "--strict"]) == 1
+    cap = capsys.readouterr()
+    assert "warning: health: " in cap.err and "error: --strict:" in cap.err.splitlines()[-1]
+    assert "health: " in cap.out and (out / "metrics.json").is_file()
