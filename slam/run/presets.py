@@ -268,10 +268,8 @@ def run_config(
     and a dataset's ``noise`` calibration, with ``settings`` (``{"isam2.robust": "cauchy",
     "extractor.min_votes": 12}``) applied."""
     given = dict(settings or {})
-    scans = {k.partition(".")[2]: v for k, v in given.items() if k.startswith("scans.")}
-    ext, own = split_settings(
-        {k: v for k, v in given.items() if not k.startswith("scans.")}, backend
-    )
+    scans, rest = _scan_settings(given)
+    ext, own = split_settings(rest, backend)
     preset = preset_for(beams)
     return RunConfig(
         preset,
@@ -358,10 +356,24 @@ def split_settings(params: dict[str, Any], backend: str) -> tuple[dict[str, Any]
     return ext, own
 
 
+def _scan_settings(settings: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """``(scan matcher settings without their scope, the others)``."""
+    scans = {k.partition(".")[2]: v for k, v in settings.items() if k.startswith("scans.")}
+    return scans, {k: v for k, v in settings.items() if not k.startswith("scans.")}
+
+
 def check_settings(backend: str, settings: dict[str, Any]) -> None:
     """Check settings before anything is read or run: their scope, fields, types and ranges
     over the default configurations (with the preset the beams choose, :func:`run_config`
-    checks them again). Raises SettingError."""
-    ext, own = split_settings(settings, backend)
+    checks them again); ``scans.*`` for the back ends that take scans. Raises SettingError."""
+    scans, rest = _scan_settings(settings)
+    ext, own = split_settings(rest, backend)
     extractor_config("default", overrides=ext)
-    backend_config(backend, own)
+    config = backend_config(backend, own)
+    if scans:
+        if "scans" not in config.constraint_kinds:
+            raise SettingError(
+                next(iter(f"scans.{k}" for k in scans)),
+                f"back end {backend!r} takes no scans with constraints {config.constraints!r}",
+            )
+        apply_overrides(SCAN_PRESETS["default"], scans, prefix="scans.")
