@@ -14,10 +14,14 @@ python benchmarks/marina_registration.py [--source marina|DIR] [--set scans.FIEL
    submap apart), registered as submaps of ``submap_scans`` scans from several starts along
    that covariance (:func:`features.scans.icp.register_from`) - the rule of the factor graph
    (:mod:`slam.backends.isam2.scans`), with dead reckoning in place of its marginals.
-4. With ``--submaps N1,N2,...`` the revisits are registered once per submap size (``1``: scan
+4. **GPS-free**: the accepted revisits at most ``--short-gap`` s apart (200) against dead
+   reckoning's relative pose, whose covariance over so short a time is small and known: the NIS
+   of their difference and the factor on the registrations' covariance that makes its median
+   chi2(3)'s (``scans.revisit_cov_scale``).
+5. With ``--submaps N1,N2,...`` the revisits are registered once per submap size (``1``: scan
    to scan, one full turn each; ``3``: three consecutive scans each, the factor graph's), the
    same pairs each time, and a row is printed per size.
-5. **Scores** per kind: pairs, accepted, rejected by reason; of the accepted, the position
+6. **Scores** per kind: pairs, accepted, rejected by reason; of the accepted, the position
    error of the registration and of dead reckoning's guess against the ruler's relative pose
    (p50, p90, share beyond 2 m), the error in the directions the registration constrains, and
    the NEES of the registration (3 dof, its own covariance; the ruler's own error is not added,
@@ -37,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.stats import chi2
 
 from datasets.errors import DataError
 from datasets.source import Dataset, open_dataset
@@ -135,6 +140,53 @@ def score(
     }
 
 
+def short_revisit_consistency(
+    rows: list[tuple[Registration, np.ndarray]],
+    t_pairs: list[tuple[float, float]],
+    dr: Trajectory,
+    max_gap_s: float,
+) -> dict[str, Any]:
+    """GPS-free: accepted revisits at most ``max_gap_s`` apart against dead reckoning's relative
+    pose, whose covariance over so short a time is small and known (``S_k - S_j`` of its chain,
+    in scan j's frame). The NIS of their difference with the sum of the two covariances, and the
+    factor on the registrations' covariance that brings its median to chi2(3)'s (a revisit's
+    systematic error beyond the floor measured on consecutive scans)."""
+    diffs = []
+    for (reg, _), (tj, tk) in zip(rows, t_pairs, strict=True):
+        if not reg.accepted or tk - tj > max_gap_s or reg.n_constrained < 3:
+            continue
+        Cj, Ck = dr.covariance(tj), dr.covariance(tk)
+        if Cj is None or Ck is None:
+            continue
+        dS = 0.5 * ((Ck - Cj) + (Ck - Cj).T)
+        w, v = np.linalg.eigh(dS)
+        dS = (v * np.clip(w, 1e-10, None)) @ v.T
+        pj, pk = dr.poses(np.array([tj, tk]))
+        c, s = np.cos(pj[2]), np.sin(pj[2])
+        rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        d = between(pj, pk)
+        nu = np.array([*(reg.z[:2] - d[:2]), wrap_angle(reg.z[2] - d[2])])
+        diffs.append((nu, rot @ dS @ rot.T, reg.cov))
+    target = float(chi2.ppf(0.5, 3))
+
+    def median_nis(scale: float) -> float:
+        return float(np.median([nu @ np.linalg.solve(S + scale * C, nu) for nu, S, C in diffs]))
+
+    if len(diffs) < 10:
+        return {"pairs": len(diffs), "nis_median": float("nan"), "cov_scale": float("nan")}
+    scales = np.geomspace(0.25, 64.0, 97)
+    nis = np.array([median_nis(x) for x in scales])
+    above = np.flatnonzero(nis <= target)
+    scale = float(scales[above[0]]) if above.size else float("inf")
+    return {
+        "pairs": len(diffs),
+        "max_gap_s": max_gap_s,
+        "nis_median": median_nis(1.0),
+        "chi2_3_median": target,
+        "cov_scale": scale,
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -148,6 +200,12 @@ def main(argv: list[str] | None = None) -> int:
         "--submaps",
         default=None,
         help="comma list of submap sizes (odd scans) to register the same revisits with, e.g. 1,3,5",
+    )
+    ap.add_argument(
+        "--short-gap",
+        type=float,
+        default=200.0,
+        help="revisits at most this far apart (s) are scored against dead reckoning (GPS-free)",
     )
     ap.add_argument("--out", type=Path, default=None, help="JSON of the scores")
     args = ap.parse_args(argv)
@@ -189,6 +247,9 @@ def main(argv: list[str] | None = None) -> int:
             guess = between(*dr.poses(np.array([scans[j].t_ref_s, scans[k].t_ref_s])))
             rows.append((sized.register(j, k, guess, S), S))
         by_size[n] = score(rows, ruler, rev_t)
+        by_size[n]["short_revisits_vs_dead_reckoning"] = short_revisit_consistency(
+            rows, rev_t, dr, args.short_gap
+        )
     wall = time.perf_counter() - wall0
     result = {
         "source": str(ds.root),
@@ -226,6 +287,13 @@ def main(argv: list[str] | None = None) -> int:
             f"{f.format(**s['registration_constrained'])} | {f.format(**s['dead_reckoning_guess'])} | "
             f"{s['nees_mean']:.2f} [{s['nees_band_95'][0]:.2f}, {s['nees_band_95'][1]:.2f}] | "
             f"{', '.join(f'{k} {v}' for k, v in s['rejected'].items())} |"
+        )
+    for n, v in by_size.items():
+        c = v["short_revisits_vs_dead_reckoning"]
+        print(
+            f"GPS-free, submaps of {n}: {c['pairs']} revisits at most {args.short_gap:g} s apart"
+            f" against dead reckoning: NIS median {c['nis_median']:.2f} (chi2(3): 2.37); their"
+            f" covariance x{c['cov_scale']:.2f} makes it chi2(3)'s (scans.revisit_cov_scale)"
         )
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -63,6 +63,12 @@ class ScanConfig:
         A systematic error added in the constrained directions, per axis (m) and in yaw (deg):
         what the scans' own noise does not explain (the same wall's echo band seen from
         elsewhere, the motion correction). The README says how it was measured (GPS-free).
+    revisit_cov_scale : float
+        Factor on a revisit registration's covariance (submap to submap, from another pass):
+        the same walls seen from elsewhere, at other ranges and incidences, whose echo bands'
+        leading edges move with the view, which a floor measured on consecutive scans does not
+        hold. The README says how the marina's was measured (GPS-free: short revisits against
+        dead reckoning).
     starts_sigma : float
         With the guess's covariance given (:meth:`features.scans.matcher.ScanMatcher.register`
         for revisits), ICP also starts from the guess moved by this many sigmas either way
@@ -99,6 +105,7 @@ class ScanConfig:
     cov_scale: float = 4.0
     floor_sigma_m: float = 0.15
     floor_sigma_deg: float = 0.5
+    revisit_cov_scale: float = 1.0
     starts_sigma: float = 1.5
     ambiguity_ratio: float = 0.9
     min_inliers: int = 15
@@ -119,7 +126,7 @@ class ScanConfig:
             self.floor_sigma_m >= 0.0 and self.floor_sigma_deg >= 0.0 and self.starts_sigma >= 0.0
         ):
             raise ValueError("floor_sigma_m, floor_sigma_deg and starts_sigma must be >= 0")
-        for name in (*positive, "cov_scale", "max_sigma_m"):
+        for name in (*positive, "cov_scale", "max_sigma_m", "revisit_cov_scale"):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.iterations < 1 or self.min_inliers < 3 or self.min_normal_points < 2:

@@ -16,6 +16,8 @@ covariance and the directions it constrains (:class:`features.scans.icp.Registra
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import numpy.typing as npt
 
@@ -109,7 +111,8 @@ class ScanMatcher:
     ) -> Registration:
         """Submap ``k`` registered onto submap ``j`` from ``guess_jTk``: ``jTk``; with its
         covariance ``guess_cov`` (3, 3), from several starts
-        (:func:`features.scans.icp.register_from`).
+        (:func:`features.scans.icp.register_from`). Its covariance is scaled by
+        ``revisit_cov_scale``.
 
         The reference submap's lines are kept while its window is complete (an old scan).
         """
@@ -124,5 +127,9 @@ class ScanMatcher:
                 self._submap_lines[j] = ref
         guess = np.asarray(guess_jTk, dtype=np.float64)
         if guess_cov is None:
-            return register(ref, self.submap(k), guess, self.config)
-        return register_from(ref, self.submap(k), guess, np.asarray(guess_cov), self.config)
+            reg = register(ref, self.submap(k), guess, self.config)
+        else:
+            reg = register_from(ref, self.submap(k), guess, np.asarray(guess_cov), self.config)
+        if self.config.revisit_cov_scale == 1.0:
+            return reg
+        return replace(reg, cov=reg.cov * self.config.revisit_cov_scale)
