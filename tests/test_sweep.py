@@ -26,6 +26,7 @@ from slam.run.sweep import (
     summarise,
     sweep,
 )
+from slam.run.sweep_summary import held_back_note
 
 DURATION_S = 90.0
 
@@ -250,3 +251,84 @@ def test_sweep_on_the_drift_world_scores_against_the_truth(tmp_path, capsys):
         ekf_rows["ate_truth_aligned_mean_m"].mean(), rel=1e-9
     )
     assert (out / "sweep.png").stat().st_size > 10_000
+
+
+def _synthetic_table(n: int = 10) -> pd.DataFrame:
+    """DR and iSAM2 (online and smoothed) ATEs on ``n`` seeds, with known gains."""
+    rng = np.random.default_rng(3)
+    dr = rng.uniform(2.0, 6.0, n)
+    online, smoothed = dr * rng.uniform(0.6, 1.2, n), dr * rng.uniform(0.3, 1.05, n)
+    rows = []
+    for s in range(n):
+        rows.append(
+            {
+                "seed": s,
+                "backend": "dr",
+                "ate_truth_mean_m": dr[s],
+                "ate_truth_aligned_mean_m": dr[s] / 3,
+                "wall_s": 0.1,
+                "error": "",
+            }
+        )
+        rows.append({"seed": s, "backend": "isam2", "ate_truth_mean_m": online[s],
+                     "ate_truth_aligned_mean_m": online[s] / 4,
+                     "ate_truth_smoothed_mean_m": smoothed[s],
+                     "ate_truth_aligned_smoothed_mean_m": smoothed[s] / 5,
+                     "wall_s": 5.0, "error": "", "world_basins": 1 + s % 3})  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def test_summary_gives_the_spread_and_a_row_for_the_smoothed_trajectory():
+    table = pair_with_baseline(_synthetic_table())
+    summary = summarise(table, np.zeros(0), np.zeros(0)).set_index("config")
+    assert list(summary.index) == ["dr", "isam2", "isam2 smoothed"]
+    dr = table[table.backend == "dr"].set_index("seed")["ate_truth_mean_m"]
+    dr_aligned = table[table.backend == "dr"].set_index("seed")["ate_truth_aligned_mean_m"]
+    loop = table[table.backend == "isam2"].set_index("seed")
+    for config, col, aligned_col in (
+        ("isam2", "ate_truth_mean_m", "ate_truth_aligned_mean_m"),
+        ("isam2 smoothed", "ate_truth_smoothed_mean_m", "ate_truth_aligned_smoothed_mean_m"),
+    ):
+        rec = summary.loc[config]
+        gain = 1.0 - loop[col] / dr
+        gain_aligned = 1.0 - loop[aligned_col] / dr_aligned
+        for q in (10, 50, 90):
+            assert rec[f"gain_over_dr_p{q}"] == pytest.approx(np.percentile(gain, q), rel=1e-12)
+            assert rec[f"gain_over_dr_aligned_p{q}"] == pytest.approx(
+                np.percentile(gain_aligned, q), rel=1e-12
+            )
+        assert rec["gain_over_dr_min"] == pytest.approx(gain.min(), rel=1e-12)
+        assert rec["beats_dr_seeds"] == int((gain > 0).sum())
+        assert rec["worse_than_dr_by_10pct_seeds"] == int((gain < -0.10).sum())
+        assert rec["ate_truth_mean_m"] == pytest.approx(loop[col].mean(), rel=1e-12)
+    # the worst seeds of the smoothed trajectory, worst first, with their world
+    worst = sweep_mod.worst_seeds(table, "isam2 smoothed", 3)
+    gain = (1.0 - loop["ate_truth_smoothed_mean_m"] / dr).sort_values()
+    assert list(worst["seed"]) == list(gain.index[:3])
+    assert list(worst["world_basins"]) == [1 + s % 3 for s in gain.index[:3]]
+    text = sweep_mod.format_spread(summary.reset_index(), table, "synthetic", "a note")
+    assert "| isam2 smoothed | 10 |" in text and "The 3 worst seeds" not in text
+    assert "The 5 worst seeds of isam2 smoothed" in text and "a note" in text
+
+
+def test_held_back_seeds_are_named_in_the_report():
+    assert "held back" in held_back_note(list(range(10000, 10050)), 10000)
+    assert "tuning seeds" in held_back_note([0, 1], 10000)
+    assert "1 of 2 seeds" in held_back_note([0, 10000], 10000)
+
+
+def test_sweep_of_drawn_worlds_reports_the_spread_and_draws_the_worlds(tmp_path, capsys):
+    """The default world is drawn per seed: two tuning seeds differ in their walls, the rows
+    carry each world's geometry, spread.md and worlds.png are written."""
+    out, cache = tmp_path / "sweep", tmp_path / "sim"
+    argv = ["sweep", "--seeds", "1-2", "--backend", "dr,isam2", "--duration", "60"]
+    argv += ["--scheduler", "synchronous", "--out", str(out), "--cache", str(cache), "--quiet"]
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "isam2 smoothed" in printed and "tuning seeds" in printed
+    table = pd.read_csv(out / "sweep.csv")
+    assert set(table["world"]) == {"drawn"} and table["world_basins"].notna().all()
+    walls = [open_dataset(cache / f"drawn_{s}_60s").truth["walls_m"] for s in (1, 2)]
+    assert walls[0] != walls[1]
+    assert "## The 2 worst seeds of isam2 smoothed" in (out / "spread.md").read_text()
+    assert (out / "worlds.png").stat().st_size > 10_000
