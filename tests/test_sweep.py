@@ -139,8 +139,9 @@ def test_sweep_on_a_local_cluster_gives_the_rows_of_direct_runs(cache, tmp_path,
     (through the CLI): each dr row is the dead-reckoning ATE of its seed, each ekf row the one
     of run_backend, and the summary's ANEES is that of nees.npz."""
     out = tmp_path / "sweep"
-    argv = ["sweep", "--seeds", "0-1", "--backend", "dr,ekf", "--duration", str(DURATION_S)]
-    argv += ["--grid", "ekf.association=jcbb,nn", "--out", str(out), "--cache", str(cache)]
+    argv = ["sweep", "--world", "harbour", "--seeds", "0-1", "--backend", "dr,ekf"]
+    argv += ["--duration", str(DURATION_S), "--grid", "ekf.association=jcbb,nn"]
+    argv += ["--out", str(out), "--cache", str(cache)]
     assert main(argv + ["--quiet"]) == 0
     printed = capsys.readouterr().out
     assert "6 runs (0 failed)" in printed
@@ -174,6 +175,7 @@ def test_synchronous_sweep_equals_the_cluster_one(cache, tmp_path):
         [0],
         ["dr"],
         tmp_path / "s",
+        world="harbour",
         duration_s=DURATION_S,
         cache_dir=cache,
         scheduler="synchronous",
