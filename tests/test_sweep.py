@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pandas as pd
 import pytest
 
 import slam.run.sweep as sweep_mod
+from datasets.simulator import make_scenario, simulate_records, write_dataset
 from datasets.source import open_dataset
 from slam.backends.ekf import EkfConfig
 from slam.cli.main import main
@@ -334,3 +337,22 @@ def test_sweep_of_drawn_worlds_reports_the_spread_and_draws_the_worlds(tmp_path,
     assert walls[0] != walls[1]
     assert "## The 2 worst seeds of isam2 smoothed" in (out / "spread.md").read_text()
     assert (out / "worlds.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("bias_deg", [0.0, 3.0])
+def test_the_gauge_floor_is_the_start_pose_error_carried_over_the_run(tmp_path, bias_deg):
+    """Without GPS and AHRS noise the estimators' start pose is off by the AHRS's constant bias
+    alone, so the floor is the truth turned by that bias about the start: the mean distance
+    from the start times 2 sin(bias / 2)."""
+    sc = make_scenario("drawn", 7, 120.0)
+    assert sc.errors is not None
+    noise = replace(sc.noise, gps_sigma_m=1e-6, ahrs_sigma_deg=0.0, ahrs_bias_deg=bias_deg)
+    errors = replace(sc.errors, ahrs_heading_walk_deg_per_sqrt_s=0.0)
+    sim = simulate_records(replace(sc, noise=noise, errors=errors))
+    dataset = open_dataset(write_dataset(sim, tmp_path))
+    truth = truth_trajectory(dataset)
+    poses = truth.poses(truth.t_s)
+    start = truth.poses([dataset.gps.t[0]])[0]
+    turn = 2.0 * np.sin(np.radians(bias_deg) / 2.0)
+    expected = float(np.mean(np.hypot(*(poses[:, :2] - start[:2]).T))) * turn
+    assert sweep_mod.gauge_ate_m(dataset) == pytest.approx(expected, abs=0.01)

@@ -43,8 +43,10 @@ from tqdm import tqdm
 from datasets.errors import DataError, DataWarning
 from datasets.settings import SettingError, read_toml
 from datasets.simulator import HELD_BACK_SEED_MIN, simulate
-from datasets.source import open_dataset
+from datasets.source import Dataset, open_dataset
+from features.geometry import compose, inverse
 from slam.backends.registry import BACKENDS
+from slam.eval.ate import ate_against_truth
 from slam.eval.consistency import NeesSeries, anees, nees_on_grid, nees_series
 from slam.eval.truth import truth_trajectory
 from slam.io.files import make_output_dir, write_atomic, write_text
@@ -53,6 +55,7 @@ from slam.io.trajectory import Trajectory
 from slam.run.presets import check_settings, parse_value
 from slam.run.run import backend_names, run_backend
 from slam.run.sonar_calibration import write_sonar_calibration
+from slam.run.sources import start_pose
 from slam.run.sweep_summary import (
     config_columns,
     config_labels,
@@ -75,6 +78,7 @@ __all__ = [
     "expand_tasks",
     "simulate_cached",
     "calibrate_cached",
+    "gauge_ate_m",
     "run_task",
     "config_labels",
     "format_summary",
@@ -296,6 +300,8 @@ def _run_into(
     try:
         dataset = open_dataset(source, config_override)
         row.update(world_columns(dataset.truth))
+        if dataset.truth is not None:
+            row["gauge_ate_m"] = gauge_ate_m(dataset)
         run = run_backend(dataset, task.backend, task.params_dict)
         row.update(
             {
@@ -315,6 +321,17 @@ def _run_into(
         return "", nees_pose, nees_position
     except Exception as exc:  # one failed run must not stop a 50-seed sweep
         return f"{type(exc).__name__}: {exc}", empty, empty
+
+
+def gauge_ate_m(dataset: Dataset) -> float:
+    """The ATE against the truth (m) of the truth itself moved rigidly onto the estimators'
+    start pose (the first GPS fix and the AHRS heading there, :func:`start_pose`): what no
+    GPS-free estimator can correct, since nothing it measures sees where the whole run sits or
+    how it is turned. A run whose ATE is at this floor has nothing left to gain unaligned."""
+    t0, pose0, _ = start_pose(dataset)
+    truth = truth_trajectory(dataset)
+    moved = compose(compose(pose0, inverse(truth.poses([t0])[0])), truth.poses(truth.t_s))
+    return float(ate_against_truth(Trajectory(truth.t_s, moved), truth).ate_mean_m)
 
 
 def _pad(rows: Sequence[np.ndarray]) -> np.ndarray:

@@ -356,6 +356,7 @@ def worst_seeds(table: pd.DataFrame, config: str, n: int = 5) -> pd.DataFrame:
         f"gain_over_dr_aligned{suffix}": "gain_aligned",
         "truth_precision": "precision",
         "truth_recall": "recall",
+        "gauge_ate_m": "gauge_m",
         **({} if view else {"nees_mean": "nees_mean"}),  # a smoothed trajectory has no NEES
         **{c: c for c in WORLD_COLUMNS},
     }
