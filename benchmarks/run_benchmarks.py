@@ -4,6 +4,7 @@
   beam, and voting one sector against scikit-image's ``hough_line``;
 * ``extractor_consistency.py``: the pool test over 50 seeds and the NEES of both covariance
   methods on the simulator;
+* ``simulator_speed.py``: one drawn world of 1,800 s simulated and written on one core;
 * ``ekf_speed.py``: the EKF back end in closed loop on one core, time per line update;
 * ``isam2_speed.py``: the GTSAM back end in closed loop on one core, time per iSAM2 update;
 * ``association_quality.py``: association precision and recall of both back ends against the
@@ -26,6 +27,7 @@ HERE = Path(__file__).resolve().parent
 SCRIPTS = (
     ("extractor_speed.py", "out/extractor_speed.json"),
     ("extractor_consistency.py", "out/extractor_consistency.json"),
+    ("simulator_speed.py", "out/simulator_speed.json"),
     ("ekf_speed.py", "out/ekf_speed.json"),
     ("isam2_speed.py", "out/isam2_speed.json"),
     ("association_quality.py", "out/association_quality.json"),

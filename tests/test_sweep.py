@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pandas as pd
 import pytest
 
 import slam.run.sweep as sweep_mod
+from datasets.simulator import make_scenario, simulate_records, write_dataset
 from datasets.source import open_dataset
 from slam.backends.ekf import EkfConfig
 from slam.cli.main import main
@@ -26,6 +29,7 @@ from slam.run.sweep import (
     summarise,
     sweep,
 )
+from slam.run.sweep_summary import held_back_note
 
 DURATION_S = 90.0
 
@@ -138,8 +142,9 @@ def test_sweep_on_a_local_cluster_gives_the_rows_of_direct_runs(cache, tmp_path,
     (through the CLI): each dr row is the dead-reckoning ATE of its seed, each ekf row the one
     of run_backend, and the summary's ANEES is that of nees.npz."""
     out = tmp_path / "sweep"
-    argv = ["sweep", "--seeds", "0-1", "--backend", "dr,ekf", "--duration", str(DURATION_S)]
-    argv += ["--grid", "ekf.association=jcbb,nn", "--out", str(out), "--cache", str(cache)]
+    argv = ["sweep", "--world", "harbour", "--seeds", "0-1", "--backend", "dr,ekf"]
+    argv += ["--duration", str(DURATION_S), "--grid", "ekf.association=jcbb,nn"]
+    argv += ["--out", str(out), "--cache", str(cache)]
     assert main(argv + ["--quiet"]) == 0
     printed = capsys.readouterr().out
     assert "6 runs (0 failed)" in printed
@@ -173,6 +178,7 @@ def test_synchronous_sweep_equals_the_cluster_one(cache, tmp_path):
         [0],
         ["dr"],
         tmp_path / "s",
+        world="harbour",
         duration_s=DURATION_S,
         cache_dir=cache,
         scheduler="synchronous",
@@ -250,3 +256,103 @@ def test_sweep_on_the_drift_world_scores_against_the_truth(tmp_path, capsys):
         ekf_rows["ate_truth_aligned_mean_m"].mean(), rel=1e-9
     )
     assert (out / "sweep.png").stat().st_size > 10_000
+
+
+def _synthetic_table(n: int = 10) -> pd.DataFrame:
+    """DR and iSAM2 (online and smoothed) ATEs on ``n`` seeds, with known gains."""
+    rng = np.random.default_rng(3)
+    dr = rng.uniform(2.0, 6.0, n)
+    online, smoothed = dr * rng.uniform(0.6, 1.2, n), dr * rng.uniform(0.3, 1.05, n)
+    rows = []
+    for s in range(n):
+        rows.append(
+            {
+                "seed": s,
+                "backend": "dr",
+                "ate_truth_mean_m": dr[s],
+                "ate_truth_aligned_mean_m": dr[s] / 3,
+                "wall_s": 0.1,
+                "error": "",
+            }
+        )
+        rows.append({"seed": s, "backend": "isam2", "ate_truth_mean_m": online[s],
+                     "ate_truth_aligned_mean_m": online[s] / 4,
+                     "ate_truth_smoothed_mean_m": smoothed[s],
+                     "ate_truth_aligned_smoothed_mean_m": smoothed[s] / 5,
+                     "wall_s": 5.0, "error": "", "world_basins": 1 + s % 3})  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def test_summary_gives_the_spread_and_a_row_for_the_smoothed_trajectory():
+    table = pair_with_baseline(_synthetic_table())
+    summary = summarise(table, np.zeros(0), np.zeros(0)).set_index("config")
+    assert list(summary.index) == ["dr", "isam2", "isam2 smoothed"]
+    dr = table[table.backend == "dr"].set_index("seed")["ate_truth_mean_m"]
+    dr_aligned = table[table.backend == "dr"].set_index("seed")["ate_truth_aligned_mean_m"]
+    loop = table[table.backend == "isam2"].set_index("seed")
+    for config, col, aligned_col in (
+        ("isam2", "ate_truth_mean_m", "ate_truth_aligned_mean_m"),
+        ("isam2 smoothed", "ate_truth_smoothed_mean_m", "ate_truth_aligned_smoothed_mean_m"),
+    ):
+        rec = summary.loc[config]
+        gain = 1.0 - loop[col] / dr
+        gain_aligned = 1.0 - loop[aligned_col] / dr_aligned
+        for q in (10, 50, 90):
+            assert rec[f"gain_over_dr_p{q}"] == pytest.approx(np.percentile(gain, q), rel=1e-12)
+            assert rec[f"gain_over_dr_aligned_p{q}"] == pytest.approx(
+                np.percentile(gain_aligned, q), rel=1e-12
+            )
+        assert rec["gain_over_dr_min"] == pytest.approx(gain.min(), rel=1e-12)
+        assert rec["beats_dr_seeds"] == int((gain > 0).sum())
+        assert rec["worse_than_dr_by_10pct_seeds"] == int((gain < -0.10).sum())
+        assert rec["ate_truth_mean_m"] == pytest.approx(loop[col].mean(), rel=1e-12)
+    # the worst seeds of the smoothed trajectory, worst first, with their world
+    worst = sweep_mod.worst_seeds(table, "isam2 smoothed", 3)
+    gain = (1.0 - loop["ate_truth_smoothed_mean_m"] / dr).sort_values()
+    assert list(worst["seed"]) == list(gain.index[:3])
+    assert list(worst["world_basins"]) == [1 + s % 3 for s in gain.index[:3]]
+    text = sweep_mod.format_spread(summary.reset_index(), table, "synthetic", "a note")
+    assert "| isam2 smoothed | 10 |" in text and "The 3 worst seeds" not in text
+    assert "The 5 worst seeds of isam2 smoothed" in text and "a note" in text
+
+
+def test_held_back_seeds_are_named_in_the_report():
+    assert "held back" in held_back_note(list(range(10000, 10050)), 10000)
+    assert "tuning seeds" in held_back_note([0, 1], 10000)
+    assert "1 of 2 seeds" in held_back_note([0, 10000], 10000)
+
+
+def test_sweep_of_drawn_worlds_reports_the_spread_and_draws_the_worlds(tmp_path, capsys):
+    """The default world is drawn per seed: two tuning seeds differ in their walls, the rows
+    carry each world's geometry, spread.md and worlds.png are written."""
+    out, cache = tmp_path / "sweep", tmp_path / "sim"
+    argv = ["sweep", "--seeds", "1-2", "--backend", "dr,isam2", "--duration", "60"]
+    argv += ["--scheduler", "synchronous", "--out", str(out), "--cache", str(cache), "--quiet"]
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "isam2 smoothed" in printed and "tuning seeds" in printed
+    table = pd.read_csv(out / "sweep.csv")
+    assert set(table["world"]) == {"drawn"} and table["world_basins"].notna().all()
+    walls = [open_dataset(cache / f"drawn_{s}_60s").truth["walls_m"] for s in (1, 2)]
+    assert walls[0] != walls[1]
+    assert "## The 2 worst seeds of isam2 smoothed" in (out / "spread.md").read_text()
+    assert (out / "worlds.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("bias_deg", [0.0, 3.0])
+def test_the_gauge_floor_is_the_start_pose_error_carried_over_the_run(tmp_path, bias_deg):
+    """Without GPS and AHRS noise the estimators' start pose is off by the AHRS's constant bias
+    alone, so the floor is the truth turned by that bias about the start: the mean distance
+    from the start times 2 sin(bias / 2)."""
+    sc = make_scenario("drawn", 7, 120.0)
+    assert sc.errors is not None
+    noise = replace(sc.noise, gps_sigma_m=1e-6, ahrs_sigma_deg=0.0, ahrs_bias_deg=bias_deg)
+    errors = replace(sc.errors, ahrs_heading_walk_deg_per_sqrt_s=0.0)
+    sim = simulate_records(replace(sc, noise=noise, errors=errors))
+    dataset = open_dataset(write_dataset(sim, tmp_path))
+    truth = truth_trajectory(dataset)
+    poses = truth.poses(truth.t_s)
+    start = truth.poses([dataset.gps.t[0]])[0]
+    turn = 2.0 * np.sin(np.radians(bias_deg) / 2.0)
+    expected = float(np.mean(np.hypot(*(poses[:, :2] - start[:2]).T))) * turn
+    assert sweep_mod.gauge_ate_m(dataset) == pytest.approx(expected, abs=0.01)

@@ -4,13 +4,15 @@
 (kinds: :data:`KINDS`); ``simulate_records(make_scenario(kind, seed))`` gives the same run in
 memory.
 
-Modules: ``world`` (walls), ``path`` (true motion), ``msis`` (the sonar beam model),
+Modules: ``world`` (walls and the fixed worlds), ``layout`` (harbours drawn per seed), ``path`` (true motion), ``msis`` (the sonar beam model),
 ``sensors`` (DVL, AHRS, GPS), ``scenario`` (what is simulated, in memory), ``writer`` (files).
 """
 
+from datasets.simulator.layout import drawn_world
 from datasets.simulator.msis import EchoModel, beam_axis_hits, cast_rays, simulate_msis
 from datasets.simulator.path import Trajectory, free_path, stationary, survey, waypoint_path
 from datasets.simulator.scenario import (
+    HELD_BACK_SEED_MIN,
     KINDS,
     Scenario,
     Simulation,
@@ -30,6 +32,7 @@ from datasets.simulator.world import (
 from datasets.simulator.writer import simulate, write_dataset
 
 __all__ = [
+    "HELD_BACK_SEED_MIN",
     "KINDS",
     "DriftErrors",
     "EchoModel",
@@ -42,6 +45,7 @@ __all__ = [
     "beam_axis_hits",
     "cast_rays",
     "draw_drift_errors",
+    "drawn_world",
     "drift_world",
     "free_path",
     "harbour_world",

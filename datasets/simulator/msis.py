@@ -42,6 +42,7 @@ from sonar.beam import Mounting, SonarBeam, SonarHead, bin_range_m
 __all__ = [
     "EchoModel",
     "cast_rays",
+    "first_hits",
     "sonar_poses",
     "beam_axis_hits",
     "beam_times",
@@ -110,6 +111,15 @@ def cast_rays(
     incidence_rad : ndarray, shape (B, R)
         Angle between the ray and the wall normal, in ``[0, pi/2]`` (rad); NaN with the range.
     """
+    r, inc, _ = first_hits(walls_m, origins_m, angles_rad)
+    return r, inc
+
+
+def first_hits(
+    walls_m: FloatArray, origins_m: npt.ArrayLike, angles_rad: npt.ArrayLike
+) -> tuple[FloatArray, FloatArray, npt.NDArray[np.intp]]:
+    """:func:`cast_rays` with the index of the wall each ray meets first (shape (B, R);
+    meaningless where the range is NaN)."""
     o = np.asarray(origins_m, dtype=np.float64)
     ang = np.asarray(angles_rad, dtype=np.float64)
     dx, dy = np.cos(ang)[..., None], np.sin(ang)[..., None]  # (B, R, 1)
@@ -130,7 +140,7 @@ def cast_rays(
     d = np.abs(np.take_along_axis(denom, j[..., None], axis=-1)[..., 0])
     cos_inc = np.clip(d / np.linalg.norm(e, axis=1)[j], 0.0, 1.0)
     none = ~np.isfinite(r)
-    return np.where(none, np.nan, r), np.where(none, np.nan, np.arccos(cos_inc))
+    return np.where(none, np.nan, r), np.where(none, np.nan, np.arccos(cos_inc)), j
 
 
 def sonar_poses(wTb: npt.ArrayLike, mounting: Mounting) -> FloatArray:
@@ -278,18 +288,36 @@ def render_intensities(
     return out
 
 
+def _walls_near(walls_m: FloatArray, origins_m: FloatArray, reach_m: float) -> npt.NDArray[np.intp]:
+    """Indices of the walls that may lie within ``reach_m`` of any of the origins (m): those
+    within reach of the origins' bounding box (a ray meets no other wall inside the range)."""
+    lo, hi = origins_m.min(axis=0), origins_m.max(axis=0)
+    centre, half_diag = (lo + hi) / 2.0, float(np.linalg.norm(hi - lo)) / 2.0
+    a = walls_m[:, 0]
+    ab = walls_m[:, 1] - a
+    u = np.clip(
+        np.sum((centre - a) * ab, axis=1) / np.maximum(np.sum(ab * ab, axis=1), 1e-12), 0, 1
+    )
+    dist = np.linalg.norm(a + u[:, None] * ab - centre, axis=1)
+    near = np.flatnonzero(dist <= reach_m + half_diag)
+    return near if near.size else np.arange(walls_m.shape[0])
+
+
 def _offset_profile(
-    delta_m: FloatArray, offset_m: float, sigma_m: float, echo: EchoModel
+    delta_m: FloatArray,
+    offset_m: float,
+    sigma_m: float,
+    echo: EchoModel,
+    tail_m: float | FloatArray,
 ) -> FloatArray:
     """The echo profile that peaks ``offset_m`` behind the wall face, with its leading edge (half
-    the peak) on it (module docstring); ``delta_m`` is bin range minus wall range (m)."""
+    the peak) on it (module docstring); ``delta_m`` is bin range minus wall range (m), ``tail_m``
+    the length of the tail (m, or per ray, broadcast against ``delta_m``)."""
     peak = 1.0 + echo.tail_fraction
     rise_sigma_m = offset_m / np.sqrt(2.0 * np.log(2.0))
     after = delta_m - offset_m
     behind = np.maximum(after, 0.0)
-    fall = np.exp(-0.5 * (behind / sigma_m) ** 2) + echo.tail_fraction * np.exp(
-        -behind / echo.tail_m
-    )
+    fall = np.exp(-0.5 * (behind / sigma_m) ** 2) + echo.tail_fraction * np.exp(-behind / tail_m)
     rise = peak * np.exp(-0.5 * (np.minimum(after, 0.0) / rise_sigma_m) ** 2)
     return np.asarray(np.where(after < 0.0, rise, fall))
 
@@ -312,7 +340,9 @@ def _render_chunk(
     weights = np.exp(-0.5 * (offsets / (head.beam_width_rad / 2.3548)) ** 2)
     weights /= weights.sum()
     ray_angles = (wTs[:, 2] + head.bearing_rad(angles))[:, None] + offsets[None, :]
-    r, inc = cast_rays(world.walls_m, wTs[:, :2], ray_angles)  # (B, R)
+    near = _walls_near(world.walls_m, wTs[:, :2], head.range_max_m + 2.0 * head.bin_size_m)
+    r, inc, j = first_hits(world.walls_m[near], wTs[:, :2], ray_angles)  # (B, R)
+    hit_wall = near[j]
 
     fade_span = echo.incidence_cutoff_rad - echo.incidence_fade_start_rad
     fade = np.clip((echo.incidence_cutoff_rad - inc) / fade_span, 0.0, 1.0)
@@ -324,21 +354,25 @@ def _render_chunk(
         * fade
         * np.exp(-echo.range_decay_per_m * r)
     )
+    if world.wall_gain is not None:  # each wall's own echo strength
+        amp = amp * world.wall_gain[hit_wall]
     visible = np.isfinite(r) & (r >= echo.dead_zone_m) & (r <= head.range_max_m + head.bin_size_m)
     amp = np.where(visible, amp, 0.0)
     r = np.where(visible, r, -1e3)
 
     delta = r_bins[None, None, :] - r[..., None]  # (B, R, N), m
     sigma_m = echo.pulse_sigma_bins * head.bin_size_m
+    # each wall's band thickness: the length of its echo's tail
+    tail_m: float | FloatArray = (
+        echo.tail_m if world.wall_band_m is None else world.wall_band_m[hit_wall][..., None]
+    )
     if range_offset_m > 0.0:
-        profile = _offset_profile(delta, range_offset_m, sigma_m, echo)
+        profile = _offset_profile(delta, range_offset_m, sigma_m, echo, tail_m)
     else:
         profile = np.exp(-0.5 * (delta / sigma_m) ** 2)
         if echo.tail_fraction > 0.0:
             behind = np.maximum(delta, 0.0)
-            profile += np.where(
-                delta > 0.0, echo.tail_fraction * np.exp(-behind / echo.tail_m), 0.0
-            )
+            profile += np.where(delta > 0.0, echo.tail_fraction * np.exp(-behind / tail_m), 0.0)
     signal = np.einsum("brn,br->bn", profile, amp)
 
     if echo.dead_zone_m > 0.0:

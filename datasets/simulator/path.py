@@ -23,6 +23,7 @@ __all__ = [
     "waypoint_path",
     "survey",
     "free_path",
+    "route_samples",
 ]
 
 #: Default start time of simulated runs (Unix s).
@@ -167,6 +168,36 @@ def _evaluate(
     dx = np.where(straight, sigma * np.cos(h0), (np.sin(h) - np.sin(h0)) / k_safe)
     dy = np.where(straight, sigma * np.sin(h0), -(np.cos(h) - np.cos(h0)) / k_safe)
     return prims["p0"][i] + np.stack([dx, dy], axis=-1), h, k
+
+
+def route_samples(
+    waypoints_m: npt.ArrayLike, turn_radius_m: float, step_m: float = 0.5
+) -> tuple[FloatArray, float]:
+    """Points every ``step_m`` along a closed route with its fillets, as
+    :func:`waypoint_path` follows it.
+
+    Parameters
+    ----------
+    waypoints_m : array_like, shape (K, 2)
+        Corners of the closed route (world, m).
+    turn_radius_m, step_m : float
+        Fillet radius and spacing of the points (m).
+
+    Returns
+    -------
+    points_m : ndarray, shape (P, 2)
+    length_m : float
+        Length of one lap (m).
+
+    Raises
+    ------
+    ValueError
+        If a leg is too short for the fillets of its corners, or a turn is beyond 170 deg.
+    """
+    prims = _primitives(np.asarray(waypoints_m, dtype=np.float64), turn_radius_m, closed=True)
+    total_m = float(prims["s0"][-1] + prims["length"][-1])
+    xy, _, _ = _evaluate(prims, np.arange(0.0, total_m, step_m))
+    return xy, total_m
 
 
 def waypoint_path(

@@ -6,10 +6,16 @@ component (world, path, sonar, DVL, AHRS, GPS, then the drift errors and the hea
 same seed always gives the same run, bit for bit, and a component's draws never shift another's.
 
 Kinds: ``pool`` (the seed paper's pool test), ``harbour`` (a marina-like survey, 600 s),
-``random`` (a free path in a random rectilinear harbour, 600 s) and ``drift``
+``random`` (a free path in a random rectilinear harbour, 600 s), ``drift``
 (:func:`~datasets.simulator.world.drift_world`, 1,800 s, with the systematic sensor errors of a
 real vehicle, :class:`~datasets.simulator.sensors.DriftErrors`, drawn per seed by
-:func:`draw_drift_errors`).
+:func:`draw_drift_errors`) and ``drawn`` (1,800 s with the same errors in a harbour and route
+drawn per seed, :func:`~datasets.simulator.layout.drawn_world`, and the AHRS's constant heading
+bias drawn per seed too). ``harbour`` and ``drift`` are fixed layouts (only the sensors' draws
+change with the seed): regression tests and figures; ``drawn`` is the one whose worlds differ.
+
+Seeds from :data:`HELD_BACK_SEED_MIN` on are held back: nothing is tuned on them, and the
+README's headline figures on the simulator come from them.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ import numpy as np
 
 from datasets.config import DatasetConfig, NoiseConfig
 from datasets.records import Attitude, DvlVelocity, GpsFix, Record
+from datasets.simulator.layout import drawn_world
 from datasets.simulator.msis import EchoModel, beam_axis_hits, simulate_msis
 from datasets.simulator.path import T0_S, Trajectory, free_path, stationary, survey
 from datasets.simulator.sensors import (
@@ -47,6 +54,8 @@ from sonar.beam import Mounting, SonarBeam, SonarHead
 
 __all__ = [
     "KINDS",
+    "HELD_BACK_SEED_MIN",
+    "AHRS_BIAS_SIGMA_DEG",
     "MARINA_HEAD",
     "POOL_HEAD",
     "SONAR_MOUNTING",
@@ -65,7 +74,14 @@ __all__ = [
     "simulate_records",
 ]
 
-KINDS = ("pool", "harbour", "random", "drift")
+KINDS = ("pool", "harbour", "random", "drift", "drawn")
+
+#: Seeds from here on are held back: never used while tuning anything; results count on them.
+HELD_BACK_SEED_MIN = 10_000
+
+#: Drawn worlds: 1-sigma of the AHRS's constant heading bias, drawn per seed (deg); the
+#: estimators are told this specification, never the realisation.
+AHRS_BIAS_SIGMA_DEG = 2.0
 
 #: The marina's Miniking: 500 bins of 0.1 m (50 m), 1.8 deg step, 3 deg beam, clockwise angles.
 MARINA_HEAD = SonarHead(
@@ -84,7 +100,13 @@ SONAR_MOUNTING = Mounting(x_m=0.3, y_m=0.0, yaw_rad=math.pi, source="simulator t
 DVL_MOUNTING = Mounting(yaw_rad=math.radians(-90.0), source="simulator truth")
 AHRS_MOUNTING = Mounting(yaw_rad=0.0, source="simulator truth (the heading bias is in the noise)")
 
-_DEFAULT_DURATION_S = {"pool": 165.0, "harbour": 600.0, "random": 600.0, "drift": 1800.0}
+_DEFAULT_DURATION_S = {
+    "pool": 165.0,
+    "harbour": 600.0,
+    "random": 600.0,
+    "drift": 1800.0,
+    "drawn": 1800.0,
+}
 
 #: Drift world: magnitude range of the DVL scale factor, drawn per seed with a random sign.
 DRIFT_DVL_SCALE_RANGE = (0.01, 0.02)
@@ -108,7 +130,8 @@ class Scenario:
     kind : str
         ``"pool"`` (stationary sonar in the seed paper's pool), ``"harbour"`` (survey of a
         marina-like harbour), ``"random"`` (free path in a random rectilinear harbour) or
-        ``"drift"`` (long survey of :func:`~datasets.simulator.world.drift_world`).
+        ``"drift"`` (long survey of :func:`~datasets.simulator.world.drift_world`) or ``"drawn"``
+        (long survey of a world drawn from the seed).
     seed : int
         Seed of every random draw (with the kind, see the module docstring).
     duration_s : float
@@ -133,6 +156,9 @@ class Scenario:
         Pool only: yaw of the sonar frame in the world (rad); the sonar sits at the origin.
     origin : GeodeticOrigin
         Geodetic point of the world origin.
+    ahrs_bias_sigma_deg : float or None
+        The AHRS constant bias's specification (1-sigma, deg) when it is drawn per seed; None:
+        the estimators are told ``noise.ahrs_bias_deg`` itself (a fixed, known-size bias).
     path_rate_hz, dvl_rate_hz, ahrs_rate_hz, gps_rate_hz : float
         Sampling rates of the truth and the sensors (Hz).
     """
@@ -153,6 +179,7 @@ class Scenario:
     speed_mps: float = 0.45
     pool_sonar_yaw_rad: float = math.radians(10.0)
     origin: GeodeticOrigin = MARINA_ORIGIN
+    ahrs_bias_sigma_deg: float | None = None
     path_rate_hz: float = 50.0
     dvl_rate_hz: float = 1.5
     ahrs_rate_hz: float = 10.0
@@ -173,6 +200,7 @@ class Scenario:
         """The ``sonarslam.toml`` content: head, true mountings, and the noise the estimators
         should assume (the AHRS sigma includes the unmodelled constant bias, in quadrature)."""
         n = self.noise
+        bias_deg = n.ahrs_bias_deg if self.ahrs_bias_sigma_deg is None else self.ahrs_bias_sigma_deg
         return DatasetConfig(
             sonar=self.head,
             sonar_mounting=self.sonar_mounting,
@@ -181,7 +209,7 @@ class Scenario:
             noise=NoiseConfig(
                 # a noise-free sensor (tests) still gets a usable sigma: the settings' floor
                 dvl_sigma_mps=max(n.dvl_sigma_mps, 1e-3),
-                ahrs_sigma_deg=max(math.hypot(n.ahrs_sigma_deg, n.ahrs_bias_deg), 1e-3),
+                ahrs_sigma_deg=max(math.hypot(n.ahrs_sigma_deg, bias_deg), 1e-3),
                 gps_sigma_m=n.gps_sigma_m,
                 dvl_max_gap_s=10.0,
                 # a DVL that degrades: its usual scatter is its white noise (slam.model.motion)
@@ -219,11 +247,12 @@ def make_scenario(kind: str, seed: int, duration_s: float | None = None) -> Scen
 
     Parameters
     ----------
-    kind : {"pool", "harbour", "random", "drift"}
+    kind : {"pool", "harbour", "random", "drift", "drawn"}
         Pool: stationary sonar at the world origin, 6 m range, 0.45 deg step, 0.5 m dead zone,
         165 s (three full turns at 14.7 beams/s). Harbour and random: the marina's head, 600 s.
         Drift: the marina's head, 1,800 s, the drift errors of the seed
-        (:func:`draw_drift_errors`).
+        (:func:`draw_drift_errors`). Drawn: as drift, in the seed's own world, with the AHRS's
+        constant bias drawn from N(0, :data:`AHRS_BIAS_SIGMA_DEG`).
     seed : int
     duration_s : float, optional
         Overrides the default length (s).
@@ -246,6 +275,17 @@ def make_scenario(kind: str, seed: int, duration_s: float | None = None) -> Scen
     if kind == "drift":
         errors = draw_drift_errors(_seed_streams(seed, kind)["errors"])
         return Scenario(kind=kind, seed=seed, duration_s=duration, errors=errors)
+    if kind == "drawn":
+        streams = _seed_streams(seed, kind)
+        bias_deg = float(streams["bias"].normal(0.0, AHRS_BIAS_SIGMA_DEG))
+        return Scenario(
+            kind=kind,
+            seed=seed,
+            duration_s=duration,
+            errors=draw_drift_errors(streams["errors"]),
+            noise=SensorNoise(ahrs_bias_deg=bias_deg),
+            ahrs_bias_sigma_deg=AHRS_BIAS_SIGMA_DEG,
+        )
     return Scenario(kind=kind, seed=seed, duration_s=duration)
 
 
@@ -253,7 +293,7 @@ def _seed_streams(seed: int, kind: str) -> dict[str, np.random.Generator]:
     """One independent generator per component, from the seed and the kind (so that two kinds
     with the same seed do not share their noise). Names are only ever appended: spawning more
     children leaves the earlier ones, and so the older kinds' runs, as they were."""
-    names = ("world", "path", "sonar", "dvl", "ahrs", "gps", "errors", "heading_walk")
+    names = ("world", "path", "sonar", "dvl", "ahrs", "gps", "errors", "heading_walk", "bias")
     root = np.random.SeedSequence([seed, KINDS.index(kind)])
     return {n: np.random.default_rng(c) for n, c in zip(names, root.spawn(len(names)), strict=True)}
 
@@ -270,6 +310,8 @@ def make_world(scenario: Scenario) -> World:
         return harbour_world()
     if scenario.kind == "drift":
         return drift_world()
+    if scenario.kind == "drawn":
+        return drawn_world(_streams(scenario)["world"])
     return random_harbour_world(_streams(scenario)["world"])
 
 
@@ -348,7 +390,7 @@ def _trajectory(scenario: Scenario, world: World, rng: np.random.Generator) -> T
         wTs = np.array([0.0, 0.0, scenario.pool_sonar_yaw_rad])
         wTb = compose(wTs, inverse(scenario.sonar_mounting.as_pose()))
         return stationary(wTb, scenario.duration_s, scenario.path_rate_hz, scenario.t0_s)
-    if scenario.kind in ("harbour", "drift"):
+    if scenario.kind in ("harbour", "drift", "drawn"):
         return survey(
             world, scenario.duration_s, scenario.speed_mps, scenario.path_rate_hz, scenario.t0_s
         )

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -46,18 +47,40 @@ class World:
         ``route_turn_radius_m`` can follow at least 3 m from every wall; None if the world has none.
     route_turn_radius_m : float
         Largest turn radius (m) for which ``route_m`` keeps its clearance.
+    wall_gain : ndarray, shape (N,) or None
+        Echo strength of each wall, a factor on the echo model's gain; None: 1 for every wall.
+    wall_band_m : ndarray, shape (N,) or None
+        Band thickness of each wall: the length of its echo's tail behind the face (m); None:
+        the echo model's ``tail_m`` for every wall.
+    wall_curve : ndarray of int, shape (N,) or None
+        Index of the curved stretch a wall is a facet of (-1: a straight wall); None: all
+        straight.
+    wall_material : tuple of str or None
+        Material of each wall (``quay``, ``breakwater``, ``hull``, ``pontoon``, ``pier``).
+    layout : dict or None
+        A summary of a drawn world (:func:`datasets.simulator.layout.drawn_world`): basins,
+        channels, features, lap; None for the fixed worlds.
     """
 
     name: str
     walls_m: FloatArray = field(repr=False)
     route_m: FloatArray | None = field(default=None, repr=False)
     route_turn_radius_m: float = 0.0
+    wall_gain: FloatArray | None = field(default=None, repr=False)
+    wall_band_m: FloatArray | None = field(default=None, repr=False)
+    wall_curve: npt.NDArray[np.int64] | None = field(default=None, repr=False)
+    wall_material: tuple[str, ...] | None = field(default=None, repr=False)
+    layout: dict[str, Any] | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         w = np.asarray(self.walls_m, dtype=np.float64)
         if w.ndim != 3 or w.shape[1:] != (2, 2) or w.shape[0] == 0:
             raise ValueError(f"World.walls_m must have shape (N, 2, 2), got {w.shape}")
         object.__setattr__(self, "walls_m", w)
+        for name in ("wall_gain", "wall_band_m", "wall_curve", "wall_material"):
+            v = getattr(self, name)
+            if v is not None and len(v) != w.shape[0]:
+                raise ValueError(f"World.{name} must have one value per wall ({w.shape[0]})")
 
     @property
     def bounds_m(self) -> FloatArray:

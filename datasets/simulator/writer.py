@@ -25,7 +25,11 @@ dvl_dropouts_s``; NaN is written as null. A scenario with systematic sensor erro
 kind) adds ``errors`` (:class:`~datasets.simulator.sensors.DriftErrors`: ``dvl_scale_factor,
 dvl_bias_mps, ahrs_heading_walk_deg_per_sqrt_s, echo_range_offset_m``) and, with a heading walk,
 ``ahrs_heading_walk {columns: [t, walk_deg], rate_hz, rows}``: the walk in the logged MTi heading
-(clockwise, deg) at every tenth AHRS sample.
+(clockwise, deg) at every tenth AHRS sample. A drawn world (the ``drawn`` kind) adds ``walls
+{echo_gain, band_m, curve, material}`` (one value per row of ``walls_m``: the echo strength
+factor, the band thickness in m, the curved stretch a wall is a facet of or -1, its material)
+and ``layout`` (:attr:`~datasets.simulator.world.World.layout`: basins, channels, features, the
+lap).
 """
 
 from __future__ import annotations
@@ -265,6 +269,16 @@ def _truth(sim: Simulation) -> dict[str, Any]:
         },
         "dvl_dropouts_s": sim.dvl.dropouts_s,
     }
+    w = sim.world
+    if w.wall_gain is not None:  # drawn worlds: each wall's echo, and what the world is made of
+        truth["walls"] = {
+            "echo_gain": w.wall_gain,
+            "band_m": w.wall_band_m,
+            "curve": w.wall_curve,
+            "material": list(w.wall_material or ()),
+        }
+    if w.layout is not None:
+        truth["layout"] = w.layout
     if s.errors is not None:  # absent for the kinds without: their truth.json is unchanged
         truth["errors"] = asdict(s.errors)
     walk = sim.ahrs.heading_walk_deg
@@ -315,7 +329,7 @@ def simulate(kind: str, seed: int, out_dir: str | Path, duration_s: float | None
 
     Parameters
     ----------
-    kind : {"pool", "harbour", "random", "drift"}
+    kind : {"pool", "harbour", "random", "drift", "drawn"}
     seed : int
     out_dir : str or Path
     duration_s : float, optional

@@ -14,7 +14,8 @@ def add_parser(sub: Subparsers) -> None:
     p.add_argument(
         "kind",
         choices=list(KINDS),
-        help="world: seed pool, harbour, random harbour, drift (1,800 s, drifting sensors)",
+        help="world: seed pool, harbour, random harbour, drift (1,800 s, drifting sensors),"
+        " drawn (as drift, in a harbour and route drawn from the seed)",
     )
     p.add_argument(
         "--seed", type=number(int, 0, 2**32 - 1), default=0, help="random seed (default 0)"

@@ -18,9 +18,11 @@ def add_parser(sub: Subparsers) -> None:
     p.add_argument("--seeds", default="0-9", help="seeds: 0-49, 3, or 0,2,5-7 (default 0-9)")
     p.add_argument(
         "--world",
-        default="harbour",
+        default="drawn",
         choices=list(KINDS),
-        help="simulated world (default harbour; drift: 1,800 s surveys with drifting sensors)",
+        help="simulated world (default drawn: a harbour and route drawn per seed, 1,800 s with"
+        " drifting sensors; drift and harbour: fixed layouts). Seeds >= 10000 are held back:"
+        " never tune on them",
     )
     p.add_argument(
         "--backend",
@@ -83,6 +85,8 @@ def command(args: argparse.Namespace) -> int:
     )
     failed = int((result.table["error"].fillna("") != "").sum()) if len(result.table) else 0
     print(format_summary(result.summary, brief=True))
+    print()
+    print(result.spread)
     print(
         f"{len(result.table)} runs ({failed} failed) in {result.wall_s:.1f} s; "
         f"outputs: {result.out_dir.resolve()} ({', '.join(p.name for p in result.files.values())})"

@@ -124,7 +124,9 @@ class AssociationScores:
     line, because a line landmark ``(rho, theta)`` is the infinite line and pairing both with it
     is right. An observation's true line is the one it matches within ``gate_rho_m`` and
     ``gate_theta_rad`` in its own frame, with the true pose; observations matching none are
-    spurious. A landmark's line is the true line most of its observations come from.
+    spurious. A landmark's line is the true line most of its observations come from. The facets
+    of a curved stretch (a drawn world's rounded corners and coves) are one unit together: a
+    line fitted to a curve is none of its facets' lines.
 
     ``precision``: of the observations associated with a landmark, the fraction whose true line
     is the landmark's. ``recall``: of the observations of a line that has a landmark, excluding
@@ -151,6 +153,7 @@ def association_scores(
     gate_rho_m: float = 1.0,
     gate_theta_rad: float = float(np.deg2rad(5.0)),
     feature_seeds: list[int | None] | None = None,
+    wall_curve: npt.ArrayLike | None = None,
 ) -> AssociationScores:
     """Precision and recall of a run's associations (see :class:`AssociationScores`).
 
@@ -169,8 +172,19 @@ def association_scores(
     feature_seeds : list, optional
         The landmark each feature seeded as a tentative line (None: none), as
         :attr:`slam.run.closed_loop.ClosedLoopResult.feature_seeds`.
+    wall_curve : array_like of int, shape (W,), optional
+        The curved stretch each wall is a facet of (-1: straight; a drawn world's
+        ``truth.json`` ``walls.curve``): the facets of one curve are one truth unit, as
+        the lines of its facets are not walls of their own.
     """
-    lines, _ = wall_lines(walls_w)
+    lines, line_of_wall = wall_lines(walls_w)
+    unit = np.arange(len(lines))  # the truth unit of each line
+    if wall_curve is not None:
+        curve = np.asarray(wall_curve, dtype=np.int64)
+        for k in range(len(lines)):
+            of = curve[line_of_wall == k]
+            if of.size and np.all(of >= 0) and np.all(of == of[0]):
+                unit[k] = len(lines) + int(of[0])
     seeds = feature_seeds if feature_seeds is not None else [None] * len(features)
     true_line: list[int | None] = []
     for f in features:
@@ -182,7 +196,7 @@ def association_scores(
             if abs(nu[0]) <= gate_rho_m and abs(nu[1]) <= gate_theta_rad:
                 cost = abs(nu[0]) / gate_rho_m + abs(nu[1]) / gate_theta_rad
                 if cost < best_cost:
-                    best, best_cost = k, cost
+                    best, best_cost = int(unit[k]), cost
         true_line.append(best)
     by_landmark: dict[int, Counter[int | None]] = {}
     for w, lm, sd in zip(true_line, feature_landmarks, seeds, strict=True):
@@ -226,6 +240,7 @@ def association_against_truth(
     """:func:`association_scores` of a closed-loop run on a simulated dataset: its features,
     pairings and seeds (:class:`slam.run.closed_loop.ClosedLoopResult`) against the true walls
     and poses."""
+    walls = (dataset.truth or {}).get("walls") or {}
     return association_scores(
         features,
         feature_landmarks,
@@ -233,6 +248,7 @@ def association_against_truth(
         truth_trajectory(dataset),
         dataset.config.sonar_mounting.as_pose(),
         feature_seeds=feature_seeds,
+        wall_curve=walls.get("curve"),
     )
 
 

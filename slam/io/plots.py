@@ -32,6 +32,7 @@ __all__ = [
     "AneesCurve",
     "plot_anees",
     "plot_sweep",
+    "plot_worlds",
 ]
 
 
@@ -386,6 +387,54 @@ def plot_sweep(
         ax.set_xticks(range(1, len(names) + 1), ticks, rotation=20, ha="right", fontsize="small")
         ax.set_ylabel(ylabel)
         ax.grid(True, which="both", lw=0.3)
+    fig.suptitle(title)
+    out = Path(path)
+    fig.savefig(out, bbox_inches="tight")
+    return out
+
+
+def plot_worlds(
+    path: str | Path,
+    worlds: list[tuple[str, FloatArray, npt.NDArray[Any] | None, FloatArray]],
+    title: str,
+) -> Path:
+    """Simulated worlds side by side: each one's walls (curved stretches in red) and the true
+    route of its vehicle.
+
+    Parameters
+    ----------
+    path : str or Path
+        The picture.
+    worlds : list of (title, walls, curve, route)
+        ``walls`` (W, 2, 2) wall segments (m), ``curve`` (W,) the curved stretch of each wall
+        (-1: straight; None: all straight), ``route`` (P, 2) the true positions (m), its start
+        marked.
+    title : str
+    """
+    n = max(len(worlds), 1)
+    n_cols = min(3, n)
+    n_rows = -(-n // n_cols)
+    fig = Figure(figsize=(5.5 * n_cols, 5 * n_rows), dpi=100, layout="constrained")
+    axes = np.atleast_1d(fig.subplots(n_rows, n_cols)).ravel()
+    for ax in axes[len(worlds) :]:
+        ax.set_visible(False)
+    for ax, (name, walls, curve, route) in zip(axes, worlds, strict=False):
+        curved = np.zeros(walls.shape[0], bool) if curve is None else np.asarray(curve) >= 0
+        for mask, colour, label in ((~curved, "black", "walls"), (curved, "tab:red", "curved")):
+            if mask.any():
+                segs = walls[mask]
+                xs = np.column_stack([segs[:, 0, 0], segs[:, 1, 0], np.full(len(segs), np.nan)])
+                ys = np.column_stack([segs[:, 0, 1], segs[:, 1, 1], np.full(len(segs), np.nan)])
+                ax.plot(xs.ravel(), ys.ravel(), color=colour, lw=1.0, label=label)
+        ax.plot(route[:, 0], route[:, 1], color="tab:blue", lw=0.6, label="route (truth)")
+        ax.plot(route[0, 0], route[0, 1], "o", color="tab:green", ms=5, label="start")
+        ax.set_aspect("equal")
+        ax.set_title(name, fontsize="medium")
+        ax.set_xlabel("East (m)")
+        ax.set_ylabel("North (m)")
+        ax.grid(True, lw=0.3)
+    if worlds:
+        axes[0].legend(fontsize="small", loc="best")
     fig.suptitle(title)
     out = Path(path)
     fig.savefig(out, bbox_inches="tight")

@@ -10,7 +10,9 @@ pose NEES against the simulator's truth (:mod:`slam.eval.consistency`). The rows
 (``sweep.csv``), each run paired with dead reckoning on its seed; the NEES of every run on a
 common 1 s grid (``nees.npz``) give the ANEES of each configuration with its 95 % band. The
 scores against the truth and dead reckoning are :mod:`slam.run.sweep_summary`'s (``summary.csv``,
-``sweep.png``).
+``sweep.png``, and the spread across seeds with the worst seeds' worlds: ``spread.md``,
+``worlds.png``). The default world is ``drawn``: a harbour and route drawn per seed; seeds from
+:data:`datasets.simulator.HELD_BACK_SEED_MIN` on are the held-back ones that results count on.
 
 Grid axes are ``<scope>.<field>=v1,v2,...`` (:mod:`slam.run.presets`): ``extractor.<field>``
 applies to every closed-loop back end; ``<backend>.<field>[.<field>]`` to that back end. The
@@ -20,6 +22,7 @@ baselines (``dr``, ``gps``) take none.
 from __future__ import annotations
 
 import itertools
+import json
 import logging
 import os
 import re
@@ -39,23 +42,30 @@ from tqdm import tqdm
 
 from datasets.errors import DataError, DataWarning
 from datasets.settings import SettingError, read_toml
-from datasets.simulator import simulate
-from datasets.source import open_dataset
+from datasets.simulator import HELD_BACK_SEED_MIN, simulate
+from datasets.source import Dataset, open_dataset
+from features.geometry import compose, inverse
 from slam.backends.registry import BACKENDS
+from slam.eval.ate import ate_against_truth
 from slam.eval.consistency import NeesSeries, anees, nees_on_grid, nees_series
 from slam.eval.truth import truth_trajectory
-from slam.io.files import make_output_dir, write_atomic
-from slam.io.plots import plot_anees, plot_sweep
+from slam.io.files import make_output_dir, write_atomic, write_text
+from slam.io.plots import plot_anees, plot_sweep, plot_worlds
 from slam.io.trajectory import Trajectory
 from slam.run.presets import check_settings, parse_value
 from slam.run.run import backend_names, run_backend
 from slam.run.sonar_calibration import write_sonar_calibration
+from slam.run.sources import start_pose
 from slam.run.sweep_summary import (
     config_columns,
     config_labels,
+    format_spread,
     format_summary,
+    held_back_note,
     pair_with_baseline,
     summarise,
+    world_columns,
+    worst_seeds,
 )
 
 __all__ = [
@@ -68,6 +78,7 @@ __all__ = [
     "expand_tasks",
     "simulate_cached",
     "calibrate_cached",
+    "gauge_ate_m",
     "run_task",
     "config_labels",
     "format_summary",
@@ -288,6 +299,9 @@ def _run_into(
     empty = np.zeros(0)
     try:
         dataset = open_dataset(source, config_override)
+        row.update(world_columns(dataset.truth))
+        if dataset.truth is not None:
+            row["gauge_ate_m"] = gauge_ate_m(dataset)
         run = run_backend(dataset, task.backend, task.params_dict)
         row.update(
             {
@@ -307,6 +321,17 @@ def _run_into(
         return "", nees_pose, nees_position
     except Exception as exc:  # one failed run must not stop a 50-seed sweep
         return f"{type(exc).__name__}: {exc}", empty, empty
+
+
+def gauge_ate_m(dataset: Dataset) -> float:
+    """The ATE against the truth (m) of the truth itself moved rigidly onto the estimators'
+    start pose (the first GPS fix and the AHRS heading there, :func:`start_pose`): what no
+    GPS-free estimator can correct, since nothing it measures sees where the whole run sits or
+    how it is turned. A run whose ATE is at this floor has nothing left to gain unaligned."""
+    t0, pose0, _ = start_pose(dataset)
+    truth = truth_trajectory(dataset)
+    moved = compose(compose(pose0, inverse(truth.poses([t0])[0])), truth.poses(truth.t_s))
+    return float(ate_against_truth(Trajectory(truth.t_s, moved), truth).ate_mean_m)
 
 
 def _pad(rows: Sequence[np.ndarray]) -> np.ndarray:
@@ -337,6 +362,7 @@ class SweepResult:
     out_dir: Path
     files: dict[str, Path]
     wall_s: float
+    spread: str = ""
 
 
 def _client(scheduler: str | None, n_workers: int) -> tuple[Client, LocalCluster | None]:
@@ -352,6 +378,37 @@ def _client(scheduler: str | None, n_workers: int) -> tuple[Client, LocalCluster
     return Client(cluster), cluster
 
 
+def _world_picture(
+    path: Path, table: pd.DataFrame, summary: pd.DataFrame, folders: dict[int, str], title: str
+) -> Path:
+    """``worlds.png``: the worlds of the three seeds where the last closed loop (its smoothed
+    trajectory if it has one) gains least over dead reckoning, and of the first three others."""
+    seeds = list(folders)
+    worst: list[int] = []
+    scored = summary[summary["dr_pairs"].notna()] if "dr_pairs" in summary else summary.iloc[0:0]
+    if len(scored):
+        main = str(scored.iloc[-1]["config"])
+        ranked = worst_seeds(table, main, 3)
+        worst = [int(s) for s in ranked["seed"]] if "seed" in ranked else []
+    else:
+        main = ""
+    chosen = worst + [s for s in seeds if s not in worst][: 6 - len(worst)]
+    worlds = []
+    for seed in chosen:
+        truth = json.loads((Path(folders[seed]) / "truth.json").read_text(encoding="utf-8"))
+        walls = np.asarray(truth["walls_m"], dtype=np.float64)
+        curve = truth.get("walls", {}).get("curve")
+        poses = np.asarray(truth["body_poses"]["rows"], dtype=np.float64)[:, 1:3]
+        lay = truth.get("layout")
+        name = f"seed {seed}"
+        if lay is not None:
+            name += f": {len(lay['basins'])} basin(s), lap {lay['lap_s'] / 60:.0f} min"
+        if seed in worst:
+            name += f" ({main}: worst {worst.index(seed) + 1})"
+        worlds.append((name, walls, None if curve is None else np.asarray(curve), poses))
+    return plot_worlds(path, worlds, f"{title}: worlds and true routes")
+
+
 def _write(
     out: Path,
     table: pd.DataFrame,
@@ -360,15 +417,24 @@ def _write(
     nees_position: np.ndarray,
     t_rel_s: np.ndarray,
     title: str,
+    folders: dict[int, str],
+    spread: str,
 ) -> dict[str, Path]:
     """The sweep's files (:func:`sweep`), by role."""
     files = {
         "table": out / "sweep.csv",
         "summary": out / "summary.csv",
+        "spread": out / "spread.md",
         "nees": out / "nees.npz",
         "plot": out / "sweep.png",
         "anees_plot": out / "anees.png",
+        "worlds": out / "worlds.png",
     }
+    write_text(files["spread"], spread)
+    if folders:
+        write_atomic(files["worlds"], lambda p: _world_picture(p, table, summary, folders, title))
+    else:
+        files.pop("worlds")
     write_atomic(files["table"], lambda p: table.to_csv(p, index=False))
     try:
         import pyarrow  # noqa: F401  # optional, not a dependency: parquet only when installed
@@ -408,7 +474,7 @@ def sweep(
     backends: Sequence[str],
     out_dir: str | Path,
     grid: dict[str, list[Any]] | None = None,
-    world: str = "harbour",
+    world: str = "drawn",
     duration_s: float | None = None,
     cache_dir: str | Path | None = None,
     scheduler: str | None = None,
@@ -428,13 +494,18 @@ def sweep(
         Receives ``sweep.csv`` (one row per run, paired with dead reckoning on its seed:
         :func:`pair_with_baseline`), ``summary.csv`` (one per configuration, :func:`summarise`),
         ``nees.npz`` (``pose`` (R, K), ``position`` (R, K), ``t_rel_s`` (K,): row ``i`` is
-        ``sweep.csv``'s), ``anees.png`` and ``sweep.png``.
+        ``sweep.csv``'s), ``anees.png``, ``sweep.png``, ``spread.md``
+        (:func:`slam.run.sweep_summary.format_spread`: the spread of the gain over dead
+        reckoning across seeds, the worst seeds with their worlds, the ANEES against its band,
+        the association scores, whether the seeds are held back) and ``worlds.png`` (six of the
+        worlds with their true routes, the worst seeds first).
     grid : dict of str to list, optional
         Axes (see the module docstring).
-    world : {"harbour", "random", "pool", "drift"}
-        Simulated world (:data:`datasets.simulator.KINDS`).
+    world : {"drawn", "drift", "harbour", "random", "pool"}
+        Simulated world (:data:`datasets.simulator.KINDS`); ``drawn``: a harbour drawn per seed.
     duration_s : float, optional
-        Simulated length (s); default the world's (600 s for the harbours, 1,800 s for drift).
+        Simulated length (s); default the world's (600 s for the harbours, 1,800 s for drift and
+        the drawn worlds).
     cache_dir : str or Path, optional
         Simulated folders, one per world, seed and length; default ``out_dir/sim``.
     scheduler : str, optional
@@ -460,8 +531,10 @@ def sweep(
     cache = Path(cache_dir) if cache_dir is not None else out / "sim"
     results: list[dict[str, Any] | None] = [None] * len(tasks)
     bar = tqdm(total=len(tasks), desc="sweep", unit="run", disable=not progress)
+    folders: dict[int, str] = {}
     if scheduler == "synchronous":
         sims = {s: simulate_cached(world, s, duration_s, cache) for s in dict.fromkeys(seeds)}
+        folders = dict(sims)
         cals = {s: calibrate_cached(f) if calibrate else None for s, f in sims.items()}
         for i, task in enumerate(tasks):
             results[i] = run_task(
@@ -497,6 +570,7 @@ def sweep(
             for fut in as_completed(futures):
                 results[futures[fut]] = fut.result()
                 bar.update()
+            folders = {s: str(f.result()) for s, f in sim_futures.items()}
         finally:
             client.close()
             if cluster is not None:
@@ -508,10 +582,29 @@ def sweep(
     nees_position = _pad([r["nees_position"] for r in done])
     t_rel_s = np.arange(nees_pose.shape[1]) * nees_period_s
     summary = summarise(table, nees_pose, nees_position)
-    title = f"{world}, {len(dict.fromkeys(seeds))} seeds" + (
+    unique = list(dict.fromkeys(int(s) for s in seeds))
+    title = f"{world}, {len(unique)} seeds ({_seed_text(unique)})" + (
         "" if duration_s is None else f", {duration_s:g} s"
     )
-    files = _write(out, table, summary, nees_pose, nees_position, t_rel_s, title)
+    note = held_back_note(unique, HELD_BACK_SEED_MIN)
+    if calibrate:
+        note += " Each seed's sonar calibrated GPS-free first (--calibrate)."
+    spread = format_spread(summary, table, title, note)
+    files = _write(out, table, summary, nees_pose, nees_position, t_rel_s, title, folders, spread)
     return SweepResult(
-        table, summary, nees_pose, nees_position, out, files, time.perf_counter() - wall0
+        table,
+        summary,
+        nees_pose,
+        nees_position,
+        out,
+        files,
+        time.perf_counter() - wall0,
+        spread,
     )
+
+
+def _seed_text(seeds: list[int]) -> str:
+    """``"10000-10049"`` for a run of consecutive seeds, else the first ones."""
+    if seeds and seeds == list(range(seeds[0], seeds[0] + len(seeds))):
+        return f"{seeds[0]}-{seeds[-1]}" if len(seeds) > 1 else str(seeds[0])
+    return ", ".join(map(str, seeds[:5])) + (", ..." if len(seeds) > 5 else "")
