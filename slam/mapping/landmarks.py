@@ -117,6 +117,9 @@ class LandmarkConfig:
             raise ValueError(f"line_cov_scale must be > 0, got {self.line_cov_scale}")
         if self.extent_margin_m is not None and not self.extent_margin_m >= 0.0:
             raise ValueError(f"extent_margin_m must be >= 0 or None, got {self.extent_margin_m}")
+        r = self.reobservation_min_move_m
+        if r is not None and not 0.0 <= r < 1e4:
+            raise ValueError(f"reobservation_min_move_m must be in [0, 1e4) or None, got {r}")
         p = self.merge_gate_probability
         if p is not None and not 0.0 < p < 1.0:
             raise ValueError(f"merge_gate_probability must be in (0, 1) or None, got {p}")
