@@ -53,6 +53,16 @@ def test_packages_are_typed() -> None:
         assert (ROOT / package / "py.typed").is_file(), package
 
 
+def test_license_file_matches_the_declared_license() -> None:
+    """pyproject.toml declares BSD-3-Clause; the LICENSE file beside it is that license's text."""
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert project["license"] == {"text": "BSD-3-Clause"}
+    assert "License :: OSI Approved :: BSD License" in project["classifiers"]
+    text = (ROOT / "LICENSE").read_text()
+    assert text.startswith("BSD 3-Clause License")
+    assert "Neither the name of the copyright holder" in text  # the third clause
+
+
 def test_version_flag() -> None:
     out = subprocess.run(
         [sys.executable, "-m", "slam.cli.main", "--version"],
