@@ -177,3 +177,38 @@ def test_readme_reoptimisation_example_runs(runs, tmp_path):
     )
     assert out.returncode == 0, out.stderr
     assert "error" in out.stdout
+
+
+def test_metrics_record_the_code_settings_and_data_of_the_run(runs):
+    """metrics.json's provenance: the package version, the commit of this tree and whether it
+    was dirty, the settings' digest, and the SHA-256 of every file of the dataset."""
+    import hashlib
+    from importlib.metadata import version
+
+    from slam.run.provenance import settings_digest
+
+    r = runs["isam2"]
+    p = json.loads((r.out_dir / "metrics.json").read_text())["provenance"]
+    assert p["version"] == version("sonarslam")
+    if (ROOT / ".git").exists():
+        head = subprocess.run(
+            ["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True
+        ).stdout.strip()
+        assert p["git_commit"] == head and isinstance(p["git_dirty"], bool)
+    source = Path(r.metrics["source"])
+    files = sorted(f for f in source.rglob("*") if f.is_file())
+    assert p["dataset_file_count"] == len(files) >= 6
+    for f in files:  # a simulated run: few files, each listed with its digest
+        rel = f.relative_to(source).as_posix()
+        assert p["dataset_files"][rel] == hashlib.sha256(f.read_bytes()).hexdigest()
+    assert re.fullmatch(r"[0-9a-f]{64}", p["settings_sha256"])
+    # the digest follows the settings: another back-end setting, another digest
+    config_text = (r.out_dir / "config_used.toml").read_text()
+    mine = settings_digest("isam2", config_text, r.config)
+    assert mine == p["settings_sha256"]
+    from dataclasses import replace
+
+    other = replace(r.config, settings={"isam2.robust": "cauchy"})
+    assert settings_digest("isam2", config_text, other) != mine
+    assert settings_digest("isam2", config_text + "\n# edited", r.config) != mine
+    assert runs["dr"].metrics["provenance"]["dataset_sha256"] == p["dataset_sha256"]

@@ -98,6 +98,16 @@ def test_report_table_holds_each_runs_numbers(runs, tmp_path):
     t, e = truth_errors(ekf.trajectory, truth_trajectory(load_run(ekf.out_dir).dataset))
     first = (t - t[0]) < 300.0
     assert _row(md, "ekf", column=0)[1] == f"{e[first].mean():.2f} / {e[first].max():.2f}"
+    # where each run's figures come from: its version, commit and digests
+    assert "## Provenance" in md
+    for r, name in ((dr, "h5-dr"), (ekf, "h5-ekf")):
+        prov = r.metrics["provenance"]
+        cells = _row(md, f"{r.backend} (`{name}`)", column=0)
+        assert cells[1] == prov["version"]
+        assert prov["settings_sha256"][:16] in cells[3]
+        assert prov["dataset_sha256"][:16] in cells[4]
+        if prov["git_commit"] is not None:
+            assert prov["git_commit"][:12] in cells[2]
     names = sorted(p.name for p in res.figures)
     assert names == [
         "errors_h5-dr.png",
