@@ -29,6 +29,7 @@ help:
 	@echo "make test   set up .venv with the development tools, lint (ruff, mypy), run the tests"
 	@echo "make venv   .venv with the development tools, without running anything"
 	@echo "make bench  speed benchmarks (benchmarks/)"
+	@echo "make readme-figures  re-measure the README's and docs/' generated figures (the marina)"
 	@echo "make lock   re-resolve requirements.lock from pyproject.toml's ranges"
 	@echo "PYTHON=python3.13 make test: the same with another interpreter (3.11 to 3.13)"
 
@@ -66,6 +67,11 @@ test: lint
 
 bench: $(STAMP_DEV)
 	$(BIN)/python benchmarks/run_benchmarks.py
+
+# the README's and docs/' generated figures: measured on the marina into docs/figures.json,
+# then rendered into the pages (about 2 min; --check and --render: benchmarks/readme_figures.py)
+readme-figures: $(STAMP_DEV)
+	$(BIN)/python benchmarks/readme_figures.py
 
 lock: $(STAMP_DEV)
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check --dry-run --ignore-installed \
