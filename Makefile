@@ -62,8 +62,11 @@ lint: $(STAMP_DEV)
 	$(BIN)/ruff format --check sonar features slam datasets tests benchmarks
 	$(BIN)/mypy
 
+# 2 workers on 2 cores, one BLAS thread each (more only contend); worksteal: a worker that runs
+# out of tests takes them from the other, so the long tests do not decide the end
 test: lint
-	$(BIN)/python -m pytest -q -n 2 -rs --durations=10
+	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 \
+		$(BIN)/python -m pytest -q -n 2 --dist worksteal -rs --durations=15
 
 bench: $(STAMP_DEV)
 	$(BIN)/python benchmarks/run_benchmarks.py
