@@ -56,7 +56,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: The pages whose examples run, in this order.
 PAGES = ["README.md", *sorted(f"docs/{p.name}" for p in (ROOT / "docs").glob("*.md"))]
 #: Length of the marina window the examples run on (s from the start of the navigation logs).
-MARINA_WINDOW_S = 250.0
+MARINA_WINDOW_S = 150.0
 #: Commands run shorter than written: (sonarslam subcommand, a token the command holds) ->
 #: the options set (replaced, or added).
 SHORTER: dict[tuple[str, str], dict[str, str]] = {
