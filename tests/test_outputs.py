@@ -125,7 +125,9 @@ def test_every_output_file_is_in_the_docs_table(runs):
     patterns = [re.sub(r"<[^>]+>", "*", n) for n in names]
     for r in runs.values():
         for f in r.out_dir.iterdir():
-            assert any(fnmatch.fnmatch(f.name, p) for p in patterns), f"{f.name} not in docs/outputs.md"
+            assert any(fnmatch.fnmatch(f.name, p) for p in patterns), (
+                f"{f.name} not in docs/outputs.md"
+            )
     # and every key of metrics.json is in its table (``*``, ``<name>``, ``{a,b}`` as patterns)
     keys_part = table[table.index("`metrics.json` (one object") : table.index("## With evo")]
     key_patterns = []
@@ -138,7 +140,9 @@ def test_every_output_file_is_in_the_docs_table(runs):
             key_patterns.append(token)
     for r in runs.values():
         for key in r.metrics:
-            assert any(fnmatch.fnmatch(key, p) for p in key_patterns), f"{key} not in docs/outputs.md"
+            assert any(fnmatch.fnmatch(key, p) for p in key_patterns), (
+                f"{key} not in docs/outputs.md"
+            )
 
 
 def test_metrics_record_the_code_settings_and_data_of_the_run(runs):
