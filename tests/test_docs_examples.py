@@ -62,8 +62,10 @@ MARINA_WINDOW_S = 150.0
 SHORTER: dict[tuple[str, str], dict[str, str]] = {
     ("simulate", "harbour"): {"--duration": "120"},  # 600 s by default
     ("simulate", "drift"): {"--duration": "360"},  # 1,800 s by default
+    ("simulate", "drawn"): {"--duration": "360"},  # 1,800 s by default
     ("sweep", "harbour"): {"--seeds": "0-1", "--duration": "60", "--scheduler": "synchronous"},
     ("sweep", "drift"): {"--seeds": "0", "--duration": "360", "--scheduler": "synchronous"},
+    ("sweep", ""): {"--seeds": "0", "--duration": "360", "--scheduler": "synchronous"},
 }
 #: What an example must print, by its ``<!-- example: NAME -->`` marker.
 EXPECTED: dict[str, Callable[[str], bool]] = {
@@ -137,14 +139,15 @@ def make_run_argv() -> list[str]:
 
 def shorter(argv: list[str]) -> list[str]:
     """``argv`` with the options of :data:`SHORTER` that apply to it."""
-    for (command, token), options in SHORTER.items():
-        if argv[:1] == [command] and token in argv:
+    for (command, token), options in SHORTER.items():  # the first that applies
+        if argv[:1] == [command] and (token in argv or not token):
             argv = list(argv)
             for opt, value in options.items():
                 if opt in argv:
                     argv[argv.index(opt) + 1] = value
                 else:
                     argv += [opt, value]
+            return argv
     return argv
 
 
