@@ -1,58 +1,91 @@
 # Two commands do everything on a fresh machine: `make run` and `make test`.
-# Both create or refresh .venv first: it is rebuilt when it was made by another interpreter than
-# $(PYTHON) (make test PYTHON=python3.13), and reinstalled when pyproject.toml or requirements.lock
-# changed. The exact versions installed are requirements.lock's (pip constraints).
+# Both create or refresh .venv first. `make run` installs the runtime dependencies only
+# (.[run]: what `pip install .` gives); `make test`, `make lint` and `make venv` add the
+# development tools (.[dev]: pytest, ruff, mypy, jupyter for the notebooks, scikit-image).
+# .venv is rebuilt only when $(PYTHON)'s version (implementation and major.minor: what its
+# wheels are built for) differs from the one it was made with (make test PYTHON=python3.13),
+# not when the same version sits at another path; it is reinstalled when pyproject.toml or
+# requirements.lock changed. The exact versions installed are requirements.lock's (pip
+# constraints).
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
-STAMP := $(VENV)/.installed
+STAMP_RUN := $(VENV)/.installed-run
+STAMP_DEV := $(VENV)/.installed-dev
 LOCK := requirements.lock
 OUT ?= out
 SHARED_DATA := $(abspath ../shared/datasets)
 # Data is found through SONARSLAM_DATA; point it at ../shared/datasets when that exists.
 export SONARSLAM_DATA ?= $(if $(wildcard $(SHARED_DATA)/marina),$(SHARED_DATA),)
 export MPLBACKEND := Agg
-PY_VERSION = import sys; print(sys.implementation.name, "%d.%d.%d" % sys.version_info[:3])
+PY_VERSION = import sys; print(sys.implementation.name, "%d.%d" % sys.version_info[:2])
+# uv installs the locked versions in parallel and keeps them in its cache (~/.cache/uv): a fresh
+# clone's .venv in ~25 s once that cache is warm (pip: ~3 min, it downloads every wheel again);
+# pip does it when uv cannot be had. uv's own version is pinned here.
+UV_VERSION := 0.13.8
+PIP_QUIET := --quiet --disable-pip-version-check
+define install
+	{ $(BIN)/python -m pip install $(PIP_QUIET) uv==$(UV_VERSION) >/dev/null 2>&1 && \
+	  $(BIN)/uv pip install --quiet --python $(BIN)/python -c $(LOCK) $(1); } || \
+	$(BIN)/python -m pip install $(PIP_QUIET) -c $(LOCK) $(1)
+endef
 
-.PHONY: venv run test lint bench lock clean help FORCE
+.PHONY: venv run test lint bench lock clean help readme-figures FORCE
 
 help:
-	@echo "make run    set up .venv and run the main job (best closed loop; marina if SONARSLAM_DATA has it)"
-	@echo "make test   set up .venv, lint (ruff, mypy) and run the tests"
+	@echo "make run    set up .venv (runtime only) and run the main job: dead reckoning, EKF and iSAM2"
+	@echo "            on the marina if SONARSLAM_DATA has it, else on a simulated harbour (it says so)"
+	@echo "make test   set up .venv with the development tools, lint (ruff, mypy), run the tests"
+	@echo "make venv   .venv with the development tools, without running anything"
 	@echo "make bench  speed benchmarks (benchmarks/)"
+	@echo "make readme-figures  re-measure the README's and docs/' generated figures (the marina)"
 	@echo "make lock   re-resolve requirements.lock from pyproject.toml's ranges"
 	@echo "PYTHON=python3.13 make test: the same with another interpreter (3.11 to 3.13)"
 
-# .venv/.python holds the interpreter the venv was made with; a different $(PYTHON) rebuilds it
+# .venv/.python holds the version the venv was made with; another version of $(PYTHON), or a
+# venv whose interpreter no longer runs, rebuilds it (the same version elsewhere does not)
 $(VENV)/.python: FORCE
 	@want="$$($(PYTHON) -c '$(PY_VERSION)')" || { echo "$(PYTHON) not found"; exit 1; }; \
-	have="$$(test -x $(BIN)/python && $(BIN)/python -c '$(PY_VERSION)')"; \
+	have="$$(test -x $(BIN)/python && $(BIN)/python -c '$(PY_VERSION)' 2>/dev/null)"; \
 	if [ "$$want" != "$$have" ]; then \
 		if [ -n "$$have" ]; then echo "$(VENV) was made with $$have, rebuilding it with $$want ($(PYTHON))"; fi; \
 		rm -rf $(VENV) && $(PYTHON) -m venv $(VENV) && echo "$$want" > $@; \
 	elif [ "$$(cat $@ 2>/dev/null)" != "$$want" ]; then echo "$$want" > $@; fi
 
-$(STAMP): pyproject.toml $(LOCK) $(VENV)/.python
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c $(LOCK) -e '.[dev]'
-	touch $(STAMP)
+$(STAMP_RUN): pyproject.toml $(LOCK) $(VENV)/.python
+	$(call install,-e .)
+	touch $(STAMP_RUN)
 
-venv: $(STAMP)
+# the development install holds the runtime one: both stamps
+$(STAMP_DEV): pyproject.toml $(LOCK) $(VENV)/.python
+	$(call install,-e '.[dev]')
+	touch $(STAMP_RUN) $(STAMP_DEV)
 
-run: $(STAMP)
+venv: $(STAMP_DEV)
+
+run: $(STAMP_RUN)
 	$(BIN)/sonarslam demo --out $(OUT)
 
-lint: $(STAMP)
+lint: $(STAMP_DEV)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check sonar features slam datasets tests benchmarks
 	$(BIN)/mypy
 
+# 2 workers on 2 cores, one BLAS thread each (more only contend); worksteal: a worker that runs
+# out of tests takes them from the other, so the long tests do not decide the end
 test: lint
-	$(BIN)/python -m pytest -q -n 2 -rs --durations=10
+	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 \
+		$(BIN)/python -m pytest -q -n 2 --dist worksteal -rs --durations=15
 
-bench: $(STAMP)
+bench: $(STAMP_DEV)
 	$(BIN)/python benchmarks/run_benchmarks.py
 
-lock: $(STAMP)
+# the README's and docs/' generated figures: measured on the marina into docs/figures.json,
+# then rendered into the pages (about 2 min; --check and --render: benchmarks/readme_figures.py)
+readme-figures: $(STAMP_DEV)
+	$(BIN)/python benchmarks/readme_figures.py
+
+lock: $(STAMP_DEV)
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check --dry-run --ignore-installed \
 		--report $(VENV)/resolved.json -e '.[dev]'
 	$(BIN)/python -c 'import json, sys; r = json.load(open(sys.argv[1])); \

@@ -44,6 +44,12 @@ __all__ = ["Dataset", "open_dataset", "resolve_source", "data_root", "read_truth
 
 ENV_VAR = "SONARSLAM_DATA"
 NAMED_SOURCES = ("marina",)
+#: Where the marina comes from and its layout, in one line (errors of a missing named source).
+MARINA_LAYOUT_HINT = (
+    "marina/logs/ (_040825_1735_*.log from the University of Girona's StPereDataset.zip, "
+    "Ribas et al. 2008) and marina/keyframes/ (the thresholded scans, pclKeyFrame*.pcd with "
+    "keyFrameTimeStamps.csv); see the README's 'Getting the data'"
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -119,11 +125,16 @@ def resolve_source(source: str | Path) -> Path:
             raise DataError(
                 path,
                 None,
-                f"the named source {source!r} needs ${ENV_VAR} (e.g. ../shared/datasets)",
+                f"the named source {source!r} needs ${ENV_VAR}: the folder that holds "
+                f"{MARINA_LAYOUT_HINT}",
             )
         found = root / str(source)
         if not found.is_dir():
-            raise DataError(found, None, f"no {source!r} dataset under ${ENV_VAR}={root}")
+            raise DataError(
+                found,
+                None,
+                f"no {source!r} dataset under ${ENV_VAR}={root}: it must hold {MARINA_LAYOUT_HINT}",
+            )
         return found
     raise DataError(path, None, f"not a directory, nor a named source ({', '.join(NAMED_SOURCES)})")
 

@@ -1,12 +1,31 @@
-"""Shared fixtures: the real marina (skipped with a reason when absent) and small helpers."""
+"""Shared fixtures: the real marina (skipped with a reason when absent), simulated runs shared
+by every test of a session (and by its xdist workers), and small helpers."""
 
 from __future__ import annotations
 
+import fcntl
+import os
+import shutil
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
-import pytest
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    # one BLAS thread per worker: the suite runs on 2 workers on 2 cores, where BLAS threads
+    # only contend (effective when numpy is not imported yet; the Makefile sets them too)
+    os.environ.setdefault(_var, "1")
 
-from datasets.source import Dataset, data_root, open_dataset
+import pytest  # noqa: E402
+from hypothesis import settings  # noqa: E402
+
+from datasets.simulator import simulate  # noqa: E402
+from datasets.source import Dataset, data_root, open_dataset  # noqa: E402
+
+# no wall-clock limit on a property's examples: speed is measured by benchmarks/, and on the
+# shared 2-core machine one example of a Jacobian check took 601 ms against hypothesis's
+# default 200 ms deadline (a FlakyFailure of test_geometry under load, on main as well)
+settings.register_profile("sonarslam", deadline=None)
+settings.load_profile("sonarslam")
 
 
 def marina_root() -> Path | None:
@@ -41,3 +60,60 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
         )
         if uses_fixture or skipif:
             item.add_marker(pytest.mark.marina)
+
+
+@contextmanager
+def _locked(path: Path) -> Iterator[None]:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("a") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+@pytest.fixture(scope="session")
+def shared_dir(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> Callable[[str, Callable[[Path], None]], Path]:
+    """``shared_dir(name, build)``: a folder built once per test session, whichever xdist worker
+    asks first (the others wait for it under a file lock), then read by all of them. ``build``
+    fills the folder it is given; a build that fails leaves nothing behind. Tests must not write
+    into the folder: copy it first."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # the session's folder, shared by the workers
+    root = root / "shared"
+
+    def get(name: str, build: Callable[[Path], None]) -> Path:
+        folder = root / name
+        with _locked(root / f"{name}.lock"):
+            if not (folder / ".complete").is_file():
+                shutil.rmtree(folder, ignore_errors=True)
+                folder.mkdir(parents=True)
+                try:
+                    build(folder)
+                except BaseException:
+                    shutil.rmtree(folder, ignore_errors=True)
+                    raise
+                (folder / ".complete").touch()
+        return folder
+
+    return get
+
+
+@pytest.fixture(scope="session")
+def simulated(shared_dir: Callable[[str, Callable[[Path], None]], Path]) -> Callable[..., Path]:
+    """``simulated(kind, seed, duration_s, name=None)``: the directory ``sonarslam simulate``
+    writes for these arguments (named ``name``, default ``<kind>_<seed>``: the dataset's name in
+    reports), simulated once per session and shared by the tests that ask for the same run.
+    Read only: a test that changes its files copies it first."""
+
+    def get(kind: str, seed: int, duration_s: float, name: str | None = None) -> Path:
+        leaf = name or f"{kind}_{seed}"
+        key = f"sim_{kind}_{seed}_{duration_s:g}s_{leaf}"
+        folder = shared_dir(key, lambda f: simulate(kind, seed, f / leaf, duration_s=duration_s))
+        return folder / leaf
+
+    return get

@@ -47,7 +47,11 @@ def test_known_errors_are_one_line_and_exit_1(tmp_path, capsys, monkeypatch):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "nowhere: not a directory" in err[0]
     assert main(["info", "marina"]) == 1
-    assert "needs $SONARSLAM_DATA" in capsys.readouterr().err
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "needs $SONARSLAM_DATA" in err[0]
+    # where the data comes from and the layout SONARSLAM_DATA must point above, in that line
+    assert "StPereDataset.zip" in err[0] and "marina/logs/" in err[0]
+    assert "marina/keyframes/" in err[0] and "Getting the data" in err[0]
 
 
 def test_unknown_backend_is_a_usage_error_naming_the_choices(short_harbour, tmp_path, capsys):

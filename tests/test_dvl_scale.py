@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pytest
 from gtsam.symbol_shorthand import K
 
-from datasets.simulator import simulate
 from datasets.simulator.scenario import make_scenario
 from datasets.source import open_dataset
 from slam.backends.ekf import N_VEHICLE, EkfConfig, LineEkf
@@ -24,8 +25,9 @@ from sonar.beam import Mounting
 
 
 @pytest.fixture(scope="module")
-def drift(tmp_path_factory: pytest.TempPathFactory) -> str:
-    return str(simulate("drift", seed=2, out_dir=tmp_path_factory.mktemp("drift"), duration_s=900))
+def drift(simulated: Callable[..., Path]) -> str:
+    """900 s of the drift world, seed 2 (tests/test_sonar_calibration.py's run: simulated once)."""
+    return str(simulated("drift", 2, 900.0))
 
 
 @pytest.mark.parametrize("name", ["ekf", "isam2"])

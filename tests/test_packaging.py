@@ -53,6 +53,50 @@ def test_packages_are_typed() -> None:
         assert (ROOT / package / "py.typed").is_file(), package
 
 
+def test_license_file_matches_the_declared_license() -> None:
+    """pyproject.toml declares BSD-3-Clause; the LICENSE file beside it is that license's text."""
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert project["license"] == {"text": "BSD-3-Clause"}
+    assert "License :: OSI Approved :: BSD License" in project["classifiers"]
+    text = (ROOT / "LICENSE").read_text()
+    assert text.startswith("BSD 3-Clause License")
+    assert "Neither the name of the copyright holder" in text  # the third clause
+
+
+def _fake_python(path: Path, version: str) -> Path:
+    """An executable that answers the Makefile's version question with ``version`` and, as
+    ``-m venv DIR``, makes a venv whose python answers the same."""
+    path.write_text(
+        "#!/bin/sh\n"
+        f'if [ "$1" = "-m" ]; then mkdir -p "$3/bin" && cp "$0" "$3/bin/python"; exit 0; fi\n'
+        f'echo "{version}"\n'
+    )
+    path.chmod(0o755)
+    return path
+
+
+def test_venv_is_rebuilt_only_when_the_python_version_changes(tmp_path: Path) -> None:
+    """The same version at another path (pyenv's 3.11.7 and /usr/bin's 3.11.2: both cp311)
+    keeps .venv; another minor version rebuilds it."""
+    venv = tmp_path / ".venv"
+
+    def make(python: Path) -> str:
+        return subprocess.run(
+            ["make", "-s", "-f", str(ROOT / "Makefile"), f"VENV={venv}", f"PYTHON={python}",
+             f"{venv}/.python"],
+            cwd=ROOT, capture_output=True, text=True, check=True,
+        ).stdout  # fmt: skip
+
+    make(_fake_python(tmp_path / "py_a", "cpython 3.11"))
+    assert (venv / ".python").read_text() == "cpython 3.11\n"
+    (venv / "kept").touch()
+    assert make(_fake_python(tmp_path / "py_b", "cpython 3.11")) == ""  # another path: kept
+    assert (venv / "kept").is_file()
+    printed = make(_fake_python(tmp_path / "py_c", "cpython 3.12"))
+    assert "rebuilding it with cpython 3.12" in printed
+    assert not (venv / "kept").exists() and (venv / ".python").read_text() == "cpython 3.12\n"
+
+
 def test_version_flag() -> None:
     out = subprocess.run(
         [sys.executable, "-m", "slam.cli.main", "--version"],

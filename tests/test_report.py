@@ -68,6 +68,26 @@ def test_band_of_a_landmark_is_the_95_percent_envelope():
     np.testing.assert_allclose(half, k * np.sqrt(0.04 + s**2 * 1e-6), rtol=1e-3)
 
 
+def test_a_segment_is_drawn_over_what_its_bins_show():
+    """A landmark whose extent runs 20 m past its bins into open water is drawn to where the
+    bins within its 95 % half width stop; bins of another wall, off the line, do not count."""
+    from slam.io.maps import landmark_layers, seen_extent
+
+    lm = {"rho": 10.0, "theta": np.pi / 2, "cov": [[0.04, 0.0], [0.0, 1e-6]]}
+    lm["endpoints"] = [[-30.0, 10.0], [30.0, 10.0]]  # the line y = 10 from x = -30 to 30
+    rng = np.random.default_rng(4)
+    x = rng.uniform(-30.0, 10.0, 400)
+    wall = np.column_stack([x, 10.0 + rng.normal(0.0, 0.1, x.size)])
+    other = np.column_stack([rng.uniform(10.0, 30.0, 200), np.full(200, 14.0)])  # 4 m off
+    ends = seen_extent(lm, np.concatenate([wall, other]))
+    assert ends[:, 1] == pytest.approx([10.0, 10.0], abs=1e-9)
+    assert sorted(ends[:, 0]) == pytest.approx([-30.0, 10.0], abs=0.8)
+    np.testing.assert_array_equal(seen_extent(lm, wall[:3]), lm["endpoints"])  # too few bins
+    (segment,), (band,) = landmark_layers([lm], wall)
+    np.testing.assert_allclose(segment, ends)
+    assert band[:, 0].max() < 10.5  # the band follows the drawn segment
+
+
 def test_report_table_holds_each_runs_numbers(runs, tmp_path):
     dr, ekf = runs["dr"], runs["ekf"]
     res = report([dr.out_dir, ekf.out_dir], tmp_path / "rep")
@@ -98,6 +118,23 @@ def test_report_table_holds_each_runs_numbers(runs, tmp_path):
     t, e = truth_errors(ekf.trajectory, truth_trajectory(load_run(ekf.out_dir).dataset))
     first = (t - t[0]) < 300.0
     assert _row(md, "ekf", column=0)[1] == f"{e[first].mean():.2f} / {e[first].max():.2f}"
+    # each error band says which covariance model it is: different ones for dr and a closed loop
+    from slam.run.report_figures import band_model
+
+    assert "with its AHRS-bias state (sd" in band_model(
+        load_run(ekf.out_dir, open_source=False), "EKF"
+    )
+    assert "no AHRS-bias state" in band_model(load_run(dr.out_dir, open_source=False), "dr")
+    # where each run's figures come from: its version, commit and digests
+    assert "## Provenance" in md
+    for r, name in ((dr, "h5-dr"), (ekf, "h5-ekf")):
+        prov = r.metrics["provenance"]
+        cells = _row(md, f"{r.backend} (`{name}`)", column=0)
+        assert cells[1] == prov["version"]
+        assert prov["settings_sha256"][:16] in cells[3]
+        assert prov["dataset_sha256"][:16] in cells[4]
+        if prov["git_commit"] is not None:
+            assert prov["git_commit"][:12] in cells[2]
     names = sorted(p.name for p in res.figures)
     assert names == [
         "errors_h5-dr.png",

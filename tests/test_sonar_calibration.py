@@ -3,12 +3,13 @@ simulator's true walls: the range offset of the kept echoes and a line's systema
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from datasets.simulator import simulate
 from datasets.source import Dataset, open_dataset
 from features.extractor import LineExtractor
 from slam.cli.main import main
@@ -16,21 +17,38 @@ from slam.eval.consistency import mean_nees_band
 from slam.eval.lines import GATE_RAD, HARBOUR_GATE_M, match_features
 from slam.eval.truth import truth_trajectory, truth_walls
 from slam.run.presets import extractor_config
-from slam.run.sonar_calibration import calibrate_line_noise, calibrate_range_offset
+from slam.run.sonar_calibration import (
+    RangeOffsetFit,
+    calibrate_line_noise,
+    calibrate_range_offset,
+)
 
 
 @pytest.fixture(scope="module")
-def drift(tmp_path_factory: pytest.TempPathFactory) -> Dataset:
-    """900 s of the drift world: its echoes rise on the wall's face and peak 0.25 m behind."""
-    return open_dataset(
-        simulate("drift", seed=2, out_dir=tmp_path_factory.mktemp("d"), duration_s=900)
-    )
+def drift(simulated: Callable[..., Path]) -> Dataset:
+    """900 s of the drift world: its echoes rise on the wall's face and peak 0.25 m behind
+    (the same run as tests/test_dvl_scale.py's, simulated once per session)."""
+    return open_dataset(simulated("drift", 2, 900.0))
+
+
+@pytest.fixture(scope="module")
+def offset_fit(drift: Dataset) -> RangeOffsetFit:
+    """``calibrate_range_offset`` on the drift run, once for the module (it is deterministic)."""
+    return calibrate_range_offset(drift)
+
+
+#: _against_truth's results by (dataset, range offset, sigmas): the extraction is deterministic
+#: and several tests score the same lines.
+_SCORED: dict[tuple[str, float, tuple[float, float]], tuple[float, np.ndarray]] = {}
 
 
 def _against_truth(
     ds: Dataset, sigmas: tuple[float, float] = (0.0, 0.0)
 ) -> tuple[float, np.ndarray]:
     """Lines extracted with the true poses: mean rho error (m, > 0 behind the wall), NEES."""
+    key = (str(ds.root), ds.config.sonar.range_offset_m, sigmas)
+    if key in _SCORED:
+        return _SCORED[key]
     cfg = extractor_config("default").replace(
         line_sigma_rho_m=sigmas[0], line_sigma_theta_rad=sigmas[1]
     )
@@ -40,7 +58,11 @@ def _against_truth(
         m for m in match_features(lines, truth_walls(ds), HARBOUR_GATE_M, GATE_RAD) if m.matched
     ]
     assert len(matched) > 100
-    return float(np.mean([m.error[0] for m in matched])), np.array([m.nees for m in matched])
+    _SCORED[key] = (
+        float(np.mean([m.error[0] for m in matched])),
+        np.array([m.nees for m in matched]),
+    )
+    return _SCORED[key]
 
 
 def _with_offset(ds: Dataset, offset_m: float) -> Dataset:
@@ -48,18 +70,22 @@ def _with_offset(ds: Dataset, offset_m: float) -> Dataset:
     return replace(ds, config=replace(ds.config, sonar=sonar))
 
 
-def test_the_range_offset_puts_the_lines_on_the_walls(drift: Dataset) -> None:
+def test_the_range_offset_puts_the_lines_on_the_walls(
+    drift: Dataset, offset_fit: RangeOffsetFit
+) -> None:
     bias_raw, _ = _against_truth(drift)
     assert bias_raw > 0.08  # the kept peaks lie behind the faces
-    fit = calibrate_range_offset(drift)
+    fit = offset_fit
     assert fit.method.startswith("raw echoes") and fit.n > 1000
     assert 0.05 < fit.offset_m < 0.25
     bias, _ = _against_truth(_with_offset(drift, fit.offset_m))
     assert abs(bias) < 0.04
 
 
-def test_the_line_noise_makes_the_lines_no_longer_overconfident(drift: Dataset) -> None:
-    ds = _with_offset(drift, calibrate_range_offset(drift).offset_m)
+def test_the_line_noise_makes_the_lines_no_longer_overconfident(
+    drift: Dataset, offset_fit: RangeOffsetFit
+) -> None:
+    ds = _with_offset(drift, offset_fit.offset_m)
     _, nees0 = _against_truth(ds)
     _, hi = mean_nees_band(nees0.size, 2)
     assert nees0.mean() > hi  # the fit's covariance alone: the echoes' noise only

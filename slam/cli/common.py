@@ -55,7 +55,7 @@ def number(
 
 
 EPILOG = (
-    "Data: a SOURCE is a directory in the marina layout (see README) or the named source 'marina', "
+    "Data: a SOURCE is a directory in the marina layout (docs/data.md) or the named source 'marina', "
     "found under $SONARSLAM_DATA/marina."
 )
 

@@ -9,7 +9,7 @@ from datasets.source import open_dataset
 from slam.cli.common import EPILOG, Subparsers, add_source
 from slam.model.motion import gyro_bias_against_heading
 from slam.run.settings import Setting, dataset_settings, run_settings
-from slam.run.sources import DR_IGNORES, dvl_quality
+from slam.run.sources import DR_IGNORES, dvl_quality, start_pose
 
 
 def add_parser(sub: Subparsers) -> None:
@@ -24,7 +24,13 @@ def command(args: argparse.Namespace) -> int:
     d = open_dataset(args.source)
     t0, t1 = d.nav_span_s
     print(f"{d.name}: {d.root}")
-    print(f"  sonar beams {len(d.beams)} ({len(d.nav_beams())} inside the navigation span)")
+    nav = d.nav_beams()
+    processed = ""
+    if d.gps is not None and nav:
+        t_start = start_pose(d)[0]
+        n_run = sum(1 for b in nav if b.t >= t_start)
+        processed = f"; a run processes the {n_run} from its start pose, the first GPS fix"
+    print(f"  sonar beams {len(d.beams)} ({len(nav)} inside the navigation span{processed})")
     print(f"  DVL rows {d.dvl.t.size} ({int((~d.dvl.valid).sum())} without bottom lock)")
     print(f"  AHRS rows {d.attitude.t.size}; GPS fixes {0 if d.gps is None else d.gps.t.size}")
     faults = {k: v for k, v in d.report.counts.items() if v}

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import matplotlib.patheffects as path_effects
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection, PolyCollection
@@ -67,6 +68,9 @@ class MapLayers:
         The simulator's true walls.
     segment_label : str
         Legend name of the segments (``"landmark"``, ``"line"``).
+    shaded : sequence of int
+        Indices of the segments whose band is shaded; every band is drawn as a thin outline
+        (a shaded band of every landmark hides the map).
     """
 
     points_w: FloatArray
@@ -75,6 +79,12 @@ class MapLayers:
     bands_w: Sequence[FloatArray] = ()
     walls_w: FloatArray | None = None
     segment_label: str = "landmark"
+    shaded: Sequence[int] = ()
+
+
+#: Colour of the segments and their bands: stands out on the grey-to-black bins and beside the
+#: trajectories' colours (a white edge keeps it apart from the black walls).
+SEGMENT_COLOUR = "#ff7f00"
 
 
 def _dense_box(points_w: FloatArray, cells: int = 100, share: float = 5e-4) -> FloatArray:
@@ -166,23 +176,32 @@ def draw_map(ax: Axes, layers: MapLayers, box: tuple[FloatArray, FloatArray]) ->
                 zorder=6,
             )
     if layers.bands_w:
-        bands = PolyCollection(
+        outlines = PolyCollection(
             list(layers.bands_w),
-            fc="tab:orange",
-            ec="none",
-            alpha=0.35,
-            zorder=1,
+            fc="none",
+            ec=SEGMENT_COLOUR,
+            lw=0.6,
+            alpha=0.9,
+            zorder=7,
             label="95 % band of (ρ, θ)",
         )
-        ax.add_collection(bands, autolim=False)
+        ax.add_collection(outlines, autolim=False)
+        shaded = [layers.bands_w[i] for i in layers.shaded]
+        if shaded:
+            fill = PolyCollection(shaded, fc=SEGMENT_COLOUR, ec="none", alpha=0.3, zorder=1)
+            ax.add_collection(fill, autolim=False)
     if layers.segments_w:
         n = len(layers.segments_w)
         lines = LineCollection(
             list(layers.segments_w),
-            colors="darkred",
-            lw=1.1,
+            colors=SEGMENT_COLOUR,
+            lw=1.8,
             zorder=8,
             label=f"{layers.segment_label}s ({n})",
+            path_effects=[
+                path_effects.Stroke(linewidth=3.0, foreground="white"),
+                path_effects.Normal(),
+            ],
         )
         ax.add_collection(lines, autolim=False)
     _draw_trajectories(ax, layers.trajectories)
@@ -360,9 +379,44 @@ def landmark_band_world(
     return ends, segment_band_world(feature, confidence)
 
 
+def seen_extent(
+    landmark: dict[str, Any],
+    points_w: FloatArray,
+    confidence: float = 0.95,
+    min_half_width_m: float = 0.1,
+    quantile: float = 0.01,
+    min_points: int = 5,
+) -> FloatArray:
+    """The part of a ``map.json`` landmark's segment that the bins show: its ends (2, 2), world (m).
+
+    The bins within the landmark's ``confidence`` half width in rho (``sqrt(chi2_1) sigma_rho``,
+    at least ``min_half_width_m``) of its line and inside its segment support it; the segment
+    is cut to the ``quantile`` and ``1 - quantile`` of their positions along the line. With
+    fewer than ``min_points`` such bins the segment is returned as it is.
+    """
+    ends = np.asarray(landmark["endpoints"], dtype=np.float64)
+    theta, rho = float(landmark["theta"]), float(landmark["rho"])
+    n = np.array([np.cos(theta), np.sin(theta)])
+    t = np.array([-n[1], n[0]])
+    half = max(np.sqrt(chi2.ppf(confidence, 1) * float(landmark["cov"][0][0])), min_half_width_m)
+    s_ends = np.sort(ends @ t)
+    pts = np.asarray(points_w, dtype=np.float64).reshape(-1, 2)
+    s = pts @ t
+    near = (np.abs(pts @ n - rho) <= half) & (s >= s_ends[0]) & (s <= s_ends[1])
+    if np.count_nonzero(near) < min_points:
+        return ends
+    lo, hi = np.quantile(s[near], [quantile, 1.0 - quantile])
+    return np.stack([rho * n + lo * t, rho * n + hi * t])
+
+
 def landmark_layers(
     landmarks: Sequence[dict[str, Any]],
+    points_w: FloatArray | None = None,
 ) -> tuple[list[FloatArray], list[FloatArray]]:
-    """Segments and 95 % bands of ``map.json`` landmarks (:func:`landmark_band_world`)."""
+    """Segments and 95 % bands of ``map.json`` landmarks (:func:`landmark_band_world`); with
+    the map's bins, each segment (and its band) is bounded by what the bins show
+    (:func:`seen_extent`)."""
+    if points_w is not None:
+        landmarks = [{**lm, "endpoints": seen_extent(lm, points_w).tolist()} for lm in landmarks]
     pairs = [landmark_band_world(lm) for lm in landmarks]
     return [p[0] for p in pairs], [p[1] for p in pairs]

@@ -177,8 +177,11 @@ def plot_error_bounds(
     sigmas: FloatArray | None,
     title: str,
     reference: str = "GPS",
+    band_label: str = "±3 sigma",
+    aligned: FloatArray | None = None,
 ) -> Path:
-    """Errors against time with their 3-sigma bounds: East, North (and heading when given).
+    """Errors against time with their 3-sigma bounds: East, North (and heading when given);
+    and, when given, the error after a rigid alignment (no band), the same for every run.
 
     Parameters
     ----------
@@ -193,6 +196,10 @@ def plot_error_bounds(
     title : str
     reference : str
         Name of the reference in the labels.
+    band_label : str
+        What the band is (which covariance model): its legend entry.
+    aligned : ndarray, shape (K, 2), optional
+        East and North error (m) after a rigid alignment of the estimate onto the reference.
     """
     n = errors.shape[1]
     names = ["East error (m)", "North error (m)", "heading error (deg)"][:n]
@@ -203,6 +210,8 @@ def plot_error_bounds(
     for k, ax in enumerate(axes):
         e = errors[:, k] * scale[k]
         ax.plot(t, e, lw=0.8, color="tab:blue", label=f"estimate - {reference}")
+        if aligned is not None and k < aligned.shape[1]:
+            ax.plot(t, aligned[:, k], lw=0.8, color="tab:purple", label="after a rigid alignment")
         if sigmas is not None:
             b = 3.0 * sigmas[:, k] * scale[k]
             inside = float(np.mean(np.abs(e) <= b)) if e.size else float("nan")
@@ -213,7 +222,7 @@ def plot_error_bounds(
                 color="tab:orange",
                 alpha=0.3,
                 lw=0,
-                label=f"±3 sigma ({100 * inside:.1f} % inside)",
+                label=f"{band_label} ({100 * inside:.1f} % inside)",
             )
         ax.axhline(0.0, color="k", lw=0.5)
         ax.set_ylabel(names[k])

@@ -179,7 +179,7 @@ def _write_closed_loop(
         map_min_intensity(beams),
     )
     ref_name, ref = _reference(dataset)
-    segments, bands = landmark_layers(landmarks)
+    segments, bands = landmark_layers(landmarks, points)
     layers = MapLayers(
         points,
         {ref_name: ref.clip(t0, t1), backend: result.trajectory},

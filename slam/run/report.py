@@ -251,6 +251,38 @@ def _consistency(runs: list[RunData], period_s: float = 1.0) -> list[str]:
     ]
 
 
+def _provenance(runs: list[RunData], labels: dict[str, str]) -> list[str]:
+    """Where each run's figures come from (``metrics.json``'s ``provenance``)."""
+    rows = []
+    for run in runs:
+        p = run.metrics.get("provenance") or {}
+        commit = p.get("git_commit")
+        dirty = p.get("git_dirty")
+        rows.append(
+            {
+                "run": f"{labels[str(run.run_dir)]} (`{run.name}`)",
+                "sonarslam": p.get("version") or "not recorded",
+                "git commit": "not recorded"
+                if commit is None
+                else f"`{commit[:12]}`" + (" (dirty tree)" if dirty else ""),
+                "settings sha256": f"`{p['settings_sha256'][:16]}`" if p else "",
+                "dataset sha256": f"`{p['dataset_sha256'][:16]}` ({p['dataset_file_count']} files)"
+                if p
+                else "",
+            }
+        )
+    cols = [(k, k) for k in rows[0]] if rows else []
+    return [
+        "## Provenance",
+        "",
+        "The code, settings and data of each run (`metrics.json`: `provenance`, full digests: "
+        "SHA-256 of the resolved settings and of every file of the dataset).",
+        "",
+        _markdown(rows, cols),
+        "",
+    ]
+
+
 def _dataset_section(
     name: str, group: list[RunData], rows: list[dict[str, Any]], segments: SegmentTable
 ) -> list[str]:
@@ -363,6 +395,7 @@ def report(
         dataset_figs.append((name, figs))
         figures += figs
     md += _consistency(runs)
+    md += _provenance(runs, labels)
     md += ["## Figures", ""]
     for name, figs in dataset_figs:
         md += [f"### {name}", ""] + [f"![{p.stem}]({p.name})\n" for p in figs]

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from evo.core.geometry import umeyama_alignment
 
 from features.projection import project_beams
 from slam.eval.ate import ate_errors, truth_errors
@@ -68,13 +69,39 @@ def _sigmas_at(trajectory: Trajectory, t_s: FloatArray) -> FloatArray | None:
     return np.sqrt(np.clip(np.diagonal(trajectory.covs[i], axis1=1, axis2=2), 0.0, None))
 
 
+def band_model(run: RunData, label: str) -> str:
+    """Which covariance a run's error band is: the bands of dead reckoning and of a closed loop
+    with an AHRS-bias state are different models (the issue of comparing their widths)."""
+    sd = run.metrics.get("state_ahrs_bias_sd_deg")
+    if sd is not None:
+        return (
+            f"band: 3σ of the {label} covariance, with its AHRS-bias state (sd {sd:.1f}° at the"
+            " end), a constant heading error no landmark observes: it grows with the distance"
+            " from the start"
+        )
+    if run.backend == "dr":
+        return "band: 3σ of dead reckoning's covariance: DVL and AHRS noise, no AHRS-bias state"
+    return f"band: 3σ of the {label} covariance"
+
+
+def _aligned_errors(est_xy: FloatArray, ref_xy: FloatArray) -> FloatArray | None:
+    """East and North error (m) after the rigid (Umeyama, no scale) alignment of the estimate's
+    positions onto the reference's: the error without the start fix and a constant heading."""
+    if est_xy.shape[0] < 3:
+        return None
+    r, t, _ = umeyama_alignment(est_xy.T, ref_xy.T, False)
+    return np.asarray((r @ est_xy.T).T + t - ref_xy, dtype=np.float64)
+
+
 def error_figure(run: RunData, label: str, out: Path) -> Path:
-    """East, North (and heading, against the truth) errors in time with their 3-sigma bounds
-    (the GPS sigma added against GPS)."""
+    """East, North (and heading, against the truth) errors in time with the 3-sigma bounds of
+    the run's own covariance, saying which model it is (the GPS sigma added against GPS), and
+    the error after a rigid alignment, which compares like with like between runs."""
     if run.truth is not None:
         t = run.gps.t_s
         e = pose_errors(run.trajectory, run.truth, t)
         ref_name, ref_sigma_m = "truth", 0.0
+        ref_xy = run.truth.poses(t)[:, :2]
     else:
         if run.dataset is not None and run.dataset.gps is not None:
             gps = run.dataset.gps
@@ -85,16 +112,21 @@ def error_figure(run: RunData, label: str, out: Path) -> Path:
         else:
             t, xy, ref_sigma_m = run.gps.t_s, run.gps.poses_wTb[:, :2], 0.0
         e = run.trajectory.poses(t)[:, :2] - xy
-        ref_name = "GPS"
+        ref_name, ref_xy = "GPS", xy
     s = _sigmas_at(run.trajectory, t)
     if s is not None:
         s = s[:, : e.shape[1]].copy()
         s[:, :2] = np.sqrt(s[:, :2] ** 2 + ref_sigma_m**2)
     gps_note = f", bounds include the GPS sigma {ref_sigma_m:g} m" if ref_sigma_m > 0 else ""
-    title = f"{run.dataset_name}: {label} against {ref_name}{gps_note}" + (
-        "" if s is not None else f" (no {cov_file(run.stem)}: no bounds)"
+    title = (
+        f"{run.dataset_name}: {label} against {ref_name}{gps_note}"
+        + ("" if s is not None else f" (no {cov_file(run.stem)}: no bounds)")
+        + f"\n{band_model(run, label)}"
+        + "\nbands of different back ends are different models; the error after a rigid"
+        " alignment compares runs alike"
     )
-    return plot_error_bounds(out, t, e, s, title, ref_name)
+    aligned = _aligned_errors(run.trajectory.poses(t)[:, :2], ref_xy)
+    return plot_error_bounds(out, t, e, s, title, ref_name, "±3σ, own covariance", aligned)
 
 
 def nees_figure(run: RunData, label: str, out: Path) -> Path:
@@ -125,7 +157,7 @@ def map_figure(run: RunData, label: str, out: Path) -> Path | None:
     points, _ = project_beams(
         beams, ds.config.sonar, ds.config.sonar_mounting, run.trajectory, map_min_intensity(beams)
     )
-    segments, bands = landmark_layers(run.landmarks)
+    segments, bands = landmark_layers(run.landmarks, points)
     ref = {"truth": run.truth.clip(t0, t1)} if run.truth is not None else {"gps": run.gps}
     layers = MapLayers(points, {**ref, run.backend: run.trajectory}, segments, bands, _walls(run))
     return plot_map(

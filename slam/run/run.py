@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from datasets.config import dump_dataset_config
 from datasets.errors import DataError, DataWarning
 from datasets.settings import SettingError
 from datasets.source import Dataset, open_dataset
@@ -33,6 +34,7 @@ from slam.run.closed_loop import ClosedLoopResult, run_closed_loop
 from slam.run.health import monitor_run
 from slam.run.outputs import write_run
 from slam.run.presets import RunConfig, check_combination, check_settings, run_config
+from slam.run.provenance import provenance
 from slam.run.sources import POSE_SOURCES, dvl_quality
 
 __all__ = [
@@ -343,7 +345,10 @@ def run(
     ``config``: a ``sonarslam.toml``-format file whose keys replace the dataset's calibration
     (:func:`datasets.source.open_dataset`); the configuration used is written to
     ``config_used.toml``. ``settings``: extractor and back-end settings
-    (``{"isam2.robust": "cauchy"}``, :mod:`slam.run.presets`), recorded in ``metrics.json``.
+    (``{"isam2.robust": "cauchy"}``, :mod:`slam.run.presets`), recorded in ``metrics.json``,
+    with the run's provenance (``provenance``: the package version, the git commit and whether
+    the tree was dirty, the settings' digest and the dataset's file digests;
+    :mod:`slam.run.provenance`).
     """
     # everything that can be checked before reading is checked first, and the output
     # directory is created only when the run has results to write
@@ -358,6 +363,9 @@ def run(
         raise SettingError("--batch", f"back end {backend!r} does not smooth")
     dataset = open_dataset(source, config_override=config)
     result = run_backend(dataset, backend, settings, progress=progress, batch=batch)
+    result.metrics["provenance"] = provenance(
+        backend, dataset.root, dump_dataset_config(dataset.config), result.config, batch
+    )
     result.files = write_run(
         Path(out_dir),
         dataset,
