@@ -335,3 +335,41 @@ def test_aligned_ate_against_gps_removes_a_rigid_move_only():
     bent = Trajectory(t, np.column_stack([xy[:, 0], xy[:, 1] + np.where(t < 100, 0.0, 2.0), 0 * t]))
     aligned = ate_against_gps(bent, gps, align=True)
     assert 0.5 < aligned.ate_mean_m < ate_against_gps(bent, gps).ate_mean_m
+
+
+def test_the_true_trajectory_projects_the_sharpest_map(simulated):
+    """GPS-free sharpness: a simulated harbour's beams projected with the truth give a lower
+    entropy than with its second half turned by 2 deg about the midpoint, or with a drift that
+    grows to 3 m; a rigid move of the whole trajectory leaves it (it holds no shape error); the
+    whole-run figure is in a dead-reckoning run's metrics.json."""
+    from datasets.source import open_dataset
+    from slam.eval.sharpness import trajectory_sharpness
+    from slam.eval.truth import truth_trajectory
+    from slam.run.presets import map_min_intensity
+    from slam.run.run import run_backend
+
+    ds = open_dataset(simulated("harbour", 2, 300.0))
+    truth = truth_trajectory(ds)
+    span = ds.sonar_span_s
+    assert span is not None
+    p = truth.poses_wTb.copy()
+    level = map_min_intensity(ds.beams)
+
+    def turned(from_index: int, angle_rad: float) -> Trajectory:
+        q = p.copy()
+        c, s = np.cos(angle_rad), np.sin(angle_rad)
+        pivot = p[from_index, :2]
+        q[from_index:, :2] = (p[from_index:, :2] - pivot) @ np.array([[c, s], [-s, c]]) + pivot
+        q[from_index:, 2] += angle_rad
+        return Trajectory(truth.t_s, q)
+
+    frac = (truth.t_s - truth.t_s[0]) / (truth.t_s[-1] - truth.t_s[0])
+    drifted = Trajectory(truth.t_s, p + np.column_stack([3.0 * frac, 0 * frac, 0 * frac]))
+    sharp = trajectory_sharpness(ds, truth, span, level)
+    half = turned(p.shape[0] // 2, np.deg2rad(2.0))
+    assert sharp < trajectory_sharpness(ds, half, span, level) - 0.01
+    assert sharp < trajectory_sharpness(ds, drifted, span, level) - 0.01
+    rigid = trajectory_sharpness(ds, turned(0, np.deg2rad(2.0)), span, level)
+    assert rigid == pytest.approx(sharp, abs=0.01)
+    dr = run_backend(ds, "dr").metrics
+    assert dr["map_entropy_nats"] > sharp

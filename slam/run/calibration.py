@@ -21,6 +21,7 @@ from features.line import LineFeature
 from features.pose_source import PoseSource
 from features.projection import beam_points
 from slam.backends.registry import backend_spec
+from slam.eval.sharpness import map_entropy
 from slam.model.motion import body_yaw
 from slam.run.closed_loop import ClosedLoopResult, run_closed_loop
 from slam.run.presets import run_config
@@ -45,18 +46,6 @@ class YawSearch:
     best_yaw_rad: float
     yaw_grid_rad: FloatArray
     entropy: FloatArray
-
-
-def map_entropy(points_w: FloatArray, cell_m: float) -> float:
-    """Shannon entropy (nats) of the 2D histogram of points with square cells."""
-    if points_w.shape[0] == 0:
-        return 0.0
-    ij = np.floor(points_w / cell_m).astype(np.int64)
-    ij -= ij.min(axis=0)
-    keys = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
-    counts = np.bincount(np.unique(keys, return_inverse=True)[1])
-    p = counts / counts.sum()
-    return float(-(p * np.log(p)).sum())
 
 
 #: A sonar calibration needs this many full turns of the head inside the navigation span: the

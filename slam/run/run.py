@@ -27,13 +27,20 @@ from datasets.settings import SettingError
 from datasets.source import Dataset, open_dataset
 from slam.backends.registry import BACKENDS, backend_spec
 from slam.eval.ate import ate_against_gps, ate_against_truth
+from slam.eval.sharpness import trajectory_sharpness
 from slam.eval.truth import association_against_truth, truth_trajectory
 from slam.io.files import check_output_dir
 from slam.io.trajectory import Trajectory
 from slam.run.closed_loop import ClosedLoopResult, run_closed_loop
 from slam.run.health import monitor_run
 from slam.run.outputs import write_run
-from slam.run.presets import RunConfig, check_combination, check_settings, run_config
+from slam.run.presets import (
+    RunConfig,
+    check_combination,
+    check_settings,
+    map_min_intensity,
+    run_config,
+)
 from slam.run.provenance import provenance
 from slam.run.sources import POSE_SOURCES, dvl_quality
 
@@ -192,7 +199,9 @@ def run_backend(
         **dataset.report.metrics((t0, t1)),
         **extra,
     }
+    metrics.update(_sharpness(dataset, trajectory, ""))
     for name, tr in trajectories.items():
+        metrics.update(_sharpness(dataset, tr, f"_{name}"))
         ate = ate_against_gps(tr, dataset.gps)
         metrics[f"ate_mean_{name}_m"] = ate.ate_mean_m
         metrics[f"ate_max_{name}_m"] = ate.ate_max_m
@@ -254,6 +263,20 @@ def _gps_coverage(dataset: Dataset, trajectory: Trajectory) -> dict[str, Any]:
             stacklevel=3,
         )
     return {"gps_uncovered_s": uncovered}
+
+
+def _sharpness(dataset: Dataset, trajectory: Trajectory, suffix: str) -> dict[str, float]:
+    """``map_entropy{suffix}_nats``: the whole sonar span's map projected with the trajectory
+    (:func:`slam.eval.sharpness.trajectory_sharpness`, 0.5 m cells; GPS-free, lower is
+    sharper); nothing without beams inside the trajectory's span."""
+    span = dataset.sonar_span_s
+    if span is None:
+        return {}
+    t0, t1 = max(span[0], trajectory.span_s[0]), min(span[1], trajectory.span_s[1])
+    if t1 <= t0:
+        return {}
+    level = map_min_intensity(dataset.beams)
+    return {f"map_entropy{suffix}_nats": trajectory_sharpness(dataset, trajectory, (t0, t1), level)}
 
 
 def _span_metrics(dataset: Dataset, trajectory: Trajectory, suffix: str) -> dict[str, Any]:
