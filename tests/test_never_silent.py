@@ -1,5 +1,5 @@
 """Issue "Never wrong in silence": each case a user hit gives a clear line or a counted
-warning (README, "Bad input"): what a kill leaves, settings refused late, the docs' rules
+warning (docs/bad-input.md): what a kill leaves, settings refused late, the docs' rules
 against the code, thin overlaps, one-row logs, a full disk, bounded memory, the health monitor
 end to end."""
 
@@ -26,7 +26,8 @@ from slam.cli.main import main
 from slam.io.files import atomic_path, make_output_dir, remove_stale_temporaries
 from tests.fuzz_inputs import edit_log_rows
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+#: Where the docs state the readers' rules (README.md links it).
+BAD_INPUT = Path(__file__).resolve().parents[1] / "docs" / "bad-input.md"
 
 
 @pytest.fixture(scope="module")
@@ -159,9 +160,9 @@ def test_dead_reckoning_names_the_settings_it_ignores(harbour, tmp_path, capsys)
 # -- the docs' rules, read from the one place they are made --------------------------------
 
 
-def test_the_readme_states_the_number_grammar_of_the_code():
-    """The README quotes datasets.logfile.NUMBER; the code accepts exactly it."""
-    assert f"`{NUMBER}`" in README.read_text(encoding="utf-8")
+def test_the_docs_state_the_number_grammar_of_the_code():
+    """docs/bad-input.md quotes datasets.logfile.NUMBER; the code accepts exactly it."""
+    assert f"`{NUMBER}`" in BAD_INPUT.read_text(encoding="utf-8")
     for text in ("5.", ".5", "+.5", "-1e3", "2.5E-02"):
         assert re.fullmatch(NUMBER, text)
     for text in (".", "+", "1e", "e3", "1_0", "0x1", "nan", "inf"):
@@ -177,10 +178,11 @@ def test_a_pcd_header_that_is_not_ascii_is_refused(tmp_path, head):
         read_pcd(pcd)
 
 
-def test_the_row_rules_are_the_readmes(tmp_path):
+def test_the_row_rules_are_the_docs(tmp_path):
     """A log row with the wrong count of fields is skipped and counted; the keyframe CSV (an
-    index of scans) and a PCD (a declared count of points) refuse it, as the README says."""
-    text = README.read_text(encoding="utf-8")
+    index of scans) and a PCD (a declared count of points) refuse it, as docs/bad-input.md
+    says."""
+    text = BAD_INPUT.read_text(encoding="utf-8")
     assert "skipped with one warning per file counting them" in text
     assert "a keyframe-CSV or PCD row with the wrong number of fields is a" in text
     log = tmp_path / "a_DVL.log"
