@@ -93,7 +93,8 @@ class LandmarkConfig:
         this far (m) since the landmark's last used observation: observations of one wall from
         nearly the same place share their systematic error (the echo band seen at the same
         incidence and range), which does not average down as independent errors would. None:
-        every associated observation is used.
+        every associated observation is used. The default's measurements are in
+        docs/marina-accuracy.md.
     """
 
     association: AssociationConfig = field(default_factory=AssociationConfig)
@@ -104,7 +105,7 @@ class LandmarkConfig:
     side_gate: bool = True
     line_cov_scale: float = 1.0
     merge_gate_probability: float | None = None
-    reobservation_min_move_m: float | None = None
+    reobservation_min_move_m: float | None = 5.0
 
     def __post_init__(self) -> None:
         if self.tentative_observations < 1:
