@@ -328,7 +328,9 @@ def test_room_recovers_the_walls_and_the_trajectory(room: SyntheticRun):
     for lm in lines:
         d = [abs(lm["rho"] - w[0]) + abs(float(wrap_angle(lm["theta"] - w[1]))) for w in WALLS]
         assert min(d) < 0.15  # m + rad: within 0.15 m and ~2 deg of a true wall
-        assert lm["observations"] >= 20
+        # a vote per metre of the 60 m path, a view counted once the vehicle moved 5 m since
+        # the landmark's last one (reobservation_min_move_m): 8-12 per wall on this seed
+        assert lm["observations"] >= 6
     sm = be.smoothed_trajectory(covariances=True)
     truth = np.interp(sm.t_s, room.t_s, np.arange(room.t_s.size))
     true_poses = room.truth[np.round(truth).astype(int)]

@@ -17,6 +17,9 @@ R_LINE = np.diag([0.05**2, np.deg2rad(0.5) ** 2])
 
 
 def _backend(kind: str, **settings: object) -> LineEkf | LineIsam2:
+    """A back end at the origin. The vehicle of these tests stands still, so every view counts
+    (``reobservation_min_move_m`` None) unless a test sets the limit itself."""
+    settings.setdefault("reobservation_min_move_m", None)
     pose, P0 = np.zeros(3), np.diag([1e-4, 1e-4, 1e-6])
     if kind == "ekf":
         return LineEkf(0.0, pose, P0, Mounting(), EkfConfig(**settings))  # type: ignore[arg-type]
