@@ -5,14 +5,15 @@ A back end estimates the vehicle pose from the motion steps (:class:`slam.model.
 the AHRS headings and the front end's lines, and in return gives the front end the pose of every
 beam through a :class:`features.pose_source.PoseSource`. Its landmarks are managed by the shared
 landmark layer (:class:`slam.mapping.landmarks.LandmarkMap`), which calls back into the back end
-through :class:`slam.mapping.landmarks.LineEstimator`. Both back ends here (the EKF,
+through one call per vote of lines (:meth:`slam.mapping.landmarks.LandmarkMap.vote`: the back
+end's belief in, the layer's decision out, :mod:`slam.mapping.vote`). Both back ends here (the EKF,
 :mod:`slam.backends.ekf`, and iSAM2, :mod:`slam.backends.isam2`) implement both protocols; a new
 back end registers in :mod:`slam.backends.registry`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
@@ -29,7 +30,15 @@ from slam.io.trajectory import Trajectory
 from slam.mapping.landmarks import LandmarkConfig, LandmarkMap
 from slam.model.motion import MotionStep, OdometryChain
 
-__all__ = ["BackendConfig", "Backend", "ScanBackend", "AnchoredOdometry"]
+__all__ = [
+    "BackendConfig",
+    "Backend",
+    "ScanBackend",
+    "AnchoredOdometry",
+    "VoteObservations",
+    "vote_observations",
+    "ids_of_features",
+]
 
 
 @dataclass(frozen=True)
@@ -171,6 +180,11 @@ class Backend(Protocol):
         """Counters of the run (the landmark layer's and the back end's own)."""
         ...
 
+    @property
+    def vote_wall_s(self) -> list[float]:
+        """Wall time of each :meth:`update_lines` (s): the back end's cost per vote of lines."""
+        ...
+
     def predict(self, step: MotionStep) -> FloatArray:
         """Integrate one motion step; returns the relative motion ``bTb'`` it applied (the
         odometry the driver chains for the front end)."""
@@ -220,6 +234,48 @@ class ScanBackend(Protocol):
         """A scan the matcher completed (its newest): the back end's node for it and the
         registrations it asks ``matcher`` for (consecutive, revisits)."""
         ...
+
+
+@dataclass(frozen=True, eq=False)
+class VoteObservations:
+    """A vote's lines as the landmark layer may use them (:func:`vote_observations`).
+
+    Attributes
+    ----------
+    features : list of LineFeature
+        Those at ``rho_m >= min_rho_m``.
+    rejected_near : int
+        How many were nearer.
+    z : ndarray, shape (m, 2)
+        ``features``' lines in the sonar frame ``(rho_m, theta_rad)``.
+    R : ndarray, shape (m, 2, 2)
+        Their covariances times ``line_cov_scale``.
+    """
+
+    features: list[LineFeature]
+    rejected_near: int
+    z: FloatArray = field(repr=False)
+    R: FloatArray = field(repr=False)
+
+
+def vote_observations(features: list[LineFeature], config: LandmarkConfig) -> VoteObservations:
+    """The lines of one vote the landmark layer may use, the rules of
+    :class:`slam.mapping.landmarks.LandmarkConfig` (``min_rho_m``, ``line_cov_scale``)."""
+    use = [f for f in features if f.rho_m >= config.min_rho_m]
+    z = np.array([f.z for f in use]).reshape(-1, 2)
+    R = np.array([f.cov for f in use]).reshape(-1, 2, 2)
+    if config.line_cov_scale != 1.0:
+        R = R * config.line_cov_scale
+    return VoteObservations(use, len(features) - len(use), z, R)
+
+
+def ids_of_features(
+    features: list[LineFeature], used: list[LineFeature], ids: list[int | None]
+) -> list[int | None]:
+    """The landmark id of each of ``features`` from those of the ``used`` ones (None for the
+    others)."""
+    by_feature = {id(f): ids[i] for i, f in enumerate(used)}
+    return [by_feature.get(id(f)) for f in features]
 
 
 class AnchoredOdometry:

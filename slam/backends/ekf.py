@@ -29,6 +29,7 @@ updates which landmark, and when a new line becomes one, is the landmark layer's
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,10 +48,16 @@ from features.geometry import (
 )
 from features.line import LineFeature
 from features.pose_source import PoseSource
-from slam.backends.base import AnchoredOdometry, BackendConfig
+from slam.backends.base import (
+    AnchoredOdometry,
+    BackendConfig,
+    VoteObservations,
+    ids_of_features,
+    vote_observations,
+)
 from slam.io.trajectory import Trajectory
-from slam.mapping.association import AssociationProblem
-from slam.mapping.landmarks import Landmark, LandmarkMap
+from slam.mapping.landmarks import LandmarkMap
+from slam.mapping.vote import Belief, Decision, LandmarkBelief
 from slam.model.lines import line_prediction, world_observation
 from slam.model.motion import MotionStep, step_displacement
 from slam.model.noise import robust_kernel
@@ -145,6 +152,8 @@ class LineEkf:
         self._last_ahrs_t = -np.inf
         self._own_stats = {"ahrs_updates": 0}
         self._gyro_s = 0.0  # how long the heading has integrated the gyro
+        #: wall time of each :meth:`update_lines` (s)
+        self.vote_wall_s: list[float] = []
         #: every AHRS heading update's innovation ``(t_s, nu_rad, S_rad2)`` before the update
         self.heading_innovations: list[tuple[float, float, float]] = []
 
@@ -290,48 +299,67 @@ class LineEkf:
         return z_hat, H
 
     def update_lines(self, features: list[LineFeature]) -> list[int | None]:
-        """Associate the lines of one vote to landmarks, update, manage new ones
-        (:meth:`slam.mapping.landmarks.LandmarkMap.update_lines`)."""
-        return self.map.update_lines(self, features)
+        """One vote of lines: this filter's belief to the landmark layer, which decides the
+        associations and new landmarks (:meth:`slam.mapping.landmarks.LandmarkMap.vote`); the
+        decision applied here. The landmark id of each feature (None: not associated)."""
+        wall0 = time.perf_counter()
+        obs = vote_observations(features, self.config)
+        decision = self.map.vote(self._belief(obs))
+        self._apply(decision)
+        self.vote_wall_s.append(time.perf_counter() - wall0)
+        return ids_of_features(features, obs.features, decision.ids)
 
-    # -- the landmark layer's hooks (slam.mapping.landmarks.LineEstimator) -----------------
+    def _belief(self, obs: VoteObservations) -> Belief:
+        """Every active landmark predicted from the whole state (the Jacobians at this vote's
+        start, :meth:`predict_line`)."""
+        ids = list(self._index) if obs.features else []
+        if obs.features:
+            self._pose_lin = self.x[POSE].copy()
+        preds = [self.predict_line(j) for j in ids]
+        lines = LandmarkBelief({j: self.landmark_line(j) for j in ids})
+        if ids and self.config.merge_gate_probability is not None:
+            lines = LandmarkBelief(lines.lines_w, ids, self.landmark_covariance(ids))
+        return Belief(
+            features=obs.features,
+            rejected_near=obs.rejected_near,
+            z=obs.z,
+            R=obs.R,
+            wTb=self.pose,
+            P_pose=self.pose_cov,
+            anchor=None,
+            candidates=ids,
+            z_hat=np.array([p[0] for p in preds]).reshape(-1, 2),
+            H=np.array([p[1] for p in preds]).reshape(-1, 2, self.x.size),
+            P=self.P,
+            landmarks=lines,
+            seeds_used=False,
+        )
 
-    def begin_vote(self) -> None:
-        self._pose_lin = self.x[POSE].copy()
+    def _apply(self, decision: Decision) -> None:
+        """The landmark layer's decision: the updates, the new landmarks, the merges."""
+        for j, f in decision.updates:
+            self._update_line(j, f)
+        for new in decision.new_landmarks:
+            self._add_landmark(new.id, new.observations[-1][1])
+        for keep, drop in decision.merges:
+            self._merge_landmarks(keep, drop)
 
-    def association_problem(
-        self, z: FloatArray, R: FloatArray, lines: list[LineFeature], anchor: Any
-    ) -> tuple[list[Landmark], AssociationProblem | None]:
-        """Every active landmark, predicted from the whole state."""
-        cands = self.map.active()
-        preds = [self.predict_line(lm.id) for lm in cands]
-        z_hat = np.array([p[0] for p in preds]).reshape(-1, 2)
-        H = np.array([p[1] for p in preds]).reshape(-1, 2, self.x.size)
-        lines_w = np.array([self.landmark_line(lm.id) for lm in cands]).reshape(-1, 2)
-        allowed = self.map.allowed(cands, lines_w, self.x[POSE], lines)
-        return cands, AssociationProblem(z, R, z_hat, H, self.P, allowed)
-
-    def add_observations(self, pairs: list[tuple[Landmark, LineFeature]], anchor: Any) -> None:
-        """Sequential updates, each re-linearised at the state the previous one left; with a
-        robust kernel each observation's covariance is divided by the kernel's weight of its
+    def _update_line(self, landmark_id: int, f: LineFeature) -> None:
+        """One associated observation's update, linearised at the state the previous one left;
+        with a robust kernel its covariance is divided by the kernel's weight of its
         innovation's Mahalanobis distance (:class:`slam.backends.base.BackendConfig`)."""
-        scale = self.config.line_cov_scale
-        for lm, f in pairs:
-            z_hat, H = self.predict_line(lm.id)
-            nu, flipped = line_difference(f.z, z_hat)
-            R = np.asarray(f.cov) * scale
-            R = FLIP_RHO @ R @ FLIP_RHO if flipped else R
-            if self._kernel is not None:
-                d = float(np.sqrt(nu @ np.linalg.solve(H @ self.P @ H.T + R, nu)))
-                R = R / self._kernel.weight(d)
-            self._update(f.z, H, z_hat, R, lambda a, b: line_difference(a, b)[0])
+        z_hat, H = self.predict_line(landmark_id)
+        nu, flipped = line_difference(f.z, z_hat)
+        R = np.asarray(f.cov) * self.config.line_cov_scale
+        R = FLIP_RHO @ R @ FLIP_RHO if flipped else R
+        if self._kernel is not None:
+            d = float(np.sqrt(nu @ np.linalg.solve(H @ self.P @ H.T + R, nu)))
+            R = R / self._kernel.weight(d)
+        self._update(f.z, H, z_hat, R, lambda a, b: line_difference(a, b)[0])
 
-    def add_landmark(
-        self, landmark: Landmark, line_w: FloatArray, observations: list[tuple[Any, LineFeature]]
-    ) -> int:
-        """Augment the state with the newest observation's world line and the full
-        cross-covariances; the earlier (tentative) observations only seeded it."""
-        f = observations[-1][1]
+    def _add_landmark(self, landmark_id: int, f: LineFeature) -> None:
+        """Augment the state with the world line of ``f`` (the newest observation of a promoted
+        line; the earlier, tentative ones only seeded it) and the full cross-covariances."""
         obs = world_observation(f, self.x[POSE], self.P[POSE, POSE], self.bTs)
         x, P = self.x, self.P
         n = x.size
@@ -347,19 +375,18 @@ class LineEkf:
         kf.P = P_new
         kf.dim_x = n + 2
         kf._I = np.eye(n + 2)
-        self._index[landmark.id] = n
-        self._first_line_w[landmark.id] = obs.line_w.copy()
-        return 1
+        self._index[landmark_id] = n
+        self._first_line_w[landmark_id] = obs.line_w.copy()
 
     def landmark_covariance(self, landmark_ids: list[int]) -> FloatArray:
         """Joint covariance of these landmarks' lines, shape (2k, 2k)."""
         idx = np.concatenate([[self.index(j), self.index(j) + 1] for j in landmark_ids])
         return self.P[np.ix_(idx, idx)].copy()
 
-    def merge_landmarks(self, keep: Landmark, drop: Landmark) -> None:
+    def _merge_landmarks(self, keep: int, drop: int) -> None:
         """Tie ``drop`` to ``keep`` by an exact update on their difference, then take ``drop``
         out of the state (its information is in ``keep`` and the cross-covariances now)."""
-        ik, idr = self.index(keep.id), self.index(drop.id)
+        ik, idr = self.index(keep), self.index(drop)
         nu, flipped = line_difference(self.x[idr : idr + 2], self.x[ik : ik + 2])
         H = np.zeros((2, self.x.size))
         H[:, ik : ik + 2] = -np.eye(2)
@@ -372,11 +399,8 @@ class LineEkf:
         kf.P = self.P[np.ix_(keep_rows, keep_rows)].copy()
         kf.dim_x = kf.x.size
         kf._I = np.eye(kf.dim_x)
-        del self._index[drop.id], self._first_line_w[drop.id]
+        del self._index[drop], self._first_line_w[drop]
         self._index = {j: i - 2 if i > idr else i for j, i in self._index.items()}
-
-    def end_vote(self, associated: bool) -> None:
-        pass
 
     # -- results (slam.backends.base.Backend) ----------------------------------------------
 

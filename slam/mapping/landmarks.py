@@ -1,7 +1,7 @@
 """The landmark layer shared by every back end: which lines become landmarks, which observation
 goes to which landmark, where each landmark's wall ends, and its ``map.json`` record.
 
-A back end (:class:`LineEstimator`) keeps the estimates (the EKF in its state, the factor graph
+A back end keeps the estimates (the EKF in its state, the factor graph
 as variables ``L(j)``); this layer keeps everything else about the landmarks, so that both back
 ends manage them by the same rules:
 
@@ -15,14 +15,15 @@ ends manage them by the same rules:
   ``tentative_max_age_s`` it is promoted to a landmark;
 * each landmark's extent along its line grows with the segments of its observations.
 
-The vote itself is :meth:`LandmarkMap.update_lines`; a back end's ``update_lines`` is that call.
+The vote itself is :meth:`LandmarkMap.vote`: the back end's :class:`slam.mapping.vote.Belief`
+in, a :class:`slam.mapping.vote.Decision` out, which the back end applies; this layer calls
+nothing of the back end.
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 from scipy.stats import chi2
@@ -45,6 +46,7 @@ from slam.mapping.association import (
     extent_allowed,
 )
 from slam.mapping.duplicates import duplicate_of
+from slam.mapping.vote import Anchored, Belief, Decision, LandmarkBelief, NewLandmark
 from slam.model.lines import sonar_side, world_observation
 
 __all__ = [
@@ -52,7 +54,6 @@ __all__ = [
     "Landmark",
     "Tentative",
     "Innovation",
-    "LineEstimator",
     "LandmarkMap",
     "landmark_record",
 ]
@@ -184,7 +185,7 @@ class Tentative:
     line_w: FloatArray
     cov_w: FloatArray
     ends_w: FloatArray
-    observations: list[tuple[Any, LineFeature]]
+    observations: list[Anchored]
     side: float = 1.0
 
 
@@ -198,64 +199,6 @@ class Innovation:
     nu: FloatArray
     S: FloatArray
     R: FloatArray
-
-
-class LineEstimator(Protocol):
-    """What the landmark layer needs from a back end, for one vote of lines.
-
-    :meth:`LandmarkMap.update_lines` calls, in order: :meth:`begin_vote`,
-    :meth:`association_problem`, :meth:`add_observations`, :meth:`add_landmark` (per promoted
-    line), :meth:`end_vote`; then :meth:`landmark_line` and :attr:`pose` for the extents.
-    """
-
-    bTs: FloatArray
-
-    @property
-    def pose(self) -> FloatArray:
-        """Current body pose ``wTb``, shape (3,)."""
-        ...
-
-    @property
-    def pose_cov(self) -> FloatArray:
-        """Its covariance in ``(x_m, y_m, yaw_rad)``, shape (3, 3)."""
-        ...
-
-    def begin_vote(self) -> Any:
-        """Prepare for a vote's observations; returns their anchor (kept with tentative lines)."""
-        ...
-
-    def association_problem(
-        self, z: FloatArray, R: FloatArray, lines: list[LineFeature], anchor: Any
-    ) -> tuple[list[Landmark], AssociationProblem | None]:
-        """The candidate landmarks and the joint belief to associate ``z`` (m, 2) with them."""
-        ...
-
-    def add_observations(self, pairs: list[tuple[Landmark, LineFeature]], anchor: Any) -> None:
-        """Use associated observations (the EKF updates, the graph adds factors)."""
-        ...
-
-    def add_landmark(
-        self, landmark: Landmark, line_w: FloatArray, observations: list[tuple[Any, LineFeature]]
-    ) -> int:
-        """Create the estimate of a promoted line; returns how many observations it uses."""
-        ...
-
-    def end_vote(self, associated: bool) -> None:
-        """After the vote's observations and new landmarks (the graph optimises here)."""
-        ...
-
-    def landmark_line(self, landmark_id: int) -> FloatArray:
-        """Current estimate of a landmark's world line, as stored (may be unnormalised)."""
-        ...
-
-    def landmark_covariance(self, landmark_ids: list[int]) -> FloatArray:
-        """Joint covariance of these landmarks' lines as stored, shape (2k, 2k)."""
-        ...
-
-    def merge_landmarks(self, keep: Landmark, drop: Landmark) -> None:
-        """``drop`` is the same wall as ``keep``: tie their estimates; only ``keep`` is used
-        from now on."""
-        ...
 
 
 class LandmarkMap:
@@ -287,8 +230,6 @@ class LandmarkMap:
         self.association_log: list[tuple[float, int, int | None]] = []
         #: tentative observations of a line that became a landmark, with its id: they seeded it
         self.seed_log: list[tuple[LineFeature, int]] = []
-        #: wall time of each :meth:`update_lines` (s): the back end's cost per vote of lines
-        self.vote_wall_s: list[float] = []
         #: every pairing's innovation (:class:`Innovation`), for the NIS
         self.innovations: list[Innovation] = []
 
@@ -340,61 +281,54 @@ class LandmarkMap:
 
     # -- one vote --------------------------------------------------------------------------
 
-    def update_lines(
-        self, estimator: LineEstimator, features: list[LineFeature]
-    ) -> list[int | None]:
-        """Associate the lines of one vote with the landmarks, use them, manage new ones.
+    def vote(self, belief: Belief) -> Decision:
+        """Decide one vote of lines from the back end's belief before it uses them
+        (:mod:`slam.mapping.vote`): associate the observations with the candidates, pick those
+        to use, grow the extents, keep or promote tentative lines, find duplicates.
 
-        Returns the landmark id of each feature (None: not associated, tentative or unused).
+        Everything is decided at the belief's pose and lines, before the back end's update: a
+        new line's world line, and the extent a segment adds, are placed with the pose of the
+        vote.
         """
-        wall0 = time.perf_counter()
-        try:
-            return self._update_lines(estimator, features)
-        finally:
-            self.vote_wall_s.append(time.perf_counter() - wall0)
-
-    def _update_lines(
-        self, estimator: LineEstimator, features: list[LineFeature]
-    ) -> list[int | None]:
         cfg = self.config
-        use = [f for f in features if f.rho_m >= cfg.min_rho_m]
-        self.stats["rejected_near"] += len(features) - len(use)
+        use = belief.features
+        self.stats["rejected_near"] += belief.rejected_near
         if not use:
-            return [None] * len(features)
+            return Decision([], [], [], [])
         self.stats["observations"] += len(use)
-        anchor = estimator.begin_vote()
-        z = np.array([f.z for f in use])
-        R = np.array([f.cov for f in use])
-        if cfg.line_cov_scale != 1.0:
-            R = R * cfg.line_cov_scale
-        candidates, problem = estimator.association_problem(z, R, use, anchor)
+        lines_w = belief.landmarks.lines_w
+        candidates = [self.landmarks[j] for j in belief.candidates]
         pairing: list[int | None] = [None] * len(use)
-        if problem is not None and candidates:
+        if candidates:
+            cand_lines = np.array([lines_w[lm.id] for lm in candidates])
+            allowed = self.allowed(candidates, cand_lines, belief.wTb, use)
+            problem = AssociationProblem(
+                belief.z, belief.R, belief.z_hat, belief.H, belief.P, allowed
+            )
             pairing = associate(problem, cfg.association)
             self._log_innovations(problem, pairing, candidates, use)
         paired = [(candidates[j], use[i]) for i, j in enumerate(pairing) if j is not None]
         ids: list[int | None] = [None if j is None else candidates[j].id for j in pairing]
         self.stats["associated"] += len(paired)
-        pairs = self._moved_enough(paired, estimator.pose)
-        estimator.add_observations(pairs, anchor)
+        pairs = self._moved_enough(paired, belief.wTb)
         for lm, _ in pairs:
             lm.n_obs += 1
-        wTb, P_pose = estimator.pose, estimator.pose_cov
+        new: list[NewLandmark] = []
         for i, j in enumerate(pairing):
             if j is None:
-                ids[i] = self._new_line(estimator, anchor, use[i], wTb, P_pose)
-        estimator.end_vote(bool(pairs))
-        if paired:  # a skipped re-observation was still seen: it grows the extent
-            wTs = compose(estimator.pose, self.bTs)
-            for lm, f in paired:
-                lm.grow(estimator.landmark_line(lm.id), transform_points(wTs, f.endpoints_r))
-        touched = {i for i in ids if i is not None}
+                ids[i] = self._new_line(belief, use[i], new)
+        # a skipped re-observation was still seen: it grows the extent
+        wTs = compose(belief.wTb, self.bTs)
+        for lm, f in paired:
+            lm.grow(lines_w[lm.id], transform_points(wTs, f.endpoints_r))
+        merges: list[tuple[int, int]] = []
+        touched = sorted({i for i in ids if i is not None and i in lines_w})
         if cfg.merge_gate_probability is not None and touched:
-            self.merge_duplicates(estimator, sorted(touched))
+            merges = self.merge_duplicates(belief.landmarks, touched)
         for i, f in enumerate(use):
             self.association_log.append((f.t, i, ids[i]))
-        by_feature = {id(f): ids[i] for i, f in enumerate(use)}
-        return [by_feature.get(id(f)) for f in features]
+        updates = [(lm.id, f) for lm, f in pairs]
+        return Decision(ids, updates, new, merges, [lm.id for lm, _ in paired])
 
     def _moved_enough(
         self, pairs: list[tuple[Landmark, LineFeature]], wTb: FloatArray
@@ -436,17 +370,12 @@ class LandmarkMap:
         """NIS ``nu^T S^-1 nu`` of every pairing made so far, shape (K,)."""
         return np.array([v.nu @ np.linalg.solve(v.S, v.nu) for v in self.innovations])
 
-    def _new_line(
-        self,
-        estimator: LineEstimator,
-        anchor: Any,
-        f: LineFeature,
-        wTb: FloatArray,
-        P_pose: FloatArray,
-    ) -> int | None:
-        """A tentative line, promoted to a landmark when seen ``tentative_observations`` times."""
+    def _new_line(self, belief: Belief, f: LineFeature, new: list[NewLandmark]) -> int | None:
+        """A tentative line, promoted to a landmark (appended to ``new``) when seen
+        ``tentative_observations`` times."""
         cfg = self.config
-        obs = world_observation(f, wTb, P_pose, self.bTs, cfg.line_cov_scale)
+        wTb = belief.wTb
+        obs = world_observation(f, wTb, belief.P_pose, self.bTs, cfg.line_cov_scale)
         kept = [c for c in self.tentative if f.t - c.t <= cfg.tentative_max_age_s]
         self.stats["tentative_dropped"] += len(self.tentative) - len(kept)
         self.tentative = kept
@@ -455,24 +384,26 @@ class LandmarkMap:
                 continue
             nu, _ = line_difference(obs.line_w, cand.line_w)
             if nu @ np.linalg.solve(obs.cov_w + cand.cov_w, nu) <= self._gate:
-                cand.observations.append((anchor, f))
+                cand.observations.append((belief.anchor, f))
                 cand.ends_w = np.vstack([cand.ends_w, obs.ends_w])
                 if len(cand.observations) >= cfg.tentative_observations:
                     self.tentative.remove(cand)
-                    return self._promote(estimator, obs.line_w, cand, wTb)
+                    return self._promote(belief, obs.line_w, cand, new)
                 return None
         side = float(sonar_side(wTb, obs.line_w, self.bTs)[0])
-        cand = Tentative(f.t, obs.line_w, obs.cov_w, obs.ends_w, [(anchor, f)], side)
+        cand = Tentative(f.t, obs.line_w, obs.cov_w, obs.ends_w, [(belief.anchor, f)], side)
         if cfg.tentative_observations <= 1:
-            return self._promote(estimator, obs.line_w, cand, wTb)
+            return self._promote(belief, obs.line_w, cand, new)
         self.tentative.append(cand)
         return None
 
     def _promote(
-        self, estimator: LineEstimator, line_w: FloatArray, cand: Tentative, wTb: FloatArray
+        self, belief: Belief, line_w: FloatArray, cand: Tentative, new: list[NewLandmark]
     ) -> int:
         """A landmark from a tentative line: its estimate is the newest observation's world line
-        (the back end decides which observations it uses), its extent all of theirs."""
+        (the back end's estimate uses all its observations or the newest,
+        :attr:`Belief.seeds_used`), its extent all of theirs."""
+        wTb = belief.wTb
         s = along_line(line_w, cand.ends_w)
         side = float(sonar_side(wTb, line_w, self.bTs)[0])
         lm = Landmark(
@@ -480,31 +411,36 @@ class LandmarkMap:
         )
         lm.last_used_xy_m = compose(wTb, self.bTs)[:2].copy()
         self.landmarks.append(lm)
-        lm.n_obs = estimator.add_landmark(lm, line_w, cand.observations)
+        lm.n_obs = len(cand.observations) if belief.seeds_used else 1
+        new.append(NewLandmark(lm.id, line_w, cand.observations))
         self.seed_log.extend((f, lm.id) for _, f in cand.observations[:-1])
         self.stats["new_landmarks"] += 1
         return lm.id
 
     # -- duplicates ------------------------------------------------------------------------
 
-    def merge_duplicates(self, estimator: LineEstimator, landmark_ids: list[int]) -> None:
+    def merge_duplicates(
+        self, belief: LandmarkBelief, landmark_ids: list[int]
+    ) -> list[tuple[int, int]]:
         """Merge each of these landmarks with another one of the same wall, if any
-        (:func:`slam.mapping.duplicates.duplicate_of`): the newer into the older."""
+        (:func:`slam.mapping.duplicates.duplicate_of`): the newer into the older. Returns the
+        merges ``(keep, drop)`` made, for the back end to apply."""
         assert self.config.merge_gate_probability is not None
         gate = float(chi2.ppf(self.config.merge_gate_probability, 2))
+        merges = []
         for j in landmark_ids:
             if not self.landmarks[j].active:
                 continue
-            other = duplicate_of(self, estimator, j, gate)
+            other = duplicate_of(self, belief, j, gate)
             if other is not None:
                 keep, drop = sorted((self.landmarks[j], other), key=lambda lm: lm.id)
-                self._merge(estimator, keep, drop)
+                self._merge(belief, keep, drop)
+                merges.append((keep.id, drop.id))
+        return merges
 
-    def _merge(self, estimator: LineEstimator, keep: Landmark, drop: Landmark) -> None:
-        line_keep = estimator.landmark_line(keep.id)
-        drop_ends = drop.ends_w(estimator.landmark_line(drop.id))
-        estimator.merge_landmarks(keep, drop)
-        keep.grow(line_keep, drop_ends)
+    def _merge(self, belief: LandmarkBelief, keep: Landmark, drop: Landmark) -> None:
+        line_keep = belief.lines_w[keep.id]
+        keep.grow(line_keep, drop.ends_w(belief.lines_w[drop.id]))
         keep.n_obs += drop.n_obs
         drop.merged_into = keep.id
         self.stats["merged"] += 1

@@ -330,7 +330,7 @@ def _closed_loop_metrics(
     if nis.size:
         out["assoc_nis_median"] = float(np.median(nis))
         out["assoc_nis_mean"] = float(np.mean(nis))
-    vote_ms = 1e3 * np.asarray(backend.map.vote_wall_s)
+    vote_ms = 1e3 * np.asarray(backend.vote_wall_s)
     if vote_ms.size:
         out["line_updates"] = int(vote_ms.size)
         out["line_update_p50_ms"] = float(np.percentile(vote_ms, 50))

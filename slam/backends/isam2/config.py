@@ -27,7 +27,7 @@ class GraphConfig(BackendConfig):
         A pose node at least this often (s); votes with lines add theirs.
     min_node_gap_s : float
         An observation this close (s) after the newest node goes on that node, carried by the
-        odometry since it (:meth:`LineIsam2.begin_vote`), instead of on a new node.
+        odometry since it (:meth:`LineIsam2.node_now`), instead of on a new node.
     update_period_s : float
         Pending odometry and heading factors go into iSAM2 at most this often (s) between
         votes with lines (which always update).
