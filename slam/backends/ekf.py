@@ -57,7 +57,7 @@ from slam.backends.base import (
 )
 from slam.io.trajectory import Trajectory
 from slam.mapping.landmarks import LandmarkMap
-from slam.mapping.vote import Belief, Decision, LandmarkBelief
+from slam.mapping.vote import AfterVote, Belief, Decision, LandmarkBelief
 from slam.model.lines import line_prediction, world_observation
 from slam.model.motion import MotionStep, step_displacement
 from slam.model.noise import robust_kernel
@@ -154,6 +154,7 @@ class LineEkf:
         self._gyro_s = 0.0  # how long the heading has integrated the gyro
         #: wall time of each :meth:`update_lines` (s)
         self.vote_wall_s: list[float] = []
+        self._after: AfterVote | None = None  # the estimate after the last vote's update
         #: every AHRS heading update's innovation ``(t_s, nu_rad, S_rad2)`` before the update
         self.heading_innovations: list[tuple[float, float, float]] = []
 
@@ -316,9 +317,6 @@ class LineEkf:
         if obs.features:
             self._pose_lin = self.x[POSE].copy()
         preds = [self.predict_line(j) for j in ids]
-        lines = LandmarkBelief({j: self.landmark_line(j) for j in ids})
-        if ids and self.config.merge_gate_probability is not None:
-            lines = LandmarkBelief(lines.lines_w, ids, self.landmark_covariance(ids))
         return Belief(
             features=obs.features,
             rejected_near=obs.rejected_near,
@@ -331,18 +329,31 @@ class LineEkf:
             z_hat=np.array([p[0] for p in preds]).reshape(-1, 2),
             H=np.array([p[1] for p in preds]).reshape(-1, 2, self.x.size),
             P=self.P,
-            landmarks=lines,
+            landmarks=LandmarkBelief({j: self.landmark_line(j) for j in ids}),
             seeds_used=False,
+            after_previous=self._after,
         )
 
     def _apply(self, decision: Decision) -> None:
-        """The landmark layer's decision: the updates, the new landmarks, the merges."""
+        """The landmark layer's decision: the merges, the updates, the new landmarks; then the
+        estimate after them for the layer (the next belief's ``after_previous``)."""
+        for keep, drop in decision.merges:
+            self._merge_landmarks(keep, drop)
         for j, f in decision.updates:
             self._update_line(j, f)
         for new in decision.new_landmarks:
             self._add_landmark(new.id, new.observations[-1][1])
-        for keep, drop in decision.merges:
-            self._merge_landmarks(keep, drop)
+        if decision.ids:
+            self._after = AfterVote(self.pose, self._landmark_belief(decision.seen))
+
+    def _landmark_belief(self, seen: list[int]) -> LandmarkBelief:
+        """The lines of ``seen``; of every active landmark, with their joint covariance, when
+        the landmark layer merges duplicates."""
+        if self.config.merge_gate_probability is None:
+            return LandmarkBelief({j: self.landmark_line(j) for j in seen})
+        ids = list(self._index)
+        cov = self.landmark_covariance(ids) if ids else None
+        return LandmarkBelief({j: self.landmark_line(j) for j in ids}, ids, cov)
 
     def _update_line(self, landmark_id: int, f: LineFeature) -> None:
         """One associated observation's update, linearised at the state the previous one left;
@@ -414,7 +425,8 @@ class LineEkf:
     def map_records(self) -> list[dict[str, object]]:
         """Per active landmark: id, rho, theta, cov, world endpoints, observation count."""
         return self.map.records(
-            {j: (self.landmark_line(j), self.landmark_covariance([j])) for j in self._index}
+            {j: (self.landmark_line(j), self.landmark_covariance([j])) for j in self._index},
+            self._after,
         )
 
     def trajectories(self, batch: bool = False) -> dict[str, Trajectory]:

@@ -46,7 +46,14 @@ from slam.mapping.association import (
     extent_allowed,
 )
 from slam.mapping.duplicates import duplicate_of
-from slam.mapping.vote import Anchored, Belief, Decision, LandmarkBelief, NewLandmark
+from slam.mapping.vote import (
+    AfterVote,
+    Anchored,
+    Belief,
+    Decision,
+    LandmarkBelief,
+    NewLandmark,
+)
 from slam.model.lines import sonar_side, world_observation
 
 __all__ = [
@@ -232,6 +239,10 @@ class LandmarkMap:
         self.seed_log: list[tuple[LineFeature, int]] = []
         #: every pairing's innovation (:class:`Innovation`), for the NIS
         self.innovations: list[Innovation] = []
+        # the last vote's segments (landmark id, sonar-frame end points (2, 2)) and landmarks,
+        # until the estimate after its update settles them (:meth:`settle`)
+        self._growth: list[tuple[int, FloatArray]] = []
+        self._touched: list[int] = []
 
     def __len__(self) -> int:
         return len(self.landmarks)
@@ -283,28 +294,28 @@ class LandmarkMap:
 
     def vote(self, belief: Belief) -> Decision:
         """Decide one vote of lines from the back end's belief before it uses them
-        (:mod:`slam.mapping.vote`): associate the observations with the candidates, pick those
-        to use, grow the extents, keep or promote tentative lines, find duplicates.
+        (:mod:`slam.mapping.vote`): settle the previous vote (:meth:`settle`), associate the
+        observations with the candidates, pick those to use, keep or promote tentative lines.
 
-        Everything is decided at the belief's pose and lines, before the back end's update: a
-        new line's world line, and the extent a segment adds, are placed with the pose of the
-        vote.
+        A new line is placed with the pose of the vote; the extents the associated segments add
+        wait for the estimate after the update (the next belief's ``after_previous``).
         """
         cfg = self.config
         use = belief.features
         self.stats["rejected_near"] += belief.rejected_near
         if not use:
-            return Decision([], [], [], [])
+            return Decision([], [], [], [], [])
+        merges = self.settle(belief.after_previous)
         self.stats["observations"] += len(use)
-        lines_w = belief.landmarks.lines_w
-        candidates = [self.landmarks[j] for j in belief.candidates]
+        live = [c for c, j in enumerate(belief.candidates) if self.landmarks[j].active]
+        candidates = [self.landmarks[belief.candidates[c]] for c in live]
         pairing: list[int | None] = [None] * len(use)
         if candidates:
+            lines_w = belief.landmarks.lines_w
             cand_lines = np.array([lines_w[lm.id] for lm in candidates])
             allowed = self.allowed(candidates, cand_lines, belief.wTb, use)
-            problem = AssociationProblem(
-                belief.z, belief.R, belief.z_hat, belief.H, belief.P, allowed
-            )
+            z_hat, H = belief.z_hat[live], belief.H[live]
+            problem = AssociationProblem(belief.z, belief.R, z_hat, H, belief.P, allowed)
             pairing = associate(problem, cfg.association)
             self._log_innovations(problem, pairing, candidates, use)
         paired = [(candidates[j], use[i]) for i, j in enumerate(pairing) if j is not None]
@@ -318,17 +329,27 @@ class LandmarkMap:
             if j is None:
                 ids[i] = self._new_line(belief, use[i], new)
         # a skipped re-observation was still seen: it grows the extent
-        wTs = compose(belief.wTb, self.bTs)
-        for lm, f in paired:
-            lm.grow(lines_w[lm.id], transform_points(wTs, f.endpoints_r))
-        merges: list[tuple[int, int]] = []
-        touched = sorted({i for i in ids if i is not None and i in lines_w})
-        if cfg.merge_gate_probability is not None and touched:
-            merges = self.merge_duplicates(belief.landmarks, touched)
+        self._growth = [(lm.id, f.endpoints_r) for lm, f in paired]
+        self._touched = sorted({i for i in ids if i is not None})
         for i, f in enumerate(use):
             self.association_log.append((f.t, i, ids[i]))
         updates = [(lm.id, f) for lm, f in pairs]
-        return Decision(ids, updates, new, merges, [lm.id for lm, _ in paired])
+        return Decision(ids, merges, updates, new, [lm.id for lm, _ in paired])
+
+    def settle(self, after: AfterVote | None) -> list[tuple[int, int]]:
+        """The previous vote's extents, grown along the lines right after its update and placed
+        with the pose then; with ``merge_gate_probability``, its landmarks' duplicates merged
+        (:meth:`merge_duplicates`). Returns the merges ``(keep, drop)``."""
+        growth, touched = self._growth, self._touched
+        self._growth, self._touched = [], []
+        if after is None:
+            return []
+        wTs = compose(after.wTb, self.bTs)
+        for j, ends_r in growth:
+            self.landmarks[j].grow(after.landmarks.lines_w[j], transform_points(wTs, ends_r))
+        if self.config.merge_gate_probability is None or not touched:
+            return []
+        return self.merge_duplicates(after.landmarks, touched)
 
     def _moved_enough(
         self, pairs: list[tuple[Landmark, LineFeature]], wTb: FloatArray
@@ -447,10 +468,19 @@ class LandmarkMap:
 
     # -- results ---------------------------------------------------------------------------
 
-    def records(self, estimates: dict[int, tuple[FloatArray, FloatArray]]) -> list[dict[str, Any]]:
+    def records(
+        self,
+        estimates: dict[int, tuple[FloatArray, FloatArray]],
+        after: AfterVote | None = None,
+    ) -> list[dict[str, Any]]:
         """``map.json``'s landmarks from the back end's estimates of the active ones: id ->
         (line as stored (2,), its covariance (2, 2)), normalised here (:func:`landmark_record`);
-        merged landmarks are counted in the one they were merged into."""
+        merged landmarks are counted in the one they were merged into. ``after``: the estimate
+        after the last vote, which settles its extents first (:meth:`settle`; a duplicate
+        found then is not merged: the back end would not apply it)."""
+        if after is not None:
+            self._touched = []  # the run is over: a duplicate found now would not be merged
+            self.settle(after)
         out = []
         for lm in self.active():
             line_n, cov_n = normalize_line_cov(*estimates[lm.id])

@@ -7,6 +7,11 @@ observation pairs with which landmark and is used, which tentative lines became 
 landmarks are one wall). The landmark layer calls nothing of the back end; the back end applies
 the decision to its estimate (the EKF's updates and augmentations, the factor graph's factors and
 variables) in the order the decision's fields are listed.
+
+What the layer needs of the estimate *after* a vote's update (the extents grow along the updated
+lines, placed with the updated pose; duplicates are found on the updated lines) comes with the
+next belief, as :class:`AfterVote`: the layer settles the previous vote first, and the map's
+records settle the last one.
 """
 
 from __future__ import annotations
@@ -16,7 +21,15 @@ from dataclasses import dataclass, field
 from features.geometry import FloatArray
 from features.line import LineFeature
 
-__all__ = ["NodeAnchor", "Anchored", "LandmarkBelief", "Belief", "NewLandmark", "Decision"]
+__all__ = [
+    "NodeAnchor",
+    "Anchored",
+    "LandmarkBelief",
+    "AfterVote",
+    "Belief",
+    "NewLandmark",
+    "Decision",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -54,6 +67,23 @@ class LandmarkBelief:
 
 
 @dataclass(frozen=True, eq=False)
+class AfterVote:
+    """The back end's estimate right after it applied a vote's decision.
+
+    Attributes
+    ----------
+    wTb : ndarray, shape (3,)
+        The body pose then.
+    landmarks : LandmarkBelief
+        The lines of the landmarks that vote saw (:attr:`Decision.seen`); of every active one,
+        with their joint covariance, when the layer merges duplicates.
+    """
+
+    wTb: FloatArray
+    landmarks: LandmarkBelief
+
+
+@dataclass(frozen=True, eq=False)
 class Belief:
     """One vote as the back end sees it before using it.
 
@@ -86,6 +116,8 @@ class Belief:
     seeds_used : bool
         A promoted line's estimate uses all its tentative observations (the factor graph), or
         only the newest (the EKF).
+    after_previous : AfterVote or None
+        The estimate right after the back end applied the previous vote with observations.
     """
 
     features: list[LineFeature]
@@ -101,6 +133,7 @@ class Belief:
     P: FloatArray
     landmarks: LandmarkBelief
     seeds_used: bool
+    after_previous: AfterVote | None
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,7 +148,8 @@ class NewLandmark:
 
 @dataclass(frozen=True, eq=False)
 class Decision:
-    """What the landmark layer decided for one vote, in the order a back end applies it.
+    """What the landmark layer decided for one vote, applied by the back end: the merges first,
+    then the updates, then the new landmarks.
 
     Attributes
     ----------
@@ -126,14 +160,14 @@ class Decision:
     new_landmarks : list of NewLandmark
         Promoted lines, in id order.
     merges : list of (int, int)
-        ``(keep, drop)``: landmark ``drop`` is the same wall as ``keep``; tie their estimates,
-        and use only ``keep`` from now on.
+        ``(keep, drop)``: landmark ``drop`` is the same wall as ``keep`` (found on the estimate
+        after the previous vote); tie their estimates, and use only ``keep`` from now on.
     seen : list of int
         The landmarks associated in this vote, used or not (their extents grew).
     """
 
     ids: list[int | None]
+    merges: list[tuple[int, int]]
     updates: list[tuple[int, LineFeature]]
     new_landmarks: list[NewLandmark]
-    merges: list[tuple[int, int]]
-    seen: list[int] = field(default_factory=list)
+    seen: list[int]

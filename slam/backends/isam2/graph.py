@@ -74,7 +74,7 @@ from slam.backends.isam2.pose_source import NodeTable, SmoothedPoseSource
 from slam.backends.isam2.scans import ScanConstraints
 from slam.io.trajectory import Trajectory
 from slam.mapping.landmarks import Landmark, LandmarkMap
-from slam.mapping.vote import Belief, Decision, LandmarkBelief, NewLandmark, NodeAnchor
+from slam.mapping.vote import AfterVote, Belief, Decision, LandmarkBelief, NewLandmark, NodeAnchor
 from slam.model.lines import line_prediction, local_to_world, sonar_side
 from slam.model.motion import MotionStep
 from sonar.beam import Mounting
@@ -126,6 +126,7 @@ class LineIsam2:
         self.timing_s = {"isam_update": 0.0, "marginals": 0.0, "association": 0.0}
         self.update_log: list[tuple[float, float, int]] = []  # (t, wall s, new factors)
         self.vote_wall_s: list[float] = []  # wall time of each update_lines (s)
+        self._after: AfterVote | None = None  # the estimate after the last vote's update
         self._n_nodes = 0
         self._var_walk = np.deg2rad(config.ahrs_bias_walk_deg_per_sqrt_s) ** 2  # rad^2/s
         self._bias_estimate = float(np.deg2rad(config.ahrs_bias_prior_deg))  # the newest node's
@@ -388,10 +389,6 @@ class LineIsam2:
             z_hat[c], H_pose, H_line = line_prediction(pose_w, self._lm_est[j], self.bTs)
             H[c, :, :3] = H_pose
             H[c, :, 3 + 2 * c : 5 + 2 * c] = H_line
-        lines = LandmarkBelief({lm.id: self._lm_est[lm.id] for lm in active})
-        if obs.features and active and self.config.merge_gate_probability is not None:
-            ids = [lm.id for lm in active]
-            lines = LandmarkBelief(lines.lines_w, ids, self.landmark_covariance(ids))
         return Belief(
             features=obs.features,
             rejected_near=obs.rejected_near,
@@ -404,13 +401,17 @@ class LineIsam2:
             z_hat=z_hat,
             H=H,
             P=P,
-            landmarks=lines,
+            landmarks=LandmarkBelief({lm.id: self._lm_est[lm.id] for lm in active}),
             seeds_used=True,
+            after_previous=self._after,
         )
 
     def _apply(self, decision: Decision, anchor: NodeAnchor) -> None:
-        """The landmark layer's decision: a factor per used observation, the new landmarks
-        with a factor per observation, an update, then the merges (for the next update)."""
+        """The landmark layer's decision: a ``LineEquality`` factor per merge, a factor per
+        used observation, the new landmarks with a factor per observation, an update; then the
+        estimate after it for the layer (the next belief's ``after_previous``)."""
+        for keep, drop in decision.merges:
+            self._merge_landmarks(keep, drop)
         for j, f in decision.updates:
             self._add_line_factor(anchor, f, j)
         for new in decision.new_landmarks:
@@ -422,8 +423,16 @@ class LineIsam2:
             # the recent nodes' smoothed poses now, not at the pose source's next question:
             # the beams' poses (and the trajectory) depend on when they are refreshed
             self.refresh()
-        for keep, drop in decision.merges:
-            self._merge_landmarks(keep, drop)
+        self._after = AfterVote(self.pose, self._landmark_belief(decision.seen))
+
+    def _landmark_belief(self, seen: list[int]) -> LandmarkBelief:
+        """The lines of ``seen``; of every active landmark, with their joint marginal, when the
+        landmark layer merges duplicates."""
+        if self.config.merge_gate_probability is None:
+            return LandmarkBelief({j: self._lm_est[j] for j in seen})
+        ids = [lm.id for lm in self.map.landmarks if lm.merged_into is None]
+        cov = self.landmark_covariance(ids) if ids else None
+        return LandmarkBelief({j: self._lm_est[j] for j in ids}, ids, cov)
 
     def node_now(self) -> tuple[int, FloatArray]:
         """A node now, or the newest if it is less than ``min_node_gap_s`` old; and the body
@@ -594,7 +603,8 @@ class LineIsam2:
         self.refresh()
         marginal = self._marginals()
         return self.map.records(
-            {lm.id: (self._lm_est[lm.id], marginal(L(lm.id))) for lm in self.map.active()}
+            {lm.id: (self._lm_est[lm.id], marginal(L(lm.id))) for lm in self.map.active()},
+            self._after,
         )
 
     def trajectories(self, batch: bool = False) -> dict[str, Trajectory]:
