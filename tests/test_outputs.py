@@ -18,7 +18,7 @@ import pytest
 
 from datasets.simulator import simulate
 from slam.backends.isam2.g2o import G2O_EDGE_TYPES, graph_json_to_g2o
-from slam.backends.isam2.graph_io import factor_from_record, key_of, load_graph
+from slam.backends.isam2.graph_io import FactorRecord, key_of, load_graph
 from slam.run.run import run
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -93,7 +93,7 @@ def test_read_g2o_loads_the_pose_graph(runs):
         p = values.atPose2(int(name[1:]))
         np.testing.assert_allclose([p.x(), p.y(), p.theta()], item["value"], atol=1e-9)
     _, json_values = load_graph(out / "graph.json")
-    ours = sum(factor_from_record(f).error(json_values) for f in odometry)
+    ours = sum(FactorRecord.from_json(f).to_gtsam().error(json_values) for f in odometry)
     assert graph.error(values) == pytest.approx(ours, rel=1e-3)
     # a GTSAM user's re-optimisation: fix the first pose and run Levenberg-Marquardt
     graph.add(

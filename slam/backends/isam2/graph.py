@@ -42,7 +42,6 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
 
 import gtsam
 import numpy as np
@@ -62,8 +61,10 @@ from slam.backends.base import (
 from slam.backends.isam2.candidates import joint_covariance, loose_distances
 from slam.backends.isam2.config import GraphConfig
 from slam.backends.isam2.graph_io import (
-    factor_from_record,
-    factor_record,
+    FactorKind,
+    FactorRecord,
+    OdometryTerms,
+    Robust,
     key_name,
     pose_of,
     save_graph,
@@ -79,7 +80,11 @@ from slam.model.lines import line_prediction, local_to_world, sonar_side
 from slam.model.motion import MotionStep
 from sonar.beam import Mounting
 
-__all__ = ["GraphConfig", "LineIsam2"]
+__all__ = ["GraphConfig", "LineIsam2", "LINE_EQUALITY_SIGMAS"]
+
+#: The noise of a ``LineEquality`` factor (rho m, theta rad): two landmarks found to be one wall
+#: are the same line.
+LINE_EQUALITY_SIGMAS = (1e-3, 1e-5)
 
 
 class LineIsam2:
@@ -115,7 +120,7 @@ class LineIsam2:
         params.relinearizeSkip = config.relinearize_skip
         self.isam = gtsam.ISAM2(params)
         self.graph = gtsam.NonlinearFactorGraph()  # every factor, for batch LM and saving
-        self.records: list[dict[str, Any]] = []
+        self.records: list[FactorRecord] = []
         self.map = LandmarkMap(config, self.bTs)
         self.odometry = NodeOdometry(self.t_s, config.gyro_sigma_radps, config.dvl_noise)
         self.nodes = NodeTable()
@@ -221,8 +226,8 @@ class LineIsam2:
 
     # -- nodes and updates -----------------------------------------------------------------
 
-    def _add_factor(self, record: dict[str, Any]) -> None:
-        self._pending.add(factor_from_record(record))
+    def _add_factor(self, record: FactorRecord) -> None:
+        self._pending.add(record.to_gtsam())
         self.records.append(record)
 
     def _register_node(self, k: int, t_s: float) -> None:
@@ -244,25 +249,22 @@ class LineIsam2:
         cfg = self.config
         if self._var_walk > 0.0:
             var = max(self._var_walk * (self.t_s - self._last_node_t), 1e-12)
-            self._add_factor(factor_record("BetweenFactorVector", [B(k - 1), B(k)], [0.0], [[var]]))
+            self._add_factor(
+                FactorRecord.of(FactorKind.BETWEEN_VECTOR, [B(k - 1), B(k)], [0.0], [[var]])
+            )
             self._pending_values.insert(B(k), np.array([self._bias_estimate]))
         if cfg.estimate_misalignment or cfg.estimate_gyro_scale or cfg.dvl_scale_sigma > 0.0:
             keys = [X(k - 1), X(k)]
             keys += [D(0)] if cfg.estimate_misalignment else []
             keys += [G(0)] if cfg.estimate_gyro_scale else []
             keys += [K(0)] if cfg.dvl_scale_sigma > 0.0 else []
-            record = factor_record(
-                "DvlGyroOdometry",
-                keys,
-                rel.pose,
-                local_covariance(rel),
-                yaw_raw=rel.yaw_raw,
-                d_t_d_scale=[rel.jx, rel.jy],
-                scale0=self.odometry.node_scale,
+            terms = OdometryTerms(rel.yaw_raw, (rel.jx, rel.jy), self.odometry.node_scale)
+            record = FactorRecord.of(
+                FactorKind.DVL_GYRO_ODOMETRY, keys, rel.pose, local_covariance(rel), odometry=terms
             )
         else:
-            record = factor_record(
-                "BetweenFactorPose2", [X(k - 1), X(k)], rel.pose, local_covariance(rel)
+            record = FactorRecord.of(
+                FactorKind.BETWEEN_POSE, [X(k - 1), X(k)], rel.pose, local_covariance(rel)
             )
         self._add_factor(record)
         n_headings = self.odometry.headings.n
@@ -270,7 +272,8 @@ class LineIsam2:
         if heading is not None:
             z, var = heading
             var += np.deg2rad(cfg.ahrs_white_sigma_deg) ** 2 / n_headings
-            self._add_factor(factor_record("HeadingBias", [X(k), self._bias_key(k)], [z], [[var]]))
+            keys = [X(k), self._bias_key(k)]
+            self._add_factor(FactorRecord.of(FactorKind.HEADING_BIAS, keys, [z], [[var]]))
         self._pending_values.insert(X(k), gtsam.Pose2(*self.pose))
         self._register_node(k, self.t_s)
         return k
@@ -456,7 +459,7 @@ class LineIsam2:
     def node_estimate(self, k: int) -> FloatArray:
         return self._node_pose(k)
 
-    def add_scan_factor(self, record: dict[str, Any]) -> None:
+    def add_scan_factor(self, record: FactorRecord) -> None:
         self._add_factor(record)
 
     def scan_update(self, extra_iterations: int = 0) -> None:
@@ -499,14 +502,14 @@ class LineIsam2:
     def _add_line_factor(self, node: NodeAnchor, f: LineFeature, lm_id: int) -> None:
         k, bTs = node.node, node.bTs
         cfg = self.config
-        robust = None if cfg.robust is None else {"kernel": cfg.robust, "k": cfg.robust_k}
+        robust = None if cfg.robust is None else Robust(cfg.robust, cfg.robust_k)
         self._add_factor(
-            factor_record(
-                "LineObservation",
+            FactorRecord.of(
+                FactorKind.LINE_OBSERVATION,
                 [X(k), L(lm_id)],
                 f.z,
                 np.asarray(f.cov) * cfg.line_cov_scale,
-                bTs=np.asarray(bTs).tolist(),
+                bTs=np.asarray(bTs, dtype=np.float64),
                 robust=robust,
             )
         )
@@ -532,9 +535,11 @@ class LineIsam2:
         """A stiff ``LineEquality`` factor ties ``L(drop)`` to ``L(keep)`` (next update);
         ``drop`` takes no more observations."""
         _, flipped = line_difference(self._lm_est[drop], self._lm_est[keep])
-        sigmas = [1e-3, 1e-5]  # m, rad: the same line
-        record = factor_record(
-            "LineEquality", [L(keep), L(drop)], [float(flipped)], np.diag(np.square(sigmas))
+        record = FactorRecord.of(
+            FactorKind.LINE_EQUALITY,
+            [L(keep), L(drop)],
+            [float(flipped)],
+            np.diag(np.square(LINE_EQUALITY_SIGMAS)),
         )
         self._add_factor(record)
 
