@@ -63,11 +63,42 @@ from slam.model.motion import MotionStep, step_displacement
 from slam.model.noise import robust_kernel
 from sonar.beam import Mounting
 
-__all__ = ["EkfConfig", "LineEkf", "POSE", "N_VEHICLE"]
+__all__ = [
+    "EkfConfig",
+    "LineEkf",
+    "POSE",
+    "YAW",
+    "AHRS_BIAS",
+    "MISALIGNMENT",
+    "DVL_SCALE",
+    "GYRO_BIAS",
+    "N_VEHICLE",
+    "MERGE_VARIANCE",
+]
 
-POSE = slice(0, 3)
-N_VEHICLE = 7  # x, y, psi, b, delta, k, g
-GYRO_BIAS = 6
+# The vehicle's block of the state (module docstring); the landmarks' lines follow it.
+POSE = slice(0, 3)  # x, y, psi: wTb
+YAW = 2  # psi
+AHRS_BIAS = 3  # b
+MISALIGNMENT = 4  # delta
+DVL_SCALE = 5  # k
+GYRO_BIAS = 6  # g
+N_VEHICLE = 7
+HEADING = [YAW, AHRS_BIAS]  # what the AHRS measures: psi + b
+
+#: The variance (m^2 and rad^2) of the exact update that ties two landmarks found to be one
+#: wall: the same line, numerically.
+MERGE_VARIANCE = 1e-10
+
+
+def _filter(x: FloatArray, P: FloatArray) -> ExtendedKalmanFilter:
+    """filterpy's EKF over the state ``x`` (n,) with covariance ``P`` (n, n); a new one when
+    the state grows or shrinks (a landmark added or merged), as filterpy's are of fixed size.
+    Its measurement size is not used: every update gives ``z``, ``H`` and ``R`` as arrays."""
+    kf = ExtendedKalmanFilter(dim_x=x.size, dim_z=2)
+    kf.x = x
+    kf.P = P
+    return kf
 
 
 @dataclass(frozen=True)
@@ -124,24 +155,22 @@ class LineEkf:
         self.config = config
         self.bTs = sonar_mounting.as_pose()
         self.t_s = t0_s
-        kf = ExtendedKalmanFilter(dim_x=N_VEHICLE, dim_z=2)
-        kf.x = np.zeros(N_VEHICLE)
-        kf.x[POSE] = wTb0
+        x = np.zeros(N_VEHICLE)
+        x[POSE] = wTb0
         P = np.zeros((N_VEHICLE, N_VEHICLE))
         P[:2, :2] = P0[:2, :2]
         var_b = np.deg2rad(config.ahrs_bias_sigma_deg) ** 2
         # psi0 came from the AHRS, which measures psi + b (white noise and bias as this filter
         # models them, not P0's heading): psi and b are anti-correlated.
-        P[2, 2] = np.deg2rad(config.ahrs_white_sigma_deg) ** 2 + var_b
-        P[3, 3] = var_b
-        P[2, 3] = P[3, 2] = -var_b
-        P[4, 4] = (
+        P[YAW, YAW] = np.deg2rad(config.ahrs_white_sigma_deg) ** 2 + var_b
+        P[AHRS_BIAS, AHRS_BIAS] = var_b
+        P[YAW, AHRS_BIAS] = P[AHRS_BIAS, YAW] = -var_b
+        P[MISALIGNMENT, MISALIGNMENT] = (
             np.deg2rad(config.misalignment_sigma_deg) ** 2 if config.estimate_misalignment else 0.0
         )
-        P[5, 5] = config.dvl_scale_sigma**2
+        P[DVL_SCALE, DVL_SCALE] = config.dvl_scale_sigma**2
         P[GYRO_BIAS, GYRO_BIAS] = np.deg2rad(config.gyro_bias_sigma_deg_per_s) ** 2
-        kf.P = P
-        self.kf = kf
+        self.kf = _filter(x, P)
         self.map = LandmarkMap(config, self.bTs)
         self._index: dict[int, int] = {}  # landmark id -> index of its rho in the state
         self._first_line_w: dict[int, FloatArray] = {}  # each landmark's first estimate (FEJ)
@@ -247,7 +276,7 @@ class LineEkf:
     ) -> None:
         n = self.kf.x.size
         self.kf.update(z, lambda _x: H, lambda _x: hx, R=R, residual=residual)
-        self.kf.x[2] = wrap_angle(self.kf.x[2])
+        self.kf.x[YAW] = wrap_angle(self.kf.x[YAW])
         for i in self._index.values():  # keep landmarks normalised, the covariance alike
             if self.kf.x[i] < 0.0:
                 J = np.eye(n)
@@ -263,16 +292,14 @@ class LineEkf:
         self._last_ahrs_t = t_s
         n = self.kf.x.size
         H = np.zeros((1, n))
-        H[0, 2] = H[0, 3] = 1.0
-        hx = np.array([self.kf.x[2] + self.kf.x[3]])
+        H[0, HEADING] = 1.0
+        hx = np.array([self.kf.x[YAW] + self.kf.x[AHRS_BIAS]])
         R = np.array([[np.deg2rad(self.config.ahrs_white_sigma_deg) ** 2]])
         nu = float(wrap_angle(yaw_body_rad - hx[0]))
         P = self.kf.P
-        S = float(P[2, 2] + 2.0 * P[2, 3] + P[3, 3] + R[0, 0])
+        S = float(P[YAW, YAW] + 2.0 * P[YAW, AHRS_BIAS] + P[AHRS_BIAS, AHRS_BIAS] + R[0, 0])
         self.heading_innovations.append((t_s, nu, S))
-        self.kf.dim_z = 1
         self._update(np.array([yaw_body_rad]), H, hx, R, lambda a, b: wrap_angle(a - b))
-        self.kf.dim_z = 2
         self._own_stats["ahrs_updates"] += 1
         return True
 
@@ -381,11 +408,7 @@ class LineEkf:
         P_new[:n, n:] = cross.T
         R = np.asarray(f.cov) * self.config.line_cov_scale
         P_new[n:, n:] = obs.G_pose @ P[POSE, POSE] @ obs.G_pose.T + obs.G_z @ R @ obs.G_z.T
-        kf = self.kf
-        kf.x = np.concatenate([x, obs.line_w])
-        kf.P = P_new
-        kf.dim_x = n + 2
-        kf._I = np.eye(n + 2)
+        self.kf = _filter(np.concatenate([x, obs.line_w]), P_new)
         self._index[landmark_id] = n
         self._first_line_w[landmark_id] = obs.line_w.copy()
 
@@ -402,14 +425,10 @@ class LineEkf:
         H = np.zeros((2, self.x.size))
         H[:, ik : ik + 2] = -np.eye(2)
         H[:, idr : idr + 2] = FLIP_RHO if flipped else np.eye(2)
-        R = np.eye(2) * 1e-10
+        R = np.eye(2) * MERGE_VARIANCE
         self._update(np.zeros(2), H, nu, R, lambda a, b: a - b)
         keep_rows = np.r_[0:idr, idr + 2 : self.x.size]
-        kf = self.kf
-        kf.x = self.x[keep_rows].copy()
-        kf.P = self.P[np.ix_(keep_rows, keep_rows)].copy()
-        kf.dim_x = kf.x.size
-        kf._I = np.eye(kf.dim_x)
+        self.kf = _filter(self.x[keep_rows].copy(), self.P[np.ix_(keep_rows, keep_rows)].copy())
         del self._index[drop], self._first_line_w[drop]
         self._index = {j: i - 2 if i > idr else i for j, i in self._index.items()}
 
@@ -438,18 +457,21 @@ class LineEkf:
         moves ``1 + k`` times the DVL's velocity)."""
         x, P = self.x, self.P
         out: dict[str, float | int] = {
-            "state_ahrs_bias_deg": float(np.rad2deg(x[3])),
-            "state_ahrs_bias_sd_deg": float(np.rad2deg(np.sqrt(P[3, 3]))),
+            "state_ahrs_bias_deg": float(np.rad2deg(x[AHRS_BIAS])),
+            "state_ahrs_bias_sd_deg": float(np.rad2deg(np.sqrt(P[AHRS_BIAS, AHRS_BIAS]))),
         }
         if self.config.estimate_misalignment:
-            out["state_misalignment_deg"] = float(np.rad2deg(x[4]))
-            out["state_misalignment_sd_deg"] = float(np.rad2deg(np.sqrt(P[4, 4])))
+            out["state_misalignment_deg"] = float(np.rad2deg(x[MISALIGNMENT]))
+            sd = np.sqrt(P[MISALIGNMENT, MISALIGNMENT])
+            out["state_misalignment_sd_deg"] = float(np.rad2deg(sd))
         if self.config.dvl_scale_sigma > 0.0:
-            out["state_dvl_scale"] = float(x[5])
-            out["state_dvl_scale_sd"] = float(np.sqrt(P[5, 5]))
+            out["state_dvl_scale"] = float(x[DVL_SCALE])
+            out["state_dvl_scale_sd"] = float(np.sqrt(P[DVL_SCALE, DVL_SCALE]))
         if self._gyro_s > 0.0:
             out["state_gyro_bias_deg_per_s"] = float(np.rad2deg(x[GYRO_BIAS]))
-            out["state_gyro_bias_sd_deg_per_s"] = float(np.rad2deg(np.sqrt(P[6, 6])))
+            out["state_gyro_bias_sd_deg_per_s"] = float(
+                np.rad2deg(np.sqrt(P[GYRO_BIAS, GYRO_BIAS]))
+            )
         return out
 
     def save(self, out_dir: Path) -> list[Path]:
