@@ -13,6 +13,7 @@ back end registers in :mod:`slam.backends.registry`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol, runtime_checkable
@@ -21,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from datasets.config import DVL_SCALE_SIGMA_MAX
-from datasets.settings import check_ranges, check_within
+from datasets.settings import bounded, one_of
 from features.geometry import FloatArray, compose, inverse
 from features.line import LineFeature
 from features.pose_source import PoseSource
@@ -88,16 +89,16 @@ class BackendConfig(LandmarkConfig):
         :mod:`features.scans`), or ``"lines,scans"``. A back end that cannot take one says so.
     """
 
-    ahrs_white_sigma_deg: float = 1.0
-    ahrs_bias_sigma_deg: float = 2.0
-    ahrs_bias_walk_deg_per_sqrt_s: float = 0.0
-    ahrs_period_s: float = 1.0
-    gyro_sigma_radps: float = 0.005
+    ahrs_white_sigma_deg: float = bounded(1.0, 1e-3, 90.0)
+    ahrs_bias_sigma_deg: float = bounded(2.0, 1e-3, 90.0)
+    ahrs_bias_walk_deg_per_sqrt_s: float = bounded(0.0, 0.0, math.inf)
+    ahrs_period_s: float = bounded(1.0, 1e-3, 3600.0)
+    gyro_sigma_radps: float = bounded(0.005, 1e-5, 1.0)
     estimate_misalignment: bool = False
-    misalignment_sigma_deg: float = 5.0
-    dvl_scale_sigma: float = 0.0
-    robust: str | None = None
-    robust_k: float = 1.345
+    misalignment_sigma_deg: float = bounded(5.0, 1e-3, 90.0)
+    dvl_scale_sigma: float = bounded(0.0, 0.0, DVL_SCALE_SIGMA_MAX, high_open=True)
+    robust: str | None = one_of(None, None, "huber", "cauchy")
+    robust_k: float = bounded(1.345, 0.0, math.inf, low_open=True)
     constraints: str = "lines"
 
     @property
@@ -106,49 +107,12 @@ class BackendConfig(LandmarkConfig):
         return frozenset(c.strip() for c in self.constraints.split(","))
 
     def __post_init__(self) -> None:
-        super().__post_init__()
+        super().__post_init__()  # every field's range (datasets.settings.check_fields)
         kinds = self.constraint_kinds
         if not kinds or not kinds <= {"lines", "scans"}:
             raise ValueError(
                 f"constraints must be 'lines', 'scans' or 'lines,scans', got {self.constraints!r}"
             )
-        if self.robust not in (None, "huber", "cauchy"):
-            raise ValueError(f"robust must be None, 'huber' or 'cauchy', got {self.robust!r}")
-        if not self.robust_k > 0.0:
-            raise ValueError(f"robust_k must be > 0, got {self.robust_k}")
-        if min(self.ahrs_white_sigma_deg, self.ahrs_bias_sigma_deg, self.gyro_sigma_radps) <= 0:
-            raise ValueError("AHRS and gyro sigmas must be > 0")
-        if not self.ahrs_bias_walk_deg_per_sqrt_s >= 0.0:
-            raise ValueError(
-                "ahrs_bias_walk_deg_per_sqrt_s must be >= 0, got "
-                f"{self.ahrs_bias_walk_deg_per_sqrt_s}"
-            )
-        if not self.ahrs_period_s > 0.0:
-            raise ValueError(f"ahrs_period_s must be > 0, got {self.ahrs_period_s}")
-        check_within(
-            "dvl_scale_sigma", self.dvl_scale_sigma, 0.0, DVL_SCALE_SIGMA_MAX, high_open=True
-        )
-        if not self.misalignment_sigma_deg > 0.0:
-            raise ValueError(
-                f"misalignment_sigma_deg must be > 0, got {self.misalignment_sigma_deg}"
-            )
-        check_ranges(self, _RANGES)
-
-
-#: Ranges of the shared settings (and the landmark layer's) beyond which a back end's
-#: numerics fail (GTSAM's "indeterminate system") or its loops never end: an error instead.
-_RANGES = {
-    "ahrs_white_sigma_deg": (1e-3, 90.0),
-    "ahrs_bias_sigma_deg": (1e-3, 90.0),
-    "ahrs_period_s": (1e-3, 3600.0),
-    "gyro_sigma_radps": (1e-5, 1.0),
-    "misalignment_sigma_deg": (1e-3, 90.0),
-    "tentative_observations": (1, 1000),
-    "tentative_max_age_s": (1e-3, 1e5),
-    "min_rho_m": (0.0, 1e3),
-    "extent_margin_m": (0.0, 1e4),
-    "line_cov_scale": (1e-2, 1e2),
-}
 
 
 class Backend(Protocol):

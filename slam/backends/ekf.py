@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-from datasets.settings import check_ranges
+from datasets.settings import bounded
 from features.geometry import (
     FLIP_RHO,
     FloatArray,
@@ -120,11 +120,7 @@ class EkfConfig(BackendConfig):
 
     side_gate: bool = False
     first_estimates_jacobians: bool = True
-    gyro_bias_sigma_deg_per_s: float = 1.0
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        check_ranges(self, {"gyro_bias_sigma_deg_per_s": (1e-6, 90.0)})
+    gyro_bias_sigma_deg_per_s: float = bounded(1.0, 1e-6, 90.0)
 
 
 class LineEkf:

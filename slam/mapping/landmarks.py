@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
+from datasets.settings import bounded, check_fields
 from features.geometry import (
     FLIP_RHO,
     FloatArray,
@@ -68,7 +69,9 @@ __all__ = [
 
 @dataclass(frozen=True)
 class LandmarkConfig:
-    """Settings of the landmark layer (every back end's configuration extends this).
+    """Settings of the landmark layer (every back end's configuration extends this). Each
+    field's range is in its metadata (:func:`datasets.settings.bounded`), checked by
+    :func:`datasets.settings.check_fields` for this class and every subclass.
 
     Attributes
     ----------
@@ -106,32 +109,17 @@ class LandmarkConfig:
     """
 
     association: AssociationConfig = field(default_factory=AssociationConfig)
-    tentative_observations: int = 2
-    tentative_max_age_s: float = 60.0
-    min_rho_m: float = 1.0
-    extent_margin_m: float | None = 10.0
+    tentative_observations: int = bounded(2, 1, 1000)
+    tentative_max_age_s: float = bounded(60.0, 1e-3, 1e5)
+    min_rho_m: float = bounded(1.0, 0.0, 1e3)
+    extent_margin_m: float | None = bounded(10.0, 0.0, 1e4)
     side_gate: bool = True
-    line_cov_scale: float = 1.0
-    merge_gate_probability: float | None = None
-    reobservation_min_move_m: float | None = 5.0
+    line_cov_scale: float = bounded(1.0, 1e-2, 1e2)
+    merge_gate_probability: float | None = bounded(None, 0.0, 1.0, low_open=True, high_open=True)
+    reobservation_min_move_m: float | None = bounded(5.0, 0.0, 1e4, high_open=True)
 
     def __post_init__(self) -> None:
-        if self.tentative_observations < 1:
-            raise ValueError(
-                f"tentative_observations must be >= 1, got {self.tentative_observations}"
-            )
-        if not self.tentative_max_age_s > 0.0:
-            raise ValueError(f"tentative_max_age_s must be > 0, got {self.tentative_max_age_s}")
-        if not self.line_cov_scale > 0.0:
-            raise ValueError(f"line_cov_scale must be > 0, got {self.line_cov_scale}")
-        if self.extent_margin_m is not None and not self.extent_margin_m >= 0.0:
-            raise ValueError(f"extent_margin_m must be >= 0 or None, got {self.extent_margin_m}")
-        r = self.reobservation_min_move_m
-        if r is not None and not 0.0 <= r < 1e4:
-            raise ValueError(f"reobservation_min_move_m must be in [0, 1e4) or None, got {r}")
-        p = self.merge_gate_probability
-        if p is not None and not 0.0 < p < 1.0:
-            raise ValueError(f"merge_gate_probability must be in (0, 1) or None, got {p}")
+        check_fields(self)  # every field's range, a subclass's too (its metadata)
 
 
 @dataclass
