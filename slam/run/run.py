@@ -162,37 +162,69 @@ def run_backend(
             raise SettingError("--batch", f"back end {backend!r} does not smooth")
         trajectory = POSE_SOURCES[backend](dataset)
     else:
-        spec = backend_spec(backend)
-        if batch and not spec.smoother:
-            raise SettingError("--batch", f"back end {backend!r} does not smooth")
-        _require_beams(dataset)
-        check_combination(dataset, backend)
-        config = run_config(dataset.beams, backend, settings, dataset.config.noise)
-        mounting = dataset.config.sonar_mounting
-        cfg = config.backend
-        result = run_closed_loop(
-            dataset,
-            lambda t0, pose0, cov0: spec.make(t0, pose0, cov0, mounting, cfg),
-            config.extractor,
-            progress=progress,
-            t_end_s=t_end_s,
-            label=backend,
-            scan_config=config.scans,
+        result, config, trajectories, loop = _closed_loop(
+            dataset, backend, settings, t_end_s, progress, batch
         )
         trajectory = result.trajectory
-        result.backend.finish()
-        trajectories = result.backend.trajectories(batch)
-        health = monitor_run(dataset, result)  # GPS-free: the run against its own model
-        loop = _closed_loop_figures(dataset, result, config, health.metrics(), health.line())
-        health.warn()
     wall_s = time.perf_counter() - wall0
     if t_end_s is not None and trajectory.t_s[-1] > t_end_s:
         trajectory = trajectory.clip(trajectory.t_s[0], t_end_s)
     for tr in (trajectory, *trajectories.values()):
         _check_finite(dataset, backend, tr)
+    figures = RunMetrics(
+        source=str(dataset.root),
+        backend=backend,
+        trajectory=_trajectory_figures(dataset, trajectory, ""),
+        data=_data_figures(dataset, trajectory, wall_s),
+        closed_loop=loop,
+        others=[_trajectory_figures(dataset, tr, name) for name, tr in trajectories.items()],
+    )
+    return RunResult(
+        backend, trajectory, figures.to_json(), result, config, trajectories, figures=figures
+    )
+
+
+def _closed_loop(
+    dataset: Dataset,
+    backend: str,
+    settings: dict[str, Any] | None,
+    t_end_s: float | None,
+    progress: bool,
+    batch: bool,
+) -> tuple[ClosedLoopResult, RunConfig, dict[str, Trajectory], ClosedLoopFigures]:
+    """A closed loop of ``backend`` on the dataset (:func:`run_backend`): its result, its
+    configuration, the back end's other trajectories and the loop's figures with the health
+    monitor's verdict (which warns here)."""
+    spec = backend_spec(backend)
+    if batch and not spec.smoother:
+        raise SettingError("--batch", f"back end {backend!r} does not smooth")
+    _require_beams(dataset)
+    check_combination(dataset, backend)
+    config = run_config(dataset.beams, backend, settings, dataset.config.noise)
+    mounting = dataset.config.sonar_mounting
+    cfg = config.backend
+    result = run_closed_loop(
+        dataset,
+        lambda t0, pose0, cov0: spec.make(t0, pose0, cov0, mounting, cfg),
+        config.extractor,
+        progress=progress,
+        t_end_s=t_end_s,
+        label=backend,
+        scan_config=config.scans,
+    )
+    result.backend.finish()
+    trajectories = result.backend.trajectories(batch)
+    health = monitor_run(dataset, result)  # GPS-free: the run against its own model
+    loop = _closed_loop_figures(dataset, result, config, health.metrics(), health.line())
+    health.warn()
+    return result, config, trajectories, loop
+
+
+def _data_figures(dataset: Dataset, trajectory: Trajectory, wall_s: float) -> DataFigures:
+    """The run's wall time and its data's span, the DVL's rows and quality, the GPS's
+    coverage and the gates' faults and gaps over the trajectory's span."""
     t0, t1 = trajectory.span_s
-    assert dataset.gps is not None
-    data = DataFigures(
+    return DataFigures(
         wall_s=wall_s,
         data_s=t1 - t0,
         dvl_rows=int(dataset.dvl.t.size),
@@ -200,17 +232,6 @@ def run_backend(
         dvl_quality=dvl_quality(dataset),
         gps_uncovered_s=_gps_uncovered_s(dataset, trajectory),
         faults_and_gaps=dataset.report.metrics((t0, t1)),
-    )
-    figures = RunMetrics(
-        source=str(dataset.root),
-        backend=backend,
-        trajectory=_trajectory_figures(dataset, trajectory, ""),
-        data=data,
-        closed_loop=loop,
-        others=[_trajectory_figures(dataset, tr, name) for name, tr in trajectories.items()],
-    )
-    return RunResult(
-        backend, trajectory, figures.to_json(), result, config, trajectories, figures=figures
     )
 
 
