@@ -14,8 +14,15 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import ClassVar
 
-from slam.eval.ate import AteResult
-from slam.eval.truth import AssociationScores
+import numpy as np
+
+from datasets.source import Dataset
+from slam.eval.ate import AteResult, ate_against_gps, ate_against_truth
+from slam.eval.sharpness import trajectory_sharpness
+from slam.eval.truth import AssociationScores, association_against_truth, truth_trajectory
+from slam.io.trajectory import Trajectory
+from slam.run.closed_loop import ClosedLoopResult
+from slam.run.presets import RunConfig, map_min_intensity
 
 __all__ = [
     "JsonValue",
@@ -23,6 +30,8 @@ __all__ = [
     "DataFigures",
     "ClosedLoopFigures",
     "RunMetrics",
+    "trajectory_figures",
+    "closed_loop_figures",
 ]
 
 #: A value of ``metrics.json`` (JSON's own types).
@@ -318,3 +327,98 @@ class RunMetrics:
         """Every key (or key pattern) ``metrics.json`` may hold, as docs/outputs.md names them."""
         records = (cls, TrajectoryFigures, DataFigures, ClosedLoopFigures)
         return {key for record in records for key in record.KEYS}
+
+
+def _sharpness(dataset: Dataset, trajectory: Trajectory) -> float | None:
+    """The entropy (nats) of the whole sonar span's map projected with the trajectory
+    (:func:`slam.eval.sharpness.trajectory_sharpness`, 0.5 m cells; GPS-free, lower is
+    sharper); None without beams inside the trajectory's span."""
+    span = dataset.sonar_span_s
+    if span is None:
+        return None
+    t0, t1 = max(span[0], trajectory.span_s[0]), min(span[1], trajectory.span_s[1])
+    if t1 <= t0:
+        return None
+    level = map_min_intensity(dataset.beams)
+    return trajectory_sharpness(dataset, trajectory, (t0, t1), level)
+
+
+def trajectory_figures(dataset: Dataset, trajectory: Trajectory, name: str) -> TrajectoryFigures:
+    """A trajectory's figures (:class:`TrajectoryFigures`): its ATE against the GPS over the whole run and over the sonar span (where
+    GPS fixes lie inside it), each also rigidly aligned; on simulated data against the truth
+    over the whole run; and its map's entropy. ``name``: "" for the run's own trajectory, else
+    the back end's name of it (``"smoothed"``)."""
+    gps = dataset.gps
+    assert gps is not None
+    span = dataset.sonar_span_s
+    inside = span is not None and bool(np.any(_in(gps.t, span, trajectory.span_s)))
+    sonar: tuple[AteResult | None, AteResult | None] = (None, None)
+    if span is not None and inside:
+        sonar = (
+            ate_against_gps(trajectory, gps, span),
+            ate_against_gps(trajectory, gps, span, align=True),
+        )
+    truth_figures: tuple[AteResult | None, AteResult | None] = (None, None)
+    if dataset.truth is not None:
+        truth = truth_trajectory(dataset)
+        truth_figures = (
+            ate_against_truth(trajectory, truth),
+            ate_against_truth(trajectory, truth, align=True),
+        )
+    return TrajectoryFigures(
+        name=name,
+        ate=ate_against_gps(trajectory, gps),
+        ate_aligned=ate_against_gps(trajectory, gps, align=True),
+        sonar_span_s=(span[0], span[1]) if span is not None and inside else None,
+        ate_sonar=sonar[0],
+        ate_sonar_aligned=sonar[1],
+        ate_truth=truth_figures[0],
+        ate_truth_aligned=truth_figures[1],
+        map_entropy_nats=_sharpness(dataset, trajectory),
+    )
+
+
+def _in(t_s: np.ndarray, *spans: tuple[float, float]) -> np.ndarray:
+    keep = np.ones(t_s.shape, dtype=bool)
+    for a, b in spans:
+        keep &= (t_s >= a) & (t_s <= b)
+    return keep
+
+
+def closed_loop_figures(
+    dataset: Dataset,
+    result: ClosedLoopResult,
+    config: RunConfig,
+    health: dict[str, JsonValue],
+    health_line: str,
+) -> ClosedLoopFigures:
+    backend = result.backend
+    nis = backend.map.nis()
+    vote_ms = 1e3 * np.asarray(backend.vote_wall_s)
+    truth = None
+    if dataset.truth is not None and "walls_m" in dataset.truth:
+        truth = association_against_truth(
+            dataset, result.features, result.feature_landmarks, result.feature_seeds
+        )
+    return ClosedLoopFigures(
+        settings=dict(config.settings),
+        extractor_preset=config.preset,
+        landmarks=len(backend.map.active()),
+        line_features=len(result.features),
+        counters=backend.stats,
+        extractor_s=result.extractor_s,
+        backend_s=result.backend_s,
+        scan_matcher_s=result.scan_matcher_s,
+        beams=result.counts.get("beams", 0),
+        backend=backend.metrics(),
+        nis_median=float(np.median(nis)) if nis.size else None,
+        nis_mean=float(np.mean(nis)) if nis.size else None,
+        vote_ms=(
+            (float(np.percentile(vote_ms, 50)), float(np.percentile(vote_ms, 99)), vote_ms.size)
+            if vote_ms.size
+            else None
+        ),
+        truth=truth,
+        health=health,
+        health_line=health_line,
+    )

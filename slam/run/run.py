@@ -26,9 +26,6 @@ from datasets.errors import DataError, DataWarning
 from datasets.settings import SettingError
 from datasets.source import Dataset, open_dataset
 from slam.backends.registry import BACKENDS, backend_spec
-from slam.eval.ate import AteResult, ate_against_gps, ate_against_truth
-from slam.eval.sharpness import trajectory_sharpness
-from slam.eval.truth import association_against_truth, truth_trajectory
 from slam.io.files import check_output_dir
 from slam.io.trajectory import Trajectory
 from slam.run.closed_loop import ClosedLoopResult, run_closed_loop
@@ -36,16 +33,15 @@ from slam.run.health import monitor_run
 from slam.run.metrics import (
     ClosedLoopFigures,
     DataFigures,
-    JsonValue,
     RunMetrics,
-    TrajectoryFigures,
+    closed_loop_figures,
+    trajectory_figures,
 )
 from slam.run.outputs import write_run
 from slam.run.presets import (
     RunConfig,
     check_combination,
     check_settings,
-    map_min_intensity,
     run_config,
 )
 from slam.run.provenance import provenance
@@ -174,10 +170,10 @@ def run_backend(
     figures = RunMetrics(
         source=str(dataset.root),
         backend=backend,
-        trajectory=_trajectory_figures(dataset, trajectory, ""),
+        trajectory=trajectory_figures(dataset, trajectory, ""),
         data=_data_figures(dataset, trajectory, wall_s),
         closed_loop=loop,
-        others=[_trajectory_figures(dataset, tr, name) for name, tr in trajectories.items()],
+        others=[trajectory_figures(dataset, tr, name) for name, tr in trajectories.items()],
     )
     return RunResult(
         backend, trajectory, figures.to_json(), result, config, trajectories, figures=figures
@@ -215,7 +211,7 @@ def _closed_loop(
     result.backend.finish()
     trajectories = result.backend.trajectories(batch)
     health = monitor_run(dataset, result)  # GPS-free: the run against its own model
-    loop = _closed_loop_figures(dataset, result, config, health.metrics(), health.line())
+    loop = closed_loop_figures(dataset, result, config, health.metrics(), health.line())
     health.warn()
     return result, config, trajectories, loop
 
@@ -286,101 +282,6 @@ def _gps_uncovered_s(dataset: Dataset, trajectory: Trajectory) -> float:
             stacklevel=3,
         )
     return uncovered
-
-
-def _sharpness(dataset: Dataset, trajectory: Trajectory) -> float | None:
-    """The entropy (nats) of the whole sonar span's map projected with the trajectory
-    (:func:`slam.eval.sharpness.trajectory_sharpness`, 0.5 m cells; GPS-free, lower is
-    sharper); None without beams inside the trajectory's span."""
-    span = dataset.sonar_span_s
-    if span is None:
-        return None
-    t0, t1 = max(span[0], trajectory.span_s[0]), min(span[1], trajectory.span_s[1])
-    if t1 <= t0:
-        return None
-    level = map_min_intensity(dataset.beams)
-    return trajectory_sharpness(dataset, trajectory, (t0, t1), level)
-
-
-def _trajectory_figures(dataset: Dataset, trajectory: Trajectory, name: str) -> TrajectoryFigures:
-    """A trajectory's ATE against the GPS over the whole run and over the sonar span (where
-    GPS fixes lie inside it), each also rigidly aligned; on simulated data against the truth
-    over the whole run; and its map's entropy. ``name``: "" for the run's own trajectory, else
-    the back end's name of it (``"smoothed"``)."""
-    gps = dataset.gps
-    assert gps is not None
-    span = dataset.sonar_span_s
-    inside = span is not None and bool(np.any(_in(gps.t, span, trajectory.span_s)))
-    sonar: tuple[AteResult | None, AteResult | None] = (None, None)
-    if span is not None and inside:
-        sonar = (
-            ate_against_gps(trajectory, gps, span),
-            ate_against_gps(trajectory, gps, span, align=True),
-        )
-    truth_figures: tuple[AteResult | None, AteResult | None] = (None, None)
-    if dataset.truth is not None:
-        truth = truth_trajectory(dataset)
-        truth_figures = (
-            ate_against_truth(trajectory, truth),
-            ate_against_truth(trajectory, truth, align=True),
-        )
-    return TrajectoryFigures(
-        name=name,
-        ate=ate_against_gps(trajectory, gps),
-        ate_aligned=ate_against_gps(trajectory, gps, align=True),
-        sonar_span_s=(span[0], span[1]) if span is not None and inside else None,
-        ate_sonar=sonar[0],
-        ate_sonar_aligned=sonar[1],
-        ate_truth=truth_figures[0],
-        ate_truth_aligned=truth_figures[1],
-        map_entropy_nats=_sharpness(dataset, trajectory),
-    )
-
-
-def _in(t_s: np.ndarray, *spans: tuple[float, float]) -> np.ndarray:
-    keep = np.ones(t_s.shape, dtype=bool)
-    for a, b in spans:
-        keep &= (t_s >= a) & (t_s <= b)
-    return keep
-
-
-def _closed_loop_figures(
-    dataset: Dataset,
-    result: ClosedLoopResult,
-    config: RunConfig,
-    health: dict[str, JsonValue],
-    health_line: str,
-) -> ClosedLoopFigures:
-    backend = result.backend
-    nis = backend.map.nis()
-    vote_ms = 1e3 * np.asarray(backend.vote_wall_s)
-    truth = None
-    if dataset.truth is not None and "walls_m" in dataset.truth:
-        truth = association_against_truth(
-            dataset, result.features, result.feature_landmarks, result.feature_seeds
-        )
-    return ClosedLoopFigures(
-        settings=dict(config.settings),
-        extractor_preset=config.preset,
-        landmarks=len(backend.map.active()),
-        line_features=len(result.features),
-        counters=backend.stats,
-        extractor_s=result.extractor_s,
-        backend_s=result.backend_s,
-        scan_matcher_s=result.scan_matcher_s,
-        beams=result.counts.get("beams", 0),
-        backend=backend.metrics(),
-        nis_median=float(np.median(nis)) if nis.size else None,
-        nis_mean=float(np.mean(nis)) if nis.size else None,
-        vote_ms=(
-            (float(np.percentile(vote_ms, 50)), float(np.percentile(vote_ms, 99)), vote_ms.size)
-            if vote_ms.size
-            else None
-        ),
-        truth=truth,
-        health=health,
-        health_line=health_line,
-    )
 
 
 def run(
