@@ -9,7 +9,7 @@ DIR is an iSAM2 run directory with scan revisits (``sonarslam run marina --backe
 --batch --set isam2.constraints=scans --out DIR``; ``graph.json`` holds every factor and the
 nodes' times). The benchmark
 
-1. reads the graph (:func:`slam.backends.isam2.graph_io.factor_from_record`) and optimises it
+1. reads the graph (:meth:`slam.backends.isam2.graph_io.FactorRecord.to_gtsam`) and optimises it
    as it is with Levenberg-Marquardt from its saved values: the run's own batch estimate;
 2. replaces the measurement of every ``scan-revisit`` factor by the ruler's relative pose of
    its two nodes (``between(ruler(t_i), ruler(t_j))``) with the stated covariance
@@ -39,7 +39,7 @@ import numpy as np
 from datasets.errors import DataError
 from datasets.source import Dataset, open_dataset
 from features.geometry import between
-from slam.backends.isam2.graph_io import factor_from_record, factor_record, key_of
+from slam.backends.isam2.graph_io import FactorKind, FactorRecord, key_of
 from slam.eval.ate import ate_against_gps, ate_against_truth
 from slam.eval.truth import truth_trajectory
 from slam.io.trajectory import Trajectory
@@ -49,7 +49,7 @@ from slam.run.sources import gps_ahrs_trajectory
 def _optimise(records: list[dict[str, Any]], values: gtsam.Values) -> gtsam.Values:
     graph = gtsam.NonlinearFactorGraph()
     for record in records:
-        graph.add(factor_from_record(record))
+        graph.add(FactorRecord.from_json(record).to_gtsam())
     params = gtsam.LevenbergMarquardtParams()
     params.setMaxIterations(100)
     return gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
@@ -95,13 +95,13 @@ def oracle_records(
         if r.get("constraint") == "scan-revisit":
             a, b = r["keys"]
             z = between(*ruler.poses(np.array([node_t[a], node_t[b]])))
-            r = factor_record(
-                "BetweenFactorPose2",
+            r = FactorRecord.of(
+                FactorKind.BETWEEN_POSE,
                 [key_of(a), key_of(b)],
                 z,
                 cov,
                 constraint="scan-revisit-oracle",
-            )
+            ).to_json()
             n += 1
         out.append(r)
     return out, n

@@ -26,7 +26,7 @@ import typing
 from collections.abc import Mapping
 from functools import cache
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from datasets.errors import DataError
 from datasets.logfile import NUMBER, read_text, split_lines
@@ -38,7 +38,10 @@ __all__ = [
     "field_types",
     "replace_checked",
     "check_within",
-    "check_ranges",
+    "Range",
+    "bounded",
+    "one_of",
+    "check_fields",
     "read_toml",
     "toml_line",
 ]
@@ -106,12 +109,47 @@ def check_within(
         raise ValueError(f"{name} must be in {lb}{low:g}, {high:g}{rb}, got {value!r}")
 
 
-def check_ranges(obj: Any, bounds: Mapping[str, tuple[float, float]]) -> None:
-    """:func:`check_within` for each named field of ``obj`` that is not None."""
-    for name, (low, high) in bounds.items():
-        value = getattr(obj, name)
-        if value is not None:
-            check_within(name, value, low, high)
+_T = TypeVar("_T")
+
+
+@dataclasses.dataclass(frozen=True)
+class Range:
+    """The values a numeric setting takes: ``[low, high]``, open at an end when said."""
+
+    low: float
+    high: float
+    low_open: bool = False
+    high_open: bool = False
+
+
+def bounded(
+    default: _T, low: float, high: float, *, low_open: bool = False, high_open: bool = False
+) -> _T:
+    """A dataclass field with its default and its range in the field's metadata
+    (:func:`check_fields` checks it; None always passes)."""
+    r = Range(low, high, low_open, high_open)
+    return dataclasses.field(default=default, metadata={"range": r})
+
+
+def one_of(default: _T, *choices: object) -> _T:
+    """A dataclass field with its default and the values it may take in its metadata
+    (:func:`check_fields`)."""
+    return dataclasses.field(default=default, metadata={"choices": choices})
+
+
+def check_fields(obj: Any) -> None:
+    """The one check of a configuration dataclass's fields: each field's range
+    (:func:`bounded`) and choices (:func:`one_of`), in the words :func:`replace_checked`
+    reports with the key. ValueError naming the first field out of them."""
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        r = f.metadata.get("range")
+        if r is not None and value is not None:
+            check_within(f.name, value, r.low, r.high, r.low_open, r.high_open)
+        choices = f.metadata.get("choices")
+        if choices is not None and value not in choices:
+            said = ", ".join(repr(c) for c in choices)
+            raise ValueError(f"{f.name} must be one of {said}, got {value!r}")
 
 
 class SettingError(ValueError):

@@ -76,8 +76,10 @@ def test_empty_inputs():
 
 
 def test_config_is_checked():
-    with pytest.raises(ValueError, match="association method"):
+    with pytest.raises(ValueError, match="method must be one of 'jcbb', 'nn', got 'hungarian'"):
         AssociationConfig(method="hungarian")
+    with pytest.raises(ValueError, match=r"gate_probability must be in \(0, 1\), got 1"):
+        AssociationConfig(gate_probability=1.0)
 
 
 def test_ekf_closed_loop_associates_the_true_walls(tmp_path):

@@ -14,6 +14,7 @@ from slam.cli.main import build_parser, main
 from slam.eval.ate import ate_against_gps
 from slam.eval.truth import truth_trajectory
 from slam.io.trajectory import read_tum
+from slam.run.presets import SettingError, check_settings, run_config
 from slam.run.sources import dead_reckoning_trajectory
 
 
@@ -191,3 +192,22 @@ def test_run_set_changes_the_settings_it_names(short_harbour, tmp_path, capsys):
     assert "no_such_field" in capsys.readouterr().err
     assert main([*args, "--set", "isam2.robust=cauchy"]) == 2
     assert "does not apply to back end 'ekf'" in capsys.readouterr().err
+
+
+def test_scan_settings_are_taken_where_the_run_takes_scans():
+    """``--set scans.*``: checked before the run and applied by run_config when the back end's
+    constraints hold scans; refused with a line naming the setting otherwise."""
+    given = {"isam2.constraints": "lines,scans", "scans.floor_sigma_m": 1.0}
+    check_settings("isam2", given)
+    config = run_config([], "isam2", given)
+    assert config.scans.floor_sigma_m == 1.0
+    assert config.backend.constraint_kinds == {"lines", "scans"}
+    assert run_config([], "isam2").scans.floor_sigma_m == 0.15  # the preset's otherwise
+    with pytest.raises(SettingError, match=r"^scans.floor_sigma_m: .*takes no scans"):
+        check_settings("isam2", {"scans.floor_sigma_m": 1.0})
+    with pytest.raises(SettingError, match=r"^scans.floor_sigma_m: .*takes no scans"):
+        check_settings("ekf", {"scans.floor_sigma_m": 1.0})
+    with pytest.raises(SettingError, match=r"^scans\.floor_sigma_mm"):
+        check_settings("isam2", {"isam2.constraints": "scans", "scans.floor_sigma_mm": 1.0})
+    with pytest.raises(SettingError, match=r"^scans\.floor_sigma_mm"):
+        run_config([], "isam2", {"isam2.constraints": "scans", "scans.floor_sigma_mm": 1.0})

@@ -3,6 +3,7 @@ source, save/load, and a short simulated closed loop against dead reckoning."""
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, replace
 
 import gtsam
@@ -31,7 +32,7 @@ from features.geometry import (
 from features.line import LineFeature
 from slam.backends.isam2.factors import heading_factor, line_factor, noise_model, odometry_factor
 from slam.backends.isam2.graph import GraphConfig, LineIsam2
-from slam.backends.isam2.graph_io import load_graph
+from slam.backends.isam2.graph_io import FactorKind, FactorRecord, load_graph
 from slam.backends.isam2.pose_source import smoothed_poses
 from slam.model.lines import (
     line_prediction,
@@ -379,7 +380,7 @@ def test_the_ahrs_bias_is_unobservable_so_its_prior_alone_fixes_it(room: Synthet
             rotated.insert(key, values.atVector(key) - alpha)
     for i, record in enumerate(be.records):
         e0, e1 = be.graph.at(i).error(values), be.graph.at(i).error(rotated)
-        if record["type"] == "PriorFactorVector":
+        if record.kind is FactorKind.PRIOR_VECTOR:
             assert e1 > e0 + 0.5 * (alpha / np.deg2rad(be.config.ahrs_bias_sigma_deg)) ** 2 - 1e-6
             continue
         assert e1 == pytest.approx(e0, rel=1e-6, abs=1e-9)
@@ -592,3 +593,39 @@ def test_short_simulated_closed_loop_beats_dead_reckoning(tmp_path_factory):
     # every landmark's extent stays on its walls (2 m of pose error, margin of the extent gate)
     overshoot = landmark_overshoot_m(result.backend.map_records(), walls)
     assert overshoot.max() < 12.0, overshoot
+
+
+def test_every_factor_kind_round_trips_through_its_json_form(room: SyntheticRun):
+    """Each record the graph made reads back to the same record, which builds a factor with the
+    same error at the estimate."""
+    be = room.backend
+    values = be.estimate()
+    kinds = set()
+    for record in be.records:
+        again = FactorRecord.from_json(json.loads(json.dumps(record.to_json())))
+        assert again.to_json() == record.to_json()
+        e0, e1 = record.to_gtsam().error(values), again.to_gtsam().error(values)
+        assert e1 == pytest.approx(e0, rel=1e-12, abs=1e-12)
+        kinds.add(record.kind)
+    assert {FactorKind.LINE_OBSERVATION, FactorKind.HEADING_BIAS} <= kinds
+
+
+@pytest.mark.parametrize(
+    "change,message",
+    [
+        ({"type": "Teleport"}, "'Teleport' is not a valid FactorKind"),
+        ({"covariance": [[1.0]]}, "covariance (1, 1) does not match"),
+        ({"keys": ["x0"]}, "takes 2 keys, got 1"),
+    ],
+)
+def test_load_graph_names_the_file_and_the_factor_it_cannot_read(
+    room: SyntheticRun, tmp_path, change: dict, message: str
+):
+    (path,) = room.backend.save(tmp_path)
+    doc = json.loads(path.read_text())
+    i = next(i for i, f in enumerate(doc["factors"]) if f["type"] == "LineObservation")
+    doc["factors"][i] |= change
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=f"graph.json: factor {i}: ") as err:
+        load_graph(path)
+    assert message in str(err.value)

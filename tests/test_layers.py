@@ -107,3 +107,14 @@ def test_the_rules_catch_a_wrong_edge():
     assert not _allowed("slam.model.motion", "slam.backends.ekf")
     assert not _allowed("slam.eval.truth", "slam.run.sources")
     assert _allowed("slam.run.run", "slam.eval.ate") and _allowed("datasets.marina", "numpy")
+
+
+def test_the_landmark_layer_imports_nothing_of_the_back_ends():
+    """The landmark layer decides a vote from the back end's belief and hands back a decision
+    (:mod:`slam.mapping.vote`): no import of ``slam.backends`` at all, not even for types."""
+    assert not _allowed("slam.mapping.landmarks", "slam.backends.base")
+    mapping = [(n, p) for n, p in MODULES if n.startswith("slam.mapping")]
+    assert len(mapping) >= 4
+    for name, path in mapping:
+        found = [m for m, _, _ in _imports(path) if m.startswith("slam.backends")]
+        assert found == [], f"{name} imports {found}"

@@ -18,7 +18,8 @@ import pytest
 
 from datasets.simulator import simulate
 from slam.backends.isam2.g2o import G2O_EDGE_TYPES, graph_json_to_g2o
-from slam.backends.isam2.graph_io import factor_from_record, key_of, load_graph
+from slam.backends.isam2.graph_io import FactorRecord, key_of, load_graph
+from slam.run.metrics import RunMetrics
 from slam.run.run import run
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -93,7 +94,7 @@ def test_read_g2o_loads_the_pose_graph(runs):
         p = values.atPose2(int(name[1:]))
         np.testing.assert_allclose([p.x(), p.y(), p.theta()], item["value"], atol=1e-9)
     _, json_values = load_graph(out / "graph.json")
-    ours = sum(factor_from_record(f).error(json_values) for f in odometry)
+    ours = sum(FactorRecord.from_json(f).to_gtsam().error(json_values) for f in odometry)
     assert graph.error(values) == pytest.approx(ours, rel=1e-3)
     # a GTSAM user's re-optimisation: fix the first pose and run Levenberg-Marquardt
     graph.add(
@@ -143,6 +144,19 @@ def test_every_output_file_is_in_the_docs_table(runs):
             assert any(fnmatch.fnmatch(key, p) for p in key_patterns), (
                 f"{key} not in docs/outputs.md"
             )
+
+
+def test_the_docs_key_table_is_the_keys_run_metrics_writes():
+    """docs/outputs.md's ``metrics.json`` table names exactly the keys (and key patterns) of
+    :class:`slam.run.metrics.RunMetrics`' records, both ways."""
+    text = _outputs_page()
+    part = text[text.index("`metrics.json` (one object") : text.index("## With evo")]
+    rows = re.findall(r"^\| (`[^|]+`) \|", part, re.M)
+    documented = {token for row in rows for token in re.findall(r"`([^`]+)`", row)}
+    assert len(documented) > 60
+    declared = RunMetrics.key_patterns()
+    assert documented - declared == set(), "in the docs, not in RunMetrics"
+    assert declared - documented == set(), "in RunMetrics, not in the docs"
 
 
 def test_metrics_record_the_code_settings_and_data_of_the_run(runs):

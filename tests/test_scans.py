@@ -21,7 +21,7 @@ from features.geometry import between, compose, inverse, transform_points, wrap_
 from features.scans import ScanConfig, ScanMatcher, reference_lines, register
 from features.scans.icp import register_from
 from slam.backends.isam2.g2o import graph_json_to_g2o
-from slam.backends.isam2.graph_io import factor_from_record, factor_record
+from slam.backends.isam2.graph_io import FactorKind, FactorRecord, Robust
 from slam.backends.isam2.scans import radial_gate_distance, relative_pose_covariance
 from slam.eval.consistency import mean_nees_band
 from slam.eval.truth import truth_trajectory
@@ -159,15 +159,15 @@ def test_scan_between_record_round_trips_with_its_kernel_and_exports_to_g2o(tmp_
     cov_plain = np.diag([0.01, 4.0, 1e-4])
     z = np.array([3.0, 1.0, 0.7])
     A = local_to_world(-z[2])
-    rec = factor_record(
-        "BetweenFactorPose2",
+    rec = FactorRecord.of(
+        FactorKind.BETWEEN_POSE,
         [X(0), X(1)],
         z,
         A @ cov_plain @ A.T,
-        robust={"kernel": "cauchy", "k": 1.0},
+        robust=Robust("cauchy", 1.0),
         constraint="scan-revisit",
     )
-    factor = factor_from_record(rec)
+    factor = FactorRecord.from_json(rec.to_json()).to_gtsam()
     assert isinstance(factor.noiseModel(), gtsam.noiseModel.Robust)
     # the covariance is in the measurement's tangent: the marginal of X(1) from X(0) = identity
     graph = gtsam.NonlinearFactorGraph()
@@ -188,7 +188,7 @@ def test_scan_between_record_round_trips_with_its_kernel_and_exports_to_g2o(tmp_
     doc = {
         "format": "sonarslam-graph/1",
         "meta": {},
-        "factors": [rec],
+        "factors": [rec.to_json()],
         "values": {
             "x0": {"type": "Pose2", "value": [0, 0, 0]},
             "x1": {"type": "Pose2", "value": z.tolist()},

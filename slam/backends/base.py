@@ -5,14 +5,16 @@ A back end estimates the vehicle pose from the motion steps (:class:`slam.model.
 the AHRS headings and the front end's lines, and in return gives the front end the pose of every
 beam through a :class:`features.pose_source.PoseSource`. Its landmarks are managed by the shared
 landmark layer (:class:`slam.mapping.landmarks.LandmarkMap`), which calls back into the back end
-through :class:`slam.mapping.landmarks.LineEstimator`. Both back ends here (the EKF,
+through one call per vote of lines (:meth:`slam.mapping.landmarks.LandmarkMap.vote`: the back
+end's belief in, the layer's decision out, :mod:`slam.mapping.vote`). Both back ends here (the EKF,
 :mod:`slam.backends.ekf`, and iSAM2, :mod:`slam.backends.isam2`) implement both protocols; a new
 back end registers in :mod:`slam.backends.registry`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
@@ -20,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from datasets.config import DVL_SCALE_SIGMA_MAX
-from datasets.settings import check_ranges, check_within
+from datasets.settings import bounded, one_of
 from features.geometry import FloatArray, compose, inverse
 from features.line import LineFeature
 from features.pose_source import PoseSource
@@ -29,7 +31,15 @@ from slam.io.trajectory import Trajectory
 from slam.mapping.landmarks import LandmarkConfig, LandmarkMap
 from slam.model.motion import MotionStep, OdometryChain
 
-__all__ = ["BackendConfig", "Backend", "ScanBackend", "AnchoredOdometry"]
+__all__ = [
+    "BackendConfig",
+    "Backend",
+    "ScanBackend",
+    "AnchoredOdometry",
+    "VoteObservations",
+    "vote_observations",
+    "ids_of_features",
+]
 
 
 @dataclass(frozen=True)
@@ -79,16 +89,16 @@ class BackendConfig(LandmarkConfig):
         :mod:`features.scans`), or ``"lines,scans"``. A back end that cannot take one says so.
     """
 
-    ahrs_white_sigma_deg: float = 1.0
-    ahrs_bias_sigma_deg: float = 2.0
-    ahrs_bias_walk_deg_per_sqrt_s: float = 0.0
-    ahrs_period_s: float = 1.0
-    gyro_sigma_radps: float = 0.005
+    ahrs_white_sigma_deg: float = bounded(1.0, 1e-3, 90.0)
+    ahrs_bias_sigma_deg: float = bounded(2.0, 1e-3, 90.0)
+    ahrs_bias_walk_deg_per_sqrt_s: float = bounded(0.0, 0.0, math.inf)
+    ahrs_period_s: float = bounded(1.0, 1e-3, 3600.0)
+    gyro_sigma_radps: float = bounded(0.005, 1e-5, 1.0)
     estimate_misalignment: bool = False
-    misalignment_sigma_deg: float = 5.0
-    dvl_scale_sigma: float = 0.0
-    robust: str | None = None
-    robust_k: float = 1.345
+    misalignment_sigma_deg: float = bounded(5.0, 1e-3, 90.0)
+    dvl_scale_sigma: float = bounded(0.0, 0.0, DVL_SCALE_SIGMA_MAX, high_open=True)
+    robust: str | None = one_of(None, None, "huber", "cauchy")
+    robust_k: float = bounded(1.345, 0.0, math.inf, low_open=True)
     constraints: str = "lines"
 
     @property
@@ -97,49 +107,12 @@ class BackendConfig(LandmarkConfig):
         return frozenset(c.strip() for c in self.constraints.split(","))
 
     def __post_init__(self) -> None:
-        super().__post_init__()
+        super().__post_init__()  # every field's range (datasets.settings.check_fields)
         kinds = self.constraint_kinds
         if not kinds or not kinds <= {"lines", "scans"}:
             raise ValueError(
                 f"constraints must be 'lines', 'scans' or 'lines,scans', got {self.constraints!r}"
             )
-        if self.robust not in (None, "huber", "cauchy"):
-            raise ValueError(f"robust must be None, 'huber' or 'cauchy', got {self.robust!r}")
-        if not self.robust_k > 0.0:
-            raise ValueError(f"robust_k must be > 0, got {self.robust_k}")
-        if min(self.ahrs_white_sigma_deg, self.ahrs_bias_sigma_deg, self.gyro_sigma_radps) <= 0:
-            raise ValueError("AHRS and gyro sigmas must be > 0")
-        if not self.ahrs_bias_walk_deg_per_sqrt_s >= 0.0:
-            raise ValueError(
-                "ahrs_bias_walk_deg_per_sqrt_s must be >= 0, got "
-                f"{self.ahrs_bias_walk_deg_per_sqrt_s}"
-            )
-        if not self.ahrs_period_s > 0.0:
-            raise ValueError(f"ahrs_period_s must be > 0, got {self.ahrs_period_s}")
-        check_within(
-            "dvl_scale_sigma", self.dvl_scale_sigma, 0.0, DVL_SCALE_SIGMA_MAX, high_open=True
-        )
-        if not self.misalignment_sigma_deg > 0.0:
-            raise ValueError(
-                f"misalignment_sigma_deg must be > 0, got {self.misalignment_sigma_deg}"
-            )
-        check_ranges(self, _RANGES)
-
-
-#: Ranges of the shared settings (and the landmark layer's) beyond which a back end's
-#: numerics fail (GTSAM's "indeterminate system") or its loops never end: an error instead.
-_RANGES = {
-    "ahrs_white_sigma_deg": (1e-3, 90.0),
-    "ahrs_bias_sigma_deg": (1e-3, 90.0),
-    "ahrs_period_s": (1e-3, 3600.0),
-    "gyro_sigma_radps": (1e-5, 1.0),
-    "misalignment_sigma_deg": (1e-3, 90.0),
-    "tentative_observations": (1, 1000),
-    "tentative_max_age_s": (1e-3, 1e5),
-    "min_rho_m": (0.0, 1e3),
-    "extent_margin_m": (0.0, 1e4),
-    "line_cov_scale": (1e-2, 1e2),
-}
 
 
 class Backend(Protocol):
@@ -169,6 +142,11 @@ class Backend(Protocol):
     @property
     def stats(self) -> dict[str, int]:
         """Counters of the run (the landmark layer's and the back end's own)."""
+        ...
+
+    @property
+    def vote_wall_s(self) -> list[float]:
+        """Wall time of each :meth:`update_lines` (s): the back end's cost per vote of lines."""
         ...
 
     def predict(self, step: MotionStep) -> FloatArray:
@@ -220,6 +198,48 @@ class ScanBackend(Protocol):
         """A scan the matcher completed (its newest): the back end's node for it and the
         registrations it asks ``matcher`` for (consecutive, revisits)."""
         ...
+
+
+@dataclass(frozen=True, eq=False)
+class VoteObservations:
+    """A vote's lines as the landmark layer may use them (:func:`vote_observations`).
+
+    Attributes
+    ----------
+    features : list of LineFeature
+        Those at ``rho_m >= min_rho_m``.
+    rejected_near : int
+        How many were nearer.
+    z : ndarray, shape (m, 2)
+        ``features``' lines in the sonar frame ``(rho_m, theta_rad)``.
+    R : ndarray, shape (m, 2, 2)
+        Their covariances times ``line_cov_scale``.
+    """
+
+    features: list[LineFeature]
+    rejected_near: int
+    z: FloatArray = field(repr=False)
+    R: FloatArray = field(repr=False)
+
+
+def vote_observations(features: list[LineFeature], config: LandmarkConfig) -> VoteObservations:
+    """The lines of one vote the landmark layer may use, the rules of
+    :class:`slam.mapping.landmarks.LandmarkConfig` (``min_rho_m``, ``line_cov_scale``)."""
+    use = [f for f in features if f.rho_m >= config.min_rho_m]
+    z = np.array([f.z for f in use]).reshape(-1, 2)
+    R = np.array([f.cov for f in use]).reshape(-1, 2, 2)
+    if config.line_cov_scale != 1.0:
+        R = R * config.line_cov_scale
+    return VoteObservations(use, len(features) - len(use), z, R)
+
+
+def ids_of_features(
+    features: list[LineFeature], used: list[LineFeature], ids: list[int | None]
+) -> list[int | None]:
+    """The landmark id of each of ``features`` from those of the ``used`` ones (None for the
+    others)."""
+    by_feature = {id(f): ids[i] for i, f in enumerate(used)}
+    return [by_feature.get(id(f)) for f in features]
 
 
 class AnchoredOdometry:

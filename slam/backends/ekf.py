@@ -29,6 +29,7 @@ updates which landmark, and when a new line becomes one, is the landmark layer's
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,7 +38,7 @@ from typing import Any
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-from datasets.settings import check_ranges
+from datasets.settings import bounded
 from features.geometry import (
     FLIP_RHO,
     FloatArray,
@@ -47,20 +48,57 @@ from features.geometry import (
 )
 from features.line import LineFeature
 from features.pose_source import PoseSource
-from slam.backends.base import AnchoredOdometry, BackendConfig
+from slam.backends.base import (
+    AnchoredOdometry,
+    BackendConfig,
+    VoteObservations,
+    ids_of_features,
+    vote_observations,
+)
 from slam.io.trajectory import Trajectory
-from slam.mapping.association import AssociationProblem
-from slam.mapping.landmarks import Landmark, LandmarkMap
+from slam.mapping.landmarks import LandmarkMap
+from slam.mapping.vote import AfterVote, Belief, Decision, LandmarkBelief
 from slam.model.lines import line_prediction, world_observation
 from slam.model.motion import MotionStep, step_displacement
 from slam.model.noise import robust_kernel
 from sonar.beam import Mounting
 
-__all__ = ["EkfConfig", "LineEkf", "POSE", "N_VEHICLE"]
+__all__ = [
+    "EkfConfig",
+    "LineEkf",
+    "POSE",
+    "YAW",
+    "AHRS_BIAS",
+    "MISALIGNMENT",
+    "DVL_SCALE",
+    "GYRO_BIAS",
+    "N_VEHICLE",
+    "MERGE_VARIANCE",
+]
 
-POSE = slice(0, 3)
-N_VEHICLE = 7  # x, y, psi, b, delta, k, g
-GYRO_BIAS = 6
+# The vehicle's block of the state (module docstring); the landmarks' lines follow it.
+POSE = slice(0, 3)  # x, y, psi: wTb
+YAW = 2  # psi
+AHRS_BIAS = 3  # b
+MISALIGNMENT = 4  # delta
+DVL_SCALE = 5  # k
+GYRO_BIAS = 6  # g
+N_VEHICLE = 7
+HEADING = [YAW, AHRS_BIAS]  # what the AHRS measures: psi + b
+
+#: The variance (m^2 and rad^2) of the exact update that ties two landmarks found to be one
+#: wall: the same line, numerically.
+MERGE_VARIANCE = 1e-10
+
+
+def _filter(x: FloatArray, P: FloatArray) -> ExtendedKalmanFilter:
+    """filterpy's EKF over the state ``x`` (n,) with covariance ``P`` (n, n); a new one when
+    the state grows or shrinks (a landmark added or merged), as filterpy's are of fixed size.
+    Its measurement size is not used: every update gives ``z``, ``H`` and ``R`` as arrays."""
+    kf = ExtendedKalmanFilter(dim_x=x.size, dim_z=2)
+    kf.x = x
+    kf.P = P
+    return kf
 
 
 @dataclass(frozen=True)
@@ -82,11 +120,7 @@ class EkfConfig(BackendConfig):
 
     side_gate: bool = False
     first_estimates_jacobians: bool = True
-    gyro_bias_sigma_deg_per_s: float = 1.0
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        check_ranges(self, {"gyro_bias_sigma_deg_per_s": (1e-6, 90.0)})
+    gyro_bias_sigma_deg_per_s: float = bounded(1.0, 1e-6, 90.0)
 
 
 class LineEkf:
@@ -117,24 +151,22 @@ class LineEkf:
         self.config = config
         self.bTs = sonar_mounting.as_pose()
         self.t_s = t0_s
-        kf = ExtendedKalmanFilter(dim_x=N_VEHICLE, dim_z=2)
-        kf.x = np.zeros(N_VEHICLE)
-        kf.x[POSE] = wTb0
+        x = np.zeros(N_VEHICLE)
+        x[POSE] = wTb0
         P = np.zeros((N_VEHICLE, N_VEHICLE))
         P[:2, :2] = P0[:2, :2]
         var_b = np.deg2rad(config.ahrs_bias_sigma_deg) ** 2
         # psi0 came from the AHRS, which measures psi + b (white noise and bias as this filter
         # models them, not P0's heading): psi and b are anti-correlated.
-        P[2, 2] = np.deg2rad(config.ahrs_white_sigma_deg) ** 2 + var_b
-        P[3, 3] = var_b
-        P[2, 3] = P[3, 2] = -var_b
-        P[4, 4] = (
+        P[YAW, YAW] = np.deg2rad(config.ahrs_white_sigma_deg) ** 2 + var_b
+        P[AHRS_BIAS, AHRS_BIAS] = var_b
+        P[YAW, AHRS_BIAS] = P[AHRS_BIAS, YAW] = -var_b
+        P[MISALIGNMENT, MISALIGNMENT] = (
             np.deg2rad(config.misalignment_sigma_deg) ** 2 if config.estimate_misalignment else 0.0
         )
-        P[5, 5] = config.dvl_scale_sigma**2
+        P[DVL_SCALE, DVL_SCALE] = config.dvl_scale_sigma**2
         P[GYRO_BIAS, GYRO_BIAS] = np.deg2rad(config.gyro_bias_sigma_deg_per_s) ** 2
-        kf.P = P
-        self.kf = kf
+        self.kf = _filter(x, P)
         self.map = LandmarkMap(config, self.bTs)
         self._index: dict[int, int] = {}  # landmark id -> index of its rho in the state
         self._first_line_w: dict[int, FloatArray] = {}  # each landmark's first estimate (FEJ)
@@ -145,6 +177,9 @@ class LineEkf:
         self._last_ahrs_t = -np.inf
         self._own_stats = {"ahrs_updates": 0}
         self._gyro_s = 0.0  # how long the heading has integrated the gyro
+        #: wall time of each :meth:`update_lines` (s)
+        self.vote_wall_s: list[float] = []
+        self._after: AfterVote | None = None  # the estimate after the last vote's update
         #: every AHRS heading update's innovation ``(t_s, nu_rad, S_rad2)`` before the update
         self.heading_innovations: list[tuple[float, float, float]] = []
 
@@ -237,7 +272,7 @@ class LineEkf:
     ) -> None:
         n = self.kf.x.size
         self.kf.update(z, lambda _x: H, lambda _x: hx, R=R, residual=residual)
-        self.kf.x[2] = wrap_angle(self.kf.x[2])
+        self.kf.x[YAW] = wrap_angle(self.kf.x[YAW])
         for i in self._index.values():  # keep landmarks normalised, the covariance alike
             if self.kf.x[i] < 0.0:
                 J = np.eye(n)
@@ -253,16 +288,14 @@ class LineEkf:
         self._last_ahrs_t = t_s
         n = self.kf.x.size
         H = np.zeros((1, n))
-        H[0, 2] = H[0, 3] = 1.0
-        hx = np.array([self.kf.x[2] + self.kf.x[3]])
+        H[0, HEADING] = 1.0
+        hx = np.array([self.kf.x[YAW] + self.kf.x[AHRS_BIAS]])
         R = np.array([[np.deg2rad(self.config.ahrs_white_sigma_deg) ** 2]])
         nu = float(wrap_angle(yaw_body_rad - hx[0]))
         P = self.kf.P
-        S = float(P[2, 2] + 2.0 * P[2, 3] + P[3, 3] + R[0, 0])
+        S = float(P[YAW, YAW] + 2.0 * P[YAW, AHRS_BIAS] + P[AHRS_BIAS, AHRS_BIAS] + R[0, 0])
         self.heading_innovations.append((t_s, nu, S))
-        self.kf.dim_z = 1
         self._update(np.array([yaw_body_rad]), H, hx, R, lambda a, b: wrap_angle(a - b))
-        self.kf.dim_z = 2
         self._own_stats["ahrs_updates"] += 1
         return True
 
@@ -290,48 +323,77 @@ class LineEkf:
         return z_hat, H
 
     def update_lines(self, features: list[LineFeature]) -> list[int | None]:
-        """Associate the lines of one vote to landmarks, update, manage new ones
-        (:meth:`slam.mapping.landmarks.LandmarkMap.update_lines`)."""
-        return self.map.update_lines(self, features)
+        """One vote of lines: this filter's belief to the landmark layer, which decides the
+        associations and new landmarks (:meth:`slam.mapping.landmarks.LandmarkMap.vote`); the
+        decision applied here. The landmark id of each feature (None: not associated)."""
+        wall0 = time.perf_counter()
+        obs = vote_observations(features, self.config)
+        decision = self.map.vote(self._belief(obs))
+        self._apply(decision)
+        self.vote_wall_s.append(time.perf_counter() - wall0)
+        return ids_of_features(features, obs.features, decision.ids)
 
-    # -- the landmark layer's hooks (slam.mapping.landmarks.LineEstimator) -----------------
+    def _belief(self, obs: VoteObservations) -> Belief:
+        """Every active landmark predicted from the whole state (the Jacobians at this vote's
+        start, :meth:`predict_line`)."""
+        ids = list(self._index) if obs.features else []
+        if obs.features:
+            self._pose_lin = self.x[POSE].copy()
+        preds = [self.predict_line(j) for j in ids]
+        return Belief(
+            features=obs.features,
+            rejected_near=obs.rejected_near,
+            z=obs.z,
+            R=obs.R,
+            wTb=self.pose,
+            P_pose=self.pose_cov,
+            anchor=None,
+            candidates=ids,
+            z_hat=np.array([p[0] for p in preds]).reshape(-1, 2),
+            H=np.array([p[1] for p in preds]).reshape(-1, 2, self.x.size),
+            P=self.P,
+            landmarks=LandmarkBelief({j: self.landmark_line(j) for j in ids}),
+            seeds_used=False,
+            after_previous=self._after,
+        )
 
-    def begin_vote(self) -> None:
-        self._pose_lin = self.x[POSE].copy()
+    def _apply(self, decision: Decision) -> None:
+        """The landmark layer's decision: the merges, the updates, the new landmarks; then the
+        estimate after them for the layer (the next belief's ``after_previous``)."""
+        for keep, drop in decision.merges:
+            self._merge_landmarks(keep, drop)
+        for j, f in decision.updates:
+            self._update_line(j, f)
+        for new in decision.new_landmarks:
+            self._add_landmark(new.id, new.observations[-1][1])
+        if decision.ids:
+            self._after = AfterVote(self.pose, self._landmark_belief(decision.seen))
 
-    def association_problem(
-        self, z: FloatArray, R: FloatArray, lines: list[LineFeature], anchor: Any
-    ) -> tuple[list[Landmark], AssociationProblem | None]:
-        """Every active landmark, predicted from the whole state."""
-        cands = self.map.active()
-        preds = [self.predict_line(lm.id) for lm in cands]
-        z_hat = np.array([p[0] for p in preds]).reshape(-1, 2)
-        H = np.array([p[1] for p in preds]).reshape(-1, 2, self.x.size)
-        lines_w = np.array([self.landmark_line(lm.id) for lm in cands]).reshape(-1, 2)
-        allowed = self.map.allowed(cands, lines_w, self.x[POSE], lines)
-        return cands, AssociationProblem(z, R, z_hat, H, self.P, allowed)
+    def _landmark_belief(self, seen: list[int]) -> LandmarkBelief:
+        """The lines of ``seen``; of every active landmark, with their joint covariance, when
+        the landmark layer merges duplicates."""
+        if self.config.merge_gate_probability is None:
+            return LandmarkBelief({j: self.landmark_line(j) for j in seen})
+        ids = list(self._index)
+        cov = self.landmark_covariance(ids) if ids else None
+        return LandmarkBelief({j: self.landmark_line(j) for j in ids}, ids, cov)
 
-    def add_observations(self, pairs: list[tuple[Landmark, LineFeature]], anchor: Any) -> None:
-        """Sequential updates, each re-linearised at the state the previous one left; with a
-        robust kernel each observation's covariance is divided by the kernel's weight of its
+    def _update_line(self, landmark_id: int, f: LineFeature) -> None:
+        """One associated observation's update, linearised at the state the previous one left;
+        with a robust kernel its covariance is divided by the kernel's weight of its
         innovation's Mahalanobis distance (:class:`slam.backends.base.BackendConfig`)."""
-        scale = self.config.line_cov_scale
-        for lm, f in pairs:
-            z_hat, H = self.predict_line(lm.id)
-            nu, flipped = line_difference(f.z, z_hat)
-            R = np.asarray(f.cov) * scale
-            R = FLIP_RHO @ R @ FLIP_RHO if flipped else R
-            if self._kernel is not None:
-                d = float(np.sqrt(nu @ np.linalg.solve(H @ self.P @ H.T + R, nu)))
-                R = R / self._kernel.weight(d)
-            self._update(f.z, H, z_hat, R, lambda a, b: line_difference(a, b)[0])
+        z_hat, H = self.predict_line(landmark_id)
+        nu, flipped = line_difference(f.z, z_hat)
+        R = np.asarray(f.cov) * self.config.line_cov_scale
+        R = FLIP_RHO @ R @ FLIP_RHO if flipped else R
+        if self._kernel is not None:
+            d = float(np.sqrt(nu @ np.linalg.solve(H @ self.P @ H.T + R, nu)))
+            R = R / self._kernel.weight(d)
+        self._update(f.z, H, z_hat, R, lambda a, b: line_difference(a, b)[0])
 
-    def add_landmark(
-        self, landmark: Landmark, line_w: FloatArray, observations: list[tuple[Any, LineFeature]]
-    ) -> int:
-        """Augment the state with the newest observation's world line and the full
-        cross-covariances; the earlier (tentative) observations only seeded it."""
-        f = observations[-1][1]
+    def _add_landmark(self, landmark_id: int, f: LineFeature) -> None:
+        """Augment the state with the world line of ``f`` (the newest observation of a promoted
+        line; the earlier, tentative ones only seeded it) and the full cross-covariances."""
         obs = world_observation(f, self.x[POSE], self.P[POSE, POSE], self.bTs)
         x, P = self.x, self.P
         n = x.size
@@ -342,41 +404,29 @@ class LineEkf:
         P_new[:n, n:] = cross.T
         R = np.asarray(f.cov) * self.config.line_cov_scale
         P_new[n:, n:] = obs.G_pose @ P[POSE, POSE] @ obs.G_pose.T + obs.G_z @ R @ obs.G_z.T
-        kf = self.kf
-        kf.x = np.concatenate([x, obs.line_w])
-        kf.P = P_new
-        kf.dim_x = n + 2
-        kf._I = np.eye(n + 2)
-        self._index[landmark.id] = n
-        self._first_line_w[landmark.id] = obs.line_w.copy()
-        return 1
+        self.kf = _filter(np.concatenate([x, obs.line_w]), P_new)
+        self._index[landmark_id] = n
+        self._first_line_w[landmark_id] = obs.line_w.copy()
 
     def landmark_covariance(self, landmark_ids: list[int]) -> FloatArray:
         """Joint covariance of these landmarks' lines, shape (2k, 2k)."""
         idx = np.concatenate([[self.index(j), self.index(j) + 1] for j in landmark_ids])
         return self.P[np.ix_(idx, idx)].copy()
 
-    def merge_landmarks(self, keep: Landmark, drop: Landmark) -> None:
+    def _merge_landmarks(self, keep: int, drop: int) -> None:
         """Tie ``drop`` to ``keep`` by an exact update on their difference, then take ``drop``
         out of the state (its information is in ``keep`` and the cross-covariances now)."""
-        ik, idr = self.index(keep.id), self.index(drop.id)
+        ik, idr = self.index(keep), self.index(drop)
         nu, flipped = line_difference(self.x[idr : idr + 2], self.x[ik : ik + 2])
         H = np.zeros((2, self.x.size))
         H[:, ik : ik + 2] = -np.eye(2)
         H[:, idr : idr + 2] = FLIP_RHO if flipped else np.eye(2)
-        R = np.eye(2) * 1e-10
+        R = np.eye(2) * MERGE_VARIANCE
         self._update(np.zeros(2), H, nu, R, lambda a, b: a - b)
         keep_rows = np.r_[0:idr, idr + 2 : self.x.size]
-        kf = self.kf
-        kf.x = self.x[keep_rows].copy()
-        kf.P = self.P[np.ix_(keep_rows, keep_rows)].copy()
-        kf.dim_x = kf.x.size
-        kf._I = np.eye(kf.dim_x)
-        del self._index[drop.id], self._first_line_w[drop.id]
+        self.kf = _filter(self.x[keep_rows].copy(), self.P[np.ix_(keep_rows, keep_rows)].copy())
+        del self._index[drop], self._first_line_w[drop]
         self._index = {j: i - 2 if i > idr else i for j, i in self._index.items()}
-
-    def end_vote(self, associated: bool) -> None:
-        pass
 
     # -- results (slam.backends.base.Backend) ----------------------------------------------
 
@@ -390,7 +440,8 @@ class LineEkf:
     def map_records(self) -> list[dict[str, object]]:
         """Per active landmark: id, rho, theta, cov, world endpoints, observation count."""
         return self.map.records(
-            {j: (self.landmark_line(j), self.landmark_covariance([j])) for j in self._index}
+            {j: (self.landmark_line(j), self.landmark_covariance([j])) for j in self._index},
+            self._after,
         )
 
     def trajectories(self, batch: bool = False) -> dict[str, Trajectory]:
@@ -402,18 +453,21 @@ class LineEkf:
         moves ``1 + k`` times the DVL's velocity)."""
         x, P = self.x, self.P
         out: dict[str, float | int] = {
-            "state_ahrs_bias_deg": float(np.rad2deg(x[3])),
-            "state_ahrs_bias_sd_deg": float(np.rad2deg(np.sqrt(P[3, 3]))),
+            "state_ahrs_bias_deg": float(np.rad2deg(x[AHRS_BIAS])),
+            "state_ahrs_bias_sd_deg": float(np.rad2deg(np.sqrt(P[AHRS_BIAS, AHRS_BIAS]))),
         }
         if self.config.estimate_misalignment:
-            out["state_misalignment_deg"] = float(np.rad2deg(x[4]))
-            out["state_misalignment_sd_deg"] = float(np.rad2deg(np.sqrt(P[4, 4])))
+            out["state_misalignment_deg"] = float(np.rad2deg(x[MISALIGNMENT]))
+            sd = np.sqrt(P[MISALIGNMENT, MISALIGNMENT])
+            out["state_misalignment_sd_deg"] = float(np.rad2deg(sd))
         if self.config.dvl_scale_sigma > 0.0:
-            out["state_dvl_scale"] = float(x[5])
-            out["state_dvl_scale_sd"] = float(np.sqrt(P[5, 5]))
+            out["state_dvl_scale"] = float(x[DVL_SCALE])
+            out["state_dvl_scale_sd"] = float(np.sqrt(P[DVL_SCALE, DVL_SCALE]))
         if self._gyro_s > 0.0:
             out["state_gyro_bias_deg_per_s"] = float(np.rad2deg(x[GYRO_BIAS]))
-            out["state_gyro_bias_sd_deg_per_s"] = float(np.rad2deg(np.sqrt(P[6, 6])))
+            out["state_gyro_bias_sd_deg_per_s"] = float(
+                np.rad2deg(np.sqrt(P[GYRO_BIAS, GYRO_BIAS]))
+            )
         return out
 
     def save(self, out_dir: Path) -> list[Path]:

@@ -46,7 +46,7 @@ import numpy as np
 from scipy.stats import binom, chi2
 
 from datasets.errors import DataWarning
-from datasets.settings import check_ranges
+from datasets.settings import bounded, check_fields
 from features.geometry import FloatArray, wrap_angle
 from slam.io.trajectory import Trajectory
 
@@ -87,29 +87,17 @@ class HealthConfig:
         Largest share of new landmarks among a window's associations and creations.
     """
 
-    window_s: float = 120.0
-    false_alarm: float = 0.01
-    min_updates: int = 10
-    nis_window_updates: int = 40
-    nis_scale_max: float = 1.5
-    bias_sigmas: float = 10.0
-    landmark_min_new: int = 5
-    landmark_new_share_max: float = 0.5
+    window_s: float = bounded(120.0, 1.0, 1e5)
+    false_alarm: float = bounded(0.01, 1e-9, 0.5)
+    min_updates: int = bounded(10, 3, 10_000)
+    nis_window_updates: int = bounded(40, 3, 100_000)
+    nis_scale_max: float = bounded(1.5, 1.0, 1e3)
+    bias_sigmas: float = bounded(10.0, 1.0, 1e3)
+    landmark_min_new: int = bounded(5, 1, 10_000)
+    landmark_new_share_max: float = bounded(0.5, 0.0, 1.0)
 
     def __post_init__(self) -> None:
-        check_ranges(self, _RANGES)
-
-
-_RANGES = {
-    "window_s": (1.0, 1e5),
-    "false_alarm": (1e-9, 0.5),
-    "min_updates": (3, 10_000),
-    "nis_window_updates": (3, 100_000),
-    "nis_scale_max": (1.0, 1e3),
-    "bias_sigmas": (1.0, 1e3),
-    "landmark_min_new": (1, 10_000),
-    "landmark_new_share_max": (0.0, 1.0),
-}
+        check_fields(self)
 
 
 @dataclass(frozen=True)

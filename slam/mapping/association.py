@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
+from datasets.settings import bounded, check_fields, one_of
 from features.geometry import FLIP_RHO, FloatArray, along_line, line_difference
 
 __all__ = [
@@ -47,14 +48,11 @@ class AssociationConfig:
         Probability of the chi2 gates (individual: 2 dof; joint: 2n dof).
     """
 
-    method: str = "jcbb"
-    gate_probability: float = 0.99
+    method: str = one_of("jcbb", "jcbb", "nn")
+    gate_probability: float = bounded(0.99, 0.0, 1.0, low_open=True, high_open=True)
 
     def __post_init__(self) -> None:
-        if self.method not in ("jcbb", "nn"):
-            raise ValueError(f"association method must be 'jcbb' or 'nn', got {self.method!r}")
-        if not 0.0 < self.gate_probability < 1.0:
-            raise ValueError(f"gate_probability must be in (0, 1), got {self.gate_probability}")
+        check_fields(self)
 
 
 @dataclass(frozen=True)

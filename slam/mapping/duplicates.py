@@ -16,7 +16,8 @@ import numpy as np
 from features.geometry import FLIP_RHO, FloatArray, along_line, line_difference
 
 if TYPE_CHECKING:  # the landmark layer imports this module: its types only, for the checker
-    from slam.mapping.landmarks import Landmark, LandmarkMap, LineEstimator
+    from slam.mapping.landmarks import Landmark, LandmarkMap
+    from slam.mapping.vote import LandmarkBelief
 
 __all__ = ["duplicate_of", "extent_gap_m"]
 
@@ -30,7 +31,7 @@ def extent_gap_m(a: Landmark, line_a: FloatArray, b: Landmark, line_b: FloatArra
 
 
 def duplicate_of(
-    landmarks: LandmarkMap, estimator: LineEstimator, landmark_id: int, gate: float
+    landmarks: LandmarkMap, belief: LandmarkBelief, landmark_id: int, gate: float
 ) -> Landmark | None:
     """The first other active landmark of the same wall as ``landmark_id`` (module docstring),
     or None.
@@ -38,24 +39,28 @@ def duplicate_of(
     Parameters
     ----------
     landmarks : LandmarkMap
-    estimator : LineEstimator
-        Gives the lines and their joint covariance.
+    belief : LandmarkBelief
+        The back end's lines and their joint covariance (``cov``, over ``cov_ids``); landmarks
+        it has no line of (promoted in this vote) are not compared.
     landmark_id : int
     gate : float
         chi2(2) threshold of the test.
     """
+    assert belief.cov is not None, "the merge test needs the lines' joint covariance"
     lm_j = landmarks.landmarks[landmark_id]
-    line_j = estimator.landmark_line(landmark_id)
+    line_j = belief.lines_w[landmark_id]
     margin = landmarks.config.extent_margin_m or 0.0
+    at = {j: 2 * c for c, j in enumerate(belief.cov_ids)}
     for lm_i in landmarks.active():
-        if lm_i.id == landmark_id or lm_i.side != lm_j.side:
+        if lm_i.id == landmark_id or lm_i.side != lm_j.side or lm_i.id not in belief.lines_w:
             continue
-        line_i = estimator.landmark_line(lm_i.id)
+        line_i = belief.lines_w[lm_i.id]
         if extent_gap_m(lm_i, line_i, lm_j, line_j) > margin:
             continue
         nu, flipped = line_difference(line_j, line_i)
         A = np.hstack([-np.eye(2), FLIP_RHO if flipped else np.eye(2)])
-        S = A @ estimator.landmark_covariance([lm_i.id, landmark_id]) @ A.T
+        idx = np.r_[at[lm_i.id] : at[lm_i.id] + 2, at[landmark_id] : at[landmark_id] + 2]
+        S = A @ belief.cov[np.ix_(idx, idx)] @ A.T
         if nu @ np.linalg.solve(S, nu) <= gate:
             return lm_i
     return None

@@ -1,7 +1,7 @@
 """The landmark layer shared by every back end: which lines become landmarks, which observation
 goes to which landmark, where each landmark's wall ends, and its ``map.json`` record.
 
-A back end (:class:`LineEstimator`) keeps the estimates (the EKF in its state, the factor graph
+A back end keeps the estimates (the EKF in its state, the factor graph
 as variables ``L(j)``); this layer keeps everything else about the landmarks, so that both back
 ends manage them by the same rules:
 
@@ -15,18 +15,20 @@ ends manage them by the same rules:
   ``tentative_max_age_s`` it is promoted to a landmark;
 * each landmark's extent along its line grows with the segments of its observations.
 
-The vote itself is :meth:`LandmarkMap.update_lines`; a back end's ``update_lines`` is that call.
+The vote itself is :meth:`LandmarkMap.vote`: the back end's :class:`slam.mapping.vote.Belief`
+in, a :class:`slam.mapping.vote.Decision` out, which the back end applies; this layer calls
+nothing of the back end.
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 from scipy.stats import chi2
 
+from datasets.settings import bounded, check_fields
 from features.geometry import (
     FLIP_RHO,
     FloatArray,
@@ -45,6 +47,14 @@ from slam.mapping.association import (
     extent_allowed,
 )
 from slam.mapping.duplicates import duplicate_of
+from slam.mapping.vote import (
+    AfterVote,
+    Anchored,
+    Belief,
+    Decision,
+    LandmarkBelief,
+    NewLandmark,
+)
 from slam.model.lines import sonar_side, world_observation
 
 __all__ = [
@@ -52,7 +62,6 @@ __all__ = [
     "Landmark",
     "Tentative",
     "Innovation",
-    "LineEstimator",
     "LandmarkMap",
     "landmark_record",
 ]
@@ -60,7 +69,9 @@ __all__ = [
 
 @dataclass(frozen=True)
 class LandmarkConfig:
-    """Settings of the landmark layer (every back end's configuration extends this).
+    """Settings of the landmark layer (every back end's configuration extends this). Each
+    field's range is in its metadata (:func:`datasets.settings.bounded`), checked by
+    :func:`datasets.settings.check_fields` for this class and every subclass.
 
     Attributes
     ----------
@@ -98,32 +109,17 @@ class LandmarkConfig:
     """
 
     association: AssociationConfig = field(default_factory=AssociationConfig)
-    tentative_observations: int = 2
-    tentative_max_age_s: float = 60.0
-    min_rho_m: float = 1.0
-    extent_margin_m: float | None = 10.0
+    tentative_observations: int = bounded(2, 1, 1000)
+    tentative_max_age_s: float = bounded(60.0, 1e-3, 1e5)
+    min_rho_m: float = bounded(1.0, 0.0, 1e3)
+    extent_margin_m: float | None = bounded(10.0, 0.0, 1e4)
     side_gate: bool = True
-    line_cov_scale: float = 1.0
-    merge_gate_probability: float | None = None
-    reobservation_min_move_m: float | None = 5.0
+    line_cov_scale: float = bounded(1.0, 1e-2, 1e2)
+    merge_gate_probability: float | None = bounded(None, 0.0, 1.0, low_open=True, high_open=True)
+    reobservation_min_move_m: float | None = bounded(5.0, 0.0, 1e4, high_open=True)
 
     def __post_init__(self) -> None:
-        if self.tentative_observations < 1:
-            raise ValueError(
-                f"tentative_observations must be >= 1, got {self.tentative_observations}"
-            )
-        if not self.tentative_max_age_s > 0.0:
-            raise ValueError(f"tentative_max_age_s must be > 0, got {self.tentative_max_age_s}")
-        if not self.line_cov_scale > 0.0:
-            raise ValueError(f"line_cov_scale must be > 0, got {self.line_cov_scale}")
-        if self.extent_margin_m is not None and not self.extent_margin_m >= 0.0:
-            raise ValueError(f"extent_margin_m must be >= 0 or None, got {self.extent_margin_m}")
-        r = self.reobservation_min_move_m
-        if r is not None and not 0.0 <= r < 1e4:
-            raise ValueError(f"reobservation_min_move_m must be in [0, 1e4) or None, got {r}")
-        p = self.merge_gate_probability
-        if p is not None and not 0.0 < p < 1.0:
-            raise ValueError(f"merge_gate_probability must be in (0, 1) or None, got {p}")
+        check_fields(self)  # every field's range, a subclass's too (its metadata)
 
 
 @dataclass
@@ -184,7 +180,7 @@ class Tentative:
     line_w: FloatArray
     cov_w: FloatArray
     ends_w: FloatArray
-    observations: list[tuple[Any, LineFeature]]
+    observations: list[Anchored]
     side: float = 1.0
 
 
@@ -198,64 +194,6 @@ class Innovation:
     nu: FloatArray
     S: FloatArray
     R: FloatArray
-
-
-class LineEstimator(Protocol):
-    """What the landmark layer needs from a back end, for one vote of lines.
-
-    :meth:`LandmarkMap.update_lines` calls, in order: :meth:`begin_vote`,
-    :meth:`association_problem`, :meth:`add_observations`, :meth:`add_landmark` (per promoted
-    line), :meth:`end_vote`; then :meth:`landmark_line` and :attr:`pose` for the extents.
-    """
-
-    bTs: FloatArray
-
-    @property
-    def pose(self) -> FloatArray:
-        """Current body pose ``wTb``, shape (3,)."""
-        ...
-
-    @property
-    def pose_cov(self) -> FloatArray:
-        """Its covariance in ``(x_m, y_m, yaw_rad)``, shape (3, 3)."""
-        ...
-
-    def begin_vote(self) -> Any:
-        """Prepare for a vote's observations; returns their anchor (kept with tentative lines)."""
-        ...
-
-    def association_problem(
-        self, z: FloatArray, R: FloatArray, lines: list[LineFeature], anchor: Any
-    ) -> tuple[list[Landmark], AssociationProblem | None]:
-        """The candidate landmarks and the joint belief to associate ``z`` (m, 2) with them."""
-        ...
-
-    def add_observations(self, pairs: list[tuple[Landmark, LineFeature]], anchor: Any) -> None:
-        """Use associated observations (the EKF updates, the graph adds factors)."""
-        ...
-
-    def add_landmark(
-        self, landmark: Landmark, line_w: FloatArray, observations: list[tuple[Any, LineFeature]]
-    ) -> int:
-        """Create the estimate of a promoted line; returns how many observations it uses."""
-        ...
-
-    def end_vote(self, associated: bool) -> None:
-        """After the vote's observations and new landmarks (the graph optimises here)."""
-        ...
-
-    def landmark_line(self, landmark_id: int) -> FloatArray:
-        """Current estimate of a landmark's world line, as stored (may be unnormalised)."""
-        ...
-
-    def landmark_covariance(self, landmark_ids: list[int]) -> FloatArray:
-        """Joint covariance of these landmarks' lines as stored, shape (2k, 2k)."""
-        ...
-
-    def merge_landmarks(self, keep: Landmark, drop: Landmark) -> None:
-        """``drop`` is the same wall as ``keep``: tie their estimates; only ``keep`` is used
-        from now on."""
-        ...
 
 
 class LandmarkMap:
@@ -287,10 +225,12 @@ class LandmarkMap:
         self.association_log: list[tuple[float, int, int | None]] = []
         #: tentative observations of a line that became a landmark, with its id: they seeded it
         self.seed_log: list[tuple[LineFeature, int]] = []
-        #: wall time of each :meth:`update_lines` (s): the back end's cost per vote of lines
-        self.vote_wall_s: list[float] = []
         #: every pairing's innovation (:class:`Innovation`), for the NIS
         self.innovations: list[Innovation] = []
+        # the last vote's segments (landmark id, sonar-frame end points (2, 2)) and landmarks,
+        # until the estimate after its update settles them (:meth:`settle`)
+        self._growth: list[tuple[int, FloatArray]] = []
+        self._touched: list[int] = []
 
     def __len__(self) -> int:
         return len(self.landmarks)
@@ -340,61 +280,64 @@ class LandmarkMap:
 
     # -- one vote --------------------------------------------------------------------------
 
-    def update_lines(
-        self, estimator: LineEstimator, features: list[LineFeature]
-    ) -> list[int | None]:
-        """Associate the lines of one vote with the landmarks, use them, manage new ones.
+    def vote(self, belief: Belief) -> Decision:
+        """Decide one vote of lines from the back end's belief before it uses them
+        (:mod:`slam.mapping.vote`): settle the previous vote (:meth:`settle`), associate the
+        observations with the candidates, pick those to use, keep or promote tentative lines.
 
-        Returns the landmark id of each feature (None: not associated, tentative or unused).
+        A new line is placed with the pose of the vote; the extents the associated segments add
+        wait for the estimate after the update (the next belief's ``after_previous``).
         """
-        wall0 = time.perf_counter()
-        try:
-            return self._update_lines(estimator, features)
-        finally:
-            self.vote_wall_s.append(time.perf_counter() - wall0)
-
-    def _update_lines(
-        self, estimator: LineEstimator, features: list[LineFeature]
-    ) -> list[int | None]:
         cfg = self.config
-        use = [f for f in features if f.rho_m >= cfg.min_rho_m]
-        self.stats["rejected_near"] += len(features) - len(use)
+        use = belief.features
+        self.stats["rejected_near"] += belief.rejected_near
         if not use:
-            return [None] * len(features)
+            return Decision([], [], [], [], [])
+        merges = self.settle(belief.after_previous)
         self.stats["observations"] += len(use)
-        anchor = estimator.begin_vote()
-        z = np.array([f.z for f in use])
-        R = np.array([f.cov for f in use])
-        if cfg.line_cov_scale != 1.0:
-            R = R * cfg.line_cov_scale
-        candidates, problem = estimator.association_problem(z, R, use, anchor)
+        live = [c for c, j in enumerate(belief.candidates) if self.landmarks[j].active]
+        candidates = [self.landmarks[belief.candidates[c]] for c in live]
         pairing: list[int | None] = [None] * len(use)
-        if problem is not None and candidates:
+        if candidates:
+            lines_w = belief.landmarks.lines_w
+            cand_lines = np.array([lines_w[lm.id] for lm in candidates])
+            allowed = self.allowed(candidates, cand_lines, belief.wTb, use)
+            z_hat, H = belief.z_hat[live], belief.H[live]
+            problem = AssociationProblem(belief.z, belief.R, z_hat, H, belief.P, allowed)
             pairing = associate(problem, cfg.association)
             self._log_innovations(problem, pairing, candidates, use)
         paired = [(candidates[j], use[i]) for i, j in enumerate(pairing) if j is not None]
         ids: list[int | None] = [None if j is None else candidates[j].id for j in pairing]
         self.stats["associated"] += len(paired)
-        pairs = self._moved_enough(paired, estimator.pose)
-        estimator.add_observations(pairs, anchor)
+        pairs = self._moved_enough(paired, belief.wTb)
         for lm, _ in pairs:
             lm.n_obs += 1
-        wTb, P_pose = estimator.pose, estimator.pose_cov
+        new: list[NewLandmark] = []
         for i, j in enumerate(pairing):
             if j is None:
-                ids[i] = self._new_line(estimator, anchor, use[i], wTb, P_pose)
-        estimator.end_vote(bool(pairs))
-        if paired:  # a skipped re-observation was still seen: it grows the extent
-            wTs = compose(estimator.pose, self.bTs)
-            for lm, f in paired:
-                lm.grow(estimator.landmark_line(lm.id), transform_points(wTs, f.endpoints_r))
-        touched = {i for i in ids if i is not None}
-        if cfg.merge_gate_probability is not None and touched:
-            self.merge_duplicates(estimator, sorted(touched))
+                ids[i] = self._new_line(belief, use[i], new)
+        # a skipped re-observation was still seen: it grows the extent
+        self._growth = [(lm.id, f.endpoints_r) for lm, f in paired]
+        self._touched = sorted({i for i in ids if i is not None})
         for i, f in enumerate(use):
             self.association_log.append((f.t, i, ids[i]))
-        by_feature = {id(f): ids[i] for i, f in enumerate(use)}
-        return [by_feature.get(id(f)) for f in features]
+        updates = [(lm.id, f) for lm, f in pairs]
+        return Decision(ids, merges, updates, new, [lm.id for lm, _ in paired])
+
+    def settle(self, after: AfterVote | None) -> list[tuple[int, int]]:
+        """The previous vote's extents, grown along the lines right after its update and placed
+        with the pose then; with ``merge_gate_probability``, its landmarks' duplicates merged
+        (:meth:`merge_duplicates`). Returns the merges ``(keep, drop)``."""
+        growth, touched = self._growth, self._touched
+        self._growth, self._touched = [], []
+        if after is None:
+            return []
+        wTs = compose(after.wTb, self.bTs)
+        for j, ends_r in growth:
+            self.landmarks[j].grow(after.landmarks.lines_w[j], transform_points(wTs, ends_r))
+        if self.config.merge_gate_probability is None or not touched:
+            return []
+        return self.merge_duplicates(after.landmarks, touched)
 
     def _moved_enough(
         self, pairs: list[tuple[Landmark, LineFeature]], wTb: FloatArray
@@ -436,17 +379,12 @@ class LandmarkMap:
         """NIS ``nu^T S^-1 nu`` of every pairing made so far, shape (K,)."""
         return np.array([v.nu @ np.linalg.solve(v.S, v.nu) for v in self.innovations])
 
-    def _new_line(
-        self,
-        estimator: LineEstimator,
-        anchor: Any,
-        f: LineFeature,
-        wTb: FloatArray,
-        P_pose: FloatArray,
-    ) -> int | None:
-        """A tentative line, promoted to a landmark when seen ``tentative_observations`` times."""
+    def _new_line(self, belief: Belief, f: LineFeature, new: list[NewLandmark]) -> int | None:
+        """A tentative line, promoted to a landmark (appended to ``new``) when seen
+        ``tentative_observations`` times."""
         cfg = self.config
-        obs = world_observation(f, wTb, P_pose, self.bTs, cfg.line_cov_scale)
+        wTb = belief.wTb
+        obs = world_observation(f, wTb, belief.P_pose, self.bTs, cfg.line_cov_scale)
         kept = [c for c in self.tentative if f.t - c.t <= cfg.tentative_max_age_s]
         self.stats["tentative_dropped"] += len(self.tentative) - len(kept)
         self.tentative = kept
@@ -455,24 +393,26 @@ class LandmarkMap:
                 continue
             nu, _ = line_difference(obs.line_w, cand.line_w)
             if nu @ np.linalg.solve(obs.cov_w + cand.cov_w, nu) <= self._gate:
-                cand.observations.append((anchor, f))
+                cand.observations.append((belief.anchor, f))
                 cand.ends_w = np.vstack([cand.ends_w, obs.ends_w])
                 if len(cand.observations) >= cfg.tentative_observations:
                     self.tentative.remove(cand)
-                    return self._promote(estimator, obs.line_w, cand, wTb)
+                    return self._promote(belief, obs.line_w, cand, new)
                 return None
         side = float(sonar_side(wTb, obs.line_w, self.bTs)[0])
-        cand = Tentative(f.t, obs.line_w, obs.cov_w, obs.ends_w, [(anchor, f)], side)
+        cand = Tentative(f.t, obs.line_w, obs.cov_w, obs.ends_w, [(belief.anchor, f)], side)
         if cfg.tentative_observations <= 1:
-            return self._promote(estimator, obs.line_w, cand, wTb)
+            return self._promote(belief, obs.line_w, cand, new)
         self.tentative.append(cand)
         return None
 
     def _promote(
-        self, estimator: LineEstimator, line_w: FloatArray, cand: Tentative, wTb: FloatArray
+        self, belief: Belief, line_w: FloatArray, cand: Tentative, new: list[NewLandmark]
     ) -> int:
         """A landmark from a tentative line: its estimate is the newest observation's world line
-        (the back end decides which observations it uses), its extent all of theirs."""
+        (the back end's estimate uses all its observations or the newest,
+        :attr:`Belief.seeds_used`), its extent all of theirs."""
+        wTb = belief.wTb
         s = along_line(line_w, cand.ends_w)
         side = float(sonar_side(wTb, line_w, self.bTs)[0])
         lm = Landmark(
@@ -480,41 +420,55 @@ class LandmarkMap:
         )
         lm.last_used_xy_m = compose(wTb, self.bTs)[:2].copy()
         self.landmarks.append(lm)
-        lm.n_obs = estimator.add_landmark(lm, line_w, cand.observations)
+        lm.n_obs = len(cand.observations) if belief.seeds_used else 1
+        new.append(NewLandmark(lm.id, line_w, cand.observations))
         self.seed_log.extend((f, lm.id) for _, f in cand.observations[:-1])
         self.stats["new_landmarks"] += 1
         return lm.id
 
     # -- duplicates ------------------------------------------------------------------------
 
-    def merge_duplicates(self, estimator: LineEstimator, landmark_ids: list[int]) -> None:
+    def merge_duplicates(
+        self, belief: LandmarkBelief, landmark_ids: list[int]
+    ) -> list[tuple[int, int]]:
         """Merge each of these landmarks with another one of the same wall, if any
-        (:func:`slam.mapping.duplicates.duplicate_of`): the newer into the older."""
+        (:func:`slam.mapping.duplicates.duplicate_of`): the newer into the older. Returns the
+        merges ``(keep, drop)`` made, for the back end to apply."""
         assert self.config.merge_gate_probability is not None
         gate = float(chi2.ppf(self.config.merge_gate_probability, 2))
+        merges = []
         for j in landmark_ids:
             if not self.landmarks[j].active:
                 continue
-            other = duplicate_of(self, estimator, j, gate)
+            other = duplicate_of(self, belief, j, gate)
             if other is not None:
                 keep, drop = sorted((self.landmarks[j], other), key=lambda lm: lm.id)
-                self._merge(estimator, keep, drop)
+                self._merge(belief, keep, drop)
+                merges.append((keep.id, drop.id))
+        return merges
 
-    def _merge(self, estimator: LineEstimator, keep: Landmark, drop: Landmark) -> None:
-        line_keep = estimator.landmark_line(keep.id)
-        drop_ends = drop.ends_w(estimator.landmark_line(drop.id))
-        estimator.merge_landmarks(keep, drop)
-        keep.grow(line_keep, drop_ends)
+    def _merge(self, belief: LandmarkBelief, keep: Landmark, drop: Landmark) -> None:
+        line_keep = belief.lines_w[keep.id]
+        keep.grow(line_keep, drop.ends_w(belief.lines_w[drop.id]))
         keep.n_obs += drop.n_obs
         drop.merged_into = keep.id
         self.stats["merged"] += 1
 
     # -- results ---------------------------------------------------------------------------
 
-    def records(self, estimates: dict[int, tuple[FloatArray, FloatArray]]) -> list[dict[str, Any]]:
+    def records(
+        self,
+        estimates: dict[int, tuple[FloatArray, FloatArray]],
+        after: AfterVote | None = None,
+    ) -> list[dict[str, Any]]:
         """``map.json``'s landmarks from the back end's estimates of the active ones: id ->
         (line as stored (2,), its covariance (2, 2)), normalised here (:func:`landmark_record`);
-        merged landmarks are counted in the one they were merged into."""
+        merged landmarks are counted in the one they were merged into. ``after``: the estimate
+        after the last vote, which settles its extents first (:meth:`settle`; a duplicate
+        found then is not merged: the back end would not apply it)."""
+        if after is not None:
+            self._touched = []  # the run is over: a duplicate found now would not be merged
+            self.settle(after)
         out = []
         for lm in self.active():
             line_n, cov_n = normalize_line_cov(*estimates[lm.id])

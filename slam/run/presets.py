@@ -276,7 +276,7 @@ def run_config(
         extractor_config(preset, overrides=ext, noise=noise),
         backend_config(backend, own, noise),
         given,
-        apply_overrides(SCAN_PRESETS[preset], scans),
+        apply_overrides(SCAN_PRESETS[preset], scans, prefix="scans."),
     )
 
 

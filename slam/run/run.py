@@ -26,19 +26,22 @@ from datasets.errors import DataError, DataWarning
 from datasets.settings import SettingError
 from datasets.source import Dataset, open_dataset
 from slam.backends.registry import BACKENDS, backend_spec
-from slam.eval.ate import ate_against_gps, ate_against_truth
-from slam.eval.sharpness import trajectory_sharpness
-from slam.eval.truth import association_against_truth, truth_trajectory
 from slam.io.files import check_output_dir
 from slam.io.trajectory import Trajectory
 from slam.run.closed_loop import ClosedLoopResult, run_closed_loop
 from slam.run.health import monitor_run
+from slam.run.metrics import (
+    ClosedLoopFigures,
+    DataFigures,
+    RunMetrics,
+    closed_loop_figures,
+    trajectory_figures,
+)
 from slam.run.outputs import write_run
 from slam.run.presets import (
     RunConfig,
     check_combination,
     check_settings,
-    map_min_intensity,
     run_config,
 )
 from slam.run.provenance import provenance
@@ -73,7 +76,7 @@ class RunResult:
     trajectory : Trajectory
         The run's trajectory (a closed loop's is causal: the filtered pose at every AHRS record).
     metrics : dict
-        The content of ``metrics.json``.
+        The content of ``metrics.json`` (``figures.to_json()``).
     closed_loop : ClosedLoopResult or None
         The closed loop's lines, landmarks and back end (None for a baseline).
     config : RunConfig or None
@@ -84,6 +87,8 @@ class RunResult:
         Where the files were written (None: nothing written).
     files : list of Path
         The files this run wrote there.
+    figures : RunMetrics or None
+        The typed figures ``metrics`` is written from (None for a result made elsewhere).
     """
 
     backend: str
@@ -94,6 +99,7 @@ class RunResult:
     trajectories: dict[str, Trajectory] = field(default_factory=dict)
     out_dir: Path | None = None
     files: list[Path] = field(default_factory=list)
+    figures: RunMetrics | None = None
 
 
 def run_backend(
@@ -138,7 +144,7 @@ def run_backend(
         raise DataError(dataset.root, None, "runs need *_DGPS.log for the start pose and the ATE")
     if backend not in backend_names():
         raise SettingError("--backend", f"must be one of {backend_names()}, got {backend!r}")
-    extra: dict[str, Any] = {}
+    loop: ClosedLoopFigures | None = None
     result: ClosedLoopResult | None = None
     config: RunConfig | None = None
     trajectories: dict[str, Trajectory] = {}
@@ -152,64 +158,77 @@ def run_backend(
             raise SettingError("--batch", f"back end {backend!r} does not smooth")
         trajectory = POSE_SOURCES[backend](dataset)
     else:
-        spec = backend_spec(backend)
-        if batch and not spec.smoother:
-            raise SettingError("--batch", f"back end {backend!r} does not smooth")
-        _require_beams(dataset)
-        check_combination(dataset, backend)
-        config = run_config(dataset.beams, backend, settings, dataset.config.noise)
-        mounting = dataset.config.sonar_mounting
-        cfg = config.backend
-        result = run_closed_loop(
-            dataset,
-            lambda t0, pose0, cov0: spec.make(t0, pose0, cov0, mounting, cfg),
-            config.extractor,
-            progress=progress,
-            t_end_s=t_end_s,
-            label=backend,
-            scan_config=config.scans,
+        result, config, trajectories, loop = _closed_loop(
+            dataset, backend, settings, t_end_s, progress, batch
         )
         trajectory = result.trajectory
-        result.backend.finish()
-        trajectories = result.backend.trajectories(batch)
-        extra = _closed_loop_metrics(dataset, result, config)
-        health = monitor_run(dataset, result)  # GPS-free: the run against its own model
-        extra.update(health.metrics())
-        extra["health_line"] = health.line()
-        health.warn()
     wall_s = time.perf_counter() - wall0
     if t_end_s is not None and trajectory.t_s[-1] > t_end_s:
         trajectory = trajectory.clip(trajectory.t_s[0], t_end_s)
     for tr in (trajectory, *trajectories.values()):
         _check_finite(dataset, backend, tr)
+    figures = RunMetrics(
+        source=str(dataset.root),
+        backend=backend,
+        trajectory=trajectory_figures(dataset, trajectory, ""),
+        data=_data_figures(dataset, trajectory, wall_s),
+        closed_loop=loop,
+        others=[trajectory_figures(dataset, tr, name) for name, tr in trajectories.items()],
+    )
+    return RunResult(
+        backend, trajectory, figures.to_json(), result, config, trajectories, figures=figures
+    )
+
+
+def _closed_loop(
+    dataset: Dataset,
+    backend: str,
+    settings: dict[str, Any] | None,
+    t_end_s: float | None,
+    progress: bool,
+    batch: bool,
+) -> tuple[ClosedLoopResult, RunConfig, dict[str, Trajectory], ClosedLoopFigures]:
+    """A closed loop of ``backend`` on the dataset (:func:`run_backend`): its result, its
+    configuration, the back end's other trajectories and the loop's figures with the health
+    monitor's verdict (which warns here)."""
+    spec = backend_spec(backend)
+    if batch and not spec.smoother:
+        raise SettingError("--batch", f"back end {backend!r} does not smooth")
+    _require_beams(dataset)
+    check_combination(dataset, backend)
+    config = run_config(dataset.beams, backend, settings, dataset.config.noise)
+    mounting = dataset.config.sonar_mounting
+    cfg = config.backend
+    result = run_closed_loop(
+        dataset,
+        lambda t0, pose0, cov0: spec.make(t0, pose0, cov0, mounting, cfg),
+        config.extractor,
+        progress=progress,
+        t_end_s=t_end_s,
+        label=backend,
+        scan_config=config.scans,
+    )
+    result.backend.finish()
+    trajectories = result.backend.trajectories(batch)
+    health = monitor_run(dataset, result)  # GPS-free: the run against its own model
+    loop = closed_loop_figures(dataset, result, config, health.metrics(), health.line())
+    health.warn()
+    return result, config, trajectories, loop
+
+
+def _data_figures(dataset: Dataset, trajectory: Trajectory, wall_s: float) -> DataFigures:
+    """The run's wall time and its data's span, the DVL's rows and quality, the GPS's
+    coverage and the gates' faults and gaps over the trajectory's span."""
     t0, t1 = trajectory.span_s
-    metrics: dict[str, Any] = {
-        "source": str(dataset.root),
-        "backend": backend,
-        **ate_against_gps(trajectory, dataset.gps).as_dict(),
-        **ate_against_gps(trajectory, dataset.gps, align=True).as_dict("ate_aligned"),
-        **_span_metrics(dataset, trajectory, ""),
-        "wall_s": wall_s,
-        "data_s": t1 - t0,
-        "realtime_factor": (t1 - t0) / wall_s if wall_s > 0 else float("inf"),
-        "dvl_rows": int(dataset.dvl.t.size),
-        "dvl_invalid_rows": int((~dataset.dvl.valid).sum()),
-        **dvl_quality(dataset),
-        **_gps_coverage(dataset, trajectory),
-        **dataset.report.metrics((t0, t1)),
-        **extra,
-    }
-    metrics.update(_sharpness(dataset, trajectory, ""))
-    for name, tr in trajectories.items():
-        metrics.update(_sharpness(dataset, tr, f"_{name}"))
-        ate = ate_against_gps(tr, dataset.gps)
-        metrics[f"ate_mean_{name}_m"] = ate.ate_mean_m
-        metrics[f"ate_max_{name}_m"] = ate.ate_max_m
-        aligned = ate_against_gps(tr, dataset.gps, align=True)
-        metrics[f"ate_aligned_mean_{name}_m"] = aligned.ate_mean_m
-        metrics[f"ate_aligned_max_{name}_m"] = aligned.ate_max_m
-        metrics.update(_span_metrics(dataset, tr, f"_{name}"))
-    return RunResult(backend, trajectory, metrics, result, config, trajectories)
+    return DataFigures(
+        wall_s=wall_s,
+        data_s=t1 - t0,
+        dvl_rows=int(dataset.dvl.t.size),
+        dvl_invalid_rows=int((~dataset.dvl.valid).sum()),
+        dvl_quality=dvl_quality(dataset),
+        gps_uncovered_s=_gps_uncovered_s(dataset, trajectory),
+        faults_and_gaps=dataset.report.metrics((t0, t1)),
+    )
 
 
 def _span(span: tuple[float, float]) -> str:
@@ -243,7 +262,7 @@ def _check_finite(dataset: Dataset, backend: str, trajectory: Trajectory) -> Non
         )
 
 
-def _gps_coverage(dataset: Dataset, trajectory: Trajectory) -> dict[str, Any]:
+def _gps_uncovered_s(dataset: Dataset, trajectory: Trajectory) -> float:
     """How much of the run the GPS covers (``gps_uncovered_s``: the run's time before the
     first and after the last fix), with a warning naming the span when a gap of the GPS's
     threshold is left uncovered: the ATE is then over the covered part only."""
@@ -262,95 +281,7 @@ def _gps_coverage(dataset: Dataset, trajectory: Trajectory) -> dict[str, Any]:
             DataWarning,
             stacklevel=3,
         )
-    return {"gps_uncovered_s": uncovered}
-
-
-def _sharpness(dataset: Dataset, trajectory: Trajectory, suffix: str) -> dict[str, float]:
-    """``map_entropy{suffix}_nats``: the whole sonar span's map projected with the trajectory
-    (:func:`slam.eval.sharpness.trajectory_sharpness`, 0.5 m cells; GPS-free, lower is
-    sharper); nothing without beams inside the trajectory's span."""
-    span = dataset.sonar_span_s
-    if span is None:
-        return {}
-    t0, t1 = max(span[0], trajectory.span_s[0]), min(span[1], trajectory.span_s[1])
-    if t1 <= t0:
-        return {}
-    level = map_min_intensity(dataset.beams)
-    return {f"map_entropy{suffix}_nats": trajectory_sharpness(dataset, trajectory, (t0, t1), level)}
-
-
-def _span_metrics(dataset: Dataset, trajectory: Trajectory, suffix: str) -> dict[str, Any]:
-    """The ATE over the sonar span (``ate_sonar_*``, with ``sonar_span_s``; rigidly aligned
-    ``ate_sonar_aligned_*``) and, on simulated
-    data, against the truth over the whole run, as it is and rigidly aligned (``ate_truth_*``,
-    ``ate_truth_aligned_*``); ``suffix`` names another trajectory of the run
-    (``ate_sonar_smoothed_mean_m``)."""
-    assert dataset.gps is not None
-    out: dict[str, Any] = {}
-    span = dataset.sonar_span_s
-    inside = span is not None and bool(np.any(_in(dataset.gps.t, span, trajectory.span_s)))
-    if span is not None and inside:
-        if not suffix:
-            out["sonar_span_s"] = [span[0], span[1]]
-        out.update(ate_against_gps(trajectory, dataset.gps, span).as_dict(f"ate_sonar{suffix}"))
-        aligned = ate_against_gps(trajectory, dataset.gps, span, align=True)
-        out.update(aligned.as_dict(f"ate_sonar_aligned{suffix}"))
-    if dataset.truth is not None:
-        truth = truth_trajectory(dataset)
-        out.update(ate_against_truth(trajectory, truth).as_dict(f"ate_truth{suffix}"))
-        aligned = ate_against_truth(trajectory, truth, align=True)
-        out.update(aligned.as_dict(f"ate_truth_aligned{suffix}"))
-    return out
-
-
-def _in(t_s: np.ndarray, *spans: tuple[float, float]) -> np.ndarray:
-    keep = np.ones(t_s.shape, dtype=bool)
-    for a, b in spans:
-        keep &= (t_s >= a) & (t_s <= b)
-    return keep
-
-
-def _closed_loop_metrics(
-    dataset: Dataset, result: ClosedLoopResult, config: RunConfig
-) -> dict[str, Any]:
-    backend = result.backend
-    out: dict[str, Any] = {
-        "settings": dict(config.settings),
-        "extractor_preset": config.preset,
-        "landmarks": len(backend.map.active()),
-        "line_features": len(result.features),
-        **{f"assoc_{k}": v for k, v in backend.stats.items()},
-        "extractor_s": result.extractor_s,
-        "backend_s": result.backend_s,
-        "scan_matcher_s": result.scan_matcher_s,
-        "beams": result.counts.get("beams", 0),
-        **backend.metrics(),
-    }
-    nis = backend.map.nis()
-    if nis.size:
-        out["assoc_nis_median"] = float(np.median(nis))
-        out["assoc_nis_mean"] = float(np.mean(nis))
-    vote_ms = 1e3 * np.asarray(backend.map.vote_wall_s)
-    if vote_ms.size:
-        out["line_updates"] = int(vote_ms.size)
-        out["line_update_p50_ms"] = float(np.percentile(vote_ms, 50))
-        out["line_update_p99_ms"] = float(np.percentile(vote_ms, 99))
-    if dataset.truth is not None and "walls_m" in dataset.truth:
-        s = association_against_truth(
-            dataset, result.features, result.feature_landmarks, result.feature_seeds
-        )
-        out.update(
-            {
-                "truth_precision": s.precision,
-                "truth_recall": s.recall,
-                "truth_associations": s.n_associated,
-                "truth_reobservations": s.n_true_pairs,
-                "truth_seeds": s.n_seeds,
-                "truth_seed_precision": s.seed_precision,
-                "truth_spurious_features": s.n_spurious,
-            }
-        )
-    return out
+    return uncovered
 
 
 def run(
@@ -386,9 +317,11 @@ def run(
         raise SettingError("--batch", f"back end {backend!r} does not smooth")
     dataset = open_dataset(source, config_override=config)
     result = run_backend(dataset, backend, settings, progress=progress, batch=batch)
-    result.metrics["provenance"] = provenance(
+    assert result.figures is not None
+    result.figures.provenance = provenance(
         backend, dataset.root, dump_dataset_config(dataset.config), result.config, batch
     )
+    result.metrics = result.figures.to_json()
     result.files = write_run(
         Path(out_dir),
         dataset,

@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
-from datasets.settings import check_ranges
+from datasets.settings import bounded, one_of
 from slam.backends.base import BackendConfig
 
 __all__ = ["GraphConfig"]
@@ -27,7 +28,7 @@ class GraphConfig(BackendConfig):
         A pose node at least this often (s); votes with lines add theirs.
     min_node_gap_s : float
         An observation this close (s) after the newest node goes on that node, carried by the
-        odometry since it (:meth:`LineIsam2.begin_vote`), instead of on a new node.
+        odometry since it (:meth:`LineIsam2.node_now`), instead of on a new node.
     update_period_s : float
         Pending odometry and heading factors go into iSAM2 at most this often (s) between
         votes with lines (which always update).
@@ -87,64 +88,27 @@ class GraphConfig(BackendConfig):
         prediction (chi2(3) of the difference with the sum of both covariances) within this.
     """
 
-    ahrs_bias_prior_deg: float = 0.0
-    dvl_noise: str = "hold"
-    node_period_s: float = 5.0
-    min_node_gap_s: float = 0.1
-    update_period_s: float = 5.0
+    ahrs_bias_prior_deg: float = bounded(0.0, -180.0, 180.0)
+    dvl_noise: str = one_of("hold", "hold", "white")
+    node_period_s: float = bounded(5.0, 0.1, 3600.0)
+    min_node_gap_s: float = bounded(0.1, 0.0, 60.0)
+    update_period_s: float = bounded(5.0, 0.0, 3600.0)
     estimate_gyro_scale: bool = False
-    gyro_scale_sigma: float = 0.2
-    robust: str | None = "huber"
-    relinearize_threshold: float = 0.1
-    relinearize_skip: int = 10
-    extra_iterations: int = 1
-    candidate_gate_probability: float = 0.9999
-    max_candidates: int = 8
-    pose_window_s: float = 30.0
-    scan_robust: str | None = "cauchy"
-    scan_robust_k: float = 1.0
+    gyro_scale_sigma: float = bounded(0.2, 1e-4, 10.0)
+    robust: str | None = one_of("huber", None, "huber", "cauchy")
+    robust_k: float = bounded(1.345, 1e-3, 100.0)
+    relinearize_threshold: float = bounded(0.1, 1e-4, 10.0)
+    relinearize_skip: int = bounded(10, 1, 1000)
+    extra_iterations: int = bounded(1, 0, 100)
+    candidate_gate_probability: float = bounded(0.9999, 1e-6, 1.0 - 1e-12)
+    max_candidates: int = bounded(8, 1, 1000)
+    pose_window_s: float = bounded(30.0, 0.0, 1e5)
+    scan_robust: str | None = one_of("cauchy", None, "huber", "cauchy")
+    scan_robust_k: float = bounded(1.0, 0.0, math.inf, low_open=True)
     scan_consecutive: bool = True
-    revisit_radius_m: float = 10.0
-    revisit_gate_probability: float = 0.99
+    revisit_radius_m: float = bounded(10.0, 0.0, math.inf)
+    revisit_gate_probability: float = bounded(0.99, 0.0, 1.0, low_open=True, high_open=True)
     revisit_min_gap_s: float = 60.0
-    revisit_candidates: int = 4
-    revisits_per_scan: int = 2
-    scan_compatibility_probability: float = 0.999
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if self.dvl_noise not in ("hold", "white"):
-            raise ValueError(f"dvl_noise must be 'hold' or 'white', got {self.dvl_noise!r}")
-        if self.node_period_s <= 0 or self.update_period_s < 0:
-            raise ValueError("node_period_s must be > 0, update_period_s >= 0")
-        if self.max_candidates < 1:
-            raise ValueError("max_candidates must be >= 1")
-        if self.scan_robust not in (None, "huber", "cauchy"):
-            raise ValueError(
-                f"scan_robust must be None, 'huber' or 'cauchy', got {self.scan_robust!r}"
-            )
-        if self.revisit_candidates < 0 or self.revisits_per_scan < 0:
-            raise ValueError("revisit_candidates and revisits_per_scan must be >= 0")
-        for name in ("revisit_gate_probability", "scan_compatibility_probability"):
-            if not 0.0 < getattr(self, name) < 1.0:
-                raise ValueError(f"{name} must be in (0, 1), got {getattr(self, name)}")
-        if not (self.scan_robust_k > 0.0 and self.revisit_radius_m >= 0.0):
-            raise ValueError("scan_robust_k must be > 0 and revisit_radius_m >= 0")
-        check_ranges(self, _RANGES)
-
-
-#: Ranges beyond which the graph's numerics fail or its loops never end: an error instead.
-_RANGES = {
-    "ahrs_bias_prior_deg": (-180.0, 180.0),
-    "node_period_s": (0.1, 3600.0),
-    "min_node_gap_s": (0.0, 60.0),
-    "update_period_s": (0.0, 3600.0),
-    "gyro_scale_sigma": (1e-4, 10.0),
-    "robust_k": (1e-3, 100.0),
-    "relinearize_threshold": (1e-4, 10.0),
-    "relinearize_skip": (1, 1000),
-    "extra_iterations": (0, 100),
-    "candidate_gate_probability": (1e-6, 1.0 - 1e-12),
-    "max_candidates": (1, 1000),
-    "pose_window_s": (0.0, 1e5),
-}
+    revisit_candidates: int = bounded(4, 0, math.inf)
+    revisits_per_scan: int = bounded(2, 0, math.inf)
+    scan_compatibility_probability: float = bounded(0.999, 0.0, 1.0, low_open=True, high_open=True)

@@ -42,7 +42,6 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
 
 import gtsam
 import numpy as np
@@ -53,12 +52,19 @@ from features.geometry import FloatArray, compose, line_difference
 from features.line import LineFeature
 from features.pose_source import PoseSource
 from features.scans import Scan, ScanMatcher
-from slam.backends.base import AnchoredOdometry
+from slam.backends.base import (
+    AnchoredOdometry,
+    VoteObservations,
+    ids_of_features,
+    vote_observations,
+)
 from slam.backends.isam2.candidates import joint_covariance, loose_distances
 from slam.backends.isam2.config import GraphConfig
 from slam.backends.isam2.graph_io import (
-    factor_from_record,
-    factor_record,
+    FactorKind,
+    FactorRecord,
+    OdometryTerms,
+    Robust,
     key_name,
     pose_of,
     save_graph,
@@ -68,13 +74,17 @@ from slam.backends.isam2.odometry import NodeOdometry, local_covariance
 from slam.backends.isam2.pose_source import NodeTable, SmoothedPoseSource
 from slam.backends.isam2.scans import ScanConstraints
 from slam.io.trajectory import Trajectory
-from slam.mapping.association import AssociationProblem
 from slam.mapping.landmarks import Landmark, LandmarkMap
+from slam.mapping.vote import AfterVote, Belief, Decision, LandmarkBelief, NewLandmark, NodeAnchor
 from slam.model.lines import line_prediction, local_to_world, sonar_side
 from slam.model.motion import MotionStep
 from sonar.beam import Mounting
 
-__all__ = ["GraphConfig", "LineIsam2"]
+__all__ = ["GraphConfig", "LineIsam2", "LINE_EQUALITY_SIGMAS"]
+
+#: The noise of a ``LineEquality`` factor (rho m, theta rad): two landmarks found to be one wall
+#: are the same line.
+LINE_EQUALITY_SIGMAS = (1e-3, 1e-5)
 
 
 class LineIsam2:
@@ -110,7 +120,7 @@ class LineIsam2:
         params.relinearizeSkip = config.relinearize_skip
         self.isam = gtsam.ISAM2(params)
         self.graph = gtsam.NonlinearFactorGraph()  # every factor, for batch LM and saving
-        self.records: list[dict[str, Any]] = []
+        self.records: list[FactorRecord] = []
         self.map = LandmarkMap(config, self.bTs)
         self.odometry = NodeOdometry(self.t_s, config.gyro_sigma_radps, config.dvl_noise)
         self.nodes = NodeTable()
@@ -120,6 +130,8 @@ class LineIsam2:
         self._own_stats = {"ahrs_updates": 0, "pose_nodes": 0, "isam_updates": 0, "factors": 0}
         self.timing_s = {"isam_update": 0.0, "marginals": 0.0, "association": 0.0}
         self.update_log: list[tuple[float, float, int]] = []  # (t, wall s, new factors)
+        self.vote_wall_s: list[float] = []  # wall time of each update_lines (s)
+        self._after: AfterVote | None = None  # the estimate after the last vote's update
         self._n_nodes = 0
         self._var_walk = np.deg2rad(config.ahrs_bias_walk_deg_per_sqrt_s) ** 2  # rad^2/s
         self._bias_estimate = float(np.deg2rad(config.ahrs_bias_prior_deg))  # the newest node's
@@ -214,8 +226,8 @@ class LineIsam2:
 
     # -- nodes and updates -----------------------------------------------------------------
 
-    def _add_factor(self, record: dict[str, Any]) -> None:
-        self._pending.add(factor_from_record(record))
+    def _add_factor(self, record: FactorRecord) -> None:
+        self._pending.add(record.to_gtsam())
         self.records.append(record)
 
     def _register_node(self, k: int, t_s: float) -> None:
@@ -237,25 +249,22 @@ class LineIsam2:
         cfg = self.config
         if self._var_walk > 0.0:
             var = max(self._var_walk * (self.t_s - self._last_node_t), 1e-12)
-            self._add_factor(factor_record("BetweenFactorVector", [B(k - 1), B(k)], [0.0], [[var]]))
+            self._add_factor(
+                FactorRecord.of(FactorKind.BETWEEN_VECTOR, [B(k - 1), B(k)], [0.0], [[var]])
+            )
             self._pending_values.insert(B(k), np.array([self._bias_estimate]))
         if cfg.estimate_misalignment or cfg.estimate_gyro_scale or cfg.dvl_scale_sigma > 0.0:
             keys = [X(k - 1), X(k)]
             keys += [D(0)] if cfg.estimate_misalignment else []
             keys += [G(0)] if cfg.estimate_gyro_scale else []
             keys += [K(0)] if cfg.dvl_scale_sigma > 0.0 else []
-            record = factor_record(
-                "DvlGyroOdometry",
-                keys,
-                rel.pose,
-                local_covariance(rel),
-                yaw_raw=rel.yaw_raw,
-                d_t_d_scale=[rel.jx, rel.jy],
-                scale0=self.odometry.node_scale,
+            terms = OdometryTerms(rel.yaw_raw, (rel.jx, rel.jy), self.odometry.node_scale)
+            record = FactorRecord.of(
+                FactorKind.DVL_GYRO_ODOMETRY, keys, rel.pose, local_covariance(rel), odometry=terms
             )
         else:
-            record = factor_record(
-                "BetweenFactorPose2", [X(k - 1), X(k)], rel.pose, local_covariance(rel)
+            record = FactorRecord.of(
+                FactorKind.BETWEEN_POSE, [X(k - 1), X(k)], rel.pose, local_covariance(rel)
             )
         self._add_factor(record)
         n_headings = self.odometry.headings.n
@@ -263,7 +272,8 @@ class LineIsam2:
         if heading is not None:
             z, var = heading
             var += np.deg2rad(cfg.ahrs_white_sigma_deg) ** 2 / n_headings
-            self._add_factor(factor_record("HeadingBias", [X(k), self._bias_key(k)], [z], [[var]]))
+            keys = [X(k), self._bias_key(k)]
+            self._add_factor(FactorRecord.of(FactorKind.HEADING_BIAS, keys, [z], [[var]]))
         self._pending_values.insert(X(k), gtsam.Pose2(*self.pose))
         self._register_node(k, self.t_s)
         return k
@@ -345,23 +355,87 @@ class LineIsam2:
             )
         self._stale = False
 
-    # -- the landmark layer's hooks (slam.mapping.landmarks.LineEstimator) -----------------
+    # -- one vote of lines -----------------------------------------------------------------
 
     def update_lines(self, features: list[LineFeature]) -> list[int | None]:
-        """Associate the lines of one vote (JCBB/NN on iSAM2 marginals), add them, update
-        (:meth:`slam.mapping.landmarks.LandmarkMap.update_lines`)."""
-        return self.map.update_lines(self, features)
+        """One vote of lines: this graph's belief (JCBB/NN on iSAM2 marginals) to the landmark
+        layer, which decides the associations and new landmarks
+        (:meth:`slam.mapping.landmarks.LandmarkMap.vote`); the decision applied here as factors
+        and variables, then an update. The landmark id of each feature (None: not associated)."""
+        wall0 = time.perf_counter()
+        obs = vote_observations(features, self.config)
+        belief = self._belief(obs)
+        decision = self.map.vote(belief)
+        if belief.anchor is not None:
+            self._apply(decision, belief.anchor)
+        self.vote_wall_s.append(time.perf_counter() - wall0)
+        return ids_of_features(features, obs.features, decision.ids)
 
-    def begin_vote(self) -> tuple[int, FloatArray]:
-        """The node for the vote's observations, and the sonar mounting to use with it.
+    def _belief(self, obs: VoteObservations) -> Belief:
+        """The vote's node (:meth:`node_now`), the candidate landmarks
+        (:func:`slam.backends.isam2.candidates.loose_distances`) and their joint marginal with
+        the current pose."""
+        anchor = None
+        cands: list[int] = []
+        if obs.features:
+            self._vote_t0 = time.perf_counter()
+            k, kTb = self.node_now()
+            anchor = NodeAnchor(k, compose(kTb, self.bTs))
+        pose_w, P_pose_w = self.pose, self.pose_cov
+        active = [lm for lm in self.map.landmarks if lm.merged_into is None]
+        if obs.features:
+            cands = self._candidates(obs.z, obs.R, pose_w, P_pose_w, active)
+        P = self._joint_covariance(cands) if cands else np.zeros((3, 3))
+        z_hat = np.zeros((len(cands), 2))
+        H = np.zeros((len(cands), 2, P.shape[0]))
+        for c, j in enumerate(cands):
+            z_hat[c], H_pose, H_line = line_prediction(pose_w, self._lm_est[j], self.bTs)
+            H[c, :, :3] = H_pose
+            H[c, :, 3 + 2 * c : 5 + 2 * c] = H_line
+        return Belief(
+            features=obs.features,
+            rejected_near=obs.rejected_near,
+            z=obs.z,
+            R=obs.R,
+            wTb=pose_w,
+            P_pose=P_pose_w,
+            anchor=anchor,
+            candidates=cands,
+            z_hat=z_hat,
+            H=H,
+            P=P,
+            landmarks=LandmarkBelief({lm.id: self._lm_est[lm.id] for lm in active}),
+            seeds_used=True,
+            after_previous=self._after,
+        )
 
-        A new node unless the newest one is less than ``min_node_gap_s`` old (odometry factors
-        over a few milliseconds would be nearly singular); then that node, with the odometry
-        since it folded into the mounting: ``bTs' = (odometry since the node) * bTs``.
-        """
-        self._vote_t0 = time.perf_counter()
-        k, kTb = self.node_now()
-        return k, compose(kTb, self.bTs)
+    def _apply(self, decision: Decision, anchor: NodeAnchor) -> None:
+        """The landmark layer's decision: a ``LineEquality`` factor per merge, a factor per
+        used observation, the new landmarks with a factor per observation, an update; then the
+        estimate after it for the layer (the next belief's ``after_previous``)."""
+        for keep, drop in decision.merges:
+            self._merge_landmarks(keep, drop)
+        for j, f in decision.updates:
+            self._add_line_factor(anchor, f, j)
+        for new in decision.new_landmarks:
+            self._add_landmark(new)
+        self.timing_s["association"] += time.perf_counter() - self._vote_t0
+        self._update(self.config.extra_iterations if decision.updates else 0)
+        merging = self.config.merge_gate_probability is not None
+        if decision.seen or (merging and any(j is not None for j in decision.ids)):
+            # the recent nodes' smoothed poses now, not at the pose source's next question:
+            # the beams' poses (and the trajectory) depend on when they are refreshed
+            self.refresh()
+        self._after = AfterVote(self.pose, self._landmark_belief(decision.seen))
+
+    def _landmark_belief(self, seen: list[int]) -> LandmarkBelief:
+        """The lines of ``seen``; of every active landmark, with their joint marginal, when the
+        landmark layer merges duplicates."""
+        if self.config.merge_gate_probability is None:
+            return LandmarkBelief({j: self._lm_est[j] for j in seen})
+        ids = [lm.id for lm in self.map.landmarks if lm.merged_into is None]
+        cov = self.landmark_covariance(ids) if ids else None
+        return LandmarkBelief({j: self._lm_est[j] for j in ids}, ids, cov)
 
     def node_now(self) -> tuple[int, FloatArray]:
         """A node now, or the newest if it is less than ``min_node_gap_s`` old; and the body
@@ -385,39 +459,23 @@ class LineIsam2:
     def node_estimate(self, k: int) -> FloatArray:
         return self._node_pose(k)
 
-    def add_scan_factor(self, record: dict[str, Any]) -> None:
+    def add_scan_factor(self, record: FactorRecord) -> None:
         self._add_factor(record)
 
     def scan_update(self, extra_iterations: int = 0) -> None:
         self._update(extra_iterations)
 
-    def association_problem(
-        self, z: FloatArray, R: FloatArray, lines: list[LineFeature], anchor: Any
-    ) -> tuple[list[Landmark], AssociationProblem | None]:
-        """The candidate landmarks (:func:`slam.backends.isam2.candidates.loose_distances`) and
-        their joint marginal with the current pose."""
-        pose_w, P_pose_w = self.pose, self.pose_cov
-        cands = self._candidates(z, R, pose_w, P_pose_w)
-        if not cands:
-            return [], None
-        P = self._joint_covariance(cands)
-        d = P.shape[0]
-        z_hat = np.zeros((len(cands), 2))
-        H = np.zeros((len(cands), 2, d))
-        for c, lm in enumerate(cands):
-            z_hat[c], H_pose, H_line = line_prediction(pose_w, self._lm_est[lm.id], self.bTs)
-            H[c, :, :3] = H_pose
-            H[c, :, 3 + 2 * c : 5 + 2 * c] = H_line
-        lines_w = np.array([self._lm_est[lm.id] for lm in cands])
-        allowed = self.map.allowed(cands, lines_w, pose_w, lines)
-        return cands, AssociationProblem(z, R, z_hat, H, P, allowed)
-
     def _candidates(
-        self, z: FloatArray, R: FloatArray, pose_w: FloatArray, P_pose_w: FloatArray
-    ) -> list[Landmark]:
-        """Landmarks individually compatible with some observation under the loose gate, on
-        the side of their line they were seen from, nearest first, at most ``max_candidates``."""
-        landmarks = self.map.active()
+        self,
+        z: FloatArray,
+        R: FloatArray,
+        pose_w: FloatArray,
+        P_pose_w: FloatArray,
+        landmarks: list[Landmark],
+    ) -> list[int]:
+        """Ids of the ``landmarks`` individually compatible with some observation under the
+        loose gate, on the side of their line they were seen from, nearest first, at most
+        ``max_candidates``."""
         if not landmarks:
             return []
         lines = np.array([self._lm_est[lm.id] for lm in landmarks])
@@ -427,71 +485,63 @@ class LineIsam2:
             sides = np.array([lm.side for lm in landmarks])
             best = np.where(sonar_side(pose_w, lines, self.bTs) == sides, best, np.inf)
         order = [int(j) for j in np.argsort(best) if best[j] <= self._gate_candidates]
-        return [landmarks[j] for j in order[: self.config.max_candidates]]
+        return [landmarks[j].id for j in order[: self.config.max_candidates]]
 
-    def _joint_covariance(self, cands: list[Landmark]) -> FloatArray:
+    def _joint_covariance(self, cands: list[int]) -> FloatArray:
         """Joint covariance of ``[current pose (x, y, yaw), candidate lines]``
         (:func:`slam.backends.isam2.candidates.joint_covariance`); caches the lines' blocks."""
         t0 = time.perf_counter()
         k_anchor = self._n_nodes - 1 - len(self._pending_nodes)
-        keys = [X(k_anchor)] + [L(lm.id) for lm in cands]
+        keys = [X(k_anchor)] + [L(j) for j in cands]
         J = self.isam.jointMarginalCovariance(keys).fullMatrix()
         self.timing_s["marginals"] += time.perf_counter() - t0
-        for c, lm in enumerate(cands):
-            self._lm_cov[lm.id] = J[3 + 2 * c : 5 + 2 * c, 3 + 2 * c : 5 + 2 * c].copy()
+        for c, j in enumerate(cands):
+            self._lm_cov[j] = J[3 + 2 * c : 5 + 2 * c, 3 + 2 * c : 5 + 2 * c].copy()
         return joint_covariance(J, self._anchor_pose, self.odometry.since_anchor)
 
-    def _add_line_factor(self, node: tuple[int, FloatArray], f: LineFeature, lm_id: int) -> None:
-        k, bTs = node
+    def _add_line_factor(self, node: NodeAnchor, f: LineFeature, lm_id: int) -> None:
+        k, bTs = node.node, node.bTs
         cfg = self.config
-        robust = None if cfg.robust is None else {"kernel": cfg.robust, "k": cfg.robust_k}
+        robust = None if cfg.robust is None else Robust(cfg.robust, cfg.robust_k)
         self._add_factor(
-            factor_record(
-                "LineObservation",
+            FactorRecord.of(
+                FactorKind.LINE_OBSERVATION,
                 [X(k), L(lm_id)],
                 f.z,
                 np.asarray(f.cov) * cfg.line_cov_scale,
-                bTs=np.asarray(bTs).tolist(),
+                bTs=np.asarray(bTs, dtype=np.float64),
                 robust=robust,
             )
         )
 
-    def add_observations(self, pairs: list[tuple[Landmark, LineFeature]], anchor: Any) -> None:
-        for lm, f in pairs:
-            self._add_line_factor(anchor, f, lm.id)
-
-    def add_landmark(
-        self, landmark: Landmark, line_w: FloatArray, observations: list[tuple[Any, LineFeature]]
-    ) -> int:
+    def _add_landmark(self, new: NewLandmark) -> None:
         """``L(id)`` at the newest observation's world line, with a factor per observation."""
-        j = landmark.id
+        j = new.id
         assert j == len(self._lm_est), "landmarks are added in id order"
-        self._pending_values.insert(L(j), np.asarray(line_w, dtype=np.float64))
-        for node, f in observations:
+        self._pending_values.insert(L(j), np.asarray(new.line_w, dtype=np.float64))
+        for node, f in new.observations:
+            assert node is not None, "the graph anchors every observation at a node"
             self._add_line_factor(node, f, j)
-        self._lm_est.append(np.asarray(line_w, dtype=np.float64).copy())
+        self._lm_est.append(np.asarray(new.line_w, dtype=np.float64).copy())
         self._lm_cov.append(np.eye(2) * 1e6)
         self._new_landmarks.append(j)
-        return len(observations)
 
     def landmark_covariance(self, landmark_ids: list[int]) -> FloatArray:
         """iSAM2's joint marginal of these landmarks' lines, shape (2k, 2k)."""
         keys = [L(j) for j in landmark_ids]
         return np.asarray(self.isam.jointMarginalCovariance(keys).fullMatrix())
 
-    def merge_landmarks(self, keep: Landmark, drop: Landmark) -> None:
+    def _merge_landmarks(self, keep: int, drop: int) -> None:
         """A stiff ``LineEquality`` factor ties ``L(drop)`` to ``L(keep)`` (next update);
         ``drop`` takes no more observations."""
-        _, flipped = line_difference(self._lm_est[drop.id], self._lm_est[keep.id])
-        sigmas = [1e-3, 1e-5]  # m, rad: the same line
-        record = factor_record(
-            "LineEquality", [L(keep.id), L(drop.id)], [float(flipped)], np.diag(np.square(sigmas))
+        _, flipped = line_difference(self._lm_est[drop], self._lm_est[keep])
+        record = FactorRecord.of(
+            FactorKind.LINE_EQUALITY,
+            [L(keep), L(drop)],
+            [float(flipped)],
+            np.diag(np.square(LINE_EQUALITY_SIGMAS)),
         )
         self._add_factor(record)
-
-    def end_vote(self, associated: bool) -> None:
-        self.timing_s["association"] += time.perf_counter() - self._vote_t0
-        self._update(self.config.extra_iterations if associated else 0)
 
     # -- results ---------------------------------------------------------------------------
 
@@ -558,7 +608,8 @@ class LineIsam2:
         self.refresh()
         marginal = self._marginals()
         return self.map.records(
-            {lm.id: (self._lm_est[lm.id], marginal(L(lm.id))) for lm in self.map.active()}
+            {lm.id: (self._lm_est[lm.id], marginal(L(lm.id))) for lm in self.map.active()},
+            self._after,
         )
 
     def trajectories(self, batch: bool = False) -> dict[str, Trajectory]:

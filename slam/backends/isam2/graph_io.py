@@ -1,15 +1,20 @@
 """The factor graph on disk: one record per factor, from which the GTSAM factor is built and
 which is saved as JSON (``graph.json``, :func:`save_graph`; read back by :func:`load_graph`).
 
-Records are plain dicts, so a graph can be saved, inspected and re-optimised with GTSAM without
-this package's estimator state: :func:`load_graph` rebuilds GTSAM's own factors for the standard
-types and the ``CustomFactor``s of :mod:`slam.backends.isam2.factors` for the others.
+Each factor is a typed :class:`FactorRecord` (its :class:`FactorKind`, keys, measurement,
+covariance and what its type needs beyond them), built into GTSAM by :meth:`FactorRecord.to_gtsam`
+through one builder per kind; its JSON form lets a graph be saved, inspected and re-optimised
+with GTSAM without this package's estimator state: :func:`load_graph` rebuilds GTSAM's own
+factors for the standard types and the ``CustomFactor``s of :mod:`slam.backends.isam2.factors`
+for the others.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from enum import Enum
 from pathlib import Path
 from typing import Any
 
@@ -33,9 +38,11 @@ __all__ = [
     "key_name",
     "key_of",
     "pose_of",
-    "factor_record",
+    "FactorKind",
+    "Robust",
+    "OdometryTerms",
+    "FactorRecord",
     "start_records",
-    "factor_from_record",
     "values_to_json",
     "save_graph",
     "load_graph",
@@ -59,102 +66,261 @@ def pose_of(p: gtsam.Pose2) -> FloatArray:
     return np.array([p.x(), p.y(), p.theta()])
 
 
-def factor_record(
-    kind: str, keys: Sequence[int], z: npt.ArrayLike, cov: npt.ArrayLike, **extra: Any
-) -> dict[str, Any]:
-    """The record of one factor (types in :func:`save_graph`)."""
-    return {
-        "type": kind,
-        "keys": [key_name(k) for k in keys],
-        "measurement": np.atleast_1d(np.asarray(z, dtype=np.float64)).tolist(),
-        "covariance": np.atleast_2d(np.asarray(cov, dtype=np.float64)).tolist(),
-        **extra,
-    }
+class FactorKind(Enum):
+    """The factor types of a graph, by their name in ``graph.json`` (:func:`save_graph`)."""
+
+    POSE_TRANSLATION_PRIOR = "PoseTranslationPrior2D"
+    PRIOR_POSE = "PriorFactorPose2"
+    BETWEEN_POSE = "BetweenFactorPose2"
+    PRIOR_VECTOR = "PriorFactorVector"
+    BETWEEN_VECTOR = "BetweenFactorVector"
+    HEADING_BIAS = "HeadingBias"
+    DVL_GYRO_ODOMETRY = "DvlGyroOdometry"
+    LINE_EQUALITY = "LineEquality"
+    LINE_OBSERVATION = "LineObservation"
+
+
+@dataclass(frozen=True)
+class Robust:
+    """A robust kernel on a factor's whitened error: ``kernel`` ``"huber"`` or ``"cauchy"``,
+    width ``k`` (sigmas)."""
+
+    kernel: str
+    k: float
+
+
+@dataclass(frozen=True)
+class OdometryTerms:
+    """What a ``DvlGyroOdometry`` factor needs beyond its measurement: the gyro's heading
+    integral ``yaw_raw_rad``, the translation's derivative by the gyro scale ``d_t_d_scale``
+    ``(dx/ds, dy/ds)`` (m) and the gyro scale ``scale0`` it was integrated with
+    (:func:`slam.backends.isam2.factors.odometry_residual`)."""
+
+    yaw_raw_rad: float
+    d_t_d_scale: tuple[float, float]
+    scale0: float
+
+
+@dataclass(frozen=True, eq=False)
+class FactorRecord:
+    """One factor of the graph, as decided and as saved: :meth:`to_gtsam` builds it,
+    :meth:`to_json` / :meth:`from_json` are its ``graph.json`` form (:func:`save_graph`).
+
+    Attributes
+    ----------
+    kind : FactorKind
+    keys : tuple of int
+        GTSAM keys of its variables, in the factor's order.
+    z : ndarray, shape (d,)
+        The measurement.
+    cov : ndarray, shape (d, d)
+        The covariance of the factor's error (``noiseModel.Gaussian``).
+    bTs : ndarray, shape (3,), optional
+        The sonar mounting of a ``LineObservation``.
+    robust : Robust, optional
+        A kernel (``LineObservation``, ``BetweenFactorPose2``).
+    odometry : OdometryTerms, optional
+        Of a ``DvlGyroOdometry``.
+    constraint : str, optional
+        Where a ``BetweenFactorPose2`` came from beside the odometry (``"scan-revisit"``).
+    """
+
+    kind: FactorKind
+    keys: tuple[int, ...]
+    z: FloatArray
+    cov: FloatArray
+    bTs: FloatArray | None = None
+    robust: Robust | None = None
+    odometry: OdometryTerms | None = None
+    constraint: str | None = None
+
+    @classmethod
+    def of(
+        cls,
+        kind: FactorKind,
+        keys: Sequence[int],
+        z: npt.ArrayLike,
+        cov: npt.ArrayLike,
+        **extra: Any,
+    ) -> FactorRecord:
+        """A record from array-likes (``z`` at least 1-d, ``cov`` at least 2-d, as floats)."""
+        return cls(
+            kind,
+            tuple(int(k) for k in keys),
+            np.atleast_1d(np.asarray(z, dtype=np.float64)),
+            np.atleast_2d(np.asarray(cov, dtype=np.float64)),
+            **extra,
+        )
+
+    def to_gtsam(self) -> gtsam.NonlinearFactor:
+        """The GTSAM factor (GTSAM's own for the standard types, a ``CustomFactor`` of
+        :mod:`slam.backends.isam2.factors` for the others)."""
+        return _BUILDERS[self.kind](self)
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``graph.json`` form: ``type``, ``keys`` (``gtsam.Symbol`` strings),
+        ``measurement``, ``covariance`` and what the type has beyond them."""
+        out: dict[str, Any] = {
+            "type": self.kind.value,
+            "keys": [key_name(k) for k in self.keys],
+            "measurement": self.z.tolist(),
+            "covariance": self.cov.tolist(),
+        }
+        if self.odometry is not None:
+            out["yaw_raw"] = self.odometry.yaw_raw_rad
+            out["d_t_d_scale"] = list(self.odometry.d_t_d_scale)
+            out["scale0"] = self.odometry.scale0
+        if self.bTs is not None:
+            out["bTs"] = self.bTs.tolist()
+        if self.robust is not None or self.kind is FactorKind.LINE_OBSERVATION:
+            out["robust"] = None if self.robust is None else asdict(self.robust)
+        if self.constraint is not None:
+            out["constraint"] = self.constraint
+        return out
+
+    @classmethod
+    def from_json(cls, item: dict[str, Any], where: str = "graph") -> FactorRecord:
+        """A record from its ``graph.json`` form; a ValueError naming ``where`` (the file and
+        the factor) and what is wrong otherwise."""
+        try:
+            kind = FactorKind(item["type"])
+            keys = [key_of(k) for k in item["keys"]]
+            z = np.asarray(item["measurement"], dtype=np.float64)
+            cov = np.asarray(item["covariance"], dtype=np.float64)
+            robust = item.get("robust")
+            odometry = None
+            if kind is FactorKind.DVL_GYRO_ODOMETRY:
+                jx, jy = (float(v) for v in item["d_t_d_scale"])
+                odometry = OdometryTerms(float(item["yaw_raw"]), (jx, jy), float(item["scale0"]))
+            bTs = item.get("bTs")
+            record = cls.of(
+                kind,
+                keys,
+                z,
+                cov,
+                bTs=None if bTs is None else np.asarray(bTs, dtype=np.float64),
+                robust=None if robust is None else Robust(robust["kernel"], float(robust["k"])),
+                odometry=odometry,
+                constraint=item.get("constraint"),
+            )
+        except (KeyError, TypeError, ValueError, IndexError) as e:
+            raise ValueError(f"{where}: {item.get('type', '?')!r} factor: {e!r}") from e
+        low, high = _N_KEYS.get(kind, (2, 2))
+        if not low <= len(keys) <= high:
+            n = f"{low}" if low == high else f"{low} to {high}"
+            raise ValueError(f"{where}: {kind.value} factor takes {n} keys, got {len(keys)}")
+        if record.cov.shape != (record.z.size, record.z.size):
+            raise ValueError(
+                f"{where}: {kind.value} factor: covariance {record.cov.shape} does not match"
+                f" the measurement's {record.z.size} values"
+            )
+        if kind is FactorKind.LINE_OBSERVATION and record.bTs is None:
+            raise ValueError(f"{where}: LineObservation factor without bTs")
+        return record
+
+
+#: How many keys a factor of each kind takes (the others: two).
+_N_KEYS = {
+    FactorKind.POSE_TRANSLATION_PRIOR: (1, 1),
+    FactorKind.PRIOR_POSE: (1, 1),
+    FactorKind.PRIOR_VECTOR: (1, 1),
+    FactorKind.DVL_GYRO_ODOMETRY: (2, 5),
+}
+
+
+def _noise(record: FactorRecord) -> gtsam.noiseModel.Base:
+    robust = record.robust
+    if robust is None:
+        return noise_model(record.cov)
+    return noise_model(record.cov, robust.kernel, robust.k)
+
+
+def _dvl_gyro_odometry(record: FactorRecord) -> gtsam.NonlinearFactor:
+    assert record.odometry is not None, "a DvlGyroOdometry record has its terms"
+    keys = record.keys
+    by_char = {chr(gtsam.Symbol(k).chr()): k for k in keys[2:]}
+    terms = record.odometry
+    return odometry_factor(
+        keys[0],
+        keys[1],
+        record.z,
+        record.cov,
+        misalignment_key=by_char.get("d"),
+        scale_key=by_char.get("g"),
+        yaw_raw_rad=terms.yaw_raw_rad,
+        d_t_d_scale=list(terms.d_t_d_scale),
+        scale0=terms.scale0,
+        dvl_scale_key=by_char.get("k"),
+    )
+
+
+def _line_observation(record: FactorRecord) -> gtsam.NonlinearFactor:
+    assert record.bTs is not None, "a LineObservation record has its mounting"
+    robust = record.robust
+    return line_factor(
+        record.keys[0],
+        record.keys[1],
+        record.z,
+        record.cov,
+        record.bTs.tolist(),
+        None if robust is None else robust.kernel,
+        1.345 if robust is None else robust.k,
+    )
+
+
+_BUILDERS: dict[FactorKind, Callable[[FactorRecord], gtsam.NonlinearFactor]] = {
+    FactorKind.POSE_TRANSLATION_PRIOR: lambda r: gtsam.PoseTranslationPrior2D(
+        r.keys[0], r.z, noise_model(r.cov)
+    ),
+    FactorKind.PRIOR_POSE: lambda r: gtsam.PriorFactorPose2(
+        r.keys[0], gtsam.Pose2(*r.z), noise_model(r.cov)
+    ),
+    FactorKind.BETWEEN_POSE: lambda r: gtsam.BetweenFactorPose2(
+        r.keys[0], r.keys[1], gtsam.Pose2(*r.z), _noise(r)
+    ),
+    FactorKind.PRIOR_VECTOR: lambda r: gtsam.PriorFactorVector(r.keys[0], r.z, noise_model(r.cov)),
+    FactorKind.BETWEEN_VECTOR: lambda r: gtsam.BetweenFactorVector(
+        r.keys[0], r.keys[1], r.z, noise_model(r.cov)
+    ),
+    FactorKind.HEADING_BIAS: lambda r: heading_factor(
+        r.keys[0], r.keys[1], float(r.z[0]), float(np.sqrt(r.cov[0, 0]))
+    ),
+    FactorKind.DVL_GYRO_ODOMETRY: _dvl_gyro_odometry,
+    FactorKind.LINE_EQUALITY: lambda r: line_equality_factor(
+        r.keys[0], r.keys[1], bool(r.z[0]), np.sqrt(np.diag(r.cov))
+    ),
+    FactorKind.LINE_OBSERVATION: _line_observation,
+}
 
 
 def start_records(
     wTb0: FloatArray, P0: FloatArray, config: GraphConfig
-) -> tuple[list[dict[str, Any]], gtsam.Values]:
+) -> tuple[list[FactorRecord], gtsam.Values]:
     """The factors and initial values of a graph's start: a prior on the start position,
     the AHRS bias ``B(0)`` (and ``D(0)``, ``G(0)``, ``K(0)`` when estimated) with their priors, and the
     start heading as an AHRS heading factor on ``X(0)`` (the start yaw came from the AHRS, so it
     carries the bias; its white noise is ``ahrs_white_sigma_deg``'s, P0's heading is not used)."""
-    records = [factor_record("PoseTranslationPrior2D", [X(0)], wTb0[:2], P0[:2, :2])]
+    prior = FactorKind.PRIOR_VECTOR
+    records = [FactorRecord.of(FactorKind.POSE_TRANSLATION_PRIOR, [X(0)], wTb0[:2], P0[:2, :2])]
     values = gtsam.Values()
     b0 = np.deg2rad(config.ahrs_bias_prior_deg)
     var_b = np.deg2rad(config.ahrs_bias_sigma_deg) ** 2
-    records.append(factor_record("PriorFactorVector", [B(0)], [b0], [[var_b]]))
+    records.append(FactorRecord.of(prior, [B(0)], [b0], [[var_b]]))
     values.insert(B(0), np.array([b0]))
     if config.estimate_misalignment:
         var_d = np.deg2rad(config.misalignment_sigma_deg) ** 2
-        records.append(factor_record("PriorFactorVector", [D(0)], [0.0], [[var_d]]))
+        records.append(FactorRecord.of(prior, [D(0)], [0.0], [[var_d]]))
         values.insert(D(0), np.zeros(1))
     if config.estimate_gyro_scale:
-        records.append(
-            factor_record("PriorFactorVector", [G(0)], [1.0], [[config.gyro_scale_sigma**2]])
-        )
+        records.append(FactorRecord.of(prior, [G(0)], [1.0], [[config.gyro_scale_sigma**2]]))
         values.insert(G(0), np.ones(1))
     if config.dvl_scale_sigma > 0.0:
-        records.append(
-            factor_record("PriorFactorVector", [K(0)], [0.0], [[config.dvl_scale_sigma**2]])
-        )
+        records.append(FactorRecord.of(prior, [K(0)], [0.0], [[config.dvl_scale_sigma**2]]))
         values.insert(K(0), np.zeros(1))
     values.insert(X(0), gtsam.Pose2(*wTb0))
     var_white = np.deg2rad(config.ahrs_white_sigma_deg) ** 2
-    records.append(factor_record("HeadingBias", [X(0), B(0)], [wTb0[2]], [[var_white]]))
+    records.append(FactorRecord.of(FactorKind.HEADING_BIAS, [X(0), B(0)], [wTb0[2]], [[var_white]]))
     return records, values
-
-
-def factor_from_record(record: dict[str, Any]) -> gtsam.NonlinearFactor:
-    """Build the GTSAM factor a record describes (see :func:`save_graph` for the types)."""
-    kind = record["type"]
-    keys = [key_of(k) for k in record["keys"]]
-    z = np.asarray(record["measurement"], dtype=np.float64)
-    cov = np.asarray(record["covariance"], dtype=np.float64)
-    if kind == "PoseTranslationPrior2D":
-        return gtsam.PoseTranslationPrior2D(keys[0], z, noise_model(cov))
-    if kind == "PriorFactorPose2":
-        return gtsam.PriorFactorPose2(keys[0], gtsam.Pose2(*z), noise_model(cov))
-    if kind == "BetweenFactorPose2":
-        robust = record.get("robust")
-        noise = (
-            noise_model(cov) if robust is None else noise_model(cov, robust["kernel"], robust["k"])
-        )
-        return gtsam.BetweenFactorPose2(keys[0], keys[1], gtsam.Pose2(*z), noise)
-    if kind == "PriorFactorVector":
-        return gtsam.PriorFactorVector(keys[0], z, noise_model(cov))
-    if kind == "BetweenFactorVector":
-        return gtsam.BetweenFactorVector(keys[0], keys[1], z, noise_model(cov))
-    if kind == "HeadingBias":
-        return heading_factor(keys[0], keys[1], float(z[0]), float(np.sqrt(cov[0, 0])))
-    if kind == "DvlGyroOdometry":
-        chars = [name[0] for name in record["keys"]]
-        return odometry_factor(
-            keys[0],
-            keys[1],
-            z,
-            cov,
-            misalignment_key=keys[chars.index("d")] if "d" in chars else None,
-            scale_key=keys[chars.index("g")] if "g" in chars else None,
-            yaw_raw_rad=float(record["yaw_raw"]),
-            d_t_d_scale=record["d_t_d_scale"],
-            scale0=float(record["scale0"]),
-            dvl_scale_key=keys[chars.index("k")] if "k" in chars else None,
-        )
-    if kind == "LineEquality":
-        return line_equality_factor(keys[0], keys[1], bool(z[0]), np.sqrt(np.diag(cov)))
-    if kind == "LineObservation":
-        robust = record.get("robust")
-        return line_factor(
-            keys[0],
-            keys[1],
-            z,
-            cov,
-            record["bTs"],
-            None if robust is None else robust["kernel"],
-            1.345 if robust is None else float(robust["k"]),
-        )
-    raise ValueError(f"unknown factor type {kind!r}")
 
 
 def values_to_json(values: gtsam.Values) -> dict[str, dict[str, Any]]:
@@ -171,7 +337,7 @@ def values_to_json(values: gtsam.Values) -> dict[str, dict[str, Any]]:
 
 def save_graph(
     path: str | Path,
-    records: Sequence[dict[str, Any]],
+    records: Sequence[FactorRecord],
     values: gtsam.Values,
     meta: dict[str, Any] | None = None,
 ) -> None:
@@ -209,7 +375,7 @@ def save_graph(
     doc = {
         "format": GRAPH_FORMAT,
         "meta": meta or {},
-        "factors": list(records),
+        "factors": [r.to_json() for r in records],
         "values": values_to_json(values),
     }
     Path(path).write_text(json.dumps(doc) + "\n")
@@ -229,8 +395,8 @@ def load_graph(path: str | Path) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Valu
     if doc.get("format") != GRAPH_FORMAT:
         raise ValueError(f"{path}: not a {GRAPH_FORMAT} file")
     graph = gtsam.NonlinearFactorGraph()
-    for record in doc["factors"]:
-        graph.add(factor_from_record(record))
+    for i, item in enumerate(doc["factors"]):
+        graph.add(FactorRecord.from_json(item, f"{path}: factor {i}").to_gtsam())
     values = gtsam.Values()
     for name, item in doc["values"].items():
         v = np.asarray(item["value"], dtype=np.float64)

@@ -38,7 +38,7 @@ from features.scans.icp import Registration
 from features.scans.matcher import ScanMatcher
 from features.scans.scan import Scan
 from slam.backends.isam2.config import GraphConfig
-from slam.backends.isam2.graph_io import factor_record
+from slam.backends.isam2.graph_io import FactorKind, FactorRecord, Robust
 from slam.model.lines import local_to_world
 
 __all__ = [
@@ -64,7 +64,7 @@ class ScanGraph(Protocol):
         """The current estimate of node ``k``, ``(x_m, y_m, yaw_rad)``."""
         ...
 
-    def add_scan_factor(self, record: dict[str, Any]) -> None:
+    def add_scan_factor(self, record: FactorRecord) -> None:
         """A factor record for the next update."""
         ...
 
@@ -148,11 +148,9 @@ class ScanConstraints:
         self._gate = float(chi2.ppf(config.revisit_gate_probability, 1))
         self._compat = float(chi2.ppf(config.scan_compatibility_probability, 3))
 
-    def _robust(self) -> dict[str, Any] | None:
+    def _robust(self) -> Robust | None:
         cfg = self.config
-        return (
-            None if cfg.scan_robust is None else {"kernel": cfg.scan_robust, "k": cfg.scan_robust_k}
-        )
+        return None if cfg.scan_robust is None else Robust(cfg.scan_robust, cfg.scan_robust_k)
 
     def _add_between(self, j: int, k: int, reg: Registration, kind: str) -> None:
         """``BetweenFactorPose2`` between the nodes of scans ``j`` and ``k`` from ``jTk``."""
@@ -164,8 +162,8 @@ class ScanConstraints:
         J = J2_a @ J1_z
         cov = J @ reg.cov @ J.T
         A = local_to_world(-float(z[2]))  # plain -> the measurement's local tangent
-        record = factor_record(
-            "BetweenFactorPose2",
+        record = FactorRecord.of(
+            FactorKind.BETWEEN_POSE,
             [X(nj), X(nk)],
             z,
             A @ cov @ A.T,

@@ -1,0 +1,424 @@
+"""``metrics.json`` typed: :class:`RunMetrics` and the records it is made of, one per part of a
+run that measures something (the trajectories against GPS and truth, the data, the closed loop,
+the health monitor, the provenance).
+
+:meth:`RunMetrics.to_json` writes the one flat object of ``metrics.json``, its keys in the order
+of the records; each record's ``KEYS`` are the keys it writes as docs/outputs.md's table names
+them (``*``, ``<name>`` and ``{a,b}`` as patterns), and a test checks the table against
+:meth:`RunMetrics.key_patterns` both ways.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from datasets.source import Dataset
+from slam.eval.ate import AteResult, ate_against_gps, ate_against_truth
+from slam.eval.sharpness import trajectory_sharpness
+from slam.eval.truth import AssociationScores, association_against_truth, truth_trajectory
+from slam.io.trajectory import Trajectory
+from slam.run.closed_loop import ClosedLoopResult
+from slam.run.presets import RunConfig, map_min_intensity
+
+__all__ = [
+    "JsonValue",
+    "TrajectoryFigures",
+    "DataFigures",
+    "ClosedLoopFigures",
+    "RunMetrics",
+    "trajectory_figures",
+    "closed_loop_figures",
+]
+
+#: A value of ``metrics.json`` (JSON's own types).
+JsonValue = str | int | float | bool | None | list["JsonValue"] | dict[str, "JsonValue"]
+
+
+@dataclass(frozen=True)
+class TrajectoryFigures:
+    """A trajectory's ATE figures: the run's own (``name`` ""), or another one of the back end
+    (``"smoothed"``, ``"batch"``: keys with ``_<name>``, of the whole run its mean and max only).
+
+    Attributes
+    ----------
+    name : str
+    ate, ate_aligned : AteResult
+        Against every GPS fix of the run, as it is and after a rigid SE(2) fit.
+    sonar_span_s : (float, float) or None
+        The sonar span (Unix s) when GPS fixes lie inside it, with ``ate_sonar`` and
+        ``ate_sonar_aligned`` over them.
+    ate_truth, ate_truth_aligned : AteResult or None
+        Simulated data: against the truth.
+    map_entropy_nats : float or None
+        The map's entropy projected with the trajectory (:mod:`slam.eval.sharpness`).
+    """
+
+    KEYS: ClassVar[tuple[str, ...]] = (
+        "ate_mean_m",
+        "ate_sd_m",
+        "ate_min_m",
+        "ate_max_m",
+        "ate_rmse_m",
+        "ate_n",
+        "sonar_span_s",
+        "ate_sonar_*",
+        "ate_aligned_*",
+        "ate_sonar_aligned_*",
+        "map_entropy_nats",
+        "map_entropy_<name>_nats",
+        "ate_truth_*",
+        "ate_truth_aligned_*",
+        "ate_mean_<name>_m",
+        "ate_max_<name>_m",
+        "ate_aligned_mean_<name>_m",
+        "ate_aligned_max_<name>_m",
+        "ate_sonar_<name>_*",
+        "ate_sonar_aligned_<name>_*",
+        "ate_truth_<name>_*",
+        "ate_truth_aligned_<name>_*",
+    )
+
+    name: str
+    ate: AteResult
+    ate_aligned: AteResult
+    sonar_span_s: tuple[float, float] | None = None
+    ate_sonar: AteResult | None = None
+    ate_sonar_aligned: AteResult | None = None
+    ate_truth: AteResult | None = None
+    ate_truth_aligned: AteResult | None = None
+    map_entropy_nats: float | None = None
+
+    def whole_json(self) -> dict[str, JsonValue]:
+        """The whole run's ATE: every figure for the run's own trajectory, mean and max for
+        another one."""
+        if not self.name:
+            return {**self.ate.as_dict(), **self.ate_aligned.as_dict("ate_aligned")}
+        n = self.name
+        return {
+            f"ate_mean_{n}_m": self.ate.ate_mean_m,
+            f"ate_max_{n}_m": self.ate.ate_max_m,
+            f"ate_aligned_mean_{n}_m": self.ate_aligned.ate_mean_m,
+            f"ate_aligned_max_{n}_m": self.ate_aligned.ate_max_m,
+        }
+
+    def span_json(self) -> dict[str, JsonValue]:
+        """The sonar span's and the truth's figures (``suffix`` ``_<name>``)."""
+        suffix = f"_{self.name}" if self.name else ""
+        out: dict[str, JsonValue] = {}
+        if self.ate_sonar is not None and self.ate_sonar_aligned is not None:
+            if not suffix and self.sonar_span_s is not None:
+                out["sonar_span_s"] = [self.sonar_span_s[0], self.sonar_span_s[1]]
+            out.update(self.ate_sonar.as_dict(f"ate_sonar{suffix}"))
+            out.update(self.ate_sonar_aligned.as_dict(f"ate_sonar_aligned{suffix}"))
+        if self.ate_truth is not None and self.ate_truth_aligned is not None:
+            out.update(self.ate_truth.as_dict(f"ate_truth{suffix}"))
+            out.update(self.ate_truth_aligned.as_dict(f"ate_truth_aligned{suffix}"))
+        return out
+
+    def entropy_json(self) -> dict[str, JsonValue]:
+        if self.map_entropy_nats is None:
+            return {}
+        suffix = f"_{self.name}" if self.name else ""
+        return {f"map_entropy{suffix}_nats": self.map_entropy_nats}
+
+
+@dataclass(frozen=True)
+class DataFigures:
+    """The run's time and its data: the estimation's wall time and the data's span (s), the DVL's
+    rows and quality (:func:`slam.run.sources.dvl_quality`), the GPS's coverage and the sensor
+    gates' faults and gaps (:meth:`datasets.gates.GateReport.metrics`)."""
+
+    KEYS: ClassVar[tuple[str, ...]] = (
+        "wall_s",
+        "data_s",
+        "realtime_factor",
+        "dvl_rows",
+        "dvl_invalid_rows",
+        "dvl_scatter_p{10,50,90,99}_mps",
+        "dvl_excess_s",
+        "dvl_excess_from_s",
+        "gps_uncovered_s",
+        "fault_<sensor>_<kind>",
+        "gap_<sensor>_{count,total_s,longest_s}",
+        "gap_spans_s",
+    )
+
+    wall_s: float
+    data_s: float
+    dvl_rows: int
+    dvl_invalid_rows: int
+    dvl_quality: Mapping[str, float]
+    gps_uncovered_s: float
+    faults_and_gaps: Mapping[str, JsonValue]
+
+    @property
+    def realtime_factor(self) -> float:
+        return self.data_s / self.wall_s if self.wall_s > 0 else float("inf")
+
+    def to_json(self) -> dict[str, JsonValue]:
+        return {
+            "wall_s": self.wall_s,
+            "data_s": self.data_s,
+            "realtime_factor": self.realtime_factor,
+            "dvl_rows": self.dvl_rows,
+            "dvl_invalid_rows": self.dvl_invalid_rows,
+            **self.dvl_quality,
+            "gps_uncovered_s": self.gps_uncovered_s,
+            **self.faults_and_gaps,
+        }
+
+
+@dataclass(frozen=True)
+class ClosedLoopFigures:
+    """A closed loop's figures: its settings, map, counters and timings, the back end's own
+    (``state_*``, ``isam2_*``, ``scan_*``), the line NIS, the cost per vote, on simulated data the
+    associations against the truth, and the health monitor's verdict."""
+
+    KEYS: ClassVar[tuple[str, ...]] = (
+        "settings",
+        "extractor_preset",
+        "landmarks",
+        "line_features",
+        "assoc_*",
+        "beams",
+        "extractor_s",
+        "backend_s",
+        "scan_matcher_s",
+        "line_updates",
+        "line_update_p50_ms",
+        "line_update_p99_ms",
+        "isam2_*",
+        "state_ahrs_bias{,_sd}_deg",
+        "state_misalignment{,_sd}_deg",
+        "state_dvl_scale{,_sd}",
+        "state_gyro_bias{,_sd}_deg_per_s",
+        "scans",
+        "scan_consecutive_tried",
+        "scan_consecutive_accepted",
+        "scan_revisit_tried",
+        "scan_revisit_accepted",
+        "scan_revisit_nis_median",
+        "truth_precision",
+        "truth_recall",
+        "truth_associations",
+        "truth_reobservations",
+        "truth_seeds",
+        "truth_seed_precision",
+        "truth_spurious_features",
+        "health_ok",
+        "health_issues",
+        "health_flagged",
+        "health_first_issue",
+        "health_line",
+        "health_<check>_windows",
+        "health_<check>_flagged",
+        "health_false_alarm",
+    )
+
+    settings: Mapping[str, JsonValue]
+    extractor_preset: str
+    landmarks: int
+    line_features: int
+    counters: Mapping[str, int]
+    extractor_s: float
+    backend_s: float
+    scan_matcher_s: float
+    beams: int
+    backend: Mapping[str, float | int]
+    nis_median: float | None = None
+    nis_mean: float | None = None
+    vote_ms: tuple[float, float, int] | None = None  # p50, p99, votes
+    truth: AssociationScores | None = None
+    health: Mapping[str, JsonValue] = field(default_factory=dict)
+    health_line: str = ""
+
+    def to_json(self) -> dict[str, JsonValue]:
+        out: dict[str, JsonValue] = {
+            "settings": dict(self.settings),
+            "extractor_preset": self.extractor_preset,
+            "landmarks": self.landmarks,
+            "line_features": self.line_features,
+            **{f"assoc_{k}": v for k, v in self.counters.items()},
+            "extractor_s": self.extractor_s,
+            "backend_s": self.backend_s,
+            "scan_matcher_s": self.scan_matcher_s,
+            "beams": self.beams,
+            **self.backend,
+        }
+        if self.nis_median is not None and self.nis_mean is not None:
+            out["assoc_nis_median"] = self.nis_median
+            out["assoc_nis_mean"] = self.nis_mean
+        if self.vote_ms is not None:
+            p50, p99, n = self.vote_ms
+            out["line_updates"] = n
+            out["line_update_p50_ms"] = p50
+            out["line_update_p99_ms"] = p99
+        if self.truth is not None:
+            s = self.truth
+            out["truth_precision"] = s.precision
+            out["truth_recall"] = s.recall
+            out["truth_associations"] = s.n_associated
+            out["truth_reobservations"] = s.n_true_pairs
+            out["truth_seeds"] = s.n_seeds
+            out["truth_seed_precision"] = s.seed_precision
+            out["truth_spurious_features"] = s.n_spurious
+        out.update(self.health)
+        out["health_line"] = self.health_line
+        return out
+
+
+@dataclass
+class RunMetrics:
+    """Everything a run measured: ``metrics.json`` (:meth:`to_json`).
+
+    Attributes
+    ----------
+    source : str
+        The dataset directory.
+    backend : str
+    trajectory : TrajectoryFigures
+        The run's own trajectory.
+    data : DataFigures
+    closed_loop : ClosedLoopFigures or None
+        None for a baseline (``dr``, ``gps``).
+    others : list of TrajectoryFigures
+        The back end's other trajectories (``smoothed``, ``batch``).
+    provenance : dict or None
+        Where the figures come from (:func:`slam.run.provenance.provenance`), added when the
+        run is written.
+    """
+
+    KEYS: ClassVar[tuple[str, ...]] = ("source", "backend", "provenance")
+
+    source: str
+    backend: str
+    trajectory: TrajectoryFigures
+    data: DataFigures
+    closed_loop: ClosedLoopFigures | None = None
+    others: list[TrajectoryFigures] = field(default_factory=list)
+    provenance: dict[str, JsonValue] | None = None
+
+    def to_json(self) -> dict[str, JsonValue]:
+        """The one flat object of ``metrics.json``."""
+        out: dict[str, JsonValue] = {
+            "source": self.source,
+            "backend": self.backend,
+            **self.trajectory.whole_json(),
+            **self.trajectory.span_json(),
+            **self.data.to_json(),
+        }
+        if self.closed_loop is not None:
+            out.update(self.closed_loop.to_json())
+        out.update(self.trajectory.entropy_json())
+        for other in self.others:
+            out.update(other.entropy_json())
+            out.update(other.whole_json())
+            out.update(other.span_json())
+        if self.provenance is not None:
+            out["provenance"] = self.provenance
+        return out
+
+    @classmethod
+    def key_patterns(cls) -> set[str]:
+        """Every key (or key pattern) ``metrics.json`` may hold, as docs/outputs.md names them."""
+        records = (cls, TrajectoryFigures, DataFigures, ClosedLoopFigures)
+        return {key for record in records for key in record.KEYS}
+
+
+def _sharpness(dataset: Dataset, trajectory: Trajectory) -> float | None:
+    """The entropy (nats) of the whole sonar span's map projected with the trajectory
+    (:func:`slam.eval.sharpness.trajectory_sharpness`, 0.5 m cells; GPS-free, lower is
+    sharper); None without beams inside the trajectory's span."""
+    span = dataset.sonar_span_s
+    if span is None:
+        return None
+    t0, t1 = max(span[0], trajectory.span_s[0]), min(span[1], trajectory.span_s[1])
+    if t1 <= t0:
+        return None
+    level = map_min_intensity(dataset.beams)
+    return trajectory_sharpness(dataset, trajectory, (t0, t1), level)
+
+
+def trajectory_figures(dataset: Dataset, trajectory: Trajectory, name: str) -> TrajectoryFigures:
+    """A trajectory's figures (:class:`TrajectoryFigures`): its ATE against the GPS over the whole run and over the sonar span (where
+    GPS fixes lie inside it), each also rigidly aligned; on simulated data against the truth
+    over the whole run; and its map's entropy. ``name``: "" for the run's own trajectory, else
+    the back end's name of it (``"smoothed"``)."""
+    gps = dataset.gps
+    assert gps is not None
+    span = dataset.sonar_span_s
+    inside = span is not None and bool(np.any(_in(gps.t, span, trajectory.span_s)))
+    sonar: tuple[AteResult | None, AteResult | None] = (None, None)
+    if span is not None and inside:
+        sonar = (
+            ate_against_gps(trajectory, gps, span),
+            ate_against_gps(trajectory, gps, span, align=True),
+        )
+    truth_figures: tuple[AteResult | None, AteResult | None] = (None, None)
+    if dataset.truth is not None:
+        truth = truth_trajectory(dataset)
+        truth_figures = (
+            ate_against_truth(trajectory, truth),
+            ate_against_truth(trajectory, truth, align=True),
+        )
+    return TrajectoryFigures(
+        name=name,
+        ate=ate_against_gps(trajectory, gps),
+        ate_aligned=ate_against_gps(trajectory, gps, align=True),
+        sonar_span_s=(span[0], span[1]) if span is not None and inside else None,
+        ate_sonar=sonar[0],
+        ate_sonar_aligned=sonar[1],
+        ate_truth=truth_figures[0],
+        ate_truth_aligned=truth_figures[1],
+        map_entropy_nats=_sharpness(dataset, trajectory),
+    )
+
+
+def _in(t_s: np.ndarray, *spans: tuple[float, float]) -> np.ndarray:
+    keep = np.ones(t_s.shape, dtype=bool)
+    for a, b in spans:
+        keep &= (t_s >= a) & (t_s <= b)
+    return keep
+
+
+def closed_loop_figures(
+    dataset: Dataset,
+    result: ClosedLoopResult,
+    config: RunConfig,
+    health: dict[str, JsonValue],
+    health_line: str,
+) -> ClosedLoopFigures:
+    backend = result.backend
+    nis = backend.map.nis()
+    vote_ms = 1e3 * np.asarray(backend.vote_wall_s)
+    truth = None
+    if dataset.truth is not None and "walls_m" in dataset.truth:
+        truth = association_against_truth(
+            dataset, result.features, result.feature_landmarks, result.feature_seeds
+        )
+    return ClosedLoopFigures(
+        settings=dict(config.settings),
+        extractor_preset=config.preset,
+        landmarks=len(backend.map.active()),
+        line_features=len(result.features),
+        counters=backend.stats,
+        extractor_s=result.extractor_s,
+        backend_s=result.backend_s,
+        scan_matcher_s=result.scan_matcher_s,
+        beams=result.counts.get("beams", 0),
+        backend=backend.metrics(),
+        nis_median=float(np.median(nis)) if nis.size else None,
+        nis_mean=float(np.mean(nis)) if nis.size else None,
+        vote_ms=(
+            (float(np.percentile(vote_ms, 50)), float(np.percentile(vote_ms, 99)), vote_ms.size)
+            if vote_ms.size
+            else None
+        ),
+        truth=truth,
+        health=health,
+        health_line=health_line,
+    )
