@@ -25,7 +25,7 @@ from features.hough import (
     vote_samples,
 )
 from features.line import LineFeature
-from features.pose_source import PoseSource
+from features.pose_source import PoseSource, pose_covariances
 from features.sector import BinsInR, Sector, SectorSnapshot
 from features.uncertainty import (
     LineEstimate,
@@ -322,12 +322,10 @@ class LineExtractor:
         return np.flatnonzero(mask)
 
     def _pose_covariances(self, snap: SectorSnapshot) -> FloatArray | None:
-        covs = [self.pose_source.covariance(float(t)) for t in snap.beam_t_s]
-        if any(c is None for c in covs):
+        covs = pose_covariances(self.pose_source, snap.beam_t_s)
+        if covs is None:
             return None
-        return relative_pose_covariances(
-            snap, np.stack([np.asarray(c, dtype=np.float64) for c in covs]), self.sector.bTs
-        )
+        return relative_pose_covariances(snap, covs, self.sector.bTs)
 
     def _estimate(
         self,

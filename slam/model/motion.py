@@ -307,6 +307,12 @@ class OdometryChain:
         part = self._span(tq)
         return float(np.interp(t_s, self._t[part], self._var[part]))
 
+    def variances_at(self, t_s: npt.ArrayLike) -> FloatArray:
+        """:meth:`variance_at` of many times in one search, shape (M,) (m^2)."""
+        tq = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+        part = self._span(tq)
+        return np.asarray(np.interp(tq, self._t[part], self._var[part]))
+
 
 @dataclass(frozen=True)
 class VelocityInput:
