@@ -21,7 +21,7 @@ from features.hough import (
     auto_h_bearings,
     auto_p_angles,
     find_winners,
-    vote_arc,
+    vote_arc_compiled,
     vote_samples,
 )
 from features.line import LineFeature
@@ -196,8 +196,8 @@ class LineExtractor:
     def cast_votes(self, bins: BinsInR) -> Votes:
         """Votes of the given bins in the grid (eqs. 2-4, :mod:`features.hough`)."""
         cfg = self.config
-        if cfg.vote_model == "arc":
-            return vote_arc(
+        if cfg.vote_model == "arc":  # compiled; the same votes as vote_arc's
+            return vote_arc_compiled(
                 bins.x_m,
                 bins.y_m,
                 bins.bearing_rad,

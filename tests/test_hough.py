@@ -15,6 +15,7 @@ from features.hough import (
     find_winners,
     sonar_model_samples,
     vote_arc,
+    vote_arc_compiled,
     vote_samples,
 )
 
@@ -121,6 +122,35 @@ def test_one_vote_per_cell_per_bin(model: str) -> None:
     one = vote_arc(x[:1], y[:1], bearing[:1], rng_m[:1], grid, ALPHA, BETA)
     acc = accumulate(one, grid)
     assert acc.max() == 1 and acc.sum() == one.cell.size
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_arc_votes_are_the_numpy_reference(seed: int) -> None:
+    """:func:`vote_arc_compiled` against :func:`vote_arc` (the reference): the same votes in the
+    same order, so the same accumulator, on random bins near and far (the rho flip, bearings
+    across -pi), on two grids and sonar models, and on no bins at all."""
+    rng = np.random.default_rng(seed)
+    grids = [
+        HoughGrid.from_resolution(np.deg2rad(1.8), 0.1, 20.0),
+        HoughGrid.from_resolution(np.deg2rad(0.9), 0.3, 50.0),
+    ]
+    for grid, (alpha, beta) in zip(
+        grids, [(ALPHA, BETA), (np.deg2rad(6.0), np.deg2rad(40.0))], strict=True
+    ):
+        n = int(rng.integers(1, 2000))
+        x, y = rng.uniform(-3, 3, n), rng.uniform(-3, 3, n)
+        bearing = rng.uniform(-np.pi, np.pi, n)
+        bearing[: n // 10] = -np.pi  # on the wrap
+        rng_m = rng.uniform(0.2, grid.n_rho * grid.rho_res_m, n)
+        ref = vote_arc(x, y, bearing, rng_m, grid, alpha, beta)
+        got = vote_arc_compiled(x, y, bearing, rng_m, grid, alpha, beta)
+        assert got.n_bins == ref.n_bins == n
+        assert np.array_equal(got.bin_index, ref.bin_index)
+        assert np.array_equal(got.cell, ref.cell)
+        assert np.array_equal(accumulate(got, grid), accumulate(ref, grid))
+    empty = np.empty(0)
+    none = vote_arc_compiled(empty, empty, empty, empty, grids[0], ALPHA, BETA)
+    assert none.n_bins == 0 and none.cell.size == 0
 
 
 def test_arc_votes_are_the_limit_of_the_samples() -> None:
