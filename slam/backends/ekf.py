@@ -209,7 +209,7 @@ class LineEkf:
 
     @property
     def pose(self) -> FloatArray:
-        return self.x[POSE].copy()
+        return np.array(self.kf.x[POSE])
 
     @property
     def pose_cov(self) -> FloatArray:
