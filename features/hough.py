@@ -656,3 +656,14 @@ def find_winners(
             )
         )
     return winners, acc0
+
+
+def _load_kernels() -> None:
+    """Load the compiled kernels from numba's cache (compile them, the first time on a
+    machine) at import, for the argument types a vote passes: not inside a run's first vote."""
+    one = np.ones(1)
+    seg = _arc_intervals(one, one, one, one, 0.01, 0.1, 0.05, 0.1, 4, 4, 4)
+    _expand_intervals(*seg, 4)
+
+
+_load_kernels()

@@ -319,3 +319,12 @@ def leading_edge_bins(
         max_range_m=max_range_m,
     )
     return seg.final_bins
+
+
+def _load_kernel() -> None:
+    """Load :func:`_segment_uint8` from numba's cache (compile it, the first time on a
+    machine) at import, for a beam's argument types: not inside a run's first beam."""
+    _segment_uint8(np.zeros(2, dtype=np.uint8), _alive_bins(2, 1.0, 0.0, None), False, 1.0, 0.0, 1)
+
+
+_load_kernel()
