@@ -83,6 +83,7 @@ __all__ = [
     "vote_arc_compiled",
     "accumulate",
     "find_winners",
+    "find_winners_reference",
     "auto_h_bearings",
     "auto_p_angles",
 ]
@@ -593,7 +594,127 @@ def find_winners(
     suppress_theta_cells: int = 1,
     suppress_rho_cells: int = 1,
 ) -> tuple[list[Winner], npt.NDArray[np.int64]]:
-    """Winning cells of a vote, best first (paper 2.5).
+    """Winning cells of a vote, best first (paper 2.5), by a compiled search.
+
+    The same winners, voters and removed bins as :func:`find_winners_reference` (integer
+    work only; ``tests/test_hough.py``), without ten array passes over the whole grid per
+    winner. Parameters and returns are its.
+    """
+    acc0 = accumulate(votes, grid)
+    if votes.cell.size == 0 or max_winners <= 0:
+        return [], acc0
+    cells, n_votes, voters, v_off, removed, r_off = _winners_kernel(
+        np.ascontiguousarray(votes.bin_index, dtype=np.int64),
+        np.ascontiguousarray(votes.cell, dtype=np.int64),
+        acc0.reshape(-1).copy(),
+        int(votes.n_bins),
+        grid.n_theta,
+        grid.n_rho,
+        int(max(min_votes, 1)),
+        int(max_winners),
+        int(suppress_theta_cells),
+        int(suppress_rho_cells),
+    )
+    winners: list[Winner] = []
+    for w in range(cells.size):
+        rho, theta = grid.cell_center(int(cells[w]))
+        winners.append(
+            Winner(
+                cell=int(cells[w]),
+                rho_m=float(rho),
+                theta_rad=float(theta),
+                votes=int(n_votes[w]),
+                voters=voters[v_off[w] : v_off[w + 1]].copy(),
+                removed=removed[r_off[w] : r_off[w + 1]].copy(),
+            )
+        )
+    return winners, acc0
+
+
+@numba.njit(cache=True, nogil=True)
+def _winners_kernel(
+    bin_index: IntArray,
+    cell: IntArray,
+    acc: IntArray,
+    n_bins: int,
+    n_theta: int,
+    n_rho: int,
+    min_votes: int,
+    max_winners: int,
+    sup_j: int,
+    sup_i: int,
+) -> tuple[IntArray, IntArray, IntArray, IntArray, IntArray, IntArray]:
+    """:func:`find_winners_reference`'s loop: per winner its cell, votes, sorted voters and
+    sorted removed bins (flat, with offsets)."""
+    nv = cell.shape[0]
+    active = np.ones(nv, dtype=np.bool_)
+    removed_bin = np.zeros(n_bins, dtype=np.bool_)
+    in_win = np.zeros(n_bins, dtype=np.bool_)
+    is_voter = np.zeros(n_bins, dtype=np.bool_)
+    window = np.zeros(n_theta * n_rho, dtype=np.bool_)
+    # a bin is removed once (its votes go with it), and every winner removes one at least
+    cap = min(max_winners, n_bins)
+    cells = np.empty(cap, dtype=np.int64)
+    counts = np.empty(cap, dtype=np.int64)
+    voters = np.empty(n_bins, dtype=np.int64)
+    removed = np.empty(n_bins, dtype=np.int64)
+    v_off = np.zeros(cap + 1, dtype=np.int64)
+    r_off = np.zeros(cap + 1, dtype=np.int64)
+    nw = 0
+    while nw < cap:
+        c = 0  # argmax: the first cell of the most votes
+        for q in range(acc.shape[0]):
+            if acc[q] > acc[c]:
+                c = q
+        if acc[c] < min_votes:
+            break
+        cells[nw], counts[nw] = c, acc[c]
+        j, i = c // n_rho, c % n_rho
+        for dj in range(-sup_j, sup_j + 1):
+            for di in range(-sup_i, sup_i + 1):
+                if 0 <= i + di < n_rho:
+                    window[((j + dj) % n_theta) * n_rho + i + di] = True
+        for v in range(nv):
+            if active[v]:
+                if cell[v] == c:
+                    is_voter[bin_index[v]] = True
+                if window[cell[v]]:
+                    in_win[bin_index[v]] = True
+        for dj in range(-sup_j, sup_j + 1):
+            for di in range(-sup_i, sup_i + 1):
+                if 0 <= i + di < n_rho:
+                    window[((j + dj) % n_theta) * n_rho + i + di] = False
+        nvo, nre = v_off[nw], r_off[nw]
+        for b in range(n_bins):  # sorted and unique, as np.unique
+            if is_voter[b]:
+                voters[nvo] = b
+                nvo += 1
+            if is_voter[b] or in_win[b]:
+                removed[nre] = b
+                nre += 1
+                removed_bin[b] = True
+            is_voter[b] = False
+            in_win[b] = False
+        v_off[nw + 1], r_off[nw + 1] = nvo, nre
+        for v in range(nv):
+            if active[v] and removed_bin[bin_index[v]]:
+                acc[cell[v]] -= 1
+                active[v] = False
+        nw += 1
+    return cells[:nw], counts[:nw], voters, v_off[: nw + 1], removed, r_off[: nw + 1]
+
+
+def find_winners_reference(
+    votes: Votes,
+    grid: HoughGrid,
+    min_votes: int,
+    max_winners: int = 32,
+    suppress_theta_cells: int = 1,
+    suppress_rho_cells: int = 1,
+) -> tuple[list[Winner], npt.NDArray[np.int64]]:
+    """:func:`find_winners` vectorised in numpy: the reference of the compiled search.
+
+    Winning cells of a vote, best first (paper 2.5).
 
     Repeat: the cell with most votes wins if it has at least ``min_votes``; its voters and the
     bins that voted for a cell within ``+-suppress_theta_cells`` x ``+-suppress_rho_cells`` of it
@@ -663,7 +784,8 @@ def _load_kernels() -> None:
     machine) at import, for the argument types a vote passes: not inside a run's first vote."""
     one = np.ones(1)
     seg = _arc_intervals(one, one, one, one, 0.01, 0.1, 0.05, 0.1, 4, 4, 4)
-    _expand_intervals(*seg, 4)
+    votes = Votes(*_expand_intervals(*seg, 4), n_bins=1)
+    find_winners(votes, HoughGrid(4, 4, 0.1), 1)
 
 
 _load_kernels()

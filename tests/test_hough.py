@@ -13,6 +13,7 @@ from features.hough import (
     auto_p_angles,
     eq4_rho,
     find_winners,
+    find_winners_reference,
     sonar_model_samples,
     vote_arc,
     vote_arc_compiled,
@@ -151,6 +152,42 @@ def test_the_compiled_arc_votes_are_the_numpy_reference(seed: int) -> None:
     empty = np.empty(0)
     none = vote_arc_compiled(empty, empty, empty, empty, grids[0], ALPHA, BETA)
     assert none.n_bins == 0 and none.cell.size == 0
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_winners_are_the_numpy_reference(seed: int) -> None:
+    """:func:`find_winners` (compiled) against :func:`find_winners_reference` on random and
+    walled votes, with and without suppression windows: the same winners, voters and removed
+    bins, best first."""
+    rng = np.random.default_rng(seed)
+    grid = HoughGrid.from_resolution(np.deg2rad(1.8), 0.2, 30.0)
+    sensors = rng.uniform(-1.0, 1.0, (3, 2))
+    x, y, b, r = _wall_bins(8.0, 0.4, sensors, np.linspace(-np.pi, np.pi, 200), 0.2, rng, 0.05)
+    x2, y2, b2, r2 = _wall_bins(5.0, 2.2, sensors, np.linspace(-np.pi, np.pi, 200), 0.2, rng)
+    n = 150
+    cols = [np.concatenate([u, v, rng.uniform(lo, hi, n)]) for u, v, lo, hi in zip(
+        (x, y, b, r), (x2, y2, b2, r2), (-1, -1, -np.pi, 1), (1, 1, np.pi, 25), strict=True
+    )]  # fmt: skip
+    votes = vote_arc(*cols, grid, ALPHA, BETA)
+    for min_votes, sup_t, sup_r, most in [
+        (5, 1, 1, 32),
+        (3, 0, 0, 4),
+        (12, 2, 3, 32),
+        (1, 1, 2, 1000),
+    ]:
+        got, acc = find_winners(votes, grid, min_votes, most, sup_t, sup_r)
+        ref, acc_ref = find_winners_reference(votes, grid, min_votes, most, sup_t, sup_r)
+        assert np.array_equal(acc, acc_ref) and len(got) == len(ref) > 0
+        for g, w in zip(got, ref, strict=True):
+            assert (g.cell, g.votes, g.rho_m, g.theta_rad) == (
+                w.cell,
+                w.votes,
+                w.rho_m,
+                w.theta_rad,
+            )
+            assert np.array_equal(g.voters, w.voters) and np.array_equal(g.removed, w.removed)
+    empty = vote_arc(np.empty(0), np.empty(0), np.empty(0), np.empty(0), grid, ALPHA, BETA)
+    assert find_winners(empty, grid, 1)[0] == [] == find_winners_reference(empty, grid, 1)[0]
 
 
 def test_arc_votes_are_the_limit_of_the_samples() -> None:
