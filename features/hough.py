@@ -784,8 +784,9 @@ def _load_kernels() -> None:
     machine) at import, for the argument types a vote passes: not inside a run's first vote."""
     one = np.ones(1)
     seg = _arc_intervals(one, one, one, one, 0.01, 0.1, 0.05, 0.1, 4, 4, 4)
-    votes = Votes(*_expand_intervals(*seg, 4), n_bins=1)
-    find_winners(votes, HoughGrid(4, 4, 0.1), 1)
+    _expand_intervals(*seg, 4)
+    i1 = np.zeros(1, dtype=np.int64)
+    _winners_kernel(i1, i1, np.ones(4, dtype=np.int64), 1, 2, 2, 1, 1, 0, 0)
 
 
 _load_kernels()
