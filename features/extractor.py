@@ -21,11 +21,11 @@ from features.hough import (
     auto_h_bearings,
     auto_p_angles,
     find_winners,
-    vote_arc,
+    vote_arc_compiled,
     vote_samples,
 )
 from features.line import LineFeature
-from features.pose_source import PoseSource
+from features.pose_source import PoseSource, pose_covariances
 from features.sector import BinsInR, Sector, SectorSnapshot
 from features.uncertainty import (
     LineEstimate,
@@ -196,8 +196,8 @@ class LineExtractor:
     def cast_votes(self, bins: BinsInR) -> Votes:
         """Votes of the given bins in the grid (eqs. 2-4, :mod:`features.hough`)."""
         cfg = self.config
-        if cfg.vote_model == "arc":
-            return vote_arc(
+        if cfg.vote_model == "arc":  # compiled; the same votes as vote_arc's
+            return vote_arc_compiled(
                 bins.x_m,
                 bins.y_m,
                 bins.bearing_rad,
@@ -322,12 +322,10 @@ class LineExtractor:
         return np.flatnonzero(mask)
 
     def _pose_covariances(self, snap: SectorSnapshot) -> FloatArray | None:
-        covs = [self.pose_source.covariance(float(t)) for t in snap.beam_t_s]
-        if any(c is None for c in covs):
+        covs = pose_covariances(self.pose_source, snap.beam_t_s)
+        if covs is None:
             return None
-        return relative_pose_covariances(
-            snap, np.stack([np.asarray(c, dtype=np.float64) for c in covs]), self.sector.bTs
-        )
+        return relative_pose_covariances(snap, covs, self.sector.bTs)
 
     def _estimate(
         self,

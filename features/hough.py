@@ -36,7 +36,8 @@ Two ways to cast the votes (both vectorised over all bins, no Python loop per bi
 
 * ``"samples"`` (:func:`vote_samples`): eqs. 2-4 literally: all ``(bin, h, p)`` samples, their cells,
   one vote per distinct ``(bin, cell)`` pair (``np.unique`` of ``bin * n_cells + cell``).
-* ``"arc"`` (:func:`vote_arc`, the default): the limit ``h, p -> infinity`` of eqs. 2-3. For each bin
+* ``"arc"`` (:func:`vote_arc`, the default; :func:`vote_arc_compiled` is the same computation
+  compiled, which the extractor uses): the limit ``h, p -> infinity`` of eqs. 2-3. For each bin
   and each theta cell that meets the span of normals ``[theta_S - alpha/2 - beta, theta_S + alpha/2 + beta]``,
   the interval of ``rho`` swept by eq. 4 over the normals of the cell and the part of the arc that
   eq. 3 allows for them (``|theta - theta_h| <= beta``) is computed in closed form (at the ends and the
@@ -44,6 +45,15 @@ Two ways to cast the votes (both vectorised over all bins, no Python loop per bi
   one vote. The ``(bin, cell)`` pairs are distinct by construction, so no deduplication is needed;
   no gaps open in rho at long range (as a fixed ``h`` does); and it is several times faster.
   Its votes are those of ``"samples"`` with dense ``h`` and ``p`` (checked in ``tests/test_hough.py``).
+
+Compiled kernel
+---------------
+A vote has tens to a few thousand bins and ~30 theta cells per bin: in numpy its time is the
+overhead of some forty array calls, not arithmetic. :func:`vote_arc_compiled` runs the same
+floating-point operations in the same order in one loop compiled by numba (its ``cos`` and
+``sin`` are the C library's, as numpy's), so its votes are identical, element by element and in
+order, to :func:`vote_arc`'s (checked in ``tests/test_hough.py``, which keeps :func:`vote_arc`
+as the reference). It is compiled at its first call and cached beside the module.
 
 Winners (paper 2.5)
 -------------------
@@ -56,6 +66,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import numpy.typing as npt
 
@@ -69,8 +80,10 @@ __all__ = [
     "sonar_model_samples",
     "vote_samples",
     "vote_arc",
+    "vote_arc_compiled",
     "accumulate",
     "find_winners",
+    "find_winners_reference",
     "auto_h_bearings",
     "auto_p_angles",
 ]
@@ -401,6 +414,172 @@ def vote_arc(
     return Votes(bin_index=seg_b[seg], cell=seg_j[seg] * nr + i, n_bins=n)
 
 
+@numba.njit(cache=True, nogil=True)
+def _arc_intervals(
+    x_m: FloatArray,
+    y_m: FloatArray,
+    bearing_rad: FloatArray,
+    range_m: FloatArray,
+    half_a: float,
+    beta: float,
+    dth: float,
+    drho: float,
+    nt: int,
+    nr: int,
+    k: int,
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:  # fmt: skip
+    """:func:`vote_arc`'s rho intervals: per ``(bin, theta cell)`` its ``(bin, theta cell,
+    first rho cell, last rho cell)``, first every rho >= 0 part in (bin, cell) order, then
+    every rho < 0 part (the line ``(-rho, theta + pi)``); the same operations in the same
+    order as :func:`vote_arc`."""
+    n = range_m.shape[0]
+    rho_lo = np.empty((n, k))
+    rho_hi = np.empty((n, k))
+    jcell = np.empty((n, k), dtype=np.int64)
+    ok = np.empty((n, k), dtype=np.bool_)
+    j_lo = np.empty(n, dtype=np.int64)
+    for b in range(n):
+        j_lo[b] = int(np.floor((bearing_rad[b] - half_a - beta + np.pi) / dth))
+    # cos and sin of the cells' edges, which most t_a and t_b are: the same values, once
+    j0 = j_lo.min()
+    n_edges = j_lo.max() - j0 + k
+    edge = np.empty(n_edges)
+    cos_a, sin_a = np.empty(n_edges), np.empty(n_edges)
+    cos_b, sin_b = np.empty(n_edges), np.empty(n_edges)
+    for e in range(n_edges):
+        edge[e] = -np.pi + (j0 + e) * dth
+        cos_a[e], sin_a[e] = np.cos(edge[e]), np.sin(edge[e])
+        cos_b[e], sin_b[e] = np.cos(edge[e] + dth), np.sin(edge[e] + dth)
+    ts = np.empty(3)
+    cs = np.empty(3)
+    sn = np.empty(3)
+    for b in range(n):
+        th_s, r, xs, ys = bearing_rad[b], range_m[b], x_m[b], y_m[b]
+        span_lo = th_s - half_a - beta
+        span_hi = th_s + half_a + beta
+        for q in range(k):
+            jj = j_lo[b] + q
+            e = jj - j0
+            t_a = max(edge[e], span_lo)
+            t_b = min(edge[e] + dth, span_hi)
+            ok[b, q] = t_a <= t_b
+            jcell[b, q] = jj % nt
+            if not t_a <= t_b:
+                continue  # no part of the cell in the span: not voted for
+            t_c = 0.5 * (t_a + t_b)
+            ts[0], ts[1], ts[2] = t_a, t_c, t_b
+            if t_a == edge[e]:
+                cs[0], sn[0] = cos_a[e], sin_a[e]
+            else:
+                cs[0], sn[0] = np.cos(t_a), np.sin(t_a)
+            cs[1], sn[1] = np.cos(t_c), np.sin(t_c)
+            if t_b == edge[e] + dth:
+                cs[2], sn[2] = cos_b[e], sin_b[e]
+            else:
+                cs[2], sn[2] = np.cos(t_b), np.sin(t_b)
+            lo, hi = np.inf, -np.inf
+            for m in range(3):
+                t = ts[m]
+                h_lo = max(th_s - half_a, t - beta)
+                h_hi = min(th_s + half_a, t + beta)
+                u_lo, u_hi = t - h_hi, t - h_lo
+                a_lo, a_hi = abs(u_lo), abs(u_hi)
+                cos_max = 1.0 if (u_lo <= 0.0 and u_hi >= 0.0) else np.cos(min(a_lo, a_hi))
+                cos_min = np.cos(max(a_lo, a_hi))
+                c0 = xs * cs[m] + ys * sn[m]
+                lo = min(lo, c0 + r * cos_min)
+                hi = max(hi, c0 + r * cos_max)
+            rho_lo[b, q], rho_hi[b, q] = lo, hi
+    seg_b = np.empty(2 * n * k, dtype=np.int64)
+    seg_j = np.empty(2 * n * k, dtype=np.int64)
+    seg_lo = np.empty(2 * n * k, dtype=np.int64)
+    seg_hi = np.empty(2 * n * k, dtype=np.int64)
+    m = 0
+    for side in range(2):
+        for b in range(n):
+            for q in range(k):
+                if not ok[b, q]:
+                    continue
+                if side == 0:
+                    if not rho_hi[b, q] >= 0.0:
+                        continue
+                    lo_m, hi_m, j = max(rho_lo[b, q], 0.0), rho_hi[b, q], jcell[b, q]
+                else:
+                    if not rho_lo[b, q] < 0.0:
+                        continue
+                    lo_m, hi_m = max(-rho_hi[b, q], 0.0), -rho_lo[b, q]
+                    j = (jcell[b, q] + nt // 2) % nt
+                i_lo = int(np.floor(lo_m / drho))
+                i_hi = min(int(np.floor(hi_m / drho)), nr - 1)
+                if i_lo <= i_hi:
+                    seg_b[m], seg_j[m], seg_lo[m], seg_hi[m] = b, j, i_lo, i_hi
+                    m += 1
+    return seg_b[:m], seg_j[:m], seg_lo[:m], seg_hi[:m]
+
+
+@numba.njit(cache=True, nogil=True)
+def _expand_intervals(
+    seg_b: npt.NDArray[np.int64],
+    seg_j: npt.NDArray[np.int64],
+    seg_lo: npt.NDArray[np.int64],
+    seg_hi: npt.NDArray[np.int64],
+    nr: int,
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """One vote ``(bin, flat cell)`` per rho cell of each interval, in order."""
+    total = 0
+    for s in range(seg_b.shape[0]):
+        total += seg_hi[s] - seg_lo[s] + 1
+    bins = np.empty(total, dtype=np.int64)
+    cells = np.empty(total, dtype=np.int64)
+    v = 0
+    for s in range(seg_b.shape[0]):
+        for i in range(seg_lo[s], seg_hi[s] + 1):
+            bins[v] = seg_b[s]
+            cells[v] = seg_j[s] * nr + i
+            v += 1
+    return bins, cells
+
+
+def vote_arc_compiled(
+    x_m: FloatArray,
+    y_m: FloatArray,
+    bearing_rad: FloatArray,
+    range_m: FloatArray,
+    grid: HoughGrid,
+    beam_width_rad: float,
+    incidence_beta_rad: float,
+) -> Votes:
+    """:func:`vote_arc` compiled (the module docstring): the same votes in the same order.
+
+    Parameters and returns are :func:`vote_arc`'s.
+    """
+    n = int(range_m.shape[0])
+    half_a, beta = 0.5 * beam_width_rad, incidence_beta_rad
+    if 2.0 * (half_a + beta) >= np.pi:
+        raise ValueError("the sonar model needs alpha + 2 beta < pi")
+    if n == 0:
+        empty = np.empty(0, dtype=np.int64)
+        return Votes(empty, empty, 0)
+    dth = grid.theta_res_rad
+    k = int(np.floor(2.0 * (half_a + beta) / dth)) + 2
+    f64 = np.float64
+    seg = _arc_intervals(
+        np.ascontiguousarray(x_m, dtype=f64),
+        np.ascontiguousarray(y_m, dtype=f64),
+        np.ascontiguousarray(bearing_rad, dtype=f64),
+        np.ascontiguousarray(range_m, dtype=f64),
+        float(half_a),
+        float(beta),
+        float(dth),
+        float(grid.rho_res_m),
+        grid.n_theta,
+        grid.n_rho,
+        k,
+    )
+    bins, cells = _expand_intervals(*seg, grid.n_rho)
+    return Votes(bin_index=bins, cell=cells, n_bins=n)
+
+
 def accumulate(votes: Votes, grid: HoughGrid) -> npt.NDArray[np.int64]:
     """The accumulator: votes per cell, shape ``(n_theta, n_rho)``."""
     acc = np.bincount(votes.cell, minlength=grid.n_cells)
@@ -415,7 +594,127 @@ def find_winners(
     suppress_theta_cells: int = 1,
     suppress_rho_cells: int = 1,
 ) -> tuple[list[Winner], npt.NDArray[np.int64]]:
-    """Winning cells of a vote, best first (paper 2.5).
+    """Winning cells of a vote, best first (paper 2.5), by a compiled search.
+
+    The same winners, voters and removed bins as :func:`find_winners_reference` (integer
+    work only; ``tests/test_hough.py``), without ten array passes over the whole grid per
+    winner. Parameters and returns are its.
+    """
+    acc0 = accumulate(votes, grid)
+    if votes.cell.size == 0 or max_winners <= 0:
+        return [], acc0
+    cells, n_votes, voters, v_off, removed, r_off = _winners_kernel(
+        np.ascontiguousarray(votes.bin_index, dtype=np.int64),
+        np.ascontiguousarray(votes.cell, dtype=np.int64),
+        acc0.reshape(-1).copy(),
+        int(votes.n_bins),
+        grid.n_theta,
+        grid.n_rho,
+        int(max(min_votes, 1)),
+        int(max_winners),
+        int(suppress_theta_cells),
+        int(suppress_rho_cells),
+    )
+    winners: list[Winner] = []
+    for w in range(cells.size):
+        rho, theta = grid.cell_center(int(cells[w]))
+        winners.append(
+            Winner(
+                cell=int(cells[w]),
+                rho_m=float(rho),
+                theta_rad=float(theta),
+                votes=int(n_votes[w]),
+                voters=voters[v_off[w] : v_off[w + 1]].copy(),
+                removed=removed[r_off[w] : r_off[w + 1]].copy(),
+            )
+        )
+    return winners, acc0
+
+
+@numba.njit(cache=True, nogil=True)
+def _winners_kernel(
+    bin_index: IntArray,
+    cell: IntArray,
+    acc: IntArray,
+    n_bins: int,
+    n_theta: int,
+    n_rho: int,
+    min_votes: int,
+    max_winners: int,
+    sup_j: int,
+    sup_i: int,
+) -> tuple[IntArray, IntArray, IntArray, IntArray, IntArray, IntArray]:
+    """:func:`find_winners_reference`'s loop: per winner its cell, votes, sorted voters and
+    sorted removed bins (flat, with offsets)."""
+    nv = cell.shape[0]
+    active = np.ones(nv, dtype=np.bool_)
+    removed_bin = np.zeros(n_bins, dtype=np.bool_)
+    in_win = np.zeros(n_bins, dtype=np.bool_)
+    is_voter = np.zeros(n_bins, dtype=np.bool_)
+    window = np.zeros(n_theta * n_rho, dtype=np.bool_)
+    # a bin is removed once (its votes go with it), and every winner removes one at least
+    cap = min(max_winners, n_bins)
+    cells = np.empty(cap, dtype=np.int64)
+    counts = np.empty(cap, dtype=np.int64)
+    voters = np.empty(n_bins, dtype=np.int64)
+    removed = np.empty(n_bins, dtype=np.int64)
+    v_off = np.zeros(cap + 1, dtype=np.int64)
+    r_off = np.zeros(cap + 1, dtype=np.int64)
+    nw = 0
+    while nw < cap:
+        c = 0  # argmax: the first cell of the most votes
+        for q in range(acc.shape[0]):
+            if acc[q] > acc[c]:
+                c = q
+        if acc[c] < min_votes:
+            break
+        cells[nw], counts[nw] = c, acc[c]
+        j, i = c // n_rho, c % n_rho
+        for dj in range(-sup_j, sup_j + 1):
+            for di in range(-sup_i, sup_i + 1):
+                if 0 <= i + di < n_rho:
+                    window[((j + dj) % n_theta) * n_rho + i + di] = True
+        for v in range(nv):
+            if active[v]:
+                if cell[v] == c:
+                    is_voter[bin_index[v]] = True
+                if window[cell[v]]:
+                    in_win[bin_index[v]] = True
+        for dj in range(-sup_j, sup_j + 1):
+            for di in range(-sup_i, sup_i + 1):
+                if 0 <= i + di < n_rho:
+                    window[((j + dj) % n_theta) * n_rho + i + di] = False
+        nvo, nre = v_off[nw], r_off[nw]
+        for b in range(n_bins):  # sorted and unique, as np.unique
+            if is_voter[b]:
+                voters[nvo] = b
+                nvo += 1
+            if is_voter[b] or in_win[b]:
+                removed[nre] = b
+                nre += 1
+                removed_bin[b] = True
+            is_voter[b] = False
+            in_win[b] = False
+        v_off[nw + 1], r_off[nw + 1] = nvo, nre
+        for v in range(nv):
+            if active[v] and removed_bin[bin_index[v]]:
+                acc[cell[v]] -= 1
+                active[v] = False
+        nw += 1
+    return cells[:nw], counts[:nw], voters, v_off[: nw + 1], removed, r_off[: nw + 1]
+
+
+def find_winners_reference(
+    votes: Votes,
+    grid: HoughGrid,
+    min_votes: int,
+    max_winners: int = 32,
+    suppress_theta_cells: int = 1,
+    suppress_rho_cells: int = 1,
+) -> tuple[list[Winner], npt.NDArray[np.int64]]:
+    """:func:`find_winners` vectorised in numpy: the reference of the compiled search.
+
+    Winning cells of a vote, best first (paper 2.5).
 
     Repeat: the cell with most votes wins if it has at least ``min_votes``; its voters and the
     bins that voted for a cell within ``+-suppress_theta_cells`` x ``+-suppress_rho_cells`` of it
@@ -478,3 +777,16 @@ def find_winners(
             )
         )
     return winners, acc0
+
+
+def _load_kernels() -> None:
+    """Load the compiled kernels from numba's cache (compile them, the first time on a
+    machine) at import, for the argument types a vote passes: not inside a run's first vote."""
+    one = np.ones(1)
+    seg = _arc_intervals(one, one, one, one, 0.01, 0.1, 0.05, 0.1, 4, 4, 4)
+    _expand_intervals(*seg, 4)
+    i1 = np.zeros(1, dtype=np.int64)
+    _winners_kernel(i1, i1, np.ones(4, dtype=np.int64), 1, 2, 2, 1, 1, 0, 0)
+
+
+_load_kernels()

@@ -111,7 +111,8 @@ class SectorStore:
         self._fin_range = np.zeros((cap, nb))
         self._fin_int = np.zeros((cap, nb), dtype=np.uint8)
         self._fin_alive = np.zeros((cap, nb), dtype=bool)
-        self._col = np.arange(nb)
+        # final bins fill the first columns of their row: stored() scans only up to the most
+        self._fin_count = np.zeros(cap, dtype=np.int64)
         self._next = 0  # slot of the next beam
         self._size = 0
         self.n_added = 0
@@ -129,6 +130,7 @@ class SectorStore:
         self._size = 0
         self._next = 0
         self._fin_alive[:] = False
+        self._fin_count[:] = 0
         self._thr_count[:] = 0
 
     def add(self, t_s: float, bearing_rad: float, segmented: SegmentedBeam) -> int:
@@ -154,6 +156,7 @@ class SectorStore:
         self._fin_range[k, : fin.size] = self.head.bin_range_m(fin)
         self._fin_int[k, : fin.size] = segmented.final_intensities
         self._fin_alive[k, : fin.size] = True
+        self._fin_count[k] = fin.size
         self._next = (k + 1) % self.capacity
         self._size = min(self._size + 1, self.capacity)
         self.n_added += 1
@@ -181,8 +184,10 @@ class SectorStore:
         if self._size == 0:
             raise ValueError("the sector store is empty")
         slots = self._slots()
-        alive = self._fin_alive[slots]
-        kb, col = np.nonzero(alive)
+        # the alive flags past a row's final bins are all False: nonzero over the first
+        # columns only gives the same bins in the same (row-major) order
+        width = int(self._fin_count[slots].max())
+        kb, col = np.nonzero(self._fin_alive[slots, :width])
         sl = slots[kb]
         final = StoredBins(
             beam=kb.astype(np.int64),
@@ -190,9 +195,11 @@ class SectorStore:
             intensity=self._fin_int[sl, col],
             bin_id=(sl * self.head.n_bins + col).astype(np.int64),
         )
-        has_thr = self._col[None, :] < self._thr_count[slots][:, None]
-        tb, tcol = np.nonzero(has_thr)
-        threshold = StoredBins(beam=tb.astype(np.int64), range_m=self._thr_range[slots[tb], tcol])
+        # threshold bins: the first count columns of each row, beam by beam
+        counts = self._thr_count[slots]
+        tb = np.repeat(np.arange(slots.size, dtype=np.int64), counts)
+        tcol = np.arange(tb.size, dtype=np.int64) - np.repeat(np.cumsum(counts) - counts, counts)
+        threshold = StoredBins(beam=tb, range_m=self._thr_range[slots[tb], tcol])
         return StoredSector(
             t_s=self._t[slots],
             bearing_rad=self._bearing[slots],

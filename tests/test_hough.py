@@ -13,8 +13,10 @@ from features.hough import (
     auto_p_angles,
     eq4_rho,
     find_winners,
+    find_winners_reference,
     sonar_model_samples,
     vote_arc,
+    vote_arc_compiled,
     vote_samples,
 )
 
@@ -121,6 +123,71 @@ def test_one_vote_per_cell_per_bin(model: str) -> None:
     one = vote_arc(x[:1], y[:1], bearing[:1], rng_m[:1], grid, ALPHA, BETA)
     acc = accumulate(one, grid)
     assert acc.max() == 1 and acc.sum() == one.cell.size
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_arc_votes_are_the_numpy_reference(seed: int) -> None:
+    """:func:`vote_arc_compiled` against :func:`vote_arc` (the reference): the same votes in the
+    same order, so the same accumulator, on random bins near and far (the rho flip, bearings
+    across -pi), on two grids and sonar models, and on no bins at all."""
+    rng = np.random.default_rng(seed)
+    grids = [
+        HoughGrid.from_resolution(np.deg2rad(1.8), 0.1, 20.0),
+        HoughGrid.from_resolution(np.deg2rad(0.9), 0.3, 50.0),
+    ]
+    for grid, (alpha, beta) in zip(
+        grids, [(ALPHA, BETA), (np.deg2rad(6.0), np.deg2rad(40.0))], strict=True
+    ):
+        n = int(rng.integers(1, 2000))
+        x, y = rng.uniform(-3, 3, n), rng.uniform(-3, 3, n)
+        bearing = rng.uniform(-np.pi, np.pi, n)
+        bearing[: n // 10] = -np.pi  # on the wrap
+        rng_m = rng.uniform(0.2, grid.n_rho * grid.rho_res_m, n)
+        ref = vote_arc(x, y, bearing, rng_m, grid, alpha, beta)
+        got = vote_arc_compiled(x, y, bearing, rng_m, grid, alpha, beta)
+        assert got.n_bins == ref.n_bins == n
+        assert np.array_equal(got.bin_index, ref.bin_index)
+        assert np.array_equal(got.cell, ref.cell)
+        assert np.array_equal(accumulate(got, grid), accumulate(ref, grid))
+    empty = np.empty(0)
+    none = vote_arc_compiled(empty, empty, empty, empty, grids[0], ALPHA, BETA)
+    assert none.n_bins == 0 and none.cell.size == 0
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_winners_are_the_numpy_reference(seed: int) -> None:
+    """:func:`find_winners` (compiled) against :func:`find_winners_reference` on random and
+    walled votes, with and without suppression windows: the same winners, voters and removed
+    bins, best first."""
+    rng = np.random.default_rng(seed)
+    grid = HoughGrid.from_resolution(np.deg2rad(1.8), 0.2, 30.0)
+    sensors = rng.uniform(-1.0, 1.0, (3, 2))
+    x, y, b, r = _wall_bins(8.0, 0.4, sensors, np.linspace(-np.pi, np.pi, 200), 0.2, rng, 0.05)
+    x2, y2, b2, r2 = _wall_bins(5.0, 2.2, sensors, np.linspace(-np.pi, np.pi, 200), 0.2, rng)
+    n = 150
+    cols = [np.concatenate([u, v, rng.uniform(lo, hi, n)]) for u, v, lo, hi in zip(
+        (x, y, b, r), (x2, y2, b2, r2), (-1, -1, -np.pi, 1), (1, 1, np.pi, 25), strict=True
+    )]  # fmt: skip
+    votes = vote_arc(*cols, grid, ALPHA, BETA)
+    for min_votes, sup_t, sup_r, most in [
+        (5, 1, 1, 32),
+        (3, 0, 0, 4),
+        (12, 2, 3, 32),
+        (1, 1, 2, 1000),
+    ]:
+        got, acc = find_winners(votes, grid, min_votes, most, sup_t, sup_r)
+        ref, acc_ref = find_winners_reference(votes, grid, min_votes, most, sup_t, sup_r)
+        assert np.array_equal(acc, acc_ref) and len(got) == len(ref) > 0
+        for g, w in zip(got, ref, strict=True):
+            assert (g.cell, g.votes, g.rho_m, g.theta_rad) == (
+                w.cell,
+                w.votes,
+                w.rho_m,
+                w.theta_rad,
+            )
+            assert np.array_equal(g.voters, w.voters) and np.array_equal(g.removed, w.removed)
+    empty = vote_arc(np.empty(0), np.empty(0), np.empty(0), np.empty(0), grid, ALPHA, BETA)
+    assert find_winners(empty, grid, 1)[0] == [] == find_winners_reference(empty, grid, 1)[0]
 
 
 def test_arc_votes_are_the_limit_of_the_samples() -> None:

@@ -18,7 +18,11 @@ from slam.model.motion import (
     step_displacement,
     velocity_input,
 )
-from slam.model.noise import MotionNoise
+from slam.model.noise import (
+    MotionNoise,
+    held_velocity_variance_step,
+    held_velocity_variance_step_float,
+)
 from slam.run.sources import dead_reckoning_trajectory
 from sonar.beam import Mounting
 from tests.conftest import needs_marina
@@ -436,3 +440,18 @@ def test_dead_reckoning_stays_consistent_when_the_dvl_degrades(tmp_path):
     assert np.mean(nees_off) > 3.0, nees_off
     assert 0.5 < np.mean(nees_on) < 2.5, nees_on
     assert np.mean(nees_off) > 2.5 * np.mean(nees_on)
+
+
+def test_the_float_held_variance_is_the_array_one_exactly():
+    """Every record's step takes the plain-float form; the same value as the vectorised one
+    (dead reckoning's) on random holds, steps and sigmas."""
+    rng = np.random.default_rng(12)
+    dt = rng.uniform(0.0, 2.0, 2000)
+    held = dt + rng.uniform(0.0, 30.0, 2000)
+    sigma = rng.uniform(1e-3, 1.0, 2000)
+    vec = held_velocity_variance_step(held, dt, sigma)
+    one = [
+        held_velocity_variance_step_float(float(h), float(d), float(s))
+        for h, d, s in zip(held, dt, sigma, strict=True)
+    ]
+    assert np.array_equal(vec, np.array(one))

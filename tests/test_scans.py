@@ -19,7 +19,7 @@ from datasets.simulator.writer import write_dataset
 from datasets.source import open_dataset
 from features.geometry import between, compose, inverse, transform_points, wrap_angle
 from features.scans import ScanConfig, ScanMatcher, reference_lines, register
-from features.scans.icp import register_from
+from features.scans.icp import _median, register_from
 from slam.backends.isam2.g2o import graph_json_to_g2o
 from slam.backends.isam2.graph_io import FactorKind, FactorRecord, Robust
 from slam.backends.isam2.scans import radial_gate_distance, relative_pose_covariance
@@ -342,3 +342,14 @@ def test_short_simulated_closed_loop_with_scans_beats_dead_reckoning(tmp_path_fa
     with pytest.warns(UserWarning):
         export = graph_json_to_g2o(paths[0])
     assert export.scan_edges == kinds["scan-consecutive"] + kinds["scan-revisit"]
+
+
+def test_the_registrations_median_is_numpys() -> None:
+    """:func:`features.scans.icp._median` against ``np.median`` on odd and even sizes with
+    ties: the same value exactly."""
+    rng = np.random.default_rng(21)
+    for n in [1, 2, 3, 4, 7, 10, 101, 500]:
+        for _ in range(20):
+            a = np.abs(rng.normal(size=n))
+            a[: n // 4] = a[-1]  # ties
+            assert _median(a) == float(np.median(a))

@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from sonar.beam import SonarBeam, SonarHead
-from sonar.segmentation import segment_beam, segment_intensities
+from sonar.segmentation import (
+    _alive_bins,
+    _segment_uint8,
+    _segment_vectorised,
+    _sparse_window_bins,
+    segment_beam,
+    segment_intensities,
+)
 
 BIN_M = 0.1
 
@@ -140,6 +147,31 @@ def test_sparseness_matches_the_pairwise_rule(seed: int, mask: bool) -> None:
         if not stronger_close:
             expect.append(i)
     np.testing.assert_array_equal(seg.final_bins, expect)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_compiled_stages_give_the_vectorised_bins(seed: int) -> None:
+    """:func:`_segment_uint8` (what uint8 beams go through) against the vectorised stages (the
+    reference) on random raw beams and masks, dead zones, windows and thresholds."""
+    rng = np.random.default_rng(seed)
+    for _ in range(50):
+        n = int(rng.integers(1, 400))
+        mask = bool(rng.random() < 0.3)
+        values = np.full(n, 255) if mask else rng.integers(0, 256, n)
+        b = np.where(rng.random(n) < rng.uniform(0.0, 0.6), values, 0).astype(np.uint8)
+        bin_m = float(rng.choice([0.05, 0.1, 0.3]))
+        alive = _alive_bins(n, bin_m, float(rng.uniform(0.0, 2.0)), None)
+        k = _sparse_window_bins(float(rng.choice([0.0, 0.1, 0.45, 1.0])), bin_m)
+        thr, diff = float(rng.integers(0, 200)), float(rng.integers(0, 256))
+        ref = _segment_vectorised(b, alive, mask, thr, diff, k)
+        tb, final = _segment_uint8(b, alive, mask, thr, diff, k)
+        np.testing.assert_array_equal(tb, ref.threshold_bins)
+        np.testing.assert_array_equal(final, ref.final_bins)
+        seg = segment_intensities(
+            b, bin_m, intensity_threshold=thr, max_intensity_difference=diff, min_distance_m=0.45
+        )
+        assert seg.final_intensities.dtype == np.uint8
+        np.testing.assert_array_equal(seg.final_intensities, b[seg.final_bins])
 
 
 def test_bins_beyond_the_maximum_range_are_ignored_by_every_stage() -> None:

@@ -170,11 +170,23 @@ def _correspond(
     return ok, ref.points[idx[ok]], ref.normals[idx[ok]]
 
 
+def _median(a: FloatArray) -> float:
+    """``np.median`` of a 1-D array without NaN, by the same partition and the same mean of the
+    middle one or two (so the same value), without its generic axis and NaN handling: the
+    registration asks at every iteration."""
+    n = a.size
+    h = n // 2
+    if n % 2:
+        return float(np.partition(a, h)[h])
+    part = np.partition(a, [h - 1, h])
+    return (float(part[h - 1]) + float(part[h])) / 2.0
+
+
 def _scale(e: FloatArray, floor: float) -> float:
     """Robust residual sigma: 1.4826 times the median absolute residual, at least ``floor``."""
     if e.size == 0:
         return floor
-    return max(1.4826 * float(np.median(np.abs(e))), floor)
+    return max(1.4826 * _median(np.abs(e)), floor)
 
 
 def _system(

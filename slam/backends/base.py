@@ -286,3 +286,14 @@ class AnchoredOdometry:
             return None
         v = self.chain.variance_at(t_s)
         return np.asarray(self._anchor_cov) + np.diag([v, v, 0.0])
+
+    def covariances(self, t_s: npt.ArrayLike) -> FloatArray | None:
+        """:meth:`covariance` at many times, shape (N, 3, 3)
+        (:class:`features.pose_source.BatchCovariances`)."""
+        if self._anchor_cov is None:
+            return None
+        v = self.chain.variances_at(t_s)
+        out = np.repeat(np.asarray(self._anchor_cov, dtype=np.float64)[None], v.size, axis=0)
+        out[:, 0, 0] += v
+        out[:, 1, 1] += v
+        return out

@@ -19,10 +19,15 @@ State ``x = [x, y, psi, b, delta, k, g, rho_1, theta_1, ..., rho_L, theta_L]``:
   landmark (:meth:`LineEkf.index`); kept normalised. A landmark merged into another (the landmark
   layer found them one wall) is tied to it by an exact update and leaves the state.
 
-Prediction integrates the motion model (:mod:`slam.model.motion`) on the pose block only (the
-landmarks are static, so only the pose rows and columns of P change). Updates are filterpy's
-(Joseph form) with H evaluated at the predicted state: the AHRS heading, and each line
-observation in the sonar frame R (:func:`slam.model.lines.line_prediction`). Which observation
+Prediction integrates the motion model (:mod:`slam.model.motion`) on the vehicle block only (the
+landmarks are static, so only the vehicle rows and columns of P change). Between two updates the
+steps are batched: each step propagates the 7 x 7 vehicle block (the driver reads the pose
+covariance at every record) and multiplies its Jacobian into their product ``Phi``; the
+vehicle-landmark block takes ``Phi`` once, when the full covariance is next needed
+(:meth:`LineEkf._flush`), not 7 x n work per record. Updates are in the Joseph form with H
+evaluated at the predicted state: the AHRS heading by :func:`scalar_joseph_update` (rank 1,
+O(n^2)), each line observation in the sonar frame R (:func:`slam.model.lines.line_prediction`)
+by filterpy's. Which observation
 updates which landmark, and when a new line becomes one, is the landmark layer's
 (:class:`slam.mapping.landmarks.LandmarkMap`); this class holds the filter state only.
 """
@@ -74,6 +79,7 @@ __all__ = [
     "GYRO_BIAS",
     "N_VEHICLE",
     "MERGE_VARIANCE",
+    "scalar_joseph_update",
 ]
 
 # The vehicle's block of the state (module docstring); the landmarks' lines follow it.
@@ -99,6 +105,41 @@ def _filter(x: FloatArray, P: FloatArray) -> ExtendedKalmanFilter:
     kf.x = x
     kf.P = P
     return kf
+
+
+def scalar_joseph_update(
+    x: FloatArray, P: FloatArray, h: FloatArray, nu: float, r: float
+) -> tuple[FloatArray, FloatArray]:
+    """The Kalman update by one scalar measurement, Joseph form, in O(n^2).
+
+    With ``a = P h``, ``s = h^T a + r`` and the gain ``k = a / s``, the Joseph form
+    ``(I - k h^T) P (I - k h^T)^T + r k k^T`` expands (P symmetric) to
+    ``P - (k a^T + a k^T) + s k k^T``: two outer products instead of two n x n x n products,
+    and exactly symmetric when P is (Simon 2006, eq. 5.19, for the Joseph form).
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+        State.
+    P : ndarray, shape (n, n)
+        Its covariance (symmetric).
+    h : ndarray, shape (n,)
+        The measurement's Jacobian row, ``z = h^T x + v``.
+    nu : float
+        The innovation ``z - h(x)`` (already wrapped for an angle).
+    r : float
+        The measurement's variance.
+
+    Returns
+    -------
+    x, P : ndarray, shapes (n,), (n, n)
+        The updated state and covariance (new arrays).
+    """
+    a = P @ h
+    s = float(h @ a) + r
+    k = a / s
+    ka = np.outer(k, a)
+    return x + k * nu, P - (ka + ka.T) + s * np.outer(k, k)
 
 
 @dataclass(frozen=True)
@@ -167,6 +208,13 @@ class LineEkf:
         P[DVL_SCALE, DVL_SCALE] = config.dvl_scale_sigma**2
         P[GYRO_BIAS, GYRO_BIAS] = np.deg2rad(config.gyro_bias_sigma_deg_per_s) ** 2
         self.kf = _filter(x, P)
+        # the steps since the last flush: their Jacobians' product (vehicle block), pending
+        # on the vehicle-landmark block of P (:meth:`_flush`)
+        self._Phi = np.eye(N_VEHICLE)
+        self._F = np.eye(N_VEHICLE)  # one step's Jacobian, rewritten in place
+        self._pending = False
+        self._h_heading = np.zeros(N_VEHICLE)  # z = psi + b
+        self._h_heading[HEADING] = 1.0
         self.map = LandmarkMap(config, self.bTs)
         self._index: dict[int, int] = {}  # landmark id -> index of its rho in the state
         self._first_line_w: dict[int, FloatArray] = {}  # each landmark's first estimate (FEJ)
@@ -191,15 +239,18 @@ class LineEkf:
 
     @property
     def P(self) -> FloatArray:
+        """The full covariance, up to date (:meth:`_flush`)."""
+        self._flush()
         return np.asarray(self.kf.P)
 
     @property
     def pose(self) -> FloatArray:
-        return self.x[POSE].copy()
+        return np.array(self.kf.x[POSE])
 
     @property
     def pose_cov(self) -> FloatArray:
-        return self.P[POSE, POSE].copy()
+        # the vehicle block is propagated at every step: no flush needed
+        return np.asarray(self.kf.P[POSE, POSE]).copy()
 
     @property
     def stats(self) -> dict[str, int]:
@@ -222,24 +273,26 @@ class LineEkf:
         """
         if step.dt_s <= 0.0:
             return np.zeros(3)
-        x, P = self.kf.x, self.kf.P
-        dx, dy = step_displacement(float(x[2] + x[4]), step.dx_m, step.dy_m)
-        gain = 1.0 + float(x[5])
+        x = self.kf.x
+        psi, delta, k_scale = float(x[2]), float(x[4]), float(x[5])
+        dx, dy = step_displacement(psi + delta, step.dx_m, step.dy_m)
+        gain = 1.0 + k_scale
         x[0] += gain * dx
         x[1] += gain * dy
         dyaw = step.dyaw_rad - step.gyro_dt_s * float(x[GYRO_BIAS])
-        x[2] = wrap_angle(x[2] + dyaw)
+        x[2] = wrap_angle(psi + dyaw)
         self._gyro_s += step.gyro_dt_s
         # d p' / d psi = J (p' - p): with first-estimate Jacobians, p is the position this step
         # started from as it was first predicted, not as the updates since have moved it (Huang,
         # Mourikis & Roumeliotis 2008, eq. 23): the filter then gains no information on the
         # unobservable rotation of the whole map and trajectory (the AHRS bias's direction)
+        x0, x1 = float(x[0]), float(x[1])
         if self.config.first_estimates_jacobians:
-            jx, jy = float(x[0]) - self._xy_first[0], float(x[1]) - self._xy_first[1]
+            jx, jy = x0 - self._xy_first[0], x1 - self._xy_first[1]
         else:
             jx, jy = gain * dx, gain * dy
-        self._xy_first = (float(x[0]), float(x[1]))
-        F = np.eye(N_VEHICLE)
+        self._xy_first = (x0, x1)
+        F = self._F
         F[0, 2] = -jy
         F[1, 2] = jx
         if self.config.estimate_misalignment:
@@ -248,17 +301,32 @@ class LineEkf:
         F[0, 5] = dx
         F[1, 5] = dy
         F[2, GYRO_BIAS] = -step.gyro_dt_s
-        Q = np.zeros((N_VEHICLE, N_VEHICLE))
-        Q[0, 0] = Q[1, 1] = step.var_xy_m2
-        Q[2, 2] = step.var_yaw_rad2(self.config.gyro_sigma_radps)
-        Q[3, 3] = self._var_walk * step.dt_s
-        V = slice(0, N_VEHICLE)
-        P[V, :] = F @ P[V, :]
-        P[:, V] = P[:, V] @ F.T
-        P[V, V] += Q
+        # the vehicle block now (P_vv <- F P_vv F^T + Q); the landmark columns at the flush
+        P_vv = self.kf.P[:N_VEHICLE, :N_VEHICLE]
+        P_vv[...] = F @ P_vv @ F.T
+        P_vv[0, 0] += step.var_xy_m2
+        P_vv[1, 1] += step.var_xy_m2
+        P_vv[2, 2] += step.var_yaw_rad2(self.config.gyro_sigma_radps)
+        P_vv[3, 3] += self._var_walk * step.dt_s
+        self._Phi = F @ self._Phi
+        self._pending = True
         self.t_s = step.t_s
-        bx, by = step_displacement(float(x[4]), step.dx_m, step.dy_m)  # delta and k
+        bx, by = step_displacement(delta, step.dx_m, step.dy_m)  # delta and k
         return np.array([gain * bx, gain * by, dyaw])
+
+    def _flush(self) -> None:
+        """Apply the batched steps' Jacobian product to the vehicle-landmark block of P:
+        ``P_vl <- Phi P_vl`` (and its transpose), which the steps one by one would have
+        done ``F_k ... F_1 P_vl``; equal to round-off."""
+        if not self._pending:
+            return
+        P = self.kf.P
+        V = N_VEHICLE
+        if P.shape[0] > V:
+            P[:V, V:] = self._Phi @ P[:V, V:]
+            P[V:, :V] = P[:V, V:].T
+        self._Phi = np.eye(V)
+        self._pending = False
 
     # -- updates ---------------------------------------------------------------------------
 
@@ -270,32 +338,38 @@ class LineEkf:
         R: FloatArray,
         residual: Callable[[Any, Any], Any],
     ) -> None:
-        n = self.kf.x.size
+        self._flush()
         self.kf.update(z, lambda _x: H, lambda _x: hx, R=R, residual=residual)
-        self.kf.x[YAW] = wrap_angle(self.kf.x[YAW])
-        for i in self._index.values():  # keep landmarks normalised, the covariance alike
-            if self.kf.x[i] < 0.0:
-                J = np.eye(n)
-                J[i : i + 2, i : i + 2] = FLIP_RHO
-                self.kf.P = J @ self.kf.P @ J.T
-            rho, theta = normalize_line(self.kf.x[i], self.kf.x[i + 1])
-            self.kf.x[i], self.kf.x[i + 1] = float(rho), float(theta)
+        self._normalise()
+
+    def _normalise(self) -> None:
+        """Wrap the heading and keep the landmarks normalised, the covariance alike: a flip of
+        ``rho``'s sign (``FLIP_RHO``) negates its row and column of P."""
+        x = self.kf.x
+        x[YAW] = wrap_angle(x[YAW])
+        if not self._index:
+            return
+        i = np.fromiter(self._index.values(), dtype=np.int64, count=len(self._index))
+        for j in i[x[i] < 0.0]:
+            self.kf.P[j, :] *= -1.0
+            self.kf.P[:, j] *= -1.0
+        x[i], x[i + 1] = normalize_line(x[i], x[i + 1])
 
     def update_heading(self, t_s: float, yaw_body_rad: float) -> bool:
         """AHRS heading update (``z = psi + b``), at most every ``ahrs_period_s``."""
         if t_s - self._last_ahrs_t < self.config.ahrs_period_s:
             return False
         self._last_ahrs_t = t_s
-        n = self.kf.x.size
-        H = np.zeros((1, n))
-        H[0, HEADING] = 1.0
-        hx = np.array([self.kf.x[YAW] + self.kf.x[AHRS_BIAS]])
-        R = np.array([[np.deg2rad(self.config.ahrs_white_sigma_deg) ** 2]])
-        nu = float(wrap_angle(yaw_body_rad - hx[0]))
-        P = self.kf.P
-        S = float(P[YAW, YAW] + 2.0 * P[YAW, AHRS_BIAS] + P[AHRS_BIAS, AHRS_BIAS] + R[0, 0])
+        self._flush()
+        x, P = self.kf.x, self.kf.P
+        r = float(np.deg2rad(self.config.ahrs_white_sigma_deg) ** 2)
+        nu = float(wrap_angle(yaw_body_rad - (float(x[YAW]) + float(x[AHRS_BIAS]))))
+        S = float(P[YAW, YAW] + 2.0 * P[YAW, AHRS_BIAS] + P[AHRS_BIAS, AHRS_BIAS] + r)
         self.heading_innovations.append((t_s, nu, S))
-        self._update(np.array([yaw_body_rad]), H, hx, R, lambda a, b: wrap_angle(a - b))
+        h = np.zeros(x.size)
+        h[:N_VEHICLE] = self._h_heading
+        self.kf.x, self.kf.P = scalar_joseph_update(x, P, h, nu, r)
+        self._normalise()
         self._own_stats["ahrs_updates"] += 1
         return True
 

@@ -30,7 +30,12 @@ from datasets.errors import DataError
 from datasets.records import AttitudeSeries, DvlSeries
 from features.geometry import FloatArray, transform_points, wrap_angle
 from slam.io.trajectory import Trajectory
-from slam.model.noise import MotionNoise, dvl_sample_sigma, held_velocity_variance_step
+from slam.model.noise import (
+    MotionNoise,
+    dvl_sample_sigma,
+    held_velocity_variance_step,
+    held_velocity_variance_step_float,
+)
 from sonar.beam import Mounting
 
 __all__ = [
@@ -116,7 +121,9 @@ class MotionStep:
     var_xy_m2: float = field(init=False)
 
     def __post_init__(self) -> None:
-        var = float(held_velocity_variance_step(self.held_s, self.dt_s, self.sigma_v_mps))
+        var = held_velocity_variance_step_float(
+            float(self.held_s), float(self.dt_s), float(self.sigma_v_mps)
+        )
         object.__setattr__(self, "var_xy_m2", var)
 
     def var_yaw_rad2(self, gyro_sigma_radps: float) -> float:
@@ -306,6 +313,12 @@ class OdometryChain:
         tq = np.array([t_s], dtype=np.float64)
         part = self._span(tq)
         return float(np.interp(t_s, self._t[part], self._var[part]))
+
+    def variances_at(self, t_s: npt.ArrayLike) -> FloatArray:
+        """:meth:`variance_at` of many times in one search, shape (M,) (m^2)."""
+        tq = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+        part = self._span(tq)
+        return np.asarray(np.interp(tq, self._t[part], self._var[part]))
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ from features.geometry import FloatArray
 __all__ = [
     "MotionNoise",
     "held_velocity_variance_step",
+    "held_velocity_variance_step_float",
     "dvl_scatter",
     "dvl_sample_sigma",
     "ROBUST_KERNELS",
@@ -101,6 +102,13 @@ def held_velocity_variance_step(
     T = np.asarray(held_s, dtype=np.float64)
     dt = np.asarray(dt_s, dtype=np.float64)
     return np.asarray((2.0 * T - dt) * dt * np.asarray(sigma_mps, dtype=np.float64) ** 2)
+
+
+def held_velocity_variance_step_float(held_s: float, dt_s: float, sigma_mps: float) -> float:
+    """:func:`held_velocity_variance_step` of one step in plain floats (every record makes
+    one): the same operations in the same order (numpy's ``** 2`` is ``x * x``), so the same
+    value."""
+    return (2.0 * held_s - dt_s) * dt_s * (sigma_mps * sigma_mps)
 
 
 def dvl_scatter(t_s: FloatArray, v_mps: FloatArray, window_s: float) -> FloatArray:

@@ -187,3 +187,17 @@ class SmoothedPoseSource:
             return self._current_cov()
         i = max(int(np.searchsorted(anchors, t_s, side="right")) - 1, 0)
         return self.nodes.anchor_cov[i]
+
+    def covariances(self, t_s: npt.ArrayLike) -> FloatArray | None:
+        """:meth:`covariance` at many times, shape (N, 3, 3)
+        (:class:`features.pose_source.BatchCovariances`)."""
+        t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+        anchors = self.nodes.anchor_t
+        current = np.asarray(self._current_cov(), dtype=np.float64)
+        out = np.repeat(current[None], t.size, axis=0)
+        if anchors:
+            past = t < anchors[-1]
+            if past.any():
+                i = np.maximum(np.searchsorted(anchors, t[past], side="right") - 1, 0)
+                out[past] = np.stack([self.nodes.anchor_cov[k] for k in i])
+        return out
