@@ -616,6 +616,9 @@ def test_every_factor_kind_round_trips_through_its_json_form(room: SyntheticRun)
         ({"type": "Teleport"}, "'Teleport' is not a valid FactorKind"),
         ({"covariance": [[1.0]]}, "covariance (1, 1) does not match"),
         ({"keys": ["x0"]}, "takes 2 keys, got 1"),
+        ({"measurement": [1.0, 2.0, 3.0], "covariance": np.eye(3).tolist()}, "expected 2"),
+        ({"bTs": [0.1, 0.2]}, "bTs of shape (2,), expected (3,)"),
+        ({"robust": {"kernel": "tukey", "k": 1.0}}, "robust kernel 'tukey'"),
     ],
 )
 def test_load_graph_names_the_file_and_the_factor_it_cannot_read(
@@ -629,3 +632,12 @@ def test_load_graph_names_the_file_and_the_factor_it_cannot_read(
     with pytest.raises(ValueError, match=f"graph.json: factor {i}: ") as err:
         load_graph(path)
     assert message in str(err.value)
+
+
+def test_load_graph_names_a_factor_that_is_not_an_object(room: SyntheticRun, tmp_path):
+    (path,) = room.backend.save(tmp_path)
+    doc = json.loads(path.read_text())
+    doc["factors"][3] = ["PriorFactorPose2"]
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match="graph.json: factor 3: a factor is a JSON object"):
+        load_graph(path)

@@ -1,7 +1,9 @@
 """The back ends by name: what ``--backend``, the sweep and the notebooks choose from.
 
-A new back end implements :class:`slam.backends.base.Backend` (and, for its landmarks,
-:class:`slam.mapping.landmarks.LineEstimator`), takes a configuration that extends
+A new back end implements :class:`slam.backends.base.Backend` (for its landmarks, its
+``update_lines`` hands :meth:`slam.mapping.landmarks.LandmarkMap.vote` a
+:class:`slam.mapping.vote.Belief` and applies the :class:`slam.mapping.vote.Decision` it gets
+back), takes a configuration that extends
 :class:`slam.backends.base.BackendConfig`, and is added to :data:`BACKENDS` here; the runner,
 the CLI's ``--set``, the sweep's grid and the reports then take it as they take these two.
 """

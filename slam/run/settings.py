@@ -28,6 +28,8 @@ __all__ = ["Setting", "unit_of", "dataset_settings", "run_settings"]
 
 _UNITS = [
     ("_deg_per_sqrt_s", "deg/sqrt(s)"),
+    ("_deg_per_s", "deg/s"),
+    ("_dps", "deg/s"),
     ("_mps", "m/s"),
     ("_radps", "rad/s"),
     ("_m", "m"),

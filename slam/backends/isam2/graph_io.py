@@ -182,6 +182,8 @@ class FactorRecord:
     def from_json(cls, item: dict[str, Any], where: str = "graph") -> FactorRecord:
         """A record from its ``graph.json`` form; a ValueError naming ``where`` (the file and
         the factor) and what is wrong otherwise."""
+        if not isinstance(item, dict):
+            raise ValueError(f"{where}: a factor is a JSON object, got {type(item).__name__}")
         try:
             kind = FactorKind(item["type"])
             keys = [key_of(k) for k in item["keys"]]
@@ -209,6 +211,21 @@ class FactorRecord:
         if not low <= len(keys) <= high:
             n = f"{low}" if low == high else f"{low} to {high}"
             raise ValueError(f"{where}: {kind.value} factor takes {n} keys, got {len(keys)}")
+        size = _Z_SIZE.get(kind)
+        if record.z.ndim != 1 or (size is not None and record.z.size != size):
+            raise ValueError(
+                f"{where}: {kind.value} factor: measurement of shape {record.z.shape}, expected"
+                f" {size if size is not None else 'a vector'}"
+            )
+        if record.bTs is not None and record.bTs.shape != (3,):
+            raise ValueError(
+                f"{where}: {kind.value} factor: bTs of shape {record.bTs.shape}, expected (3,)"
+            )
+        if record.robust is not None and record.robust.kernel not in ("huber", "cauchy"):
+            raise ValueError(
+                f"{where}: {kind.value} factor: robust kernel {record.robust.kernel!r},"
+                " expected 'huber' or 'cauchy'"
+            )
         if record.cov.shape != (record.z.size, record.z.size):
             raise ValueError(
                 f"{where}: {kind.value} factor: covariance {record.cov.shape} does not match"
@@ -225,6 +242,18 @@ _N_KEYS = {
     FactorKind.PRIOR_POSE: (1, 1),
     FactorKind.PRIOR_VECTOR: (1, 1),
     FactorKind.DVL_GYRO_ODOMETRY: (2, 5),
+}
+
+
+#: The measurement's size of each kind (the vector priors and betweens: any).
+_Z_SIZE = {
+    FactorKind.POSE_TRANSLATION_PRIOR: 2,
+    FactorKind.PRIOR_POSE: 3,
+    FactorKind.BETWEEN_POSE: 3,
+    FactorKind.HEADING_BIAS: 1,
+    FactorKind.DVL_GYRO_ODOMETRY: 3,
+    FactorKind.LINE_EQUALITY: 1,
+    FactorKind.LINE_OBSERVATION: 2,
 }
 
 
@@ -396,7 +425,12 @@ def load_graph(path: str | Path) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Valu
         raise ValueError(f"{path}: not a {GRAPH_FORMAT} file")
     graph = gtsam.NonlinearFactorGraph()
     for i, item in enumerate(doc["factors"]):
-        graph.add(FactorRecord.from_json(item, f"{path}: factor {i}").to_gtsam())
+        where = f"{path}: factor {i}"
+        record = FactorRecord.from_json(item, where)
+        try:
+            graph.add(record.to_gtsam())
+        except (TypeError, ValueError, RuntimeError) as e:
+            raise ValueError(f"{where}: {record.kind.value} factor: {e}") from e
     values = gtsam.Values()
     for name, item in doc["values"].items():
         v = np.asarray(item["value"], dtype=np.float64)
