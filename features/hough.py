@@ -329,6 +329,14 @@ def vote_samples(
     return Votes(bin_index=b, cell=c, n_bins=n)
 
 
+def _check_finite(**arrays: FloatArray) -> None:
+    """A ValueError naming the first of ``arrays`` that holds a NaN or an infinity (the
+    compiled kernel's cell arithmetic has no meaning for them)."""
+    for name, a in arrays.items():
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} holds a non-finite value")
+
+
 def vote_arc(
     x_m: FloatArray,
     y_m: FloatArray,
@@ -359,6 +367,7 @@ def vote_arc(
     -------
     Votes
     """
+    _check_finite(x_m=x_m, y_m=y_m, bearing_rad=bearing_rad, range_m=range_m)
     n = int(range_m.shape[0])
     half_a, beta = 0.5 * beam_width_rad, incidence_beta_rad
     if 2.0 * (half_a + beta) >= np.pi:
@@ -553,6 +562,7 @@ def vote_arc_compiled(
 
     Parameters and returns are :func:`vote_arc`'s.
     """
+    _check_finite(x_m=x_m, y_m=y_m, bearing_rad=bearing_rad, range_m=range_m)
     n = int(range_m.shape[0])
     half_a, beta = 0.5 * beam_width_rad, incidence_beta_rad
     if 2.0 * (half_a + beta) >= np.pi:

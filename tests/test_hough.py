@@ -152,6 +152,11 @@ def test_the_compiled_arc_votes_are_the_numpy_reference(seed: int) -> None:
     empty = np.empty(0)
     none = vote_arc_compiled(empty, empty, empty, empty, grids[0], ALPHA, BETA)
     assert none.n_bins == 0 and none.cell.size == 0
+    for vote in (vote_arc, vote_arc_compiled):  # a NaN is refused by name, by both
+        bad = bearing.copy()
+        bad[1] = np.nan
+        with pytest.raises(ValueError, match="bearing_rad holds a non-finite value"):
+            vote(x, y, bad, rng_m, grids[1], alpha, beta)
 
 
 @pytest.mark.parametrize("seed", range(4))
