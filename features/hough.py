@@ -337,6 +337,22 @@ def _check_finite(**arrays: FloatArray) -> None:
             raise ValueError(f"{name} holds a non-finite value")
 
 
+#: The votes of no bins.
+_NO_VOTES = Votes(np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64), 0)
+
+
+def _arc_model(
+    grid: HoughGrid, beam_width_rad: float, incidence_beta_rad: float
+) -> tuple[float, float, int]:
+    """``(alpha / 2, beta, K)`` of :func:`vote_arc` and its compiled twin: ``K`` theta cells
+    cover a bin's span of line normals ``[theta_S - alpha/2 - beta, theta_S + alpha/2 + beta]``
+    wherever it starts; a ValueError unless ``alpha + 2 beta < pi``."""
+    half_a, beta = 0.5 * beam_width_rad, incidence_beta_rad
+    if 2.0 * (half_a + beta) >= np.pi:
+        raise ValueError("the sonar model needs alpha + 2 beta < pi")
+    return half_a, beta, int(np.floor(2.0 * (half_a + beta) / grid.theta_res_rad)) + 2
+
+
 def vote_arc(
     x_m: FloatArray,
     y_m: FloatArray,
@@ -369,18 +385,14 @@ def vote_arc(
     """
     _check_finite(x_m=x_m, y_m=y_m, bearing_rad=bearing_rad, range_m=range_m)
     n = int(range_m.shape[0])
-    half_a, beta = 0.5 * beam_width_rad, incidence_beta_rad
-    if 2.0 * (half_a + beta) >= np.pi:
-        raise ValueError("the sonar model needs alpha + 2 beta < pi")
+    half_a, beta, k = _arc_model(grid, beam_width_rad, incidence_beta_rad)
     dth, drho, nt, nr = grid.theta_res_rad, grid.rho_res_m, grid.n_theta, grid.n_rho
     if n == 0:
-        empty = np.empty(0, dtype=np.int64)
-        return Votes(empty, empty, 0)
+        return _NO_VOTES
     # theta cells meeting the span of line normals [theta_S - alpha/2 - beta, .. + beta] (eqs. 2-3)
     span_lo = (bearing_rad - half_a - beta)[:, None]
     span_hi = (bearing_rad + half_a + beta)[:, None]
     j_lo = np.floor((span_lo[:, 0] + np.pi) / dth).astype(np.int64)
-    k = int(np.floor(2.0 * (half_a + beta) / dth)) + 2
     jj = j_lo[:, None] + np.arange(k)[None, :]  # (N, K), unwrapped; cell jj mod nt
     edge = -np.pi + jj * dth
     t_a = np.maximum(edge, span_lo)  # the part of the cell inside the span
@@ -564,14 +576,10 @@ def vote_arc_compiled(
     """
     _check_finite(x_m=x_m, y_m=y_m, bearing_rad=bearing_rad, range_m=range_m)
     n = int(range_m.shape[0])
-    half_a, beta = 0.5 * beam_width_rad, incidence_beta_rad
-    if 2.0 * (half_a + beta) >= np.pi:
-        raise ValueError("the sonar model needs alpha + 2 beta < pi")
+    half_a, beta, k = _arc_model(grid, beam_width_rad, incidence_beta_rad)
     if n == 0:
-        empty = np.empty(0, dtype=np.int64)
-        return Votes(empty, empty, 0)
+        return _NO_VOTES
     dth = grid.theta_res_rad
-    k = int(np.floor(2.0 * (half_a + beta) / dth)) + 2
     f64 = np.float64
     seg = _arc_intervals(
         np.ascontiguousarray(x_m, dtype=f64),
