@@ -68,7 +68,7 @@ run: $(STAMP_RUN)
 
 lint: $(STAMP_DEV)
 	$(BIN)/ruff check .
-	$(BIN)/ruff format --check sonar features slam datasets tests benchmarks
+	$(BIN)/ruff format --check sonarslam sonar features slam datasets tests benchmarks
 	$(BIN)/mypy
 
 # 2 workers on 2 cores, one BLAS thread each (more only contend); worksteal: a worker that runs

@@ -10,9 +10,9 @@ import json
 import tempfile
 from pathlib import Path
 
-from datasets.simulator import simulate
-from datasets.source import open_dataset
-from slam.run.run import run_backend
+from sonarslam.datasets.simulator import simulate
+from sonarslam.datasets.source import open_dataset
+from sonarslam.slam.run.run import run_backend
 
 
 def measure(source: Path, backend: str) -> dict[str, float]:

@@ -12,8 +12,8 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import tempfile  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from datasets.simulator import simulate  # noqa: E402
-from datasets.source import Dataset, data_root, open_dataset  # noqa: E402
+from sonarslam.datasets.simulator import simulate  # noqa: E402
+from sonarslam.datasets.source import Dataset, data_root, open_dataset  # noqa: E402
 
 
 def pin_one_core() -> int | None:

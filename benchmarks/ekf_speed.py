@@ -1,7 +1,7 @@
 """Speed of the EKF back end in closed loop on one core.
 
-The whole marina through the runner (:func:`slam.run.run.run_backend`: the extractor preset of
-the beams, :class:`slam.backends.ekf.LineEkf` with its defaults, the anchored odometry as the
+The whole marina through the runner (:func:`sonarslam.slam.run.run.run_backend`: the extractor preset of
+the beams, :class:`sonarslam.slam.backends.ekf.LineEkf` with its defaults, the anchored odometry as the
 extractor's pose source): the real-time factor of the whole loop (data span / wall time,
 extractor included), the split between extractor and filter, and the time per vote of lines
 (association, updates, landmarks). Without ``$SONARSLAM_DATA/marina`` a simulated harbour
@@ -23,8 +23,8 @@ from typing import Any
 
 from isam2_speed import REALTIME_FACTOR_MIN
 
-from slam.backends.ekf import LineEkf
-from slam.run.run import run_backend
+from sonarslam.slam.backends.ekf import LineEkf
+from sonarslam.slam.run.run import run_backend
 
 
 def main(argv: list[str] | None = None) -> int:

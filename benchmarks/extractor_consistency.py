@@ -2,7 +2,7 @@
 
 a. The seed paper's pool test (Song et al. 2010, section 3) over many seeds:
    ``make_scenario("pool", seed)``, a stationary sonar in a 2 m x 4 m pool, 6 m range, 0.45 deg step,
-   a 270 deg sector, beta 25 deg, min votes 15 (:func:`slam.eval.lines.pool_config`); one vote per
+   a 270 deg sector, beta 25 deg, min votes 15 (:func:`sonarslam.slam.eval.lines.pool_config`); one vote per
    full sector, four per run. Reports the fraction of seeds whose every vote finds all four walls
    (required >= 95 %), and the RMS errors of ``rho`` (required < 5 cm) and ``theta`` (< 1 deg) of
    the features against the true walls, in each feature's frame R, sign-free.
@@ -37,9 +37,9 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from features.config import ExtractorConfig
-from slam.eval.consistency import mean_nees_band
-from slam.run.line_trials import TrialResult, drift_trial, harbour_trial, pool_trial
+from sonarslam.features.config import ExtractorConfig
+from sonarslam.slam.eval.consistency import mean_nees_band
+from sonarslam.slam.run.line_trials import TrialResult, drift_trial, harbour_trial, pool_trial
 
 METHODS = ("fit", "seed")
 POOL_WALL_SEED_FRACTION_MIN = 0.95

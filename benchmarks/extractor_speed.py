@@ -1,6 +1,6 @@
 """Speed of the line extractor on one core.
 
-1. The whole marina (GPS + AHRS poses, an extractor preset of :mod:`slam.run.presets`,
+1. The whole marina (GPS + AHRS poses, an extractor preset of :mod:`sonarslam.slam.run.presets`,
    ``marina-fit`` by default): real-time factor (data span / wall
    time of the loop over the beams; required >= 200x) and the time per beam (one
    ``LineExtractor.add``: segmentation, storage, and the vote when due), p50 and p99.
@@ -39,17 +39,17 @@ from typing import Any
 
 import numpy as np
 
-from datasets.simulator import make_scenario, simulate_records
-from datasets.source import data_root, open_dataset
-from features.config import ExtractorConfig
-from features.extractor import LineExtractor
-from features.hough import find_winners
-from features.pose_source import PoseSource
-from features.sector import SectorSnapshot
-from slam.run.extraction import extract_lines
-from slam.run.presets import EXTRACTOR_PRESETS
-from slam.run.sources import gps_ahrs_trajectory
-from sonar.beam import Mounting, SonarBeam, SonarHead
+from sonarslam.datasets.simulator import make_scenario, simulate_records
+from sonarslam.datasets.source import data_root, open_dataset
+from sonarslam.features.config import ExtractorConfig
+from sonarslam.features.extractor import LineExtractor
+from sonarslam.features.hough import find_winners
+from sonarslam.features.pose_source import PoseSource
+from sonarslam.features.sector import SectorSnapshot
+from sonarslam.slam.run.extraction import extract_lines
+from sonarslam.slam.run.presets import EXTRACTOR_PRESETS
+from sonarslam.slam.run.sources import gps_ahrs_trajectory
+from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead
 
 REALTIME_FACTOR_MIN = 200.0
 

@@ -30,10 +30,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the fuzzer's slicing helper
 
-from datasets.simulator import simulate  # noqa: E402
-from datasets.source import data_root  # noqa: E402
-from slam.cli.main import main  # noqa: E402
-from slam.io.trajectory import read_tum, trajectory_stem  # noqa: E402
+from sonarslam.datasets.simulator import simulate  # noqa: E402
+from sonarslam.datasets.source import data_root  # noqa: E402
+from sonarslam.slam.cli.main import main  # noqa: E402
+from sonarslam.slam.io.trajectory import read_tum, trajectory_stem  # noqa: E402
 from tests.fuzz_inputs import edit_log_rows, marina_window  # noqa: E402
 
 Edit = Callable[[Path], list[str]]

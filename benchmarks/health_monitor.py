@@ -21,15 +21,15 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from datasets.simulator import make_scenario, simulate_records
-from datasets.simulator.writer import write_dataset
-from datasets.source import Dataset, open_dataset
-from slam.backends.registry import backend_spec
-from slam.run.closed_loop import run_closed_loop
-from slam.run.health import monitor_run
-from slam.run.presets import run_config
-from slam.run.run import run_backend
-from slam.run.sweep import parse_seeds
+from sonarslam.datasets.simulator import make_scenario, simulate_records
+from sonarslam.datasets.simulator.writer import write_dataset
+from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.slam.backends.registry import backend_spec
+from sonarslam.slam.run.closed_loop import run_closed_loop
+from sonarslam.slam.run.health import monitor_run
+from sonarslam.slam.run.presets import run_config
+from sonarslam.slam.run.run import run_backend
+from sonarslam.slam.run.sweep import parse_seeds
 
 
 def _dataset(kind: str, seed: int, folder: Path, gyro_bias_radps: float = 0.0) -> Dataset:

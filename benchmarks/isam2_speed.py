@@ -1,7 +1,7 @@
 """Speed of the GTSAM back end in closed loop on one core.
 
-The whole marina through the runner (:func:`slam.run.run.run_backend`: the extractor preset of
-the beams, :class:`slam.backends.isam2.graph.LineIsam2` with its defaults, its smoothed
+The whole marina through the runner (:func:`sonarslam.slam.run.run.run_backend`: the extractor preset of
+the beams, :class:`sonarslam.slam.backends.isam2.graph.LineIsam2` with its defaults, its smoothed
 trajectory as the extractor's pose source): the real-time factor of the whole
 closed loop (data span / wall time, extractor included; required >= 100x), the split between
 extractor and back end, and per iSAM2 update (one per vote with lines, and the pending odometry
@@ -35,11 +35,11 @@ from typing import Any
 
 import numpy as np
 
-from slam.backends.isam2.graph import LineIsam2
-from slam.eval.ate import ate_against_gps
-from slam.run.presets import parse_settings
-from slam.run.run import run_backend
-from slam.run.sources import dead_reckoning_trajectory
+from sonarslam.slam.backends.isam2.graph import LineIsam2
+from sonarslam.slam.eval.ate import ate_against_gps
+from sonarslam.slam.run.presets import parse_settings
+from sonarslam.slam.run.run import run_backend
+from sonarslam.slam.run.sources import dead_reckoning_trajectory
 
 REALTIME_FACTOR_MIN = 100.0
 

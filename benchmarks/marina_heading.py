@@ -29,11 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-from datasets.errors import DataError
-from datasets.source import Dataset, open_dataset
-from slam.eval.ate import ate_against_gps
-from slam.run.run import run_backend
-from slam.run.sources import dead_reckoning_trajectory, start_pose
+from sonarslam.datasets.errors import DataError
+from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.slam.eval.ate import ate_against_gps
+from sonarslam.slam.run.run import run_backend
+from sonarslam.slam.run.sources import dead_reckoning_trajectory, start_pose
 
 
 def turned(dataset: Dataset, d_deg: float) -> Dataset:

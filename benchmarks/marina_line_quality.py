@@ -4,16 +4,16 @@ leading edges of all scans (GPS + AHRS as a ruler only: it measures, it is an in
 python benchmarks/marina_line_quality.py --lines extract-gps extract-dr out/ekf \\
     --out out/marina_line_quality.json
 
-1. **References** (:func:`slam.eval.walls.wall_references`): the nearest bin of each run of
+1. **References** (:func:`sonarslam.slam.eval.walls.wall_references`): the nearest bin of each run of
    returns of every beam, projected with GPS positions and the AHRS heading
-   (:func:`slam.run.sources.gps_ahrs_trajectory`), and the straight walls through them (seeded
+   (:func:`sonarslam.slam.run.sources.gps_ahrs_trajectory`), and the straight walls through them (seeded
    RANSAC, a robust refit, bends cut, sides kept). The picture (``--picture``, default beside
    ``--out``) draws them over the projected bins; ``--references FILE`` reuses saved ones.
 2. **Lines**, any number of sets: ``extract-gps`` and ``extract-dr`` run the extractor
-   (:func:`slam.run.extraction.extract`, the beams' preset unless ``--preset``) with GPS or
+   (:func:`sonarslam.slam.run.extraction.extract`, the beams' preset unless ``--preset``) with GPS or
    dead-reckoning poses; a directory (``sonarslam run ... --out DIR`` or ``sonarslam extract``)
    or a ``lines.jsonl`` gives lines written before (a closed loop's own observations).
-3. **Statistics** (:func:`slam.eval.line_quality.evaluate_lines`) per reference wall and over
+3. **Statistics** (:func:`sonarslam.slam.eval.line_quality.evaluate_lines`) per reference wall and over
    all: bias and scatter of the error in rho (m) and theta (deg) in each line's frame R, the
    NEES with the line's covariance (median, quantiles, mean) and the share beyond the 99 %
    chi2(2) gate; in three frames: the lines' own (``own``: R as the pose source that extracted
@@ -46,23 +46,23 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from datasets.errors import DataError
-from datasets.source import Dataset, open_dataset
-from features.line import LineFeature
-from slam.eval.leading_edges import EdgeConfig, Edges
-from slam.eval.line_quality import AssociationGates, ScanReference, evaluate_lines
-from slam.eval.line_stats import GATE_PROBABILITY
-from slam.eval.walls import (
+from sonarslam.datasets.errors import DataError
+from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.features.line import LineFeature
+from sonarslam.slam.eval.leading_edges import EdgeConfig, Edges
+from sonarslam.slam.eval.line_quality import AssociationGates, ScanReference, evaluate_lines
+from sonarslam.slam.eval.line_stats import GATE_PROBABILITY
+from sonarslam.slam.eval.walls import (
     WallFitConfig,
     WallReference,
     ruler_edges,
     ruler_wander,
     wall_references,
 )
-from slam.io.lines import read_lines_jsonl
-from slam.io.trajectory import Trajectory
-from slam.run.extraction import extract
-from slam.run.sources import gps_ahrs_trajectory
+from sonarslam.slam.io.lines import read_lines_jsonl
+from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.run.extraction import extract
+from sonarslam.slam.run.sources import gps_ahrs_trajectory
 
 RULER_NOTE = (
     "GPS positions with the AHRS heading are used only as a ruler: they place the leading edges "
@@ -86,7 +86,7 @@ def finite(x: Any) -> Any:
 def scan_duration_s(ds: Dataset) -> float:
     """One 360 deg scan (s): the beams per turn times the median time between beams (the
     marina: 200 beams at ~14.7 Hz, ~13.6 s); the window of :func:`ruler_wander` and of
-    :func:`slam.eval.line_quality.scan_lines` (the voters of a line are at most one turn old)."""
+    :func:`sonarslam.slam.eval.line_quality.scan_lines` (the voters of a line are at most one turn old)."""
     t = np.array([b.t for b in ds.nav_beams()])
     return float(2.0 * np.pi / ds.config.sonar.step_rad * np.median(np.diff(t)))
 

@@ -9,7 +9,7 @@ DIR is an iSAM2 run directory with scan revisits (``sonarslam run marina --backe
 --batch --set isam2.constraints=scans --out DIR``; ``graph.json`` holds every factor and the
 nodes' times). The benchmark
 
-1. reads the graph (:meth:`slam.backends.isam2.graph_io.FactorRecord.to_gtsam`) and optimises it
+1. reads the graph (:meth:`sonarslam.slam.backends.isam2.graph_io.FactorRecord.to_gtsam`) and optimises it
    as it is with Levenberg-Marquardt from its saved values: the run's own batch estimate;
 2. replaces the measurement of every ``scan-revisit`` factor by the ruler's relative pose of
    its two nodes (``between(ruler(t_i), ruler(t_j))``) with the stated covariance
@@ -36,14 +36,14 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from datasets.errors import DataError
-from datasets.source import Dataset, open_dataset
-from features.geometry import between
-from slam.backends.isam2.graph_io import FactorKind, FactorRecord, key_of
-from slam.eval.ate import ate_against_gps, ate_against_truth
-from slam.eval.truth import truth_trajectory
-from slam.io.trajectory import Trajectory
-from slam.run.sources import gps_ahrs_trajectory
+from sonarslam.datasets.errors import DataError
+from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.features.geometry import between
+from sonarslam.slam.backends.isam2.graph_io import FactorKind, FactorRecord, key_of
+from sonarslam.slam.eval.ate import ate_against_gps, ate_against_truth
+from sonarslam.slam.eval.truth import truth_trajectory
+from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.run.sources import gps_ahrs_trajectory
 
 
 def _optimise(records: list[dict[str, Any]], values: gtsam.Values) -> gtsam.Values:

@@ -4,7 +4,7 @@ marina, the simulator's truth on simulated data. The ruler measures only.
 python benchmarks/marina_registration.py [--source marina|DIR] [--set scans.FIELD=V ...] \\
     [--submaps 1,3,5] [--out out/marina_registration.json]
 
-1. **Scans** (:class:`features.scans.ScanMatcher`): every full turn of the head, leading edges
+1. **Scans** (:class:`sonarslam.features.scans.ScanMatcher`): every full turn of the head, leading edges
    motion-corrected with **dead reckoning** (GPS-free, as a closed loop's first pass).
 2. **Consecutive pairs**: each scan registered onto the one before it, from dead reckoning's
    relative pose.
@@ -12,8 +12,8 @@ python benchmarks/marina_registration.py [--source marina|DIR] [--set scans.FIEL
    within ``revisit_radius_m`` (10 m) up to the chi2(1) 0.99 gate of dead reckoning's relative
    position covariance (``S_k - S_j`` of its growing chain), the nearest two per scan (a
    submap apart), registered as submaps of ``submap_scans`` scans from several starts along
-   that covariance (:func:`features.scans.icp.register_from`) - the rule of the factor graph
-   (:mod:`slam.backends.isam2.scans`), with dead reckoning in place of its marginals.
+   that covariance (:func:`sonarslam.features.scans.icp.register_from`) - the rule of the factor graph
+   (:mod:`sonarslam.slam.backends.isam2.scans`), with dead reckoning in place of its marginals.
 4. **GPS-free**: the accepted revisits at most ``--short-gap`` s apart (200) against dead
    reckoning's relative pose, whose covariance over so short a time is small and known: the NIS
    of their difference and the factor on the registrations' covariance that makes its median
@@ -43,16 +43,16 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
-from datasets.errors import DataError
-from datasets.source import Dataset, open_dataset
-from features.geometry import between, wrap_angle
-from features.scans import Registration, ScanConfig, ScanMatcher  # noqa: F401
-from slam.backends.isam2.scans import radial_gate_distance
-from slam.eval.consistency import mean_nees_band
-from slam.eval.truth import truth_trajectory
-from slam.io.trajectory import Trajectory
-from slam.run.presets import SCAN_PRESETS, apply_overrides, parse_settings, preset_for
-from slam.run.sources import dead_reckoning_trajectory, gps_ahrs_trajectory
+from sonarslam.datasets.errors import DataError
+from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.features.geometry import between, wrap_angle
+from sonarslam.features.scans import Registration, ScanConfig, ScanMatcher  # noqa: F401
+from sonarslam.slam.backends.isam2.scans import radial_gate_distance
+from sonarslam.slam.eval.consistency import mean_nees_band
+from sonarslam.slam.eval.truth import truth_trajectory
+from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.run.presets import SCAN_PRESETS, apply_overrides, parse_settings, preset_for
+from sonarslam.slam.run.sources import dead_reckoning_trajectory, gps_ahrs_trajectory
 
 GATE_CHI2_1 = 6.635  # chi2(1) at 0.99
 

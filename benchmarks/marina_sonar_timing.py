@@ -4,7 +4,7 @@
 
 Both settings decide when each keyframe beam was taken, so both smear the motion-corrected map
 when wrong. With dead-reckoning poses (no GPS), this prints the summed entropy of 0.5 m
-histograms of the projected bins over 60 s windows (:func:`slam.run.calibration.scan_entropy`;
+histograms of the projected bins over 60 s windows (:func:`sonarslam.slam.run.calibration.scan_entropy`;
 lower is sharper) for the scan direction (-1: the head turns toward decreasing angle, the
 configured value; +1: the data README's reading) and for sonar clock offsets 0-1 s. Values
 compare only within this script (one dataset, one pose source, one window).
@@ -17,10 +17,10 @@ import json
 import tempfile
 from pathlib import Path
 
-from datasets.errors import DataError
-from datasets.source import open_dataset
-from slam.run.calibration import scan_entropy
-from slam.run.sources import dead_reckoning_trajectory
+from sonarslam.datasets.errors import DataError
+from sonarslam.datasets.source import open_dataset
+from sonarslam.slam.run.calibration import scan_entropy
+from sonarslam.slam.run.sources import dead_reckoning_trajectory
 
 
 def entropy_with(toml_text: str) -> float:

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from datasets.source import open_dataset
+from sonarslam.datasets.source import open_dataset
 
 SONARSLAM = str(Path(sys.executable).with_name("sonarslam"))
 

@@ -7,7 +7,7 @@ which this script measures on the marina:
 * ``dataset``: what the marina copy holds (rows, beams and spans, the DVL's degraded stretch);
 * ``runs``: dead reckoning, the EKF, iSAM2 (online, smoothed, batch), iSAM2 with scans and with
   lines and scans: each run's ATE over the sonar span and the whole run (``metrics.json``'s
-  keys), with the digest of the settings it ran with (:func:`slam.run.provenance.settings_digest`).
+  keys), with the digest of the settings it ran with (:func:`sonarslam.slam.run.provenance.settings_digest`).
 
 ``python benchmarks/readme_figures.py`` measures (about 1 min) and rewrites the blocks;
 ``--render`` rewrites the blocks from the recorded ``docs/figures.json`` without measuring;
@@ -29,13 +29,13 @@ from typing import Any  # noqa: E402
 
 import common  # noqa: F401  # first: one BLAS thread
 
-from datasets.config import dump_dataset_config  # noqa: E402
-from datasets.source import Dataset, open_dataset  # noqa: E402
-from slam.eval.published import PUBLISHED  # noqa: E402
-from slam.run.presets import run_config  # noqa: E402
-from slam.run.provenance import git_state, settings_digest  # noqa: E402
-from slam.run.run import run_backend  # noqa: E402
-from slam.run.sources import dvl_quality, pose_source_by_name  # noqa: E402
+from sonarslam.datasets.config import dump_dataset_config  # noqa: E402
+from sonarslam.datasets.source import Dataset, open_dataset  # noqa: E402
+from sonarslam.slam.eval.published import PUBLISHED  # noqa: E402
+from sonarslam.slam.run.presets import run_config  # noqa: E402
+from sonarslam.slam.run.provenance import git_state, settings_digest  # noqa: E402
+from sonarslam.slam.run.run import run_backend  # noqa: E402
+from sonarslam.slam.run.sources import dvl_quality, pose_source_by_name  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 FIGURES = ROOT / "docs" / "figures.json"

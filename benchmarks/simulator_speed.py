@@ -2,9 +2,9 @@
 
 For each seed (tuning seeds by default: a speed benchmark tunes nothing, but the held-back range
 stays untouched anyway), the wall time of each stage: drawing the world and its route
-(:func:`datasets.simulator.drawn_world`), the rest of the simulation in memory (true motion, the
-MSIS beams, DVL, AHRS, GPS: :func:`datasets.simulator.simulate_records`), and writing the run in
-the marina layout (:func:`datasets.simulator.write_dataset`); their sum is what ``sonarslam
+(:func:`sonarslam.datasets.simulator.drawn_world`), the rest of the simulation in memory (true motion, the
+MSIS beams, DVL, AHRS, GPS: :func:`sonarslam.datasets.simulator.simulate_records`), and writing the run in
+the marina layout (:func:`sonarslam.datasets.simulator.write_dataset`); their sum is what ``sonarslam
 simulate drawn`` takes (the issue's target: 20 s). The process is pinned to one CPU and the BLAS
 thread pools to one thread before numpy loads; the machine's load average is printed beside the
 figures, since on a shared machine it decides them.
@@ -28,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from datasets.simulator import make_scenario, make_world, simulate_records, write_dataset
-from slam.run.sweep import parse_seeds
+from sonarslam.datasets.simulator import make_scenario, make_world, simulate_records, write_dataset
+from sonarslam.slam.run.sweep import parse_seeds
 
 
 def time_seed(seed: int, kind: str, duration_s: float) -> dict[str, Any]:

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from datasets.logfile import open_regular
+from sonarslam.datasets.logfile import open_regular
 
 __all__ = ["CACHE_VERSION", "ENV_VAR", "cache_file", "load_cached", "save_cached"]
 

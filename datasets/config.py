@@ -59,7 +59,7 @@ radians in the objects)::
     gap_periods = 5.0       # a sensor gap: no sample for this many of its median periods,
     min_gap_s = 1.0         # and at least this long
 
-Every value is checked against the field it sets (type, finite, range: :mod:`datasets.settings`);
+Every value is checked against the field it sets (type, finite, range: :mod:`sonarslam.datasets.settings`);
 a wrong one is a ``DataError`` naming the file and the key. Keys a file leaves out take the
 neutral defaults of :class:`DatasetConfig` (no clock offset,
 identity mountings); the simulator writes every key. Without a file, a dataset gets the marina's
@@ -77,8 +77,8 @@ from typing import Any
 
 import tomli_w
 
-from datasets.errors import DataError
-from datasets.settings import (
+from sonarslam.datasets.errors import DataError
+from sonarslam.datasets.settings import (
     SettingError,
     check_within,
     coerce,
@@ -87,7 +87,7 @@ from datasets.settings import (
     replace_checked,
     toml_line,
 )
-from sonar.beam import Mounting, SonarHead
+from sonarslam.sonar.beam import Mounting, SonarHead
 
 __all__ = [
     "NoiseConfig",
@@ -141,7 +141,7 @@ class NoiseConfig:
 
 @dataclass(frozen=True)
 class GateConfig:
-    """Plausibility gates of the sensors' samples (:mod:`datasets.gates`).
+    """Plausibility gates of the sensors' samples (:mod:`sonarslam.datasets.gates`).
 
     Attributes
     ----------
@@ -165,7 +165,7 @@ class GateConfig:
         sampling periods ...
     min_gap_s : float
         ... and than this (s). The motion model takes a DVL or AHRS sample as stale from then
-        on (:mod:`slam.model.motion`), so the covariance grows with the gap.
+        on (:mod:`sonarslam.slam.model.motion`), so the covariance grows with the gap.
     """
 
     dvl_max_speed_mps: float = 3.0
@@ -362,7 +362,7 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
         A file that cannot be read or is not UTF-8 (with its line), a TOML syntax error (with
         its line), a table that is not one, an unknown key, a value of the wrong type,
         non-finite or out of range (naming the key, and its line when written ``key = ...``;
-        :mod:`datasets.settings`).
+        :mod:`sonarslam.datasets.settings`).
     """
     p = Path(path)
     base = base if base is not None else DatasetConfig()

@@ -1,11 +1,11 @@
 """Sensor faults that pass the readers: implausible samples, repeated stamps and gaps.
 
-The readers (:mod:`datasets.marina`) refuse what is not a log of the kind; what remains can
+The readers (:mod:`sonarslam.datasets.marina`) refuse what is not a log of the kind; what remains can
 still be a fault of the sensor: a spike, a stamp logged twice, a silence. Spikes and gaps are
 normal at sea, so a run survives them and says so: every sample dropped or flagged here is
 counted in :class:`SensorReport` (``metrics.json``: ``fault_*``, ``gap_*``) with one
-:class:`datasets.errors.DataWarning` per kind naming the file. The limits are ``[gates]`` of
-``sonarslam.toml`` (:class:`datasets.config.GateConfig`).
+:class:`sonarslam.datasets.errors.DataWarning` per kind naming the file. The limits are ``[gates]`` of
+``sonarslam.toml`` (:class:`sonarslam.datasets.config.GateConfig`).
 
 =====================================  =======================================================
 fault                                  what happens
@@ -18,7 +18,7 @@ not explain                            sample turned by the gyro's integral sinc
 GPS row without a fix, or at 0/0       dropped from the evaluation (the reader flags it)
 GPS fix far from its neighbours        dropped from the evaluation
 no sample for a while (any sensor)     a gap: reported; the motion model takes the DVL or
-                                       AHRS sample as stale (:mod:`slam.model.motion`)
+                                       AHRS sample as stale (:mod:`sonarslam.slam.model.motion`)
 =====================================  =======================================================
 """
 
@@ -32,11 +32,11 @@ from typing import Any
 
 import numpy as np
 
-from datasets.config import GateConfig
-from datasets.errors import DataWarning
-from datasets.geodesy import local_en_to_geodetic
-from datasets.records import AttitudeSeries, DvlSeries, GpsSeries
-from features.geometry import FloatArray
+from sonarslam.datasets.config import GateConfig
+from sonarslam.datasets.errors import DataWarning
+from sonarslam.datasets.geodesy import local_en_to_geodetic
+from sonarslam.datasets.records import AttitudeSeries, DvlSeries, GpsSeries
+from sonarslam.features.geometry import FloatArray
 
 __all__ = [
     "Gaps",

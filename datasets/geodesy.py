@@ -6,7 +6,7 @@ import numpy as np
 import numpy.typing as npt
 import pymap3d
 
-from features.geometry import FloatArray
+from sonarslam.features.geometry import FloatArray
 
 __all__ = ["ddmm_to_degrees", "degrees_to_ddmm", "geodetic_to_local_en", "local_en_to_geodetic"]
 

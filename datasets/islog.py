@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from datasets.errors import DataError
-from datasets.logfile import iter_tables
-from datasets.records import BeamSeries
-from sonar.beam import FloatArray, SonarBeam
+from sonarslam.datasets.errors import DataError
+from sonarslam.datasets.logfile import iter_tables
+from sonarslam.datasets.records import BeamSeries
+from sonarslam.sonar.beam import FloatArray, SonarBeam
 
 __all__ = ["read_is_log", "write_is_log"]
 
@@ -48,13 +48,13 @@ def read_is_log(path: str | Path, n_bins: int | None = None) -> BeamSeries:
     -------
     BeamSeries
         In file order (time never decreases); the bins as uint8 rows, so the memory is the
-        beams' bins (one byte each) and one block of text (:func:`datasets.logfile.iter_tables`),
+        beams' bins (one byte each) and one block of text (:func:`sonarslam.datasets.logfile.iter_tables`),
         not the file's rows as floats and Python objects.
 
     Raises
     ------
     DataError
-        Bad input by :mod:`datasets.logfile` (missing or special file, non-numeric or
+        Bad input by :mod:`sonarslam.datasets.logfile` (missing or special file, non-numeric or
         non-finite field, time going backwards), an intensity that is not a whole number in
         0-255, a transducer angle beyond +-2 pi rad. Rows with a wrong bin count, or a last
         line without a line end that may be cut, are skipped with a warning.

@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from datasets.cache import load_cached, save_cached
-from datasets.errors import DataError
-from datasets.logfile import (
+from sonarslam.datasets.cache import load_cached, save_cached
+from sonarslam.datasets.errors import DataError
+from sonarslam.datasets.logfile import (
     MAX_UNIX_TIME_S,
     Table,
     check_ascii,
@@ -31,9 +31,9 @@ from datasets.logfile import (
     parse_table,
     text_lines,
 )
-from datasets.records import BeamSeries
-from features.geometry import FloatArray
-from sonar.beam import SonarHead
+from sonarslam.datasets.records import BeamSeries
+from sonarslam.features.geometry import FloatArray
+from sonarslam.sonar.beam import SonarHead
 
 __all__ = ["read_pcd", "iter_pcd", "read_pcd_xy", "read_keyframe_times", "read_keyframes"]
 
@@ -49,7 +49,7 @@ KEYFRAME_CSV_HEADER = ("keyFrame", "keyFrameBeginning", "keyFrameEnd")
 
 def read_pcd(path: str | Path) -> Table:
     """Read an ASCII PCD with fields starting ``x y``: the points (N, n_fields) with the
-    physical line of each (:class:`datasets.logfile.Table`; the header's length is the file's).
+    physical line of each (:class:`sonarslam.datasets.logfile.Table`; the header's length is the file's).
 
     Raises
     ------
@@ -70,7 +70,7 @@ def read_pcd(path: str | Path) -> Table:
 
 def iter_pcd(path: str | Path) -> Iterator[Table]:
     """The points of an ASCII PCD with fields starting ``x y``, a block of rows at a time
-    (:func:`datasets.logfile.iter_line_blocks`): the memory of one block, whatever the file's
+    (:func:`sonarslam.datasets.logfile.iter_line_blocks`): the memory of one block, whatever the file's
     size. At least one table (empty when the file has no point); its ``POINTS`` are checked
     against the rows when the last block has been read.
 
@@ -80,7 +80,7 @@ def iter_pcd(path: str | Path) -> Iterator[Table]:
         A header byte that is not ASCII (a UTF-8 byte-order mark included: PCD is ASCII), no
         ``DATA ascii`` line, FIELDS not starting with ``x y``, POINTS not a whole number or not
         the count of point rows, a row with another number of fields, a field that is not a
-        finite number (the strict tokenizer, :mod:`datasets.logfile`).
+        finite number (the strict tokenizer, :mod:`sonarslam.datasets.logfile`).
     """
     p = Path(path)
     header: dict[str, str] = {}
@@ -220,7 +220,7 @@ def read_keyframes(
         +1: angle index ``j`` is the ``j``-th beam of the scan; -1: the ``(-j mod n)``-th
         (see the module docstring).
     cache : bool
-        Keep the beams in a versioned ``.npz`` (:mod:`datasets.cache`) and read them from it
+        Keep the beams in a versioned ``.npz`` (:mod:`sonarslam.datasets.cache`) and read them from it
         while the keyframe files, the beam times and the head are the same.
 
     Returns

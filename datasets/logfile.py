@@ -41,7 +41,7 @@ A skipped row is one sample of a sensor that samples many times a second; every 
 copes with a missing sample (that is a sensor gap), and the warning says how many there were.
 A non-numeric field or time going backwards means the file is not what we think it is, so
 nothing is guessed. Implausible values of valid syntax (a DVL speed of 50 m/s, a GPS fix at
-0/0) are the sensors' faults, gated with counted warnings after reading (:mod:`datasets.gates`).
+0/0) are the sensors' faults, gated with counted warnings after reading (:mod:`sonarslam.datasets.gates`).
 """
 
 from __future__ import annotations
@@ -58,8 +58,8 @@ from typing import BinaryIO
 
 import numpy as np
 
-from datasets.errors import DataError, DataWarning
-from features.geometry import FloatArray
+from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.features.geometry import FloatArray
 
 __all__ = [
     "NUMBER",

@@ -4,7 +4,7 @@ Each reader returns a series of arrays (one row per log row, time never decreasi
 and units fixed here, once: yaw counter-clockwise from East in rad (the logs' headings grow
 clockwise from North: ``yaw = pi/2 - heading``), velocities in m/s, positions in local
 East-North metres with the origin at the first DGPS fix. Bad input follows the policy of
-:mod:`datasets.logfile`.
+:mod:`sonarslam.datasets.logfile`.
 """
 
 from __future__ import annotations
@@ -14,12 +14,12 @@ from pathlib import Path
 
 import numpy as np
 
-from datasets.errors import DataError
-from datasets.geodesy import ddmm_to_degrees, geodetic_to_local_en
-from datasets.logfile import Table, read_table
-from datasets.records import AttitudeSeries, DvlSeries, GpsSeries
-from features.geometry import FloatArray, wrap_angle
-from sonar.beam import SonarHead
+from sonarslam.datasets.errors import DataError
+from sonarslam.datasets.geodesy import ddmm_to_degrees, geodetic_to_local_en
+from sonarslam.datasets.logfile import Table, read_table
+from sonarslam.datasets.records import AttitudeSeries, DvlSeries, GpsSeries
+from sonarslam.features.geometry import FloatArray, wrap_angle
+from sonarslam.sonar.beam import SonarHead
 
 __all__ = [
     "DvlSeries",
@@ -57,7 +57,7 @@ def read_dvl(path: str | Path) -> DvlSeries:
     bottom-lock flag, kept as ``valid`` (invalid rows are kept, flagged, never silently used).
     The DVL's own date fields are wrong in the marina log and are ignored (``logTime`` is used).
     A status other than 0/1 or a compass heading beyond +-360 deg is a :class:`DataError`;
-    an implausible speed is the gates' (:mod:`datasets.gates`).
+    an implausible speed is the gates' (:mod:`sonarslam.datasets.gates`).
     """
     table = read_table(path, n_columns=DVL_COLUMNS, used_columns=(0, 11, 12, 14, 22))
     d = table.data
@@ -109,7 +109,7 @@ def read_dgps(path: str | Path) -> GpsSeries:
 
     ``status`` 1-5 is a fix; 0 and 6-8 (none, estimated, manual, simulated), and the 0/0
     placeholder of a receiver without a fix, are kept as rows without ``fix`` (the gates drop
-    them, :mod:`datasets.gates`); another status, minutes >= 60 or an impossible latitude or
+    them, :mod:`sonarslam.datasets.gates`); another status, minutes >= 60 or an impossible latitude or
     longitude is a :class:`DataError`.
     """
     table = read_table(path, n_columns=DGPS_COLUMNS, used_columns=(0, 1, 2, 3))
@@ -150,7 +150,7 @@ def read_setup(path: str | Path) -> tuple[float, float, float]:
     The range must be a whole number of bins, and the step a whole division of the turn (to
     0.01 of a beam; the step returned is exactly ``2 pi / n``): so a value cut short in the
     file's last line (``0.03`` for ``0.0314159...``) is found, not used. The head's limits are
-    :class:`sonar.beam.SonarHead`'s.
+    :class:`sonarslam.sonar.beam.SonarHead`'s.
     """
     table = read_table(path, n_columns=3, time_column=None, trust_last_line=True)
     line = int(table.line_numbers[0])

@@ -4,7 +4,7 @@ Frames and units are fixed in the readers: yaw angles are counter-clockwise from
 velocities are in the sensor's own frame (m/s), positions are local East-North (m). The
 readers return whole logs as series of arrays (:class:`DvlSeries`, ...), one row per log row. Sensor
 mountings are applied by the consumers (``slam.model.motion``), from ``datasets.config``.
-The sonar beam record is :class:`sonar.beam.SonarBeam`.
+The sonar beam record is :class:`sonarslam.sonar.beam.SonarBeam`.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from typing import overload
 import numpy as np
 import numpy.typing as npt
 
-from sonar.beam import FloatArray, SonarBeam
+from sonarslam.sonar.beam import FloatArray, SonarBeam
 
 __all__ = [
     "DvlVelocity",
@@ -82,7 +82,7 @@ Record = SonarBeam | DvlVelocity | Attitude | GpsFix
 
 @dataclass(frozen=True)
 class DvlSeries:
-    """DVL bottom-track velocities in the DVL frame; see :class:`datasets.records.DvlVelocity`."""
+    """DVL bottom-track velocities in the DVL frame; see :class:`sonarslam.datasets.records.DvlVelocity`."""
 
     t: FloatArray
     v_mps: FloatArray  # (N, 2) vx, vy in the DVL frame
@@ -118,7 +118,7 @@ class GpsSeries:
     """GPS positions in local East-North (m), origin at ``origin_lat_lon_deg`` (the first fix).
 
     ``fix`` flags the rows with a position fix (None: all); rows without one (status 0, or the
-    receiver's 0/0 placeholder) are kept by the reader and dropped by :mod:`datasets.gates`.
+    receiver's 0/0 placeholder) are kept by the reader and dropped by :mod:`sonarslam.datasets.gates`.
     """
 
     t: FloatArray
@@ -137,7 +137,7 @@ class GpsSeries:
 class BeamSeries(Sequence[SonarBeam]):
     """The sonar beams of a run as arrays: one row per beam, ``(N, n_bins)`` uint8 intensities.
 
-    A sequence of :class:`sonar.beam.SonarBeam`: ``beams[i]`` is a beam (its intensities a view
+    A sequence of :class:`sonarslam.sonar.beam.SonarBeam`: ``beams[i]`` is a beam (its intensities a view
     of the row), ``beams[a:b]`` and :meth:`between` are series over views of the same arrays.
     A beam as a Python object costs ~0.5 kB beside its bins; held as rows, a run of 460,000
     beams of 500 bins takes its 230 MB of bins and little more.

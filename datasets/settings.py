@@ -1,18 +1,18 @@
 """Typed settings: every value from a file or the command line checked against the frozen
 dataclass it sets, by one mechanism.
 
-``sonarslam.toml`` and ``run --config`` (:func:`datasets.config.load_dataset_config`),
+``sonarslam.toml`` and ``run --config`` (:func:`sonarslam.datasets.config.load_dataset_config`),
 ``extract --config``, ``run --set SCOPE.FIELD=VALUE`` and the sweep's grid
-(:mod:`slam.run.presets`) all end in :func:`replace_checked`: each dotted name must be a field
+(:mod:`sonarslam.slam.run.presets`) all end in :func:`replace_checked`: each dotted name must be a field
 of the dataclass (nested dataclasses by dots); its value must have the field's annotated type
 (:func:`coerce`: a whole number for an ``int``, a finite number for a ``float``, ``true`` /
 ``false`` for a ``bool``, a string for a ``str``, ``None`` only where the field allows it, a
 table for a nested dataclass); then the dataclass is built, and its own ``__post_init__``
 checks the ranges. Anything wrong is a :class:`SettingError` naming the key; a file's loader
-turns it into a :class:`datasets.errors.DataError` naming the file too.
+turns it into a :class:`sonarslam.datasets.errors.DataError` naming the file too.
 
 Text from the command line is parsed by the same grammar as the logs' numbers
-(:data:`datasets.logfile.NUMBER`): ``nan``, ``inf``, ``1_000`` or ``0x10`` are not numbers.
+(:data:`sonarslam.datasets.logfile.NUMBER`): ``nan``, ``inf``, ``1_000`` or ``0x10`` are not numbers.
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ from functools import cache
 from pathlib import Path
 from typing import Any, TypeVar
 
-from datasets.errors import DataError
-from datasets.logfile import NUMBER, read_text, split_lines
+from sonarslam.datasets.errors import DataError
+from sonarslam.datasets.logfile import NUMBER, read_text, split_lines
 
 __all__ = [
     "SettingError",
@@ -54,7 +54,7 @@ MAX_INT = 10**9
 
 
 def read_toml(path: str | Path) -> tuple[dict[str, Any], str]:
-    """A TOML file (UTF-8, :func:`datasets.logfile.read_text`) and its text; a syntax error is
+    """A TOML file (UTF-8, :func:`sonarslam.datasets.logfile.read_text`) and its text; a syntax error is
     a :class:`DataError` with its line (the last line when the parser ran out of document)."""
     p = Path(path)
     text = read_text(p, "utf-8")
@@ -164,7 +164,7 @@ class SettingError(ValueError):
 
 def parse_text(text: str) -> Any:
     """A value typed on the command line, by its look: ``true``/``false``, ``none``/``null``,
-    a whole number, a number (:data:`datasets.logfile.NUMBER`), else the text itself.
+    a whole number, a number (:data:`sonarslam.datasets.logfile.NUMBER`), else the text itself.
 
     :func:`coerce` then checks it against the field it sets (``"10"`` is fine for a float).
     """

@@ -10,7 +10,7 @@ A directory (searched to two levels deep) holds, by file-name suffix:
 ``keyFrameTimeStamps.csv``  + ``pclKeyFrame*.pcd`` + ``*_IS_timestamps.log`` (marina keyframes)
 ``*_SETUP.log``             ``range_m bin_size_m step_rad`` of the head (optional)
 ``sonarslam.toml``          sonar settings, sensor mountings, noise (optional, see
-                            :mod:`datasets.config`; keys it leaves out take neutral
+                            :mod:`sonarslam.datasets.config`; keys it leaves out take neutral
                             defaults); without it, the marina's calibration
 ``truth.json``              the simulator's ground truth (optional)
 ==========================  ===========================================================
@@ -31,14 +31,14 @@ from typing import Any
 
 import numpy as np
 
-from datasets.config import MARINA_CONFIG, DatasetConfig, load_dataset_config
-from datasets.errors import DataError, DataWarning
-from datasets.gates import SensorReport, gate_attitude, gate_beams, gate_dvl, gate_gps
-from datasets.islog import read_is_log
-from datasets.keyframes import read_keyframes
-from datasets.logfile import read_text
-from datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti, read_setup
-from datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries, Record
+from sonarslam.datasets.config import MARINA_CONFIG, DatasetConfig, load_dataset_config
+from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.gates import SensorReport, gate_attitude, gate_beams, gate_dvl, gate_gps
+from sonarslam.datasets.islog import read_is_log
+from sonarslam.datasets.keyframes import read_keyframes
+from sonarslam.datasets.logfile import read_text
+from sonarslam.datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti, read_setup
+from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries, Record
 
 __all__ = ["Dataset", "open_dataset", "resolve_source", "data_root", "read_truth"]
 
@@ -55,7 +55,7 @@ MARINA_LAYOUT_HINT = (
 @dataclass(frozen=True, eq=False)
 class Dataset:
     """All the logs of one run, read and checked; ``report`` counts what the gates dropped and
-    lists the sensors' gaps (:mod:`datasets.gates`)."""
+    lists the sensors' gaps (:mod:`sonarslam.datasets.gates`)."""
 
     name: str
     root: Path
@@ -163,9 +163,9 @@ def open_dataset(source: str | Path, config_override: str | Path | None = None) 
     Raises
     ------
     DataError
-        A missing required file or any bad input (see :mod:`datasets.logfile`), DVL and AHRS
+        A missing required file or any bad input (see :mod:`sonarslam.datasets.logfile`), DVL and AHRS
         logs that do not overlap in time, a malformed ``truth.json``. Sensor faults that
-        pass the readers are gated with warnings (:mod:`datasets.gates`).
+        pass the readers are gated with warnings (:mod:`sonarslam.datasets.gates`).
     """
     root = resolve_source(source)
     config = _config(root, config_override)

@@ -1,4 +1,4 @@
-"""Settings of the line extractor (:class:`features.extractor.LineExtractor`), with units in
+"""Settings of the line extractor (:class:`sonarslam.features.extractor.LineExtractor`), with units in
 the names, loadable from TOML."""
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ class ExtractorConfig:
     Defaults marked *paper* are those of the seed paper (Song et al. 2010, section 3: sector,
     beta, min votes, confidence); the others are this project's choices, stated here. Settings
     for particular sonars and data (the marina's thresholded keyframes, the seed paper's pool)
-    are presets, decided in :mod:`slam.run.presets`.
+    are presets, decided in :mod:`sonarslam.slam.run.presets`.
 
     Attributes
     ----------
@@ -44,11 +44,11 @@ class ExtractorConfig:
     incidence_beta_rad : float
         Largest incidence that still returns, ``beta`` (rad): 25 deg (*paper*).
     vote_model : {"arc", "samples"}
-        How eqs. 2-4 cast votes (see :mod:`features.hough`): "arc" (continuous arc, default) or
+        How eqs. 2-4 cast votes (see :mod:`sonarslam.features.hough`): "arc" (continuous arc, default) or
         "samples" (the ``h x p`` samples literally).
     h_bearings, p_angles : int or None
         Samples of eqs. 2 and 3 for ``vote_model="samples"``; None chooses them from the
-        resolution (:func:`~features.hough.auto_h_bearings`, :func:`~features.hough.auto_p_angles`).
+        resolution (:func:`~sonarslam.features.hough.auto_h_bearings`, :func:`~sonarslam.features.hough.auto_p_angles`).
     theta_res_rad : float or None
         Voting-space cell in ``theta`` (rad); None takes the head's step (paper 2.4).
     rho_res_m : float or None
@@ -64,7 +64,7 @@ class ExtractorConfig:
     requery_poses : bool
         Re-query the pose source for every stored beam at each vote (smoothing back ends). True.
     covariance_method : {"fit", "seed", "seed-at-fit"}
-        :mod:`features.uncertainty` method: "fit" (weighted least squares) or "seed" (the
+        :mod:`sonarslam.features.uncertainty` method: "fit" (weighted least squares) or "seed" (the
         paper's overlap-ratio ellipse; its line is the ellipse centre), or "seed-at-fit": the
         seed ellipse's covariance about the least-squares line of the same voters (on thick
         echo bands the ellipse's centre sits inside the band, the fit on its leading edge).
@@ -85,7 +85,7 @@ class ExtractorConfig:
     range_offset_sigma_m : float or None
         Fit: range error common to all the bins (m): where the wall is inside the bin of an
         echo's peak or first return, which does not average down with the number of voters
-        (:mod:`features.uncertainty`); None: ``bin_size / sqrt(12)``; 0 leaves it out.
+        (:mod:`sonarslam.features.uncertainty`); None: ``bin_size / sqrt(12)``; 0 leaves it out.
     pose_uncertainty : bool
         Fit: add the relative pose uncertainty from ``PoseSource.covariance``. False.
     line_sigma_rho_m, line_sigma_theta_rad : float

@@ -3,7 +3,7 @@
 ``beam -> segmentation [2.1] -> sector store [2.2] -> every n beams: snapshot in R [2.3] ->
 votes [2.4-2.5] -> winners, voters removed [2.5] -> uncertainty [2.6] -> LineFeature``.
 
-Poses come only through a :class:`~features.pose_source.PoseSource` (the plugin seam).
+Poses come only through a :class:`~sonarslam.features.pose_source.PoseSource` (the plugin seam).
 """
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ from dataclasses import replace
 import numpy as np
 import numpy.typing as npt
 
-from features.config import ExtractorConfig
-from features.geometry import FloatArray
-from features.hough import (
+from sonarslam.features.config import ExtractorConfig
+from sonarslam.features.geometry import FloatArray
+from sonarslam.features.hough import (
     HoughGrid,
     Votes,
     auto_h_bearings,
@@ -24,10 +24,10 @@ from features.hough import (
     vote_arc_compiled,
     vote_samples,
 )
-from features.line import LineFeature
-from features.pose_source import PoseSource, pose_covariances
-from features.sector import BinsInR, Sector, SectorSnapshot
-from features.uncertainty import (
+from sonarslam.features.line import LineFeature
+from sonarslam.features.pose_source import PoseSource, pose_covariances
+from sonarslam.features.sector import BinsInR, Sector, SectorSnapshot
+from sonarslam.features.uncertainty import (
     LineEstimate,
     effective_bearings,
     fit_line,
@@ -35,8 +35,8 @@ from features.uncertainty import (
     seed_ellipse,
     support_mask,
 )
-from sonar.beam import Mounting, SonarBeam, SonarHead
-from sonar.segmentation import SegmentedBeam, segment_intensities
+from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead
+from sonarslam.sonar.segmentation import SegmentedBeam, segment_intensities
 
 __all__ = ["LineExtractor", "segment_with"]
 
@@ -55,7 +55,7 @@ def segment_with(
         Range step between bins (m).
     intensities : array_like, shape (n_bins,)
     thresholded : bool
-        A 0/255 mask (:attr:`sonar.beam.SonarBeam.thresholded`).
+        A 0/255 mask (:attr:`sonarslam.sonar.beam.SonarBeam.thresholded`).
     """
     return segment_intensities(
         intensities,
@@ -95,7 +95,7 @@ class LineExtractor:
     every ``vote_every_n_beams`` beams and returns the lines found. :meth:`flush` votes on what
     is stored now (the end of a stream).
 
-    Each :class:`~features.line.LineFeature` has ``t`` the newest beam's time, ``wTr`` its sonar
+    Each :class:`~sonarslam.features.line.LineFeature` has ``t`` the newest beam's time, ``wTr`` its sonar
     pose (frame R), ``(rho_m, theta_rad)`` and ``cov`` in R, ``votes`` of the winning cell,
     ``n_voters`` the bins the line rests on (the winner's voters for "seed"; the fit's gated
     support for "fit"), all removed from the store, and ``endpoints_r`` the trimmed extent of
@@ -194,7 +194,7 @@ class LineExtractor:
     # -- one vote --------------------------------------------------------------------------
 
     def cast_votes(self, bins: BinsInR) -> Votes:
-        """Votes of the given bins in the grid (eqs. 2-4, :mod:`features.hough`)."""
+        """Votes of the given bins in the grid (eqs. 2-4, :mod:`sonarslam.features.hough`)."""
         cfg = self.config
         if cfg.vote_model == "arc":  # compiled; the same votes as vote_arc's
             return vote_arc_compiled(

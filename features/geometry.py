@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from sonar.beam import FloatArray
+from sonarslam.sonar.beam import FloatArray
 
 __all__ = [
     "FloatArray",

@@ -29,7 +29,7 @@ A bin of range ``rho_S`` of a beam whose sensor sits at ``(x_S, y_S)`` in R with
   lines up to ``rho_S (1 - cos(alpha/2)) + rho_S sin(beta) alpha/2`` (1.2 m at 50 m) off the arc.
   This module implements the geometric form above (:func:`eq4_rho`).
 
-A negative ``rho_{h,p}`` is the line ``(-rho, theta + pi)`` (:func:`features.geometry.normalize_line`).
+A negative ``rho_{h,p}`` is the line ``(-rho, theta + pi)`` (:func:`sonarslam.features.geometry.normalize_line`).
 A bin gives at most one vote to a cell.
 
 Two ways to cast the votes (both vectorised over all bins, no Python loop per bin or vote):
@@ -70,7 +70,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-from features.geometry import FloatArray, normalize_line
+from sonarslam.features.geometry import FloatArray, normalize_line
 
 __all__ = [
     "HoughGrid",

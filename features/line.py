@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from features.geometry import FloatArray, line_frame_to_world, transform_points
+from sonarslam.features.geometry import FloatArray, line_frame_to_world, transform_points
 
 __all__ = ["LineFeature"]
 

@@ -11,7 +11,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 import numpy.typing as npt
 
-from features.geometry import FloatArray
+from sonarslam.features.geometry import FloatArray
 
 __all__ = ["PoseSource", "BatchCovariances", "pose_covariances"]
 

@@ -6,9 +6,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from features.geometry import FloatArray, compose
-from features.pose_source import PoseSource
-from sonar.beam import Mounting, SonarBeam, SonarHead
+from sonarslam.features.geometry import FloatArray, compose
+from sonarslam.features.pose_source import PoseSource
+from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead
 
 __all__ = ["beam_points", "project_beams"]
 

@@ -5,11 +5,11 @@ At each vote the newest beam's sonar pose is the reference frame R and every sto
 re-referenced to R with the pose of its own time: for beam ``k`` with sonar pose ``wTs_k``,
 ``rTs_k = inverse(wTR) * wTs_k`` gives the sensor position ``(x_S, y_S)`` in R and the beam
 bearing ``theta_S = yaw(rTs_k) + bearing_k``. The poses come from a
-:class:`~features.pose_source.PoseSource`: either cached when each beam arrived or, by default,
+:class:`~sonarslam.features.pose_source.PoseSource`: either cached when each beam arrived or, by default,
 re-queried for every stored beam time at each vote, so that a smoothing back end's latest
 trajectory corrects the whole sector.
 
-:class:`Sector` pairs the sensor-frame ring buffer (:class:`sonar.store.SectorStore`) with the
+:class:`Sector` pairs the sensor-frame ring buffer (:class:`sonarslam.sonar.store.SectorStore`) with the
 pose source; :func:`reference_to_newest` is the re-referencing itself.
 """
 
@@ -20,11 +20,11 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from features.geometry import FloatArray, between, compose, wrap_angle
-from features.pose_source import PoseSource
-from sonar.beam import Mounting, SonarHead
-from sonar.segmentation import SegmentedBeam
-from sonar.store import SectorStore, StoredSector
+from sonarslam.features.geometry import FloatArray, between, compose, wrap_angle
+from sonarslam.features.pose_source import PoseSource
+from sonarslam.sonar.beam import Mounting, SonarHead
+from sonarslam.sonar.segmentation import SegmentedBeam
+from sonarslam.sonar.store import SectorStore, StoredSector
 
 __all__ = ["BinsInR", "SectorSnapshot", "Sector", "reference_to_newest"]
 
@@ -180,7 +180,7 @@ class Sector:
     pose_source : PoseSource
         Vehicle poses ``wTb`` at beam times.
     sector_rad : float
-        Angular span of the stored beams (rad), see :class:`sonar.store.SectorStore`.
+        Angular span of the stored beams (rad), see :class:`sonarslam.sonar.store.SectorStore`.
     requery_poses : bool
         Re-query ``pose_source`` for every stored beam time at each snapshot (default); if
         False, use the poses cached when each beam arrived.
@@ -217,7 +217,7 @@ class Sector:
         return compose(wTb.reshape(-1, 3), self.bTs)
 
     def add(self, t_s: float, bearing_rad: float, segmented: SegmentedBeam) -> None:
-        """Store one segmented beam (:meth:`sonar.store.SectorStore.add`)."""
+        """Store one segmented beam (:meth:`sonarslam.sonar.store.SectorStore.add`)."""
         slot = self.store.add(t_s, bearing_rad, segmented)
         if not self.requery_poses:
             self._wTs[slot] = self.sonar_poses(t_s)[0]

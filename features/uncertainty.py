@@ -60,7 +60,7 @@ voters. ``benchmarks/extractor_consistency.py`` measures the NEES with and witho
 
 Optionally the pose uncertainty is added: the relative pose of each beam with respect to R is
 taken as a random walk backwards from R, ``Cov(d_k, d_l) = Q(t_max(k, l))`` with
-``Q(t) = psd(Sigma(t_R) - Sigma(t))`` from the :class:`~features.pose_source.PoseSource`
+``Q(t) = psd(Sigma(t_R) - Sigma(t))`` from the :class:`~sonarslam.features.pose_source.PoseSource`
 covariances (the covariance accumulated between ``t`` and ``t_R``), so that the errors of the
 voters of nearby beams are correlated; it enters through the sandwich
 ``P + P J^T W C_pose W J P``.
@@ -75,9 +75,9 @@ import numpy.typing as npt
 from scipy import ndimage
 from scipy.stats import chi2
 
-from features.geometry import FloatArray, normalize_line, wrap_angle
-from features.hough import HoughGrid
-from features.sector import BinsInR, SectorSnapshot
+from sonarslam.features.geometry import FloatArray, normalize_line, wrap_angle
+from sonarslam.features.hough import HoughGrid
+from sonarslam.features.sector import BinsInR, SectorSnapshot
 
 __all__ = [
     "LineEstimate",

@@ -1,5 +1,5 @@
 """The sensor: MSIS beam and head model, beam segmentation, the rolling scan store."""
 
-from sonar.beam import Mounting, SonarBeam, SonarHead
+from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead
 
 __all__ = ["Mounting", "SonarBeam", "SonarHead"]

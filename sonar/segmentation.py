@@ -19,7 +19,7 @@ stages in one compiled loop (numba): integer comparisons only, so its bins are e
 the vectorised stages (:func:`_segment_vectorised`, kept as the reference and for other dtypes;
 ``tests/test_segmentation.py``), at a small fraction of some fifteen numpy calls per beam.
 
-Already-thresholded beams (:attr:`sonar.beam.SonarBeam.thresholded`, e.g. the marina keyframes,
+Already-thresholded beams (:attr:`sonarslam.sonar.beam.SonarBeam.thresholded`, e.g. the marina keyframes,
 whose intensities are a 0/255 mask made by a third party) go through the same three stages,
 which then reduce to:
 
@@ -42,7 +42,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.ndimage import maximum_filter1d
 
-from sonar.beam import SonarBeam, SonarHead, bin_range_m
+from sonarslam.sonar.beam import SonarBeam, SonarHead, bin_range_m
 
 __all__ = ["SegmentedBeam", "segment_intensities", "segment_beam", "leading_edge_bins"]
 
@@ -253,7 +253,7 @@ def segment_beam(
     min_range_m: float = 0.0,
     max_range_m: float | None = None,
 ) -> SegmentedBeam:
-    """Segment a :class:`~sonar.beam.SonarBeam` with its head settings.
+    """Segment a :class:`~sonarslam.sonar.beam.SonarBeam` with its head settings.
 
     See :func:`segment_intensities`; ``beam.thresholded`` selects the mask behaviour.
     """
@@ -285,8 +285,8 @@ def leading_edge_bins(
     ``intensity_threshold``) are cut into runs, chains whose gaps are shorter than
     ``run_gap_m``, and the nearest bin of each run is kept: stage (c) of
     :func:`segment_intensities` with all returns equal (the module docstring). The one rule of
-    the wall references (:mod:`slam.eval.leading_edges`) and the scan matcher
-    (:mod:`features.scans`).
+    the wall references (:mod:`sonarslam.slam.eval.leading_edges`) and the scan matcher
+    (:mod:`sonarslam.features.scans`).
 
     Parameters
     ----------

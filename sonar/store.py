@@ -6,7 +6,7 @@ The store holds the last ``capacity`` segmented beams in a ring buffer of preall
 beams; 180 deg at 1.8 deg: 100). Each beam keeps its time, its bearing in the sonar frame, its
 threshold bins (ranges) and its final bins (ranges, intensities, alive flags). A new beam evicts
 the oldest. The store knows nothing of poses: putting the beams in one frame (the motion
-correction, paper 2.3) is the front end's job (:mod:`features.sector`).
+correction, paper 2.3) is the front end's job (:mod:`sonarslam.features.sector`).
 
 Winners' voters are removed with :meth:`SectorStore.remove_final_bins` (paper 2.5).
 """
@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from sonar.beam import FloatArray, SonarHead
-from sonar.segmentation import SegmentedBeam
+from sonarslam.sonar.beam import FloatArray, SonarHead
+from sonarslam.sonar.segmentation import SegmentedBeam
 
 __all__ = ["StoredBins", "StoredSector", "SectorStore", "sector_beam_count"]
 
@@ -143,7 +143,7 @@ class SectorStore:
         bearing_rad : float
             Beam bearing in the sonar frame (rad), ``head.bearing_rad(transducer_angle)``.
         segmented : SegmentedBeam
-            Output of :func:`sonar.segmentation.segment_intensities` for this beam.
+            Output of :func:`sonarslam.sonar.segmentation.segment_intensities` for this beam.
         """
         k = self._next  # when full, this is the oldest beam's slot: it is overwritten
         self._t[k] = t_s

@@ -18,8 +18,8 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import pytest  # noqa: E402
 from hypothesis import settings  # noqa: E402
 
-from datasets.simulator import simulate  # noqa: E402
-from datasets.source import Dataset, data_root, open_dataset  # noqa: E402
+from sonarslam.datasets.simulator import simulate  # noqa: E402
+from sonarslam.datasets.source import Dataset, data_root, open_dataset  # noqa: E402
 
 # no wall-clock limit on a property's examples: speed is measured by benchmarks/, and on the
 # shared 2-core machine one example of a Jacobian check took 601 ms against hypothesis's

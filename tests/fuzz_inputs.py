@@ -13,11 +13,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from datasets.config import MARINA_CONFIG, dump_dataset_config
-from datasets.errors import DataWarning
-from datasets.marina import read_is_timestamps
-from datasets.simulator import simulate
-from datasets.source import data_root, open_dataset
+from sonarslam.datasets.config import MARINA_CONFIG, dump_dataset_config
+from sonarslam.datasets.errors import DataWarning
+from sonarslam.datasets.marina import read_is_timestamps
+from sonarslam.datasets.simulator import simulate
+from sonarslam.datasets.source import data_root, open_dataset
 
 __all__ = [
     "REF_NUMBER",

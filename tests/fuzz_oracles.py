@@ -10,9 +10,9 @@ from typing import Any
 
 import numpy as np
 
-from datasets.config import _SCHEMA as TOML_SCHEMA  # what each key of the file sets
-from datasets.source import Dataset
-from features.geometry import wrap_angle
+from sonarslam.datasets.config import _SCHEMA as TOML_SCHEMA  # what each key of the file sets
+from sonarslam.datasets.source import Dataset
+from sonarslam.features.geometry import wrap_angle
 from tests.fuzz_inputs import Mutation, ref_lines, ref_rows
 
 __all__ = [

@@ -11,11 +11,11 @@ Its outcome is one of
 
 * ``accepted``: the target returned; the oracle then checks what it returned: every value
   finite; the rows exactly those a reference tokenizer (written here, independently, from the
-  rules of :mod:`datasets.logfile`) finds in the mutated text; for a file cut short, every
+  rules of :mod:`sonarslam.datasets.logfile`) finds in the mutated text; for a file cut short, every
   value it kept equal to the uncut file's; for a dataset, the gates' promises (no DVL speed
   over the limit, no GPS fix at 0/0 or repeated, no unexplained AHRS jump...);
-* ``data_error``: a :class:`datasets.errors.DataError` (or for settings a
-  :class:`datasets.settings.SettingError`); the oracle checks that it names the mutated file
+* ``data_error``: a :class:`sonarslam.datasets.errors.DataError` (or for settings a
+  :class:`sonarslam.datasets.settings.SettingError`); the oracle checks that it names the mutated file
   and, when it names a line, that the line is one the mutation changed (or the data line
   after one: time going backwards is seen there);
 * ``foreign``: any other exception (a bug); ``hang``: no answer within the time limit.
@@ -37,14 +37,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from datasets.config import load_dataset_config
-from datasets.errors import DataError, DataWarning
-from datasets.islog import read_is_log
-from datasets.keyframes import read_keyframe_times, read_pcd_xy
-from datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti, read_setup
-from datasets.settings import SettingError
-from datasets.source import open_dataset, read_truth
-from slam.run.presets import (
+from sonarslam.datasets.config import load_dataset_config
+from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.islog import read_is_log
+from sonarslam.datasets.keyframes import read_keyframe_times, read_pcd_xy
+from sonarslam.datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti, read_setup
+from sonarslam.datasets.settings import SettingError
+from sonarslam.datasets.source import open_dataset, read_truth
+from sonarslam.slam.run.presets import (
     apply_overrides,
     backend_config,
     check_settings,

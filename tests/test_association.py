@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from features.geometry import line_difference
-from slam.mapping.association import (
+from sonarslam.features.geometry import line_difference
+from sonarslam.slam.mapping.association import (
     AssociationConfig,
     AssociationProblem,
     associate,
@@ -86,12 +86,16 @@ def test_ekf_closed_loop_associates_the_true_walls(tmp_path):
     """EKF closed loop on 300 s of simulated harbour: the pairings against the true walls meet
     the issue's targets (precision 99 %, recall 95 %), and the tentative lines that seeded
     landmarks are reported as seeds, on their landmark's wall."""
-    from datasets.simulator import simulate
-    from datasets.source import open_dataset
-    from features.config import ExtractorConfig
-    from slam.backends.ekf import EkfConfig, LineEkf
-    from slam.eval.truth import association_against_truth, landmark_overshoot_m, truth_walls
-    from slam.run.closed_loop import run_closed_loop
+    from sonarslam.datasets.simulator import simulate
+    from sonarslam.datasets.source import open_dataset
+    from sonarslam.features.config import ExtractorConfig
+    from sonarslam.slam.backends.ekf import EkfConfig, LineEkf
+    from sonarslam.slam.eval.truth import (
+        association_against_truth,
+        landmark_overshoot_m,
+        truth_walls,
+    )
+    from sonarslam.slam.run.closed_loop import run_closed_loop
 
     ds = open_dataset(simulate("harbour", seed=4, out_dir=tmp_path / "h", duration_s=300.0))
     mount = ds.config.sonar_mounting
@@ -110,7 +114,7 @@ def test_ekf_closed_loop_associates_the_true_walls(tmp_path):
 @pytest.mark.parametrize("method", ["jcbb", "nn"])
 def test_a_pairing_ruled_out_by_the_back_end_is_never_made(method):
     """``allowed`` (e.g. the landmark's extent) overrides a perfect Mahalanobis match."""
-    from slam.mapping.association import AssociationConfig, AssociationProblem, associate
+    from sonarslam.slam.mapping.association import AssociationConfig, AssociationProblem, associate
 
     z = np.array([[5.0, 0.1], [8.0, 1.2]])
     R = np.broadcast_to(np.diag([0.01, 1e-4]), (2, 2, 2)).copy()
@@ -128,12 +132,12 @@ def test_a_line_seen_in_both_representations_gets_the_extent_it_was_seen_over(ba
     """A wall through the origin's neighbourhood (x = 0.05 m) is seen once as (rho, 0) and
     once as (rho', pi): their along-line axes are reversed. The landmark's extent must be the
     10 m stretch both saw, not their mirror images joined (40 m)."""
-    from features.geometry import compose, inverse, line_world_to_frame, transform_points
-    from features.line import LineFeature
-    from slam.backends.ekf import EkfConfig, LineEkf
-    from slam.backends.isam2.graph import GraphConfig, LineIsam2
-    from slam.model.motion import motion_step
-    from sonar.beam import Mounting
+    from sonarslam.features.geometry import compose, inverse, line_world_to_frame, transform_points
+    from sonarslam.features.line import LineFeature
+    from sonarslam.slam.backends.ekf import EkfConfig, LineEkf
+    from sonarslam.slam.backends.isam2.graph import GraphConfig, LineIsam2
+    from sonarslam.slam.model.motion import motion_step
+    from sonarslam.sonar.beam import Mounting
 
     pose = np.array([-8.0, 15.0, 0.0])
     P0 = np.diag([1e-4, 1e-4, 1e-6])

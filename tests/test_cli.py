@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 from evo.core.geometry import umeyama_alignment
 
-from datasets.simulator import simulate
-from datasets.source import open_dataset
-from slam.cli.main import build_parser, main
-from slam.eval.ate import ate_against_gps
-from slam.eval.truth import truth_trajectory
-from slam.io.trajectory import read_tum
-from slam.run.presets import SettingError, check_settings, run_config
-from slam.run.sources import dead_reckoning_trajectory
+from sonarslam.datasets.simulator import simulate
+from sonarslam.datasets.source import open_dataset
+from sonarslam.slam.cli.main import build_parser, main
+from sonarslam.slam.eval.ate import ate_against_gps
+from sonarslam.slam.eval.truth import truth_trajectory
+from sonarslam.slam.io.trajectory import read_tum
+from sonarslam.slam.run.presets import SettingError, check_settings, run_config
+from sonarslam.slam.run.sources import dead_reckoning_trajectory
 
 
 @pytest.fixture(scope="module")
@@ -147,7 +147,7 @@ def test_run_config_replaces_only_the_keys_it_gives(short_harbour, tmp_path, cap
     import math
     from dataclasses import replace
 
-    from datasets.config import load_dataset_config
+    from sonarslam.datasets.config import load_dataset_config
 
     ds = open_dataset(short_harbour)
     yaw_deg = math.degrees(ds.config.ahrs_mounting.yaw_rad) + 3.0

@@ -12,9 +12,9 @@ from types import ModuleType
 
 import pytest
 
-from datasets.source import Dataset
-from slam.eval.ate import ate_against_gps
-from slam.run.sources import dead_reckoning_trajectory
+from sonarslam.datasets.source import Dataset
+from sonarslam.slam.eval.ate import ate_against_gps
+from sonarslam.slam.run.sources import dead_reckoning_trajectory
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -16,7 +16,7 @@ name it, skip with a reason (as every marina test).
 
 How a shell line runs:
 
-* ``sonarslam ARGS``: ``slam.cli.main.main(ARGS)`` in this process (a process per command would
+* ``sonarslam ARGS``: ``sonarslam.slam.cli.main.main(ARGS)`` in this process (a process per command would
   cost seconds of imports each); it must exit 0;
 * ``make TARGET``: ``run`` is the quickstart above (its recipe checked; ``sonarslam demo --out
   out``, the recipe's command, is that same quickstart too); the other targets must
@@ -48,7 +48,7 @@ from pathlib import Path
 
 import pytest
 
-from slam.cli.main import build_parser, main
+from sonarslam.slam.cli.main import build_parser, main
 from tests.conftest import marina_root
 from tests.fuzz_inputs import marina_window
 

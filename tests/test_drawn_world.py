@@ -10,22 +10,29 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from datasets.simulator import World, drawn_world, make_scenario, make_world, simulate, survey
-from datasets.simulator.layout import LAP_RANGE_M, ROUTE_CLEARANCE_M
-from datasets.simulator.msis import render_intensities
-from datasets.simulator.path import route_samples
-from datasets.simulator.scenario import (
+from sonarslam.datasets.simulator import (
+    World,
+    drawn_world,
+    make_scenario,
+    make_world,
+    simulate,
+    survey,
+)
+from sonarslam.datasets.simulator.layout import LAP_RANGE_M, ROUTE_CLEARANCE_M
+from sonarslam.datasets.simulator.msis import render_intensities
+from sonarslam.datasets.simulator.path import route_samples
+from sonarslam.datasets.simulator.scenario import (
     AHRS_BIAS_SIGMA_DEG,
     DRIFT_DVL_SCALE_SIGMA,
     HELD_BACK_SEED_MIN,
     MARINA_HEAD,
 )
-from datasets.simulator.world import clearance_m, inside, loop_segments
-from features.geometry import wrap_angle
-from features.line import LineFeature
-from slam.eval.truth import association_scores, wall_lines
-from slam.io.trajectory import Trajectory
-from sonar.beam import Mounting
+from sonarslam.datasets.simulator.world import clearance_m, inside, loop_segments
+from sonarslam.features.geometry import wrap_angle
+from sonarslam.features.line import LineFeature
+from sonarslam.slam.eval.truth import association_scores, wall_lines
+from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.sonar.beam import Mounting
 
 # tuning seeds only: the held-back range is never looked at by the tests either
 SEEDS = range(0, 30)

@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from datasets.config import load_dataset_config
-from datasets.islog import read_is_log
-from datasets.logfile import read_table
-from datasets.simulator import (
+from sonarslam.datasets.config import load_dataset_config
+from sonarslam.datasets.islog import read_is_log
+from sonarslam.datasets.logfile import read_table
+from sonarslam.datasets.simulator import (
     DriftErrors,
     EchoModel,
     Simulation,
@@ -26,19 +26,24 @@ from datasets.simulator import (
     survey,
     write_dataset,
 )
-from datasets.simulator.msis import render_intensities
-from datasets.simulator.path import Trajectory
-from datasets.simulator.scenario import (
+from sonarslam.datasets.simulator.msis import render_intensities
+from sonarslam.datasets.simulator.path import Trajectory
+from sonarslam.datasets.simulator.scenario import (
     DRIFT_DVL_SCALE_SIGMA,
     DRIFT_ECHO_RANGE_OFFSET_M,
     DRIFT_HEADING_WALK_DEG_PER_SQRT_S,
     _seed_streams,
 )
-from datasets.simulator.sensors import simulate_dvl
-from datasets.simulator.world import DRIFT_ROTATION_RAD, clearance_m, inside, rotate_points
-from features.geometry import wrap_angle
-from slam.eval.truth import wall_lines_world
-from sonar.beam import Mounting, SonarHead
+from sonarslam.datasets.simulator.sensors import simulate_dvl
+from sonarslam.datasets.simulator.world import (
+    DRIFT_ROTATION_RAD,
+    clearance_m,
+    inside,
+    rotate_points,
+)
+from sonarslam.features.geometry import wrap_angle
+from sonarslam.slam.eval.truth import wall_lines_world
+from sonarslam.sonar.beam import Mounting, SonarHead
 
 SEED = 4
 

@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 from gtsam.symbol_shorthand import K
 
-from datasets.simulator.scenario import make_scenario
-from datasets.source import open_dataset
-from slam.backends.ekf import N_VEHICLE, EkfConfig, LineEkf
-from slam.backends.registry import backend_spec
-from slam.model.motion import MotionStep
-from slam.run.closed_loop import run_closed_loop
-from slam.run.presets import run_config
-from sonar.beam import Mounting
+from sonarslam.datasets.simulator.scenario import make_scenario
+from sonarslam.datasets.source import open_dataset
+from sonarslam.slam.backends.ekf import N_VEHICLE, EkfConfig, LineEkf
+from sonarslam.slam.backends.registry import backend_spec
+from sonarslam.slam.model.motion import MotionStep
+from sonarslam.slam.run.closed_loop import run_closed_loop
+from sonarslam.slam.run.presets import run_config
+from sonarslam.sonar.beam import Mounting
 
 
 @pytest.fixture(scope="module")

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter
 
-from slam.backends.ekf import N_VEHICLE, EkfConfig, LineEkf, scalar_joseph_update
-from slam.model.motion import MotionStep
-from sonar.beam import Mounting
+from sonarslam.slam.backends.ekf import N_VEHICLE, EkfConfig, LineEkf, scalar_joseph_update
+from sonarslam.slam.model.motion import MotionStep
+from sonarslam.sonar.beam import Mounting
 
 
 def _random_spd(rng: np.random.Generator, n: int) -> np.ndarray:

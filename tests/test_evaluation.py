@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from datasets.records import GpsSeries
-from slam.eval.ate import ate_against_gps
-from slam.eval.consistency import (
+from sonarslam.datasets.records import GpsSeries
+from sonarslam.slam.eval.ate import ate_against_gps
+from sonarslam.slam.eval.consistency import (
     anees,
     chi2_band,
     mean_nees_band,
@@ -16,8 +16,8 @@ from slam.eval.consistency import (
     nees_series,
     nis,
 )
-from slam.eval.evo_metrics import evo_ape, evo_rpe
-from slam.io.trajectory import (
+from sonarslam.slam.eval.evo_metrics import evo_ape, evo_rpe
+from sonarslam.slam.io.trajectory import (
     Trajectory,
     cov_file,
     load_run_trajectory,
@@ -172,7 +172,7 @@ def test_chi2_bands_match_the_tables():
 
 
 def test_nees_on_grid_takes_the_last_value_at_or_before():
-    from slam.eval.consistency import NeesSeries
+    from sonarslam.slam.eval.consistency import NeesSeries
 
     s = NeesSeries(T0_S + np.array([0.0, 1.0, 2.0, 3.0]), np.array([1.0, 2.0, 3.0, 4.0]), 3)
     got = nees_on_grid(s, T0_S, [0.0, 0.5, 1.5, 3.0, 4.0, 10.0])
@@ -236,9 +236,9 @@ def test_anees_counts_the_runs_present_at_each_time():
 def test_association_scores_on_known_pairings():
     from types import SimpleNamespace
 
-    from features.geometry import compose, line_world_to_frame
-    from slam.eval.truth import association_scores
-    from slam.io.trajectory import Trajectory
+    from sonarslam.features.geometry import compose, line_world_to_frame
+    from sonarslam.slam.eval.truth import association_scores
+    from sonarslam.slam.io.trajectory import Trajectory
 
     walls = np.array([[[-10.0, 5.0], [10.0, 5.0]], [[8.0, -10.0], [8.0, 10.0]]])  # y = 5, x = 8
     truth = Trajectory(np.array([0.0, 100.0]), np.array([[0.0, 0.0, 0.3], [1.0, 0.0, 0.3]]))
@@ -266,9 +266,9 @@ def test_association_scores_collinear_walls_are_one_line_and_seeds_are_not_misse
     landmark is not counted as a missed association (it is reported as a seed)."""
     from types import SimpleNamespace
 
-    from features.geometry import compose, line_world_to_frame
-    from slam.eval.truth import association_scores, wall_lines
-    from slam.io.trajectory import Trajectory
+    from sonarslam.features.geometry import compose, line_world_to_frame
+    from sonarslam.slam.eval.truth import association_scores, wall_lines
+    from sonarslam.slam.io.trajectory import Trajectory
 
     # y = 5 split in two collinear segments, and x = 8
     walls = np.array(
@@ -301,7 +301,7 @@ def test_association_scores_collinear_walls_are_one_line_and_seeds_are_not_misse
 def test_ate_over_a_span_and_against_the_truth_aligned_or_not():
     """The sonar-span ATE is the ATE of the fixes inside the span only; against the truth, a
     rigidly moved copy of the truth has the move's error, and none once aligned."""
-    from slam.eval.ate import ate_against_truth
+    from sonarslam.slam.eval.ate import ate_against_truth
 
     t = np.arange(0.0, 100.0, 1.0)
     truth = Trajectory(t, np.column_stack([np.cos(0.05 * t) * 20, np.sin(0.05 * t) * 10, 0 * t]))
@@ -342,11 +342,11 @@ def test_the_true_trajectory_projects_the_sharpest_map(simulated):
     entropy than with its second half turned by 2 deg about the midpoint, or with a drift that
     grows to 3 m; a rigid move of the whole trajectory leaves it (it holds no shape error); the
     whole-run figure is in a dead-reckoning run's metrics.json."""
-    from datasets.source import open_dataset
-    from slam.eval.sharpness import trajectory_sharpness
-    from slam.eval.truth import truth_trajectory
-    from slam.run.presets import map_min_intensity
-    from slam.run.run import run_backend
+    from sonarslam.datasets.source import open_dataset
+    from sonarslam.slam.eval.sharpness import trajectory_sharpness
+    from sonarslam.slam.eval.truth import truth_trajectory
+    from sonarslam.slam.run.presets import map_min_intensity
+    from sonarslam.slam.run.run import run_backend
 
     ds = open_dataset(simulated("harbour", 2, 300.0))
     truth = truth_trajectory(ds)

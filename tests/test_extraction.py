@@ -1,4 +1,4 @@
-"""``sonarslam extract`` and :mod:`slam.run.extraction`: presets, TOML over a preset, the 95 % band
+"""``sonarslam extract`` and :mod:`sonarslam.slam.run.extraction`: presets, TOML over a preset, the 95 % band
 of a segment, and an end-to-end run on a simulated harbour checked against its true walls."""
 
 from __future__ import annotations
@@ -10,16 +10,16 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from datasets.simulator import simulate
-from datasets.source import open_dataset
-from features.config import ExtractorConfig
-from features.geometry import inverse, line_frame_to_world, transform_points
-from features.line import LineFeature
-from slam.cli.main import main
-from slam.eval.lines import GATE_RAD, HARBOUR_GATE_M, match_features
-from slam.io.maps import segment_band_world
-from slam.run.presets import EXTRACTOR_PRESETS, extractor_config, preset_for
-from sonar.beam import SonarBeam
+from sonarslam.datasets.simulator import simulate
+from sonarslam.datasets.source import open_dataset
+from sonarslam.features.config import ExtractorConfig
+from sonarslam.features.geometry import inverse, line_frame_to_world, transform_points
+from sonarslam.features.line import LineFeature
+from sonarslam.slam.cli.main import main
+from sonarslam.slam.eval.lines import GATE_RAD, HARBOUR_GATE_M, match_features
+from sonarslam.slam.io.maps import segment_band_world
+from sonarslam.slam.run.presets import EXTRACTOR_PRESETS, extractor_config, preset_for
+from sonarslam.sonar.beam import SonarBeam
 
 # -- configuration ---------------------------------------------------------------------------
 

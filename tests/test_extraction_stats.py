@@ -11,10 +11,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from features.sector import BinsInR
-from features.uncertainty import LineEstimate, fit_line
-from slam.eval.consistency import mean_nees_band
-from slam.run.line_trials import TrialResult, harbour_trial, pool_trial
+from sonarslam.features.sector import BinsInR
+from sonarslam.features.uncertainty import LineEstimate, fit_line
+from sonarslam.slam.eval.consistency import mean_nees_band
+from sonarslam.slam.run.line_trials import TrialResult, harbour_trial, pool_trial
 
 POOL_SEEDS = range(4)  # the benchmark runs 50; four already give 64 lines per method
 RMS_RHO_MAX_M = 0.05  # the pool test's requirement

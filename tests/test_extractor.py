@@ -15,13 +15,13 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from features.config import ExtractorConfig
-from features.extractor import LineExtractor
-from features.geometry import compose, line_world_to_frame, wrap_angle
-from features.line import LineFeature
-from features.pose_source import PoseSource
-from slam.run.presets import EXTRACTOR_PRESETS
-from sonar.beam import Mounting, SonarBeam, SonarHead
+from sonarslam.features.config import ExtractorConfig
+from sonarslam.features.extractor import LineExtractor
+from sonarslam.features.geometry import compose, line_world_to_frame, wrap_angle
+from sonarslam.features.line import LineFeature
+from sonarslam.features.pose_source import PoseSource
+from sonarslam.slam.run.presets import EXTRACTOR_PRESETS
+from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead
 
 #: The marina keyframes' preset with the least-squares covariance (180 deg, 10 votes)
 MARINA_FIT = EXTRACTOR_PRESETS["marina-fit"]
@@ -460,7 +460,7 @@ class MutablePoses:
 
 
 def _segmented(ranges_bins: list[int]):  # type: ignore[no-untyped-def]
-    from sonar.segmentation import SegmentedBeam
+    from sonarslam.sonar.segmentation import SegmentedBeam
 
     b = np.asarray(ranges_bins, dtype=np.int64)
     return SegmentedBeam(b, b, np.full(b.size, 200, dtype=np.uint8))
@@ -468,9 +468,9 @@ def _segmented(ranges_bins: list[int]):  # type: ignore[no-untyped-def]
 
 @pytest.mark.parametrize("requery", [True, False])
 def test_store_ring_buffer_and_motion_correction(requery: bool) -> None:
-    from features.geometry import transform_points
-    from features.sector import Sector
-    from sonar.store import sector_beam_count
+    from sonarslam.features.geometry import transform_points
+    from sonarslam.features.sector import Sector
+    from sonarslam.sonar.store import sector_beam_count
 
     assert sector_beam_count(np.pi, np.deg2rad(0.9)) == 200
     assert sector_beam_count(1.5 * np.pi, np.deg2rad(0.45)) == 600

@@ -21,7 +21,7 @@ from gtsam.utils.numerical_derivative import (
 )
 from scipy.stats import chi2
 
-from features.geometry import (
+from sonarslam.features.geometry import (
     between,
     compose,
     inverse,
@@ -29,20 +29,25 @@ from features.geometry import (
     transform_points,
     wrap_angle,
 )
-from features.line import LineFeature
-from slam.backends.isam2.factors import heading_factor, line_factor, noise_model, odometry_factor
-from slam.backends.isam2.graph import GraphConfig, LineIsam2
-from slam.backends.isam2.graph_io import FactorKind, FactorRecord, load_graph
-from slam.backends.isam2.pose_source import smoothed_poses
-from slam.model.lines import (
+from sonarslam.features.line import LineFeature
+from sonarslam.slam.backends.isam2.factors import (
+    heading_factor,
+    line_factor,
+    noise_model,
+    odometry_factor,
+)
+from sonarslam.slam.backends.isam2.graph import GraphConfig, LineIsam2
+from sonarslam.slam.backends.isam2.graph_io import FactorKind, FactorRecord, load_graph
+from sonarslam.slam.backends.isam2.pose_source import smoothed_poses
+from sonarslam.slam.model.lines import (
     line_prediction,
     line_predictions,
     line_residual,
     local_to_world,
     sonar_side,
 )
-from slam.model.motion import motion_step
-from sonar.beam import Mounting
+from sonarslam.slam.model.motion import motion_step
+from sonarslam.sonar.beam import Mounting
 
 BTS = np.array([0.3, -0.1, np.pi])  # the sonar mounting of the synthetic runs (and the sims)
 
@@ -197,7 +202,7 @@ def test_odometry_agrees_with_gtsams_between_factor_without_misalignment_and_sca
 
 def test_odometry_translation_follows_the_gyro_scale():
     """The accumulated ``d(x, y)/d(scale)`` is the derivative of the integrated arc's end."""
-    from slam.model.motion import RelativeMotion
+    from sonarslam.slam.model.motion import RelativeMotion
 
     def arc(scale: float) -> RelativeMotion:
         m = RelativeMotion()
@@ -419,8 +424,8 @@ def test_between_nodes_the_pose_is_the_ekf_prediction():
     """One motion model: before the first node after X(0) the graph's current pose and
     covariance are X(0)'s marginal propagated by the same motion steps as the EKF's prediction
     (one held DVL sample over several steps included)."""
-    from slam.backends.ekf import POSE, EkfConfig, LineEkf
-    from slam.model.motion import motion_step
+    from sonarslam.slam.backends.ekf import POSE, EkfConfig, LineEkf
+    from sonarslam.slam.model.motion import motion_step
 
     rng = np.random.default_rng(21)
     cfg = GraphConfig()
@@ -453,7 +458,7 @@ def test_between_nodes_the_pose_is_the_ekf_prediction():
 
 
 def test_the_odometry_chain_interpolates_its_steps_and_holds_past_its_ends():
-    from slam.model.motion import OdometryChain
+    from sonarslam.slam.model.motion import OdometryChain
 
     chain = OdometryChain(0.0, capacity=2)  # forces buffer growth
     for k in range(1, 50):
@@ -541,19 +546,19 @@ def test_robust_kernel_downweights_a_wrong_line():
 def test_short_simulated_closed_loop_beats_dead_reckoning(tmp_path_factory):
     """300 s of harbour with a poor DVL (0.1 m/s, a dropout every 30 s) and no AHRS bias, so
     that drift, not the unobservable gauge, dominates the dead reckoning error."""
-    from datasets.simulator import make_scenario, simulate_records
-    from datasets.simulator.writer import write_dataset
-    from datasets.source import open_dataset
-    from features.config import ExtractorConfig
-    from slam.eval.ate import ate_against_gps
-    from slam.eval.truth import (
+    from sonarslam.datasets.simulator import make_scenario, simulate_records
+    from sonarslam.datasets.simulator.writer import write_dataset
+    from sonarslam.datasets.source import open_dataset
+    from sonarslam.features.config import ExtractorConfig
+    from sonarslam.slam.eval.ate import ate_against_gps
+    from sonarslam.slam.eval.truth import (
         association_against_truth,
         landmark_overshoot_m,
         truth_trajectory,
         truth_walls,
     )
-    from slam.run.closed_loop import run_closed_loop
-    from slam.run.sources import dead_reckoning_trajectory
+    from sonarslam.slam.run.closed_loop import run_closed_loop
+    from sonarslam.slam.run.sources import dead_reckoning_trajectory
 
     scenario = make_scenario("harbour", 3, 300.0)
     noise = replace(

@@ -12,12 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from datasets.errors import DataError, DataWarning
-from datasets.simulator import simulate
-from datasets.source import open_dataset
-from slam.cli.main import main
-from slam.io.files import atomic_path, write_json
-from slam.run.run import run_backend
+from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.simulator import simulate
+from sonarslam.datasets.source import open_dataset
+from sonarslam.slam.cli.main import main
+from sonarslam.slam.io.files import atomic_path, write_json
+from sonarslam.slam.run.run import run_backend
 from tests.fuzz_inputs import edit_log_rows
 
 GAP = (30.0, 60.0)  # s after the first row

@@ -17,12 +17,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from datasets.config import _SCHEMA as TOML_SCHEMA  # what each key of the file sets
-from datasets.config import load_dataset_config
-from datasets.errors import DataError
-from datasets.logfile import NUMBER, read_table
-from datasets.settings import SettingError
-from slam.run.presets import parse_settings
+from sonarslam.datasets.config import _SCHEMA as TOML_SCHEMA  # what each key of the file sets
+from sonarslam.datasets.config import load_dataset_config
+from sonarslam.datasets.errors import DataError
+from sonarslam.datasets.logfile import NUMBER, read_table
+from sonarslam.datasets.settings import SettingError
+from sonarslam.slam.run.presets import parse_settings
 from tests.fuzz_inputs import Mutation, build_seeds, ref_lines
 from tests.fuzz_oracles import check_toml, match_rows
 from tests.fuzzing import TARGETS, check_setting, fuzz, run_case, summarise

@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from features.geometry import (
+from sonarslam.features.geometry import (
     along_line,
     between,
     compose,

@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 from gtsam.symbol_shorthand import B
 
-from datasets.simulator import simulate
-from datasets.source import open_dataset
-from slam.backends.registry import backend_spec
-from slam.eval.truth import truth_trajectory
-from slam.model.motion import MotionStep
-from slam.run.run import run_backend
-from sonar.beam import Mounting
+from sonarslam.datasets.simulator import simulate
+from sonarslam.datasets.source import open_dataset
+from sonarslam.slam.backends.registry import backend_spec
+from sonarslam.slam.eval.truth import truth_trajectory
+from sonarslam.slam.model.motion import MotionStep
+from sonarslam.slam.run.run import run_backend
+from sonarslam.sonar.beam import Mounting
 
 WALK_DEG = 0.2  # deg / sqrt(s)
 

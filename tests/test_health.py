@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from slam.eval.health import (
+from sonarslam.slam.eval.health import (
     HealthConfig,
     HealthInputs,
     NisStream,
@@ -18,7 +18,7 @@ from slam.eval.health import (
     assess,
     median_lower_bound,
 )
-from slam.io.trajectory import Trajectory
+from sonarslam.slam.io.trajectory import Trajectory
 
 T0 = 1.7e9
 DURATION_S = 1200.0
@@ -151,7 +151,7 @@ def test_the_median_bound_holds_its_level() -> None:
 
 
 def test_the_warnings_name_the_span_and_the_cause() -> None:
-    from datasets.errors import DataWarning
+    from sonarslam.datasets.errors import DataWarning
 
     rng = np.random.default_rng(7)
     report = assess(_inputs(rng, states=[StateValue("AHRS bias", 50.0, 2.0, "deg")]))
@@ -174,9 +174,9 @@ def gyro_harbour(tmp_path_factory):
     0.01 rad/s; and the same world with a clean gyro."""
     import warnings
 
-    from datasets.simulator import make_scenario, simulate_records
-    from datasets.simulator.writer import write_dataset
-    from datasets.source import open_dataset
+    from sonarslam.datasets.simulator import make_scenario, simulate_records
+    from sonarslam.datasets.simulator.writer import write_dataset
+    from sonarslam.datasets.source import open_dataset
 
     scenario = make_scenario("harbour", 10001, 300.0)
     out = {}
@@ -192,7 +192,7 @@ def gyro_harbour(tmp_path_factory):
 def _quiet_run(ds, backend, settings=None):
     import warnings
 
-    from slam.run.run import run_backend
+    from sonarslam.slam.run.run import run_backend
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -223,10 +223,10 @@ def test_an_unmodelled_gyro_bias_with_a_walking_ahrs_bias_trips_the_monitor(gyro
 def test_isam2_without_a_gyro_bias_state_is_flagged_on_a_biased_gyro(gyro_harbour):
     """The runner refuses isam2 with the gyro and a walking AHRS bias; run through the closed
     loop anyway, the monitor flags it."""
-    from slam.backends.registry import backend_spec
-    from slam.run.closed_loop import run_closed_loop
-    from slam.run.health import monitor_run
-    from slam.run.presets import run_config
+    from sonarslam.slam.backends.registry import backend_spec
+    from sonarslam.slam.run.closed_loop import run_closed_loop
+    from sonarslam.slam.run.health import monitor_run
+    from sonarslam.slam.run.presets import run_config
 
     ds = gyro_harbour["biased"]
     noise = replace(ds.config.noise, ahrs_bias_walk_deg_per_sqrt_s=0.15)
@@ -244,7 +244,7 @@ def test_isam2_without_a_gyro_bias_state_is_flagged_on_a_biased_gyro(gyro_harbou
 
 
 def test_strict_exits_1_on_an_unhealthy_run_and_still_writes_it(gyro_harbour, tmp_path, capsys):
-    from slam.cli.main import main
+    from sonarslam.slam.cli.main import main
 
     walk = tmp_path / "walk.toml"
     walk.write_text("[noise]\nahrs_bias_walk_deg_per_sqrt_s = 0.15\n")

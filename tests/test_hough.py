@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from features.geometry import normalize_line, wrap_angle
-from features.hough import (
+from sonarslam.features.geometry import normalize_line, wrap_angle
+from sonarslam.features.hough import (
     HoughGrid,
     accumulate,
     auto_h_bearings,

@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from features.geometry import compose, inverse, line_world_to_frame, transform_points
-from features.line import LineFeature
-from slam.backends.ekf import EkfConfig, LineEkf
-from slam.backends.isam2.graph import GraphConfig, LineIsam2
-from slam.model.motion import motion_step
-from sonar.beam import Mounting
+from sonarslam.features.geometry import compose, inverse, line_world_to_frame, transform_points
+from sonarslam.features.line import LineFeature
+from sonarslam.slam.backends.ekf import EkfConfig, LineEkf
+from sonarslam.slam.backends.isam2.graph import GraphConfig, LineIsam2
+from sonarslam.slam.model.motion import motion_step
+from sonarslam.sonar.beam import Mounting
 
 R_LINE = np.diag([0.05**2, np.deg2rad(0.5) ** 2])
 

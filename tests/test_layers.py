@@ -1,8 +1,12 @@
 """The architecture, enforced: data flows one way (datasets -> sonar -> features -> slam), the
 layers inside ``slam`` import only downwards, and no import hides inside a function.
 
-Every module of the four packages is parsed (not imported); every ``import``/``from ... import``
-of a project package is an edge. The allowed edges:
+The four packages are the layers of the one import namespace, ``sonarslam.sonar``,
+``sonarslam.features``, ``sonarslam.datasets`` and ``sonarslam.slam`` (the folders ``sonar/``,
+``features/``, ``datasets/`` and ``slam/``); the rules below name them without the prefix. Every
+module of the four is parsed (not imported); every ``import``/``from ... import`` of a project
+package is an edge, and a project package is only ever imported through ``sonarslam.``. The
+allowed edges:
 
 * ``sonar`` imports nothing of the project but itself;
 * ``features`` imports ``sonar`` and itself;
@@ -27,7 +31,11 @@ PACKAGES = ("sonar", "features", "datasets", "slam")
 SLAM_LAYERS = ("io", "model", "mapping", "backends", "eval", "run", "cli")
 
 
+NAMESPACE = "sonarslam"
+
+
 def _modules() -> list[tuple[str, Path]]:
+    """``(layer-relative module name, path)``: ``slam.run.run`` for ``sonarslam.slam.run.run``."""
     out = []
     for pkg in PACKAGES:
         for path in sorted((ROOT / pkg).rglob("*.py")):
@@ -35,6 +43,12 @@ def _modules() -> list[tuple[str, Path]]:
             name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
             out.append((name, path))
     return out
+
+
+def _layer_name(imported: str) -> str | None:
+    """The layer-relative name of a ``sonarslam.<layer>...`` import, else None."""
+    head, _, rest = imported.partition(".")
+    return rest if head == NAMESPACE and rest else None
 
 
 def _imports(path: Path) -> list[tuple[str, int, bool]]:
@@ -93,9 +107,14 @@ def test_imports_flow_one_way_and_none_hides_in_a_function(name: str, path: Path
     lines = path.read_text().splitlines()
     for imported, lineno, in_function in _imports(path):
         where = f"{path.relative_to(ROOT)}:{lineno}"
-        assert _allowed(name, imported), f"{where}: {name} must not import {imported}"
+        bare = imported.split(".")[0] in PACKAGES
+        assert not bare, f"{where}: {imported} is imported as sonarslam.{imported}"
+        assert imported != NAMESPACE, f"{where}: a layer imports the sonarslam facade"
+        layered = _layer_name(imported)
+        if layered is not None:
+            assert _allowed(name, layered), f"{where}: {name} must not import {imported}"
         if in_function:
-            project = imported.split(".")[0] in PACKAGES
+            project = layered is not None
             assert not project, f"{where}: import of {imported} inside a function hides an edge"
             assert "#" in lines[lineno - 1], f"{where}: a lazy import says why on its line"
 
@@ -111,10 +130,10 @@ def test_the_rules_catch_a_wrong_edge():
 
 def test_the_landmark_layer_imports_nothing_of_the_back_ends():
     """The landmark layer decides a vote from the back end's belief and hands back a decision
-    (:mod:`slam.mapping.vote`): no import of ``slam.backends`` at all, not even for types."""
+    (:mod:`sonarslam.slam.mapping.vote`): no import of ``slam.backends`` at all, not even for types."""
     assert not _allowed("slam.mapping.landmarks", "slam.backends.base")
     mapping = [(n, p) for n, p in MODULES if n.startswith("slam.mapping")]
     assert len(mapping) >= 4
     for name, path in mapping:
-        found = [m for m, _, _ in _imports(path) if m.startswith("slam.backends")]
+        found = [m for m, _, _ in _imports(path) if m.startswith("sonarslam.slam.backends")]
         assert found == [], f"{name} imports {found}"

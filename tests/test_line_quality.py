@@ -9,10 +9,10 @@ import json
 import numpy as np
 import pytest
 
-from datasets.errors import DataError
-from datasets.simulator import make_scenario, simulate_records
-from datasets.simulator.world import inside
-from features.geometry import (
+from sonarslam.datasets.errors import DataError
+from sonarslam.datasets.simulator import make_scenario, simulate_records
+from sonarslam.datasets.simulator.world import inside
+from sonarslam.features.geometry import (
     compose,
     inverse,
     line_world_to_frame,
@@ -20,10 +20,15 @@ from features.geometry import (
     transform_points,
     wrap_angle,
 )
-from features.line import LineFeature
-from slam.eval.consistency import chi2_gate
-from slam.eval.leading_edges import EdgeConfig, Edges, leading_edge_beams, leading_edge_points
-from slam.eval.line_quality import (
+from sonarslam.features.line import LineFeature
+from sonarslam.slam.eval.consistency import chi2_gate
+from sonarslam.slam.eval.leading_edges import (
+    EdgeConfig,
+    Edges,
+    leading_edge_beams,
+    leading_edge_points,
+)
+from sonarslam.slam.eval.line_quality import (
     AssociationGates,
     ScanReference,
     associate,
@@ -33,13 +38,13 @@ from slam.eval.line_quality import (
     scan_lines,
     walls_from_segments,
 )
-from slam.eval.line_stats import error_stats
-from slam.eval.truth import wall_lines_world
-from slam.eval.walls import WallReference, fit_walls, wall_references, water_side
-from slam.io.lines import read_lines_jsonl
-from slam.io.trajectory import Trajectory
-from slam.run.sources import gps_ahrs_trajectory
-from sonar.beam import SonarBeam, SonarHead
+from sonarslam.slam.eval.line_stats import error_stats
+from sonarslam.slam.eval.truth import wall_lines_world
+from sonarslam.slam.eval.walls import WallReference, fit_walls, wall_references, water_side
+from sonarslam.slam.io.lines import read_lines_jsonl
+from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.run.sources import gps_ahrs_trajectory
+from sonarslam.sonar.beam import SonarBeam, SonarHead
 
 T0_S = 1.7e9
 #: A basin of 60 m x 30 m, water inside: four walls whose water side is the centre's.

@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from datasets.records import AttitudeSeries, DvlSeries
-from features.geometry import wrap_angle
-from slam.eval.ate import ate_against_gps
-from slam.model.motion import (
+from sonarslam.datasets.records import AttitudeSeries, DvlSeries
+from sonarslam.features.geometry import wrap_angle
+from sonarslam.slam.eval.ate import ate_against_gps
+from sonarslam.slam.model.motion import (
     RelativeMotion,
     body_velocity,
     dead_reckoning,
@@ -18,13 +18,13 @@ from slam.model.motion import (
     step_displacement,
     velocity_input,
 )
-from slam.model.noise import (
+from sonarslam.slam.model.noise import (
     MotionNoise,
     held_velocity_variance_step,
     held_velocity_variance_step_float,
 )
-from slam.run.sources import dead_reckoning_trajectory
-from sonar.beam import Mounting
+from sonarslam.slam.run.sources import dead_reckoning_trajectory
+from sonarslam.sonar.beam import Mounting
 from tests.conftest import needs_marina
 
 DVL_MOUNT = Mounting(yaw_rad=-np.pi / 2)  # DVL x to starboard, as the marina's
@@ -158,8 +158,8 @@ def test_marina_dead_reckoning_with_the_gps_free_calibration(marina):
 
 
 def test_anchored_odometry_is_the_chain_anchored_at_the_estimate():
-    from features.geometry import compose, inverse
-    from slam.backends.base import AnchoredOdometry
+    from sonarslam.features.geometry import compose, inverse
+    from sonarslam.slam.backends.base import AnchoredOdometry
 
     rng = np.random.default_rng(5)
     steps = np.column_stack(
@@ -186,11 +186,11 @@ def test_ekf_recovers_a_dvl_mounting_error(tmp_path):
     import math
     from dataclasses import replace
 
-    from datasets.simulator import simulate
-    from datasets.source import open_dataset
-    from features.config import ExtractorConfig
-    from slam.backends.ekf import EkfConfig, LineEkf
-    from slam.run.closed_loop import run_closed_loop
+    from sonarslam.datasets.simulator import simulate
+    from sonarslam.datasets.source import open_dataset
+    from sonarslam.features.config import ExtractorConfig
+    from sonarslam.slam.backends.ekf import EkfConfig, LineEkf
+    from sonarslam.slam.run.closed_loop import run_closed_loop
 
     ds = open_dataset(simulate("harbour", seed=1, out_dir=tmp_path / "h", duration_s=400.0))
     c = ds.config
@@ -220,9 +220,9 @@ def biased_gyro_harbour(tmp_path_factory):
     """300 s of harbour whose AHRS yaw rate has the marina MTi's bias (0.01 rad/s)."""
     from dataclasses import replace
 
-    from datasets.simulator import make_scenario, simulate_records
-    from datasets.simulator.writer import write_dataset
-    from datasets.source import open_dataset
+    from sonarslam.datasets.simulator import make_scenario, simulate_records
+    from sonarslam.datasets.simulator.writer import write_dataset
+    from sonarslam.datasets.source import open_dataset
 
     scenario = make_scenario("harbour", 2, 300.0)
     noise = replace(scenario.noise, ahrs_gyro_bias_radps=0.01)
@@ -237,11 +237,11 @@ def _biased_gyro_runs(ds0, backend):
     per source the median heading error (deg), the mean position error (m), the result."""
     from dataclasses import replace
 
-    from features.config import ExtractorConfig
-    from slam.backends.ekf import EkfConfig, LineEkf
-    from slam.backends.isam2.graph import GraphConfig, LineIsam2
-    from slam.eval.truth import truth_trajectory
-    from slam.run.closed_loop import run_closed_loop
+    from sonarslam.features.config import ExtractorConfig
+    from sonarslam.slam.backends.ekf import EkfConfig, LineEkf
+    from sonarslam.slam.backends.isam2.graph import GraphConfig, LineIsam2
+    from sonarslam.slam.eval.truth import truth_trajectory
+    from sonarslam.slam.run.closed_loop import run_closed_loop
 
     assert ds0.config.yaw_rate_source == "gyro"  # the simulator's toml: the neutral default
     runs = {}
@@ -294,10 +294,10 @@ def test_ahrs_yaw_from_a_deviated_dvl_compass(tmp_path):
     import math
     from dataclasses import replace
 
-    from datasets.simulator import make_scenario, simulate_records
-    from datasets.simulator.writer import write_dataset
-    from datasets.source import open_dataset
-    from slam.run.calibration import calibrate_ahrs_yaw
+    from sonarslam.datasets.simulator import make_scenario, simulate_records
+    from sonarslam.datasets.simulator.writer import write_dataset
+    from sonarslam.datasets.source import open_dataset
+    from sonarslam.slam.run.calibration import calibrate_ahrs_yaw
 
     # the compasses alone: few sonar beams (each sensor draws from its own stream, so the
     # DVL and AHRS samples are those of the full beam rate)
@@ -321,7 +321,7 @@ def test_marina_ahrs_mounting_is_the_compass_fit(marina):
     """The configured AHRS yaw is what ``sonarslam calibrate --ahrs`` finds, GPS-free."""
     import math
 
-    from slam.run.calibration import calibrate_ahrs_yaw
+    from sonarslam.slam.run.calibration import calibrate_ahrs_yaw
 
     fit = calibrate_ahrs_yaw(marina)
     assert math.degrees(fit.ahrs_yaw_rad) == pytest.approx(
@@ -336,10 +336,10 @@ def test_ahrs_deviation_self_calibration_from_sonar_lines(tmp_path):
     import math
     from dataclasses import replace
 
-    from datasets.simulator import make_scenario, simulate_records
-    from datasets.simulator.writer import write_dataset
-    from datasets.source import open_dataset
-    from slam.run.calibration import calibrate_ahrs_deviation
+    from sonarslam.datasets.simulator import make_scenario, simulate_records
+    from sonarslam.datasets.simulator.writer import write_dataset
+    from sonarslam.datasets.source import open_dataset
+    from sonarslam.slam.run.calibration import calibrate_ahrs_deviation
 
     scenario = make_scenario("harbour", 1, 400.0)  # (-1.99, 2.25) deg found; 600 s: (-2.44, 2.51)
     noise = replace(scenario.noise, ahrs_bias_deg=0.0, ahrs_deviation_deg=(-2.0, 2.5))
@@ -358,7 +358,7 @@ def test_ahrs_deviation_self_calibration_from_sonar_lines(tmp_path):
 def test_dvl_scatter_is_the_white_noise_sigma():
     """On a slowly varying velocity with white noise of 0.3 m/s per axis, the scatter over
     60 s (~90 samples) is 0.3 within 20 % (its sampling error is ~7 %)."""
-    from slam.model.noise import dvl_scatter
+    from sonarslam.slam.model.noise import dvl_scatter
 
     rng = np.random.default_rng(11)
     t = np.cumsum(rng.uniform(0.6, 0.75, 3000))
@@ -370,7 +370,7 @@ def test_dvl_scatter_is_the_white_noise_sigma():
 
 
 def test_dvl_sample_sigma_adds_only_the_excess_scatter():
-    from slam.model.noise import dvl_sample_sigma
+    from sonarslam.slam.model.noise import dvl_sample_sigma
 
     rng = np.random.default_rng(12)
     t = np.arange(4000) * 0.66
@@ -391,7 +391,7 @@ def test_dvl_sample_sigma_adds_only_the_excess_scatter():
 def test_anchored_odometry_covariance_grows_with_the_chain():
     """Differences of the odometry's covariance are the variance chained between two times
     (what the extractor's relative pose uncertainty takes); the anchor's cancels."""
-    from slam.backends.base import AnchoredOdometry
+    from sonarslam.slam.backends.base import AnchoredOdometry
 
     odo = AnchoredOdometry(0.0, np.zeros(3), capacity=4)
     assert odo.covariance(0.0) is None  # no anchor covariance yet: no covariance
@@ -410,10 +410,10 @@ def test_dead_reckoning_stays_consistent_when_the_dvl_degrades(tmp_path):
     scatter taken as noise (mean over 5 seeds, so that one random walk does not decide)."""
     from dataclasses import replace
 
-    from datasets.simulator import make_scenario, simulate_records
-    from datasets.simulator.writer import write_dataset
-    from datasets.source import open_dataset
-    from slam.eval.truth import truth_trajectory
+    from sonarslam.datasets.simulator import make_scenario, simulate_records
+    from sonarslam.datasets.simulator.writer import write_dataset
+    from sonarslam.datasets.source import open_dataset
+    from sonarslam.slam.eval.truth import truth_trajectory
 
     nees_on, nees_off = [], []
     for seed in range(5):

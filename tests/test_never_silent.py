@@ -17,13 +17,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from datasets.errors import DataError, DataWarning
-from datasets.keyframes import read_keyframe_times, read_pcd
-from datasets.logfile import NUMBER, iter_tables, read_table
-from datasets.simulator import simulate
-from datasets.source import open_dataset
-from slam.cli.main import main
-from slam.io.files import atomic_path, make_output_dir, remove_stale_temporaries
+from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.keyframes import read_keyframe_times, read_pcd
+from sonarslam.datasets.logfile import NUMBER, iter_tables, read_table
+from sonarslam.datasets.simulator import simulate
+from sonarslam.datasets.source import open_dataset
+from sonarslam.slam.cli.main import main
+from sonarslam.slam.io.files import atomic_path, make_output_dir, remove_stale_temporaries
 from tests.fuzz_inputs import edit_log_rows
 
 #: Where the docs state the readers' rules (README.md links it).
@@ -110,8 +110,8 @@ def test_a_setting_out_of_range_names_the_file_key_and_line(
 
 
 def test_the_back_ends_take_every_scale_sigma_the_file_takes():
-    from datasets.config import DVL_SCALE_SIGMA_MAX, NoiseConfig
-    from slam.backends.ekf import EkfConfig
+    from sonarslam.datasets.config import DVL_SCALE_SIGMA_MAX, NoiseConfig
+    from sonarslam.slam.backends.ekf import EkfConfig
 
     top = np.nextafter(DVL_SCALE_SIGMA_MAX, 0.0)
     assert EkfConfig(dvl_scale_sigma=NoiseConfig(dvl_scale_sigma=top).dvl_scale_sigma)
@@ -125,8 +125,8 @@ def test_isam2_refuses_the_gyro_with_a_walking_bias_up_front(harbour, tmp_path, 
     simulated gyro with the marina MTi's 0.01 rad/s is refused, an unbiased one is not."""
     from dataclasses import replace
 
-    from datasets.simulator import make_scenario, simulate_records
-    from datasets.simulator.writer import write_dataset
+    from sonarslam.datasets.simulator import make_scenario, simulate_records
+    from sonarslam.datasets.simulator.writer import write_dataset
 
     scenario = make_scenario("harbour", 4, 100.0)
     biased = replace(scenario, noise=replace(scenario.noise, ahrs_gyro_bias_radps=0.01))
@@ -138,7 +138,7 @@ def test_isam2_refuses_the_gyro_with_a_walking_bias_up_front(harbour, tmp_path, 
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert "the gyro reads +0.5" in err and "no gyro-bias state" in err
     assert not (tmp_path / "o").exists()
-    from slam.run.presets import check_combination
+    from sonarslam.slam.run.presets import check_combination
 
     unbiased = open_dataset(harbour, config_override=config)
     assert unbiased.config.yaw_rate_source == "gyro"
@@ -146,7 +146,7 @@ def test_isam2_refuses_the_gyro_with_a_walking_bias_up_front(harbour, tmp_path, 
 
 
 def test_dead_reckoning_names_the_settings_it_ignores(harbour, tmp_path, capsys):
-    from slam.run.sources import DR_IGNORES
+    from sonarslam.slam.run.sources import DR_IGNORES
 
     assert main(["info", str(harbour)]) == 0
     assert "[motion] yaw_rate_source" in capsys.readouterr().out
@@ -271,9 +271,9 @@ def _keyframes(folder: Path, points: list[tuple[int, int]]) -> np.ndarray:
 
 
 def test_the_keyframe_cache_is_used_and_rebuilt_when_a_source_changes(tmp_path, monkeypatch):
-    from datasets.cache import cache_file
-    from datasets.keyframes import read_keyframes
-    from sonar.beam import SonarHead
+    from sonarslam.datasets.cache import cache_file
+    from sonarslam.datasets.keyframes import read_keyframes
+    from sonarslam.sonar.beam import SonarHead
 
     monkeypatch.delenv("SONARSLAM_CACHE", raising=False)
     head = SonarHead(n_bins=500, bin_size_m=0.1, step_rad=np.deg2rad(1.8))
@@ -310,7 +310,7 @@ def test_the_keyframe_cache_is_used_and_rebuilt_when_a_source_changes(tmp_path, 
 
 
 def test_a_back_ends_write_error_names_the_folder(tmp_path):
-    from slam.io.files import write_files_into
+    from sonarslam.slam.io.files import write_files_into
 
     def full(folder: Path) -> None:
         raise OSError(errno.ENOSPC, "No space left on device")

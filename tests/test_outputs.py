@@ -16,11 +16,11 @@ import gtsam
 import numpy as np
 import pytest
 
-from datasets.simulator import simulate
-from slam.backends.isam2.g2o import G2O_EDGE_TYPES, graph_json_to_g2o
-from slam.backends.isam2.graph_io import FactorRecord, key_of, load_graph
-from slam.run.metrics import RunMetrics
-from slam.run.run import run
+from sonarslam.datasets.simulator import simulate
+from sonarslam.slam.backends.isam2.g2o import G2O_EDGE_TYPES, graph_json_to_g2o
+from sonarslam.slam.backends.isam2.graph_io import FactorRecord, key_of, load_graph
+from sonarslam.slam.run.metrics import RunMetrics
+from sonarslam.slam.run.run import run
 
 ROOT = Path(__file__).resolve().parents[1]
 EVO_APE = Path(sys.executable).parent / "evo_ape"
@@ -148,7 +148,7 @@ def test_every_output_file_is_in_the_docs_table(runs):
 
 def test_the_docs_key_table_is_the_keys_run_metrics_writes():
     """docs/outputs.md's ``metrics.json`` table names exactly the keys (and key patterns) of
-    :class:`slam.run.metrics.RunMetrics`' records, both ways."""
+    :class:`sonarslam.slam.run.metrics.RunMetrics`' records, both ways."""
     text = _outputs_page()
     part = text[text.index("`metrics.json` (one object") : text.index("## With evo")]
     rows = re.findall(r"^\| (`[^|]+`) \|", part, re.M)
@@ -165,7 +165,7 @@ def test_metrics_record_the_code_settings_and_data_of_the_run(runs):
     import hashlib
     from importlib.metadata import version
 
-    from slam.run.provenance import settings_digest
+    from sonarslam.slam.run.provenance import settings_digest
 
     r = runs["isam2"]
     p = json.loads((r.out_dir / "metrics.json").read_text())["provenance"]

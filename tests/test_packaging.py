@@ -11,7 +11,7 @@ from pathlib import Path
 from packaging.requirements import Requirement
 from packaging.utils import canonicalize_name
 
-from slam.cli.main import build_parser
+from sonarslam.slam.cli.main import build_parser
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -49,7 +49,7 @@ def test_supported_pythons_declared() -> None:
 
 
 def test_packages_are_typed() -> None:
-    for package in ("sonar", "features", "slam", "datasets"):
+    for package in ("sonarslam", "sonar", "features", "slam", "datasets"):
         assert (ROOT / package / "py.typed").is_file(), package
 
 
@@ -99,7 +99,7 @@ def test_venv_is_rebuilt_only_when_the_python_version_changes(tmp_path: Path) ->
 
 def test_version_flag() -> None:
     out = subprocess.run(
-        [sys.executable, "-m", "slam.cli.main", "--version"],
+        [sys.executable, "-m", "sonarslam.slam.cli.main", "--version"],
         capture_output=True,
         text=True,
         cwd=ROOT,

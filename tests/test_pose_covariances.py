@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from features.pose_source import BatchCovariances, PoseSource, pose_covariances
-from slam.backends.base import AnchoredOdometry
-from slam.backends.isam2.pose_source import NodeTable, SmoothedPoseSource
-from slam.io.trajectory import Trajectory
-from slam.model.motion import OdometryChain
+from sonarslam.features.pose_source import BatchCovariances, PoseSource, pose_covariances
+from sonarslam.slam.backends.base import AnchoredOdometry
+from sonarslam.slam.backends.isam2.pose_source import NodeTable, SmoothedPoseSource
+from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.model.motion import OdometryChain
 
 
 def _odometry(rng: np.random.Generator) -> tuple[AnchoredOdometry, np.ndarray]:

@@ -9,19 +9,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from datasets.config import load_dataset_config
-from datasets.errors import DataError, DataWarning
-from datasets.geodesy import (
+from sonarslam.datasets.config import load_dataset_config
+from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.geodesy import (
     ddmm_to_degrees,
     degrees_to_ddmm,
     geodetic_to_local_en,
     local_en_to_geodetic,
 )
-from datasets.islog import read_is_log, write_is_log
-from datasets.keyframes import read_pcd_xy
-from datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti
-from datasets.source import open_dataset
-from sonar.beam import SonarBeam
+from sonarslam.datasets.islog import read_is_log, write_is_log
+from sonarslam.datasets.keyframes import read_pcd_xy
+from sonarslam.datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti
+from sonarslam.datasets.source import open_dataset
+from sonarslam.sonar.beam import SonarBeam
 from tests.conftest import marina_root, needs_marina
 
 DVL_ROW = "1093455407.147\t\t2007 3 16 13 0 56 38.20 -47.00 1.80 1 6.10 -4.90 2.80 1 1.84 1.88 1.86 143.00 142.00 149.00 100 207.70 -0.50 1.60 14.27 1488.00 12.80 0.50 1.50 0.08 -0.25"
@@ -242,7 +242,7 @@ def test_config_errors_name_file_and_key(tmp_path):
     path.write_text("[motion]\nyaw_rate_source = 'heading'\n")
     assert load_dataset_config(path).yaw_rate_source == "heading"
     # what the dump writes reads back the same
-    from datasets.config import MARINA_CONFIG, dump_dataset_config
+    from sonarslam.datasets.config import MARINA_CONFIG, dump_dataset_config
 
     path.write_text(dump_dataset_config(MARINA_CONFIG))
     back = load_dataset_config(path)
@@ -285,7 +285,7 @@ def test_named_source_needs_the_environment(monkeypatch):
 
 
 def test_partial_toml_does_not_inherit_the_marina_calibration(tmp_path):
-    from datasets.simulator import simulate
+    from sonarslam.datasets.simulator import simulate
 
     src = simulate("harbour", seed=2, out_dir=tmp_path / "h", duration_s=30.0)
     toml = src / "sonarslam.toml"

@@ -11,18 +11,18 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from datasets.simulator import simulate
-from slam.cli.main import main
-from slam.eval.ate import truth_errors
-from slam.eval.consistency import nees_series
-from slam.eval.evo_metrics import evo_ape
-from slam.eval.published import PUBLISHED
-from slam.eval.truth import truth_trajectory
-from slam.io.maps import landmark_band_world
-from slam.io.trajectory import cov_file, read_tum
-from slam.run.report import report
-from slam.run.report_data import load_run
-from slam.run.run import run
+from sonarslam.datasets.simulator import simulate
+from sonarslam.slam.cli.main import main
+from sonarslam.slam.eval.ate import truth_errors
+from sonarslam.slam.eval.consistency import nees_series
+from sonarslam.slam.eval.evo_metrics import evo_ape
+from sonarslam.slam.eval.published import PUBLISHED
+from sonarslam.slam.eval.truth import truth_trajectory
+from sonarslam.slam.io.maps import landmark_band_world
+from sonarslam.slam.io.trajectory import cov_file, read_tum
+from sonarslam.slam.run.report import report
+from sonarslam.slam.run.report_data import load_run
+from sonarslam.slam.run.run import run
 
 
 @pytest.fixture(scope="module")
@@ -71,7 +71,7 @@ def test_band_of_a_landmark_is_the_95_percent_envelope():
 def test_a_segment_is_drawn_over_what_its_bins_show():
     """A landmark whose extent runs 20 m past its bins into open water is drawn to where the
     bins within its 95 % half width stop; bins of another wall, off the line, do not count."""
-    from slam.io.maps import landmark_layers, seen_extent
+    from sonarslam.slam.io.maps import landmark_layers, seen_extent
 
     lm = {"rho": 10.0, "theta": np.pi / 2, "cov": [[0.04, 0.0], [0.0, 1e-6]]}
     lm["endpoints"] = [[-30.0, 10.0], [30.0, 10.0]]  # the line y = 10 from x = -30 to 30
@@ -119,7 +119,7 @@ def test_report_table_holds_each_runs_numbers(runs, tmp_path):
     first = (t - t[0]) < 300.0
     assert _row(md, "ekf", column=0)[1] == f"{e[first].mean():.2f} / {e[first].max():.2f}"
     # each error band says which covariance model it is: different ones for dr and a closed loop
-    from slam.run.report_figures import band_model
+    from sonarslam.slam.run.report_figures import band_model
 
     assert "with its AHRS-bias state (sd" in band_model(
         load_run(ekf.out_dir, open_source=False), "EKF"

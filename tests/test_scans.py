@@ -14,20 +14,20 @@ import numpy as np
 import pytest
 from gtsam.symbol_shorthand import X
 
-from datasets.simulator import make_scenario, simulate_records
-from datasets.simulator.writer import write_dataset
-from datasets.source import open_dataset
-from features.geometry import between, compose, inverse, transform_points, wrap_angle
-from features.scans import ScanConfig, ScanMatcher, reference_lines, register
-from features.scans.icp import _median, register_from
-from slam.backends.isam2.g2o import graph_json_to_g2o
-from slam.backends.isam2.graph_io import FactorKind, FactorRecord, Robust
-from slam.backends.isam2.scans import radial_gate_distance, relative_pose_covariance
-from slam.eval.consistency import mean_nees_band
-from slam.eval.truth import truth_trajectory
-from slam.model.lines import local_to_world
-from slam.run.run import run_backend
-from sonar.beam import Mounting, SonarBeam, SonarHead
+from sonarslam.datasets.simulator import make_scenario, simulate_records
+from sonarslam.datasets.simulator.writer import write_dataset
+from sonarslam.datasets.source import open_dataset
+from sonarslam.features.geometry import between, compose, inverse, transform_points, wrap_angle
+from sonarslam.features.scans import ScanConfig, ScanMatcher, reference_lines, register
+from sonarslam.features.scans.icp import _median, register_from
+from sonarslam.slam.backends.isam2.g2o import graph_json_to_g2o
+from sonarslam.slam.backends.isam2.graph_io import FactorKind, FactorRecord, Robust
+from sonarslam.slam.backends.isam2.scans import radial_gate_distance, relative_pose_covariance
+from sonarslam.slam.eval.consistency import mean_nees_band
+from sonarslam.slam.eval.truth import truth_trajectory
+from sonarslam.slam.model.lines import local_to_world
+from sonarslam.slam.run.run import run_backend
+from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead
 
 #: The sensor noise alone: no correlated wall error to take, no systematic floor.
 PURE = ScanConfig(cov_scale=1.0, floor_sigma_m=0.0, floor_sigma_deg=0.0)
@@ -345,7 +345,7 @@ def test_short_simulated_closed_loop_with_scans_beats_dead_reckoning(tmp_path_fa
 
 
 def test_the_registrations_median_is_numpys() -> None:
-    """:func:`features.scans.icp._median` against ``np.median`` on odd and even sizes with
+    """:func:`sonarslam.features.scans.icp._median` against ``np.median`` on odd and even sizes with
     ties: the same value exactly."""
     rng = np.random.default_rng(21)
     for n in [1, 2, 3, 4, 7, 10, 101, 500]:

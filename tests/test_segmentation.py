@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sonar.beam import SonarBeam, SonarHead
-from sonar.segmentation import (
+from sonarslam.sonar.beam import SonarBeam, SonarHead
+from sonarslam.sonar.segmentation import (
     _alive_bins,
     _segment_uint8,
     _segment_vectorised,

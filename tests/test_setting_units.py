@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from slam.backends.registry import BACKENDS
-from slam.run.presets import backend_config
-from slam.run.settings import unit_of
+from sonarslam.slam.backends.registry import BACKENDS
+from sonarslam.slam.run.presets import backend_config
+from sonarslam.slam.run.settings import unit_of
 
 
 @pytest.mark.parametrize(

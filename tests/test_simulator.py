@@ -12,12 +12,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from datasets.config import load_dataset_config
-from datasets.geodesy import ddmm_to_degrees, degrees_to_ddmm
-from datasets.islog import read_is_log
-from datasets.logfile import read_table
-from datasets.records import Attitude, DvlVelocity, GpsFix
-from datasets.simulator import (
+from sonarslam.datasets.config import load_dataset_config
+from sonarslam.datasets.geodesy import ddmm_to_degrees, degrees_to_ddmm
+from sonarslam.datasets.islog import read_is_log
+from sonarslam.datasets.logfile import read_table
+from sonarslam.datasets.records import Attitude, DvlVelocity, GpsFix
+from sonarslam.datasets.simulator import (
     World,
     beam_axis_hits,
     cast_rays,
@@ -30,12 +30,17 @@ from datasets.simulator import (
     simulate_records,
     survey,
 )
-from datasets.simulator.msis import transducer_angles
-from datasets.simulator.world import HARBOUR_ROTATION_RAD, clearance_m, inside, rotate_points
-from datasets.simulator.writer import TRUTH_SCHEMA
-from features.geometry import wrap_angle
-from features.pose_source import PoseSource
-from sonar.beam import Mounting, SonarBeam, SonarHead
+from sonarslam.datasets.simulator.msis import transducer_angles
+from sonarslam.datasets.simulator.world import (
+    HARBOUR_ROTATION_RAD,
+    clearance_m,
+    inside,
+    rotate_points,
+)
+from sonarslam.datasets.simulator.writer import TRUTH_SCHEMA
+from sonarslam.features.geometry import wrap_angle
+from sonarslam.features.pose_source import PoseSource
+from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead
 
 FILE_SUFFIXES = ("_IS.log", "_IS_timestamps.log", "_SETUP.log", "_DVL.log", "_MTi.log", "_DGPS.log")
 

@@ -10,14 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from datasets.source import Dataset, open_dataset
-from features.extractor import LineExtractor
-from slam.cli.main import main
-from slam.eval.consistency import mean_nees_band
-from slam.eval.lines import GATE_RAD, HARBOUR_GATE_M, match_features
-from slam.eval.truth import truth_trajectory, truth_walls
-from slam.run.presets import extractor_config
-from slam.run.sonar_calibration import (
+from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.features.extractor import LineExtractor
+from sonarslam.slam.cli.main import main
+from sonarslam.slam.eval.consistency import mean_nees_band
+from sonarslam.slam.eval.lines import GATE_RAD, HARBOUR_GATE_M, match_features
+from sonarslam.slam.eval.truth import truth_trajectory, truth_walls
+from sonarslam.slam.run.presets import extractor_config
+from sonarslam.slam.run.sonar_calibration import (
     RangeOffsetFit,
     calibrate_line_noise,
     calibrate_range_offset,

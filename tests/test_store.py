@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from sonar.beam import SonarHead
-from sonar.segmentation import SegmentedBeam
-from sonar.store import SectorStore
+from sonarslam.sonar.beam import SonarHead
+from sonarslam.sonar.segmentation import SegmentedBeam
+from sonarslam.sonar.store import SectorStore
 
 
 def _segmented(bins: list[int]) -> SegmentedBeam:
@@ -34,7 +34,7 @@ def test_store_keeps_the_last_sector_oldest_first_with_ranges_in_the_sensor_fram
 
 
 def test_a_calibrated_range_offset_moves_every_bin_to_the_surface(tmp_path) -> None:
-    from datasets.config import DatasetConfig, dump_dataset_config, load_dataset_config
+    from sonarslam.datasets.config import DatasetConfig, dump_dataset_config, load_dataset_config
 
     head = SonarHead(n_bins=50, bin_size_m=0.1, range_offset_m=0.25)
     np.testing.assert_allclose(head.bin_range_m([9, 19]), [0.75, 1.75], atol=1e-12)

@@ -8,18 +8,18 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import slam.run.sweep as sweep_mod
-from datasets.simulator import make_scenario, simulate_records, write_dataset
-from datasets.source import open_dataset
-from slam.backends.ekf import EkfConfig
-from slam.cli.main import main
-from slam.eval.ate import ate_against_gps, ate_against_truth
-from slam.eval.consistency import anees, nees_on_grid, nees_series
-from slam.eval.truth import truth_trajectory
-from slam.run.presets import apply_overrides, parse_value
-from slam.run.run import run, run_backend
-from slam.run.sources import dead_reckoning_trajectory
-from slam.run.sweep import (
+import sonarslam.slam.run.sweep as sweep_mod
+from sonarslam.datasets.simulator import make_scenario, simulate_records, write_dataset
+from sonarslam.datasets.source import open_dataset
+from sonarslam.slam.backends.ekf import EkfConfig
+from sonarslam.slam.cli.main import main
+from sonarslam.slam.eval.ate import ate_against_gps, ate_against_truth
+from sonarslam.slam.eval.consistency import anees, nees_on_grid, nees_series
+from sonarslam.slam.eval.truth import truth_trajectory
+from sonarslam.slam.run.presets import apply_overrides, parse_value
+from sonarslam.slam.run.run import run, run_backend
+from sonarslam.slam.run.sources import dead_reckoning_trajectory
+from sonarslam.slam.run.sweep import (
     expand_tasks,
     load_grid_toml,
     pair_with_baseline,
@@ -29,7 +29,7 @@ from slam.run.sweep import (
     summarise,
     sweep,
 )
-from slam.run.sweep_summary import held_back_note
+from sonarslam.slam.run.sweep_summary import held_back_note
 
 DURATION_S = 90.0
 

@@ -8,10 +8,16 @@ Modules: ``world`` (walls and the fixed worlds), ``layout`` (harbours drawn per 
 ``sensors`` (DVL, AHRS, GPS), ``scenario`` (what is simulated, in memory), ``writer`` (files).
 """
 
-from datasets.simulator.layout import drawn_world
-from datasets.simulator.msis import EchoModel, beam_axis_hits, cast_rays, simulate_msis
-from datasets.simulator.path import Trajectory, free_path, stationary, survey, waypoint_path
-from datasets.simulator.scenario import (
+from sonarslam.datasets.simulator.layout import drawn_world
+from sonarslam.datasets.simulator.msis import EchoModel, beam_axis_hits, cast_rays, simulate_msis
+from sonarslam.datasets.simulator.path import (
+    Trajectory,
+    free_path,
+    stationary,
+    survey,
+    waypoint_path,
+)
+from sonarslam.datasets.simulator.scenario import (
     HELD_BACK_SEED_MIN,
     KINDS,
     Scenario,
@@ -21,15 +27,15 @@ from datasets.simulator.scenario import (
     make_world,
     simulate_records,
 )
-from datasets.simulator.sensors import DriftErrors, GeodeticOrigin, SensorNoise
-from datasets.simulator.world import (
+from sonarslam.datasets.simulator.sensors import DriftErrors, GeodeticOrigin, SensorNoise
+from sonarslam.datasets.simulator.world import (
     World,
     drift_world,
     harbour_world,
     pool_world,
     random_harbour_world,
 )
-from datasets.simulator.writer import simulate, write_dataset
+from sonarslam.datasets.simulator.writer import simulate, write_dataset
 
 __all__ = [
     "HELD_BACK_SEED_MIN",

@@ -34,9 +34,9 @@ import shapely
 from shapely.geometry import Point, Polygon, box
 from shapely.geometry.base import BaseGeometry
 
-from datasets.simulator.path import route_samples
-from datasets.simulator.world import World, clearance_m, inside, rotate_points
-from features.geometry import FloatArray
+from sonarslam.datasets.simulator.path import route_samples
+from sonarslam.datasets.simulator.world import World, clearance_m, inside, rotate_points
+from sonarslam.features.geometry import FloatArray
 
 __all__ = [
     "ROUTE_CLEARANCE_M",

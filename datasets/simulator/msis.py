@@ -34,10 +34,10 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from datasets.simulator.path import Trajectory
-from datasets.simulator.world import World
-from features.geometry import FloatArray, compose
-from sonar.beam import Mounting, SonarBeam, SonarHead, bin_range_m
+from sonarslam.datasets.simulator.path import Trajectory
+from sonarslam.datasets.simulator.world import World
+from sonarslam.features.geometry import FloatArray, compose
+from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead, bin_range_m
 
 __all__ = [
     "EchoModel",

@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from datasets.simulator.world import World, clearance_m, inside
-from features.geometry import FloatArray, interpolate_poses, wrap_angle
+from sonarslam.datasets.simulator.world import World, clearance_m, inside
+from sonarslam.features.geometry import FloatArray, interpolate_poses, wrap_angle
 
 __all__ = [
     "T0_S",
@@ -282,7 +282,7 @@ def survey(
     Parameters
     ----------
     world : World
-        A world with a ``route_m`` (e.g. :func:`~datasets.simulator.world.harbour_world`).
+        A world with a ``route_m`` (e.g. :func:`~sonarslam.datasets.simulator.world.harbour_world`).
     duration_s, speed_mps, rate_hz, t0_s : float
         Length (s), mean speed (m/s), sample rate (Hz), start time (Unix s).
 

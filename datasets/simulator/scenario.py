@@ -7,10 +7,10 @@ same seed always gives the same run, bit for bit, and a component's draws never 
 
 Kinds: ``pool`` (the seed paper's pool test), ``harbour`` (a marina-like survey, 600 s),
 ``random`` (a free path in a random rectilinear harbour, 600 s), ``drift``
-(:func:`~datasets.simulator.world.drift_world`, 1,800 s, with the systematic sensor errors of a
-real vehicle, :class:`~datasets.simulator.sensors.DriftErrors`, drawn per seed by
+(:func:`~sonarslam.datasets.simulator.world.drift_world`, 1,800 s, with the systematic sensor errors of a
+real vehicle, :class:`~sonarslam.datasets.simulator.sensors.DriftErrors`, drawn per seed by
 :func:`draw_drift_errors`) and ``drawn`` (1,800 s with the same errors in a harbour and route
-drawn per seed, :func:`~datasets.simulator.layout.drawn_world`, and the AHRS's constant heading
+drawn per seed, :func:`~sonarslam.datasets.simulator.layout.drawn_world`, and the AHRS's constant heading
 bias drawn per seed too). ``harbour`` and ``drift`` are fixed layouts (only the sensors' draws
 change with the seed): regression tests and figures; ``drawn`` is the one whose worlds differ.
 
@@ -25,12 +25,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from datasets.config import DatasetConfig, NoiseConfig
-from datasets.records import Attitude, DvlVelocity, GpsFix, Record
-from datasets.simulator.layout import drawn_world
-from datasets.simulator.msis import EchoModel, beam_axis_hits, simulate_msis
-from datasets.simulator.path import T0_S, Trajectory, free_path, stationary, survey
-from datasets.simulator.sensors import (
+from sonarslam.datasets.config import DatasetConfig, NoiseConfig
+from sonarslam.datasets.records import Attitude, DvlVelocity, GpsFix, Record
+from sonarslam.datasets.simulator.layout import drawn_world
+from sonarslam.datasets.simulator.msis import EchoModel, beam_axis_hits, simulate_msis
+from sonarslam.datasets.simulator.path import T0_S, Trajectory, free_path, stationary, survey
+from sonarslam.datasets.simulator.sensors import (
     MARINA_ORIGIN,
     AhrsSamples,
     DriftErrors,
@@ -42,15 +42,15 @@ from datasets.simulator.sensors import (
     simulate_dvl,
     simulate_gps,
 )
-from datasets.simulator.world import (
+from sonarslam.datasets.simulator.world import (
     World,
     drift_world,
     harbour_world,
     pool_world,
     random_harbour_world,
 )
-from features.geometry import FloatArray, compose, inverse, wrap_angle
-from sonar.beam import Mounting, SonarBeam, SonarHead
+from sonarslam.features.geometry import FloatArray, compose, inverse, wrap_angle
+from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead
 
 __all__ = [
     "KINDS",
@@ -130,7 +130,7 @@ class Scenario:
     kind : str
         ``"pool"`` (stationary sonar in the seed paper's pool), ``"harbour"`` (survey of a
         marina-like harbour), ``"random"`` (free path in a random rectilinear harbour) or
-        ``"drift"`` (long survey of :func:`~datasets.simulator.world.drift_world`) or ``"drawn"``
+        ``"drift"`` (long survey of :func:`~sonarslam.datasets.simulator.world.drift_world`) or ``"drawn"``
         (long survey of a world drawn from the seed).
     seed : int
         Seed of every random draw (with the kind, see the module docstring).

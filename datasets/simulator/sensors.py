@@ -24,9 +24,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import pymap3d
 
-from datasets.simulator.path import Trajectory
-from features.geometry import FloatArray, wrap_angle
-from sonar.beam import Mounting
+from sonarslam.datasets.simulator.path import Trajectory
+from sonarslam.features.geometry import FloatArray, wrap_angle
+from sonarslam.sonar.beam import Mounting
 
 __all__ = [
     "SensorNoise",
@@ -133,7 +133,7 @@ class DriftErrors:
         (deg/sqrt(s)), zero at the first AHRS sample.
     echo_range_offset_m : float
         How far behind the wall face the sonar's echo peaks (m); its leading edge (half the
-        peak, rising) stays on the wall face (:mod:`datasets.simulator.msis`).
+        peak, rising) stays on the wall face (:mod:`sonarslam.datasets.simulator.msis`).
     """
 
     dvl_scale_factor: float = 0.0

@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
 
-from features.geometry import FloatArray
+from sonarslam.features.geometry import FloatArray
 
 __all__ = [
     "World",
@@ -58,7 +58,7 @@ class World:
     wall_material : tuple of str or None
         Material of each wall (``quay``, ``breakwater``, ``hull``, ``pontoon``, ``pier``).
     layout : dict or None
-        A summary of a drawn world (:func:`datasets.simulator.layout.drawn_world`): basins,
+        A summary of a drawn world (:func:`sonarslam.datasets.simulator.layout.drawn_world`): basins,
         channels, features, lap; None for the fixed worlds.
     """
 
@@ -314,7 +314,7 @@ def random_harbour_world(rng: np.random.Generator, cell_m: float = 10.0) -> Worl
     notches (docks) cut into its edge, on a grid of ``cell_m``; the connected water containing the
     main basin's centre is kept, holes are filled, its outline is merged into straight walls,
     rotated by a random angle and centred on the origin. No survey route; use
-    :func:`datasets.simulator.path.free_path`.
+    :func:`sonarslam.datasets.simulator.path.free_path`.
 
     Parameters
     ----------

@@ -3,13 +3,13 @@
 Files written in ``out_dir`` (prefix ``sim_<kind>_<seed>``):
 
 =============================  =============================================================
-``<prefix>_IS.log``            raw beams, :func:`datasets.islog.write_is_log`
+``<prefix>_IS.log``            raw beams, :func:`sonarslam.datasets.islog.write_is_log`
 ``<prefix>_IS_timestamps.log`` ``logTime sensorTime`` per beam (ms since midnight UTC), no header
 ``<prefix>_SETUP.log``         ``range_m bin_size_m step_rad``
 ``<prefix>_DVL.log``           32 columns in the real DVL log's order, velocities in cm/s
 ``<prefix>_MTi.log``           10 columns: logTime, roll, pitch, yaw (deg), rates (rad/s), acc
 ``<prefix>_DGPS.log``          10 columns: logTime, lat, lon (ddmm.mmmmmm), status, ...
-``sonarslam.toml``             :func:`datasets.config.dump_dataset_config` of the scenario
+``sonarslam.toml``             :func:`sonarslam.datasets.config.dump_dataset_config` of the scenario
 ``truth.json``                 true poses, walls, mountings, geodetic origin, seed (see below)
 =============================  =============================================================
 
@@ -22,13 +22,13 @@ from the first fix: the two tangent planes differ by that much). Keys: ``schema,
 prefix, frames, scenario, geodetic_origin, first_fix_t, first_fix_enu_m, head, mountings,
 noise, walls_m, route_m, body_poses {columns, rate_hz, rows}, beams {columns, rows},
 dvl_dropouts_s``; NaN is written as null. A scenario with systematic sensor errors (the ``drift``
-kind) adds ``errors`` (:class:`~datasets.simulator.sensors.DriftErrors`: ``dvl_scale_factor,
+kind) adds ``errors`` (:class:`~sonarslam.datasets.simulator.sensors.DriftErrors`: ``dvl_scale_factor,
 dvl_bias_mps, ahrs_heading_walk_deg_per_sqrt_s, echo_range_offset_m``) and, with a heading walk,
 ``ahrs_heading_walk {columns: [t, walk_deg], rate_hz, rows}``: the walk in the logged MTi heading
 (clockwise, deg) at every tenth AHRS sample. A drawn world (the ``drawn`` kind) adds ``walls
 {echo_gain, band_m, curve, material}`` (one value per row of ``walls_m``: the echo strength
 factor, the band thickness in m, the curved stretch a wall is a facet of or -1, its material)
-and ``layout`` (:attr:`~datasets.simulator.world.World.layout`: basins, channels, features, the
+and ``layout`` (:attr:`~sonarslam.datasets.simulator.world.World.layout`: basins, channels, features, the
 lap).
 """
 
@@ -44,12 +44,12 @@ from typing import Any
 import numpy as np
 import pymap3d
 
-from datasets.config import dump_dataset_config
-from datasets.geodesy import ddmm_to_degrees, degrees_to_ddmm
-from datasets.islog import write_is_log
-from datasets.simulator.scenario import Simulation, make_scenario, simulate_records
-from features.geometry import FloatArray
-from sonar.beam import Mounting
+from sonarslam.datasets.config import dump_dataset_config
+from sonarslam.datasets.geodesy import ddmm_to_degrees, degrees_to_ddmm
+from sonarslam.datasets.islog import write_is_log
+from sonarslam.datasets.simulator.scenario import Simulation, make_scenario, simulate_records
+from sonarslam.features.geometry import FloatArray
+from sonarslam.sonar.beam import Mounting
 
 __all__ = [
     "TRUTH_SCHEMA",

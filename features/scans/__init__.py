@@ -1,10 +1,10 @@
 """The scan matcher: motion-corrected scans of leading edges and their probabilistic
 point-to-line ICP (MSISpIC, Mallios et al. 2014), a front end beside the line extractor."""
 
-from features.scans.config import ScanConfig
-from features.scans.icp import ReferenceLines, Registration, reference_lines, register
-from features.scans.matcher import ScanMatcher
-from features.scans.scan import Scan, ScanBuilder, submap_points
+from sonarslam.features.scans.config import ScanConfig
+from sonarslam.features.scans.icp import ReferenceLines, Registration, reference_lines, register
+from sonarslam.features.scans.matcher import ScanMatcher
+from sonarslam.features.scans.scan import Scan, ScanBuilder, submap_points
 
 __all__ = [
     "ScanConfig",

@@ -1,4 +1,4 @@
-"""Settings of the scan matcher (:class:`features.scans.matcher.ScanMatcher`), units in names."""
+"""Settings of the scan matcher (:class:`sonarslam.features.scans.matcher.ScanMatcher`), units in names."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ __all__ = ["ScanConfig"]
 class ScanConfig:
     """Settings of the scans and of their registration (probabilistic point-to-line ICP).
 
-    Scans (:mod:`features.scans.scan`):
+    Scans (:mod:`sonarslam.features.scans.scan`):
 
     Attributes
     ----------
@@ -20,7 +20,7 @@ class ScanConfig:
         Beams of one scan; 0: one full turn of the head (``round(2 pi / step)``).
     run_gap_m, min_range_m, max_range_m, intensity_threshold
         The leading edge of each run of returns of a beam is a scan point
-        (:func:`sonar.segmentation.leading_edge_bins`): runs are chains of returns with gaps
+        (:func:`sonarslam.sonar.segmentation.leading_edge_bins`): runs are chains of returns with gaps
         under ``run_gap_m`` (m); bins nearer than ``min_range_m`` or farther than
         ``max_range_m`` (m, None: all) are ignored; a raw beam's returns are its bins at or above
         ``intensity_threshold`` (masks: every non-zero bin).
@@ -29,7 +29,7 @@ class ScanConfig:
         its neighbours, motion-corrected into the middle scan's frame; the newest scan's submap
         takes the scans before it). Consecutive scans are registered one to one.
 
-    Registration (:func:`features.scans.icp.register`):
+    Registration (:func:`sonarslam.features.scans.icp.register`):
 
     normal_radius_m : float
         The reference scan's points within this of a point fit its local line (m).
@@ -70,7 +70,7 @@ class ScanConfig:
         hold. The README says how the marina's was measured (GPS-free: short revisits against
         dead reckoning).
     starts_sigma : float
-        With the guess's covariance given (:meth:`features.scans.matcher.ScanMatcher.register`
+        With the guess's covariance given (:meth:`sonarslam.features.scans.matcher.ScanMatcher.register`
         for revisits), ICP also starts from the guess moved by this many sigmas either way
         along the two largest principal directions of that covariance, when their sigma is
         beyond ``corr_end_m``; the solution with the most weight wins.

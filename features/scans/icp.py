@@ -40,8 +40,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
-from features.geometry import FloatArray, transform_points, wrap_angle
-from features.scans.config import ScanConfig
+from sonarslam.features.geometry import FloatArray, transform_points, wrap_angle
+from sonarslam.features.scans.config import ScanConfig
 
 __all__ = ["ReferenceLines", "Registration", "reference_lines", "register", "register_from"]
 

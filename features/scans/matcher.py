@@ -1,8 +1,8 @@
 """The scan matcher: the second front end, beside the line extractor, on the same seam.
 
-It gets the beams and, through :class:`features.pose_source.PoseSource`, the closed loop's own
+It gets the beams and, through :class:`sonarslam.features.pose_source.PoseSource`, the closed loop's own
 poses (never a back end's internals). It builds motion-corrected scans
-(:mod:`features.scans.scan`) and registers them (:mod:`features.scans.icp`):
+(:mod:`sonarslam.features.scans.scan`) and registers them (:mod:`sonarslam.features.scans.icp`):
 
 * each new scan onto the one before it (:meth:`ScanMatcher.consecutive`), from the relative
   pose of the pose source;
@@ -11,7 +11,7 @@ poses (never a back end's internals). It builds motion-corrected scans
   revisits from its own marginals.
 
 Each result is a relative pose ``jTk`` of the scans' reference body frames with its 3x3
-covariance and the directions it constrains (:class:`features.scans.icp.Registration`).
+covariance and the directions it constrains (:class:`sonarslam.features.scans.icp.Registration`).
 """
 
 from __future__ import annotations
@@ -21,18 +21,18 @@ from dataclasses import replace
 import numpy as np
 import numpy.typing as npt
 
-from features.geometry import FloatArray, between
-from features.pose_source import PoseSource
-from features.scans.config import ScanConfig
-from features.scans.icp import (
+from sonarslam.features.geometry import FloatArray, between
+from sonarslam.features.pose_source import PoseSource
+from sonarslam.features.scans.config import ScanConfig
+from sonarslam.features.scans.icp import (
     ReferenceLines,
     Registration,
     reference_lines,
     register,
     register_from,
 )
-from features.scans.scan import Scan, ScanBuilder, submap_points
-from sonar.beam import Mounting, SonarBeam, SonarHead
+from sonarslam.features.scans.scan import Scan, ScanBuilder, submap_points
+from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead
 
 __all__ = ["ScanMatcher"]
 
@@ -111,7 +111,7 @@ class ScanMatcher:
     ) -> Registration:
         """Submap ``k`` registered onto submap ``j`` from ``guess_jTk``: ``jTk``; with its
         covariance ``guess_cov`` (3, 3), from several starts
-        (:func:`features.scans.icp.register_from`). Its covariance is scaled by
+        (:func:`sonarslam.features.scans.icp.register_from`). Its covariance is scaled by
         ``revisit_cov_scale``.
 
         The reference submap's lines are kept while its window is complete (an old scan).

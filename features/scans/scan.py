@@ -1,9 +1,9 @@
 """Scans: the leading edges of one turn of the head, motion-corrected into one body frame.
 
 A scan gathers ``beams_per_scan`` consecutive beams (a full turn by default). Each beam keeps
-the leading edge of each run of returns (:func:`sonar.segmentation.leading_edge_bins`: where a
+the leading edge of each run of returns (:func:`sonarslam.sonar.segmentation.leading_edge_bins`: where a
 wall's face is on a thick echo band) as range and bearing. When the scan is complete, every
-point is placed with the pose of its own beam from the :class:`features.pose_source.PoseSource`
+point is placed with the pose of its own beam from the :class:`sonarslam.features.pose_source.PoseSource`
 (the closed loop's) and brought into the body frame of the scan's last beam, its *reference*:
 ``p_ref = inverse(wTb(t_ref)) * wTb(t_beam) * bTs * (r cos b, r sin b)``. This is the motion
 correction (the vehicle moves metres during a turn); between two scans only the poses' relative
@@ -19,11 +19,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from features.geometry import FloatArray, between, compose, inverse, transform_points
-from features.pose_source import PoseSource
-from features.scans.config import ScanConfig
-from sonar.beam import Mounting, SonarBeam, SonarHead
-from sonar.segmentation import leading_edge_bins
+from sonarslam.features.geometry import FloatArray, between, compose, inverse, transform_points
+from sonarslam.features.pose_source import PoseSource
+from sonarslam.features.scans.config import ScanConfig
+from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead
+from sonarslam.sonar.segmentation import leading_edge_bins
 
 __all__ = ["Scan", "ScanBuilder", "submap_points"]
 

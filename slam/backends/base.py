@@ -1,14 +1,14 @@
 """The seam between the driver and a SLAM back end: the settings every back end shares and the
 typed :class:`Backend` protocol.
 
-A back end estimates the vehicle pose from the motion steps (:class:`slam.model.motion.MotionStep`),
+A back end estimates the vehicle pose from the motion steps (:class:`sonarslam.slam.model.motion.MotionStep`),
 the AHRS headings and the front end's lines, and in return gives the front end the pose of every
-beam through a :class:`features.pose_source.PoseSource`. Its landmarks are managed by the shared
-landmark layer (:class:`slam.mapping.landmarks.LandmarkMap`), which calls back into the back end
-through one call per vote of lines (:meth:`slam.mapping.landmarks.LandmarkMap.vote`: the back
-end's belief in, the layer's decision out, :mod:`slam.mapping.vote`). Both back ends here (the EKF,
-:mod:`slam.backends.ekf`, and iSAM2, :mod:`slam.backends.isam2`) implement both protocols; a new
-back end registers in :mod:`slam.backends.registry`.
+beam through a :class:`sonarslam.features.pose_source.PoseSource`. Its landmarks are managed by the shared
+landmark layer (:class:`sonarslam.slam.mapping.landmarks.LandmarkMap`), which calls back into the back end
+through one call per vote of lines (:meth:`sonarslam.slam.mapping.landmarks.LandmarkMap.vote`: the back
+end's belief in, the layer's decision out, :mod:`sonarslam.slam.mapping.vote`). Both back ends here (the EKF,
+:mod:`sonarslam.slam.backends.ekf`, and iSAM2, :mod:`sonarslam.slam.backends.isam2`) implement both protocols; a new
+back end registers in :mod:`sonarslam.slam.backends.registry`.
 """
 
 from __future__ import annotations
@@ -21,15 +21,15 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 import numpy.typing as npt
 
-from datasets.config import DVL_SCALE_SIGMA_MAX
-from datasets.settings import bounded, one_of
-from features.geometry import FloatArray, compose, inverse
-from features.line import LineFeature
-from features.pose_source import PoseSource
-from features.scans import Scan, ScanMatcher
-from slam.io.trajectory import Trajectory
-from slam.mapping.landmarks import LandmarkConfig, LandmarkMap
-from slam.model.motion import MotionStep, OdometryChain
+from sonarslam.datasets.config import DVL_SCALE_SIGMA_MAX
+from sonarslam.datasets.settings import bounded, one_of
+from sonarslam.features.geometry import FloatArray, compose, inverse
+from sonarslam.features.line import LineFeature
+from sonarslam.features.pose_source import PoseSource
+from sonarslam.features.scans import Scan, ScanMatcher
+from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.mapping.landmarks import LandmarkConfig, LandmarkMap
+from sonarslam.slam.model.motion import MotionStep, OdometryChain
 
 __all__ = [
     "BackendConfig",
@@ -86,7 +86,7 @@ class BackendConfig(LandmarkConfig):
     constraints : str
         What corrects the odometry, comma-separated: ``"lines"`` (line landmarks from the line
         extractor), ``"scans"`` (relative poses from the scan matcher,
-        :mod:`features.scans`), or ``"lines,scans"``. A back end that cannot take one says so.
+        :mod:`sonarslam.features.scans`), or ``"lines,scans"``. A back end that cannot take one says so.
     """
 
     ahrs_white_sigma_deg: float = bounded(1.0, 1e-3, 90.0)
@@ -116,7 +116,7 @@ class BackendConfig(LandmarkConfig):
 
 
 class Backend(Protocol):
-    """What the driver (:func:`slam.run.closed_loop.run_closed_loop`) and the runner need from
+    """What the driver (:func:`sonarslam.slam.run.closed_loop.run_closed_loop`) and the runner need from
     a SLAM back end."""
 
     @property
@@ -172,7 +172,7 @@ class Backend(Protocol):
         ...
 
     def map_records(self) -> list[dict[str, object]]:
-        """``map.json``'s landmarks (:meth:`slam.mapping.landmarks.LandmarkMap.records`)."""
+        """``map.json``'s landmarks (:meth:`sonarslam.slam.mapping.landmarks.LandmarkMap.records`)."""
         ...
 
     def trajectories(self, batch: bool = False) -> dict[str, Trajectory]:
@@ -192,7 +192,7 @@ class Backend(Protocol):
 @runtime_checkable
 class ScanBackend(Protocol):
     """A back end that takes the scan matcher's relative poses (``constraints`` with
-    ``"scans"``): the factor graph (:mod:`slam.backends.isam2.scans`)."""
+    ``"scans"``): the factor graph (:mod:`sonarslam.slam.backends.isam2.scans`)."""
 
     def update_scan(self, scan: Scan, matcher: ScanMatcher) -> None:
         """A scan the matcher completed (its newest): the back end's node for it and the
@@ -224,7 +224,7 @@ class VoteObservations:
 
 def vote_observations(features: list[LineFeature], config: LandmarkConfig) -> VoteObservations:
     """The lines of one vote the landmark layer may use, the rules of
-    :class:`slam.mapping.landmarks.LandmarkConfig` (``min_rho_m``, ``line_cov_scale``)."""
+    :class:`sonarslam.slam.mapping.landmarks.LandmarkConfig` (``min_rho_m``, ``line_cov_scale``)."""
     use = [f for f in features if f.rho_m >= config.min_rho_m]
     z = np.array([f.z for f in use]).reshape(-1, 2)
     R = np.array([f.cov for f in use]).reshape(-1, 2, 2)
@@ -246,7 +246,7 @@ class AnchoredOdometry:
     """PoseSource of a filter: past poses from the odometry chain, anchored at the current estimate.
 
     ``wTb(t) = wTb_now * inverse(O(t_now)) * O(t)``, where ``O`` chains the relative motions of
-    the filter's predictions (:class:`slam.model.motion.OdometryChain`). After a correction the
+    the filter's predictions (:class:`sonarslam.slam.model.motion.OdometryChain`). After a correction the
     whole stored sector moves rigidly with the current estimate, so the motion-distortion
     correction uses the (locally accurate) odometry and the absolute pose comes from the filter.
 
@@ -289,7 +289,7 @@ class AnchoredOdometry:
 
     def covariances(self, t_s: npt.ArrayLike) -> FloatArray | None:
         """:meth:`covariance` at many times, shape (N, 3, 3)
-        (:class:`features.pose_source.BatchCovariances`)."""
+        (:class:`sonarslam.features.pose_source.BatchCovariances`)."""
         if self._anchor_cov is None:
             return None
         v = self.chain.variances_at(t_s)

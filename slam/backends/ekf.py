@@ -5,31 +5,31 @@ State ``x = [x, y, psi, b, delta, k, g, rho_1, theta_1, ..., rho_L, theta_L]``:
 * ``x, y, psi``: the body pose ``wTb`` (m, m, rad);
 * ``b``: the AHRS heading bias (rad) with prior ``ahrs_bias_sigma_deg``, constant or a random
   walk (``ahrs_bias_walk_deg_per_sqrt_s``): the AHRS measures ``psi + b``
-  (:class:`slam.backends.base.BackendConfig`);
+  (:class:`sonarslam.slam.backends.base.BackendConfig`);
 * ``delta``: the misalignment of the DVL velocity with the body heading (rad), a constant with
   prior ``misalignment_sigma_deg`` when ``estimate_misalignment``, else held at 0;
 * ``k``: the DVL's scale-factor error, a constant with prior ``dvl_scale_sigma`` (0: held at 0);
 * ``g``: the gyro's yaw-rate bias (rad/s), a constant with prior ``gyro_bias_sigma_deg_per_s``:
   a step whose heading change integrates the gyro turns by ``dyaw - g dt``
-  (:attr:`slam.model.motion.MotionStep.gyro_dt_s`); the AHRS headings observe it. Left out, a
+  (:attr:`sonarslam.slam.model.motion.MotionStep.gyro_dt_s`); the AHRS headings observe it. Left out, a
   gyro bias (the marina MTi's is -0.66 deg/s) is taken for the AHRS bias's walk when the bias
   walks, and the heading spins away; with the AHRS heading's own change as the rate
   (``yaw_rate_source = "heading"``) no step involves it and it stays at its prior;
-* world lines ``(rho_w, theta_w)`` (:mod:`features.geometry` conventions), one per active
+* world lines ``(rho_w, theta_w)`` (:mod:`sonarslam.features.geometry` conventions), one per active
   landmark (:meth:`LineEkf.index`); kept normalised. A landmark merged into another (the landmark
   layer found them one wall) is tied to it by an exact update and leaves the state.
 
-Prediction integrates the motion model (:mod:`slam.model.motion`) on the vehicle block only (the
+Prediction integrates the motion model (:mod:`sonarslam.slam.model.motion`) on the vehicle block only (the
 landmarks are static, so only the vehicle rows and columns of P change). Between two updates the
 steps are batched: each step propagates the 7 x 7 vehicle block (the driver reads the pose
 covariance at every record) and multiplies its Jacobian into their product ``Phi``; the
 vehicle-landmark block takes ``Phi`` once, when the full covariance is next needed
 (:meth:`LineEkf._flush`), not 7 x n work per record. Updates are in the Joseph form with H
 evaluated at the predicted state: the AHRS heading by :func:`scalar_joseph_update` (rank 1,
-O(n^2)), each line observation in the sonar frame R (:func:`slam.model.lines.line_prediction`)
+O(n^2)), each line observation in the sonar frame R (:func:`sonarslam.slam.model.lines.line_prediction`)
 by filterpy's. Which observation
 updates which landmark, and when a new line becomes one, is the landmark layer's
-(:class:`slam.mapping.landmarks.LandmarkMap`); this class holds the filter state only.
+(:class:`sonarslam.slam.mapping.landmarks.LandmarkMap`); this class holds the filter state only.
 """
 
 from __future__ import annotations
@@ -43,30 +43,30 @@ from typing import Any
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-from datasets.settings import bounded
-from features.geometry import (
+from sonarslam.datasets.settings import bounded
+from sonarslam.features.geometry import (
     FLIP_RHO,
     FloatArray,
     line_difference,
     normalize_line,
     wrap_angle,
 )
-from features.line import LineFeature
-from features.pose_source import PoseSource
-from slam.backends.base import (
+from sonarslam.features.line import LineFeature
+from sonarslam.features.pose_source import PoseSource
+from sonarslam.slam.backends.base import (
     AnchoredOdometry,
     BackendConfig,
     VoteObservations,
     ids_of_features,
     vote_observations,
 )
-from slam.io.trajectory import Trajectory
-from slam.mapping.landmarks import LandmarkMap
-from slam.mapping.vote import AfterVote, Belief, Decision, LandmarkBelief
-from slam.model.lines import line_prediction, world_observation
-from slam.model.motion import MotionStep, step_displacement
-from slam.model.noise import robust_kernel
-from sonar.beam import Mounting
+from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.mapping.landmarks import LandmarkMap
+from sonarslam.slam.mapping.vote import AfterVote, Belief, Decision, LandmarkBelief
+from sonarslam.slam.model.lines import line_prediction, world_observation
+from sonarslam.slam.model.motion import MotionStep, step_displacement
+from sonarslam.slam.model.noise import robust_kernel
+from sonarslam.sonar.beam import Mounting
 
 __all__ = [
     "EkfConfig",
@@ -144,12 +144,12 @@ def scalar_joseph_update(
 
 @dataclass(frozen=True)
 class EkfConfig(BackendConfig):
-    """Settings of the EKF: :class:`slam.backends.base.BackendConfig`'s and
+    """Settings of the EKF: :class:`sonarslam.slam.backends.base.BackendConfig`'s and
 
     Attributes
     ----------
     side_gate : bool
-        As :class:`slam.mapping.landmarks.LandmarkConfig`; off for the EKF by default.
+        As :class:`sonarslam.slam.mapping.landmarks.LandmarkConfig`; off for the EKF by default.
     first_estimates_jacobians : bool
         FEJ-EKF: line Jacobians at the landmarks' first estimates (consistency; see
         :meth:`LineEkf.predict_line`).
@@ -267,7 +267,7 @@ class LineEkf:
     # -- prediction ------------------------------------------------------------------------
 
     def predict(self, step: MotionStep) -> FloatArray:
-        """Integrate one motion step (:mod:`slam.model.motion`) on the pose block.
+        """Integrate one motion step (:mod:`sonarslam.slam.model.motion`) on the pose block.
 
         Returns the relative motion ``bTb'`` of this step (the odometry the front end chains).
         """
@@ -398,7 +398,7 @@ class LineEkf:
 
     def update_lines(self, features: list[LineFeature]) -> list[int | None]:
         """One vote of lines: this filter's belief to the landmark layer, which decides the
-        associations and new landmarks (:meth:`slam.mapping.landmarks.LandmarkMap.vote`); the
+        associations and new landmarks (:meth:`sonarslam.slam.mapping.landmarks.LandmarkMap.vote`); the
         decision applied here. The landmark id of each feature (None: not associated)."""
         wall0 = time.perf_counter()
         obs = vote_observations(features, self.config)
@@ -455,7 +455,7 @@ class LineEkf:
     def _update_line(self, landmark_id: int, f: LineFeature) -> None:
         """One associated observation's update, linearised at the state the previous one left;
         with a robust kernel its covariance is divided by the kernel's weight of its
-        innovation's Mahalanobis distance (:class:`slam.backends.base.BackendConfig`)."""
+        innovation's Mahalanobis distance (:class:`sonarslam.slam.backends.base.BackendConfig`)."""
         z_hat, H = self.predict_line(landmark_id)
         nu, flipped = line_difference(f.z, z_hat)
         R = np.asarray(f.cov) * self.config.line_cov_scale

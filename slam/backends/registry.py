@@ -1,10 +1,10 @@
 """The back ends by name: what ``--backend``, the sweep and the notebooks choose from.
 
-A new back end implements :class:`slam.backends.base.Backend` (for its landmarks, its
-``update_lines`` hands :meth:`slam.mapping.landmarks.LandmarkMap.vote` a
-:class:`slam.mapping.vote.Belief` and applies the :class:`slam.mapping.vote.Decision` it gets
+A new back end implements :class:`sonarslam.slam.backends.base.Backend` (for its landmarks, its
+``update_lines`` hands :meth:`sonarslam.slam.mapping.landmarks.LandmarkMap.vote` a
+:class:`sonarslam.slam.mapping.vote.Belief` and applies the :class:`sonarslam.slam.mapping.vote.Decision` it gets
 back), takes a configuration that extends
-:class:`slam.backends.base.BackendConfig`, and is added to :data:`BACKENDS` here; the runner,
+:class:`sonarslam.slam.backends.base.BackendConfig`, and is added to :data:`BACKENDS` here; the runner,
 the CLI's ``--set``, the sweep's grid and the reports then take it as they take these two.
 """
 
@@ -14,11 +14,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from features.geometry import FloatArray
-from slam.backends.base import Backend, BackendConfig
-from slam.backends.ekf import EkfConfig, LineEkf
-from slam.backends.isam2.graph import GraphConfig, LineIsam2
-from sonar.beam import Mounting
+from sonarslam.features.geometry import FloatArray
+from sonarslam.slam.backends.base import Backend, BackendConfig
+from sonarslam.slam.backends.ekf import EkfConfig, LineEkf
+from sonarslam.slam.backends.isam2.graph import GraphConfig, LineIsam2
+from sonarslam.sonar.beam import Mounting
 
 __all__ = ["BackendSpec", "BACKENDS", "backend_spec"]
 

@@ -1,2 +1,2 @@
 """The ``sonarslam`` command: one module per command (parse, call one library function, print);
-:mod:`slam.cli.main` builds the parser and turns known errors into one line."""
+:mod:`sonarslam.slam.cli.main` builds the parser and turns known errors into one line."""

@@ -7,18 +7,18 @@ import argparse
 import math
 from dataclasses import replace
 
-from datasets.settings import SettingError
-from datasets.source import Dataset, open_dataset
-from slam.cli.common import EPILOG, Subparsers, add_poses, add_quiet, add_source, number
-from slam.run.calibration import (
+from sonarslam.datasets.settings import SettingError
+from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.slam.cli.common import EPILOG, Subparsers, add_poses, add_quiet, add_source, number
+from sonarslam.slam.run.calibration import (
     calibrate_ahrs_deviation,
     calibrate_ahrs_yaw,
     calibrate_sonar_yaw,
     ekf_closed_loop,
 )
-from slam.run.closed_loop import ClosedLoopResult
-from slam.run.sonar_calibration import calibrate_line_noise, calibrate_range_offset
-from slam.run.sources import pose_source_by_name
+from sonarslam.slam.run.closed_loop import ClosedLoopResult
+from sonarslam.slam.run.sonar_calibration import calibrate_line_noise, calibrate_range_offset
+from sonarslam.slam.run.sources import pose_source_by_name
 
 
 def add_parser(sub: Subparsers) -> None:

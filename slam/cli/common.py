@@ -7,8 +7,8 @@ import math
 from collections.abc import Callable
 from typing import NoReturn, Protocol
 
-from datasets.settings import SettingError, coerce
-from slam.run.sources import POSE_SOURCES
+from sonarslam.datasets.settings import SettingError, coerce
+from sonarslam.slam.run.sources import POSE_SOURCES
 
 __all__ = [
     "EPILOG",
@@ -32,7 +32,7 @@ class Parser(argparse.ArgumentParser):
 def number(
     kind: type, low: float | None = None, high: float | None = None, low_open: bool = False
 ) -> Callable[[str], float | int]:
-    """An argparse ``type``: a finite ``float`` or a whole ``int`` (:mod:`datasets.settings`'s
+    """An argparse ``type``: a finite ``float`` or a whole ``int`` (:mod:`sonarslam.datasets.settings`'s
     grammar: no ``nan``, ``inf``, ``1_0``) within ``[low, high]`` (``(low, ...`` when
     ``low_open``)."""
 
@@ -72,7 +72,7 @@ def add_source(p: argparse.ArgumentParser) -> None:
 
 
 def add_poses(p: argparse.ArgumentParser, default: str, note: str = "") -> None:
-    """``--poses``: one of :data:`slam.run.sources.POSE_SOURCES`."""
+    """``--poses``: one of :data:`sonarslam.slam.run.sources.POSE_SOURCES`."""
     p.add_argument(
         "--poses",
         default=default,

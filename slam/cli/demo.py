@@ -5,10 +5,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from slam.cli.common import EPILOG, Subparsers, add_quiet
-from slam.io.files import check_output_dir
-from slam.run.demo import SIM_DURATION_S, demo_source, main_job
-from slam.run.run import results_table, summary_line
+from sonarslam.slam.cli.common import EPILOG, Subparsers, add_quiet
+from sonarslam.slam.io.files import check_output_dir
+from sonarslam.slam.run.demo import SIM_DURATION_S, demo_source, main_job
+from sonarslam.slam.run.run import results_table, summary_line
 
 
 def add_parser(sub: Subparsers) -> None:

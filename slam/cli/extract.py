@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from slam.cli.common import EPILOG, Subparsers, add_poses, add_quiet, add_source
-from slam.run.extraction import extract
-from slam.run.presets import EXTRACTOR_PRESETS
+from sonarslam.slam.cli.common import EPILOG, Subparsers, add_poses, add_quiet, add_source
+from sonarslam.slam.run.extraction import extract
+from sonarslam.slam.run.presets import EXTRACTOR_PRESETS
 
 
 def add_parser(sub: Subparsers) -> None:

@@ -5,11 +5,11 @@ from __future__ import annotations
 import argparse
 import math
 
-from datasets.source import open_dataset
-from slam.cli.common import EPILOG, Subparsers, add_source
-from slam.model.motion import gyro_bias_against_heading
-from slam.run.settings import Setting, dataset_settings, run_settings
-from slam.run.sources import DR_IGNORES, dvl_quality, start_pose
+from sonarslam.datasets.source import open_dataset
+from sonarslam.slam.cli.common import EPILOG, Subparsers, add_source
+from sonarslam.slam.model.motion import gyro_bias_against_heading
+from sonarslam.slam.run.settings import Setting, dataset_settings, run_settings
+from sonarslam.slam.run.sources import DR_IGNORES, dvl_quality, start_pose
 
 
 def add_parser(sub: Subparsers) -> None:

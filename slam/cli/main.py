@@ -1,7 +1,7 @@
 """The ``sonarslam`` command: builds the parser from the command modules, runs one, and turns
 every known error into one line on stderr, no traceback: exit 2 for usage (a wrong option,
 a setting that does not fit its field, an ``--out`` that cannot be written), exit 1 for data
-(:class:`datasets.errors.DataError` naming the file and line, other input that cannot be run,
+(:class:`sonarslam.datasets.errors.DataError` naming the file and line, other input that cannot be run,
 a file that cannot be written)."""
 
 from __future__ import annotations
@@ -12,10 +12,20 @@ import warnings
 from collections.abc import Sequence
 from importlib.metadata import PackageNotFoundError, version
 
-from datasets.errors import DataError, DataWarning
-from datasets.settings import SettingError
-from slam.cli import calibrate, demo, extract, info, plot_scans, report, run, simulate, sweep
-from slam.cli.common import EPILOG, Parser
+from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.settings import SettingError
+from sonarslam.slam.cli import (
+    calibrate,
+    demo,
+    extract,
+    info,
+    plot_scans,
+    report,
+    run,
+    simulate,
+    sweep,
+)
+from sonarslam.slam.cli.common import EPILOG, Parser
 
 __all__ = ["main", "build_parser"]
 

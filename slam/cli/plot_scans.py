@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import argparse
 
-from datasets.source import open_dataset
-from features.projection import project_beams
-from slam.cli.common import EPILOG, Subparsers, add_poses, add_source, number
-from slam.eval.truth import truth_walls
-from slam.io.files import check_output_file, make_output_dir, write_atomic
-from slam.io.maps import plot_scans
-from slam.run.presets import map_min_intensity
-from slam.run.sources import pose_source_by_name
+from sonarslam.datasets.source import open_dataset
+from sonarslam.features.projection import project_beams
+from sonarslam.slam.cli.common import EPILOG, Subparsers, add_poses, add_source, number
+from sonarslam.slam.eval.truth import truth_walls
+from sonarslam.slam.io.files import check_output_file, make_output_dir, write_atomic
+from sonarslam.slam.io.maps import plot_scans
+from sonarslam.slam.run.presets import map_min_intensity
+from sonarslam.slam.run.sources import pose_source_by_name
 
 
 def add_parser(sub: Subparsers) -> None:

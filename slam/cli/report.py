@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from slam.cli.common import EPILOG, Subparsers, number
-from slam.io.files import check_output_dir
-from slam.run.report import report
+from sonarslam.slam.cli.common import EPILOG, Subparsers, number
+from sonarslam.slam.io.files import check_output_dir
+from sonarslam.slam.run.report import report
 
 
 def add_parser(sub: Subparsers) -> None:

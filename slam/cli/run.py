@@ -6,9 +6,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from slam.cli.common import EPILOG, Subparsers, add_quiet, add_source
-from slam.run.presets import parse_settings
-from slam.run.run import backend_names, run, summary_line
+from sonarslam.slam.cli.common import EPILOG, Subparsers, add_quiet, add_source
+from sonarslam.slam.run.presets import parse_settings
+from sonarslam.slam.run.run import backend_names, run, summary_line
 
 
 def add_parser(sub: Subparsers) -> None:

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from datasets.simulator import KINDS, simulate
-from slam.cli.common import EPILOG, Subparsers, number
-from slam.io.files import check_output_dir
+from sonarslam.datasets.simulator import KINDS, simulate
+from sonarslam.slam.cli.common import EPILOG, Subparsers, number
+from sonarslam.slam.io.files import check_output_dir
 
 
 def add_parser(sub: Subparsers) -> None:

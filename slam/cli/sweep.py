@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from datasets.simulator import KINDS
-from slam.cli.common import EPILOG, Subparsers, add_quiet, number
-from slam.run.sweep import format_summary, load_grid_toml, parse_grid, parse_seeds, sweep
+from sonarslam.datasets.simulator import KINDS
+from sonarslam.slam.cli.common import EPILOG, Subparsers, add_quiet, number
+from sonarslam.slam.run.sweep import format_summary, load_grid_toml, parse_grid, parse_seeds, sweep
 
 
 def add_parser(sub: Subparsers) -> None:

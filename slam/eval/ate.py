@@ -11,7 +11,7 @@
   evo), which leaves the shape error only.
 
 Either can be restricted to a time span: the **sonar span** (first to last sonar beam inside the
-navigation span, :attr:`datasets.source.Dataset.sonar_span_s`) is where line landmarks can act;
+navigation span, :attr:`sonarslam.datasets.source.Dataset.sonar_span_s`) is where line landmarks can act;
 after the sonar stops every method is dead reckoning.
 """
 
@@ -22,9 +22,9 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from evo.core.geometry import umeyama_alignment
 
-from datasets.records import GpsSeries
-from features.geometry import FloatArray
-from slam.io.trajectory import Trajectory
+from sonarslam.datasets.records import GpsSeries
+from sonarslam.features.geometry import FloatArray
+from sonarslam.slam.io.trajectory import Trajectory
 
 __all__ = [
     "AteResult",

@@ -1,7 +1,7 @@
 """Filter consistency against a known truth: NEES, NIS and ANEES with their chi2 bands.
 
 * pose NEES ``e_k^T P_k^-1 e_k``, ``e_k = (x - x_true, y - y_true, wrap(psi - psi_true))``
-  (:func:`features.geometry.wrap_angle`), chi2 with 3 degrees of freedom when consistent (2 for
+  (:func:`sonarslam.features.geometry.wrap_angle`), chi2 with 3 degrees of freedom when consistent (2 for
   the position only, 1 for the heading only);
 * NIS of the innovations when a back end logs them (:func:`nis`);
 * the one-sided gate of one chi2 value (:func:`chi2_gate`), whose exceedances a consistent
@@ -10,7 +10,7 @@
   band is ``chi2.ppf([0.025, 0.975], N dof) / N`` (Bar-Shalom, Li, Kirubarajan 2001, 5.4.2).
 
 The one place of the NEES and of its chi2 bands: trajectories (here), line features against
-true walls (:mod:`slam.eval.lines`), the report and the sweep all use these.
+true walls (:mod:`sonarslam.slam.eval.lines`), the report and the sweep all use these.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy import stats
 
-from features.geometry import FloatArray, wrap_angle
-from slam.io.trajectory import Trajectory
+from sonarslam.features.geometry import FloatArray, wrap_angle
+from sonarslam.slam.io.trajectory import Trajectory
 
 __all__ = [
     "NEES_PROBABILITY",

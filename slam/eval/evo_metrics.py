@@ -5,7 +5,7 @@
   none), Umeyama SE(3) alignment (``PoseTrajectory3D.align``) as an option. The default
   association interpolates the denser trajectory at the times of the sparser one (evo's
   ``SyncMethod.interpolation``), so that against GPS the APE is taken at every GPS fix on the
-  estimate interpolated there: the same errors as :mod:`slam.eval.ate` (a test checks it);
+  estimate interpolated there: the same errors as :mod:`sonarslam.slam.eval.ate` (a test checks it);
 * RPE per travelled distance (``evo.core.metrics.RPE`` with ``delta_unit=Unit.meters``): the
   translation error of the relative motion between poses ``delta_m`` metres of path apart.
 """
@@ -23,7 +23,7 @@ from evo.core.sync_method import SyncMethod
 from evo.core.trajectory import PoseTrajectory3D
 from evo.core.units import Unit
 
-from slam.io.trajectory import GPS_FILE, Trajectory, read_tum, to_evo
+from sonarslam.slam.io.trajectory import GPS_FILE, Trajectory, read_tum, to_evo
 
 __all__ = ["MAX_DIFF_S", "ErrorStats", "evo_ape", "evo_rpe", "evo_metrics_of_run"]
 
@@ -159,7 +159,7 @@ def evo_metrics_of_run(
     max_diff_s: float = MAX_DIFF_S,
 ) -> dict[str, float | int]:
     """evo's APE and RPE of a run directory's ``<stem>.tum`` (``ekf.tum``) against its
-    ``gps.tum`` (:mod:`slam.run.outputs`).
+    ``gps.tum`` (:mod:`sonarslam.slam.run.outputs`).
 
     Returns
     -------

@@ -45,10 +45,10 @@ from typing import Any
 import numpy as np
 from scipy.stats import binom, chi2
 
-from datasets.errors import DataWarning
-from datasets.settings import bounded, check_fields
-from features.geometry import FloatArray, wrap_angle
-from slam.io.trajectory import Trajectory
+from sonarslam.datasets.errors import DataWarning
+from sonarslam.datasets.settings import bounded, check_fields
+from sonarslam.features.geometry import FloatArray, wrap_angle
+from sonarslam.slam.io.trajectory import Trajectory
 
 __all__ = [
     "HealthConfig",

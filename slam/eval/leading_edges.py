@@ -4,8 +4,8 @@ A wall's echo is a band of returns several metres thick along a beam; its near e
 wall's face is. Each beam's returns (the non-zero bins of a 0/255 mask; raw beams: the bins at
 or above ``intensity_threshold``) are cut into runs, a run being a chain of returns whose gaps
 are shorter than ``run_gap_m``, and the nearest bin of each run is kept: the rule of
-:func:`sonar.segmentation.leading_edge_bins`, which the scan matcher uses too. Second returns and far echoes give leading
-edges too; they lie behind the walls, and the wall fit (:mod:`slam.eval.walls`) treats them as
+:func:`sonarslam.sonar.segmentation.leading_edge_bins`, which the scan matcher uses too. Second returns and far echoes give leading
+edges too; they lie behind the walls, and the wall fit (:mod:`sonarslam.slam.eval.walls`) treats them as
 outliers.
 """
 
@@ -17,11 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from features.geometry import FloatArray, compose
-from features.pose_source import PoseSource
-from features.projection import project_beams
-from sonar.beam import Mounting, SonarBeam, SonarHead
-from sonar.segmentation import leading_edge_bins
+from sonarslam.features.geometry import FloatArray, compose
+from sonarslam.features.pose_source import PoseSource
+from sonarslam.features.projection import project_beams
+from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead
+from sonarslam.sonar.segmentation import leading_edge_bins
 
 __all__ = ["EdgeConfig", "Edges", "leading_edge_beams", "leading_edge_points"]
 

@@ -1,6 +1,6 @@
 """Line features against wall references: association, per-wall error statistics, NEES.
 
-The references are :class:`slam.eval.walls.WallReference` (real data: fitted through the
+The references are :class:`sonarslam.slam.eval.walls.WallReference` (real data: fitted through the
 GPS-projected leading edges) or the simulator's true walls (:func:`walls_from_segments`).
 
 * **Association** (:func:`associate`), geometric and blind to the lines' covariances, so that a
@@ -16,11 +16,11 @@ GPS-projected leading edges) or the simulator's true walls (:func:`walls_from_se
   the gates decide anything. :func:`evaluate_lines` associates every line once, placed by the ruler
   (where the sonar was), and scores it against that wall in every frame, so that a pose error
   of the estimator cannot move a line to another wall or out of the gates.
-* **Error** in each line's own frame R (:func:`slam.eval.lines.line_error_r`, sign-free):
+* **Error** in each line's own frame R (:func:`sonarslam.slam.eval.lines.line_error_r`, sign-free):
   ``e = (rho - rho_wall, theta - theta_wall)`` with the wall's line taken into R by the pose
   of R. ``e_rho > 0``: the line lies beyond the wall's face as seen from the sonar.
 * **NEES** ``e^T P^-1 e`` with the line's own covariance, and the statistics per wall and over
-  all matched lines: :mod:`slam.eval.line_stats`.
+  all matched lines: :mod:`sonarslam.slam.eval.line_stats`.
 * **Frames** (:func:`evaluate_lines`): the lines as their pose source placed them (``own``),
   re-projected onto the ruler at each line's time (``ruler``), and the same against the wall
   as the line's own scan's leading edges show it (``ruler_scan``, :func:`scan_lines`): the
@@ -41,15 +41,15 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from features.geometry import FloatArray, compose, wrap_angle
-from features.line import LineFeature
-from features.pose_source import PoseSource
-from slam.eval.consistency import nees
-from slam.eval.leading_edges import Edges
-from slam.eval.line_stats import error_stats, pooled_sd
-from slam.eval.lines import line_error_r
-from slam.eval.truth import wall_lines_world
-from slam.eval.walls import WallReference, robust_line_fit, water_side
+from sonarslam.features.geometry import FloatArray, compose, wrap_angle
+from sonarslam.features.line import LineFeature
+from sonarslam.features.pose_source import PoseSource
+from sonarslam.slam.eval.consistency import nees
+from sonarslam.slam.eval.leading_edges import Edges
+from sonarslam.slam.eval.line_stats import error_stats, pooled_sd
+from sonarslam.slam.eval.lines import line_error_r
+from sonarslam.slam.eval.truth import wall_lines_world
+from sonarslam.slam.eval.walls import WallReference, robust_line_fit, water_side
 
 __all__ = [
     "AssociationGates",
@@ -236,7 +236,7 @@ class ScanReference:
     min_span_m : float
         Edges spread along the wall over less than this (m): no scan reference.
     loss_scale_m : float
-        Cauchy loss of the fit (:func:`slam.eval.walls.robust_line_fit`).
+        Cauchy loss of the fit (:func:`sonarslam.slam.eval.walls.robust_line_fit`).
     """
 
     window_s: float

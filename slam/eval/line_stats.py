@@ -1,13 +1,13 @@
 """Statistics of line errors against references: bias, scatter, claimed sigmas and the NEES.
 
 For ``N`` lines with errors ``e = (rho - rho_ref, theta - theta_ref)`` in their frames R and
-covariances ``P`` (:mod:`slam.eval.line_quality`):
+covariances ``P`` (:mod:`sonarslam.slam.eval.line_quality`):
 
 * bias (mean), median, scatter (standard deviation) and RMS of ``e_rho`` (m) and ``e_theta``
   (deg), beside the sigmas the covariances claim (median of their square roots);
-* NEES ``e^T P^-1 e`` (:func:`slam.eval.consistency.nees`): chi2 with 2 degrees of freedom if
+* NEES ``e^T P^-1 e`` (:func:`sonarslam.slam.eval.consistency.nees`): chi2 with 2 degrees of freedom if
   ``(rho, theta)`` and ``P`` are honest; its median is then 1.386, its mean 2, and 1 % of it
-  lies beyond the 99 % gate (:func:`slam.eval.consistency.chi2_gate`, 9.21);
+  lies beyond the 99 % gate (:func:`sonarslam.slam.eval.consistency.chi2_gate`, 9.21);
 * over several walls, the *per-wall scatter*: the pooled within-wall standard deviation (each
   line about its wall's mean error), what a landmark of that wall sees (:func:`pooled_sd`).
 """
@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from features.geometry import FloatArray
-from slam.eval.consistency import chi2_gate
+from sonarslam.features.geometry import FloatArray
+from sonarslam.slam.eval.consistency import chi2_gate
 
 __all__ = ["GATE_PROBABILITY", "NEES_QUANTILES", "error_stats", "pooled_sd"]
 

@@ -2,7 +2,7 @@
 
 A feature ``(rho, theta)`` with covariance ``P`` lives in its frame R (pose ``wTr``). A true wall
 is a world segment; its infinite line, expressed in R with
-:func:`features.geometry.line_world_to_frame`, is the truth of any feature lying on it.
+:func:`sonarslam.features.geometry.line_world_to_frame`, is the truth of any feature lying on it.
 
 * Matching (:func:`match_features`): each feature goes to the true wall whose infinite line is
   nearest to the feature's segment, the distance being the larger of the distances of the two
@@ -11,13 +11,13 @@ is a world segment; its infinite line, expressed in R with
   *matched* when that distance is at most ``gate_m`` and the angle between the lines at most
   ``gate_rad``; otherwise it is *false*.
 * Error (:func:`line_error_r`): ``e = (rho - rho_true, wrap(theta - theta_true))`` in R, taken
-  sign-free (:func:`features.geometry.line_difference`).
-* NEES ``e^T P^-1 e`` (:func:`slam.eval.consistency.nees`): for a consistent estimator a chi2
+  sign-free (:func:`sonarslam.features.geometry.line_difference`).
+* NEES ``e^T P^-1 e`` (:func:`sonarslam.slam.eval.consistency.nees`): for a consistent estimator a chi2
   variable with 2 degrees of freedom; the mean of ``N`` independent ones lies in
-  :func:`slam.eval.consistency.mean_nees_band` with probability 0.95.
+  :func:`sonarslam.slam.eval.consistency.mean_nees_band` with probability 0.95.
 
 The trials that simulate a run and extract its lines with the true poses are
-:mod:`slam.run.line_trials`.
+:mod:`sonarslam.slam.run.line_trials`.
 """
 
 from __future__ import annotations
@@ -27,10 +27,10 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from features.geometry import FloatArray, line_difference, line_world_to_frame
-from features.line import LineFeature
-from slam.eval.consistency import nees
-from slam.eval.truth import wall_lines_world
+from sonarslam.features.geometry import FloatArray, line_difference, line_world_to_frame
+from sonarslam.features.line import LineFeature
+from sonarslam.slam.eval.consistency import nees
+from sonarslam.slam.eval.truth import wall_lines_world
 
 __all__ = [
     "Match",

@@ -1,7 +1,7 @@
 """Published accuracy on the marina, the rows our tables stand beside.
 
 Mallios, Ridao, Ribas, Hernandez, "Scan matching SLAM in underwater environments", Autonomous
-Robots 36:181-198, 2014, Table 2: ATE against GPS (m) by the protocol of :mod:`slam.eval.ate`.
+Robots 36:181-198, 2014, Table 2: ATE against GPS (m) by the protocol of :mod:`sonarslam.slam.eval.ate`.
 """
 
 from __future__ import annotations

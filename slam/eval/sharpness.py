@@ -1,11 +1,11 @@
 """The sharpness of the sonar map a trajectory projects: a GPS-free score of its consistency.
 
 Every bin of every beam is placed in the world with the trajectory's pose at its beam's time
-(:func:`features.projection.project_beams`); the Shannon entropy of the 2-D histogram of those
+(:func:`sonarslam.features.projection.project_beams`); the Shannon entropy of the 2-D histogram of those
 points in square cells (:func:`map_entropy`) is low when the walls seen from different places
 and passes fall on the same cells, and grows as the trajectory smears them. Over a window of a
 minute it scores the local motion (the sonar clock, the scan direction and the sonar yaw are
-calibrated so, :mod:`slam.run.calibration`); over the whole run it scores the revisits too,
+calibrated so, :mod:`sonarslam.slam.run.calibration`); over the whole run it scores the revisits too,
 without a ruler: a loop that moves the trajectory onto its earlier passes sharpens the map.
 Values compare trajectories of one dataset with one cell size only (nats).
 """
@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from datasets.source import Dataset
-from features.geometry import FloatArray
-from features.pose_source import PoseSource
-from features.projection import project_beams
+from sonarslam.datasets.source import Dataset
+from sonarslam.features.geometry import FloatArray
+from sonarslam.features.pose_source import PoseSource
+from sonarslam.features.projection import project_beams
 
 __all__ = ["map_entropy", "trajectory_sharpness"]
 
@@ -43,7 +43,7 @@ def trajectory_sharpness(
 ) -> float:
     """:func:`map_entropy` of the bins at or above ``min_intensity`` of the dataset's beams
     inside ``span_s`` projected with ``trajectory`` (nats; lower is sharper). Raw beams need
-    the threshold of their echoes (:func:`slam.run.presets.map_min_intensity`): their
+    the threshold of their echoes (:func:`sonarslam.slam.run.presets.map_min_intensity`): their
     background noise would fill every cell."""
     beams = [b for b in dataset.nav_beams() if span_s[0] <= b.t <= span_s[1]]
     points, _ = project_beams(

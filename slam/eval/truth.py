@@ -14,8 +14,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from datasets.source import Dataset
-from features.geometry import (
+from sonarslam.datasets.source import Dataset
+from sonarslam.features.geometry import (
     FloatArray,
     compose,
     line_difference,
@@ -23,8 +23,8 @@ from features.geometry import (
     normalize_line,
     wrap_angle,
 )
-from features.line import LineFeature
-from slam.io.trajectory import Trajectory
+from sonarslam.features.line import LineFeature
+from sonarslam.slam.io.trajectory import Trajectory
 
 __all__ = [
     "truth_trajectory",
@@ -96,7 +96,7 @@ def wall_lines(
     Returns
     -------
     lines : ndarray, shape (K, 2)
-        Distinct lines (m, rad), normalised (:func:`features.geometry.normalize_line`).
+        Distinct lines (m, rad), normalised (:func:`sonarslam.features.geometry.normalize_line`).
     line_of_wall : ndarray of int, shape (W,)
     """
     lines: list[FloatArray] = []
@@ -171,7 +171,7 @@ def association_scores(
         How close (m, rad) an observation must be to a true line to be of it.
     feature_seeds : list, optional
         The landmark each feature seeded as a tentative line (None: none), as
-        :attr:`slam.run.closed_loop.ClosedLoopResult.feature_seeds`.
+        :attr:`sonarslam.slam.run.closed_loop.ClosedLoopResult.feature_seeds`.
     wall_curve : array_like of int, shape (W,), optional
         The curved stretch each wall is a facet of (-1: straight; a drawn world's
         ``truth.json`` ``walls.curve``): the facets of one curve are one truth unit, as
@@ -238,7 +238,7 @@ def association_against_truth(
     feature_seeds: list[int | None],
 ) -> AssociationScores:
     """:func:`association_scores` of a closed-loop run on a simulated dataset: its features,
-    pairings and seeds (:class:`slam.run.closed_loop.ClosedLoopResult`) against the true walls
+    pairings and seeds (:class:`sonarslam.slam.run.closed_loop.ClosedLoopResult`) against the true walls
     and poses."""
     walls = (dataset.truth or {}).get("walls") or {}
     return association_scores(

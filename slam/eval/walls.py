@@ -5,9 +5,9 @@ projected into the world with a pose source that is not estimated from the sonar
 the marina), and the straight walls are fitted through them. The ruler only measures; nothing it
 gives goes back into an estimator.
 
-1. **Leading edges** (:mod:`slam.eval.leading_edges`): the nearest bin of each run of returns
+1. **Leading edges** (:mod:`sonarslam.slam.eval.leading_edges`): the nearest bin of each run of returns
    along each beam, where a wall's echo band begins.
-2. **Projection** (:func:`slam.eval.leading_edges.leading_edge_points`) with the ruler, keeping
+2. **Projection** (:func:`sonarslam.slam.eval.leading_edges.leading_edge_points`) with the ruler, keeping
    where the sonar was: a face is seen from its own side only (its *water side*).
 3. **Walls** (:func:`fit_walls`), round after round until no line holds ``min_points`` edges:
 
@@ -47,10 +47,10 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
-from datasets.source import Dataset
-from features.geometry import FloatArray, line_side, normalize_line, wrap_angle
-from features.pose_source import PoseSource
-from slam.eval.leading_edges import EdgeConfig, Edges, leading_edge_points
+from sonarslam.datasets.source import Dataset
+from sonarslam.features.geometry import FloatArray, line_side, normalize_line, wrap_angle
+from sonarslam.features.pose_source import PoseSource
+from sonarslam.slam.eval.leading_edges import EdgeConfig, Edges, leading_edge_points
 
 __all__ = [
     "WallFitConfig",
@@ -148,7 +148,7 @@ class WallReference:
         1.4826 MAD of those edges' distances to the line (m).
     n_sightings : float
         Effective number of windows of ``sighting_window_s`` in which it was seen
-        (:meth:`slam.eval.leading_edges.Edges.sightings`).
+        (:meth:`sonarslam.slam.eval.leading_edges.Edges.sightings`).
     """
 
     index: int
@@ -205,7 +205,7 @@ def _normal(line: FloatArray) -> tuple[FloatArray, FloatArray]:
 def water_side(line_w: npt.ArrayLike, positions_w: npt.ArrayLike) -> npt.NDArray[np.int64]:
     """Side of a line ``(rho, theta)`` the positions (..., 2) are on: +1 on the side of its
     normal ``(cos theta, sin theta)`` (``p . n > rho``), else -1 (:attr:`WallReference.side`;
-    :func:`features.geometry.line_side` with the other sign)."""
+    :func:`sonarslam.features.geometry.line_side` with the other sign)."""
     p = np.asarray(positions_w, dtype=np.float64)
     line = np.broadcast_to(np.asarray(line_w, dtype=np.float64), p.shape)
     return np.where(line_side(line, p) < 0.0, 1, -1).astype(np.int64)  # the normal's side

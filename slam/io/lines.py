@@ -1,5 +1,5 @@
 """``lines.jsonl`` back into line features: the files ``sonarslam extract`` and ``sonarslam run``
-write (one :meth:`features.line.LineFeature.to_json` object per line; a run adds ``landmark``).
+write (one :meth:`sonarslam.features.line.LineFeature.to_json` object per line; a run adds ``landmark``).
 
 The segment ends are stored in the world; they are taken back into the frame R with the
 stored pose of R, so :meth:`LineFeature.endpoints_world` gives them back unchanged.
@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from datasets.errors import DataError
-from features.geometry import inverse, transform_points
-from features.line import LineFeature
+from sonarslam.datasets.errors import DataError
+from sonarslam.features.geometry import inverse, transform_points
+from sonarslam.features.line import LineFeature
 
 __all__ = ["line_from_json", "read_lines_jsonl"]
 

@@ -22,9 +22,9 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 from scipy.stats import chi2
 
-from features.geometry import FloatArray, transform_points
-from features.line import LineFeature
-from slam.io.trajectory import Trajectory
+from sonarslam.features.geometry import FloatArray, transform_points
+from sonarslam.features.line import LineFeature
+from sonarslam.slam.io.trajectory import Trajectory
 
 __all__ = [
     "TRAJECTORY_STYLES",

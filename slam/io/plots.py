@@ -1,5 +1,5 @@
 """Evaluation pictures: trajectories and their ATE against the reference, the ATE per time
-segment, errors with their bounds, NEES, ANEES and the sweep (maps: :mod:`slam.io.maps`).
+segment, errors with their bounds, NEES, ANEES and the sweep (maps: :mod:`sonarslam.slam.io.maps`).
 
 Matplotlib's object interface (``Figure``), so that importing this module changes no global
 state (no backend switch, no pyplot figure registry): every function draws into its own figure
@@ -20,9 +20,9 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 
-from features.geometry import FloatArray
-from slam.io.maps import TRAJECTORY_STYLES, MapLayers, data_box, draw_map
-from slam.io.trajectory import Trajectory
+from sonarslam.features.geometry import FloatArray
+from sonarslam.slam.io.maps import TRAJECTORY_STYLES, MapLayers, data_box, draw_map
+from sonarslam.slam.io.trajectory import Trajectory
 
 __all__ = [
     "plot_trajectories",
@@ -85,7 +85,7 @@ def plot_trajectories(
     shaded; one legend below both.
 
     ``trajectories`` holds the reference (``"gps"`` or ``"truth"``) and the estimates by name
-    (:data:`slam.io.maps.TRAJECTORY_STYLES`); ``errors`` maps an estimate's name to its times
+    (:data:`sonarslam.slam.io.maps.TRAJECTORY_STYLES`); ``errors`` maps an estimate's name to its times
     (Unix s) and errors (m).
     """
     fig = Figure(figsize=(13, 6.8), dpi=110, layout="constrained")
@@ -137,7 +137,7 @@ def plot_segment_ate(
     edges_s : ndarray, shape (K + 1,)
         Segment edges, seconds since the start.
     stats : dict of str to (ndarray (K,), ndarray (K,))
-        A method's name (:data:`slam.io.maps.TRAJECTORY_STYLES`) to the mean and max error (m)
+        A method's name (:data:`sonarslam.slam.io.maps.TRAJECTORY_STYLES`) to the mean and max error (m)
         of each segment (NaN: no fix there).
     sonar_end_s : float, optional
         When the sonar stops, seconds since the start (a dashed line).
@@ -244,7 +244,7 @@ def plot_nees(
     """NEES against time, one panel per series, with the two-sided chi2(dof) band of one value.
 
     ``series`` maps a label to ``(t_s (K,), nees (K,), dof, (lo, hi))``, the band of
-    ``probability`` (:func:`slam.eval.consistency.chi2_band`).
+    ``probability`` (:func:`sonarslam.slam.eval.consistency.chi2_band`).
     """
     n = max(len(series), 1)
     fig = Figure(figsize=(12, 2.8 * n + 0.8), dpi=100, layout="constrained")
@@ -279,7 +279,7 @@ def plot_nees(
 
 
 class AneesCurve(Protocol):
-    """What :func:`plot_anees` draws of an ANEES (:class:`slam.eval.consistency.AneesResult`)."""
+    """What :func:`plot_anees` draws of an ANEES (:class:`sonarslam.slam.eval.consistency.AneesResult`)."""
 
     @property
     def t_rel_s(self) -> FloatArray: ...
@@ -345,7 +345,7 @@ def plot_sweep(
     position NEES means (log) and its wall time.
 
     ``table`` is the sweep's DataFrame (``gain_over_dr`` from
-    :func:`slam.run.sweep_summary.pair_with_baseline`); ``labels`` (R,) names each row's
+    :func:`sonarslam.slam.run.sweep_summary.pair_with_baseline`); ``labels`` (R,) names each row's
     configuration; ``notes`` maps a configuration to a line under its name in the gain panel
     (the share of seeds on which it beats dead reckoning).
     """

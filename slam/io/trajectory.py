@@ -18,7 +18,7 @@ from evo.core.trajectory import PoseTrajectory3D
 from evo.tools import file_interface
 from scipy.spatial.transform import Rotation
 
-from features.geometry import FloatArray, interpolate_poses
+from sonarslam.features.geometry import FloatArray, interpolate_poses
 
 __all__ = [
     "Trajectory",
@@ -41,7 +41,7 @@ __all__ = [
 
 @dataclass(frozen=True, eq=False)
 class Trajectory:
-    """Body poses ``wTb`` at increasing times; implements :class:`features.pose_source.PoseSource`.
+    """Body poses ``wTb`` at increasing times; implements :class:`sonarslam.features.pose_source.PoseSource`.
 
     Attributes
     ----------

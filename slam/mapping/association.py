@@ -11,7 +11,7 @@ Observation ``i`` is ``z[i]`` with covariance ``R[i]``; all lines are ``(rho_m, 
   (chi2 with 2n dof on the stacked innovation), ties broken by the smaller joint distance.
 
 Near ``rho = 0`` a line has two close representations, ``(rho, theta)`` and
-``(-rho, theta + pi)``; :func:`features.geometry.line_difference` compares in the one that is
+``(-rho, theta + pi)``; :func:`sonarslam.features.geometry.line_difference` compares in the one that is
 nearest.
 """
 
@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
-from datasets.settings import bounded, check_fields, one_of
-from features.geometry import FLIP_RHO, FloatArray, along_line, line_difference
+from sonarslam.datasets.settings import bounded, check_fields, one_of
+from sonarslam.features.geometry import FLIP_RHO, FloatArray, along_line, line_difference
 
 __all__ = [
     "AssociationConfig",
@@ -205,7 +205,7 @@ def extent_allowed(
     lines_w : ndarray, shape (k, 2)
         Landmark lines ``(rho_m, theta_rad)`` (world).
     extents_m : ndarray, shape (k, 2)
-        Their extents ``(s_min, s_max)`` along the line (:func:`features.geometry.along_line`).
+        Their extents ``(s_min, s_max)`` along the line (:func:`sonarslam.features.geometry.along_line`).
     segments_w : ndarray, shape (m, 2, 2)
         Each observation's two end points in the world (m).
     margin_m : float

@@ -3,7 +3,7 @@
 Two active landmarks are of the same wall when they were seen from the same side, their extents
 overlap or lie within ``extent_margin_m`` of each other along the line, and their lines are
 jointly compatible: ``d2 = nu^T S^-1 nu <= gate`` with ``nu`` their sign-free difference
-(:func:`features.geometry.line_difference`) and ``S`` its covariance from the back end's joint
+(:func:`sonarslam.features.geometry.line_difference`) and ``S`` its covariance from the back end's joint
 covariance of the two lines (the joint-compatibility test of Neira & Tardos 2001, on the pair).
 """
 
@@ -13,11 +13,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from features.geometry import FLIP_RHO, FloatArray, along_line, line_difference
+from sonarslam.features.geometry import FLIP_RHO, FloatArray, along_line, line_difference
 
 if TYPE_CHECKING:  # the landmark layer imports this module: its types only, for the checker
-    from slam.mapping.landmarks import Landmark, LandmarkMap
-    from slam.mapping.vote import LandmarkBelief
+    from sonarslam.slam.mapping.landmarks import Landmark, LandmarkMap
+    from sonarslam.slam.mapping.vote import LandmarkBelief
 
 __all__ = ["duplicate_of", "extent_gap_m"]
 

@@ -7,7 +7,7 @@ ends manage them by the same rules:
 
 * observations of lines nearer than ``min_rho_m`` are not used;
 * each vote's observations are associated with the landmarks by the back end's joint belief
-  (:mod:`slam.mapping.association`, JCBB or nearest neighbour), with pairings ruled out when the
+  (:mod:`sonarslam.slam.mapping.association`, JCBB or nearest neighbour), with pairings ruled out when the
   observed segment does not reach the landmark's extent (``extent_margin_m``) or when the sonar
   is on the other side of the landmark's line than when it was first seen (``side_gate``);
 * an observation that pairs with no landmark is a *tentative* line; when ``tentative_observations``
@@ -15,8 +15,8 @@ ends manage them by the same rules:
   ``tentative_max_age_s`` it is promoted to a landmark;
 * each landmark's extent along its line grows with the segments of its observations.
 
-The vote itself is :meth:`LandmarkMap.vote`: the back end's :class:`slam.mapping.vote.Belief`
-in, a :class:`slam.mapping.vote.Decision` out, which the back end applies; this layer calls
+The vote itself is :meth:`LandmarkMap.vote`: the back end's :class:`sonarslam.slam.mapping.vote.Belief`
+in, a :class:`sonarslam.slam.mapping.vote.Decision` out, which the back end applies; this layer calls
 nothing of the back end.
 """
 
@@ -28,8 +28,8 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
-from datasets.settings import bounded, check_fields
-from features.geometry import (
+from sonarslam.datasets.settings import bounded, check_fields
+from sonarslam.features.geometry import (
     FLIP_RHO,
     FloatArray,
     along_line,
@@ -39,15 +39,15 @@ from features.geometry import (
     segment_on_line,
     transform_points,
 )
-from features.line import LineFeature
-from slam.mapping.association import (
+from sonarslam.features.line import LineFeature
+from sonarslam.slam.mapping.association import (
     AssociationConfig,
     AssociationProblem,
     associate,
     extent_allowed,
 )
-from slam.mapping.duplicates import duplicate_of
-from slam.mapping.vote import (
+from sonarslam.slam.mapping.duplicates import duplicate_of
+from sonarslam.slam.mapping.vote import (
     AfterVote,
     Anchored,
     Belief,
@@ -55,7 +55,7 @@ from slam.mapping.vote import (
     LandmarkBelief,
     NewLandmark,
 )
-from slam.model.lines import sonar_side, world_observation
+from sonarslam.slam.model.lines import sonar_side, world_observation
 
 __all__ = [
     "LandmarkConfig",
@@ -70,8 +70,8 @@ __all__ = [
 @dataclass(frozen=True)
 class LandmarkConfig:
     """Settings of the landmark layer (every back end's configuration extends this). Each
-    field's range is in its metadata (:func:`datasets.settings.bounded`), checked by
-    :func:`datasets.settings.check_fields` for this class and every subclass.
+    field's range is in its metadata (:func:`sonarslam.datasets.settings.bounded`), checked by
+    :func:`sonarslam.datasets.settings.check_fields` for this class and every subclass.
 
     Attributes
     ----------
@@ -87,11 +87,11 @@ class LandmarkConfig:
         the sonar's near field).
     extent_margin_m : float or None
         A landmark is paired only with observations whose world segment reaches its extent
-        within this margin (m), :func:`slam.mapping.association.extent_allowed`; None: no extent
+        within this margin (m), :func:`sonarslam.slam.mapping.association.extent_allowed`; None: no extent
         gate. It keeps a landmark from spanning the gap to a collinear wall further on.
     side_gate : bool
         A landmark (or tentative line) is paired only with observations made from the side of
-        its line it was first seen from (:func:`slam.model.lines.sonar_side`).
+        its line it was first seen from (:func:`sonarslam.slam.model.lines.sonar_side`).
     line_cov_scale : float
         The extractor's line covariances are multiplied by this (1: taken as they are).
     merge_gate_probability : float or None
@@ -282,7 +282,7 @@ class LandmarkMap:
 
     def vote(self, belief: Belief) -> Decision:
         """Decide one vote of lines from the back end's belief before it uses them
-        (:mod:`slam.mapping.vote`): settle the previous vote (:meth:`settle`), associate the
+        (:mod:`sonarslam.slam.mapping.vote`): settle the previous vote (:meth:`settle`), associate the
         observations with the candidates, pick those to use, keep or promote tentative lines.
 
         A new line is placed with the pose of the vote; the extents the associated segments add
@@ -432,7 +432,7 @@ class LandmarkMap:
         self, belief: LandmarkBelief, landmark_ids: list[int]
     ) -> list[tuple[int, int]]:
         """Merge each of these landmarks with another one of the same wall, if any
-        (:func:`slam.mapping.duplicates.duplicate_of`): the newer into the older. Returns the
+        (:func:`sonarslam.slam.mapping.duplicates.duplicate_of`): the newer into the older. Returns the
         merges ``(keep, drop)`` made, for the back end to apply."""
         assert self.config.merge_gate_probability is not None
         gate = float(chi2.ppf(self.config.merge_gate_probability, 2))

@@ -1,6 +1,6 @@
 """What a back end and the landmark layer exchange for one vote of lines: data, both ways.
 
-A back end hands :meth:`slam.mapping.landmarks.LandmarkMap.vote` one :class:`Belief` (the vote's
+A back end hands :meth:`sonarslam.slam.mapping.landmarks.LandmarkMap.vote` one :class:`Belief` (the vote's
 observations, the pose it was made from, the landmarks' lines as stored and the prediction of the
 candidate landmarks with their joint covariance) and gets back one :class:`Decision` (which
 observation pairs with which landmark and is used, which tentative lines became landmarks, which
@@ -18,8 +18,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from features.geometry import FloatArray
-from features.line import LineFeature
+from sonarslam.features.geometry import FloatArray
+from sonarslam.features.line import LineFeature
 
 __all__ = [
     "NodeAnchor",
@@ -110,7 +110,7 @@ class Belief:
     H : ndarray, shape (k, 2, d)
         Their Jacobians with respect to the belief's vector ``s``.
     P : ndarray, shape (d, d)
-        The covariance of ``s`` (:mod:`slam.mapping.association`).
+        The covariance of ``s`` (:mod:`sonarslam.slam.mapping.association`).
     landmarks : LandmarkBelief
         Every active landmark's line (the extent and side gates, the extents, the merges).
     seeds_used : bool

@@ -1,7 +1,7 @@
 """The line observation model shared by every back end (design.md conventions).
 
 A world line ``L = (rho_w, theta_w)`` seen by the sonar at ``wTs = wTb * bTs`` is
-``z = line_world_to_frame(L, wTs)`` (:mod:`features.geometry`), normalised. This module gives
+``z = line_world_to_frame(L, wTs)`` (:mod:`sonarslam.features.geometry`), normalised. This module gives
 that prediction with its Jacobians for one line (:func:`line_prediction`) or many
 (:func:`line_predictions`), the residual of a measured line against it with the sign ambiguity
 resolved (:func:`line_residual`, the factor graph's error), the world line an observation
@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from features.geometry import (
+from sonarslam.features.geometry import (
     FLIP_RHO,
     FloatArray,
     compose,
@@ -32,7 +32,7 @@ from features.geometry import (
     transform_points,
     wrap_angle,
 )
-from features.line import LineFeature
+from sonarslam.features.line import LineFeature
 
 __all__ = [
     "local_to_world",
@@ -125,7 +125,7 @@ def line_residual(
     """Error of a line observation: measured minus predicted, in the sonar frame R.
 
     ``e = z - z_hat`` with ``z_hat`` in the representation nearest ``z``
-    (:func:`features.geometry.line_difference`, with the prediction flipped rather than the
+    (:func:`sonarslam.features.geometry.line_difference`, with the prediction flipped rather than the
     measurement, so that ``e ~ N(0, R)`` with the measurement's own covariance ``R``).
 
     Returns

@@ -2,7 +2,7 @@
 
 Frames: the DVL measures velocity in its own frame; ``v_b = R(dvl_yaw) v_dvl`` in the body frame
 (x forward, y left). The AHRS gives the yaw of its own frame; the body yaw is
-``psi_b = psi_ahrs - ahrs_yaw`` (mountings in :mod:`datasets.config`). Lever arms are ignored
+``psi_b = psi_ahrs - ahrs_yaw`` (mountings in :mod:`sonarslam.datasets.config`). Lever arms are ignored
 (the vehicle turns slowly; a 0.3 m arm at 5 deg/s is 2.6 cm/s, below the DVL noise).
 
 The model, one step of ``dt`` between two records::
@@ -10,7 +10,7 @@ The model, one step of ``dt`` between two records::
     (x, y) += R(psi) (dt v_b)        psi += dt r        F = [[1, 0, -dy], [0, 1, dx], [0, 0, 1]]
 
 with ``(dx, dy) = R(psi) dt v_b`` the step in the world (:func:`step_displacement`) and the
-velocity noise counted once per held DVL sample (:func:`slam.model.noise.held_velocity_variance_step`).
+velocity noise counted once per held DVL sample (:func:`sonarslam.slam.model.noise.held_velocity_variance_step`).
 The driver turns the sensor stream into one :class:`MotionStep` per record
 (:func:`motion_step`), and every estimator integrates those same steps: the EKF's prediction,
 the factor graph's odometry (:class:`RelativeMotion`), the odometry chain of the front end's
@@ -26,17 +26,17 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from datasets.errors import DataError
-from datasets.records import AttitudeSeries, DvlSeries
-from features.geometry import FloatArray, transform_points, wrap_angle
-from slam.io.trajectory import Trajectory
-from slam.model.noise import (
+from sonarslam.datasets.errors import DataError
+from sonarslam.datasets.records import AttitudeSeries, DvlSeries
+from sonarslam.features.geometry import FloatArray, transform_points, wrap_angle
+from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.model.noise import (
     MotionNoise,
     dvl_sample_sigma,
     held_velocity_variance_step,
     held_velocity_variance_step_float,
 )
-from sonar.beam import Mounting
+from sonarslam.sonar.beam import Mounting
 
 __all__ = [
     "body_velocity",
@@ -97,7 +97,7 @@ class MotionStep:
         How long the velocity sample has been held at the end of the step (s), >= ``dt_s``.
     var_yaw_gap_rad2 : float
         Heading variance the step adds because the AHRS is silent (rad^2): the growth of
-        :meth:`slam.model.noise.MotionNoise.gap_heading_variance` over the step; 0 otherwise.
+        :meth:`sonarslam.slam.model.noise.MotionNoise.gap_heading_variance` over the step; 0 otherwise.
     gyro_dt_s : float
         How much of the step ``dyaw_rad`` integrates the gyro's rate over (s): ``dt_s`` when
         the rate is the gyro's, 0 when it is the AHRS heading's own change or none (an AHRS
@@ -105,7 +105,7 @@ class MotionStep:
         ``dyaw_rad - g * gyro_dt_s``.
     var_xy_m2 : float
         Derived: the position variance per axis the step adds, one error per held DVL sample
-        (:func:`slam.model.noise.held_velocity_variance_step`, m^2).
+        (:func:`sonarslam.slam.model.noise.held_velocity_variance_step`, m^2).
     """
 
     t_s: float
@@ -183,7 +183,7 @@ class RelativeMotion:
 
     The motion model from the identity, in plain floats: ``P <- F P F^T + diag(qv, qv, qr)``.
     It also carries the gyro's own integral and ``d(x, y) / d(gyro scale)`` for the factor
-    graph's gyro-scale odometry (:func:`slam.backends.isam2.factors.odometry_residual`).
+    graph's gyro-scale odometry (:func:`sonarslam.slam.backends.isam2.factors.odometry_residual`).
     """
 
     __slots__ = ("x", "y", "yaw", "a", "b", "c", "d", "e", "f", "yaw_raw", "jx", "jy")
@@ -336,7 +336,7 @@ def velocity_input(
 ) -> VelocityInput:
     """Body velocity at times ``t_s``: the last valid DVL sample (zero-order hold).
 
-    The 1-sigma of a valid sample is :func:`slam.model.noise.dvl_sample_sigma`. During a
+    The 1-sigma of a valid sample is :func:`sonarslam.slam.model.noise.dvl_sample_sigma`. During a
     dropout (the newest DVL row has no bottom lock, or the newest valid sample is older than
     ``dvl_stale_s``: a gap of the DVL) the last valid velocity is held and its 1-sigma grows
     linearly from that to ``gap_sigma_mps`` (or stays, when larger) over ``dvl_max_gap_s``;

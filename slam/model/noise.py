@@ -1,7 +1,7 @@
 """Noise of the navigation sensors as the estimators model it: the DVL velocity (held between
 samples, inflated when its own scatter rises) and the AHRS heading.
 
-Used by the motion model (:mod:`slam.model.motion`), hence by dead reckoning, the EKF, the
+Used by the motion model (:mod:`sonarslam.slam.model.motion`), hence by dead reckoning, the EKF, the
 factor graph's odometry and the front end's odometry chain alike.
 """
 
@@ -13,7 +13,7 @@ import gtsam
 import numpy as np
 import numpy.typing as npt
 
-from features.geometry import FloatArray
+from sonarslam.features.geometry import FloatArray
 
 __all__ = [
     "MotionNoise",
@@ -52,8 +52,8 @@ class MotionNoise:
         velocity noise added to ``dvl_sigma_mps`` (:func:`dvl_sample_sigma`).
     dvl_stale_s : float
         A valid DVL sample older than this (s) is stale: the DVL is in a gap (no rows, or rows
-        without lock), handled as a dropout (:func:`slam.model.motion.velocity_input`). The
-        dataset's DVL gap threshold (:mod:`datasets.gates`); infinite: only rows without
+        without lock), handled as a dropout (:func:`sonarslam.slam.model.motion.velocity_input`). The
+        dataset's DVL gap threshold (:mod:`sonarslam.datasets.gates`); infinite: only rows without
         bottom lock make a dropout.
     ahrs_stale_s : float
         An AHRS sample older than this (s) is stale: the AHRS is in a gap; the heading is held

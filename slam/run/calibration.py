@@ -14,17 +14,17 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from datasets.errors import DataError
-from datasets.source import Dataset
-from features.geometry import FloatArray, compose, wrap_angle
-from features.line import LineFeature
-from features.pose_source import PoseSource
-from features.projection import beam_points
-from slam.backends.registry import backend_spec
-from slam.eval.sharpness import map_entropy
-from slam.model.motion import body_yaw
-from slam.run.closed_loop import ClosedLoopResult, run_closed_loop
-from slam.run.presets import run_config
+from sonarslam.datasets.errors import DataError
+from sonarslam.datasets.source import Dataset
+from sonarslam.features.geometry import FloatArray, compose, wrap_angle
+from sonarslam.features.line import LineFeature
+from sonarslam.features.pose_source import PoseSource
+from sonarslam.features.projection import beam_points
+from sonarslam.slam.backends.registry import backend_spec
+from sonarslam.slam.eval.sharpness import map_entropy
+from sonarslam.slam.model.motion import body_yaw
+from sonarslam.slam.run.closed_loop import ClosedLoopResult, run_closed_loop
+from sonarslam.slam.run.presets import run_config
 
 __all__ = [
     "YawSearch",
@@ -55,7 +55,7 @@ MIN_CALIBRATION_TURNS = 10
 
 
 def require_turns(dataset: Dataset, n_beams: int, what: str) -> None:
-    """A :class:`datasets.errors.DataError` when ``n_beams`` are fewer than
+    """A :class:`sonarslam.datasets.errors.DataError` when ``n_beams`` are fewer than
     :data:`MIN_CALIBRATION_TURNS` turns of the head: too few to calibrate ``what`` by."""
     per_turn = int(round(2.0 * np.pi / dataset.config.sonar.step_rad))
     need = MIN_CALIBRATION_TURNS * per_turn
@@ -253,7 +253,7 @@ def heading_deviation_from_lines(
         applied, so the result is what is left of it).
     features, feature_landmarks : list
         A closed-loop run's lines and the landmark each was associated with
-        (:class:`slam.run.closed_loop.ClosedLoopResult`).
+        (:class:`sonarslam.slam.run.closed_loop.ClosedLoopResult`).
     min_observations : int
         Landmarks seen fewer times are left out.
 
@@ -325,7 +325,7 @@ def calibrate_ahrs_deviation(
     """Self-calibrate the AHRS deviation ``(B, C)`` with closed loops, GPS-free.
 
     Each iteration runs ``run(dataset)`` (a closed loop returning a
-    :class:`slam.run.closed_loop.ClosedLoopResult`) with the deviation found so far, fits what is
+    :class:`sonarslam.slam.run.closed_loop.ClosedLoopResult`) with the deviation found so far, fits what is
     left of it (:func:`heading_deviation_from_lines`) and adds it. The associations improve as
     the heading does, hence the iterations. ``progress(k, iterations)`` is called before each.
 

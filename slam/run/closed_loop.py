@@ -1,15 +1,15 @@
 """The closed loop: back end -> poses -> front end -> lines -> back end (the design card's shape).
 
 The driver walks the merged record stream in time order. Every record first moves the back end
-to its time by one motion step (:func:`slam.model.motion.motion_step`: the DVL velocity held
+to its time by one motion step (:func:`sonarslam.slam.model.motion.motion_step`: the DVL velocity held
 since its sample, causal, its noise growing through a DVL gap; the yaw rate of the gyro or of
 the AHRS heading's own change, none through an AHRS gap, where the DVL records carry the
-trajectory on). AHRS records update the heading; sonar beams go to the :class:`features.extractor.LineExtractor`,
-whose only view of the vehicle is the :class:`features.pose_source.PoseSource` the back end
-gives (:meth:`slam.backends.base.Backend.pose_source`); the lines it returns update the back end.
+trajectory on). AHRS records update the heading; sonar beams go to the :class:`sonarslam.features.extractor.LineExtractor`,
+whose only view of the vehicle is the :class:`sonarslam.features.pose_source.PoseSource` the back end
+gives (:meth:`sonarslam.slam.backends.base.Backend.pose_source`); the lines it returns update the back end.
 With ``"scans"`` among the back end's ``constraints`` the beams also go to the scan matcher
-(:class:`features.scans.ScanMatcher`, the same seam), and each scan it completes goes to the
-back end (:class:`slam.backends.base.ScanBackend`) with the matcher, which registers the pairs
+(:class:`sonarslam.features.scans.ScanMatcher`, the same seam), and each scan it completes goes to the
+back end (:class:`sonarslam.slam.backends.base.ScanBackend`) with the matcher, which registers the pairs
 the back end asks for; without ``"lines"`` the line extractor does not run.
 GPS records are never used here (evaluation only).
 """
@@ -23,18 +23,18 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm import tqdm
 
-from datasets.records import Attitude, DvlVelocity, GpsFix
-from datasets.source import Dataset
-from features.config import ExtractorConfig
-from features.extractor import LineExtractor
-from features.geometry import FloatArray, wrap_angle
-from features.line import LineFeature
-from features.scans import ScanConfig, ScanMatcher
-from slam.backends.base import AnchoredOdometry, Backend, ScanBackend
-from slam.io.trajectory import Trajectory
-from slam.model.motion import body_yaw, motion_step, velocity_input
-from slam.run.sources import motion_noise, start_pose
-from sonar.beam import SonarBeam
+from sonarslam.datasets.records import Attitude, DvlVelocity, GpsFix
+from sonarslam.datasets.source import Dataset
+from sonarslam.features.config import ExtractorConfig
+from sonarslam.features.extractor import LineExtractor
+from sonarslam.features.geometry import FloatArray, wrap_angle
+from sonarslam.features.line import LineFeature
+from sonarslam.features.scans import ScanConfig, ScanMatcher
+from sonarslam.slam.backends.base import AnchoredOdometry, Backend, ScanBackend
+from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.model.motion import body_yaw, motion_step, velocity_input
+from sonarslam.slam.run.sources import motion_noise, start_pose
+from sonarslam.sonar.beam import SonarBeam
 
 __all__ = ["ClosedLoopResult", "run_closed_loop"]
 
@@ -92,7 +92,7 @@ def run_closed_loop(
     dataset : Dataset
     make_backend : callable
         ``(t0_s, wTb0, P0) -> Backend`` at the start pose of the ATE protocol
-        (:func:`slam.run.sources.start_pose`).
+        (:func:`sonarslam.slam.run.sources.start_pose`).
     extractor_config : ExtractorConfig
     progress : bool
         A progress bar over the records, named ``label``.

@@ -7,15 +7,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from datasets.simulator import simulate
-from datasets.source import ENV_VAR, data_root, open_dataset
-from features.projection import project_beams
-from slam.eval.truth import truth_walls
-from slam.io.files import write_atomic
-from slam.io.maps import plot_scans
-from slam.run.presets import map_min_intensity
-from slam.run.run import RunResult, run
-from slam.run.sources import gps_ahrs_trajectory
+from sonarslam.datasets.simulator import simulate
+from sonarslam.datasets.source import ENV_VAR, data_root, open_dataset
+from sonarslam.features.projection import project_beams
+from sonarslam.slam.eval.truth import truth_walls
+from sonarslam.slam.io.files import write_atomic
+from sonarslam.slam.io.maps import plot_scans
+from sonarslam.slam.run.presets import map_min_intensity
+from sonarslam.slam.run.run import RunResult, run
+from sonarslam.slam.run.sources import gps_ahrs_trajectory
 
 __all__ = ["DEMO_BACKENDS", "DemoSource", "demo_source", "main_job"]
 

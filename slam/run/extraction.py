@@ -1,11 +1,11 @@
 """Line extraction over a whole dataset, as a plain function the CLI calls (``sonarslam extract``).
 
-``extract(source, poses, out_dir)`` runs :class:`features.extractor.LineExtractor` over the
+``extract(source, poses, out_dir)`` runs :class:`sonarslam.features.extractor.LineExtractor` over the
 dataset's beams inside the navigation span with one pose source and writes
 
-* ``lines.jsonl``: one :meth:`features.line.LineFeature.to_json` object per line (``t``, the frame
+* ``lines.jsonl``: one :meth:`sonarslam.features.line.LineFeature.to_json` object per line (``t``, the frame
   R ``x, y, yaw``, ``rho, theta`` and ``cov`` in R, ``votes``, ``n_voters``, world ``endpoints``);
-* ``lines_world.png``: every segment with its 95 % band (:func:`slam.io.maps.segment_band_world`) over the
+* ``lines_world.png``: every segment with its 95 % band (:func:`sonarslam.slam.io.maps.segment_band_world`) over the
   density image of the projected threshold bins (intensity at least the extractor's threshold;
   every given bin of thresholded beams);
 * ``extract.json``: counts and timings (``features``, ``beams``, ``beam_time_p50_us``,
@@ -28,14 +28,14 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from datasets.source import Dataset, open_dataset
-from features.extractor import LineExtractor
-from features.geometry import FloatArray
-from features.line import LineFeature
-from features.pose_source import PoseSource
-from features.projection import project_beams
-from slam.eval.truth import truth_walls
-from slam.io.files import (
+from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.features.extractor import LineExtractor
+from sonarslam.features.geometry import FloatArray
+from sonarslam.features.line import LineFeature
+from sonarslam.features.pose_source import PoseSource
+from sonarslam.features.projection import project_beams
+from sonarslam.slam.eval.truth import truth_walls
+from sonarslam.slam.io.files import (
     check_output_dir,
     json_safe,
     make_output_dir,
@@ -43,11 +43,11 @@ from slam.io.files import (
     write_json,
     write_text,
 )
-from slam.io.maps import MapLayers, plot_lines, segment_band_world
-from slam.io.trajectory import Trajectory
-from slam.run.presets import extractor_config, map_min_intensity, preset_for
-from slam.run.sources import pose_source_by_name
-from sonar.beam import SonarBeam
+from sonarslam.slam.io.maps import MapLayers, plot_lines, segment_band_world
+from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.run.presets import extractor_config, map_min_intensity, preset_for
+from sonarslam.slam.run.sources import pose_source_by_name
+from sonarslam.sonar.beam import SonarBeam
 
 __all__ = [
     "ExtractionResult",
@@ -136,15 +136,15 @@ def extract(
     source : str, Path or Dataset
         Dataset directory, the named source ``"marina"``, or an opened dataset.
     poses : {"gps", "dr", "truth"}
-        Pose source (:data:`slam.run.run.POSE_SOURCES`).
+        Pose source (:data:`sonarslam.slam.run.run.POSE_SOURCES`).
     out_dir : str or Path
         Created if needed; receives ``lines.jsonl``, ``lines_world.png`` and ``extract.json``.
     config_path : str or Path, optional
         TOML of :class:`ExtractorConfig` fields over the preset
-        (:func:`slam.run.presets.extractor_config`).
+        (:func:`sonarslam.slam.run.presets.extractor_config`).
     preset : str, optional
-        A name of :data:`slam.run.presets.EXTRACTOR_PRESETS`; None: the one for the beams
-        (:func:`slam.run.presets.preset_for`, as the closed loops use it).
+        A name of :data:`sonarslam.slam.run.presets.EXTRACTOR_PRESETS`; None: the one for the beams
+        (:func:`sonarslam.slam.run.presets.preset_for`, as the closed loops use it).
     progress : bool
         tqdm progress bar.
 

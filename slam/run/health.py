@@ -1,9 +1,9 @@
-"""The hook between a closed loop and the health monitor (:mod:`slam.eval.health`).
+"""The hook between a closed loop and the health monitor (:mod:`sonarslam.slam.eval.health`).
 
 Both back ends feed the monitor the same way, from what a run already logs: the causal
-trajectory with its covariances (:class:`slam.run.closed_loop.ClosedLoopResult`), the landmark
-layer's innovations and associations (:class:`slam.mapping.landmarks.LandmarkMap`, shared), the
-final constants of :meth:`slam.backends.base.Backend.metrics` (``state_*``), and the logs a
+trajectory with its covariances (:class:`sonarslam.slam.run.closed_loop.ClosedLoopResult`), the landmark
+layer's innovations and associations (:class:`sonarslam.slam.mapping.landmarks.LandmarkMap`, shared), the
+final constants of :meth:`sonarslam.slam.backends.base.Backend.metrics` (``state_*``), and the logs a
 back end keeps beyond those when it has them: ``heading_innovations`` (the EKF's AHRS updates)
 and the scan constraints' pairs (iSAM2 with ``scans``). Dead reckoning from the same sensors
 is the reference the estimate must stay near. Nothing here reads GPS or the truth.
@@ -15,11 +15,18 @@ from typing import Any
 
 import numpy as np
 
-from datasets.source import Dataset
-from slam.eval.health import HealthConfig, HealthInputs, HealthReport, NisStream, StateValue, assess
-from slam.model.motion import body_yaw
-from slam.run.closed_loop import ClosedLoopResult
-from slam.run.sources import dead_reckoning_trajectory
+from sonarslam.datasets.source import Dataset
+from sonarslam.slam.eval.health import (
+    HealthConfig,
+    HealthInputs,
+    HealthReport,
+    NisStream,
+    StateValue,
+    assess,
+)
+from sonarslam.slam.model.motion import body_yaw
+from sonarslam.slam.run.closed_loop import ClosedLoopResult
+from sonarslam.slam.run.sources import dead_reckoning_trajectory
 
 __all__ = ["health_inputs", "monitor_run"]
 
@@ -108,5 +115,5 @@ def health_inputs(dataset: Dataset, result: ClosedLoopResult) -> HealthInputs:
 def monitor_run(
     dataset: Dataset, result: ClosedLoopResult, config: HealthConfig | None = None
 ) -> HealthReport:
-    """:func:`slam.eval.health.assess` on a closed loop's run."""
+    """:func:`sonarslam.slam.eval.health.assess` on a closed loop's run."""
     return assess(health_inputs(dataset, result), config)

@@ -1,6 +1,6 @@
 """Trials of the line extractor on the simulator with the true poses: only the front end is
 measured. A trial simulates a run in memory, extracts its lines and matches them against the
-true walls (:mod:`slam.eval.lines`); ``benchmarks/extractor_consistency.py`` and
+true walls (:mod:`sonarslam.slam.eval.lines`); ``benchmarks/extractor_consistency.py`` and
 ``tests/test_extraction_stats.py`` use them.
 """
 
@@ -14,17 +14,17 @@ from typing import Any
 
 import numpy as np
 
-from datasets.errors import DataWarning
-from datasets.simulator import Simulation, make_scenario, simulate, simulate_records
-from datasets.source import Dataset, open_dataset
-from features.config import ExtractorConfig
-from features.extractor import LineExtractor
-from features.geometry import FloatArray
-from features.line import LineFeature
-from slam.eval.lines import GATE_RAD, HARBOUR_GATE_M, POOL_GATE_M, Match, match_features
-from slam.eval.truth import truth_trajectory, truth_walls
-from slam.run.presets import EXTRACTOR_PRESETS, pool_preset
-from slam.run.sonar_calibration import calibrate_line_noise, calibrate_range_offset
+from sonarslam.datasets.errors import DataWarning
+from sonarslam.datasets.simulator import Simulation, make_scenario, simulate, simulate_records
+from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.features.config import ExtractorConfig
+from sonarslam.features.extractor import LineExtractor
+from sonarslam.features.geometry import FloatArray
+from sonarslam.features.line import LineFeature
+from sonarslam.slam.eval.lines import GATE_RAD, HARBOUR_GATE_M, POOL_GATE_M, Match, match_features
+from sonarslam.slam.eval.truth import truth_trajectory, truth_walls
+from sonarslam.slam.run.presets import EXTRACTOR_PRESETS, pool_preset
+from sonarslam.slam.run.sonar_calibration import calibrate_line_noise, calibrate_range_offset
 
 __all__ = ["TrialResult", "extract_simulation", "pool_trial", "harbour_trial", "drift_trial"]
 
@@ -124,7 +124,7 @@ def pool_trial(
 
     The 165 s run is four full 270 deg sectors (2400 beams) and 25 beams: one vote per sector,
     no flush, so that every vote sees one fresh 270 deg scan, as in the paper.
-    ``config_changes`` replace fields of :func:`slam.run.presets.pool_preset`.
+    ``config_changes`` replace fields of :func:`sonarslam.slam.run.presets.pool_preset`.
     """
     sim = simulate_records(make_scenario("pool", seed))
     out = []

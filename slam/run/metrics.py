@@ -16,13 +16,13 @@ from typing import ClassVar
 
 import numpy as np
 
-from datasets.source import Dataset
-from slam.eval.ate import AteResult, ate_against_gps, ate_against_truth
-from slam.eval.sharpness import trajectory_sharpness
-from slam.eval.truth import AssociationScores, association_against_truth, truth_trajectory
-from slam.io.trajectory import Trajectory
-from slam.run.closed_loop import ClosedLoopResult
-from slam.run.presets import RunConfig, map_min_intensity
+from sonarslam.datasets.source import Dataset
+from sonarslam.slam.eval.ate import AteResult, ate_against_gps, ate_against_truth
+from sonarslam.slam.eval.sharpness import trajectory_sharpness
+from sonarslam.slam.eval.truth import AssociationScores, association_against_truth, truth_trajectory
+from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.run.closed_loop import ClosedLoopResult
+from sonarslam.slam.run.presets import RunConfig, map_min_intensity
 
 __all__ = [
     "JsonValue",
@@ -54,7 +54,7 @@ class TrajectoryFigures:
     ate_truth, ate_truth_aligned : AteResult or None
         Simulated data: against the truth.
     map_entropy_nats : float or None
-        The map's entropy projected with the trajectory (:mod:`slam.eval.sharpness`).
+        The map's entropy projected with the trajectory (:mod:`sonarslam.slam.eval.sharpness`).
     """
 
     KEYS: ClassVar[tuple[str, ...]] = (
@@ -129,8 +129,8 @@ class TrajectoryFigures:
 @dataclass(frozen=True)
 class DataFigures:
     """The run's time and its data: the estimation's wall time and the data's span (s), the DVL's
-    rows and quality (:func:`slam.run.sources.dvl_quality`), the GPS's coverage and the sensor
-    gates' faults and gaps (:meth:`datasets.gates.GateReport.metrics`)."""
+    rows and quality (:func:`sonarslam.slam.run.sources.dvl_quality`), the GPS's coverage and the sensor
+    gates' faults and gaps (:meth:`sonarslam.datasets.gates.GateReport.metrics`)."""
 
     KEYS: ClassVar[tuple[str, ...]] = (
         "wall_s",
@@ -288,7 +288,7 @@ class RunMetrics:
     others : list of TrajectoryFigures
         The back end's other trajectories (``smoothed``, ``batch``).
     provenance : dict or None
-        Where the figures come from (:func:`slam.run.provenance.provenance`), added when the
+        Where the figures come from (:func:`sonarslam.slam.run.provenance.provenance`), added when the
         run is written.
     """
 
@@ -331,7 +331,7 @@ class RunMetrics:
 
 def _sharpness(dataset: Dataset, trajectory: Trajectory) -> float | None:
     """The entropy (nats) of the whole sonar span's map projected with the trajectory
-    (:func:`slam.eval.sharpness.trajectory_sharpness`, 0.5 m cells; GPS-free, lower is
+    (:func:`sonarslam.slam.eval.sharpness.trajectory_sharpness`, 0.5 m cells; GPS-free, lower is
     sharper); None without beams inside the trajectory's span."""
     span = dataset.sonar_span_s
     if span is None:

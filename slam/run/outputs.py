@@ -6,15 +6,15 @@
   poses inside the run); ``metrics.json``, ``config_used.toml`` (the dataset configuration
   used), ``report.png`` (trajectories against the reference beside dead reckoning).
   Every estimate is written at its own times and, interpolated, at the reference's times inside
-  its span (:func:`slam.io.trajectory.with_samples_at`): ``evo_ape tum gps.tum ekf.tum`` pairs
+  its span (:func:`sonarslam.slam.io.trajectory.with_samples_at`): ``evo_ape tum gps.tum ekf.tum`` pairs
   the same poses as ``metrics.json``'s ATE and prints its figures;
 * closed loops also ``map.json`` (the landmarks), ``lines.jsonl`` (every line with the landmark
   it was associated with), ``map.png`` (the landmarks with their 95 % bands over the sonar bins
   projected with the run's trajectory), one ``<backend>_<name>.tum`` per other trajectory of the
   back end (``isam2_smoothed.tum``, ``isam2_batch.tum``) and whatever the back end saves
-  (``graph.json``, and its poses and odometry as ``graph.g2o``: :mod:`slam.backends.isam2.g2o`).
+  (``graph.json``, and its poses and odometry as ``graph.g2o``: :mod:`sonarslam.slam.backends.isam2.g2o`).
 
-Every file is written under a temporary name and renamed when whole (:mod:`slam.io.files`);
+Every file is written under a temporary name and renamed when whole (:mod:`sonarslam.slam.io.files`);
 ``metrics.json`` is strict JSON (null where a figure is undefined).
 """
 
@@ -27,13 +27,13 @@ from typing import Any
 
 import numpy as np
 
-from datasets.config import dump_dataset_config
-from datasets.source import Dataset
-from features.projection import project_beams
-from slam.backends.isam2.g2o import graph_json_to_g2o
-from slam.eval.ate import ate_errors, truth_errors
-from slam.eval.truth import truth_trajectory, truth_walls
-from slam.io.files import (
+from sonarslam.datasets.config import dump_dataset_config
+from sonarslam.datasets.source import Dataset
+from sonarslam.features.projection import project_beams
+from sonarslam.slam.backends.isam2.g2o import graph_json_to_g2o
+from sonarslam.slam.eval.ate import ate_errors, truth_errors
+from sonarslam.slam.eval.truth import truth_trajectory, truth_walls
+from sonarslam.slam.io.files import (
     json_safe,
     make_output_dir,
     write_atomic,
@@ -41,9 +41,9 @@ from slam.io.files import (
     write_json,
     write_text,
 )
-from slam.io.maps import MapLayers, landmark_layers, plot_map
-from slam.io.plots import plot_trajectories
-from slam.io.trajectory import (
+from sonarslam.slam.io.maps import MapLayers, landmark_layers, plot_map
+from sonarslam.slam.io.plots import plot_trajectories
+from sonarslam.slam.io.trajectory import (
     GPS_FILE,
     TRUTH_FILE,
     Trajectory,
@@ -53,9 +53,9 @@ from slam.io.trajectory import (
     write_trajectory_covariances,
     write_tum,
 )
-from slam.run.closed_loop import ClosedLoopResult
-from slam.run.presets import map_min_intensity
-from slam.run.sources import DR_IGNORES, dead_reckoning_trajectory, gps_ahrs_trajectory
+from sonarslam.slam.run.closed_loop import ClosedLoopResult
+from sonarslam.slam.run.presets import map_min_intensity
+from sonarslam.slam.run.sources import DR_IGNORES, dead_reckoning_trajectory, gps_ahrs_trajectory
 
 __all__ = ["write_run"]
 

@@ -5,23 +5,23 @@
   ``marina`` for thresholded 0/255 keyframes (the marina), as the closed loops use them. Every
   command that extracts lines (``run``, ``extract``, ``calibrate --ahrs-deviation``, the sweep,
   the benchmarks and notebooks) takes them from here and records the preset's name.
-* Back-end configurations: each back end's defaults (:mod:`slam.backends.registry`), with
+* Back-end configurations: each back end's defaults (:mod:`sonarslam.slam.backends.registry`), with
   settings over them.
 * A dataset's calibration of the sensors' noise (``[noise]`` of its ``sonarslam.toml``,
-  :class:`datasets.config.NoiseConfig`) goes over the preset and the defaults, under a TOML
+  :class:`sonarslam.datasets.config.NoiseConfig`) goes over the preset and the defaults, under a TOML
   file's and the settings: a line's systematic error (``line_sigma_rho_m``,
   ``line_sigma_theta_deg``) into the extractor, the AHRS bias's random walk and the DVL's
   scale-factor error into the back end (:func:`noise_settings`).
 * Settings given as ``SCOPE.FIELD=VALUE`` (``sonarslam run --set``, ``sonarslam sweep --grid``):
-  ``SCOPE`` is ``extractor`` (:class:`features.extractor.ExtractorConfig`), ``scans`` (the scan
-  matcher, :class:`features.scans.ScanConfig`, when the back end's ``constraints`` hold
+  ``SCOPE`` is ``extractor`` (:class:`sonarslam.features.extractor.ExtractorConfig`), ``scans`` (the scan
+  matcher, :class:`sonarslam.features.scans.ScanConfig`, when the back end's ``constraints`` hold
   ``scans``) or a back end's name
-  (``ekf``: :class:`slam.backends.ekf.EkfConfig`, ``isam2``:
-  :class:`slam.backends.isam2.graph.GraphConfig`); ``FIELD`` is a field of that frozen
+  (``ekf``: :class:`sonarslam.slam.backends.ekf.EkfConfig`, ``isam2``:
+  :class:`sonarslam.slam.backends.isam2.graph.GraphConfig`); ``FIELD`` is a field of that frozen
   dataclass, nested by dots (``ekf.association.gate_probability``); ``<backend>.association``
   is short for ``<backend>.association.method``. Every value is checked against the field's
-  type and the dataclass's ranges (:mod:`datasets.settings`, the mechanism that also checks
-  ``sonarslam.toml``): a wrong one is a :class:`datasets.settings.SettingError` naming it.
+  type and the dataclass's ranges (:mod:`sonarslam.datasets.settings`, the mechanism that also checks
+  ``sonarslam.toml``): a wrong one is a :class:`sonarslam.datasets.settings.SettingError` naming it.
 """
 
 from __future__ import annotations
@@ -34,18 +34,24 @@ from typing import Any
 
 import numpy as np
 
-from datasets.config import NoiseConfig
-from datasets.errors import DataError
-from datasets.records import BeamSeries
-from datasets.settings import SettingError, parse_text, read_toml, replace_checked, toml_line
-from datasets.source import Dataset
-from features.config import ExtractorConfig
-from features.scans import ScanConfig
-from slam.backends.base import BackendConfig
-from slam.backends.registry import backend_spec
-from slam.model.motion import gyro_bias_against_heading
-from sonar.beam import SonarBeam
-from sonar.store import sector_beam_count
+from sonarslam.datasets.config import NoiseConfig
+from sonarslam.datasets.errors import DataError
+from sonarslam.datasets.records import BeamSeries
+from sonarslam.datasets.settings import (
+    SettingError,
+    parse_text,
+    read_toml,
+    replace_checked,
+    toml_line,
+)
+from sonarslam.datasets.source import Dataset
+from sonarslam.features.config import ExtractorConfig
+from sonarslam.features.scans import ScanConfig
+from sonarslam.slam.backends.base import BackendConfig
+from sonarslam.slam.backends.registry import backend_spec
+from sonarslam.slam.model.motion import gyro_bias_against_heading
+from sonarslam.sonar.beam import SonarBeam
+from sonarslam.sonar.store import sector_beam_count
 
 __all__ = [
     "EXTRACTOR_PRESETS",
@@ -288,10 +294,10 @@ GYRO_BIAS_LIMIT_DEG_PER_S = 0.05
 def check_combination(dataset: Dataset, backend: str) -> None:
     """Refuse, before any work, a dataset setting that a back end would silently get wrong.
 
-    The factor graph has no gyro-bias state (the EKF has, :mod:`slam.backends.ekf`): with the
+    The factor graph has no gyro-bias state (the EKF has, :mod:`sonarslam.slam.backends.ekf`): with the
     gyro's rate and a walking AHRS bias, a gyro bias is taken for the walk and the heading
     spins away (the marina, walk 0.15 deg/sqrt(s): ATE 97 m, exit 0). Refused when the data
-    show such a bias (:func:`slam.model.motion.gyro_bias_against_heading`, GPS-free); an
+    show such a bias (:func:`sonarslam.slam.model.motion.gyro_bias_against_heading`, GPS-free); an
     unbiased gyro (the simulated drift world's) is fine.
     """
     cfg = dataset.config
@@ -315,7 +321,7 @@ def check_combination(dataset: Dataset, backend: str) -> None:
 
 _ALIASES = {"association": "association.method"}
 
-#: A setting's value as typed on the command line (:func:`datasets.settings.parse_text`).
+#: A setting's value as typed on the command line (:func:`sonarslam.datasets.settings.parse_text`).
 parse_value = parse_text
 
 
@@ -334,7 +340,7 @@ def parse_settings(specs: Iterable[str]) -> dict[str, Any]:
 
 def apply_overrides(config: Any, overrides: dict[str, Any], prefix: str = "") -> Any:
     """``config`` with dotted fields (``"association.method"``, aliases too) replaced, each
-    value checked against its field (:func:`datasets.settings.replace_checked`); ``prefix``
+    value checked against its field (:func:`sonarslam.datasets.settings.replace_checked`); ``prefix``
     names the scope in messages. Raises SettingError."""
     resolved = {_ALIASES.get(name, name): value for name, value in overrides.items()}
     return replace_checked(config, resolved, prefix=prefix)

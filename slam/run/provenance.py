@@ -8,7 +8,7 @@ A figure can be traced back to the code, the settings and the data that made it:
   null when the code is not in a git work tree (a wheel install) or git is not there;
 * ``settings_sha256``: SHA-256 of the settings that decide the run: the back end, ``--batch``, the dataset
   configuration used (``config_used.toml``'s text) and the closed loop's resolved extractor,
-  back-end and scan-matcher settings (:class:`slam.run.presets.RunConfig`), as canonical JSON;
+  back-end and scan-matcher settings (:class:`sonarslam.slam.run.presets.RunConfig`), as canonical JSON;
 * ``dataset_sha256`` and ``dataset_files``: the SHA-256 of every file under the dataset's
   directory (``dataset_files``: relative path -> digest; a folder of more than
   :data:`GROUP_OVER` files, the marina's keyframes, is one entry ``folder/*`` over its files'

@@ -1,6 +1,6 @@
 """A side-by-side report of run directories (``sonarslam report DIR... --out OUT``).
 
-Reads what :func:`slam.run.run.run` wrote in each directory (:mod:`slam.run.report_data`),
+Reads what :func:`sonarslam.slam.run.run.run` wrote in each directory (:mod:`sonarslam.slam.run.report_data`),
 re-opens the run's dataset when it is still there, and writes into ``OUT``:
 
 * ``report.md``: per dataset, one table of its runs with the ATE over the **sonar span** (first
@@ -31,10 +31,16 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from slam.eval.consistency import NeesSeries, anees, mean_nees_band, nees_on_grid, nees_series
-from slam.eval.published import PUBLISHED
-from slam.run.report_data import DISPLAY_NAMES, RunData, evaluate_run, load_run
-from slam.run.report_figures import (
+from sonarslam.slam.eval.consistency import (
+    NeesSeries,
+    anees,
+    mean_nees_band,
+    nees_on_grid,
+    nees_series,
+)
+from sonarslam.slam.eval.published import PUBLISHED
+from sonarslam.slam.run.report_data import DISPLAY_NAMES, RunData, evaluate_run, load_run
+from sonarslam.slam.run.report_figures import (
     SegmentTable,
     error_figure,
     map_figure,
@@ -323,7 +329,7 @@ def _dataset_section(
 
 
 def _health(group: list[RunData]) -> list[str]:
-    """The health monitor's line of each closed loop (:mod:`slam.eval.health`)."""
+    """The health monitor's line of each closed loop (:mod:`sonarslam.slam.eval.health`)."""
     lines = [
         f"- {_label(r, group)}: {r.metrics['health_line']}"
         for r in group

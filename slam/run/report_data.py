@@ -1,4 +1,4 @@
-"""A run directory read back for ``sonarslam report`` (:mod:`slam.run.report`): its
+"""A run directory read back for ``sonarslam report`` (:mod:`sonarslam.slam.run.report`): its
 ``metrics.json``, its trajectory ``<backend>.tum`` (with ``<backend>_cov.npz``), ``gps.tum``,
 ``map.json``, and the run's dataset when it can still be opened (GPS fixes, beams, truth)."""
 
@@ -9,12 +9,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from datasets.errors import DataError
-from datasets.source import Dataset, open_dataset
-from slam.eval.consistency import nees_series
-from slam.eval.evo_metrics import evo_metrics_of_run
-from slam.eval.truth import truth_trajectory
-from slam.io.trajectory import (
+from sonarslam.datasets.errors import DataError
+from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.slam.eval.consistency import nees_series
+from sonarslam.slam.eval.evo_metrics import evo_metrics_of_run
+from sonarslam.slam.eval.truth import truth_trajectory
+from sonarslam.slam.io.trajectory import (
     GPS_FILE,
     Trajectory,
     cov_file,
@@ -111,7 +111,7 @@ def evaluate_run(run: RunData, rpe_delta_m: float = 10.0, align: bool = False) -
     Returns
     -------
     dict
-        :func:`slam.eval.evo_metrics.evo_metrics_of_run`'s keys, and ``nees_mean``,
+        :func:`sonarslam.slam.eval.evo_metrics.evo_metrics_of_run`'s keys, and ``nees_mean``,
         ``nees_in_band_fraction`` (pose, 3 dof), ``nees_position_mean`` when available.
     """
     out: dict[str, Any] = dict(evo_metrics_of_run(run.run_dir, run.stem, rpe_delta_m, align=align))

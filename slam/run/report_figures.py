@@ -1,4 +1,4 @@
-"""The figures of ``sonarslam report`` (:mod:`slam.run.report`): trajectories and their error in
+"""The figures of ``sonarslam report`` (:mod:`sonarslam.slam.run.report`): trajectories and their error in
 time, the ATE per time segment, each run's map, error bounds and NEES.
 
 The reference of a simulated run is the simulator's truth (its GPS is simulated, noisy); of a
@@ -14,15 +14,20 @@ from pathlib import Path
 import numpy as np
 from evo.core.geometry import umeyama_alignment
 
-from features.projection import project_beams
-from slam.eval.ate import ate_errors, truth_errors
-from slam.eval.consistency import chi2_band, nees_series, pose_errors
-from slam.eval.truth import truth_walls
-from slam.io.maps import MapLayers, landmark_layers, plot_map
-from slam.io.plots import plot_error_bounds, plot_nees, plot_segment_ate, plot_trajectories
-from slam.io.trajectory import FloatArray, Trajectory, cov_file
-from slam.run.presets import map_min_intensity
-from slam.run.report_data import RunData
+from sonarslam.features.projection import project_beams
+from sonarslam.slam.eval.ate import ate_errors, truth_errors
+from sonarslam.slam.eval.consistency import chi2_band, nees_series, pose_errors
+from sonarslam.slam.eval.truth import truth_walls
+from sonarslam.slam.io.maps import MapLayers, landmark_layers, plot_map
+from sonarslam.slam.io.plots import (
+    plot_error_bounds,
+    plot_nees,
+    plot_segment_ate,
+    plot_trajectories,
+)
+from sonarslam.slam.io.trajectory import FloatArray, Trajectory, cov_file
+from sonarslam.slam.run.presets import map_min_intensity
+from sonarslam.slam.run.report_data import RunData
 
 __all__ = [
     "SEGMENT_S",
@@ -42,7 +47,7 @@ SEGMENT_S = 300.0
 
 def run_errors(run: RunData) -> tuple[FloatArray, FloatArray, str]:
     """Times (Unix s) and position errors (m) of a run against its reference, and its name
-    (``"truth"``, ``"GPS"``): the ATE's own errors (:mod:`slam.eval.ate`)."""
+    (``"truth"``, ``"GPS"``): the ATE's own errors (:mod:`sonarslam.slam.eval.ate`)."""
     if run.truth is not None:
         t, e = truth_errors(run.trajectory, run.truth)
         return t, e, "truth"
@@ -248,7 +253,7 @@ def segment_table(
 
 
 def segment_figure(table: SegmentTable, dataset_name: str, out: Path) -> Path:
-    """:func:`slam.io.plots.plot_segment_ate` of a :class:`SegmentTable`."""
+    """:func:`sonarslam.slam.io.plots.plot_segment_ate` of a :class:`SegmentTable`."""
     stats = {lab: (table.mean_m[lab], table.max_m[lab]) for lab in table.mean_m}
     return plot_segment_ate(
         out,

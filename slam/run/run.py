@@ -1,12 +1,12 @@
 """One runner for the CLI, the sweep, the notebooks and the benchmarks.
 
 :func:`run_backend` runs a back end on an opened dataset and measures it, writing nothing;
-:func:`run` opens a dataset, runs, and writes the run directory (:mod:`slam.run.outputs`). A
-back end is a baseline that needs no estimator (``dr``, ``gps``: :mod:`slam.run.sources`) or a
-closed loop (:data:`slam.backends.registry.BACKENDS`), whose settings come from
-:mod:`slam.run.presets`.
+:func:`run` opens a dataset, runs, and writes the run directory (:mod:`sonarslam.slam.run.outputs`). A
+back end is a baseline that needs no estimator (``dr``, ``gps``: :mod:`sonarslam.slam.run.sources`) or a
+closed loop (:data:`sonarslam.slam.backends.registry.BACKENDS`), whose settings come from
+:mod:`sonarslam.slam.run.presets`.
 
-The ATE protocol (:mod:`slam.eval.ate`): the start pose is the first GPS fix with the heading
+The ATE protocol (:mod:`sonarslam.slam.eval.ate`): the start pose is the first GPS fix with the heading
 sensor; the ATE is taken at every GPS fix inside the trajectory's span, with no alignment.
 """
 
@@ -21,31 +21,31 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from datasets.config import dump_dataset_config
-from datasets.errors import DataError, DataWarning
-from datasets.settings import SettingError
-from datasets.source import Dataset, open_dataset
-from slam.backends.registry import BACKENDS, backend_spec
-from slam.io.files import check_output_dir
-from slam.io.trajectory import Trajectory
-from slam.run.closed_loop import ClosedLoopResult, run_closed_loop
-from slam.run.health import monitor_run
-from slam.run.metrics import (
+from sonarslam.datasets.config import dump_dataset_config
+from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.settings import SettingError
+from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.slam.backends.registry import BACKENDS, backend_spec
+from sonarslam.slam.io.files import check_output_dir
+from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.run.closed_loop import ClosedLoopResult, run_closed_loop
+from sonarslam.slam.run.health import monitor_run
+from sonarslam.slam.run.metrics import (
     ClosedLoopFigures,
     DataFigures,
     RunMetrics,
     closed_loop_figures,
     trajectory_figures,
 )
-from slam.run.outputs import write_run
-from slam.run.presets import (
+from sonarslam.slam.run.outputs import write_run
+from sonarslam.slam.run.presets import (
     RunConfig,
     check_combination,
     check_settings,
     run_config,
 )
-from slam.run.provenance import provenance
-from slam.run.sources import POSE_SOURCES, dvl_quality
+from sonarslam.slam.run.provenance import provenance
+from sonarslam.slam.run.sources import POSE_SOURCES, dvl_quality
 
 __all__ = [
     "BASELINES",
@@ -119,7 +119,7 @@ def run_backend(
     backend : str
         One of :func:`backend_names`.
     settings : dict, optional
-        ``SCOPE.FIELD`` -> value (:mod:`slam.run.presets`); closed loops only.
+        ``SCOPE.FIELD`` -> value (:mod:`sonarslam.slam.run.presets`); closed loops only.
     t_end_s : float, optional
         Stop at this time (Unix s).
     progress : bool
@@ -294,15 +294,15 @@ def run(
     settings: dict[str, Any] | None = None,
 ) -> RunResult:
     """Open a dataset, run a back end on it (:func:`run_backend`) and write the run directory
-    (:func:`slam.run.outputs.write_run`).
+    (:func:`sonarslam.slam.run.outputs.write_run`).
 
     ``config``: a ``sonarslam.toml``-format file whose keys replace the dataset's calibration
-    (:func:`datasets.source.open_dataset`); the configuration used is written to
+    (:func:`sonarslam.datasets.source.open_dataset`); the configuration used is written to
     ``config_used.toml``. ``settings``: extractor and back-end settings
-    (``{"isam2.robust": "cauchy"}``, :mod:`slam.run.presets`), recorded in ``metrics.json``,
+    (``{"isam2.robust": "cauchy"}``, :mod:`sonarslam.slam.run.presets`), recorded in ``metrics.json``,
     with the run's provenance (``provenance``: the package version, the git commit and whether
     the tree was dirty, the settings' digest and the dataset's file digests;
-    :mod:`slam.run.provenance`).
+    :mod:`sonarslam.slam.run.provenance`).
     """
     # everything that can be checked before reading is checked first, and the output
     # directory is created only when the run has results to write

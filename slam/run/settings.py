@@ -1,11 +1,11 @@
 """Every setting of a dataset and of its runs, with its unit and where its value comes from
 (``sonarslam info``).
 
-* The dataset's settings (``sonarslam.toml``'s keys, :func:`datasets.config.config_tables`): from
+* The dataset's settings (``sonarslam.toml``'s keys, :func:`sonarslam.datasets.config.config_tables`): from
   the dataset's own ``sonarslam.toml``, else its ``*_SETUP.log`` (the head) and the marina
   calibration (``datasets.config.MARINA_CONFIG``, README "Calibration"); keys a
   ``sonarslam.toml`` leaves out take the neutral defaults of ``DatasetConfig``.
-* The run settings (``--set SCOPE.FIELD=VALUE``, :mod:`slam.run.presets`): the extractor preset
+* The run settings (``--set SCOPE.FIELD=VALUE``, :mod:`sonarslam.slam.run.presets`): the extractor preset
   of the dataset's beams and each back end's defaults.
 
 Units are read off the names (``_m``: metres, ``_deg``, ``_rad``, ``_s``, ``_mps``: m/s, ...).
@@ -19,10 +19,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from datasets.config import config_tables
-from datasets.source import Dataset
-from slam.backends.registry import BACKENDS
-from slam.run.presets import backend_config, extractor_config, noise_settings, preset_for
+from sonarslam.datasets.config import config_tables
+from sonarslam.datasets.source import Dataset
+from sonarslam.slam.backends.registry import BACKENDS
+from sonarslam.slam.run.presets import backend_config, extractor_config, noise_settings, preset_for
 
 __all__ = ["Setting", "unit_of", "dataset_settings", "run_settings"]
 

@@ -39,10 +39,10 @@ import tomli_w
 from scipy.optimize import brentq
 from scipy.stats import chi2
 
-from datasets.source import Dataset, open_dataset
-from features.config import ExtractorConfig
-from features.extractor import LineExtractor, segment_with
-from features.geometry import (
+from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.features.config import ExtractorConfig
+from sonarslam.features.extractor import LineExtractor, segment_with
+from sonarslam.features.geometry import (
     FLIP_RHO,
     FloatArray,
     along_line,
@@ -51,12 +51,12 @@ from features.geometry import (
     line_side,
     line_world_to_frame,
 )
-from features.line import LineFeature
-from slam.io.files import write_text
-from slam.io.trajectory import Trajectory
-from slam.run.calibration import require_turns
-from slam.run.presets import extractor_config, preset_for
-from slam.run.sources import dead_reckoning_trajectory
+from sonarslam.features.line import LineFeature
+from sonarslam.slam.io.files import write_text
+from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.run.calibration import require_turns
+from sonarslam.slam.run.presets import extractor_config, preset_for
+from sonarslam.slam.run.sources import dead_reckoning_trajectory
 
 __all__ = [
     "RangeOffsetFit",

@@ -1,8 +1,8 @@
 """A dataset's start pose, motion noise and the pose sources that need no estimator.
 
 GPS + AHRS (``gps``), dead reckoning (``dr``) and the simulator's truth (``truth``) all return a
-:class:`slam.io.trajectory.Trajectory`, which implements the front end's
-:class:`features.pose_source.PoseSource` (:data:`POSE_SOURCES`, :func:`pose_source_by_name`).
+:class:`sonarslam.slam.io.trajectory.Trajectory`, which implements the front end's
+:class:`sonarslam.features.pose_source.PoseSource` (:data:`POSE_SOURCES`, :func:`pose_source_by_name`).
 """
 
 from __future__ import annotations
@@ -11,13 +11,13 @@ from collections.abc import Callable
 
 import numpy as np
 
-from datasets.records import GpsSeries
-from datasets.source import Dataset
-from features.geometry import FloatArray
-from slam.eval.truth import truth_trajectory
-from slam.io.trajectory import Trajectory
-from slam.model.motion import body_yaw, dead_reckoning
-from slam.model.noise import MotionNoise, dvl_scatter
+from sonarslam.datasets.records import GpsSeries
+from sonarslam.datasets.source import Dataset
+from sonarslam.features.geometry import FloatArray
+from sonarslam.slam.eval.truth import truth_trajectory
+from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.model.motion import body_yaw, dead_reckoning
+from sonarslam.slam.model.noise import MotionNoise, dvl_scatter
 
 __all__ = [
     "motion_noise",
@@ -32,7 +32,7 @@ __all__ = [
 
 def motion_noise(dataset: Dataset) -> MotionNoise:
     """The motion-model noise from the dataset's ``[noise]`` settings; a DVL or AHRS sample is
-    stale after the sensor's gap threshold (:mod:`datasets.gates`)."""
+    stale after the sensor's gap threshold (:mod:`sonarslam.datasets.gates`)."""
     n = dataset.config.noise
     gaps = dataset.report.gaps
     inf = float("inf")
@@ -50,9 +50,9 @@ def motion_noise(dataset: Dataset) -> MotionNoise:
 def dvl_quality(dataset: Dataset) -> dict[str, float]:
     """How the DVL behaved (for ``metrics.json`` and ``sonarslam info``).
 
-    Quantiles (10, 50, 90, 99 %) of its own scatter (:func:`slam.model.noise.dvl_scatter`, m/s,
+    Quantiles (10, 50, 90, 99 %) of its own scatter (:func:`sonarslam.slam.model.noise.dvl_scatter`, m/s,
     over ``[noise] dvl_scatter_window_s``, 60 s when that is off); the time its scatter stayed
-    above the nominal one, when :func:`slam.model.noise.dvl_sample_sigma` added the excess as noise
+    above the nominal one, when :func:`sonarslam.slam.model.noise.dvl_sample_sigma` added the excess as noise
     (s; 0 when off), and the first such time after the start of the logs (s, -1 if none).
     """
     noise = motion_noise(dataset)

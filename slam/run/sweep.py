@@ -3,18 +3,18 @@
 A sweep is the product of seeds, back ends and the grid axes that apply to each back end. Every
 seed's world is simulated once (a Dask task; the folder is cached on disk, so back ends and later
 sweeps share it) and each (seed, back end, parameters) is one task that runs the back end
-through the one runner (:func:`slam.run.run.run_backend`) and returns one flat row: the seed,
+through the one runner (:func:`sonarslam.slam.run.run.run_backend`) and returns one flat row: the seed,
 back end and parameters, the run's metrics (the ATE against the truth, as it is and rigidly
 aligned, beside the GPS protocol's; association scores against the true walls; timings), the
-pose NEES against the simulator's truth (:mod:`slam.eval.consistency`). The rows make one table
+pose NEES against the simulator's truth (:mod:`sonarslam.slam.eval.consistency`). The rows make one table
 (``sweep.csv``), each run paired with dead reckoning on its seed; the NEES of every run on a
 common 1 s grid (``nees.npz``) give the ANEES of each configuration with its 95 % band. The
-scores against the truth and dead reckoning are :mod:`slam.run.sweep_summary`'s (``summary.csv``,
+scores against the truth and dead reckoning are :mod:`sonarslam.slam.run.sweep_summary`'s (``summary.csv``,
 ``sweep.png``, and the spread across seeds with the worst seeds' worlds: ``spread.md``,
 ``worlds.png``). The default world is ``drawn``: a harbour and route drawn per seed; seeds from
-:data:`datasets.simulator.HELD_BACK_SEED_MIN` on are the held-back ones that results count on.
+:data:`sonarslam.datasets.simulator.HELD_BACK_SEED_MIN` on are the held-back ones that results count on.
 
-Grid axes are ``<scope>.<field>=v1,v2,...`` (:mod:`slam.run.presets`): ``extractor.<field>``
+Grid axes are ``<scope>.<field>=v1,v2,...`` (:mod:`sonarslam.slam.run.presets`): ``extractor.<field>``
 applies to every closed-loop back end; ``<backend>.<field>[.<field>]`` to that back end. The
 baselines (``dr``, ``gps``) take none.
 """
@@ -40,23 +40,23 @@ import pandas as pd
 from dask.distributed import Client, LocalCluster, as_completed
 from tqdm import tqdm
 
-from datasets.errors import DataError, DataWarning
-from datasets.settings import SettingError, read_toml
-from datasets.simulator import HELD_BACK_SEED_MIN, simulate
-from datasets.source import Dataset, open_dataset
-from features.geometry import compose, inverse
-from slam.backends.registry import BACKENDS
-from slam.eval.ate import ate_against_truth
-from slam.eval.consistency import NeesSeries, anees, nees_on_grid, nees_series
-from slam.eval.truth import truth_trajectory
-from slam.io.files import make_output_dir, write_atomic, write_text
-from slam.io.plots import plot_anees, plot_sweep, plot_worlds
-from slam.io.trajectory import Trajectory
-from slam.run.presets import check_settings, parse_value
-from slam.run.run import backend_names, run_backend
-from slam.run.sonar_calibration import write_sonar_calibration
-from slam.run.sources import start_pose
-from slam.run.sweep_summary import (
+from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.settings import SettingError, read_toml
+from sonarslam.datasets.simulator import HELD_BACK_SEED_MIN, simulate
+from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.features.geometry import compose, inverse
+from sonarslam.slam.backends.registry import BACKENDS
+from sonarslam.slam.eval.ate import ate_against_truth
+from sonarslam.slam.eval.consistency import NeesSeries, anees, nees_on_grid, nees_series
+from sonarslam.slam.eval.truth import truth_trajectory
+from sonarslam.slam.io.files import make_output_dir, write_atomic, write_text
+from sonarslam.slam.io.plots import plot_anees, plot_sweep, plot_worlds
+from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.run.presets import check_settings, parse_value
+from sonarslam.slam.run.run import backend_names, run_backend
+from sonarslam.slam.run.sonar_calibration import write_sonar_calibration
+from sonarslam.slam.run.sources import start_pose
+from sonarslam.slam.run.sweep_summary import (
     config_columns,
     config_labels,
     format_spread,
@@ -224,7 +224,7 @@ def simulate_cached(world: str, seed: int, duration_s: float | None, cache_dir: 
 
 def calibrate_cached(folder: str) -> str:
     """The GPS-free sonar calibration of a simulated folder (range offset, a line's systematic
-    error: :func:`slam.run.sonar_calibration.write_sonar_calibration`), written once beside its
+    error: :func:`sonarslam.slam.run.sonar_calibration.write_sonar_calibration`), written once beside its
     logs as ``calibration.toml``; returns its path."""
     path = Path(folder) / "calibration.toml"
     if not path.is_file():
@@ -489,20 +489,20 @@ def sweep(
     ----------
     seeds : sequence of int
     backends : sequence of str
-        Names of :func:`slam.run.run.backend_names`.
+        Names of :func:`sonarslam.slam.run.run.backend_names`.
     out_dir : str or Path
         Receives ``sweep.csv`` (one row per run, paired with dead reckoning on its seed:
         :func:`pair_with_baseline`), ``summary.csv`` (one per configuration, :func:`summarise`),
         ``nees.npz`` (``pose`` (R, K), ``position`` (R, K), ``t_rel_s`` (K,): row ``i`` is
         ``sweep.csv``'s), ``anees.png``, ``sweep.png``, ``spread.md``
-        (:func:`slam.run.sweep_summary.format_spread`: the spread of the gain over dead
+        (:func:`sonarslam.slam.run.sweep_summary.format_spread`: the spread of the gain over dead
         reckoning across seeds, the worst seeds with their worlds, the ANEES against its band,
         the association scores, whether the seeds are held back) and ``worlds.png`` (six of the
         worlds with their true routes, the worst seeds first).
     grid : dict of str to list, optional
         Axes (see the module docstring).
     world : {"drawn", "drift", "harbour", "random", "pool"}
-        Simulated world (:data:`datasets.simulator.KINDS`); ``drawn``: a harbour drawn per seed.
+        Simulated world (:data:`sonarslam.datasets.simulator.KINDS`); ``drawn``: a harbour drawn per seed.
     duration_s : float, optional
         Simulated length (s); default the world's (600 s for the harbours, 1,800 s for drift and
         the drawn worlds).

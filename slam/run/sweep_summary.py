@@ -1,15 +1,15 @@
 """The sweep's scores: each run against the truth and against dead reckoning on its own seed, and
-one summary row per configuration (:func:`slam.run.sweep.sweep` writes them).
+one summary row per configuration (:func:`sonarslam.slam.run.sweep.sweep` writes them).
 
 A sweep runs on simulated worlds, so it scores against the **truth**, not simulated GPS: per run
 the ATE against the true poses (``ate_truth_mean_m``) and after a rigid alignment onto them
-(``ate_truth_aligned_mean_m``, the shape error; :func:`slam.eval.ate.ate_against_truth`), both
-written by :func:`slam.run.run.run_backend`. Each run is paired with the dead-reckoning run of the
+(``ate_truth_aligned_mean_m``, the shape error; :func:`sonarslam.slam.eval.ate.ate_against_truth`), both
+written by :func:`sonarslam.slam.run.run.run_backend`. Each run is paired with the dead-reckoning run of the
 same seed (:func:`pair_with_baseline`): ``beats_dr`` (1 when its ATE is below dead reckoning's,
 0 when not) and ``gain_over_dr`` (``1 - ATE / ATE_dr``), for both ATEs. Per configuration
 (:func:`summarise`): the share of its seeds on which it beats dead reckoning, its gain in the
 mean (``1 - mean ATE / mean ATE_dr`` over the paired seeds) and the spread of the per-seed gain
-(p10 / p50 / p90 and the worst), beside the ANEES with its band (:mod:`slam.eval.consistency`)
+(p10 / p50 / p90 and the worst), beside the ANEES with its band (:mod:`sonarslam.slam.eval.consistency`)
 and the association scores against the true walls. A back end that smooths gets a second row
 for its smoothed trajectory (``isam2 smoothed``), scored the same way against the same dead
 reckoning. :func:`worst_seeds` lists the seeds where a configuration gains least, with their
@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from slam.eval.consistency import anees
+from sonarslam.slam.eval.consistency import anees
 
 __all__ = [
     "BASELINE",

@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from features.geometry import FloatArray, compose_jacobians, wrap_angle
-from slam.model.lines import line_predictions, local_to_world
-from slam.model.motion import RelativeMotion
+from sonarslam.features.geometry import FloatArray, compose_jacobians, wrap_angle
+from sonarslam.slam.model.lines import line_predictions, local_to_world
+from sonarslam.slam.model.motion import RelativeMotion
 
 __all__ = ["loose_distances", "joint_covariance"]
 
@@ -86,7 +86,7 @@ def joint_covariance(
     -------
     ndarray, shape (3 + 2k, 3 + 2k)
         The anchor mapped to world coordinates and composed with the odometry since it
-        (:func:`features.geometry.compose_jacobians`).
+        (:func:`sonarslam.features.geometry.compose_jacobians`).
     """
     n = J_local.shape[0]
     T = np.eye(n)

@@ -1,19 +1,19 @@
-"""Settings of the factor-graph back end (:class:`slam.backends.isam2.graph.LineIsam2`)."""
+"""Settings of the factor-graph back end (:class:`sonarslam.slam.backends.isam2.graph.LineIsam2`)."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
-from datasets.settings import bounded, one_of
-from slam.backends.base import BackendConfig
+from sonarslam.datasets.settings import bounded, one_of
+from sonarslam.slam.backends.base import BackendConfig
 
 __all__ = ["GraphConfig"]
 
 
 @dataclass(frozen=True)
 class GraphConfig(BackendConfig):
-    """Settings of the factor graph: :class:`slam.backends.base.BackendConfig`'s and
+    """Settings of the factor graph: :class:`sonarslam.slam.backends.base.BackendConfig`'s and
 
     Attributes
     ----------
@@ -21,7 +21,7 @@ class GraphConfig(BackendConfig):
         Prior mean of the constant AHRS bias ``B(0)`` (deg).
     dvl_noise : {"hold", "white"}
         How the velocity noise adds up. ``"hold"``: the error of a held DVL sample is one draw
-        for the whole hold (:func:`slam.model.noise.held_velocity_variance_step`, the EKF's
+        for the whole hold (:func:`sonarslam.slam.model.noise.held_velocity_variance_step`, the EKF's
         model). ``"white"``: independent per motion step, ``(dt * sigma)**2`` each, which with a
         1.5 Hz DVL and 20 records a second makes the position variance ~20x too small.
     node_period_s : float
@@ -38,7 +38,7 @@ class GraphConfig(BackendConfig):
     gyro_scale_sigma : float
         Prior 1-sigma of ``s`` around 1.
     robust : {None, "huber", "cauchy"}
-        As :class:`slam.backends.base.BackendConfig`; Huber by default here (heavy-tailed line
+        As :class:`sonarslam.slam.backends.base.BackendConfig`; Huber by default here (heavy-tailed line
         errors on thick echo bands).
     relinearize_threshold : float
         iSAM2 relinearises a variable whose delta exceeds this (m, rad). GTSAM's default: a
@@ -59,7 +59,7 @@ class GraphConfig(BackendConfig):
         pose source when it is next asked (the front end's stored sector spans seconds); all of
         them for :meth:`LineIsam2.smoothed_trajectory`.
 
-    Scan constraints (``constraints`` with ``"scans"``, :mod:`slam.backends.isam2.scans`):
+    Scan constraints (``constraints`` with ``"scans"``, :mod:`sonarslam.slam.backends.isam2.scans`):
 
     scan_robust : {None, "huber", "cauchy"}
         Robust kernel of the scan constraints (``BetweenFactorPose2``).

@@ -5,19 +5,19 @@ Variables (keys from :mod:`gtsam.symbol_shorthand`):
 * ``X(k)``: body pose ``wTb`` of node k, a ``gtsam.Pose2``. GTSAM perturbs it in its *local*
   (body-frame) tangent ``(dx_b, dy_b, dtheta)``: ``wTb.retract(xi) = wTb * Exp(xi)``, so a
   Jacobian in plain world coordinates ``(x, y, yaw)`` is multiplied by
-  :func:`slam.model.lines.local_to_world` ``= blockdiag(R(yaw), 1)``.
+  :func:`sonarslam.slam.model.lines.local_to_world` ``= blockdiag(R(yaw), 1)``.
 * ``L(j)``: a world line ``(rho_m, theta_rad)``, a 2-vector (a GTSAM ``Vector``: what
   ``Values.insert`` makes of a numpy array, read with ``Values.atVector``). A vector space
   (retract is ``+``) is what a ``(rho, theta)`` pair needs near a solution: ``theta`` enters
   only through ``cos`` and ``sin``, so it needs no wrapping in the state, and a manifold such as
   ``Pose2``/``Rot2`` would add nothing but conversions. The stored pair is not kept normalised
   (the optimiser may leave ``rho < 0`` or ``theta`` outside ``[-pi, pi)``); the factor compares
-  lines through :func:`slam.model.lines.line_residual`, which normalises and resolves the sign
+  lines through :func:`sonarslam.slam.model.lines.line_residual`, which normalises and resolves the sign
   ambiguity; reports normalise.
 * ``B(0)``: the constant AHRS heading bias (rad), a size-1 ``Vector``; the AHRS measures
-  ``yaw + b`` (the model of :class:`slam.backends.ekf.LineEkf`).
+  ``yaw + b`` (the model of :class:`sonarslam.slam.backends.ekf.LineEkf`).
 * ``D(0)``: optional constant misalignment (rad) of the DVL velocity with the body heading: the
-  vehicle moves along ``R(yaw + delta) v_b`` (as :class:`slam.backends.ekf.LineEkf`).
+  vehicle moves along ``R(yaw + delta) v_b`` (as :class:`sonarslam.slam.backends.ekf.LineEkf`).
 * ``G(0)``: optional constant scale of the gyro's yaw rate (the odometry's heading change is
   ``s`` times the gyro's integral).
 
@@ -34,9 +34,9 @@ import gtsam
 import numpy as np
 import numpy.typing as npt
 
-from features.geometry import FloatArray, wrap_angle
-from slam.model.lines import line_residual
-from slam.model.noise import robust_kernel
+from sonarslam.features.geometry import FloatArray, wrap_angle
+from sonarslam.slam.model.lines import line_residual
+from sonarslam.slam.model.noise import robust_kernel
 
 __all__ = [
     "noise_model",
@@ -62,7 +62,7 @@ def noise_model(
     cov : array_like, shape (n, n)
         Covariance of the factor's error, in its units.
     robust : {None, "huber", "cauchy"}
-        Robust kernel (:func:`slam.model.noise.robust_kernel`) on the whitened error.
+        Robust kernel (:func:`sonarslam.slam.model.noise.robust_kernel`) on the whitened error.
     robust_k : float
         Kernel width in sigmas (Huber: 1.345 is 95 % efficient on Gaussian data).
     """

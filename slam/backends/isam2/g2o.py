@@ -3,7 +3,7 @@
 g2o's 2D types hold poses (``VERTEX_SE2 id x y theta``) and relative poses with their
 information (``EDGE_SE2 i j dx dy dtheta I11 I12 I13 I22 I23 I33``, the upper triangle of the
 inverse covariance in the order ``(x, y, theta)``, as ``gtsam.BetweenFactorPose2``). Of our graph
-(:func:`slam.backends.isam2.graph_io.save_graph`) that is the poses at the estimate and the
+(:func:`sonarslam.slam.backends.isam2.graph_io.save_graph`) that is the poses at the estimate and the
 odometry; a g2o file cannot hold:
 
 * the line landmarks ``L(j)`` and their ``LineObservation`` factors (g2o's 2D types have points
@@ -17,12 +17,12 @@ odometry; a g2o file cannot hold:
   them: such an edge is written at ``delta = 0``, ``s = scale0``.
 
 The scan matcher's relative poses (``BetweenFactorPose2`` with ``"constraint"``,
-:mod:`slam.backends.isam2.scans`) are ``EDGE_SE2`` too; their robust kernel is not (g2o's file
+:mod:`sonarslam.slam.backends.isam2.scans`) are ``EDGE_SE2`` too; their robust kernel is not (g2o's file
 format has no kernel: a reader applies its own), which the warning counts.
 
 ``DvlGyroOdometry`` without those variables is ``BetweenFactorPose2`` to first order
-(:func:`slam.backends.isam2.factors.odometry_residual`), so it is written as ``EDGE_SE2``. The
-whole graph is ``graph.json`` (:func:`slam.backends.isam2.graph_io.load_graph`). Vertex ``k`` of
+(:func:`sonarslam.slam.backends.isam2.factors.odometry_residual`), so it is written as ``EDGE_SE2``. The
+whole graph is ``graph.json`` (:func:`sonarslam.slam.backends.isam2.graph_io.load_graph`). Vertex ``k`` of
 the file is ``X(k)``.
 """
 
@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from slam.backends.isam2.graph_io import GRAPH_FORMAT
+from sonarslam.slam.backends.isam2.graph_io import GRAPH_FORMAT
 
 __all__ = ["G2O_EDGE_TYPES", "G2oExport", "write_g2o", "graph_json_to_g2o"]
 
@@ -141,7 +141,7 @@ def write_g2o(
 
 
 def graph_json_to_g2o(json_path: str | Path, g2o_path: str | Path | None = None) -> G2oExport:
-    """``graph.json`` (:func:`slam.backends.isam2.graph_io.save_graph`) to ``graph.g2o`` beside
+    """``graph.json`` (:func:`sonarslam.slam.backends.isam2.graph_io.save_graph`) to ``graph.g2o`` beside
     it (or ``g2o_path``)."""
     src = Path(json_path)
     doc = json.loads(src.read_text())

@@ -1,12 +1,12 @@
 """Factor-graph SLAM with line landmarks on GTSAM iSAM2: the second back end.
 
-The graph (factors in :mod:`slam.backends.isam2.factors`, records in
-:mod:`slam.backends.isam2.graph_io`):
+The graph (factors in :mod:`sonarslam.slam.backends.isam2.factors`, records in
+:mod:`sonarslam.slam.backends.isam2.graph_io`):
 
 * ``X(k)``: body poses ``wTb`` (``Pose2``) at *nodes*: one at each vote that returns lines and
   one every ``node_period_s`` otherwise;
 * odometry between consecutive nodes: the motion model integrated between them with its
-  covariance (:class:`slam.backends.isam2.odometry.NodeOdometry`), as a ``BetweenFactorPose2``
+  covariance (:class:`sonarslam.slam.backends.isam2.odometry.NodeOdometry`), as a ``BetweenFactorPose2``
   (or, with ``estimate_misalignment`` / ``estimate_gyro_scale`` / ``dvl_scale_sigma``, the same
   motion with its translation rotated by the DVL misalignment ``D(0)`` and scaled by the DVL's
   ``1 + K(0)``, and its heading change scaled by the gyro scale ``G(0)``);
@@ -27,13 +27,13 @@ association), and between votes the pending odometry and heading factors are add
 every ``update_period_s``. Until then the current pose is the newest optimised node composed
 with the odometry since it (:attr:`LineIsam2.pose`, :attr:`LineIsam2.pose_cov`).
 
-Landmarks are managed by the shared landmark layer (:class:`slam.mapping.landmarks.LandmarkMap`);
+Landmarks are managed by the shared landmark layer (:class:`sonarslam.slam.mapping.landmarks.LandmarkMap`);
 here its association uses the iSAM2 joint marginal of the newest optimised node and of the
-candidate landmarks only (those within a loose gate, :mod:`slam.backends.isam2.candidates`),
+candidate landmarks only (those within a loose gate, :mod:`sonarslam.slam.backends.isam2.candidates`),
 propagated to the current time by the odometry. A promoted line enters the graph with all its
 observations.
 
-The seam to the front end is :class:`slam.backends.isam2.pose_source.SmoothedPoseSource`.
+The seam to the front end is :class:`sonarslam.slam.backends.isam2.pose_source.SmoothedPoseSource`.
 """
 
 from __future__ import annotations
@@ -48,19 +48,19 @@ import numpy as np
 from gtsam.symbol_shorthand import B, D, G, K, L, X
 from scipy.stats import chi2
 
-from features.geometry import FloatArray, compose, line_difference
-from features.line import LineFeature
-from features.pose_source import PoseSource
-from features.scans import Scan, ScanMatcher
-from slam.backends.base import (
+from sonarslam.features.geometry import FloatArray, compose, line_difference
+from sonarslam.features.line import LineFeature
+from sonarslam.features.pose_source import PoseSource
+from sonarslam.features.scans import Scan, ScanMatcher
+from sonarslam.slam.backends.base import (
     AnchoredOdometry,
     VoteObservations,
     ids_of_features,
     vote_observations,
 )
-from slam.backends.isam2.candidates import joint_covariance, loose_distances
-from slam.backends.isam2.config import GraphConfig
-from slam.backends.isam2.graph_io import (
+from sonarslam.slam.backends.isam2.candidates import joint_covariance, loose_distances
+from sonarslam.slam.backends.isam2.config import GraphConfig
+from sonarslam.slam.backends.isam2.graph_io import (
     FactorKind,
     FactorRecord,
     OdometryTerms,
@@ -70,15 +70,22 @@ from slam.backends.isam2.graph_io import (
     save_graph,
     start_records,
 )
-from slam.backends.isam2.odometry import NodeOdometry, local_covariance
-from slam.backends.isam2.pose_source import NodeTable, SmoothedPoseSource
-from slam.backends.isam2.scans import ScanConstraints
-from slam.io.trajectory import Trajectory
-from slam.mapping.landmarks import Landmark, LandmarkMap
-from slam.mapping.vote import AfterVote, Belief, Decision, LandmarkBelief, NewLandmark, NodeAnchor
-from slam.model.lines import line_prediction, local_to_world, sonar_side
-from slam.model.motion import MotionStep
-from sonar.beam import Mounting
+from sonarslam.slam.backends.isam2.odometry import NodeOdometry, local_covariance
+from sonarslam.slam.backends.isam2.pose_source import NodeTable, SmoothedPoseSource
+from sonarslam.slam.backends.isam2.scans import ScanConstraints
+from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.mapping.landmarks import Landmark, LandmarkMap
+from sonarslam.slam.mapping.vote import (
+    AfterVote,
+    Belief,
+    Decision,
+    LandmarkBelief,
+    NewLandmark,
+    NodeAnchor,
+)
+from sonarslam.slam.model.lines import line_prediction, local_to_world, sonar_side
+from sonarslam.slam.model.motion import MotionStep
+from sonarslam.sonar.beam import Mounting
 
 __all__ = ["GraphConfig", "LineIsam2", "LINE_EQUALITY_SIGMAS"]
 
@@ -169,7 +176,7 @@ class LineIsam2:
     def pose_cov(self) -> FloatArray:
         """Its covariance in ``(x_m, y_m, yaw_rad)``: the node's iSAM2 marginal, propagated.
 
-        ``J_a S J_a^T + J_b P J_b^T`` of :func:`features.geometry.compose_jacobians`, in floats
+        ``J_a S J_a^T + J_b P J_b^T`` of :func:`sonarslam.features.geometry.compose_jacobians`, in floats
         (the driver asks for it at every record).
         """
         return self.odometry.carried_covariance(self._anchor_xyyaw[2], self._anchor_cov_rows)
@@ -215,7 +222,7 @@ class LineIsam2:
         """Take an AHRS heading ``z = yaw + b`` (at most every ``ahrs_period_s``).
 
         It goes into the heading factor of the next node
-        (:class:`slam.backends.isam2.odometry.HeadingMean`).
+        (:class:`sonarslam.slam.backends.isam2.odometry.HeadingMean`).
         """
         if t_s - self._last_heading_t < self.config.ahrs_period_s:
             return False
@@ -360,7 +367,7 @@ class LineIsam2:
     def update_lines(self, features: list[LineFeature]) -> list[int | None]:
         """One vote of lines: this graph's belief (JCBB/NN on iSAM2 marginals) to the landmark
         layer, which decides the associations and new landmarks
-        (:meth:`slam.mapping.landmarks.LandmarkMap.vote`); the decision applied here as factors
+        (:meth:`sonarslam.slam.mapping.landmarks.LandmarkMap.vote`); the decision applied here as factors
         and variables, then an update. The landmark id of each feature (None: not associated)."""
         wall0 = time.perf_counter()
         obs = vote_observations(features, self.config)
@@ -373,7 +380,7 @@ class LineIsam2:
 
     def _belief(self, obs: VoteObservations) -> Belief:
         """The vote's node (:meth:`node_now`), the candidate landmarks
-        (:func:`slam.backends.isam2.candidates.loose_distances`) and their joint marginal with
+        (:func:`sonarslam.slam.backends.isam2.candidates.loose_distances`) and their joint marginal with
         the current pose."""
         anchor = None
         cands: list[int] = []
@@ -449,7 +456,7 @@ class LineIsam2:
 
     def update_scan(self, scan: Scan, matcher: ScanMatcher) -> None:
         """A new scan of the scan matcher: its node and constraints
-        (:meth:`slam.backends.isam2.scans.ScanConstraints.add_scan`)."""
+        (:meth:`sonarslam.slam.backends.isam2.scans.ScanConstraints.add_scan`)."""
         if self.scans is None:
             raise ValueError("scans are not among this graph's constraints")
         t0 = time.perf_counter()
@@ -489,7 +496,7 @@ class LineIsam2:
 
     def _joint_covariance(self, cands: list[int]) -> FloatArray:
         """Joint covariance of ``[current pose (x, y, yaw), candidate lines]``
-        (:func:`slam.backends.isam2.candidates.joint_covariance`); caches the lines' blocks."""
+        (:func:`sonarslam.slam.backends.isam2.candidates.joint_covariance`); caches the lines' blocks."""
         t0 = time.perf_counter()
         k_anchor = self._n_nodes - 1 - len(self._pending_nodes)
         keys = [X(k_anchor)] + [L(j) for j in cands]
@@ -653,7 +660,7 @@ class LineIsam2:
         return out
 
     def save(self, out_dir: Path) -> list[Path]:
-        """``graph.json`` (:func:`slam.backends.isam2.graph_io.save_graph`)."""
+        """``graph.json`` (:func:`sonarslam.slam.backends.isam2.graph_io.save_graph`)."""
         path = Path(out_dir) / "graph.json"
         values = self.estimate()
         meta = {

@@ -5,7 +5,7 @@ Each factor is a typed :class:`FactorRecord` (its :class:`FactorKind`, keys, mea
 covariance and what its type needs beyond them), built into GTSAM by :meth:`FactorRecord.to_gtsam`
 through one builder per kind; its JSON form lets a graph be saved, inspected and re-optimised
 with GTSAM without this package's estimator state: :func:`load_graph` rebuilds GTSAM's own
-factors for the standard types and the ``CustomFactor``s of :mod:`slam.backends.isam2.factors`
+factors for the standard types and the ``CustomFactor``s of :mod:`sonarslam.slam.backends.isam2.factors`
 for the others.
 """
 
@@ -23,9 +23,9 @@ import numpy as np
 import numpy.typing as npt
 from gtsam.symbol_shorthand import B, D, G, K, X
 
-from features.geometry import FloatArray
-from slam.backends.isam2.config import GraphConfig
-from slam.backends.isam2.factors import (
+from sonarslam.features.geometry import FloatArray
+from sonarslam.slam.backends.isam2.config import GraphConfig
+from sonarslam.slam.backends.isam2.factors import (
     heading_factor,
     line_equality_factor,
     line_factor,
@@ -94,7 +94,7 @@ class OdometryTerms:
     """What a ``DvlGyroOdometry`` factor needs beyond its measurement: the gyro's heading
     integral ``yaw_raw_rad``, the translation's derivative by the gyro scale ``d_t_d_scale``
     ``(dx/ds, dy/ds)`` (m) and the gyro scale ``scale0`` it was integrated with
-    (:func:`slam.backends.isam2.factors.odometry_residual`)."""
+    (:func:`sonarslam.slam.backends.isam2.factors.odometry_residual`)."""
 
     yaw_raw_rad: float
     d_t_d_scale: tuple[float, float]
@@ -154,7 +154,7 @@ class FactorRecord:
 
     def to_gtsam(self) -> gtsam.NonlinearFactor:
         """The GTSAM factor (GTSAM's own for the standard types, a ``CustomFactor`` of
-        :mod:`slam.backends.isam2.factors` for the others)."""
+        :mod:`sonarslam.slam.backends.isam2.factors` for the others)."""
         return _BUILDERS[self.kind](self)
 
     def to_json(self) -> dict[str, Any]:
@@ -392,12 +392,12 @@ def save_graph(
     * ``HeadingBias`` on ``(x, b)``: ``[yaw_meas]``, error ``wrap(yaw + b - yaw_meas)``;
     * ``DvlGyroOdometry`` on ``(x_i, x_j[, d][, g][, k])``: ``[x, y, yaw]`` integrated with
       ``delta = 0``, gyro scale ``"scale0"`` and no DVL scale error, plus ``"yaw_raw"`` (the gyro's integral) and
-      ``"d_t_d_scale"`` ``[dx/ds, dy/ds]`` (:func:`slam.backends.isam2.factors.odometry_residual`);
+      ``"d_t_d_scale"`` ``[dx/ds, dy/ds]`` (:func:`sonarslam.slam.backends.isam2.factors.odometry_residual`);
     * ``LineObservation`` on ``(x, l)``: ``[rho, theta]`` in the sonar frame, plus ``"bTs"``
       ``[x, y, yaw]`` and ``"robust"`` (``null`` or ``{"kernel": "huber", "k": 1.345}``);
-      error :func:`slam.model.lines.line_residual`;
+      error :func:`sonarslam.slam.model.lines.line_residual`;
     * ``LineEquality`` on ``(l_keep, l_drop)``: ``[flipped]`` (0 or 1), a diagonal covariance;
-      two landmarks found to be one wall (:func:`slam.backends.isam2.factors.line_equality_residual`).
+      two landmarks found to be one wall (:func:`sonarslam.slam.backends.isam2.factors.line_equality_residual`).
 
     ``meta`` holds what is not a factor: node times, the sonar mounting, the settings.
     """
@@ -417,7 +417,7 @@ def load_graph(path: str | Path) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Valu
     -------
     graph : gtsam.NonlinearFactorGraph
         GTSAM's own factors for the standard types, ``CustomFactor`` from
-        :mod:`slam.backends.isam2.factors` for the others.
+        :mod:`sonarslam.slam.backends.isam2.factors` for the others.
     values : gtsam.Values
     """
     doc = json.loads(Path(path).read_text())

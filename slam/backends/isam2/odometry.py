@@ -1,14 +1,14 @@
 """The factor graph's odometry between pose nodes, and its averaged AHRS headings.
 
-The graph has a pose node every few seconds (:class:`slam.backends.isam2.graph.LineIsam2`);
-between nodes the motion steps (:class:`slam.model.motion.MotionStep`) are integrated by the
-motion model (:class:`slam.model.motion.RelativeMotion`) three ways at once:
+The graph has a pose node every few seconds (:class:`sonarslam.slam.backends.isam2.graph.LineIsam2`);
+between nodes the motion steps (:class:`sonarslam.slam.model.motion.MotionStep`) are integrated by the
+motion model (:class:`sonarslam.slam.model.motion.RelativeMotion`) three ways at once:
 
 * since the newest node: the measurement and covariance of the next node's odometry factor
   (with the gyro scale the node started with, no misalignment and no DVL scale error, which
   the factor applies);
 * since the newest optimised node: the current pose is that node composed with it;
-* the chain ``O(t)`` of the whole run (:class:`slam.model.motion.OdometryChain`): the shape of
+* the chain ``O(t)`` of the whole run (:class:`sonarslam.slam.model.motion.OdometryChain`): the shape of
   the trajectory between nodes, for the front end's pose source.
 
 AHRS headings taken since the newest node are carried to the next node by the gyro and averaged
@@ -22,9 +22,9 @@ import math
 
 import numpy as np
 
-from features.geometry import FloatArray, wrap_angle
-from slam.model.lines import local_to_world
-from slam.model.motion import MotionStep, OdometryChain, RelativeMotion, step_displacement
+from sonarslam.features.geometry import FloatArray, wrap_angle
+from sonarslam.slam.model.lines import local_to_world
+from sonarslam.slam.model.motion import MotionStep, OdometryChain, RelativeMotion, step_displacement
 
 __all__ = ["HeadingMean", "NodeOdometry", "local_covariance"]
 
@@ -72,7 +72,7 @@ class HeadingMean:
 
 
 class NodeOdometry:
-    """The odometry of :class:`slam.backends.isam2.graph.LineIsam2` (module docstring).
+    """The odometry of :class:`sonarslam.slam.backends.isam2.graph.LineIsam2` (module docstring).
 
     Parameters
     ----------
@@ -81,7 +81,7 @@ class NodeOdometry:
     gyro_sigma_radps : float
         Yaw-rate noise of the motion model (rad/s).
     dvl_noise : {"hold", "white"}
-        How the velocity noise adds up (:class:`slam.backends.isam2.graph.GraphConfig`).
+        How the velocity noise adds up (:class:`sonarslam.slam.backends.isam2.graph.GraphConfig`).
     """
 
     def __init__(self, t0_s: float, gyro_sigma_radps: float, dvl_noise: str = "hold") -> None:
@@ -148,7 +148,7 @@ class NodeOdometry:
         self, anchor_yaw_rad: float, anchor_cov_rows: tuple[tuple[float, ...], ...]
     ) -> FloatArray:
         """Covariance of :meth:`carried`: ``J_a S J_a^T + J_b P J_b^T`` of
-        :func:`features.geometry.compose_jacobians` with ``S`` the anchor's (rows of floats) and
+        :func:`sonarslam.features.geometry.compose_jacobians` with ``S`` the anchor's (rows of floats) and
         ``P`` the motion's since it, in floats (the driver asks for it at every record)."""
         m = self.since_anchor
         c, s = math.cos(anchor_yaw_rad), math.sin(anchor_yaw_rad)

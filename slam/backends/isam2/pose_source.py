@@ -14,8 +14,8 @@ from collections.abc import Callable, Sequence
 import numpy as np
 import numpy.typing as npt
 
-from features.geometry import FloatArray, wrap_angle
-from slam.model.motion import OdometryChain
+from sonarslam.features.geometry import FloatArray, wrap_angle
+from sonarslam.slam.model.motion import OdometryChain
 
 __all__ = ["Rows", "NodeTable", "SmoothedPoseSource", "smoothed_poses"]
 
@@ -122,7 +122,7 @@ def smoothed_poses(
         Odometry chain ``O`` at the node times, yaw unwrapped.
     odo_t : ndarray, shape (M, 3)
         The odometry chain at the query times, yaw unwrapped
-        (:meth:`slam.model.motion.OdometryChain.at`).
+        (:meth:`sonarslam.slam.model.motion.OdometryChain.at`).
 
     Returns
     -------
@@ -190,7 +190,7 @@ class SmoothedPoseSource:
 
     def covariances(self, t_s: npt.ArrayLike) -> FloatArray | None:
         """:meth:`covariance` at many times, shape (N, 3, 3)
-        (:class:`features.pose_source.BatchCovariances`)."""
+        (:class:`sonarslam.features.pose_source.BatchCovariances`)."""
         t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
         anchors = self.nodes.anchor_t
         current = np.asarray(self._current_cov(), dtype=np.float64)

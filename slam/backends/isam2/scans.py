@@ -1,6 +1,6 @@
 """Scan constraints in the factor graph: a pose node per scan, relative poses between them.
 
-The scan matcher (:class:`features.scans.matcher.ScanMatcher`, the front end) gives each new
+The scan matcher (:class:`sonarslam.features.scans.matcher.ScanMatcher`, the front end) gives each new
 scan. Here (MSISpIC's pose graph, Mallios et al. 2014, in iSAM2):
 
 1. **A node** at the scan's reference time (the newest node when one is less than
@@ -18,7 +18,7 @@ scan. Here (MSISpIC's pose graph, Mallios et al. 2014, in iSAM2):
    from the graph's relative pose, and kept when compatible with it (chi2(3) of the difference
    with both covariances; the directions the registration leaves free carry no information).
 4. Every scan factor has a robust kernel (``scan_robust``, Cauchy by default) and is a record
-   of :mod:`slam.backends.isam2.graph_io` (``BetweenFactorPose2`` with ``"robust"`` and
+   of :mod:`sonarslam.slam.backends.isam2.graph_io` (``BetweenFactorPose2`` with ``"robust"`` and
    ``"constraint"``: ``"scan-consecutive"`` or ``"scan-revisit"``), so ``graph.json`` holds
    it and ``graph.g2o`` writes it as ``EDGE_SE2``.
 """
@@ -33,13 +33,20 @@ import numpy as np
 from gtsam.symbol_shorthand import X
 from scipy.stats import chi2
 
-from features.geometry import FloatArray, between, compose, compose_jacobians, inverse, wrap_angle
-from features.scans.icp import Registration
-from features.scans.matcher import ScanMatcher
-from features.scans.scan import Scan
-from slam.backends.isam2.config import GraphConfig
-from slam.backends.isam2.graph_io import FactorKind, FactorRecord, Robust
-from slam.model.lines import local_to_world
+from sonarslam.features.geometry import (
+    FloatArray,
+    between,
+    compose,
+    compose_jacobians,
+    inverse,
+    wrap_angle,
+)
+from sonarslam.features.scans.icp import Registration
+from sonarslam.features.scans.matcher import ScanMatcher
+from sonarslam.features.scans.scan import Scan
+from sonarslam.slam.backends.isam2.config import GraphConfig
+from sonarslam.slam.backends.isam2.graph_io import FactorKind, FactorRecord, Robust
+from sonarslam.slam.model.lines import local_to_world
 
 __all__ = [
     "ScanGraph",
@@ -51,7 +58,7 @@ __all__ = [
 
 
 class ScanGraph(Protocol):
-    """What the scan constraints need of the graph (:class:`slam.backends.isam2.graph.LineIsam2`)."""
+    """What the scan constraints need of the graph (:class:`sonarslam.slam.backends.isam2.graph.LineIsam2`)."""
 
     @property
     def isam(self) -> gtsam.ISAM2: ...
@@ -135,7 +142,7 @@ class ScanConstraints:
     Parameters
     ----------
     graph : ScanGraph
-        The graph they go into (:class:`slam.backends.isam2.graph.LineIsam2`).
+        The graph they go into (:class:`sonarslam.slam.backends.isam2.graph.LineIsam2`).
     config : GraphConfig
     """
 
