@@ -19,12 +19,10 @@ def pose(t_s: float) -> gtsam.Pose2:
     return gtsam.Pose2(*odometry.poses(t_s)[0])
 
 
-def belief(k: int, with_covariance: bool) -> sonarslam.WorldBelief:
-    """iSAM2's estimate of pose X(k) and every landmark, its marginals in world (x, y, yaw)."""
+def belief(k: int, marginals: gtsam.ISAM2 | None = None) -> sonarslam.WorldBelief:
+    """Pose X(k) and every landmark (their joint marginal in world x, y, yaw if asked)."""
     keys = [L(j) for j in range(len(association.map.landmarks))]
-    return sonarslam.gtsam_belief(
-        isam.calculateEstimate(), X(k), keys, isam if with_covariance else None
-    )
+    return sonarslam.gtsam_belief(isam.calculateEstimate(), X(k), keys, marginals)
 
 
 isam, k, t_k = gtsam.ISAM2(), 0, float(odometry.t_s[0])
@@ -45,7 +43,7 @@ for beam in ds.nav_beams():
     values.insert(X(k + 1), isam.calculateEstimatePose2(X(k)).compose(step))
     isam.update(graph, values)
     k, t_k = k + 1, lines[0].t
-    decision = association.decide(lines, belief(k, True), pose_key=X(k))
+    decision = association.decide(lines, belief(k, isam), pose_key=X(k))
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()  # merges: none by default
     for j, line in decision.updates:  # an observation of landmark j
         graph.add(sonarslam.line_factor(X(k), L(j), line.z, line.cov, bTs))
@@ -54,7 +52,7 @@ for beam in ds.nav_beams():
         for anchor, line in new.observations:
             graph.add(sonarslam.line_factor(anchor.node, L(new.id), line.z, line.cov, bTs))
     isam.update(graph, values)
-    association.applied(belief(k, False))  # the estimate after the update, before the next vote
+    association.applied(belief(k))  # the estimate after the update, before the next vote
 
-final = belief(k, False)
+final = belief(k)
 print(f"{k} poses, {final.k} landmarks")
