@@ -54,8 +54,30 @@ MARINA_LAYOUT_HINT = (
 
 @dataclass(frozen=True, eq=False)
 class Dataset:
-    """All the logs of one run, read and checked; ``report`` counts what the gates dropped and
-    lists the sensors' gaps (:mod:`sonarslam.datasets.gates`)."""
+    """All the logs of one run, read and checked (:func:`open_dataset`).
+
+    Attributes
+    ----------
+    name : str
+        The run's name (its files' prefix).
+    root : Path
+        Its folder.
+    config : DatasetConfig
+        Its ``sonarslam.toml``: the sonar head (``config.sonar``), the mountings ``bTs`` of
+        the sonar, DVL and AHRS, the sensors' noise.
+    beams : BeamSeries
+        Sonar beams in time order.
+    dvl : DvlSeries
+        DVL velocities in the DVL frame (m/s).
+    attitude : AttitudeSeries
+        AHRS headings (rad, CCW from East) and yaw rates.
+    gps : GpsSeries or None
+        GPS fixes in the readers' local East-North frame (m; origin at the first fix).
+    truth : dict or None
+        A simulated run's ``truth.json`` (:func:`read_truth`).
+    report : SensorReport
+        What the gates dropped and the sensors' gaps (:mod:`sonarslam.datasets.gates`).
+    """
 
     name: str
     root: Path

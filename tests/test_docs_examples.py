@@ -2,7 +2,9 @@
 
 An example is a fenced block of ``sh``, ``python`` or ``toml`` (``text`` and unlabelled blocks
 are not); a ``toml`` block under ``<!-- file: NAME -->`` is that file, written where the
-examples run. Each page runs in a fresh copy of a layout like a clone beside ``shared/``::
+examples run; a ``python`` block under ``<!-- script: PATH -->`` is the script ``PATH``
+(:data:`SCRIPTS`) as it is, checked here and run by ``tests/test_api_examples.py``. Each page
+runs in a fresh copy of a layout like a clone beside ``shared/``::
 
     WORK/clone/                     the working directory: the clone's root (its benchmarks/,
                                     notebooks/, Makefile and .venv are this repository's)
@@ -76,9 +78,16 @@ SHORTER: dict[tuple[str, str], dict[str, str]] = {
 }
 #: What an example must print, by its ``<!-- example: NAME -->`` marker.
 EXPECTED: dict[str, Callable[[str], bool]] = {
-    "api": lambda out: len([ln for ln in out.splitlines() if "rho" in ln]) >= 4,
+    "typed_run": lambda out: "{'isam2.robust': 'cauchy'}" in out and "against the truth" in out,
     "load_graph": lambda out: "graph error" in out and "line landmarks" in out,
 }
+#: The example scripts pages show whole (``<!-- script: PATH -->`` above the block): each block
+#: must be the file as it is; ``tests/test_api_examples.py`` runs them and checks their results.
+SCRIPTS = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs" / "examples").glob("*.py"))
+#: The order docs/api.md shows them in.
+SCRIPTS_IN_API_ORDER = [
+    f"docs/examples/{n}.py" for n in ("front_end", "isam2_plugin", "ekf_plugin")
+]
 FENCE = re.compile(r"^```([a-z]*)\s*$")
 
 
@@ -88,7 +97,7 @@ class Example:
     line: int  # of the opening fence
     lang: str
     code: str
-    marker: str | None  # the <!-- example: NAME --> or <!-- file: NAME --> above it
+    marker: str | None  # the <!-- example: NAME -->, <!-- file: NAME --> or <!-- script: PATH -->
 
     @property
     def where(self) -> str:
@@ -106,7 +115,7 @@ def examples(page: str) -> list[Example]:
             continue
         end = next(j for j in range(k + 1, len(lines)) if lines[j].startswith("```"))
         above = next((lines[j] for j in range(k - 1, -1, -1) if lines[j].strip()), "")
-        marker = re.fullmatch(r"<!-- (?:example|file): (\S+) -->", above.strip())
+        marker = re.fullmatch(r"<!-- (?:example|file|script): (\S+) -->", above.strip())
         if m[1] in ("sh", "python", "toml"):
             code = "\n".join(lines[k + 1 : end]) + "\n"
             out.append(Example(page, k + 1, m[1], code, marker[1] if marker else None))
@@ -250,6 +259,9 @@ class Shell:
         elif ex.lang == "sh":
             for text in shell_commands(ex.code):
                 self.line(ex, text)
+        elif ex.marker in SCRIPTS:  # a script the page shows whole: run by test_api_examples
+            script = (ROOT / ex.marker).read_text()
+            assert ex.code == script, f"{ex.where}: the block is not {ex.marker} as it is"
         else:
             try:
                 exec(compile(ex.code, ex.where, "exec"), {"__name__": "__main__"})
@@ -306,7 +318,9 @@ def quickstart(shared_dir: Callable[[str, Callable[[Path], None]], Path]) -> Pat
 def test_examples_are_found() -> None:
     """The runner sees the examples the pages hold (a renamed fence would silently drop one)."""
     found = {p: examples(p) for p in PAGES}
-    assert [e.marker for e in found["docs/api.md"]] == ["api"]
+    assert [e.marker for e in found["docs/api.md"]] == [*SCRIPTS_IN_API_ORDER, "typed_run"]
+    for ex in found["docs/api.md"][:3]:
+        assert ex.code == (ROOT / str(ex.marker)).read_text(), ex.where
     assert "load_graph" in [e.marker for e in found["docs/outputs.md"]]
     readme = found["README.md"]
     assert [e.lang for e in readme].count("sh") >= 4

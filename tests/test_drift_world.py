@@ -27,7 +27,7 @@ from sonarslam.datasets.simulator import (
     write_dataset,
 )
 from sonarslam.datasets.simulator.msis import render_intensities
-from sonarslam.datasets.simulator.path import Trajectory
+from sonarslam.datasets.simulator.path import TrueMotion
 from sonarslam.datasets.simulator.scenario import (
     DRIFT_DVL_SCALE_SIGMA,
     DRIFT_ECHO_RANGE_OFFSET_M,
@@ -103,7 +103,7 @@ def test_new_streams_leave_the_older_ones_as_they_were() -> None:
 # --- the errors in the logs ----------------------------------------------------------------------
 
 
-def _dvl_truth_mps(trajectory: Trajectory, m: Mounting, t: np.ndarray) -> np.ndarray:
+def _dvl_truth_mps(trajectory: TrueMotion, m: Mounting, t: np.ndarray) -> np.ndarray:
     """True velocity of a DVL mounted at the body origin, in its own frame (m/s)."""
     assert m.x_m == 0.0 and m.y_m == 0.0
     v = trajectory.velocity_body_mps(t)

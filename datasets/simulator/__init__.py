@@ -11,7 +11,7 @@ Modules: ``world`` (walls and the fixed worlds), ``layout`` (harbours drawn per 
 from sonarslam.datasets.simulator.layout import drawn_world
 from sonarslam.datasets.simulator.msis import EchoModel, beam_axis_hits, cast_rays, simulate_msis
 from sonarslam.datasets.simulator.path import (
-    Trajectory,
+    TrueMotion,
     free_path,
     stationary,
     survey,
@@ -46,7 +46,7 @@ __all__ = [
     "Scenario",
     "SensorNoise",
     "Simulation",
-    "Trajectory",
+    "TrueMotion",
     "World",
     "beam_axis_hits",
     "cast_rays",

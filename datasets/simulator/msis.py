@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from sonarslam.datasets.simulator.path import Trajectory
+from sonarslam.datasets.simulator.path import TrueMotion
 from sonarslam.datasets.simulator.world import World
 from sonarslam.features.geometry import FloatArray, compose
 from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead, bin_range_m
@@ -400,7 +400,7 @@ def simulate_msis(
     world: World,
     head: SonarHead,
     mounting: Mounting,
-    trajectory: Trajectory,
+    trajectory: TrueMotion,
     rng: np.random.Generator,
     rate_hz: float = 14.7,
     start_rad: float = 0.0,

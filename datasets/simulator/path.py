@@ -18,7 +18,7 @@ from sonarslam.features.geometry import FloatArray, interpolate_poses, wrap_angl
 
 __all__ = [
     "T0_S",
-    "Trajectory",
+    "TrueMotion",
     "stationary",
     "waypoint_path",
     "survey",
@@ -31,7 +31,7 @@ T0_S = 1.7e9
 
 
 @dataclass(frozen=True, eq=False)
-class Trajectory:
+class TrueMotion:
     """True body motion sampled at a fixed rate; also a ``features.pose_source.PoseSource``.
 
     Attributes
@@ -83,7 +83,7 @@ def _sample_times(duration_s: float, rate_hz: float, t0_s: float) -> FloatArray:
 
 def stationary(
     wTb: npt.ArrayLike, duration_s: float, rate_hz: float = 50.0, t0_s: float = T0_S
-) -> Trajectory:
+) -> TrueMotion:
     """A vehicle that does not move.
 
     Parameters
@@ -95,12 +95,12 @@ def stationary(
 
     Returns
     -------
-    Trajectory
+    TrueMotion
     """
     t = _sample_times(duration_s, rate_hz, t0_s)
     pose = np.asarray(wTb, dtype=np.float64).copy()
     pose[2] = float(wrap_angle(pose[2]))
-    return Trajectory(
+    return TrueMotion(
         t_s=t,
         wTb=np.tile(pose, (t.size, 1)),
         v_body_mps=np.zeros((t.size, 2)),
@@ -212,7 +212,7 @@ def waypoint_path(
     crab_period_s: float = 70.0,
     rate_hz: float = 50.0,
     t0_s: float = T0_S,
-) -> Trajectory:
+) -> TrueMotion:
     """Follow a polyline with circular fillets, analytically.
 
     Speed ``v(t) = speed + speed_variation sin(2 pi t / speed_period)``; heading
@@ -239,7 +239,7 @@ def waypoint_path(
 
     Returns
     -------
-    Trajectory
+    TrueMotion
     """
     w = np.asarray(waypoints_m, dtype=np.float64)
     if w.ndim != 2 or w.shape[1] != 2 or w.shape[0] < 2:
@@ -262,7 +262,7 @@ def waypoint_path(
     omega_c = 2.0 * np.pi / crab_period_s
     crab = crab_amplitude_rad * np.sin(omega_c * tau)
     crab_rate = crab_amplitude_rad * omega_c * np.cos(omega_c * tau)
-    return Trajectory(
+    return TrueMotion(
         t_s=t,
         wTb=np.column_stack([xy, wrap_angle(course + crab)]),
         v_body_mps=np.column_stack([v * np.cos(crab), -v * np.sin(crab)]),
@@ -276,7 +276,7 @@ def survey(
     speed_mps: float = 0.45,
     rate_hz: float = 50.0,
     t0_s: float = T0_S,
-) -> Trajectory:
+) -> TrueMotion:
     """Follow the world's own closed survey route (lawnmower and racetrack), see :class:`World`.
 
     Parameters
@@ -288,7 +288,7 @@ def survey(
 
     Returns
     -------
-    Trajectory
+    TrueMotion
     """
     if world.route_m is None:
         raise ValueError(f"world {world.name!r} has no survey route; use free_path")
@@ -319,7 +319,7 @@ def free_path(
     rate_hz: float = 50.0,
     t0_s: float = T0_S,
     max_tries: int = 1000,
-) -> Trajectory:
+) -> TrueMotion:
     """A smooth path through random waypoints, at least ``margin_m`` from every wall.
 
     Waypoints are drawn where the clearance is at least ``margin_m + turn_radius_m tan(60 deg)``,
@@ -338,7 +338,7 @@ def free_path(
 
     Returns
     -------
-    Trajectory
+    TrueMotion
 
     Raises
     ------

@@ -29,7 +29,7 @@ from sonarslam.datasets.config import DatasetConfig, NoiseConfig
 from sonarslam.datasets.records import Attitude, DvlVelocity, GpsFix, Record
 from sonarslam.datasets.simulator.layout import drawn_world
 from sonarslam.datasets.simulator.msis import EchoModel, beam_axis_hits, simulate_msis
-from sonarslam.datasets.simulator.path import T0_S, Trajectory, free_path, stationary, survey
+from sonarslam.datasets.simulator.path import T0_S, TrueMotion, free_path, stationary, survey
 from sonarslam.datasets.simulator.sensors import (
     MARINA_ORIGIN,
     AhrsSamples,
@@ -323,7 +323,7 @@ class Simulation:
     ----------
     scenario : Scenario
     world : World
-    trajectory : Trajectory
+    trajectory : TrueMotion
         True body motion (50 Hz); a ``PoseSource``.
     beams : list of SonarBeam
         Raw sonar beams.
@@ -336,7 +336,7 @@ class Simulation:
 
     scenario: Scenario
     world: World
-    trajectory: Trajectory
+    trajectory: TrueMotion
     beams: list[SonarBeam] = field(repr=False)
     beam_axis_range_m: FloatArray = field(repr=False)
     beam_axis_incidence_rad: FloatArray = field(repr=False)
@@ -385,7 +385,7 @@ class Simulation:
         return [r for _, _, r in out]
 
 
-def _trajectory(scenario: Scenario, world: World, rng: np.random.Generator) -> Trajectory:
+def _trajectory(scenario: Scenario, world: World, rng: np.random.Generator) -> TrueMotion:
     if scenario.kind == "pool":
         wTs = np.array([0.0, 0.0, scenario.pool_sonar_yaw_rad])
         wTb = compose(wTs, inverse(scenario.sonar_mounting.as_pose()))

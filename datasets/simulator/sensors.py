@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pymap3d
 
-from sonarslam.datasets.simulator.path import Trajectory
+from sonarslam.datasets.simulator.path import TrueMotion
 from sonarslam.features.geometry import FloatArray, wrap_angle
 from sonarslam.sonar.beam import Mounting
 
@@ -249,7 +249,7 @@ class GpsSamples:
 
 
 def sample_times(
-    trajectory: Trajectory,
+    trajectory: TrueMotion,
     rate_hz: float,
     offset_s: float,
     rng: np.random.Generator,
@@ -294,7 +294,7 @@ def _dropouts(t0_s: float, t1_s: float, noise: SensorNoise, rng: np.random.Gener
 
 
 def simulate_dvl(
-    trajectory: Trajectory,
+    trajectory: TrueMotion,
     mounting: Mounting,
     noise: SensorNoise,
     rng: np.random.Generator,
@@ -310,7 +310,7 @@ def simulate_dvl(
 
     Parameters
     ----------
-    trajectory : Trajectory
+    trajectory : TrueMotion
         True motion.
     mounting : Mounting
         DVL frame in the body frame.
@@ -370,7 +370,7 @@ def simulate_dvl(
 
 
 def simulate_ahrs(
-    trajectory: Trajectory,
+    trajectory: TrueMotion,
     mounting: Mounting,
     noise: SensorNoise,
     rng: np.random.Generator,
@@ -388,7 +388,7 @@ def simulate_ahrs(
 
     Parameters
     ----------
-    trajectory : Trajectory
+    trajectory : TrueMotion
     mounting : Mounting
         AHRS frame in the body frame (only its yaw is used).
     noise : SensorNoise
@@ -446,7 +446,7 @@ def simulate_ahrs(
 
 
 def simulate_gps(
-    trajectory: Trajectory,
+    trajectory: TrueMotion,
     origin: GeodeticOrigin,
     noise: SensorNoise,
     rng: np.random.Generator,
@@ -456,7 +456,7 @@ def simulate_gps(
 
     Parameters
     ----------
-    trajectory : Trajectory
+    trajectory : TrueMotion
     origin : GeodeticOrigin
         Geodetic point of the world origin.
     noise : SensorNoise

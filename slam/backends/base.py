@@ -14,7 +14,7 @@ back end registers in :mod:`sonarslam.slam.backends.registry`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
@@ -29,6 +29,7 @@ from sonarslam.features.pose_source import PoseSource
 from sonarslam.features.scans import Scan, ScanMatcher
 from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.mapping.landmarks import LandmarkConfig, LandmarkMap
+from sonarslam.slam.model.lines import VoteObservations, usable_observations
 from sonarslam.slam.model.motion import MotionStep, OdometryChain
 
 __all__ = [
@@ -200,37 +201,11 @@ class ScanBackend(Protocol):
         ...
 
 
-@dataclass(frozen=True, eq=False)
-class VoteObservations:
-    """A vote's lines as the landmark layer may use them (:func:`vote_observations`).
-
-    Attributes
-    ----------
-    features : list of LineFeature
-        Those at ``rho_m >= min_rho_m``.
-    rejected_near : int
-        How many were nearer.
-    z : ndarray, shape (m, 2)
-        ``features``' lines in the sonar frame ``(rho_m, theta_rad)``.
-    R : ndarray, shape (m, 2, 2)
-        Their covariances times ``line_cov_scale``.
-    """
-
-    features: list[LineFeature]
-    rejected_near: int
-    z: FloatArray = field(repr=False)
-    R: FloatArray = field(repr=False)
-
-
 def vote_observations(features: list[LineFeature], config: LandmarkConfig) -> VoteObservations:
     """The lines of one vote the landmark layer may use, the rules of
-    :class:`sonarslam.slam.mapping.landmarks.LandmarkConfig` (``min_rho_m``, ``line_cov_scale``)."""
-    use = [f for f in features if f.rho_m >= config.min_rho_m]
-    z = np.array([f.z for f in use]).reshape(-1, 2)
-    R = np.array([f.cov for f in use]).reshape(-1, 2, 2)
-    if config.line_cov_scale != 1.0:
-        R = R * config.line_cov_scale
-    return VoteObservations(use, len(features) - len(use), z, R)
+    :class:`sonarslam.slam.mapping.landmarks.LandmarkConfig` (``min_rho_m``, ``line_cov_scale``;
+    :func:`sonarslam.slam.model.lines.usable_observations`)."""
+    return usable_observations(features, config.min_rho_m, config.line_cov_scale)
 
 
 def ids_of_features(

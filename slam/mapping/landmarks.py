@@ -231,6 +231,7 @@ class LandmarkMap:
         # until the estimate after its update settles them (:meth:`settle`)
         self._growth: list[tuple[int, FloatArray]] = []
         self._touched: list[int] = []
+        self._decided_t: float | None = None  # the time of the last vote decided with lines
 
     def __len__(self) -> int:
         return len(self.landmarks)
@@ -293,6 +294,13 @@ class LandmarkMap:
         self.stats["rejected_near"] += belief.rejected_near
         if not use:
             return Decision([], [], [], [], [])
+        if belief.after_previous is None and self._decided_t is not None:
+            raise ValueError(
+                f"Belief.after_previous is None, but the vote at t={self._decided_t:.3f} s was"
+                " decided before this one: pass the estimate right after applying its decision"
+                " (AfterVote); without it that vote's extents and duplicates are never settled"
+            )
+        self._decided_t = float(use[-1].t)
         merges = self.settle(belief.after_previous)
         self.stats["observations"] += len(use)
         live = [c for c, j in enumerate(belief.candidates) if self.landmarks[j].active]

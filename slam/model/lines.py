@@ -15,7 +15,7 @@ convention, :func:`local_to_world`). All are checked numerically in the tests.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -36,12 +36,15 @@ from sonarslam.features.line import LineFeature
 
 __all__ = [
     "local_to_world",
+    "local_to_world_covariance",
     "line_prediction",
     "line_predictions",
     "line_residual",
     "WorldObservation",
     "world_observation",
     "sonar_side",
+    "VoteObservations",
+    "usable_observations",
 ]
 
 
@@ -49,6 +52,37 @@ def local_to_world(yaw_rad: float) -> FloatArray:
     """``d (x, y, yaw) / d xi`` of ``Pose2.retract(xi)`` at ``xi = 0``: ``blockdiag(R(yaw), 1)``."""
     c, s = np.cos(yaw_rad), np.sin(yaw_rad)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def local_to_world_covariance(wTb: npt.ArrayLike, cov_local: npt.ArrayLike) -> FloatArray:
+    """A covariance whose first three rows and columns are a ``Pose2``'s, from GTSAM's local
+    (body-frame) tangent to plain world coordinates ``(x_m, y_m, yaw_rad)``.
+
+    GTSAM perturbs a pose ``wTb`` as ``wTb.retract(xi) = wTb * Exp(xi)`` with
+    ``xi = (dx_b, dy_b, dtheta)`` in the body frame, so its marginals (``ISAM2``, ``Marginals``)
+    of a ``Pose2`` are the covariance of ``xi``. To first order the world pose moves by
+    ``T xi`` with ``T = blockdiag(R(yaw), 1)`` (:func:`local_to_world`); the covariance in the
+    world is ``A C A^T`` with ``A = blockdiag(T, I)``: the pose block ``T C_pp T^T``, its cross
+    terms ``T C_pl``, the rest (vector variables, whose tangent is the world's) unchanged.
+
+    Parameters
+    ----------
+    wTb : array_like, shape (3,)
+        The pose ``(x_m, y_m, yaw_rad)`` the covariance is about (only its yaw is used).
+    cov_local : array_like, shape (n, n), n >= 3
+        Joint covariance of ``[pose in the local tangent, other variables]``.
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+        The same covariance with the pose in ``(x_m, y_m, yaw_rad)``.
+    """
+    cov = np.asarray(cov_local, dtype=np.float64)
+    if cov.ndim != 2 or cov.shape[0] != cov.shape[1] or cov.shape[0] < 3:
+        raise ValueError(f"cov_local must be square, (n, n) with n >= 3, got {cov.shape}")
+    A = np.eye(cov.shape[0])
+    A[:3, :3] = local_to_world(float(np.asarray(wTb, dtype=np.float64)[2]))
+    return A @ cov @ A.T
 
 
 def line_prediction(
@@ -177,9 +211,29 @@ def world_observation(
     bTs: FloatArray,
     cov_scale: float = 1.0,
 ) -> WorldObservation:
-    """The world line of an observation made from body pose ``wTb`` (covariance ``P_pose``).
+    """The world line of an observation made from body pose ``wTb`` (covariance ``P_pose``):
+    a new landmark's line and its first-order covariance (a filter's augmentation).
 
-    ``cov_scale`` multiplies the observation's covariance (the back ends' ``line_cov_scale``).
+    Parameters
+    ----------
+    feature : LineFeature
+        The observation: ``(rho_m, theta_rad)`` and its covariance in the sonar frame,
+        ``endpoints_r`` (2, 2) its segment there.
+    wTb : ndarray, shape (3,)
+        Body pose ``(x_m, y_m, yaw_rad)`` it was made from.
+    P_pose : ndarray, shape (3, 3)
+        That pose's covariance in ``(x_m, y_m, yaw_rad)``.
+    bTs : ndarray, shape (3,)
+        Sonar mounting in the body frame.
+    cov_scale : float
+        Multiplies the observation's covariance (the back ends' ``line_cov_scale``).
+
+    Returns
+    -------
+    WorldObservation
+        The normalised world line, its covariance, the segment's world end points and the
+        Jacobians ``G_z`` (2, 2) and ``G_pose`` (2, 3) (the cross-covariance of the new line
+        with the state is ``G_pose P[pose, :]``).
     """
     wTs = compose(wTb, bTs)
     line_w, G_z, G_sensor = line_frame_to_world(feature.z, wTs)
@@ -212,3 +266,38 @@ def sonar_side(wTb: FloatArray, lines_w: npt.ArrayLike, bTs: FloatArray) -> Floa
     """
     x, y, _ = compose(wTb, bTs)
     return line_side(np.asarray(lines_w, dtype=np.float64).reshape(-1, 2), np.array([x, y]))
+
+
+@dataclass(frozen=True, eq=False)
+class VoteObservations:
+    """A vote's lines as the landmark layer may use them (:func:`usable_observations`).
+
+    Attributes
+    ----------
+    features : list of LineFeature
+        Those at ``rho_m >= min_rho_m``.
+    rejected_near : int
+        How many were nearer.
+    z : ndarray, shape (m, 2)
+        ``features``' lines in the sonar frame ``(rho_m, theta_rad)``.
+    R : ndarray, shape (m, 2, 2)
+        Their covariances times ``line_cov_scale``.
+    """
+
+    features: list[LineFeature]
+    rejected_near: int
+    z: FloatArray = field(repr=False)
+    R: FloatArray = field(repr=False)
+
+
+def usable_observations(
+    features: list[LineFeature], min_rho_m: float, line_cov_scale: float
+) -> VoteObservations:
+    """The lines of one vote the landmark layer may use: those at least ``min_rho_m`` from the
+    sonar, their covariances times ``line_cov_scale`` (the landmark layer's settings)."""
+    use = [f for f in features if f.rho_m >= min_rho_m]
+    z = np.array([f.z for f in use]).reshape(-1, 2)
+    R = np.array([f.cov for f in use]).reshape(-1, 2, 2)
+    if line_cov_scale != 1.0:
+        R = R * line_cov_scale
+    return VoteObservations(use, len(features) - len(use), z, R)

@@ -59,6 +59,7 @@ __all__ = [
     "RunConfig",
     "preset_for",
     "extractor_config",
+    "extractor_preset",
     "pool_preset",
     "map_min_intensity",
     "backend_config",
@@ -205,6 +206,22 @@ def extractor_config(
     return apply_overrides(config, overrides or {}, prefix="extractor.")
 
 
+def extractor_preset(source: str | Dataset) -> ExtractorConfig:
+    """The extractor's settings for the front end alone.
+
+    Parameters
+    ----------
+    source : str or Dataset
+        A preset's name (:data:`EXTRACTOR_PRESETS`: ``"default"`` for raw intensity beams,
+        ``"marina"`` for thresholded keyframes, ...), or a dataset: the preset of its beams
+        (:func:`preset_for`) with its ``[noise]`` calibration, what ``sonarslam run`` extracts
+        with.
+    """
+    if isinstance(source, str):
+        return extractor_config(source)
+    return extractor_config(preset_for(source.beams), noise=source.config.noise)
+
+
 def pool_preset(step_rad: float, covariance_method: str = "fit") -> ExtractorConfig:
     """The seed paper's pool test (section 3): 270 deg sector, beta 25 deg, min votes 15, one
     vote per full sector (``vote_every_n_beams`` = the sector's beams, 600 at 0.45 deg); the
@@ -262,6 +279,14 @@ class RunConfig:
     backend: BackendConfig
     settings: dict[str, Any]
     scans: ScanConfig = ScanConfig()
+
+    @classmethod
+    def for_dataset(cls, dataset: Dataset, backend: str) -> RunConfig:
+        """What ``sonarslam run`` uses on this dataset with no settings: the extractor preset of
+        its beams and back end ``backend``'s defaults, both with the dataset's ``[noise]``.
+        Change it with :func:`dataclasses.replace` and give it to
+        :func:`sonarslam.slam.run.run.run_backend` (``config=``)."""
+        return run_config(dataset.beams, backend, None, dataset.config.noise)
 
 
 def run_config(

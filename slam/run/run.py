@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -109,6 +109,8 @@ def run_backend(
     t_end_s: float | None = None,
     progress: bool = False,
     batch: bool = False,
+    *,
+    config: RunConfig | None = None,
 ) -> RunResult:
     """Run one back end on a dataset and measure it; no file is written.
 
@@ -120,12 +122,18 @@ def run_backend(
         One of :func:`backend_names`.
     settings : dict, optional
         ``SCOPE.FIELD`` -> value (:mod:`sonarslam.slam.run.presets`); closed loops only.
+        Give either this or ``config``.
     t_end_s : float, optional
         Stop at this time (Unix s).
     progress : bool
         Progress bar of the closed loop.
     batch : bool
         Back ends that smooth: also a final batch optimisation (``trajectories["batch"]``).
+    config : RunConfig, optional
+        The typed settings of a closed loop (:meth:`RunConfig.for_dataset` changed with
+        :func:`dataclasses.replace`); its back-end configuration must be ``backend``'s type.
+        ``metrics.json``'s ``settings`` are then its fields that differ from
+        :meth:`RunConfig.for_dataset`'s, by dotted name.
 
     Returns
     -------
@@ -146,8 +154,9 @@ def run_backend(
         raise SettingError("--backend", f"must be one of {backend_names()}, got {backend!r}")
     loop: ClosedLoopFigures | None = None
     result: ClosedLoopResult | None = None
-    config: RunConfig | None = None
     trajectories: dict[str, Trajectory] = {}
+    if config is not None:
+        config = replace(config, settings=_typed_settings(dataset, backend, config, settings))
     wall0 = time.perf_counter()
     if backend in BASELINES:
         if settings:
@@ -159,7 +168,7 @@ def run_backend(
         trajectory = POSE_SOURCES[backend](dataset)
     else:
         result, config, trajectories, loop = _closed_loop(
-            dataset, backend, settings, t_end_s, progress, batch
+            dataset, backend, settings, t_end_s, progress, batch, config
         )
         trajectory = result.trajectory
     wall_s = time.perf_counter() - wall0
@@ -187,16 +196,21 @@ def _closed_loop(
     t_end_s: float | None,
     progress: bool,
     batch: bool,
+    typed: RunConfig | None = None,
 ) -> tuple[ClosedLoopResult, RunConfig, dict[str, Trajectory], ClosedLoopFigures]:
     """A closed loop of ``backend`` on the dataset (:func:`run_backend`): its result, its
-    configuration, the back end's other trajectories and the loop's figures with the health
-    monitor's verdict (which warns here)."""
+    configuration (``typed``, or made from ``settings``), the back end's other trajectories and
+    the loop's figures with the health monitor's verdict (which warns here)."""
     spec = backend_spec(backend)
     if batch and not spec.smoother:
         raise SettingError("--batch", f"back end {backend!r} does not smooth")
     _require_beams(dataset)
     check_combination(dataset, backend)
-    config = run_config(dataset.beams, backend, settings, dataset.config.noise)
+    config = (
+        typed
+        if typed is not None
+        else run_config(dataset.beams, backend, settings, dataset.config.noise)
+    )
     mounting = dataset.config.sonar_mounting
     cfg = config.backend
     result = run_closed_loop(
@@ -214,6 +228,43 @@ def _closed_loop(
     loop = closed_loop_figures(dataset, result, config, health.metrics(), health.line())
     health.warn()
     return result, config, trajectories, loop
+
+
+def _typed_settings(
+    dataset: Dataset, backend: str, config: RunConfig, settings: dict[str, Any] | None
+) -> dict[str, Any]:
+    """The dotted settings a typed ``config`` stands for: its fields that differ from
+    :meth:`RunConfig.for_dataset`'s (refused with ``settings`` too, on a baseline, or with
+    another back end's configuration type)."""
+    if settings:
+        raise SettingError("settings", "give either settings or config, not both")
+    if backend in BASELINES:
+        raise SettingError("config", f"back end {backend!r} has no settings")
+    want = backend_spec(backend).config_type
+    if type(config.backend) is not want:
+        raise SettingError(
+            "config.backend",
+            f"back end {backend!r} takes a {want.__name__}, got {type(config.backend).__name__}",
+        )
+    default = RunConfig.for_dataset(dataset, backend)
+    return {
+        **_differences(default.extractor, config.extractor, "extractor."),
+        **_differences(default.backend, config.backend, f"{backend}."),
+        **_differences(default.scans, config.scans, "scans."),
+    }
+
+
+def _differences(default: Any, given: Any, prefix: str) -> dict[str, Any]:
+    """``prefix + FIELD`` -> value of the fields of dataclass ``given`` that differ from
+    ``default``'s, nested dataclasses by dots."""
+    out: dict[str, Any] = {}
+    for f in fields(given):
+        a, b = getattr(default, f.name), getattr(given, f.name)
+        if is_dataclass(b) and type(a) is type(b):
+            out.update(_differences(a, b, f"{prefix}{f.name}."))
+        elif a != b:
+            out[prefix + f.name] = b
+    return out
 
 
 def _data_figures(dataset: Dataset, trajectory: Trajectory, wall_s: float) -> DataFigures:

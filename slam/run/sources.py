@@ -101,7 +101,10 @@ def start_pose(dataset: Dataset) -> tuple[float, FloatArray, FloatArray]:
 
 
 def dead_reckoning_trajectory(dataset: Dataset) -> Trajectory:
-    """Dead reckoning over the navigation span from the ATE protocol's start pose."""
+    """Dead reckoning of a ``dataset`` (DVL velocities rotated by the AHRS heading) over its
+    navigation span, from the ATE protocol's start pose (the first GPS fix with the AHRS
+    heading): body poses ``wTb`` ``(x_m, y_m, yaw_rad)`` in the readers' local East-North frame
+    with their covariances, a :class:`sonarslam.features.pose_source.PoseSource`."""
     t0, pose0, cov0 = start_pose(dataset)
     return dead_reckoning(
         dataset.attitude,

@@ -1,0 +1,266 @@
+"""The landmark layer for a SLAM of your own: line observations in, association decisions out.
+
+Your estimator (a filterpy EKF, a GTSAM graph, anything) keeps the estimates: the body pose
+``wTb`` and one world line ``(rho_m, theta_rad)`` per landmark. :class:`LandmarkAssociation`
+keeps everything else (which lines became landmarks, their extents, the tentative lines) by the
+rules every back end here uses (:mod:`sonarslam.slam.mapping.landmarks`). For each vote of
+lines of the extractor:
+
+1. describe your estimate at the vote as a :class:`WorldBelief` (your EKF's mean and covariance,
+   or :func:`gtsam_belief` of your ``ISAM2`` / ``Values`` and marginals);
+2. :meth:`LandmarkAssociation.decide` returns a :class:`sonarslam.slam.mapping.vote.Decision`:
+   the merges, then which observation updates which landmark, then the new landmarks
+   (ids ``0, 1, 2, ...`` in order of creation, each with its world line and observations);
+3. apply it to your estimate, in that order;
+4. :meth:`LandmarkAssociation.applied` with your estimate right after: the extents of the
+   landmarks grow along the updated lines, and duplicates are found on them.
+
+Step 4 cannot be skipped: :meth:`~LandmarkAssociation.decide` refuses to decide a vote before
+the previous decision was reported applied, and a belief whose landmarks are not those the
+association made (a new landmark left out) is refused, naming the parameter.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from sonarslam.features.geometry import FloatArray
+from sonarslam.features.line import LineFeature
+from sonarslam.slam.mapping.landmarks import LandmarkConfig, LandmarkMap
+from sonarslam.slam.mapping.vote import AfterVote, Belief, Decision, LandmarkBelief, NodeAnchor
+from sonarslam.slam.model.lines import (
+    line_predictions,
+    local_to_world_covariance,
+    usable_observations,
+)
+
+__all__ = ["WorldBelief", "LandmarkAssociation", "gtsam_belief"]
+
+
+@dataclass(frozen=True, eq=False)
+class WorldBelief:
+    """Your estimate at one instant, in world coordinates (local East-North, yaw CCW from East).
+
+    Attributes
+    ----------
+    wTb : ndarray, shape (3,)
+        Body pose ``(x_m, y_m, yaw_rad)``.
+    lines_w : ndarray, shape (k, 2)
+        World line ``(rho_m, theta_rad)`` of every landmark the association made, row ``j``
+        landmark ``j`` (merged ones too: their rows are not read); need not be normalised.
+    cov : ndarray, shape (3 + 2k, 3 + 2k), optional
+        Joint covariance of ``[x_m, y_m, yaw_rad, rho_0, theta_0, ..., rho_k-1, theta_k-1]``
+        (m, rad), with the pose in world coordinates (a GTSAM ``Pose2`` marginal is in the
+        body frame: :func:`sonarslam.slam.model.lines.local_to_world_covariance`). Needed by
+        :meth:`LandmarkAssociation.decide`; by :meth:`LandmarkAssociation.applied` only when
+        duplicates are merged (``merge_gate_probability``).
+    """
+
+    wTb: FloatArray
+    lines_w: FloatArray
+    cov: FloatArray | None = None
+
+    def __post_init__(self) -> None:
+        wTb = np.asarray(self.wTb, dtype=np.float64)
+        lines = np.asarray(self.lines_w, dtype=np.float64).reshape(-1, 2)
+        object.__setattr__(self, "wTb", wTb)
+        object.__setattr__(self, "lines_w", lines)
+        if wTb.shape != (3,) or not np.all(np.isfinite(wTb)):
+            raise ValueError(f"WorldBelief.wTb must be 3 finite numbers, got {self.wTb!r}")
+        if not np.all(np.isfinite(lines)):
+            raise ValueError("WorldBelief.lines_w holds a line that is not finite")
+        if self.cov is not None:
+            cov = np.asarray(self.cov, dtype=np.float64)
+            n = 3 + 2 * lines.shape[0]
+            if cov.shape != (n, n):
+                raise ValueError(
+                    f"WorldBelief.cov must be ({n}, {n}) for {lines.shape[0]} landmark lines,"
+                    f" got {cov.shape}"
+                )
+            if not np.all(np.isfinite(cov)):
+                raise ValueError("WorldBelief.cov is not finite")
+            object.__setattr__(self, "cov", cov)
+
+    @property
+    def k(self) -> int:
+        """How many landmark lines it holds."""
+        return int(self.lines_w.shape[0])
+
+
+def gtsam_belief(
+    estimate: Any,
+    pose_key: int,
+    line_keys: Sequence[int],
+    marginals: Any | None = None,
+) -> WorldBelief:
+    """A :class:`WorldBelief` from a GTSAM estimate: the ``Pose2`` at ``pose_key``, the 2-vector
+    lines at ``line_keys`` and, with ``marginals``, their joint marginal covariance with the pose
+    block converted from GTSAM's local (body) frame to world ``(x, y, yaw)``
+    (:func:`sonarslam.slam.model.lines.local_to_world_covariance`).
+
+    Parameters
+    ----------
+    estimate : gtsam.Values
+        ``isam.calculateEstimate()`` or a batch optimum.
+    pose_key : int
+        Key of the body pose of the vote, a ``Pose2``.
+    line_keys : sequence of int
+        Keys of the landmark lines (2-vectors ``(rho_m, theta_rad)`` in the world), landmark
+        ``j``'s at position ``j``.
+    marginals : gtsam.ISAM2 or gtsam.Marginals, optional
+        Anything with ``jointMarginalCovariance(keys)``; None: no covariance (enough for
+        :meth:`LandmarkAssociation.applied` without merging).
+    """
+    p = estimate.atPose2(pose_key)
+    wTb = np.array([p.x(), p.y(), p.theta()])
+    lines = np.array([np.asarray(estimate.atVector(key)) for key in line_keys]).reshape(-1, 2)
+    if marginals is None:
+        return WorldBelief(wTb, lines)
+    keys = [pose_key, *line_keys]
+    joint = marginals.jointMarginalCovariance(keys)
+    sizes = [3] + [2] * len(line_keys)
+    starts = np.concatenate([[0], np.cumsum(sizes)])
+    cov_local = np.zeros((starts[-1], starts[-1]))
+    for a, ka in enumerate(keys):  # by key: whatever order GTSAM keeps the blocks in
+        for b, kb in enumerate(keys):
+            block = np.asarray(joint.at(ka, kb))
+            cov_local[starts[a] : starts[a + 1], starts[b] : starts[b + 1]] = block
+    return WorldBelief(wTb, lines, local_to_world_covariance(wTb, cov_local))
+
+
+class LandmarkAssociation:
+    """Which line observation is of which landmark, for your own estimator (module doc).
+
+    Parameters
+    ----------
+    bTs : array_like, shape (3,)
+        Sonar mounting ``(x_m, y_m, yaw_rad)`` in the body frame (``Mounting.as_pose()``).
+    config : LandmarkConfig, optional
+        The landmark layer's rules (association method and gate, tentative lines, extents,
+        merges); the back ends' defaults when not given.
+    seeds_used : bool
+        Whether your estimate of a new landmark uses all its tentative observations (a factor
+        graph adds a factor for each of ``NewLandmark.observations``) or only the newest (a
+        filter initialises it from ``NewLandmark.line_w``): the observation counts of
+        :attr:`map` follow it.
+
+    Attributes
+    ----------
+    map : LandmarkMap
+        The landmarks (extents, sides, counts) and their statistics.
+    """
+
+    def __init__(
+        self, bTs: npt.ArrayLike, config: LandmarkConfig | None = None, *, seeds_used: bool
+    ) -> None:
+        self.bTs = np.asarray(bTs, dtype=np.float64).reshape(3)
+        self.config = config if config is not None else LandmarkConfig()
+        self.seeds_used = seeds_used
+        self.map = LandmarkMap(self.config, self.bTs)
+        self._pending: Decision | None = None
+        self._after: AfterVote | None = None
+
+    def decide(
+        self, lines: Sequence[LineFeature], belief: WorldBelief, pose_key: int | None = None
+    ) -> Decision:
+        """Decide one vote of lines from your estimate at the vote.
+
+        Parameters
+        ----------
+        lines : sequence of LineFeature
+            The lines of one vote (what :meth:`sonarslam.features.extractor.LineExtractor.add`
+            returned), in the sonar frame of the vote; those nearer than ``min_rho_m`` are not
+            used (``Decision.ids`` is over the used ones).
+        belief : WorldBelief
+            Your estimate at the vote (its time: the lines' ``t``), with its covariance, over
+            every landmark made so far.
+        pose_key : int, optional
+            Your key of the pose of this vote (a graph's ``X(k)``): the new landmarks'
+            observations come back with it (``NodeAnchor.node``) so that you can add their
+            factors to the poses they were made from.
+
+        Returns
+        -------
+        Decision
+            Apply its ``merges``, then its ``updates`` (landmark id, observation), then its
+            ``new_landmarks`` (id, world line, observations with their anchors); then call
+            :meth:`applied`.
+        """
+        if self._pending is not None:
+            raise RuntimeError(
+                "LandmarkAssociation.decide: the previous decision was not reported applied:"
+                " call applied(belief) with your estimate right after applying it first"
+            )
+        n = len(self.map.landmarks)
+        if belief.k != n:
+            raise ValueError(
+                f"belief.lines_w holds {belief.k} landmark lines, but the association made {n}"
+                " (ids 0..n-1, merged ones too): add each decision's new_landmarks to your"
+                " estimate"
+            )
+        if belief.cov is None:
+            raise ValueError("belief.cov is None: decide needs the joint covariance")
+        cfg = self.config
+        obs = usable_observations(list(lines), cfg.min_rho_m, cfg.line_cov_scale)
+        active = [lm.id for lm in self.map.active()]
+        z_hat, H_pose, H_line = line_predictions(belief.wTb, belief.lines_w, self.bTs)
+        H = np.zeros((n, 2, 3 + 2 * n))
+        H[:, :, :3] = H_pose
+        for j in range(n):
+            H[j, :, 3 + 2 * j : 5 + 2 * j] = H_line[j]
+        anchor = NodeAnchor(pose_key, self.bTs) if pose_key is not None else None
+        decision = self.map.vote(
+            Belief(
+                features=obs.features,
+                rejected_near=obs.rejected_near,
+                z=obs.z,
+                R=obs.R,
+                wTb=belief.wTb,
+                P_pose=belief.cov[:3, :3],
+                anchor=anchor,
+                candidates=list(range(n)),
+                z_hat=z_hat.reshape(-1, 2),
+                H=H,
+                P=belief.cov,
+                landmarks=LandmarkBelief({j: belief.lines_w[j] for j in active}),
+                seeds_used=self.seeds_used,
+                after_previous=self._after,
+            )
+        )
+        self._pending = decision
+        return decision
+
+    def applied(self, belief: WorldBelief) -> None:
+        """Your estimate right after applying the last decision (its new landmarks included):
+        the pose and the lines (and, when duplicates are merged, their joint covariance) that
+        the next :meth:`decide` settles the extents and looks for duplicates with."""
+        decision = self._pending
+        if decision is None:
+            raise RuntimeError("LandmarkAssociation.applied: no decision to report (decide first)")
+        n = len(self.map.landmarks)
+        if belief.k != n:
+            raise ValueError(
+                f"belief.lines_w holds {belief.k} landmark lines, but the association made {n}:"
+                " add the decision's new_landmarks to your estimate before applied"
+            )
+        self._pending = None
+        if not decision.ids:  # a vote without usable lines: the earlier estimate still counts
+            return
+        active = [lm.id for lm in self.map.active()]
+        if self.config.merge_gate_probability is None:
+            lines = LandmarkBelief({j: belief.lines_w[j] for j in decision.seen})
+        else:
+            if belief.cov is None:
+                raise ValueError(
+                    "belief.cov is None: applied needs the lines' joint covariance when"
+                    " duplicates are merged (merge_gate_probability)"
+                )
+            idx = np.concatenate([[3 + 2 * j, 4 + 2 * j] for j in active]).astype(int)
+            cov = belief.cov[np.ix_(idx, idx)] if active else None
+            lines = LandmarkBelief({j: belief.lines_w[j] for j in active}, active, cov)
+        self._after = AfterVote(belief.wTb, lines)
