@@ -59,7 +59,7 @@ radians in the objects)::
     gap_periods = 5.0       # a sensor gap: no sample for this many of its median periods,
     min_gap_s = 1.0         # and at least this long
 
-Every value is checked against the field it sets (type, finite, range: :mod:`sonarslam.datasets.settings`);
+Every value is checked against the field it sets (type, finite, range: :mod:`sonarslam.settings`);
 a wrong one is a ``DataError`` naming the file and the key. Keys a file leaves out take the
 neutral defaults of :class:`DatasetConfig` (no clock offset,
 identity mountings); the simulator writes every key. Without a file, a dataset gets the marina's
@@ -78,14 +78,13 @@ from typing import Any
 import tomli_w
 
 from sonarslam.datasets.errors import DataError
-from sonarslam.datasets.settings import (
+from sonarslam.datasets.toml import read_toml, toml_line
+from sonarslam.settings import (
     SettingError,
     check_within,
     coerce,
     field_types,
-    read_toml,
     replace_checked,
-    toml_line,
 )
 from sonarslam.sonar.beam import Mounting, SonarHead
 
@@ -362,7 +361,7 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
         A file that cannot be read or is not UTF-8 (with its line), a TOML syntax error (with
         its line), a table that is not one, an unknown key, a value of the wrong type,
         non-finite or out of range (naming the key, and its line when written ``key = ...``;
-        :mod:`sonarslam.datasets.settings`).
+        :mod:`sonarslam.settings`).
     """
     p = Path(path)
     base = base if base is not None else DatasetConfig()

@@ -22,11 +22,11 @@ import numpy as np
 import numpy.typing as npt
 
 from sonarslam.datasets.config import DVL_SCALE_SIGMA_MAX
-from sonarslam.datasets.settings import bounded, one_of
 from sonarslam.features.geometry import FloatArray, compose, inverse
 from sonarslam.features.line import LineFeature
 from sonarslam.features.pose_source import PoseSource
 from sonarslam.features.scans import Scan, ScanMatcher
+from sonarslam.settings import bounded, one_of
 from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.mapping.landmarks import LandmarkConfig, LandmarkMap
 from sonarslam.slam.model.motion import MotionStep, OdometryChain
@@ -107,7 +107,7 @@ class BackendConfig(LandmarkConfig):
         return frozenset(c.strip() for c in self.constraints.split(","))
 
     def __post_init__(self) -> None:
-        super().__post_init__()  # every field's range (datasets.settings.check_fields)
+        super().__post_init__()  # every field's range (sonarslam.settings.check_fields)
         kinds = self.constraint_kinds
         if not kinds or not kinds <= {"lines", "scans"}:
             raise ValueError(

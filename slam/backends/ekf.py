@@ -43,7 +43,6 @@ from typing import Any
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-from sonarslam.datasets.settings import bounded
 from sonarslam.features.geometry import (
     FLIP_RHO,
     FloatArray,
@@ -53,6 +52,7 @@ from sonarslam.features.geometry import (
 )
 from sonarslam.features.line import LineFeature
 from sonarslam.features.pose_source import PoseSource
+from sonarslam.settings import bounded
 from sonarslam.slam.backends.base import (
     AnchoredOdometry,
     BackendConfig,

@@ -20,8 +20,8 @@
   :class:`sonarslam.slam.backends.isam2.graph.GraphConfig`); ``FIELD`` is a field of that frozen
   dataclass, nested by dots (``ekf.association.gate_probability``); ``<backend>.association``
   is short for ``<backend>.association.method``. Every value is checked against the field's
-  type and the dataclass's ranges (:mod:`sonarslam.datasets.settings`, the mechanism that also checks
-  ``sonarslam.toml``): a wrong one is a :class:`sonarslam.datasets.settings.SettingError` naming it.
+  type and the dataclass's ranges (:mod:`sonarslam.settings`, the mechanism that also checks
+  ``sonarslam.toml``): a wrong one is a :class:`sonarslam.settings.SettingError` naming it.
 """
 
 from __future__ import annotations
@@ -37,16 +37,11 @@ import numpy as np
 from sonarslam.datasets.config import NoiseConfig
 from sonarslam.datasets.errors import DataError
 from sonarslam.datasets.records import BeamSeries
-from sonarslam.datasets.settings import (
-    SettingError,
-    parse_text,
-    read_toml,
-    replace_checked,
-    toml_line,
-)
 from sonarslam.datasets.source import Dataset
+from sonarslam.datasets.toml import read_toml, toml_line
 from sonarslam.features.config import ExtractorConfig
 from sonarslam.features.scans import ScanConfig
+from sonarslam.settings import SettingError, parse_text, replace_checked
 from sonarslam.slam.backends.base import BackendConfig
 from sonarslam.slam.backends.registry import backend_spec
 from sonarslam.slam.model.motion import gyro_bias_against_heading
@@ -321,7 +316,7 @@ def check_combination(dataset: Dataset, backend: str) -> None:
 
 _ALIASES = {"association": "association.method"}
 
-#: A setting's value as typed on the command line (:func:`sonarslam.datasets.settings.parse_text`).
+#: A setting's value as typed on the command line (:func:`sonarslam.settings.parse_text`).
 parse_value = parse_text
 
 
@@ -340,7 +335,7 @@ def parse_settings(specs: Iterable[str]) -> dict[str, Any]:
 
 def apply_overrides(config: Any, overrides: dict[str, Any], prefix: str = "") -> Any:
     """``config`` with dotted fields (``"association.method"``, aliases too) replaced, each
-    value checked against its field (:func:`sonarslam.datasets.settings.replace_checked`); ``prefix``
+    value checked against its field (:func:`sonarslam.settings.replace_checked`); ``prefix``
     names the scope in messages. Raises SettingError."""
     resolved = {_ALIASES.get(name, name): value for name, value in overrides.items()}
     return replace_checked(config, resolved, prefix=prefix)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from sonarslam.datasets.settings import bounded, one_of
+from sonarslam.settings import bounded, one_of
 from sonarslam.slam.backends.base import BackendConfig
 
 __all__ = ["GraphConfig"]
