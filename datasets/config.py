@@ -81,9 +81,11 @@ from sonarslam.datasets.errors import DataError
 from sonarslam.datasets.toml import read_toml, toml_line
 from sonarslam.settings import (
     SettingError,
-    check_within,
+    bounded,
+    check_fields,
     coerce,
     field_types,
+    one_of,
     replace_checked,
 )
 from sonarslam.sonar.beam import Mounting, SonarHead
@@ -108,34 +110,23 @@ DVL_SCALE_SIGMA_MAX = 0.5
 class NoiseConfig:
     """1-sigma noise of the navigation sensors, as used by the estimators."""
 
-    dvl_sigma_mps: float = 0.05
-    ahrs_sigma_deg: float = 2.0
-    gps_sigma_m: float = 1.0
-    dvl_max_gap_s: float = 10.0
+    dvl_sigma_mps: float = bounded(0.05, 0.0, 10.0, low_open=True)
+    ahrs_sigma_deg: float = bounded(2.0, 0.0, 180.0, low_open=True)
+    gps_sigma_m: float = bounded(1.0, 0.0, 1e4, low_open=True)
+    dvl_max_gap_s: float = bounded(10.0, 0.0, 3600.0, low_open=True)
     #: 0 turns the excess-scatter DVL noise off (slam.model.motion.dvl_sample_sigma)
-    dvl_scatter_window_s: float = 0.0
-    dvl_nominal_scatter_mps: float = 0.0
+    dvl_scatter_window_s: float = bounded(0.0, 0.0, 3600.0)
+    dvl_nominal_scatter_mps: float = bounded(0.0, 0.0, 10.0)
     #: the AHRS heading bias's random walk (deg/sqrt(s)), 0: constant (the back ends' state)
-    ahrs_bias_walk_deg_per_sqrt_s: float = 0.0
+    ahrs_bias_walk_deg_per_sqrt_s: float = bounded(0.0, 0.0, 10.0)
     #: 1-sigma of the DVL's scale-factor error (a ratio), 0: none (estimated by the back ends)
-    dvl_scale_sigma: float = 0.0
+    dvl_scale_sigma: float = bounded(0.0, 0.0, DVL_SCALE_SIGMA_MAX, high_open=True)
     #: a line's systematic error (m, deg), added to every line's covariance by the extractor
-    line_sigma_rho_m: float = 0.0
-    line_sigma_theta_deg: float = 0.0
+    line_sigma_rho_m: float = bounded(0.0, 0.0, 100.0)
+    line_sigma_theta_deg: float = bounded(0.0, 0.0, 90.0)
 
     def __post_init__(self) -> None:
-        check_within("dvl_sigma_mps", self.dvl_sigma_mps, 0.0, 10.0, low_open=True)
-        check_within("ahrs_sigma_deg", self.ahrs_sigma_deg, 0.0, 180.0, low_open=True)
-        check_within("gps_sigma_m", self.gps_sigma_m, 0.0, 1e4, low_open=True)
-        check_within("dvl_max_gap_s", self.dvl_max_gap_s, 0.0, 3600.0, low_open=True)
-        check_within("dvl_scatter_window_s", self.dvl_scatter_window_s, 0.0, 3600.0)
-        check_within("dvl_nominal_scatter_mps", self.dvl_nominal_scatter_mps, 0.0, 10.0)
-        check_within("ahrs_bias_walk_deg_per_sqrt_s", self.ahrs_bias_walk_deg_per_sqrt_s, 0.0, 10.0)
-        check_within(
-            "dvl_scale_sigma", self.dvl_scale_sigma, 0.0, DVL_SCALE_SIGMA_MAX, high_open=True
-        )
-        check_within("line_sigma_rho_m", self.line_sigma_rho_m, 0.0, 100.0)
-        check_within("line_sigma_theta_deg", self.line_sigma_theta_deg, 0.0, 90.0)
+        check_fields(self)
 
 
 @dataclass(frozen=True)
@@ -167,22 +158,16 @@ class GateConfig:
         on (:mod:`sonarslam.slam.model.motion`), so the covariance grows with the gap.
     """
 
-    dvl_max_speed_mps: float = 3.0
-    ahrs_max_jump_deg: float = 10.0
-    ahrs_jump_drift_dps: float = 1.0
-    ahrs_max_rate_dps: float = 600.0
-    gps_max_jump_m: float = 20.0
-    gap_periods: float = 5.0
-    min_gap_s: float = 1.0
+    dvl_max_speed_mps: float = bounded(3.0, 0.0, 100.0, low_open=True)
+    ahrs_max_jump_deg: float = bounded(10.0, 0.0, 180.0, low_open=True)
+    ahrs_jump_drift_dps: float = bounded(1.0, 0.0, 360.0)
+    ahrs_max_rate_dps: float = bounded(600.0, 0.0, 1e4, low_open=True)
+    gps_max_jump_m: float = bounded(20.0, 0.0, 1e5, low_open=True)
+    gap_periods: float = bounded(5.0, 1.0, 1e4)
+    min_gap_s: float = bounded(1.0, 0.0, 3600.0, low_open=True)
 
     def __post_init__(self) -> None:
-        check_within("dvl_max_speed_mps", self.dvl_max_speed_mps, 0.0, 100.0, low_open=True)
-        check_within("ahrs_max_jump_deg", self.ahrs_max_jump_deg, 0.0, 180.0, low_open=True)
-        check_within("ahrs_jump_drift_dps", self.ahrs_jump_drift_dps, 0.0, 360.0)
-        check_within("ahrs_max_rate_dps", self.ahrs_max_rate_dps, 0.0, 1e4, low_open=True)
-        check_within("gps_max_jump_m", self.gps_max_jump_m, 0.0, 1e5, low_open=True)
-        check_within("gap_periods", self.gap_periods, 1.0, 1e4)
-        check_within("min_gap_s", self.min_gap_s, 0.0, 3600.0, low_open=True)
+        check_fields(self)
 
 
 #: What turns the estimators' heading between AHRS samples (``[motion] yaw_rate_source``):
@@ -203,26 +188,16 @@ class DatasetConfig:
     dvl_mounting: Mounting = field(default_factory=Mounting)
     ahrs_mounting: Mounting = field(default_factory=Mounting)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
-    keyframe_scan_direction: int = -1
-    sonar_time_offset_s: float = 0.0
-    yaw_rate_source: str = "gyro"
-    ahrs_deviation_rad: tuple[float, float] = (0.0, 0.0)
+    keyframe_scan_direction: int = one_of(-1, -1, 1)
+    sonar_time_offset_s: float = bounded(0.0, -MAX_TIME_OFFSET_S, MAX_TIME_OFFSET_S)
+    yaw_rate_source: str = one_of("gyro", *YAW_RATE_SOURCES)
+    #: each of the two within +-pi/2 (:func:`sonarslam.settings.check_fields` checks a tuple's
+    #: every element)
+    ahrs_deviation_rad: tuple[float, float] = bounded((0.0, 0.0), -math.pi / 2, math.pi / 2)
     gates: GateConfig = field(default_factory=GateConfig)
 
     def __post_init__(self) -> None:
-        if self.yaw_rate_source not in YAW_RATE_SOURCES:
-            raise ValueError(
-                f"yaw_rate_source must be one of {YAW_RATE_SOURCES}, got {self.yaw_rate_source!r}"
-            )
-        if self.keyframe_scan_direction not in (-1, 1):
-            raise ValueError(
-                f"keyframe_scan_direction must be +1 or -1, got {self.keyframe_scan_direction!r}"
-            )
-        check_within(
-            "sonar_time_offset_s", self.sonar_time_offset_s, -MAX_TIME_OFFSET_S, MAX_TIME_OFFSET_S
-        )
-        for v in self.ahrs_deviation_rad:
-            check_within("ahrs_deviation_rad", v, -math.pi / 2, math.pi / 2)
+        check_fields(self)
         if self.yaw_rate_source == "heading" and self.noise.ahrs_bias_walk_deg_per_sqrt_s > 0.0:
             # the heading between AHRS samples would follow the AHRS's own change, walk and all,
             # while the back ends' bias state would be told it walks: not one model

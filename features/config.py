@@ -10,6 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from sonarslam.settings import bounded, check_fields, one_of
+
 __all__ = ["ExtractorConfig"]
 
 _DEG = float(np.pi / 180.0)
@@ -114,112 +116,51 @@ class ExtractorConfig:
         Not in the paper (it removes the voters only); 0 disables. 3.
     """
 
-    intensity_threshold: float = 80.0
-    max_intensity_difference: float = 40.0
-    min_distance_m: float = 0.5
-    min_range_m: float = 0.5
-    max_range_m: float | None = None
-    sector_deg: float = 180.0
-    beam_width_rad: float | None = None
-    incidence_beta_rad: float = 25.0 * _DEG
-    vote_model: str = "arc"
-    h_bearings: int | None = None
-    p_angles: int | None = None
-    theta_res_rad: float | None = None
-    rho_res_m: float | None = None
-    min_votes: int = 15
-    max_lines_per_vote: int = 16
-    suppress_theta_cells: int = 1
-    suppress_rho_cells: int = 1
-    vote_every_n_beams: int = 10
+    intensity_threshold: float = bounded(80.0, 0.0, 255.0)
+    max_intensity_difference: float = bounded(40.0, 0.0, 255.0)
+    min_distance_m: float = bounded(0.5, 0.0, 1e3)
+    min_range_m: float = bounded(0.5, 0.0, 1e4)
+    max_range_m: float | None = bounded(None, 0.0, 1e4)
+    sector_deg: float = bounded(180.0, 0.0, 360.0, low_open=True)
+    beam_width_rad: float | None = bounded(None, 1e-4, 0.5 * np.pi)
+    incidence_beta_rad: float = bounded(
+        25.0 * _DEG, 0.0, 0.5 * np.pi, low_open=True, high_open=True
+    )
+    vote_model: str = one_of("arc", "arc", "samples")
+    h_bearings: int | None = bounded(None, 1, 1000)
+    p_angles: int | None = bounded(None, 1, 1000)
+    theta_res_rad: float | None = bounded(None, 0.1 * _DEG, 0.125 * np.pi)
+    rho_res_m: float | None = bounded(None, 0.01, 10.0)
+    min_votes: int = bounded(15, 1, 1e9)
+    max_lines_per_vote: int = bounded(16, 1, 1000)
+    suppress_theta_cells: int = bounded(1, 0, 1000)
+    suppress_rho_cells: int = bounded(1, 0, 1000)
+    vote_every_n_beams: int = bounded(10, 1, 1e9)
     requery_poses: bool = True
-    covariance_method: str = "fit"
-    confidence: float = 0.95
-    overlap_similarity: float = 0.8
-    seed_window_theta_cells: int = 20
-    seed_window_rho_cells: int = 10
-    return_model: str = "axis"
-    range_sigma_m: float | None = None
-    bearing_sigma_rad: float | None = None
-    range_offset_sigma_m: float | None = None
+    covariance_method: str = one_of("fit", "fit", "seed", "seed-at-fit")
+    confidence: float = bounded(0.95, 0.0, 1.0, low_open=True, high_open=True)
+    overlap_similarity: float = bounded(0.8, 1e-6, 1.0)
+    seed_window_theta_cells: int = bounded(20, 0, 1000)
+    seed_window_rho_cells: int = bounded(10, 0, 1000)
+    return_model: str = one_of("axis", "axis", "first_return")
+    range_sigma_m: float | None = bounded(None, 1e-6, 100.0)
+    bearing_sigma_rad: float | None = bounded(None, 1e-6, np.pi)
+    range_offset_sigma_m: float | None = bounded(None, 0.0, 100.0)
     pose_uncertainty: bool = False
-    line_sigma_rho_m: float = 0.0
-    line_sigma_theta_rad: float = 0.0
-    fit_iterations: int = 5
-    fit_gate_sigma: float = 3.0
-    fit_gate_iterations: int = 2
-    endpoint_trim_fraction: float = 0.05
-    remove_on_line_sigma: float = 3.0
+    line_sigma_rho_m: float = bounded(0.0, 0.0, 100.0)
+    line_sigma_theta_rad: float = bounded(0.0, 0.0, 0.5 * np.pi)
+    fit_iterations: int = bounded(5, 1, 100)
+    fit_gate_sigma: float = bounded(3.0, 0.0, 100.0)
+    fit_gate_iterations: int = bounded(2, 0, 100)
+    endpoint_trim_fraction: float = bounded(0.05, 0.0, 0.5, high_open=True)
+    remove_on_line_sigma: float = bounded(3.0, 0.0, 100.0)
 
     def __post_init__(self) -> None:
-        if self.vote_model not in ("arc", "samples"):
-            raise ValueError(f"vote_model must be 'arc' or 'samples', got {self.vote_model!r}")
-        if self.covariance_method not in ("fit", "seed", "seed-at-fit"):
-            raise ValueError(
-                "covariance_method must be 'fit', 'seed' or 'seed-at-fit', got "
-                f"{self.covariance_method!r}"
-            )
-        if self.return_model not in ("axis", "first_return"):
-            raise ValueError(
-                f"return_model must be 'axis' or 'first_return', got {self.return_model!r}"
-            )
-        if not 0.0 < self.sector_deg <= 360.0:
-            raise ValueError(f"sector_deg must be in (0, 360], got {self.sector_deg}")
-        if self.vote_every_n_beams < 1 or self.min_votes < 1:
-            raise ValueError("vote_every_n_beams and min_votes must be >= 1")
-        if not 0.0 < self.confidence < 1.0:
-            raise ValueError(f"confidence must be in (0, 1), got {self.confidence}")
-        if not 0.0 <= self.endpoint_trim_fraction < 0.5:
-            raise ValueError("endpoint_trim_fraction must be in [0, 0.5)")
-        if not 0.0 < self.incidence_beta_rad < 0.5 * np.pi:
-            raise ValueError("incidence_beta_rad must be in (0, pi/2)")
-        if self.remove_on_line_sigma < 0.0:
-            raise ValueError("remove_on_line_sigma must be >= 0")
+        check_fields(self)
         if self.max_range_m is not None and not self.max_range_m > self.min_range_m:
             raise ValueError(
                 f"max_range_m must be > min_range_m ({self.min_range_m}), got {self.max_range_m}"
             )
-        if self.range_offset_sigma_m is not None and self.range_offset_sigma_m < 0.0:
-            raise ValueError("range_offset_sigma_m must be >= 0 (or None)")
-        self._check_ranges()
-
-    def _check_ranges(self) -> None:
-        """The ranges of the remaining numeric fields: the settings that size a voting space or
-        a loop are bounded, so that a typo is an error, not an hour of work or a memory error
-        (None means "from the head" where a field allows it)."""
-        bounds: dict[str, tuple[float, float]] = {
-            "intensity_threshold": (0.0, 255.0),
-            "max_intensity_difference": (0.0, 255.0),
-            "min_distance_m": (0.0, 1e3),
-            "min_range_m": (0.0, 1e4),
-            "max_range_m": (0.0, 1e4),
-            "beam_width_rad": (1e-4, 0.5 * np.pi),
-            "h_bearings": (1, 1000),
-            "p_angles": (1, 1000),
-            "theta_res_rad": (0.1 * _DEG, 0.125 * np.pi),
-            "rho_res_m": (0.01, 10.0),
-            "min_votes": (1, 1e9),
-            "max_lines_per_vote": (1, 1000),
-            "suppress_theta_cells": (0, 1000),
-            "suppress_rho_cells": (0, 1000),
-            "vote_every_n_beams": (1, 1e9),
-            "overlap_similarity": (1e-6, 1.0),
-            "seed_window_theta_cells": (0, 1000),
-            "seed_window_rho_cells": (0, 1000),
-            "range_sigma_m": (1e-6, 100.0),
-            "bearing_sigma_rad": (1e-6, np.pi),
-            "range_offset_sigma_m": (0.0, 100.0),
-            "fit_iterations": (1, 100),
-            "fit_gate_sigma": (0.0, 100.0),
-            "fit_gate_iterations": (0, 100),
-            "remove_on_line_sigma": (0.0, 100.0),
-            "line_sigma_rho_m": (0.0, 100.0),
-            "line_sigma_theta_rad": (0.0, 0.5 * np.pi),
-        }
-        for name, (low, high) in bounds.items():
-            value = getattr(self, name)
-            if value is not None and not low <= value <= high:
-                raise ValueError(f"{name} must be in [{low:g}, {high:g}], got {value!r}")
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> ExtractorConfig:

@@ -38,7 +38,6 @@ __all__ = [
     "coerce",
     "field_types",
     "replace_checked",
-    "check_within",
     "Range",
     "bounded",
     "one_of",
@@ -55,7 +54,7 @@ _NONE_TEXT = ("none", "null")
 MAX_INT = 10**9
 
 
-def check_within(
+def _check_within(
     name: str,
     value: float,
     low: float,
@@ -63,9 +62,9 @@ def check_within(
     low_open: bool = False,
     high_open: bool = False,
 ) -> None:
-    """For a dataclass's ``__post_init__``: ValueError unless ``low <= value <= high``
-    (``low < value`` when ``low_open``, ``value < high`` when ``high_open``), in the words
-    :func:`replace_checked` reports with the key."""
+    """ValueError unless ``low <= value <= high`` (``low < value`` when ``low_open``,
+    ``value < high`` when ``high_open``), in the words :func:`replace_checked` reports with the
+    key."""
     ok = (value > low if low_open else value >= low) and (
         value < high if high_open else value <= high
     )
@@ -103,14 +102,17 @@ def one_of(default: _T, *choices: object) -> _T:
 
 
 def check_fields(obj: Any) -> None:
-    """The one check of a configuration dataclass's fields: each field's range
-    (:func:`bounded`) and choices (:func:`one_of`), in the words :func:`replace_checked`
-    reports with the key. ValueError naming the first field out of them."""
+    """The one check of a configuration dataclass's fields, for its ``__post_init__``: each
+    field's range (:func:`bounded`; every element of a tuple) and choices (:func:`one_of`), in
+    the words :func:`replace_checked` reports with the key. ValueError naming the first field
+    out of them. What ties two fields together (``max_range_m > min_range_m``) the class checks
+    after this, naming the field it refuses."""
     for f in dataclasses.fields(obj):
         value = getattr(obj, f.name)
         r = f.metadata.get("range")
         if r is not None and value is not None:
-            check_within(f.name, value, r.low, r.high, r.low_open, r.high_open)
+            for v in value if isinstance(value, tuple) else (value,):
+                _check_within(f.name, v, r.low, r.high, r.low_open, r.high_open)
         choices = f.metadata.get("choices")
         if choices is not None and value not in choices:
             said = ", ".join(repr(c) for c in choices)

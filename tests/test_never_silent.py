@@ -95,7 +95,7 @@ def test_a_write_error_names_the_file(tmp_path):
         ),
         (
             "[mounting.sonar]\nx_m = 1.0\ny_m = 179.9\n",
-            r"t\.toml:3: \[mounting\.sonar\] y_m: must be within \+-100 m",
+            r"t\.toml:3: \[mounting\.sonar\] y_m: must be in \[-100, 100\]",
         ),
     ],
 )

@@ -108,7 +108,7 @@ class GraphConfig(BackendConfig):
     scan_consecutive: bool = True
     revisit_radius_m: float = bounded(10.0, 0.0, math.inf)
     revisit_gate_probability: float = bounded(0.99, 0.0, 1.0, low_open=True, high_open=True)
-    revisit_min_gap_s: float = 60.0
+    revisit_min_gap_s: float = bounded(60.0, 0.0, math.inf)
     revisit_candidates: int = bounded(4, 0, math.inf)
     revisits_per_scan: int = bounded(2, 0, math.inf)
     scan_compatibility_probability: float = bounded(0.999, 0.0, 1.0, low_open=True, high_open=True)
