@@ -30,15 +30,20 @@ radians in the objects)::
     scan_direction = -1     # -1: the head turns toward decreasing angle (measured, see
                             # datasets/keyframes.py); +1: as the marina README says
 
-    [noise]                 # 1-sigma sensor noise used by the estimators
+    [noise]                 # 1-sigma sensor noise, every estimator's (NoiseConfig)
     dvl_sigma_mps = 0.05
-    ahrs_sigma_deg = 2.0
+    ahrs_sigma_deg = 2.0    # an AHRS heading, bias included (dead reckoning, GPS + AHRS)
     gps_sigma_m = 1.0
-    dvl_max_gap_s = 10.0    # a DVL dropout longer than this inflates the velocity noise
+    dvl_max_gap_s = 10.0    # a DVL dropout longer than this inflates the velocity noise ...
+    dvl_gap_sigma_mps = 0.3 # ... to this
     dvl_scatter_window_s = 60.0     # the DVL's own scatter over this window (0: off) ...
     dvl_nominal_scatter_mps = 0.2   # ... beyond its usual scatter is white noise added to
                             # dvl_sigma_mps (sonarslam info prints the scatter's quantiles)
-    ahrs_bias_walk_deg_per_sqrt_s = 0.0  # the AHRS bias's random walk (0: a constant bias)
+    ahrs_gap_yaw_rate_sigma_deg_per_s = 1.0  # the unmeasured yaw rate in an AHRS gap
+    ahrs_white_sigma_deg = 1.0      # the back ends' AHRS model: white noise ...
+    ahrs_bias_sigma_deg = 2.0       # ... and a bias of this prior sigma ...
+    ahrs_bias_walk_deg_per_sqrt_s = 0.0  # ... walking at this (0: a constant bias)
+    gyro_sigma_rad_per_s = 0.005    # the back ends' heading process noise
     dvl_scale_sigma = 0.0   # 1-sigma of the DVL's scale-factor error (0: none)
     line_sigma_rho_m = 0.0  # a line's systematic error, added to every line's covariance
     line_sigma_theta_deg = 0.0      # (sonarslam calibrate --line-noise, GPS-free)
@@ -52,8 +57,8 @@ radians in the objects)::
     [gates]                 # plausibility of the sensors' samples (datasets/gates.py)
     dvl_max_speed_mps = 3.0 # a faster DVL velocity is a spike: the row counts as no lock
     ahrs_max_jump_deg = 10.0      # a heading change the gyro does not explain by more ...
-    ahrs_jump_drift_dps = 1.0     # ... (plus this per second since the last good sample)
-    ahrs_max_rate_dps = 600.0     # a faster gyro rate is a spike: the sample is dropped
+    ahrs_jump_drift_deg_per_s = 1.0     # ... (plus this per second since the last good sample)
+    ahrs_max_rate_deg_per_s = 600.0     # a faster gyro rate is a spike: the sample is dropped
     gps_max_jump_m = 20.0   # a fix this far (plus dvl_max_speed_mps per s) from its
                             # neighbours' median is an outlier, dropped from the evaluation
     gap_periods = 5.0       # a sensor gap: no sample for this many of its median periods,
@@ -95,6 +100,7 @@ __all__ = [
     "GateConfig",
     "DatasetConfig",
     "MARINA_CONFIG",
+    "RENAMED_KEYS",
     "load_dataset_config",
     "dump_dataset_config",
     "config_tables",
@@ -108,20 +114,72 @@ DVL_SCALE_SIGMA_MAX = 0.5
 
 @dataclass(frozen=True)
 class NoiseConfig:
-    """1-sigma noise of the navigation sensors, as used by the estimators."""
+    """1-sigma noise of the navigation sensors (the ``[noise]`` table): the one place every
+    estimator takes its sensor noise from (dead reckoning and the motion model through
+    :class:`sonarslam.slam.model.noise.MotionNoise`, the EKF and the factor graph through
+    :class:`sonarslam.slam.backends.base.BackendConfig`'s ``noise``), and the extractor its
+    lines' systematic error.
+
+    The AHRS heading's error is modelled two ways: dead reckoning and the GPS + AHRS pose
+    source take it as one white sigma (``ahrs_sigma_deg``, bias and all); the closed-loop
+    back ends split it into white noise (``ahrs_white_sigma_deg``) and a bias they estimate
+    (``ahrs_bias_sigma_deg``, walking at ``ahrs_bias_walk_deg_per_sqrt_s``).
+
+    Attributes
+    ----------
+    dvl_sigma_mps : float
+        A valid DVL velocity, per axis (m/s).
+    ahrs_sigma_deg : float
+        An AHRS heading, bias included, for dead reckoning and the GPS + AHRS poses (deg).
+    gps_sigma_m : float
+        A GPS fix, per axis (m).
+    dvl_max_gap_s : float
+        A DVL dropout up to this long holds the last valid velocity; longer, the velocity is
+        taken as zero with ``dvl_gap_sigma_mps`` (s).
+    dvl_gap_sigma_mps : float
+        Velocity 1-sigma added during a dropout, growing linearly to this at
+        ``dvl_max_gap_s`` (m/s).
+    dvl_scatter_window_s : float
+        Window of the DVL's own scatter (:func:`sonarslam.slam.model.noise.dvl_scatter`, s);
+        0 turns the excess-scatter noise off.
+    dvl_nominal_scatter_mps : float
+        The DVL's usual scatter (m/s): its excess over this is white velocity noise added to
+        ``dvl_sigma_mps`` (:func:`sonarslam.slam.model.noise.dvl_sample_sigma`).
+    ahrs_gap_yaw_rate_sigma_deg_per_s : float
+        The vehicle's yaw rate nobody measures while the AHRS is silent (deg/s): the heading
+        variance grows with it over an AHRS gap.
+    ahrs_white_sigma_deg : float
+        The back ends' white noise of one AHRS heading (deg).
+    ahrs_bias_sigma_deg : float
+        The back ends' prior 1-sigma of the AHRS heading bias ``b`` (deg): the AHRS measures
+        ``yaw + b``.
+    ahrs_bias_walk_deg_per_sqrt_s : float
+        The bias's random walk: ``b`` drifts by ``N(0, walk^2 dt)`` over ``dt``
+        (deg/sqrt(s)); 0: a constant bias.
+    gyro_sigma_rad_per_s : float
+        The back ends' heading process noise, as a yaw-rate noise (rad/s), added as
+        ``(dt sigma)^2`` per motion step.
+    dvl_scale_sigma : float
+        Prior 1-sigma of the DVL's scale-factor error ``k`` (a ratio; the vehicle moves along
+        ``(1 + k) R v_b``); 0: none, not estimated.
+    line_sigma_rho_m, line_sigma_theta_deg : float
+        A line's systematic error (m, deg), added to every line's covariance by the extractor
+        (``ExtractorConfig.line_sigma_rho_m`` and ``line_sigma_theta_rad``).
+    """
 
     dvl_sigma_mps: float = bounded(0.05, 0.0, 10.0, low_open=True)
     ahrs_sigma_deg: float = bounded(2.0, 0.0, 180.0, low_open=True)
     gps_sigma_m: float = bounded(1.0, 0.0, 1e4, low_open=True)
     dvl_max_gap_s: float = bounded(10.0, 0.0, 3600.0, low_open=True)
-    #: 0 turns the excess-scatter DVL noise off (slam.model.motion.dvl_sample_sigma)
+    dvl_gap_sigma_mps: float = bounded(0.3, 0.0, 10.0)
     dvl_scatter_window_s: float = bounded(0.0, 0.0, 3600.0)
     dvl_nominal_scatter_mps: float = bounded(0.0, 0.0, 10.0)
-    #: the AHRS heading bias's random walk (deg/sqrt(s)), 0: constant (the back ends' state)
+    ahrs_gap_yaw_rate_sigma_deg_per_s: float = bounded(1.0, 0.0, 360.0)
+    ahrs_white_sigma_deg: float = bounded(1.0, 1e-3, 90.0)
+    ahrs_bias_sigma_deg: float = bounded(2.0, 1e-3, 90.0)
     ahrs_bias_walk_deg_per_sqrt_s: float = bounded(0.0, 0.0, 10.0)
-    #: 1-sigma of the DVL's scale-factor error (a ratio), 0: none (estimated by the back ends)
+    gyro_sigma_rad_per_s: float = bounded(0.005, 1e-5, 1.0)
     dvl_scale_sigma: float = bounded(0.0, 0.0, DVL_SCALE_SIGMA_MAX, high_open=True)
-    #: a line's systematic error (m, deg), added to every line's covariance by the extractor
     line_sigma_rho_m: float = bounded(0.0, 0.0, 100.0)
     line_sigma_theta_deg: float = bounded(0.0, 0.0, 90.0)
 
@@ -140,11 +198,11 @@ class GateConfig:
         as one without bottom lock (the motion model holds the last good velocity).
     ahrs_max_jump_deg : float
         An AHRS heading that differs from the last good one turned by the gyro's integral by
-        more than this (deg), plus ``ahrs_jump_drift_dps`` per second since that sample, is a
+        more than this (deg), plus ``ahrs_jump_drift_deg_per_s`` per second since that sample, is a
         jump the gyro does not explain: dropped.
-    ahrs_jump_drift_dps : float
+    ahrs_jump_drift_deg_per_s : float
         The allowance for the gyro's bias (deg/s).
-    ahrs_max_rate_dps : float
+    ahrs_max_rate_deg_per_s : float
         A gyro yaw rate beyond this (deg/s) is a spike: the sample is dropped.
     gps_max_jump_m : float
         A GPS fix farther than this (m), plus ``dvl_max_speed_mps`` times the time to its
@@ -160,8 +218,8 @@ class GateConfig:
 
     dvl_max_speed_mps: float = bounded(3.0, 0.0, 100.0, low_open=True)
     ahrs_max_jump_deg: float = bounded(10.0, 0.0, 180.0, low_open=True)
-    ahrs_jump_drift_dps: float = bounded(1.0, 0.0, 360.0)
-    ahrs_max_rate_dps: float = bounded(600.0, 0.0, 1e4, low_open=True)
+    ahrs_jump_drift_deg_per_s: float = bounded(1.0, 0.0, 360.0)
+    ahrs_max_rate_deg_per_s: float = bounded(600.0, 0.0, 1e4, low_open=True)
     gps_max_jump_m: float = bounded(20.0, 0.0, 1e5, low_open=True)
     gap_periods: float = bounded(5.0, 1.0, 1e4)
     min_gap_s: float = bounded(1.0, 0.0, 3600.0, low_open=True)
@@ -288,6 +346,16 @@ _SCHEMA: dict[str, dict[str, tuple[str, str | None]]] = {
 }
 
 
+#: Keys of ``sonarslam.toml`` that were renamed, with their new names: an old one is an error
+#: naming the new one (not an alias: one name per setting).
+RENAMED_KEYS: dict[str, dict[str, str]] = {
+    "gates": {
+        "ahrs_jump_drift_dps": "ahrs_jump_drift_deg_per_s",
+        "ahrs_max_rate_dps": "ahrs_max_rate_deg_per_s",
+    },
+}
+
+
 def _field_type(path: str) -> Any:
     """The annotated type of a dotted :class:`DatasetConfig` field."""
     cls: Any = DatasetConfig
@@ -317,6 +385,15 @@ def _tables(p: Path, text: str, data: dict[str, Any]) -> dict[str, dict[str, Any
                 p, line, f"[{name}] must be a table, got {table!r} ({type(table).__name__})"
             )
         unknown = sorted(set(table) - set(_SCHEMA[name]))
+        renamed = [k for k in unknown if k in RENAMED_KEYS.get(name, {})]
+        if renamed:
+            new = RENAMED_KEYS[name][renamed[0]]
+            raise DataError(
+                p,
+                toml_line(text, name, renamed[0]),
+                f"[{name}] {renamed[0]} was renamed {new} (one unit suffix per unit: deg/s is"
+                f" _deg_per_s); write {new} = ...",
+            )
         if unknown:
             raise DataError(
                 p,

@@ -14,12 +14,16 @@ from pathlib import Path
 
 import pytest
 
-from sonarslam.datasets.config import DatasetConfig
+from sonarslam.datasets.config import DatasetConfig, NoiseConfig, load_dataset_config
+from sonarslam.datasets.errors import DataError
 from sonarslam.features.config import ExtractorConfig
 from sonarslam.features.scans import ScanConfig
 from sonarslam.settings import SettingError, bounded, check_fields, field_types, replace_checked
+from sonarslam.slam.backends.ekf import EkfConfig
 from sonarslam.slam.backends.registry import BACKENDS
 from sonarslam.slam.eval.health import HealthConfig
+from sonarslam.slam.model.noise import MotionNoise
+from sonarslam.slam.run.presets import apply_overrides, backend_config
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -121,3 +125,32 @@ def test_no_module_checks_a_range_its_own_way() -> None:
             for node in ast.walk(tree):
                 if isinstance(node, ast.Name):
                     assert node.id != "check_within", f"{path}:{node.lineno}"
+
+
+def test_a_renamed_key_is_an_error_naming_the_new_one(tmp_path: Path) -> None:
+    """One spelling per unit (deg/s: ``_deg_per_s``, rad/s: ``_rad_per_s``) and one home per
+    noise value (the dataset's ``[noise]``): the old names are errors that say the new one."""
+    path = tmp_path / "sonarslam.toml"
+    path.write_text("[gates]\nmin_gap_s = 2.0\nahrs_max_rate_dps = 300.0\n", encoding="utf-8")
+    with pytest.raises(DataError, match=r"sonarslam.toml:3: .*renamed ahrs_max_rate_deg_per_s"):
+        load_dataset_config(path)
+    path.write_text("[gates]\nahrs_max_rate_deg_per_s = 300.0\n", encoding="utf-8")
+    assert load_dataset_config(path).gates.ahrs_max_rate_deg_per_s == 300.0
+    with pytest.raises(SettingError, match=r"^ekf.gyro_sigma_radps: .*ekf.noise.gyro_sigma_rad"):
+        apply_overrides(EkfConfig(), {"gyro_sigma_radps": 0.01}, prefix="ekf.")
+    cfg = apply_overrides(EkfConfig(), {"noise.gyro_sigma_rad_per_s": 0.01}, prefix="ekf.")
+    assert cfg.noise.gyro_sigma_rad_per_s == 0.01
+
+
+def test_the_back_ends_noise_is_the_dataset_s() -> None:
+    """No noise value of the back ends' own: the runner hands them the dataset's ``[noise]``
+    whole, and the motion model's comes from the same table."""
+    noise = NoiseConfig(ahrs_white_sigma_deg=0.7, gyro_sigma_rad_per_s=0.002)
+    for name in BACKENDS:
+        assert backend_config(name, noise=noise).noise == noise
+        assert backend_config(name).noise == NoiseConfig()
+    motion = MotionNoise.from_config(noise)
+    assert motion.ahrs_sigma_rad == pytest.approx(math.radians(noise.ahrs_sigma_deg))
+    assert motion.gap_sigma_mps == noise.dvl_gap_sigma_mps
+    names = {f.name for f in dataclasses.fields(EkfConfig)}
+    assert not names & {f.name for f in dataclasses.fields(NoiseConfig)}

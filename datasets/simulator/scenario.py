@@ -371,7 +371,7 @@ class Simulation:
             (
                 float(a.t_s[i]),
                 2,
-                Attitude(float(a.t_s[i]), float(yaw[i]), float(-a.rate_radps[i, 2])),
+                Attitude(float(a.t_s[i]), float(yaw[i]), float(-a.rate_rad_per_s[i, 2])),
             )
             for i in range(a.t_s.size)
         ]

@@ -196,16 +196,16 @@ class LineEkf:
         x[POSE] = wTb0
         P = np.zeros((N_VEHICLE, N_VEHICLE))
         P[:2, :2] = P0[:2, :2]
-        var_b = np.deg2rad(config.ahrs_bias_sigma_deg) ** 2
+        var_b = np.deg2rad(config.noise.ahrs_bias_sigma_deg) ** 2
         # psi0 came from the AHRS, which measures psi + b (white noise and bias as this filter
         # models them, not P0's heading): psi and b are anti-correlated.
-        P[YAW, YAW] = np.deg2rad(config.ahrs_white_sigma_deg) ** 2 + var_b
+        P[YAW, YAW] = np.deg2rad(config.noise.ahrs_white_sigma_deg) ** 2 + var_b
         P[AHRS_BIAS, AHRS_BIAS] = var_b
         P[YAW, AHRS_BIAS] = P[AHRS_BIAS, YAW] = -var_b
         P[MISALIGNMENT, MISALIGNMENT] = (
             np.deg2rad(config.misalignment_sigma_deg) ** 2 if config.estimate_misalignment else 0.0
         )
-        P[DVL_SCALE, DVL_SCALE] = config.dvl_scale_sigma**2
+        P[DVL_SCALE, DVL_SCALE] = config.noise.dvl_scale_sigma**2
         P[GYRO_BIAS, GYRO_BIAS] = np.deg2rad(config.gyro_bias_sigma_deg_per_s) ** 2
         self.kf = _filter(x, P)
         # the steps since the last flush: their Jacobians' product (vehicle block), pending
@@ -219,7 +219,7 @@ class LineEkf:
         self._index: dict[int, int] = {}  # landmark id -> index of its rho in the state
         self._first_line_w: dict[int, FloatArray] = {}  # each landmark's first estimate (FEJ)
         self._kernel = robust_kernel(config.robust, config.robust_k)
-        self._var_walk = np.deg2rad(config.ahrs_bias_walk_deg_per_sqrt_s) ** 2  # rad^2/s
+        self._var_walk = np.deg2rad(config.noise.ahrs_bias_walk_deg_per_sqrt_s) ** 2  # rad^2/s
         self._pose_lin = np.zeros(3)  # the pose the vote's Jacobians are taken at (FEJ)
         self._xy_first = (float(wTb0[0]), float(wTb0[1]))  # the position as first predicted
         self._last_ahrs_t = -np.inf
@@ -306,7 +306,7 @@ class LineEkf:
         P_vv[...] = F @ P_vv @ F.T
         P_vv[0, 0] += step.var_xy_m2
         P_vv[1, 1] += step.var_xy_m2
-        P_vv[2, 2] += step.var_yaw_rad2(self.config.gyro_sigma_radps)
+        P_vv[2, 2] += step.var_yaw_rad2(self.config.noise.gyro_sigma_rad_per_s)
         P_vv[3, 3] += self._var_walk * step.dt_s
         self._Phi = F @ self._Phi
         self._pending = True
@@ -362,7 +362,7 @@ class LineEkf:
         self._last_ahrs_t = t_s
         self._flush()
         x, P = self.kf.x, self.kf.P
-        r = float(np.deg2rad(self.config.ahrs_white_sigma_deg) ** 2)
+        r = float(np.deg2rad(self.config.noise.ahrs_white_sigma_deg) ** 2)
         nu = float(wrap_angle(yaw_body_rad - (float(x[YAW]) + float(x[AHRS_BIAS]))))
         S = float(P[YAW, YAW] + 2.0 * P[YAW, AHRS_BIAS] + P[AHRS_BIAS, AHRS_BIAS] + r)
         self.heading_innovations.append((t_s, nu, S))
@@ -534,7 +534,7 @@ class LineEkf:
             out["state_misalignment_deg"] = float(np.rad2deg(x[MISALIGNMENT]))
             sd = np.sqrt(P[MISALIGNMENT, MISALIGNMENT])
             out["state_misalignment_sd_deg"] = float(np.rad2deg(sd))
-        if self.config.dvl_scale_sigma > 0.0:
+        if self.config.noise.dvl_scale_sigma > 0.0:
             out["state_dvl_scale"] = float(x[DVL_SCALE])
             out["state_dvl_scale_sd"] = float(np.sqrt(P[DVL_SCALE, DVL_SCALE]))
         if self._gyro_s > 0.0:

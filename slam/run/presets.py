@@ -10,8 +10,9 @@
 * A dataset's calibration of the sensors' noise (``[noise]`` of its ``sonarslam.toml``,
   :class:`sonarslam.datasets.config.NoiseConfig`) goes over the preset and the defaults, under a TOML
   file's and the settings: a line's systematic error (``line_sigma_rho_m``,
-  ``line_sigma_theta_deg``) into the extractor, the AHRS bias's random walk and the DVL's
-  scale-factor error into the back end (:func:`noise_settings`).
+  ``line_sigma_theta_deg``) into the extractor (:func:`noise_settings`), the whole table into
+  the back end as its ``noise`` (the AHRS's white noise, bias and walk, the gyro's noise, the
+  DVL's scale-factor error).
 * Settings given as ``SCOPE.FIELD=VALUE`` (``sonarslam run --set``, ``sonarslam sweep --grid``):
   ``SCOPE`` is ``extractor`` (:class:`sonarslam.features.extractor.ExtractorConfig`), ``scans`` (the scan
   matcher, :class:`sonarslam.features.scans.ScanConfig`, when the back end's ``constraints`` hold
@@ -28,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -163,11 +164,7 @@ def noise_settings(noise: NoiseConfig | None) -> tuple[dict[str, Any], dict[str,
         "line_sigma_rho_m": noise.line_sigma_rho_m,
         "line_sigma_theta_rad": math.radians(noise.line_sigma_theta_deg),
     }
-    backend = {
-        "ahrs_bias_walk_deg_per_sqrt_s": noise.ahrs_bias_walk_deg_per_sqrt_s,
-        "dvl_scale_sigma": noise.dvl_scale_sigma,
-    }
-    return ext, backend
+    return ext, {"noise": noise}
 
 
 def extractor_config(
@@ -229,7 +226,7 @@ def backend_config(
 ) -> BackendConfig:
     """Back end ``name``'s default configuration with a dataset's ``noise`` calibration
     (:func:`noise_settings`) and ``overrides`` (dotted names) over it."""
-    defaults = replace(backend_spec(name).config_type(), **noise_settings(noise)[1])
+    defaults = backend_spec(name).config_type(**noise_settings(noise)[1])
     return apply_overrides(defaults, overrides or {}, prefix=f"{name}.")
 
 
@@ -315,6 +312,15 @@ def check_combination(dataset: Dataset, backend: str) -> None:
 
 
 _ALIASES = {"association": "association.method"}
+#: Back-end settings that moved or were renamed, with their new names: an old one is a
+#: SettingError naming the new one (not an alias: one name per setting).
+RENAMED_SETTINGS = {
+    "ahrs_white_sigma_deg": "noise.ahrs_white_sigma_deg",
+    "ahrs_bias_sigma_deg": "noise.ahrs_bias_sigma_deg",
+    "ahrs_bias_walk_deg_per_sqrt_s": "noise.ahrs_bias_walk_deg_per_sqrt_s",
+    "gyro_sigma_radps": "noise.gyro_sigma_rad_per_s",
+    "dvl_scale_sigma": "noise.dvl_scale_sigma",
+}
 
 #: A setting's value as typed on the command line (:func:`sonarslam.settings.parse_text`).
 parse_value = parse_text
@@ -337,6 +343,10 @@ def apply_overrides(config: Any, overrides: dict[str, Any], prefix: str = "") ->
     """``config`` with dotted fields (``"association.method"``, aliases too) replaced, each
     value checked against its field (:func:`sonarslam.settings.replace_checked`); ``prefix``
     names the scope in messages. Raises SettingError."""
+    for name in overrides:
+        if name in RENAMED_SETTINGS and isinstance(config, BackendConfig):
+            new = f"{prefix}{RENAMED_SETTINGS[name]}"
+            raise SettingError(f"{prefix}{name}", f"was renamed {new} (the dataset's [noise])")
     resolved = {_ALIASES.get(name, name): value for name, value in overrides.items()}
     return replace_checked(config, resolved, prefix=prefix)
 
