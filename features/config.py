@@ -24,18 +24,19 @@ class ExtractorConfig:
     Defaults marked *paper* are those of the seed paper (Song et al. 2010, section 3: sector,
     beta, min votes, confidence); the others are this project's choices, stated here. Settings
     for particular sonars and data (the marina's thresholded keyframes, the seed paper's pool)
-    are presets, decided in :mod:`sonarslam.slam.run.presets`.
+    are presets, decided in :mod:`sonarslam.slam.run.presets`. Each field's default and range
+    are in its definition below.
 
     Attributes
     ----------
     intensity_threshold : float
-        Segmentation (a): threshold bins have intensity ``>=`` this (0-255). 80.
+        Segmentation (a): threshold bins have intensity ``>=`` this (0-255).
     max_intensity_difference : float
-        Segmentation (b): keep bins within this of the beam's strongest (0-255). 40.
+        Segmentation (b): keep bins within this of the beam's strongest (0-255).
     min_distance_m : float
-        Segmentation (c): of two kept bins closer than this, drop the weaker (m). 0.5.
+        Segmentation (c): of two kept bins closer than this, drop the weaker (m).
     min_range_m : float
-        Near-field dead zone (m). 0.5.
+        Near-field dead zone (m).
     max_range_m : float or None
         Bins beyond this range (m) take no part (None: the head's range). On thick echo bands
         a wall seen far off and at a slant gives a line metres off the wall.
@@ -58,13 +59,13 @@ class ExtractorConfig:
     min_votes : int
         Votes needed by a line: 15 (*paper*, pool test).
     max_lines_per_vote : int
-        Most lines per vote. 16.
+        Most lines per vote.
     suppress_theta_cells, suppress_rho_cells : int
-        Half sizes of the window around a winner whose voters are removed with it (cells). 1, 1.
+        Half sizes of the window around a winner whose voters are removed with it (cells).
     vote_every_n_beams : int
-        Beams between votes once the store holds a full sector. 10.
+        Beams between votes once the store holds a full sector.
     requery_poses : bool
-        Re-query the pose source for every stored beam at each vote (smoothing back ends). True.
+        Re-query the pose source for every stored beam at each vote (smoothing back ends).
     covariance_method : {"fit", "seed", "seed-at-fit"}
         :mod:`sonarslam.features.uncertainty` method: "fit" (weighted least squares) or "seed" (the
         paper's overlap-ratio ellipse; its line is the ellipse centre), or "seed-at-fit": the
@@ -73,10 +74,11 @@ class ExtractorConfig:
     confidence : float
         Probability of the seed ellipse: 0.95 (*paper*).
     overlap_similarity : float
-        Seed: similar cells have an overlap ratio ``>=`` this times the winner's. 0.8.
+        Seed: similar cells have an overlap ratio ``>=`` this times the winner's.
     seed_window_theta_cells, seed_window_rho_cells : int
-        Seed: half sizes of the searched neighbourhood (cells). 20, 10: the similar-overlap
-        region of a wall is long in theta (the beam width hides small rotations).
+        Seed: half sizes of the searched neighbourhood (cells); the theta one the larger: the
+        similar-overlap region of a wall is long in theta (the beam width hides small
+        rotations).
     return_model : {"axis", "first_return"}
         Fit: where in the beam a final bin's echo comes from. "axis" for raw intensities (the
         strongest bin), "first_return" for thresholded masks (the nearest bin of a run).
@@ -89,31 +91,31 @@ class ExtractorConfig:
         echo's peak or first return, which does not average down with the number of voters
         (:mod:`sonarslam.features.uncertainty`); None: ``bin_size / sqrt(12)``; 0 leaves it out.
     pose_uncertainty : bool
-        Fit: add the relative pose uncertainty from ``PoseSource.covariance``. False.
+        Fit: add the relative pose uncertainty from ``PoseSource.covariance``.
     line_sigma_rho_m, line_sigma_theta_rad : float
         Systematic error of a line, added to every line's covariance as
         ``diag(line_sigma_rho_m^2, line_sigma_theta_rad^2)`` (m, rad): what neither the echoes'
         noise nor the poses explain (a wall that is not straight, an echo band's structure, the
         sector's rotation between beams); it does not shrink with the number of voters. A
         dataset calibration (``[noise] line_sigma_rho_m``, ``line_sigma_theta_deg``, GPS-free:
-        ``sonarslam calibrate --line-noise``). 0, 0.
+        ``sonarslam calibrate --line-noise``).
     fit_iterations : int
-        Fit: Gauss-Newton iterations. 5.
+        Fit: Gauss-Newton iterations.
     fit_gate_sigma : float
         Fit: after fitting the winner's voters, the fit is redone on every stored final bin
         whose echo lies within this many sigmas of the line (from a beam that sees it), so
-        that the voters' truncation to one rho cell does not bias it; 0 fits the voters only. 3.
+        that the voters' truncation to one rho cell does not bias it; 0 fits the voters only.
     fit_gate_iterations : int
-        Fit: rounds of gathering the support and refitting. 2.
+        Fit: rounds of gathering the support and refitting.
     endpoint_trim_fraction : float
-        Segment ends are the ``f`` and ``1 - f`` quantiles of the voters along the line. 0.05.
+        Segment ends are the ``f`` and ``1 - f`` quantiles of the voters along the line.
     remove_on_line_sigma : float
         After a line is found, the stored final bins whose echoes lie within this many sigmas of
         it are removed with its voters, *at any incidence* (from every beam that faces it). A wall
-        also returns echoes beyond ``beta`` (the simulator's walls return up to ~60 deg); the
-        sonar model cannot give them to the wall's line, so left in the store they voted for
-        spurious lines a few degrees off the wall (3-4 per 270 deg pool scan, 3-30 deg off).
-        Not in the paper (it removes the voters only); 0 disables. 3.
+        also returns echoes beyond ``beta``; the sonar model cannot give them to the wall's
+        line, so left in the store they vote for spurious lines a few degrees off the wall
+        (docs/calibration.md gives the simulator's figures). Not in the paper (it removes the
+        voters only); 0 disables.
     """
 
     intensity_threshold: float = bounded(80.0, 0.0, 255.0)

@@ -61,8 +61,8 @@ class SensorNoise:
         White noise of the DVL's own compass (deg).
     dvl_compass_deviation_deg : tuple of float
         ``(B, C)``: the DVL compass reads ``B sin(yaw) + C cos(yaw)`` (deg) off, ``yaw`` the
-        DVL frame's yaw, as a compass deflected by the vehicle's own field (hard iron); the
-        marina's is ~5 deg.
+        DVL frame's yaw, as a compass deflected by the vehicle's own field (hard iron)
+        (docs/calibration.md gives the marina's).
     ahrs_sigma_deg : float
         White noise of the AHRS heading (deg).
     ahrs_bias_deg : float
@@ -74,8 +74,8 @@ class SensorNoise:
         ``(B, C)``: the AHRS yaw (counter-clockwise) reads ``B sin(psi) + C cos(psi)`` (deg)
         off, ``psi`` the true body yaw, as a compass deflected by the vehicle (hard iron).
     ahrs_gyro_bias_rad_per_s : float
-        Constant bias of the AHRS yaw rate (rad/s, counter-clockwise); the marina's MTi has
-        ~0.01 (0.6 deg/s).
+        Constant bias of the AHRS yaw rate (rad/s, counter-clockwise) (docs/calibration.md
+        gives the marina MTi's).
     ahrs_acc_sigma_mps2 : float
         White noise of the AHRS accelerations (m/s^2).
     ahrs_attitude_sigma_deg : float

@@ -4,16 +4,17 @@ State ``x = [x, y, psi, b, delta, k, g, rho_1, theta_1, ..., rho_L, theta_L]``:
 
 * ``x, y, psi``: the body pose ``wTb`` (m, m, rad);
 * ``b``: the AHRS heading bias (rad) with prior ``ahrs_bias_sigma_deg``, constant or a random
-  walk (``ahrs_bias_walk_deg_per_sqrt_s``): the AHRS measures ``psi + b``
-  (:class:`sonarslam.slam.backends.base.BackendConfig`);
+  walk (``ahrs_bias_walk_deg_per_sqrt_s``): the AHRS measures ``psi + b`` (both of the
+  dataset's ``[noise]``, :class:`sonarslam.datasets.config.NoiseConfig`);
 * ``delta``: the misalignment of the DVL velocity with the body heading (rad), a constant with
   prior ``misalignment_sigma_deg`` when ``estimate_misalignment``, else held at 0;
-* ``k``: the DVL's scale-factor error, a constant with prior ``dvl_scale_sigma`` (0: held at 0);
+* ``k``: the DVL's scale-factor error, a constant with prior ``[noise] dvl_scale_sigma`` (0: held
+  at 0);
 * ``g``: the gyro's yaw-rate bias (rad/s), a constant with prior ``gyro_bias_sigma_deg_per_s``:
   a step whose heading change integrates the gyro turns by ``dyaw - g dt``
-  (:attr:`sonarslam.slam.model.motion.MotionStep.gyro_dt_s`); the AHRS headings observe it. Left out, a
-  gyro bias (the marina MTi's is -0.66 deg/s) is taken for the AHRS bias's walk when the bias
-  walks, and the heading spins away; with the AHRS heading's own change as the rate
+  (:attr:`sonarslam.slam.model.motion.MotionStep.gyro_dt_s`); the AHRS headings observe it. Left
+  out, a gyro bias (docs/calibration.md gives the marina's) is taken for the AHRS bias's walk
+  when the bias walks, and the heading spins away; with the AHRS heading's own change as the rate
   (``yaw_rate_source = "heading"``) no step involves it and it stays at its prior;
 * world lines ``(rho_w, theta_w)`` (:mod:`sonarslam.features.geometry` conventions), one per active
   landmark (:meth:`LineEkf.index`); kept normalised. A landmark merged into another (the landmark
@@ -144,7 +145,8 @@ def scalar_joseph_update(
 
 @dataclass(frozen=True)
 class EkfConfig(BackendConfig):
-    """Settings of the EKF: :class:`sonarslam.slam.backends.base.BackendConfig`'s and
+    """Settings of the EKF: those of :class:`sonarslam.slam.backends.base.BackendConfig` and the
+    following.
 
     Attributes
     ----------
@@ -155,8 +157,8 @@ class EkfConfig(BackendConfig):
         :meth:`LineEkf.predict_line`).
     gyro_bias_sigma_deg_per_s : float
         Prior 1-sigma of the gyro's constant yaw-rate bias ``g`` (deg/s); used only on steps
-        that integrate the gyro (``[motion] yaw_rate_source = "gyro"``). An uncalibrated MEMS
-        gyro's bias is up to ~1 deg/s.
+        that integrate the gyro (``[motion] yaw_rate_source = "gyro"``). docs/calibration.md
+        says how its default was chosen.
     """
 
     side_gate: bool = False

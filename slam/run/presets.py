@@ -104,8 +104,8 @@ EXTRACTOR_PRESETS: dict[str, ExtractorConfig] = {
     # the same over a 180 deg sector and 10 votes without the odometry's uncertainty: more,
     # shorter lines whose covariance describes the sonar's own noise only
     "marina-fit": _MARINA.replace(sector_deg=180.0, min_votes=10, pose_uncertainty=False),
-    # the paper's overlap-ratio ellipse and its centre (the closed loops' preset until the
-    # line-quality benchmark found its lines inside the echo band: README)
+    # the paper's overlap-ratio ellipse and its centre (docs/results.md: why the closed loops
+    # take the fit instead)
     "marina-seed": _MARINA.replace(covariance_method="seed"),
 }
 
@@ -288,7 +288,7 @@ def check_combination(dataset: Dataset, backend: str) -> None:
 
     The factor graph has no gyro-bias state (the EKF has, :mod:`sonarslam.slam.backends.ekf`): with the
     gyro's rate and a walking AHRS bias, a gyro bias is taken for the walk and the heading
-    spins away (the marina, walk 0.15 deg/sqrt(s): ATE 97 m, exit 0). Refused when the data
+    spins away (docs/calibration.md gives the marina's figures). Refused when the data
     show such a bias (:func:`sonarslam.slam.model.motion.gyro_bias_against_heading`, GPS-free); an
     unbiased gyro (the simulated drift world's) is fine.
     """

@@ -13,7 +13,8 @@ __all__ = ["GraphConfig"]
 
 @dataclass(frozen=True)
 class GraphConfig(BackendConfig):
-    """Settings of the factor graph: :class:`sonarslam.slam.backends.base.BackendConfig`'s and
+    """Settings of the factor graph: those of :class:`sonarslam.slam.backends.base.BackendConfig`
+    and the following.
 
     Attributes
     ----------
@@ -22,8 +23,9 @@ class GraphConfig(BackendConfig):
     dvl_noise : {"hold", "white"}
         How the velocity noise adds up. ``"hold"``: the error of a held DVL sample is one draw
         for the whole hold (:func:`sonarslam.slam.model.noise.held_velocity_variance_step`, the EKF's
-        model). ``"white"``: independent per motion step, ``(dt * sigma)**2`` each, which with a
-        1.5 Hz DVL and 20 records a second makes the position variance ~20x too small.
+        model). ``"white"``: independent per motion step, ``(dt * sigma)**2`` each: a held
+        sample's one error counted as a new one at every step, which understates the position
+        variance by about the number of steps per hold (docs/calibration.md).
     node_period_s : float
         A pose node at least this often (s); votes with lines add theirs.
     min_node_gap_s : float
