@@ -4,13 +4,13 @@ the names, loadable from TOML."""
 from __future__ import annotations
 
 import tomllib
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from sonarslam.settings import bounded, check_fields, one_of
+from sonarslam.settings import bounded, check_fields, one_of, replace_checked
 
 __all__ = ["ExtractorConfig"]
 
@@ -165,25 +165,27 @@ class ExtractorConfig:
             )
 
     @classmethod
-    def from_dict(cls, values: dict[str, Any]) -> ExtractorConfig:
-        """Config from a mapping of field names (unknown names are an error)."""
-        known = {f.name for f in fields(cls)}
-        unknown = set(values) - known
-        if unknown:
-            raise ValueError(f"unknown ExtractorConfig fields: {sorted(unknown)}")
-        return cls(**values)
+    def from_dict(cls, values: dict[str, Any], prefix: str = "") -> ExtractorConfig:
+        """Config from a mapping of field names over the defaults, each value checked like
+        every other setting (:func:`sonarslam.settings.replace_checked`: type, range, known
+        name). Raises :class:`sonarslam.settings.SettingError` naming the key (``prefix``
+        before it)."""
+        return replace_checked(cls(), values, prefix=prefix, parse_strings=False)
 
     @classmethod
     def from_toml(cls, path: str | Path, table: str | None = "extractor") -> ExtractorConfig:
         """Load from a TOML file: the ``[extractor]`` table if present, else the top level.
 
-        Fields left out take their defaults; ``None`` fields are left out to stay None.
+        Fields left out take their defaults; ``None`` fields are left out to stay None. A
+        wrong key or value is a :class:`sonarslam.settings.SettingError` naming the file and
+        the key (``sonarslam run --config`` also gives its line).
         """
         with open(path, "rb") as f:
             data = tomllib.load(f)
+        where = ""
         if table is not None and table in data:
-            data = data[table]
-        return cls.from_dict(data)
+            data, where = data[table], f"[{table}] "
+        return cls.from_dict(data, prefix=f"{path}: {where}")
 
     def to_dict(self) -> dict[str, Any]:
         """All fields, ``None`` ones included (TOML has no null: drop them to write TOML)."""

@@ -406,6 +406,11 @@ def test_config_toml_round_trip(tmp_path: Path) -> None:
     assert ExtractorConfig.from_toml(path) == cfg
     with pytest.raises(ValueError, match="unknown"):
         ExtractorConfig.from_dict({"min_vote": 3})
+    path.write_text('[extractor]\nmin_votes = "12"\n')
+    with pytest.raises(
+        ValueError, match=r"extractor.toml: \[extractor\] min_votes: must be a whole"
+    ):
+        ExtractorConfig.from_toml(path)  # the file's loader checks types like every other
     with pytest.raises(ValueError):
         ExtractorConfig(covariance_method="ellipse")
 
