@@ -19,6 +19,7 @@ random walk of the AHRS heading on top of its constant bias and deviation.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,6 +27,7 @@ import pymap3d
 
 from sonarslam.datasets.simulator.path import Trajectory
 from sonarslam.features.geometry import FloatArray, wrap_angle
+from sonarslam.settings import bounded, check_fields
 from sonarslam.sonar.beam import Mounting
 
 __all__ = [
@@ -136,20 +138,13 @@ class DriftErrors:
         peak, rising) stays on the wall face (:mod:`sonarslam.datasets.simulator.msis`).
     """
 
-    dvl_scale_factor: float = 0.0
+    dvl_scale_factor: float = bounded(0.0, -0.5, 0.5, low_open=True, high_open=True)
     dvl_bias_mps: tuple[float, float] = (0.0, 0.0)
-    ahrs_heading_walk_deg_per_sqrt_s: float = 0.0
-    echo_range_offset_m: float = 0.0
+    ahrs_heading_walk_deg_per_sqrt_s: float = bounded(0.0, 0.0, math.inf)
+    echo_range_offset_m: float = bounded(0.0, 0.0, math.inf)
 
     def __post_init__(self) -> None:
-        if not -0.5 < self.dvl_scale_factor < 0.5:
-            raise ValueError(
-                f"DriftErrors.dvl_scale_factor must be in (-0.5, 0.5), got {self.dvl_scale_factor}"
-            )
-        if self.ahrs_heading_walk_deg_per_sqrt_s < 0.0 or self.echo_range_offset_m < 0.0:
-            raise ValueError(
-                "DriftErrors.ahrs_heading_walk_deg_per_sqrt_s and echo_range_offset_m must be >= 0"
-            )
+        check_fields(self)
 
 
 @dataclass(frozen=True)
