@@ -32,11 +32,11 @@ from sonarslam.slam.run.run import run_backend
 from sonarslam.slam.run.sweep import parse_seeds
 
 
-def _dataset(kind: str, seed: int, folder: Path, gyro_bias_radps: float = 0.0) -> Dataset:
+def _dataset(kind: str, seed: int, folder: Path, gyro_bias_rad_per_s: float = 0.0) -> Dataset:
     scenario = make_scenario(kind, seed)
-    if gyro_bias_radps:
+    if gyro_bias_rad_per_s:
         scenario = replace(
-            scenario, noise=replace(scenario.noise, ahrs_gyro_bias_radps=gyro_bias_radps)
+            scenario, noise=replace(scenario.noise, ahrs_gyro_bias_rad_per_s=gyro_bias_rad_per_s)
         )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

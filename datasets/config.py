@@ -30,15 +30,20 @@ radians in the objects)::
     scan_direction = -1     # -1: the head turns toward decreasing angle (measured, see
                             # datasets/keyframes.py); +1: as the marina README says
 
-    [noise]                 # 1-sigma sensor noise used by the estimators
+    [noise]                 # 1-sigma sensor noise, every estimator's (NoiseConfig)
     dvl_sigma_mps = 0.05
-    ahrs_sigma_deg = 2.0
+    ahrs_sigma_deg = 2.0    # an AHRS heading, bias included (dead reckoning, GPS + AHRS)
     gps_sigma_m = 1.0
-    dvl_max_gap_s = 10.0    # a DVL dropout longer than this inflates the velocity noise
+    dvl_max_gap_s = 10.0    # a DVL dropout longer than this inflates the velocity noise ...
+    dvl_gap_sigma_mps = 0.3 # ... to this
     dvl_scatter_window_s = 60.0     # the DVL's own scatter over this window (0: off) ...
     dvl_nominal_scatter_mps = 0.2   # ... beyond its usual scatter is white noise added to
                             # dvl_sigma_mps (sonarslam info prints the scatter's quantiles)
-    ahrs_bias_walk_deg_per_sqrt_s = 0.0  # the AHRS bias's random walk (0: a constant bias)
+    ahrs_gap_yaw_rate_sigma_deg_per_s = 1.0  # the unmeasured yaw rate in an AHRS gap
+    ahrs_white_sigma_deg = 1.0      # the back ends' AHRS model: white noise ...
+    ahrs_bias_sigma_deg = 2.0       # ... and a bias of this prior sigma ...
+    ahrs_bias_walk_deg_per_sqrt_s = 0.0  # ... walking at this (0: a constant bias)
+    gyro_sigma_rad_per_s = 0.005    # the back ends' heading process noise
     dvl_scale_sigma = 0.0   # 1-sigma of the DVL's scale-factor error (0: none)
     line_sigma_rho_m = 0.0  # a line's systematic error, added to every line's covariance
     line_sigma_theta_deg = 0.0      # (sonarslam calibrate --line-noise, GPS-free)
@@ -52,14 +57,14 @@ radians in the objects)::
     [gates]                 # plausibility of the sensors' samples (datasets/gates.py)
     dvl_max_speed_mps = 3.0 # a faster DVL velocity is a spike: the row counts as no lock
     ahrs_max_jump_deg = 10.0      # a heading change the gyro does not explain by more ...
-    ahrs_jump_drift_dps = 1.0     # ... (plus this per second since the last good sample)
-    ahrs_max_rate_dps = 600.0     # a faster gyro rate is a spike: the sample is dropped
+    ahrs_jump_drift_deg_per_s = 1.0     # ... (plus this per second since the last good sample)
+    ahrs_max_rate_deg_per_s = 600.0     # a faster gyro rate is a spike: the sample is dropped
     gps_max_jump_m = 20.0   # a fix this far (plus dvl_max_speed_mps per s) from its
                             # neighbours' median is an outlier, dropped from the evaluation
     gap_periods = 5.0       # a sensor gap: no sample for this many of its median periods,
     min_gap_s = 1.0         # and at least this long
 
-Every value is checked against the field it sets (type, finite, range: :mod:`sonarslam.datasets.settings`);
+Every value is checked against the field it sets (type, finite, range: :mod:`sonarslam.settings`);
 a wrong one is a ``DataError`` naming the file and the key. Keys a file leaves out take the
 neutral defaults of :class:`DatasetConfig` (no clock offset,
 identity mountings); the simulator writes every key. Without a file, a dataset gets the marina's
@@ -78,14 +83,15 @@ from typing import Any
 import tomli_w
 
 from sonarslam.datasets.errors import DataError
-from sonarslam.datasets.settings import (
+from sonarslam.datasets.toml import read_toml, toml_line
+from sonarslam.settings import (
     SettingError,
-    check_within,
+    bounded,
+    check_fields,
     coerce,
     field_types,
-    read_toml,
+    one_of,
     replace_checked,
-    toml_line,
 )
 from sonarslam.sonar.beam import Mounting, SonarHead
 
@@ -94,6 +100,7 @@ __all__ = [
     "GateConfig",
     "DatasetConfig",
     "MARINA_CONFIG",
+    "RENAMED_KEYS",
     "load_dataset_config",
     "dump_dataset_config",
     "config_tables",
@@ -107,36 +114,77 @@ DVL_SCALE_SIGMA_MAX = 0.5
 
 @dataclass(frozen=True)
 class NoiseConfig:
-    """1-sigma noise of the navigation sensors, as used by the estimators."""
+    """1-sigma noise of the navigation sensors (the ``[noise]`` table): the one place every
+    estimator takes its sensor noise from (dead reckoning and the motion model through
+    :class:`sonarslam.slam.model.noise.MotionNoise`, the EKF and the factor graph through
+    :class:`sonarslam.slam.backends.base.BackendConfig`'s ``noise``), and the extractor its
+    lines' systematic error.
 
-    dvl_sigma_mps: float = 0.05
-    ahrs_sigma_deg: float = 2.0
-    gps_sigma_m: float = 1.0
-    dvl_max_gap_s: float = 10.0
-    #: 0 turns the excess-scatter DVL noise off (slam.model.motion.dvl_sample_sigma)
-    dvl_scatter_window_s: float = 0.0
-    dvl_nominal_scatter_mps: float = 0.0
-    #: the AHRS heading bias's random walk (deg/sqrt(s)), 0: constant (the back ends' state)
-    ahrs_bias_walk_deg_per_sqrt_s: float = 0.0
-    #: 1-sigma of the DVL's scale-factor error (a ratio), 0: none (estimated by the back ends)
-    dvl_scale_sigma: float = 0.0
-    #: a line's systematic error (m, deg), added to every line's covariance by the extractor
-    line_sigma_rho_m: float = 0.0
-    line_sigma_theta_deg: float = 0.0
+    The AHRS heading's error is modelled two ways: dead reckoning and the GPS + AHRS pose
+    source take it as one white sigma (``ahrs_sigma_deg``, bias and all); the closed-loop
+    back ends split it into white noise (``ahrs_white_sigma_deg``) and a bias they estimate
+    (``ahrs_bias_sigma_deg``, walking at ``ahrs_bias_walk_deg_per_sqrt_s``).
+
+    Attributes
+    ----------
+    dvl_sigma_mps : float
+        A valid DVL velocity, per axis (m/s).
+    ahrs_sigma_deg : float
+        An AHRS heading, bias included, for dead reckoning and the GPS + AHRS poses (deg).
+    gps_sigma_m : float
+        A GPS fix, per axis (m).
+    dvl_max_gap_s : float
+        A DVL dropout up to this long holds the last valid velocity; longer, the velocity is
+        taken as zero with ``dvl_gap_sigma_mps`` (s).
+    dvl_gap_sigma_mps : float
+        Velocity 1-sigma added during a dropout, growing linearly to this at
+        ``dvl_max_gap_s`` (m/s).
+    dvl_scatter_window_s : float
+        Window of the DVL's own scatter (:func:`sonarslam.slam.model.noise.dvl_scatter`, s);
+        0 turns the excess-scatter noise off.
+    dvl_nominal_scatter_mps : float
+        The DVL's usual scatter (m/s): its excess over this is white velocity noise added to
+        ``dvl_sigma_mps`` (:func:`sonarslam.slam.model.noise.dvl_sample_sigma`).
+    ahrs_gap_yaw_rate_sigma_deg_per_s : float
+        The vehicle's yaw rate nobody measures while the AHRS is silent (deg/s): the heading
+        variance grows with it over an AHRS gap.
+    ahrs_white_sigma_deg : float
+        The back ends' white noise of one AHRS heading (deg).
+    ahrs_bias_sigma_deg : float
+        The back ends' prior 1-sigma of the AHRS heading bias ``b`` (deg): the AHRS measures
+        ``yaw + b``.
+    ahrs_bias_walk_deg_per_sqrt_s : float
+        The bias's random walk: ``b`` drifts by ``N(0, walk^2 dt)`` over ``dt``
+        (deg/sqrt(s)); 0: a constant bias.
+    gyro_sigma_rad_per_s : float
+        The back ends' heading process noise, as a yaw-rate noise (rad/s), added as
+        ``(dt sigma)^2`` per motion step.
+    dvl_scale_sigma : float
+        Prior 1-sigma of the DVL's scale-factor error ``k`` (a ratio; the vehicle moves along
+        ``(1 + k) R v_b``); 0: none, not estimated.
+    line_sigma_rho_m, line_sigma_theta_deg : float
+        A line's systematic error (m, deg), added to every line's covariance by the extractor
+        (``ExtractorConfig.line_sigma_rho_m`` and ``line_sigma_theta_rad``).
+    """
+
+    dvl_sigma_mps: float = bounded(0.05, 0.0, 10.0, low_open=True)
+    ahrs_sigma_deg: float = bounded(2.0, 0.0, 180.0, low_open=True)
+    gps_sigma_m: float = bounded(1.0, 0.0, 1e4, low_open=True)
+    dvl_max_gap_s: float = bounded(10.0, 0.0, 3600.0, low_open=True)
+    dvl_gap_sigma_mps: float = bounded(0.3, 0.0, 10.0)
+    dvl_scatter_window_s: float = bounded(0.0, 0.0, 3600.0)
+    dvl_nominal_scatter_mps: float = bounded(0.0, 0.0, 10.0)
+    ahrs_gap_yaw_rate_sigma_deg_per_s: float = bounded(1.0, 0.0, 360.0)
+    ahrs_white_sigma_deg: float = bounded(1.0, 1e-3, 90.0)
+    ahrs_bias_sigma_deg: float = bounded(2.0, 1e-3, 90.0)
+    ahrs_bias_walk_deg_per_sqrt_s: float = bounded(0.0, 0.0, 10.0)
+    gyro_sigma_rad_per_s: float = bounded(0.005, 1e-5, 1.0)
+    dvl_scale_sigma: float = bounded(0.0, 0.0, DVL_SCALE_SIGMA_MAX, high_open=True)
+    line_sigma_rho_m: float = bounded(0.0, 0.0, 100.0)
+    line_sigma_theta_deg: float = bounded(0.0, 0.0, 90.0)
 
     def __post_init__(self) -> None:
-        check_within("dvl_sigma_mps", self.dvl_sigma_mps, 0.0, 10.0, low_open=True)
-        check_within("ahrs_sigma_deg", self.ahrs_sigma_deg, 0.0, 180.0, low_open=True)
-        check_within("gps_sigma_m", self.gps_sigma_m, 0.0, 1e4, low_open=True)
-        check_within("dvl_max_gap_s", self.dvl_max_gap_s, 0.0, 3600.0, low_open=True)
-        check_within("dvl_scatter_window_s", self.dvl_scatter_window_s, 0.0, 3600.0)
-        check_within("dvl_nominal_scatter_mps", self.dvl_nominal_scatter_mps, 0.0, 10.0)
-        check_within("ahrs_bias_walk_deg_per_sqrt_s", self.ahrs_bias_walk_deg_per_sqrt_s, 0.0, 10.0)
-        check_within(
-            "dvl_scale_sigma", self.dvl_scale_sigma, 0.0, DVL_SCALE_SIGMA_MAX, high_open=True
-        )
-        check_within("line_sigma_rho_m", self.line_sigma_rho_m, 0.0, 100.0)
-        check_within("line_sigma_theta_deg", self.line_sigma_theta_deg, 0.0, 90.0)
+        check_fields(self)
 
 
 @dataclass(frozen=True)
@@ -150,11 +198,11 @@ class GateConfig:
         as one without bottom lock (the motion model holds the last good velocity).
     ahrs_max_jump_deg : float
         An AHRS heading that differs from the last good one turned by the gyro's integral by
-        more than this (deg), plus ``ahrs_jump_drift_dps`` per second since that sample, is a
+        more than this (deg), plus ``ahrs_jump_drift_deg_per_s`` per second since that sample, is a
         jump the gyro does not explain: dropped.
-    ahrs_jump_drift_dps : float
+    ahrs_jump_drift_deg_per_s : float
         The allowance for the gyro's bias (deg/s).
-    ahrs_max_rate_dps : float
+    ahrs_max_rate_deg_per_s : float
         A gyro yaw rate beyond this (deg/s) is a spike: the sample is dropped.
     gps_max_jump_m : float
         A GPS fix farther than this (m), plus ``dvl_max_speed_mps`` times the time to its
@@ -168,22 +216,16 @@ class GateConfig:
         on (:mod:`sonarslam.slam.model.motion`), so the covariance grows with the gap.
     """
 
-    dvl_max_speed_mps: float = 3.0
-    ahrs_max_jump_deg: float = 10.0
-    ahrs_jump_drift_dps: float = 1.0
-    ahrs_max_rate_dps: float = 600.0
-    gps_max_jump_m: float = 20.0
-    gap_periods: float = 5.0
-    min_gap_s: float = 1.0
+    dvl_max_speed_mps: float = bounded(3.0, 0.0, 100.0, low_open=True)
+    ahrs_max_jump_deg: float = bounded(10.0, 0.0, 180.0, low_open=True)
+    ahrs_jump_drift_deg_per_s: float = bounded(1.0, 0.0, 360.0)
+    ahrs_max_rate_deg_per_s: float = bounded(600.0, 0.0, 1e4, low_open=True)
+    gps_max_jump_m: float = bounded(20.0, 0.0, 1e5, low_open=True)
+    gap_periods: float = bounded(5.0, 1.0, 1e4)
+    min_gap_s: float = bounded(1.0, 0.0, 3600.0, low_open=True)
 
     def __post_init__(self) -> None:
-        check_within("dvl_max_speed_mps", self.dvl_max_speed_mps, 0.0, 100.0, low_open=True)
-        check_within("ahrs_max_jump_deg", self.ahrs_max_jump_deg, 0.0, 180.0, low_open=True)
-        check_within("ahrs_jump_drift_dps", self.ahrs_jump_drift_dps, 0.0, 360.0)
-        check_within("ahrs_max_rate_dps", self.ahrs_max_rate_dps, 0.0, 1e4, low_open=True)
-        check_within("gps_max_jump_m", self.gps_max_jump_m, 0.0, 1e5, low_open=True)
-        check_within("gap_periods", self.gap_periods, 1.0, 1e4)
-        check_within("min_gap_s", self.min_gap_s, 0.0, 3600.0, low_open=True)
+        check_fields(self)
 
 
 #: What turns the estimators' heading between AHRS samples (``[motion] yaw_rate_source``):
@@ -204,26 +246,16 @@ class DatasetConfig:
     dvl_mounting: Mounting = field(default_factory=Mounting)
     ahrs_mounting: Mounting = field(default_factory=Mounting)
     noise: NoiseConfig = field(default_factory=NoiseConfig)
-    keyframe_scan_direction: int = -1
-    sonar_time_offset_s: float = 0.0
-    yaw_rate_source: str = "gyro"
-    ahrs_deviation_rad: tuple[float, float] = (0.0, 0.0)
+    keyframe_scan_direction: int = one_of(-1, -1, 1)
+    sonar_time_offset_s: float = bounded(0.0, -MAX_TIME_OFFSET_S, MAX_TIME_OFFSET_S)
+    yaw_rate_source: str = one_of("gyro", *YAW_RATE_SOURCES)
+    #: each of the two within +-pi/2 (:func:`sonarslam.settings.check_fields` checks a tuple's
+    #: every element)
+    ahrs_deviation_rad: tuple[float, float] = bounded((0.0, 0.0), -math.pi / 2, math.pi / 2)
     gates: GateConfig = field(default_factory=GateConfig)
 
     def __post_init__(self) -> None:
-        if self.yaw_rate_source not in YAW_RATE_SOURCES:
-            raise ValueError(
-                f"yaw_rate_source must be one of {YAW_RATE_SOURCES}, got {self.yaw_rate_source!r}"
-            )
-        if self.keyframe_scan_direction not in (-1, 1):
-            raise ValueError(
-                f"keyframe_scan_direction must be +1 or -1, got {self.keyframe_scan_direction!r}"
-            )
-        check_within(
-            "sonar_time_offset_s", self.sonar_time_offset_s, -MAX_TIME_OFFSET_S, MAX_TIME_OFFSET_S
-        )
-        for v in self.ahrs_deviation_rad:
-            check_within("ahrs_deviation_rad", v, -math.pi / 2, math.pi / 2)
+        check_fields(self)
         if self.yaw_rate_source == "heading" and self.noise.ahrs_bias_walk_deg_per_sqrt_s > 0.0:
             # the heading between AHRS samples would follow the AHRS's own change, walk and all,
             # while the back ends' bias state would be told it walks: not one model
@@ -314,6 +346,16 @@ _SCHEMA: dict[str, dict[str, tuple[str, str | None]]] = {
 }
 
 
+#: Keys of ``sonarslam.toml`` that were renamed, with their new names: an old one is an error
+#: naming the new one (not an alias: one name per setting).
+RENAMED_KEYS: dict[str, dict[str, str]] = {
+    "gates": {
+        "ahrs_jump_drift_dps": "ahrs_jump_drift_deg_per_s",
+        "ahrs_max_rate_dps": "ahrs_max_rate_deg_per_s",
+    },
+}
+
+
 def _field_type(path: str) -> Any:
     """The annotated type of a dotted :class:`DatasetConfig` field."""
     cls: Any = DatasetConfig
@@ -343,6 +385,15 @@ def _tables(p: Path, text: str, data: dict[str, Any]) -> dict[str, dict[str, Any
                 p, line, f"[{name}] must be a table, got {table!r} ({type(table).__name__})"
             )
         unknown = sorted(set(table) - set(_SCHEMA[name]))
+        renamed = [k for k in unknown if k in RENAMED_KEYS.get(name, {})]
+        if renamed:
+            new = RENAMED_KEYS[name][renamed[0]]
+            raise DataError(
+                p,
+                toml_line(text, name, renamed[0]),
+                f"[{name}] {renamed[0]} was renamed {new} (one unit suffix per unit: deg/s is"
+                f" _deg_per_s); write {new} = ...",
+            )
         if unknown:
             raise DataError(
                 p,
@@ -362,7 +413,7 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
         A file that cannot be read or is not UTF-8 (with its line), a TOML syntax error (with
         its line), a table that is not one, an unknown key, a value of the wrong type,
         non-finite or out of range (naming the key, and its line when written ``key = ...``;
-        :mod:`sonarslam.datasets.settings`).
+        :mod:`sonarslam.settings`).
     """
     p = Path(path)
     base = base if base is not None else DatasetConfig()

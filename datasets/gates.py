@@ -12,7 +12,7 @@ fault                                  what happens
 =====================================  =======================================================
 repeated stamp (DVL, AHRS, GPS)        the later rows of a stamp are dropped
 DVL speed > ``dvl_max_speed_mps``      the row is flagged as without bottom lock
-AHRS rate > ``ahrs_max_rate_dps``      the sample is dropped
+AHRS rate > ``ahrs_max_rate_deg_per_s``      the sample is dropped
 AHRS heading jump the gyro does        the sample is dropped (judged against the last good
 not explain                            sample turned by the gyro's integral since)
 GPS row without a fix, or at 0/0       dropped from the evaluation (the reader flags it)
@@ -173,20 +173,25 @@ def gate_dvl(dvl: DvlSeries, gates: GateConfig, report: SensorReport) -> DvlSeri
     return out
 
 
-def _gyro_integral(t_s: FloatArray, rate_radps: FloatArray) -> FloatArray:
+def _gyro_integral(t_s: FloatArray, rate_rad_per_s: FloatArray) -> FloatArray:
     """Trapezoidal integral of the yaw rate from the first sample (rad), shape (N,)."""
-    steps = 0.5 * (rate_radps[1:] + rate_radps[:-1]) * np.diff(t_s)
+    steps = 0.5 * (rate_rad_per_s[1:] + rate_rad_per_s[:-1]) * np.diff(t_s)
     return np.concatenate([[0.0], np.cumsum(steps)])
 
 
 def gate_attitude(att: AttitudeSeries, gates: GateConfig, report: SensorReport) -> AttitudeSeries:
     """Drop repeated stamps, rate spikes and heading jumps the gyro does not explain."""
     repeat = _later_repeats(att.t)
-    spike = ~repeat & ~(np.abs(att.yaw_rate_radps) <= math.radians(gates.ahrs_max_rate_dps))
+    spike = ~repeat & ~(
+        np.abs(att.yaw_rate_rad_per_s) <= math.radians(gates.ahrs_max_rate_deg_per_s)
+    )
     keep = ~(repeat | spike)
-    t, yaw, rate = att.t[keep], att.yaw_rad[keep], att.yaw_rate_radps[keep]
+    t, yaw, rate = att.t[keep], att.yaw_rad[keep], att.yaw_rate_rad_per_s[keep]
     gyro = _gyro_integral(t, rate)
-    tol0, drift = math.radians(gates.ahrs_max_jump_deg), math.radians(gates.ahrs_jump_drift_dps)
+    tol0, drift = (
+        math.radians(gates.ahrs_max_jump_deg),
+        math.radians(gates.ahrs_jump_drift_deg_per_s),
+    )
     good = np.ones(t.size, dtype=bool)
     ref = 0
     ts, ys, gs = t.tolist(), yaw.tolist(), gyro.tolist()  # plain floats: one pass of 10^4-10^5
@@ -202,7 +207,7 @@ def gate_attitude(att: AttitudeSeries, gates: GateConfig, report: SensorReport) 
     report.counts["ahrs_heading_jumps"] = jumps
     for n, what in (
         (int(repeat.sum()), "repeating a stamp"),
-        (int(spike.sum()), f"with a yaw rate beyond {gates.ahrs_max_rate_dps:g} deg/s"),
+        (int(spike.sum()), f"with a yaw rate beyond {gates.ahrs_max_rate_deg_per_s:g} deg/s"),
         (jumps, f"whose heading jumps more than {gates.ahrs_max_jump_deg:g} deg off the gyro's"),
     ):
         if n:

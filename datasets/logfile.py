@@ -60,6 +60,7 @@ import numpy as np
 
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.features.geometry import FloatArray
+from sonarslam.settings import NUMBER
 
 __all__ = [
     "NUMBER",
@@ -85,8 +86,6 @@ __all__ = [
     "is_number",
 ]
 
-#: The grammar of a number in every text input (and of numbers given on the command line).
-NUMBER = r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
 #: Larger files are refused (they are not logs of this kind; reading them would exhaust memory).
 MAX_FILE_BYTES = 2**31
 #: Times are Unix seconds in ``[0, MAX_UNIX_TIME_S)`` (the year 2286).

@@ -84,7 +84,7 @@ def read_mti(path: str | Path) -> AttitudeSeries:
     return AttitudeSeries(
         t=d[:, 0].copy(),
         yaw_rad=heading_deg_to_yaw_rad(d[:, 3]),
-        yaw_rate_radps=-d[:, 6],
+        yaw_rate_rad_per_s=-d[:, 6],
         path=table.path,
     )
 

@@ -62,7 +62,7 @@ class Attitude:
 
     t: float
     yaw_rad: float
-    yaw_rate_radps: float = 0.0
+    yaw_rate_rad_per_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -103,13 +103,13 @@ class AttitudeSeries:
 
     t: FloatArray
     yaw_rad: FloatArray
-    yaw_rate_radps: FloatArray
+    yaw_rate_rad_per_s: FloatArray
     path: Path | None = None  # the log it was read from (for messages)
 
     def records(self) -> list[Attitude]:
         return [
             Attitude(float(t), float(y), float(r))
-            for t, y, r in zip(self.t, self.yaw_rad, self.yaw_rate_radps, strict=True)
+            for t, y, r in zip(self.t, self.yaw_rad, self.yaw_rate_rad_per_s, strict=True)
         ]
 
 

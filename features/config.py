@@ -4,11 +4,13 @@ the names, loadable from TOML."""
 from __future__ import annotations
 
 import tomllib
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from sonarslam.settings import bounded, check_fields, one_of, replace_checked
 
 __all__ = ["ExtractorConfig"]
 
@@ -22,18 +24,19 @@ class ExtractorConfig:
     Defaults marked *paper* are those of the seed paper (Song et al. 2010, section 3: sector,
     beta, min votes, confidence); the others are this project's choices, stated here. Settings
     for particular sonars and data (the marina's thresholded keyframes, the seed paper's pool)
-    are presets, decided in :mod:`sonarslam.slam.run.presets`.
+    are presets, decided in :mod:`sonarslam.slam.run.presets`. Each field's default and range
+    are in its definition below.
 
     Attributes
     ----------
     intensity_threshold : float
-        Segmentation (a): threshold bins have intensity ``>=`` this (0-255). 80.
+        Segmentation (a): threshold bins have intensity ``>=`` this (0-255).
     max_intensity_difference : float
-        Segmentation (b): keep bins within this of the beam's strongest (0-255). 40.
+        Segmentation (b): keep bins within this of the beam's strongest (0-255).
     min_distance_m : float
-        Segmentation (c): of two kept bins closer than this, drop the weaker (m). 0.5.
+        Segmentation (c): of two kept bins closer than this, drop the weaker (m).
     min_range_m : float
-        Near-field dead zone (m). 0.5.
+        Near-field dead zone (m).
     max_range_m : float or None
         Bins beyond this range (m) take no part (None: the head's range). On thick echo bands
         a wall seen far off and at a slant gives a line metres off the wall.
@@ -56,13 +59,13 @@ class ExtractorConfig:
     min_votes : int
         Votes needed by a line: 15 (*paper*, pool test).
     max_lines_per_vote : int
-        Most lines per vote. 16.
+        Most lines per vote.
     suppress_theta_cells, suppress_rho_cells : int
-        Half sizes of the window around a winner whose voters are removed with it (cells). 1, 1.
+        Half sizes of the window around a winner whose voters are removed with it (cells).
     vote_every_n_beams : int
-        Beams between votes once the store holds a full sector. 10.
+        Beams between votes once the store holds a full sector.
     requery_poses : bool
-        Re-query the pose source for every stored beam at each vote (smoothing back ends). True.
+        Re-query the pose source for every stored beam at each vote (smoothing back ends).
     covariance_method : {"fit", "seed", "seed-at-fit"}
         :mod:`sonarslam.features.uncertainty` method: "fit" (weighted least squares) or "seed" (the
         paper's overlap-ratio ellipse; its line is the ellipse centre), or "seed-at-fit": the
@@ -71,10 +74,11 @@ class ExtractorConfig:
     confidence : float
         Probability of the seed ellipse: 0.95 (*paper*).
     overlap_similarity : float
-        Seed: similar cells have an overlap ratio ``>=`` this times the winner's. 0.8.
+        Seed: similar cells have an overlap ratio ``>=`` this times the winner's.
     seed_window_theta_cells, seed_window_rho_cells : int
-        Seed: half sizes of the searched neighbourhood (cells). 20, 10: the similar-overlap
-        region of a wall is long in theta (the beam width hides small rotations).
+        Seed: half sizes of the searched neighbourhood (cells); the theta one the larger: the
+        similar-overlap region of a wall is long in theta (the beam width hides small
+        rotations).
     return_model : {"axis", "first_return"}
         Fit: where in the beam a final bin's echo comes from. "axis" for raw intensities (the
         strongest bin), "first_return" for thresholded masks (the nearest bin of a run).
@@ -87,160 +91,101 @@ class ExtractorConfig:
         echo's peak or first return, which does not average down with the number of voters
         (:mod:`sonarslam.features.uncertainty`); None: ``bin_size / sqrt(12)``; 0 leaves it out.
     pose_uncertainty : bool
-        Fit: add the relative pose uncertainty from ``PoseSource.covariance``. False.
+        Fit: add the relative pose uncertainty from ``PoseSource.covariance``.
     line_sigma_rho_m, line_sigma_theta_rad : float
         Systematic error of a line, added to every line's covariance as
         ``diag(line_sigma_rho_m^2, line_sigma_theta_rad^2)`` (m, rad): what neither the echoes'
         noise nor the poses explain (a wall that is not straight, an echo band's structure, the
         sector's rotation between beams); it does not shrink with the number of voters. A
         dataset calibration (``[noise] line_sigma_rho_m``, ``line_sigma_theta_deg``, GPS-free:
-        ``sonarslam calibrate --line-noise``). 0, 0.
+        ``sonarslam calibrate --line-noise``).
     fit_iterations : int
-        Fit: Gauss-Newton iterations. 5.
+        Fit: Gauss-Newton iterations.
     fit_gate_sigma : float
         Fit: after fitting the winner's voters, the fit is redone on every stored final bin
         whose echo lies within this many sigmas of the line (from a beam that sees it), so
-        that the voters' truncation to one rho cell does not bias it; 0 fits the voters only. 3.
+        that the voters' truncation to one rho cell does not bias it; 0 fits the voters only.
     fit_gate_iterations : int
-        Fit: rounds of gathering the support and refitting. 2.
+        Fit: rounds of gathering the support and refitting.
     endpoint_trim_fraction : float
-        Segment ends are the ``f`` and ``1 - f`` quantiles of the voters along the line. 0.05.
+        Segment ends are the ``f`` and ``1 - f`` quantiles of the voters along the line.
     remove_on_line_sigma : float
         After a line is found, the stored final bins whose echoes lie within this many sigmas of
         it are removed with its voters, *at any incidence* (from every beam that faces it). A wall
-        also returns echoes beyond ``beta`` (the simulator's walls return up to ~60 deg); the
-        sonar model cannot give them to the wall's line, so left in the store they voted for
-        spurious lines a few degrees off the wall (3-4 per 270 deg pool scan, 3-30 deg off).
-        Not in the paper (it removes the voters only); 0 disables. 3.
+        also returns echoes beyond ``beta``; the sonar model cannot give them to the wall's
+        line, so left in the store they vote for spurious lines a few degrees off the wall
+        (docs/calibration.md gives the simulator's figures). Not in the paper (it removes the
+        voters only); 0 disables.
     """
 
-    intensity_threshold: float = 80.0
-    max_intensity_difference: float = 40.0
-    min_distance_m: float = 0.5
-    min_range_m: float = 0.5
-    max_range_m: float | None = None
-    sector_deg: float = 180.0
-    beam_width_rad: float | None = None
-    incidence_beta_rad: float = 25.0 * _DEG
-    vote_model: str = "arc"
-    h_bearings: int | None = None
-    p_angles: int | None = None
-    theta_res_rad: float | None = None
-    rho_res_m: float | None = None
-    min_votes: int = 15
-    max_lines_per_vote: int = 16
-    suppress_theta_cells: int = 1
-    suppress_rho_cells: int = 1
-    vote_every_n_beams: int = 10
+    intensity_threshold: float = bounded(80.0, 0.0, 255.0)
+    max_intensity_difference: float = bounded(40.0, 0.0, 255.0)
+    min_distance_m: float = bounded(0.5, 0.0, 1e3)
+    min_range_m: float = bounded(0.5, 0.0, 1e4)
+    max_range_m: float | None = bounded(None, 0.0, 1e4)
+    sector_deg: float = bounded(180.0, 0.0, 360.0, low_open=True)
+    beam_width_rad: float | None = bounded(None, 1e-4, 0.5 * np.pi)
+    incidence_beta_rad: float = bounded(
+        25.0 * _DEG, 0.0, 0.5 * np.pi, low_open=True, high_open=True
+    )
+    vote_model: str = one_of("arc", "arc", "samples")
+    h_bearings: int | None = bounded(None, 1, 1000)
+    p_angles: int | None = bounded(None, 1, 1000)
+    theta_res_rad: float | None = bounded(None, 0.1 * _DEG, 0.125 * np.pi)
+    rho_res_m: float | None = bounded(None, 0.01, 10.0)
+    min_votes: int = bounded(15, 1, 1e9)
+    max_lines_per_vote: int = bounded(16, 1, 1000)
+    suppress_theta_cells: int = bounded(1, 0, 1000)
+    suppress_rho_cells: int = bounded(1, 0, 1000)
+    vote_every_n_beams: int = bounded(10, 1, 1e9)
     requery_poses: bool = True
-    covariance_method: str = "fit"
-    confidence: float = 0.95
-    overlap_similarity: float = 0.8
-    seed_window_theta_cells: int = 20
-    seed_window_rho_cells: int = 10
-    return_model: str = "axis"
-    range_sigma_m: float | None = None
-    bearing_sigma_rad: float | None = None
-    range_offset_sigma_m: float | None = None
+    covariance_method: str = one_of("fit", "fit", "seed", "seed-at-fit")
+    confidence: float = bounded(0.95, 0.0, 1.0, low_open=True, high_open=True)
+    overlap_similarity: float = bounded(0.8, 1e-6, 1.0)
+    seed_window_theta_cells: int = bounded(20, 0, 1000)
+    seed_window_rho_cells: int = bounded(10, 0, 1000)
+    return_model: str = one_of("axis", "axis", "first_return")
+    range_sigma_m: float | None = bounded(None, 1e-6, 100.0)
+    bearing_sigma_rad: float | None = bounded(None, 1e-6, np.pi)
+    range_offset_sigma_m: float | None = bounded(None, 0.0, 100.0)
     pose_uncertainty: bool = False
-    line_sigma_rho_m: float = 0.0
-    line_sigma_theta_rad: float = 0.0
-    fit_iterations: int = 5
-    fit_gate_sigma: float = 3.0
-    fit_gate_iterations: int = 2
-    endpoint_trim_fraction: float = 0.05
-    remove_on_line_sigma: float = 3.0
+    line_sigma_rho_m: float = bounded(0.0, 0.0, 100.0)
+    line_sigma_theta_rad: float = bounded(0.0, 0.0, 0.5 * np.pi)
+    fit_iterations: int = bounded(5, 1, 100)
+    fit_gate_sigma: float = bounded(3.0, 0.0, 100.0)
+    fit_gate_iterations: int = bounded(2, 0, 100)
+    endpoint_trim_fraction: float = bounded(0.05, 0.0, 0.5, high_open=True)
+    remove_on_line_sigma: float = bounded(3.0, 0.0, 100.0)
 
     def __post_init__(self) -> None:
-        if self.vote_model not in ("arc", "samples"):
-            raise ValueError(f"vote_model must be 'arc' or 'samples', got {self.vote_model!r}")
-        if self.covariance_method not in ("fit", "seed", "seed-at-fit"):
-            raise ValueError(
-                "covariance_method must be 'fit', 'seed' or 'seed-at-fit', got "
-                f"{self.covariance_method!r}"
-            )
-        if self.return_model not in ("axis", "first_return"):
-            raise ValueError(
-                f"return_model must be 'axis' or 'first_return', got {self.return_model!r}"
-            )
-        if not 0.0 < self.sector_deg <= 360.0:
-            raise ValueError(f"sector_deg must be in (0, 360], got {self.sector_deg}")
-        if self.vote_every_n_beams < 1 or self.min_votes < 1:
-            raise ValueError("vote_every_n_beams and min_votes must be >= 1")
-        if not 0.0 < self.confidence < 1.0:
-            raise ValueError(f"confidence must be in (0, 1), got {self.confidence}")
-        if not 0.0 <= self.endpoint_trim_fraction < 0.5:
-            raise ValueError("endpoint_trim_fraction must be in [0, 0.5)")
-        if not 0.0 < self.incidence_beta_rad < 0.5 * np.pi:
-            raise ValueError("incidence_beta_rad must be in (0, pi/2)")
-        if self.remove_on_line_sigma < 0.0:
-            raise ValueError("remove_on_line_sigma must be >= 0")
+        check_fields(self)
         if self.max_range_m is not None and not self.max_range_m > self.min_range_m:
             raise ValueError(
                 f"max_range_m must be > min_range_m ({self.min_range_m}), got {self.max_range_m}"
             )
-        if self.range_offset_sigma_m is not None and self.range_offset_sigma_m < 0.0:
-            raise ValueError("range_offset_sigma_m must be >= 0 (or None)")
-        self._check_ranges()
-
-    def _check_ranges(self) -> None:
-        """The ranges of the remaining numeric fields: the settings that size a voting space or
-        a loop are bounded, so that a typo is an error, not an hour of work or a memory error
-        (None means "from the head" where a field allows it)."""
-        bounds: dict[str, tuple[float, float]] = {
-            "intensity_threshold": (0.0, 255.0),
-            "max_intensity_difference": (0.0, 255.0),
-            "min_distance_m": (0.0, 1e3),
-            "min_range_m": (0.0, 1e4),
-            "max_range_m": (0.0, 1e4),
-            "beam_width_rad": (1e-4, 0.5 * np.pi),
-            "h_bearings": (1, 1000),
-            "p_angles": (1, 1000),
-            "theta_res_rad": (0.1 * _DEG, 0.125 * np.pi),
-            "rho_res_m": (0.01, 10.0),
-            "min_votes": (1, 1e9),
-            "max_lines_per_vote": (1, 1000),
-            "suppress_theta_cells": (0, 1000),
-            "suppress_rho_cells": (0, 1000),
-            "vote_every_n_beams": (1, 1e9),
-            "overlap_similarity": (1e-6, 1.0),
-            "seed_window_theta_cells": (0, 1000),
-            "seed_window_rho_cells": (0, 1000),
-            "range_sigma_m": (1e-6, 100.0),
-            "bearing_sigma_rad": (1e-6, np.pi),
-            "range_offset_sigma_m": (0.0, 100.0),
-            "fit_iterations": (1, 100),
-            "fit_gate_sigma": (0.0, 100.0),
-            "fit_gate_iterations": (0, 100),
-            "remove_on_line_sigma": (0.0, 100.0),
-            "line_sigma_rho_m": (0.0, 100.0),
-            "line_sigma_theta_rad": (0.0, 0.5 * np.pi),
-        }
-        for name, (low, high) in bounds.items():
-            value = getattr(self, name)
-            if value is not None and not low <= value <= high:
-                raise ValueError(f"{name} must be in [{low:g}, {high:g}], got {value!r}")
 
     @classmethod
-    def from_dict(cls, values: dict[str, Any]) -> ExtractorConfig:
-        """Config from a mapping of field names (unknown names are an error)."""
-        known = {f.name for f in fields(cls)}
-        unknown = set(values) - known
-        if unknown:
-            raise ValueError(f"unknown ExtractorConfig fields: {sorted(unknown)}")
-        return cls(**values)
+    def from_dict(cls, values: dict[str, Any], prefix: str = "") -> ExtractorConfig:
+        """Config from a mapping of field names over the defaults, each value checked like
+        every other setting (:func:`sonarslam.settings.replace_checked`: type, range, known
+        name). Raises :class:`sonarslam.settings.SettingError` naming the key (``prefix``
+        before it)."""
+        return replace_checked(cls(), values, prefix=prefix, parse_strings=False)
 
     @classmethod
     def from_toml(cls, path: str | Path, table: str | None = "extractor") -> ExtractorConfig:
         """Load from a TOML file: the ``[extractor]`` table if present, else the top level.
 
-        Fields left out take their defaults; ``None`` fields are left out to stay None.
+        Fields left out take their defaults; ``None`` fields are left out to stay None. A
+        wrong key or value is a :class:`sonarslam.settings.SettingError` naming the file and
+        the key (``sonarslam run --config`` also gives its line).
         """
         with open(path, "rb") as f:
             data = tomllib.load(f)
+        where = ""
         if table is not None and table in data:
-            data = data[table]
-        return cls.from_dict(data)
+            data, where = data[table], f"[{table}] "
+        return cls.from_dict(data, prefix=f"{path}: {where}")
 
     def to_dict(self) -> dict[str, Any]:
         """All fields, ``None`` ones included (TOML has no null: drop them to write TOML)."""

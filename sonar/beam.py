@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from sonarslam.settings import bounded, check_fields, one_of
+
 __all__ = [
     "FloatArray",
     "SonarBeam",
@@ -27,6 +29,9 @@ def bin_range_m(bin_index: npt.ArrayLike, bin_size_m: float) -> FloatArray:
     return (np.asarray(bin_index, dtype=np.float64) + 1.0) * bin_size_m
 
 
+#: Largest echo range offset of a head (m), either sign: an echo is kept metres, not tens of
+#: metres, behind its surface.
+MAX_RANGE_OFFSET_M = 10.0
 #: Largest lever arm of a sensor mounting (m).
 MAX_LEVER_M = 100.0
 #: Most bins per beam of a head (MSIS heads log up to ~1,500): more is a corrupt setting that
@@ -64,28 +69,17 @@ class SonarHead:
         The echo's range minus the surface's (m), subtracted from every bin's range.
     """
 
-    n_bins: int = 500
-    bin_size_m: float = 0.1
-    step_rad: float = float(np.deg2rad(1.8))
-    beam_width_rad: float = float(np.deg2rad(3.0))
-    angle_sense: int = -1
-    range_offset_m: float = 0.0
+    n_bins: int = bounded(500, 1, MAX_BINS)
+    bin_size_m: float = bounded(0.1, 0.0, np.inf, low_open=True, high_open=True)
+    step_rad: float = bounded(float(np.deg2rad(1.8)), MIN_STEP_RAD, np.pi, high_open=True)
+    beam_width_rad: float = bounded(
+        float(np.deg2rad(3.0)), 0.0, np.pi / 2, low_open=True, high_open=True
+    )
+    angle_sense: int = one_of(-1, -1, 1)
+    range_offset_m: float = bounded(0.0, -MAX_RANGE_OFFSET_M, MAX_RANGE_OFFSET_M)
 
     def __post_init__(self) -> None:
-        if not 0 < self.n_bins <= MAX_BINS:
-            raise ValueError(f"SonarHead.n_bins must be in 1-{MAX_BINS}, got {self.n_bins}")
-        if not 0.0 < self.bin_size_m < np.inf:
-            raise ValueError(f"SonarHead.bin_size_m must be positive, got {self.bin_size_m}")
-        if not MIN_STEP_RAD <= self.step_rad < np.pi:
-            raise ValueError(
-                f"SonarHead.step_rad must be in [{MIN_STEP_RAD:.6f}, pi), got {self.step_rad}"
-            )
-        if not 0.0 < self.beam_width_rad < np.pi / 2:
-            raise ValueError(
-                f"SonarHead.beam_width_rad must be in (0, pi/2), got {self.beam_width_rad}"
-            )
-        if self.angle_sense not in (-1, 1):
-            raise ValueError(f"SonarHead.angle_sense must be +1 or -1, got {self.angle_sense}")
+        check_fields(self)
         if not abs(self.range_offset_m) < self.n_bins * self.bin_size_m:
             raise ValueError(
                 f"SonarHead.range_offset_m must be finite and inside the range, got {self.range_offset_m}"
@@ -134,17 +128,13 @@ class Mounting:
         Where the numbers come from (calibration method, drawing, ...).
     """
 
-    x_m: float = 0.0
-    y_m: float = 0.0
-    yaw_rad: float = 0.0
+    x_m: float = bounded(0.0, -MAX_LEVER_M, MAX_LEVER_M)
+    y_m: float = bounded(0.0, -MAX_LEVER_M, MAX_LEVER_M)
+    yaw_rad: float = bounded(0.0, -2.0 * np.pi, 2.0 * np.pi)
     source: str = "identity"
 
     def __post_init__(self) -> None:
-        for name, value in (("x_m", self.x_m), ("y_m", self.y_m)):  # each named alone
-            if not abs(value) <= MAX_LEVER_M:
-                raise ValueError(f"{name} must be within +-{MAX_LEVER_M:g} m, got {value}")
-        if not abs(self.yaw_rad) <= 2.0 * np.pi:
-            raise ValueError(f"Mounting.yaw_rad must be within +-2 pi, got {self.yaw_rad}")
+        check_fields(self)
 
     def as_pose(self) -> FloatArray:
         """``bTs`` as an array ``(x_m, y_m, yaw_rad)``."""

@@ -101,7 +101,7 @@ def check_dvl(result: Any, mutated: bytes, original: bytes, m: Mutation, folder:
 
 
 def check_mti(result: Any, mutated: bytes, original: bytes, m: Mutation, folder: Path) -> list[str]:
-    got = np.column_stack([result.t, result.yaw_rad, result.yaw_rate_radps])
+    got = np.column_stack([result.t, result.yaw_rad, result.yaw_rate_rad_per_s])
     problems = _finite(got)
     if problems:
         return problems
@@ -293,7 +293,7 @@ def check_dataset(ds: Dataset) -> list[str]:
         "dvl.t": ds.dvl.t,
         "dvl.v": ds.dvl.v_mps[ds.dvl.valid],
         "ahrs": ds.attitude.yaw_rad,
-        "ahrs.rate": ds.attitude.yaw_rate_radps,
+        "ahrs.rate": ds.attitude.yaw_rate_rad_per_s,
         "ahrs.t": ds.attitude.t,
     }
     if ds.gps is not None:
@@ -310,7 +310,7 @@ def check_dataset(ds: Dataset) -> list[str]:
     ):
         if np.any(np.diff(t) <= 0):
             out.append(f"{name} times repeat or go back")
-    if np.any(np.abs(ds.attitude.yaw_rate_radps) > math.radians(g.ahrs_max_rate_dps)):
+    if np.any(np.abs(ds.attitude.yaw_rate_rad_per_s) > math.radians(g.ahrs_max_rate_deg_per_s)):
         out.append("an AHRS rate over the gate")
     if ds.gps is not None and ds.gps.en_m.size and np.any(np.hypot(*ds.gps.en_m.T) > 1e6):
         out.append("a GPS fix 1000 km away (0/0?)")

@@ -15,7 +15,7 @@ Its outcome is one of
   value it kept equal to the uncut file's; for a dataset, the gates' promises (no DVL speed
   over the limit, no GPS fix at 0/0 or repeated, no unexplained AHRS jump...);
 * ``data_error``: a :class:`sonarslam.datasets.errors.DataError` (or for settings a
-  :class:`sonarslam.datasets.settings.SettingError`); the oracle checks that it names the mutated file
+  :class:`sonarslam.settings.SettingError`); the oracle checks that it names the mutated file
   and, when it names a line, that the line is one the mutation changed (or the data line
   after one: time going backwards is seen there);
 * ``foreign``: any other exception (a bug); ``hang``: no answer within the time limit.
@@ -42,8 +42,8 @@ from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.islog import read_is_log
 from sonarslam.datasets.keyframes import read_keyframe_times, read_pcd_xy
 from sonarslam.datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti, read_setup
-from sonarslam.datasets.settings import SettingError
 from sonarslam.datasets.source import open_dataset, read_truth
+from sonarslam.settings import SettingError
 from sonarslam.slam.run.presets import (
     apply_overrides,
     backend_config,

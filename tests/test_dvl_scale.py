@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from gtsam.symbol_shorthand import K
 
+from sonarslam.datasets.config import NoiseConfig
 from sonarslam.datasets.simulator.scenario import make_scenario
 from sonarslam.datasets.source import open_dataset
 from sonarslam.slam.backends.ekf import N_VEHICLE, EkfConfig, LineEkf
@@ -63,7 +64,7 @@ def test_the_dvl_scale_error_is_found(drift: str, name: str) -> None:
 def test_the_ekf_prediction_jacobian_matches_numerical_derivatives() -> None:
     """``F`` of :meth:`LineEkf.predict` (pose, misalignment, DVL scale and gyro bias columns)
     is the derivative of the step it takes: P' = F P F^T + Q with P = eps I and Q subtracted."""
-    cfg = EkfConfig(estimate_misalignment=True, dvl_scale_sigma=0.02)
+    cfg = EkfConfig(estimate_misalignment=True, noise=NoiseConfig(dvl_scale_sigma=0.02))
     step = MotionStep(1.0, 1.0, 0.8, -0.3, 0.05, 0.0, 1.0, gyro_dt_s=1.0)
 
     def propagate(x0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

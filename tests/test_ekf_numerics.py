@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter
 
+from sonarslam.datasets.config import NoiseConfig
 from sonarslam.slam.backends.ekf import N_VEHICLE, EkfConfig, LineEkf, scalar_joseph_update
 from sonarslam.slam.model.motion import MotionStep
 from sonarslam.sonar.beam import Mounting
@@ -54,7 +55,7 @@ def test_scalar_joseph_update_keeps_a_near_singular_covariance_positive() -> Non
 
 
 def _filter_with_landmarks(rng: np.random.Generator, n_landmarks: int) -> LineEkf:
-    cfg = EkfConfig(estimate_misalignment=True, dvl_scale_sigma=0.02)
+    cfg = EkfConfig(estimate_misalignment=True, noise=NoiseConfig(dvl_scale_sigma=0.02))
     ekf = LineEkf(0.0, np.array([1.0, -2.0, 0.3]), np.eye(3), Mounting(), cfg)
     n = N_VEHICLE + 2 * n_landmarks
     x = rng.normal(size=n)

@@ -38,14 +38,14 @@ class ConstantVelocityPoses:
 
     start: tuple[float, float, float] = (0.0, 0.0, 0.0)
     velocity_mps: tuple[float, float] = (0.0, 0.0)
-    yaw_rate_radps: float = 0.0
+    yaw_rate_rad_per_s: float = 0.0
     t0_s: float = 0.0
 
     def poses(self, t_s: npt.ArrayLike) -> np.ndarray:
         dt = np.atleast_1d(np.asarray(t_s, dtype=np.float64)) - self.t0_s
         x = self.start[0] + self.velocity_mps[0] * dt
         y = self.start[1] + self.velocity_mps[1] * dt
-        yaw = wrap_angle(self.start[2] + self.yaw_rate_radps * dt)
+        yaw = wrap_angle(self.start[2] + self.yaw_rate_rad_per_s * dt)
         return np.stack([x, y, yaw], axis=-1)
 
     def covariance(self, t_s: float) -> np.ndarray | None:
@@ -311,7 +311,7 @@ def test_motion_correction_with_truth_poses_and_blur_without() -> None:
     truth = ConstantVelocityPoses(
         start=(-1.0, 1.0, 0.3),
         velocity_mps=(0.25, -0.15),
-        yaw_rate_radps=np.deg2rad(2.0),
+        yaw_rate_rad_per_s=np.deg2rad(2.0),
         t0_s=500.0,
     )
     walls_w = wall_lines_world(HARBOUR_WALLS)
@@ -406,6 +406,11 @@ def test_config_toml_round_trip(tmp_path: Path) -> None:
     assert ExtractorConfig.from_toml(path) == cfg
     with pytest.raises(ValueError, match="unknown"):
         ExtractorConfig.from_dict({"min_vote": 3})
+    path.write_text('[extractor]\nmin_votes = "12"\n')
+    with pytest.raises(
+        ValueError, match=r"extractor.toml: \[extractor\] min_votes: must be a whole"
+    ):
+        ExtractorConfig.from_toml(path)  # the file's loader checks types like every other
     with pytest.raises(ValueError):
         ExtractorConfig(covariance_method="ellipse")
 

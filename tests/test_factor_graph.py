@@ -289,7 +289,7 @@ def run_room(
     )
     sigma_w = np.deg2rad(0.5)  # AHRS white noise in the data (the model says 1 deg at 1 Hz)
     P0 = np.diag([0.3**2, 0.3**2, sigma_w**2])
-    bias = rng.normal(0.0, np.deg2rad(cfg.ahrs_bias_sigma_deg)) if random_gauge else 0.0
+    bias = rng.normal(0.0, np.deg2rad(cfg.noise.ahrs_bias_sigma_deg)) if random_gauge else 0.0
     start = truth[0].copy()
     if random_gauge:
         start[:2] += rng.normal(0.0, 0.3, 2)
@@ -386,11 +386,14 @@ def test_the_ahrs_bias_is_unobservable_so_its_prior_alone_fixes_it(room: Synthet
     for i, record in enumerate(be.records):
         e0, e1 = be.graph.at(i).error(values), be.graph.at(i).error(rotated)
         if record.kind is FactorKind.PRIOR_VECTOR:
-            assert e1 > e0 + 0.5 * (alpha / np.deg2rad(be.config.ahrs_bias_sigma_deg)) ** 2 - 1e-6
+            assert (
+                e1
+                > e0 + 0.5 * (alpha / np.deg2rad(be.config.noise.ahrs_bias_sigma_deg)) ** 2 - 1e-6
+            )
             continue
         assert e1 == pytest.approx(e0, rel=1e-6, abs=1e-9)
     sigma_b = np.sqrt(be.isam.marginalCovariance(B(0))[0, 0])
-    assert sigma_b == pytest.approx(np.deg2rad(be.config.ahrs_bias_sigma_deg), rel=0.01)
+    assert sigma_b == pytest.approx(np.deg2rad(be.config.noise.ahrs_bias_sigma_deg), rel=0.01)
 
 
 def test_pose_covariance_is_consistent_over_monte_carlo_runs():
@@ -436,7 +439,10 @@ def test_between_nodes_the_pose_is_the_ekf_prediction():
     # X(0)'s marginal: the prior's position, the AHRS start heading (its white noise as the
     # back ends model it, not P0's) plus the bias prior
     P = P0.copy()
-    P[2, 2] = np.deg2rad(cfg.ahrs_white_sigma_deg) ** 2 + np.deg2rad(cfg.ahrs_bias_sigma_deg) ** 2
+    P[2, 2] = (
+        np.deg2rad(cfg.noise.ahrs_white_sigma_deg) ** 2
+        + np.deg2rad(cfg.noise.ahrs_bias_sigma_deg) ** 2
+    )
     assert np.allclose(be.pose_cov, P, atol=1e-9)
     assert np.allclose(ekf.P[POSE, POSE], P, atol=1e-12)
     t, held_from = 100.0, 100.0

@@ -21,7 +21,7 @@ from sonarslam.datasets.config import _SCHEMA as TOML_SCHEMA  # what each key of
 from sonarslam.datasets.config import load_dataset_config
 from sonarslam.datasets.errors import DataError
 from sonarslam.datasets.logfile import NUMBER, read_table
-from sonarslam.datasets.settings import SettingError
+from sonarslam.settings import SettingError
 from sonarslam.slam.run.presets import parse_settings
 from tests.fuzz_inputs import Mutation, build_seeds, ref_lines
 from tests.fuzz_oracles import check_toml, match_rows

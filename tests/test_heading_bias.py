@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from gtsam.symbol_shorthand import B
 
+from sonarslam.datasets.config import NoiseConfig
 from sonarslam.datasets.simulator import simulate
 from sonarslam.datasets.source import open_dataset
 from sonarslam.slam.backends.registry import backend_spec
@@ -21,7 +22,7 @@ WALK_DEG = 0.2  # deg / sqrt(s)
 def _run(name: str, walk_deg: float, headings: bool, seconds: int = 120):
     spec = backend_spec(name)
     extra = {"node_period_s": 5.0} if name == "isam2" else {}
-    config = spec.config_type(ahrs_bias_walk_deg_per_sqrt_s=walk_deg, **extra)
+    config = spec.config_type(noise=NoiseConfig(ahrs_bias_walk_deg_per_sqrt_s=walk_deg), **extra)
     P0 = np.diag([0.1, 0.1, np.deg2rad(1.0) ** 2])
     be = spec.make(0.0, np.zeros(3), P0, Mounting(), config)
     rng = np.random.default_rng(4)
@@ -45,7 +46,7 @@ def _bias_var(name: str, be) -> float:
 def test_without_headings_the_bias_variance_grows_by_the_walk(name: str):
     be, config = _run(name, WALK_DEG, headings=False)
     t = be.t_s if name == "ekf" else be.nodes.t_s[-1]
-    expected = np.deg2rad(config.ahrs_bias_sigma_deg) ** 2 + np.deg2rad(WALK_DEG) ** 2 * t
+    expected = np.deg2rad(config.noise.ahrs_bias_sigma_deg) ** 2 + np.deg2rad(WALK_DEG) ** 2 * t
     assert _bias_var(name, be) == pytest.approx(expected, rel=1e-6)
 
 
@@ -86,7 +87,7 @@ def test_no_back_end_learns_the_unobservable_rotation(drift_300s: str, name: str
     tr = run.trajectory
     assert tr.covs is not None
     var_yaw = tr.covs[:, 2, 2]
-    sigma_b = np.deg2rad(run.closed_loop.backend.config.ahrs_bias_sigma_deg)
+    sigma_b = np.deg2rad(run.closed_loop.backend.config.noise.ahrs_bias_sigma_deg)
     assert var_yaw.min() >= 0.99 * sigma_b**2
     err = np.angle(np.exp(1j * (tr.poses_wTb[:, 2] - truth_trajectory(ds).poses(tr.t_s)[:, 2])))
     assert np.mean(err**2 / var_yaw) < 2.5  # one run of a correlated series: a loose bound

@@ -181,7 +181,7 @@ def gyro_harbour(tmp_path_factory):
     scenario = make_scenario("harbour", 10001, 300.0)
     out = {}
     for name, bias in (("clean", 0.0), ("biased", 0.01)):
-        noise = replace(scenario.noise, ahrs_gyro_bias_radps=bias)
+        noise = replace(scenario.noise, ahrs_gyro_bias_rad_per_s=bias)
         sim = simulate_records(replace(scenario, noise=noise))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

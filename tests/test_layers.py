@@ -11,6 +11,9 @@ allowed edges:
 * ``sonar`` imports nothing of the project but itself;
 * ``features`` imports ``sonar`` and itself;
 * ``datasets`` imports ``sonar``, ``features.geometry`` and itself;
+* the neutral modules at the namespace's root (``sonarslam/settings.py``: typed settings and
+  their checks) belong to no layer: every layer may import them, and they import nothing of the
+  project;
 * nothing outside ``slam`` imports ``slam``;
 * inside ``slam``, a module imports its own layer or lower ones, in this order:
   ``io`` < ``model`` < ``mapping`` < ``backends`` < ``eval`` < ``run`` < ``cli``.
@@ -29,6 +32,8 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("sonar", "features", "datasets", "slam")
 SLAM_LAYERS = ("io", "model", "mapping", "backends", "eval", "run", "cli")
+#: Modules of ``sonarslam/`` itself that every layer may import (they import no layer).
+NEUTRAL = ("settings",)
 
 
 NAMESPACE = "sonarslam"
@@ -42,6 +47,8 @@ def _modules() -> list[tuple[str, Path]]:
             parts = path.relative_to(ROOT).with_suffix("").parts
             name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
             out.append((name, path))
+    for name in NEUTRAL:
+        out.append((name, ROOT / NAMESPACE / f"{name}.py"))
     return out
 
 
@@ -71,9 +78,13 @@ def _imports(path: Path) -> list[tuple[str, int, bool]]:
 
 def _allowed(importer: str, imported: str) -> bool:
     top = imported.split(".")[0]
-    if top not in PACKAGES:
-        return True
     own = importer.split(".")[0]
+    if own in NEUTRAL:
+        return False  # a neutral module imports nothing of the project
+    if top in NEUTRAL:
+        return True
+    if top not in PACKAGES:
+        return False  # sonarslam.<something that is neither a layer nor neutral>
     if own == "sonar":
         return top == "sonar"
     if own == "features":
@@ -125,7 +136,20 @@ def test_the_rules_catch_a_wrong_edge():
     assert not _allowed("datasets.source", "features.extractor")
     assert not _allowed("slam.model.motion", "slam.backends.ekf")
     assert not _allowed("slam.eval.truth", "slam.run.sources")
-    assert _allowed("slam.run.run", "slam.eval.ate") and _allowed("datasets.marina", "numpy")
+    assert _allowed("slam.run.run", "slam.eval.ate")
+    assert not _allowed("settings", "datasets.errors")
+    assert not _allowed("settings", "sonar.beam")
+    assert not _allowed("features.config", "cli")
+    for layer in ("sonar.beam", "features.config", "datasets.config", "slam.io.files"):
+        assert _allowed(layer, "settings")
+
+
+def test_the_neutral_modules_import_no_layer():
+    """``sonarslam.settings`` is imported by every layer; it imports none (and not the facade)."""
+    for name in NEUTRAL:
+        path = ROOT / NAMESPACE / f"{name}.py"
+        found = [m for m, _, _ in _imports(path) if m.split(".")[0] in (NAMESPACE, *PACKAGES)]
+        assert found == [], f"{path.relative_to(ROOT)} imports {found}"
 
 
 def test_the_landmark_layer_imports_nothing_of_the_back_ends():

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from sonarslam.datasets.config import NoiseConfig
 from sonarslam.datasets.records import AttitudeSeries, DvlSeries
 from sonarslam.features.geometry import wrap_angle
 from sonarslam.slam.eval.ate import ate_against_gps
@@ -29,6 +30,8 @@ from tests.conftest import needs_marina
 
 DVL_MOUNT = Mounting(yaw_rad=-np.pi / 2)  # DVL x to starboard, as the marina's
 AHRS_MOUNT = Mounting(yaw_rad=np.deg2rad(-30.0))
+#: the motion noise of the [noise] table's defaults
+NOISE = MotionNoise.from_config(NoiseConfig())
 
 
 def circle_run(dropouts: slice | None = None):
@@ -100,7 +103,15 @@ def test_motion_steps_share_the_error_of_a_held_dvl_sample():
 def test_dead_reckoning_follows_a_noiseless_circle():
     dvl, att, truth = circle_run()
     tr = dead_reckoning(
-        att, dvl, DVL_MOUNT, AHRS_MOUNT, truth(np.array([0.0]))[0], np.eye(3) * 1e-4, 0.0, 299.0
+        att,
+        dvl,
+        DVL_MOUNT,
+        AHRS_MOUNT,
+        truth(np.array([0.0]))[0],
+        np.eye(3) * 1e-4,
+        0.0,
+        299.0,
+        NOISE,
     )
     err = np.hypot(*(tr.poses_wTb[:, :2] - truth(tr.t_s)[:, :2]).T)
     # zero-order hold of heading over 0.1 s on a 20 m circle: error stays well under 10 cm
@@ -108,13 +119,13 @@ def test_dead_reckoning_follows_a_noiseless_circle():
     assert np.all(np.abs(wrap_angle(tr.poses_wTb[:, 2] - truth(tr.t_s)[:, 2])) < 1e-9)
     # covariance grows monotonically in position, heading variance is the AHRS's
     assert np.all(np.diff(tr.covs[:, 0, 0]) >= 0) and np.allclose(
-        tr.covs[:, 2, 2], MotionNoise().ahrs_sigma_rad ** 2
+        tr.covs[:, 2, 2], NOISE.ahrs_sigma_rad**2
     )
 
 
 def test_dropouts_hold_velocity_and_inflate_sigma():
     dvl, att, truth = circle_run(dropouts=slice(100, 106))  # ~4 s without bottom lock
-    noise = MotionNoise()
+    noise = NOISE
     vin = velocity_input(att.t, dvl, DVL_MOUNT, noise)
     gap = (att.t >= dvl.t[100]) & (att.t < dvl.t[106])
     assert vin.in_dropout[gap].all() and not vin.in_dropout[~gap & (att.t > 1)].any()
@@ -137,7 +148,9 @@ def test_dropouts_hold_velocity_and_inflate_sigma():
 
 def test_long_dropout_stops_the_vehicle():
     dvl, att, _ = circle_run(dropouts=slice(100, 140))  # ~26 s > dvl_max_gap_s
-    vin = velocity_input(att.t, dvl, DVL_MOUNT, MotionNoise(dvl_max_gap_s=10.0))
+    vin = velocity_input(
+        att.t, dvl, DVL_MOUNT, MotionNoise.from_config(NoiseConfig(dvl_max_gap_s=10.0))
+    )
     late = (att.t > dvl.t[100] + 11.0) & (att.t < dvl.t[140])
     assert np.allclose(vin.v_b_mps[late], 0.0) and np.allclose(vin.sigma_mps[late], 0.3)
 
@@ -225,7 +238,7 @@ def biased_gyro_harbour(tmp_path_factory):
     from sonarslam.datasets.source import open_dataset
 
     scenario = make_scenario("harbour", 2, 300.0)
-    noise = replace(scenario.noise, ahrs_gyro_bias_radps=0.01)
+    noise = replace(scenario.noise, ahrs_gyro_bias_rad_per_s=0.01)
     root = write_dataset(
         simulate_records(replace(scenario, noise=noise)), tmp_path_factory.mktemp("gyro")
     )
@@ -375,12 +388,14 @@ def test_dvl_sample_sigma_adds_only_the_excess_scatter():
     rng = np.random.default_rng(12)
     t = np.arange(4000) * 0.66
     noisy = np.where(t[:, None] >= 1500.0, 0.35, 0.15) * rng.normal(0.0, 1.0, (t.size, 2))
-    off = dvl_sample_sigma(t, noisy, MotionNoise(dvl_sigma_mps=0.05))
+    off = dvl_sample_sigma(t, noisy, MotionNoise.from_config(NoiseConfig(dvl_sigma_mps=0.05)))
     assert np.all(off == 0.05)  # the window 0 turns it off
     on = dvl_sample_sigma(
         t,
         noisy,
-        MotionNoise(dvl_sigma_mps=0.05, dvl_scatter_window_s=60.0, dvl_nominal_scatter_mps=0.15),
+        MotionNoise.from_config(
+            NoiseConfig(dvl_sigma_mps=0.05, dvl_scatter_window_s=60.0, dvl_nominal_scatter_mps=0.15)
+        ),
     )
     assert np.all(on >= 0.05)
     # usual scatter: hardly any excess; degraded: sqrt(0.05^2 + 0.35^2 - 0.15^2) = 0.32

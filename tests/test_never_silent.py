@@ -95,7 +95,7 @@ def test_a_write_error_names_the_file(tmp_path):
         ),
         (
             "[mounting.sonar]\nx_m = 1.0\ny_m = 179.9\n",
-            r"t\.toml:3: \[mounting\.sonar\] y_m: must be within \+-100 m",
+            r"t\.toml:3: \[mounting\.sonar\] y_m: must be in \[-100, 100\]",
         ),
     ],
 )
@@ -111,13 +111,14 @@ def test_a_setting_out_of_range_names_the_file_key_and_line(
 
 def test_the_back_ends_take_every_scale_sigma_the_file_takes():
     from sonarslam.datasets.config import DVL_SCALE_SIGMA_MAX, NoiseConfig
+    from sonarslam.settings import SettingError
     from sonarslam.slam.backends.ekf import EkfConfig
+    from sonarslam.slam.run.presets import apply_overrides
 
     top = np.nextafter(DVL_SCALE_SIGMA_MAX, 0.0)
-    assert EkfConfig(dvl_scale_sigma=NoiseConfig(dvl_scale_sigma=top).dvl_scale_sigma)
-    for build in (lambda: NoiseConfig(dvl_scale_sigma=0.5), lambda: EkfConfig(dvl_scale_sigma=0.5)):
-        with pytest.raises(ValueError, match=r"\[0, 0\.5\)"):
-            build()
+    assert EkfConfig(noise=NoiseConfig(dvl_scale_sigma=top)).noise.dvl_scale_sigma == top
+    with pytest.raises(SettingError, match=r"^ekf.noise.dvl_scale_sigma: must be in \[0, 0\.5\)"):
+        apply_overrides(EkfConfig(), {"noise.dvl_scale_sigma": 0.5}, prefix="ekf.")
 
 
 def test_isam2_refuses_the_gyro_with_a_walking_bias_up_front(harbour, tmp_path, capsys):
@@ -129,7 +130,7 @@ def test_isam2_refuses_the_gyro_with_a_walking_bias_up_front(harbour, tmp_path, 
     from sonarslam.datasets.simulator.writer import write_dataset
 
     scenario = make_scenario("harbour", 4, 100.0)
-    biased = replace(scenario, noise=replace(scenario.noise, ahrs_gyro_bias_radps=0.01))
+    biased = replace(scenario, noise=replace(scenario.noise, ahrs_gyro_bias_rad_per_s=0.01))
     root = write_dataset(simulate_records(biased), tmp_path / "biased")
     config = tmp_path / "gw.toml"
     config.write_text("[noise]\nahrs_bias_walk_deg_per_sqrt_s = 0.15\n")

@@ -213,7 +213,7 @@ def test_config_errors_name_file_and_key(tmp_path):
     with pytest.raises(DataError, match=r"sonarslam.toml:1: TOML syntax error"):
         load_dataset_config(path)
     path.write_text("[sonar]\nangle_sense = 2\n")
-    with pytest.raises(DataError, match=r"angle_sense: must be \+1 or -1"):
+    with pytest.raises(DataError, match=r"angle_sense: must be one of -1, 1"):
         load_dataset_config(path)
     path.write_text("[mounting.dvl]\nyaw_deg = -90.0\n[noise]\ndvl_sigma_mps = 0.02\n")
     cfg = load_dataset_config(path)
@@ -223,7 +223,7 @@ def test_config_errors_name_file_and_key(tmp_path):
         ("[noise]\ndvl_sigma_mps = -1\n", r"\[noise\] dvl_sigma_mps: must be in \(0, 10\], got -1"),
         ("[mounting.ahrs]\nyaw_deg = nan\n", r"yaw_deg: must be a finite number, got nan"),
         ("[sonar]\nn_bins = 500.5\n", r"n_bins: must be a whole number, got 500.5"),
-        ("[sonar]\nbin_size_m = 0\n", r"bin_size_m: must be positive"),
+        ("[sonar]\nbin_size_m = 0\n", r"bin_size_m: must be in \(0, inf\)"),
         (
             "[noise]\ndvl_scatter_window_s = -60\n",
             r"dvl_scatter_window_s: must be in \[0, 3600\], got -60",

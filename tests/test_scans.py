@@ -205,8 +205,8 @@ def test_scan_between_record_round_trips_with_its_kernel_and_exports_to_g2o(tmp_
 class _Moving:
     """A pose source moving at constant speed and turn rate."""
 
-    def __init__(self, v_mps: float, w_radps: float) -> None:
-        self.v, self.w = v_mps, w_radps
+    def __init__(self, v_mps: float, w_rad_per_s: float) -> None:
+        self.v, self.w = v_mps, w_rad_per_s
 
     def poses(self, t_s):
         t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))

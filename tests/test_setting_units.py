@@ -14,7 +14,7 @@ from sonarslam.slam.run.settings import unit_of
     [
         ("ekf.gyro_bias_sigma_deg_per_s", "deg/s"),
         ("noise.ahrs_bias_walk_deg_per_sqrt_s", "deg/sqrt(s)"),
-        ("gates.ahrs_max_rate_dps", "deg/s"),
+        ("gates.ahrs_max_rate_deg_per_s", "deg/s"),
         ("isam2.node_period_s", "s"),
         ("noise.dvl_sigma_mps", "m/s"),
         ("extractor.min_votes", ""),

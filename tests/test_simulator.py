@@ -156,7 +156,7 @@ def _check_trajectory(world: World, tr, margin_m: float = 3.0) -> None:
     v_mid = (tr.v_body_mps[1:] + tr.v_body_mps[:-1]) / 2.0
     np.testing.assert_allclose(v_b, v_mid, atol=2e-3)
     w_fd = wrap_angle(np.diff(tr.wTb[:, 2])) / dt
-    w_mid = (tr.yaw_rate_radps[1:] + tr.yaw_rate_radps[:-1]) / 2.0
+    w_mid = (tr.yaw_rate_rad_per_s[1:] + tr.yaw_rate_rad_per_s[:-1]) / 2.0
     # a fillet starts with a jump of curvature: allow it at the few samples that straddle one
     assert np.mean(np.abs(w_fd - w_mid) < 1e-3) > 0.99
     speed = np.hypot(*tr.v_body_mps.T)
@@ -366,7 +366,7 @@ def test_mti_log_matches_truth_with_bias(harbour_dir: Path, harbour_sim) -> None
     assert err.std() == pytest.approx(noise.ahrs_sigma_deg, rel=0.1)
     assert np.all(np.abs(m[:, 3]) <= 180.0)
     rate_err = -m[:, 6] - harbour_sim.trajectory.yaw_rate_at(t)
-    assert np.sqrt(np.mean(rate_err**2)) == pytest.approx(noise.ahrs_rate_sigma_radps, rel=0.1)
+    assert np.sqrt(np.mean(rate_err**2)) == pytest.approx(noise.ahrs_rate_sigma_rad_per_s, rel=0.1)
     assert m[:, 9].mean() == pytest.approx(-9.81, abs=0.01)
 
 

@@ -95,8 +95,8 @@ def test_tasks_take_only_the_axes_of_their_back_end():
 
 
 def test_overrides_reach_nested_fields_and_name_the_valid_ones():
-    cfg = apply_overrides(EkfConfig(), {"association": "nn", "ahrs_bias_sigma_deg": 3.0})
-    assert cfg.association.method == "nn" and cfg.ahrs_bias_sigma_deg == 3.0
+    cfg = apply_overrides(EkfConfig(), {"association": "nn", "noise.ahrs_bias_sigma_deg": 3.0})
+    assert cfg.association.method == "nn" and cfg.noise.ahrs_bias_sigma_deg == 3.0
     cfg = apply_overrides(EkfConfig(), {"association.gate_probability": 0.95})
     assert cfg.association.gate_probability == 0.95 and cfg.association.method == "jcbb"
     with pytest.raises(ValueError, match="association.gate: unknown field.*gate_probability"):

@@ -29,6 +29,7 @@ head's time-varying gain), sparse clutter (exponential blobs) and, in a few beam
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +38,7 @@ import numpy.typing as npt
 from sonarslam.datasets.simulator.path import TrueMotion
 from sonarslam.datasets.simulator.world import World
 from sonarslam.features.geometry import FloatArray, compose
+from sonarslam.settings import bounded, check_fields
 from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead, bin_range_m
 
 __all__ = [
@@ -61,11 +63,13 @@ class EchoModel:
     Intensities are in the head's 0-255 counts. See the module docstring for the model.
     """
 
-    n_rays: int = 9
+    n_rays: int = bounded(9, 1, 10_000)
     echo_gain: float = 300.0
     incidence_exponent: float = 2.0
-    incidence_fade_start_rad: float = float(np.deg2rad(60.0))
-    incidence_cutoff_rad: float = float(np.deg2rad(70.0))
+    incidence_fade_start_rad: float = bounded(
+        float(np.deg2rad(60.0)), 0.0, np.pi / 2, low_open=True, high_open=True
+    )
+    incidence_cutoff_rad: float = bounded(float(np.deg2rad(70.0)), 0.0, np.pi / 2, low_open=True)
     range_decay_per_m: float = 0.01
     pulse_sigma_bins: float = 0.6
     tail_m: float = 0.15
@@ -78,16 +82,16 @@ class EchoModel:
     false_return_prob_per_beam: float = 0.02
     false_return_min: float = 80.0
     false_return_max: float = 255.0
-    dead_zone_m: float = 1.0
+    dead_zone_m: float = bounded(1.0, 0.0, math.inf)
     ringing_level: float = 180.0
 
     def __post_init__(self) -> None:
-        if self.n_rays < 1:
-            raise ValueError(f"EchoModel.n_rays must be >= 1, got {self.n_rays}")
-        if not 0.0 < self.incidence_fade_start_rad < self.incidence_cutoff_rad <= np.pi / 2:
-            raise ValueError("EchoModel needs 0 < incidence_fade_start_rad < incidence_cutoff_rad")
-        if self.dead_zone_m < 0.0:
-            raise ValueError(f"EchoModel.dead_zone_m must be >= 0, got {self.dead_zone_m}")
+        check_fields(self)
+        if not self.incidence_fade_start_rad < self.incidence_cutoff_rad:
+            raise ValueError(
+                "incidence_fade_start_rad must be < incidence_cutoff_rad, got"
+                f" {self.incidence_fade_start_rad} >= {self.incidence_cutoff_rad}"
+            )
 
 
 def cast_rays(

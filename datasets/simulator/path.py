@@ -42,14 +42,14 @@ class TrueMotion:
         Body poses ``(x_m, y_m, yaw_rad)`` in the world; yaw in ``[-pi, pi)``.
     v_body_mps : ndarray, shape (N, 2)
         Velocity over ground of the body origin in the body frame (m/s).
-    yaw_rate_radps : ndarray, shape (N,)
+    yaw_rate_rad_per_s : ndarray, shape (N,)
         Yaw rate, counter-clockwise (rad/s).
     """
 
     t_s: FloatArray = field(repr=False)
     wTb: FloatArray = field(repr=False)
     v_body_mps: FloatArray = field(repr=False)
-    yaw_rate_radps: FloatArray = field(repr=False)
+    yaw_rate_rad_per_s: FloatArray = field(repr=False)
 
     def poses(self, t_s: npt.ArrayLike) -> FloatArray:
         """Body poses at times ``t_s``, shape ``(M, 3)``, linearly interpolated (yaw on its arc)."""
@@ -67,7 +67,7 @@ class TrueMotion:
     def yaw_rate_at(self, t_s: npt.ArrayLike) -> FloatArray:
         """Yaw rate at times ``t_s``, shape ``(M,)`` (rad/s, counter-clockwise)."""
         tq = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
-        return np.asarray(np.interp(tq, self.t_s, self.yaw_rate_radps))
+        return np.asarray(np.interp(tq, self.t_s, self.yaw_rate_rad_per_s))
 
     @property
     def duration_s(self) -> float:
@@ -104,7 +104,7 @@ def stationary(
         t_s=t,
         wTb=np.tile(pose, (t.size, 1)),
         v_body_mps=np.zeros((t.size, 2)),
-        yaw_rate_radps=np.zeros(t.size),
+        yaw_rate_rad_per_s=np.zeros(t.size),
     )
 
 
@@ -266,7 +266,7 @@ def waypoint_path(
         t_s=t,
         wTb=np.column_stack([xy, wrap_angle(course + crab)]),
         v_body_mps=np.column_stack([v * np.cos(crab), -v * np.sin(crab)]),
-        yaw_rate_radps=kappa * v + crab_rate,
+        yaw_rate_rad_per_s=kappa * v + crab_rate,
     )
 
 

@@ -50,6 +50,7 @@ from sonarslam.datasets.simulator.world import (
     random_harbour_world,
 )
 from sonarslam.features.geometry import FloatArray, compose, inverse, wrap_angle
+from sonarslam.settings import Range, check_fields
 from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead
 
 __all__ = [
@@ -163,9 +164,9 @@ class Scenario:
         Sampling rates of the truth and the sensors (Hz).
     """
 
-    kind: str
+    kind: str = field(metadata={"choices": KINDS})
     seed: int
-    duration_s: float
+    duration_s: float = field(metadata={"range": Range(1.0, math.inf, low_open=True)})
     t0_s: float = T0_S
     head: SonarHead = field(default_factory=lambda: MARINA_HEAD)
     beam_rate_hz: float = 14.7
@@ -186,10 +187,7 @@ class Scenario:
     gps_rate_hz: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.kind not in KINDS:
-            raise ValueError(f"Scenario.kind must be one of {KINDS}, got {self.kind!r}")
-        if self.duration_s <= 1.0:
-            raise ValueError(f"Scenario.duration_s must be above 1 s, got {self.duration_s}")
+        check_fields(self)
 
     @property
     def prefix(self) -> str:
@@ -371,7 +369,7 @@ class Simulation:
             (
                 float(a.t_s[i]),
                 2,
-                Attitude(float(a.t_s[i]), float(yaw[i]), float(-a.rate_radps[i, 2])),
+                Attitude(float(a.t_s[i]), float(yaw[i]), float(-a.rate_rad_per_s[i, 2])),
             )
             for i in range(a.t_s.size)
         ]

@@ -19,6 +19,7 @@ random walk of the AHRS heading on top of its constant bias and deviation.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,6 +27,7 @@ import pymap3d
 
 from sonarslam.datasets.simulator.path import TrueMotion
 from sonarslam.features.geometry import FloatArray, wrap_angle
+from sonarslam.settings import bounded, check_fields
 from sonarslam.sonar.beam import Mounting
 
 __all__ = [
@@ -61,21 +63,21 @@ class SensorNoise:
         White noise of the DVL's own compass (deg).
     dvl_compass_deviation_deg : tuple of float
         ``(B, C)``: the DVL compass reads ``B sin(yaw) + C cos(yaw)`` (deg) off, ``yaw`` the
-        DVL frame's yaw, as a compass deflected by the vehicle's own field (hard iron); the
-        marina's is ~5 deg.
+        DVL frame's yaw, as a compass deflected by the vehicle's own field (hard iron)
+        (docs/calibration.md gives the marina's).
     ahrs_sigma_deg : float
         White noise of the AHRS heading (deg).
     ahrs_bias_deg : float
         Constant bias added to the AHRS clockwise heading (deg); the AHRS yaw counter-clockwise
         from East is therefore ``true - bias``.
-    ahrs_rate_sigma_radps : float
+    ahrs_rate_sigma_rad_per_s : float
         White noise of the AHRS rates (rad/s).
     ahrs_deviation_deg : tuple of float
         ``(B, C)``: the AHRS yaw (counter-clockwise) reads ``B sin(psi) + C cos(psi)`` (deg)
         off, ``psi`` the true body yaw, as a compass deflected by the vehicle (hard iron).
-    ahrs_gyro_bias_radps : float
-        Constant bias of the AHRS yaw rate (rad/s, counter-clockwise); the marina's MTi has
-        ~0.01 (0.6 deg/s).
+    ahrs_gyro_bias_rad_per_s : float
+        Constant bias of the AHRS yaw rate (rad/s, counter-clockwise) (docs/calibration.md
+        gives the marina MTi's).
     ahrs_acc_sigma_mps2 : float
         White noise of the AHRS accelerations (m/s^2).
     ahrs_attitude_sigma_deg : float
@@ -98,8 +100,8 @@ class SensorNoise:
     dvl_compass_deviation_deg: tuple[float, float] = (0.0, 0.0)
     ahrs_sigma_deg: float = 0.5
     ahrs_bias_deg: float = 2.0
-    ahrs_rate_sigma_radps: float = 0.002
-    ahrs_gyro_bias_radps: float = 0.0
+    ahrs_rate_sigma_rad_per_s: float = 0.002
+    ahrs_gyro_bias_rad_per_s: float = 0.0
     ahrs_deviation_deg: tuple[float, float] = (0.0, 0.0)
     ahrs_acc_sigma_mps2: float = 0.02
     ahrs_attitude_sigma_deg: float = 0.1
@@ -136,20 +138,13 @@ class DriftErrors:
         peak, rising) stays on the wall face (:mod:`sonarslam.datasets.simulator.msis`).
     """
 
-    dvl_scale_factor: float = 0.0
+    dvl_scale_factor: float = bounded(0.0, -0.5, 0.5, low_open=True, high_open=True)
     dvl_bias_mps: tuple[float, float] = (0.0, 0.0)
-    ahrs_heading_walk_deg_per_sqrt_s: float = 0.0
-    echo_range_offset_m: float = 0.0
+    ahrs_heading_walk_deg_per_sqrt_s: float = bounded(0.0, 0.0, math.inf)
+    echo_range_offset_m: float = bounded(0.0, 0.0, math.inf)
 
     def __post_init__(self) -> None:
-        if not -0.5 < self.dvl_scale_factor < 0.5:
-            raise ValueError(
-                f"DriftErrors.dvl_scale_factor must be in (-0.5, 0.5), got {self.dvl_scale_factor}"
-            )
-        if self.ahrs_heading_walk_deg_per_sqrt_s < 0.0 or self.echo_range_offset_m < 0.0:
-            raise ValueError(
-                "DriftErrors.ahrs_heading_walk_deg_per_sqrt_s and echo_range_offset_m must be >= 0"
-            )
+        check_fields(self)
 
 
 @dataclass(frozen=True)
@@ -205,7 +200,7 @@ class AhrsSamples:
     roll_deg, pitch_deg : ndarray, shape (N,)
     heading_deg : ndarray, shape (N,)
         The log's ``yaw``: heading of the AHRS frame clockwise from North, ``[-180, 180)`` (deg).
-    rate_radps : ndarray, shape (N, 3)
+    rate_rad_per_s : ndarray, shape (N, 3)
         Angular rates about the MTi x, y, z axes (rad/s); ``rate_z`` is positive clockwise.
     acc_mps2 : ndarray, shape (N, 3)
         Specific force along the MTi axes (m/s^2); ``acc_z`` is about ``-9.81``.
@@ -217,7 +212,7 @@ class AhrsSamples:
     roll_deg: FloatArray = field(repr=False)
     pitch_deg: FloatArray = field(repr=False)
     heading_deg: FloatArray = field(repr=False)
-    rate_radps: FloatArray = field(repr=False)
+    rate_rad_per_s: FloatArray = field(repr=False)
     acc_mps2: FloatArray = field(repr=False)
     heading_walk_deg: FloatArray | None = field(default=None, repr=False)
 
@@ -432,14 +427,14 @@ def simulate_ahrs(
     )
     c, s = np.cos(mounting.yaw_rad), np.sin(mounting.yaw_rad)
     acc_a = np.column_stack([c * acc_b[:, 0] + s * acc_b[:, 1], -s * acc_b[:, 0] + c * acc_b[:, 1]])
-    rate = np.column_stack([np.zeros(n), np.zeros(n), -w - noise.ahrs_gyro_bias_radps])
+    rate = np.column_stack([np.zeros(n), np.zeros(n), -w - noise.ahrs_gyro_bias_rad_per_s])
     acc = np.column_stack([acc_a[:, 0], -acc_a[:, 1], np.full(n, -GRAVITY_MPS2)])
     return AhrsSamples(
         t_s=t,
         roll_deg=roll_deg + rng.normal(0.0, noise.ahrs_attitude_sigma_deg, n),
         pitch_deg=pitch_deg + rng.normal(0.0, noise.ahrs_attitude_sigma_deg, n),
         heading_deg=heading,
-        rate_radps=rate + rng.normal(0.0, noise.ahrs_rate_sigma_radps, (n, 3)),
+        rate_rad_per_s=rate + rng.normal(0.0, noise.ahrs_rate_sigma_rad_per_s, (n, 3)),
         acc_mps2=acc + rng.normal(0.0, noise.ahrs_acc_sigma_mps2, (n, 3)),
         heading_walk_deg=walk,
     )

@@ -128,7 +128,7 @@ def _write_mti(path: Path, sim: Simulation) -> None:
     ]
     lines = list(header)
     for i in range(a.t_s.size):
-        r, q = a.rate_radps[i], a.acc_mps2[i]
+        r, q = a.rate_rad_per_s[i], a.acc_mps2[i]
         lines.append(
             f"{a.t_s[i]:.3f}\t\t{a.roll_deg[i]:.4f}\t{a.pitch_deg[i]:.4f}\t{a.heading_deg[i]:.4f}"
             f"\t\t{r[0]:.6f}\t{r[1]:.6f}\t{r[2]:.6f}\t\t{q[0]:.5f}\t{q[1]:.5f}\t{q[2]:.5f}\t\t"

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, replace
 from typing import Any
+
+from sonarslam.settings import bounded, check_fields
 
 __all__ = ["ScanConfig"]
 
@@ -86,55 +89,40 @@ class ScanConfig:
         ... and a residual sigma at most this (m).
     """
 
-    beams_per_scan: int = 0
-    run_gap_m: float = 1.0
-    min_range_m: float = 1.0
-    max_range_m: float | None = 30.0
-    intensity_threshold: float = 60.0
-    submap_scans: int = 3
-    normal_radius_m: float = 3.0
-    min_normal_points: int = 3
-    max_normal_thickness: float = 0.35
-    corr_start_m: float = 3.0
-    corr_end_m: float = 1.0
-    iterations: int = 30
-    kernel_k: float = 2.5
-    min_sigma_m: float = 0.05
-    degenerate_share: float = 0.1
-    free_sigma: float = 100.0
-    cov_scale: float = 4.0
-    floor_sigma_m: float = 0.15
-    floor_sigma_deg: float = 0.5
-    revisit_cov_scale: float = 1.0
-    starts_sigma: float = 1.5
-    ambiguity_ratio: float = 0.9
-    min_inliers: int = 15
-    min_inlier_share: float = 0.4
-    max_sigma_m: float = 1.0
+    beams_per_scan: int = bounded(0, 0, 1e6)
+    run_gap_m: float = bounded(1.0, 0.0, math.inf, low_open=True)
+    min_range_m: float = bounded(1.0, 0.0, 1e4)
+    max_range_m: float | None = bounded(30.0, 0.0, 1e4)
+    intensity_threshold: float = bounded(60.0, 0.0, 255.0)
+    submap_scans: int = bounded(3, 1, 1001)
+    normal_radius_m: float = bounded(3.0, 0.0, math.inf, low_open=True)
+    min_normal_points: int = bounded(3, 2, 1e6)
+    max_normal_thickness: float = bounded(0.35, 0.0, 1.0, low_open=True)
+    corr_start_m: float = bounded(3.0, 0.0, math.inf, low_open=True)
+    corr_end_m: float = bounded(1.0, 0.0, math.inf, low_open=True)
+    iterations: int = bounded(30, 1, 1000)
+    kernel_k: float = bounded(2.5, 0.0, math.inf, low_open=True)
+    min_sigma_m: float = bounded(0.05, 0.0, math.inf, low_open=True)
+    degenerate_share: float = bounded(0.1, 0.0, 1.0, low_open=True, high_open=True)
+    free_sigma: float = bounded(100.0, 0.0, math.inf, low_open=True)
+    cov_scale: float = bounded(4.0, 0.0, math.inf, low_open=True)
+    floor_sigma_m: float = bounded(0.15, 0.0, math.inf)
+    floor_sigma_deg: float = bounded(0.5, 0.0, 180.0)
+    revisit_cov_scale: float = bounded(1.0, 0.0, math.inf, low_open=True)
+    starts_sigma: float = bounded(1.5, 0.0, math.inf)
+    ambiguity_ratio: float = bounded(0.9, 0.0, math.inf)
+    min_inliers: int = bounded(15, 3, 1e9)
+    min_inlier_share: float = bounded(0.4, 0.0, 1.0)
+    max_sigma_m: float = bounded(1.0, 0.0, math.inf, low_open=True)
 
     def __post_init__(self) -> None:
-        if self.beams_per_scan < 0:
-            raise ValueError(f"beams_per_scan must be >= 0, got {self.beams_per_scan}")
-        if self.submap_scans < 1 or self.submap_scans % 2 == 0:
-            raise ValueError(f"submap_scans must be odd and >= 1, got {self.submap_scans}")
+        check_fields(self)
+        if self.submap_scans % 2 == 0:
+            raise ValueError(f"submap_scans must be odd, got {self.submap_scans}")
         if self.max_range_m is not None and not self.max_range_m > self.min_range_m:
             raise ValueError(f"max_range_m must be > min_range_m, got {self.max_range_m}")
-        if not 0.0 < self.corr_end_m <= self.corr_start_m:
-            raise ValueError("need 0 < corr_end_m <= corr_start_m")
-        positive = ("run_gap_m", "normal_radius_m", "kernel_k", "min_sigma_m", "free_sigma")
-        if not (
-            self.floor_sigma_m >= 0.0 and self.floor_sigma_deg >= 0.0 and self.starts_sigma >= 0.0
-        ):
-            raise ValueError("floor_sigma_m, floor_sigma_deg and starts_sigma must be >= 0")
-        for name in (*positive, "cov_scale", "max_sigma_m", "revisit_cov_scale"):
-            if not getattr(self, name) > 0.0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
-        if self.iterations < 1 or self.min_inliers < 3 or self.min_normal_points < 2:
-            raise ValueError("iterations >= 1, min_inliers >= 3, min_normal_points >= 2")
-        if not 0.0 <= self.min_inlier_share <= 1.0 or not 0.0 < self.degenerate_share < 1.0:
-            raise ValueError("min_inlier_share in [0, 1], degenerate_share in (0, 1)")
-        if not 0.0 < self.max_normal_thickness <= 1.0:
-            raise ValueError("max_normal_thickness must be in (0, 1]")
+        if not self.corr_end_m <= self.corr_start_m:
+            raise ValueError(f"corr_end_m must be <= corr_start_m, got {self.corr_end_m}")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

@@ -21,12 +21,12 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 import numpy.typing as npt
 
-from sonarslam.datasets.config import DVL_SCALE_SIGMA_MAX
-from sonarslam.datasets.settings import bounded, one_of
+from sonarslam.datasets.config import NoiseConfig
 from sonarslam.features.geometry import FloatArray, compose, inverse
 from sonarslam.features.line import LineFeature
 from sonarslam.features.pose_source import PoseSource
 from sonarslam.features.scans import Scan, ScanMatcher
+from sonarslam.settings import bounded, one_of
 from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.mapping.landmarks import LandmarkConfig, LandmarkMap
 from sonarslam.slam.model.lines import VoteObservations, usable_observations
@@ -50,33 +50,24 @@ class BackendConfig(LandmarkConfig):
 
     Attributes
     ----------
-    ahrs_white_sigma_deg : float
-        White noise of one AHRS heading (deg).
-    ahrs_bias_sigma_deg : float
-        Prior 1-sigma of the constant AHRS heading bias ``b`` (deg): the AHRS measures
-        ``yaw + b``. Modelled so that an estimator never believes its heading better than the
-        compass can tell it (a white-noise model at 1 Hz would, and would be inconsistent).
-        Nothing else observes it: line landmarks, DVL and gyro are blind to a rotation of the
-        whole map and trajectory about the start position, which is what the bias does.
-    ahrs_bias_walk_deg_per_sqrt_s : float
-        The bias's random walk (deg/sqrt(s)): ``b`` drifts by ``N(0, walk**2 dt)`` over ``dt``
-        (a compass near steel, a gyro-based heading). 0: a constant bias. Its changes since a
-        wall was mapped are what re-observing the wall corrects.
+    noise : NoiseConfig
+        The sensor noise the heading and motion models take: the dataset's ``[noise]``
+        (:class:`sonarslam.datasets.config.NoiseConfig`: the AHRS's white noise and bias, the
+        bias's walk, the gyro's and the DVL's scale error), set by the runner; its ``--set``
+        names are ``<backend>.noise.<key>``. The AHRS bias is modelled so that an estimator
+        never believes its heading better than the compass can tell it (a white-noise model
+        at 1 Hz would, and would be inconsistent); nothing else observes it: line landmarks,
+        DVL and gyro are blind to a rotation of the whole map and trajectory about the start
+        position, which is what the bias does. Its walk's changes since a wall was mapped are
+        what re-observing the wall corrects.
     ahrs_period_s : float
         An AHRS heading is used at most this often (s); the AHRS errors are not white.
-    gyro_sigma_radps : float
-        Heading process noise of the motion model, as a yaw-rate noise (rad/s), added as
-        ``(dt * sigma)**2`` per motion step.
     estimate_misalignment : bool
         Estimate the misalignment ``delta`` of the DVL velocity with the body heading (rad): the
         vehicle moves along ``R(psi + delta) v_b``. Line landmarks make it observable; it
         absorbs the error of a GPS-free DVL/AHRS calibration.
     misalignment_sigma_deg : float
         Its prior 1-sigma (deg).
-    dvl_scale_sigma : float
-        Prior 1-sigma of the DVL's scale-factor error ``k`` (a constant: the vehicle moves along
-        ``(1 + k) R(psi + delta) v_b``); 0: not estimated (``k = 0``). Line landmarks observe
-        it (a wall passed at a known distance); a DVL's specification gives its size (0.01-0.02).
     robust : {None, "huber", "cauchy"}
         Robust kernel on the line observations, so that one bad line cannot drag the pose: the
         factor graph's on the whitened residual (``gtsam.noiseModel.Robust``), the EKF's on the
@@ -90,14 +81,10 @@ class BackendConfig(LandmarkConfig):
         :mod:`sonarslam.features.scans`), or ``"lines,scans"``. A back end that cannot take one says so.
     """
 
-    ahrs_white_sigma_deg: float = bounded(1.0, 1e-3, 90.0)
-    ahrs_bias_sigma_deg: float = bounded(2.0, 1e-3, 90.0)
-    ahrs_bias_walk_deg_per_sqrt_s: float = bounded(0.0, 0.0, math.inf)
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
     ahrs_period_s: float = bounded(1.0, 1e-3, 3600.0)
-    gyro_sigma_radps: float = bounded(0.005, 1e-5, 1.0)
     estimate_misalignment: bool = False
     misalignment_sigma_deg: float = bounded(5.0, 1e-3, 90.0)
-    dvl_scale_sigma: float = bounded(0.0, 0.0, DVL_SCALE_SIGMA_MAX, high_open=True)
     robust: str | None = one_of(None, None, "huber", "cauchy")
     robust_k: float = bounded(1.345, 0.0, math.inf, low_open=True)
     constraints: str = "lines"
@@ -108,7 +95,7 @@ class BackendConfig(LandmarkConfig):
         return frozenset(c.strip() for c in self.constraints.split(","))
 
     def __post_init__(self) -> None:
-        super().__post_init__()  # every field's range (datasets.settings.check_fields)
+        super().__post_init__()  # every field's range (sonarslam.settings.check_fields)
         kinds = self.constraint_kinds
         if not kinds or not kinds <= {"lines", "scans"}:
             raise ValueError(

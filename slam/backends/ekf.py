@@ -4,16 +4,17 @@ State ``x = [x, y, psi, b, delta, k, g, rho_1, theta_1, ..., rho_L, theta_L]``:
 
 * ``x, y, psi``: the body pose ``wTb`` (m, m, rad);
 * ``b``: the AHRS heading bias (rad) with prior ``ahrs_bias_sigma_deg``, constant or a random
-  walk (``ahrs_bias_walk_deg_per_sqrt_s``): the AHRS measures ``psi + b``
-  (:class:`sonarslam.slam.backends.base.BackendConfig`);
+  walk (``ahrs_bias_walk_deg_per_sqrt_s``): the AHRS measures ``psi + b`` (both of the
+  dataset's ``[noise]``, :class:`sonarslam.datasets.config.NoiseConfig`);
 * ``delta``: the misalignment of the DVL velocity with the body heading (rad), a constant with
   prior ``misalignment_sigma_deg`` when ``estimate_misalignment``, else held at 0;
-* ``k``: the DVL's scale-factor error, a constant with prior ``dvl_scale_sigma`` (0: held at 0);
+* ``k``: the DVL's scale-factor error, a constant with prior ``[noise] dvl_scale_sigma`` (0: held
+  at 0);
 * ``g``: the gyro's yaw-rate bias (rad/s), a constant with prior ``gyro_bias_sigma_deg_per_s``:
   a step whose heading change integrates the gyro turns by ``dyaw - g dt``
-  (:attr:`sonarslam.slam.model.motion.MotionStep.gyro_dt_s`); the AHRS headings observe it. Left out, a
-  gyro bias (the marina MTi's is -0.66 deg/s) is taken for the AHRS bias's walk when the bias
-  walks, and the heading spins away; with the AHRS heading's own change as the rate
+  (:attr:`sonarslam.slam.model.motion.MotionStep.gyro_dt_s`); the AHRS headings observe it. Left
+  out, a gyro bias (docs/calibration.md gives the marina's) is taken for the AHRS bias's walk
+  when the bias walks, and the heading spins away; with the AHRS heading's own change as the rate
   (``yaw_rate_source = "heading"``) no step involves it and it stays at its prior;
 * world lines ``(rho_w, theta_w)`` (:mod:`sonarslam.features.geometry` conventions), one per active
   landmark (:meth:`LineEkf.index`); kept normalised. A landmark merged into another (the landmark
@@ -43,7 +44,6 @@ from typing import Any
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-from sonarslam.datasets.settings import bounded
 from sonarslam.features.geometry import (
     FLIP_RHO,
     FloatArray,
@@ -53,6 +53,7 @@ from sonarslam.features.geometry import (
 )
 from sonarslam.features.line import LineFeature
 from sonarslam.features.pose_source import PoseSource
+from sonarslam.settings import bounded
 from sonarslam.slam.backends.base import (
     AnchoredOdometry,
     BackendConfig,
@@ -144,7 +145,8 @@ def scalar_joseph_update(
 
 @dataclass(frozen=True)
 class EkfConfig(BackendConfig):
-    """Settings of the EKF: :class:`sonarslam.slam.backends.base.BackendConfig`'s and
+    """Settings of the EKF: those of :class:`sonarslam.slam.backends.base.BackendConfig` and the
+    following.
 
     Attributes
     ----------
@@ -155,8 +157,8 @@ class EkfConfig(BackendConfig):
         :meth:`LineEkf.predict_line`).
     gyro_bias_sigma_deg_per_s : float
         Prior 1-sigma of the gyro's constant yaw-rate bias ``g`` (deg/s); used only on steps
-        that integrate the gyro (``[motion] yaw_rate_source = "gyro"``). An uncalibrated MEMS
-        gyro's bias is up to ~1 deg/s.
+        that integrate the gyro (``[motion] yaw_rate_source = "gyro"``). docs/calibration.md
+        says how its default was chosen.
     """
 
     side_gate: bool = False
@@ -196,16 +198,16 @@ class LineEkf:
         x[POSE] = wTb0
         P = np.zeros((N_VEHICLE, N_VEHICLE))
         P[:2, :2] = P0[:2, :2]
-        var_b = np.deg2rad(config.ahrs_bias_sigma_deg) ** 2
+        var_b = np.deg2rad(config.noise.ahrs_bias_sigma_deg) ** 2
         # psi0 came from the AHRS, which measures psi + b (white noise and bias as this filter
         # models them, not P0's heading): psi and b are anti-correlated.
-        P[YAW, YAW] = np.deg2rad(config.ahrs_white_sigma_deg) ** 2 + var_b
+        P[YAW, YAW] = np.deg2rad(config.noise.ahrs_white_sigma_deg) ** 2 + var_b
         P[AHRS_BIAS, AHRS_BIAS] = var_b
         P[YAW, AHRS_BIAS] = P[AHRS_BIAS, YAW] = -var_b
         P[MISALIGNMENT, MISALIGNMENT] = (
             np.deg2rad(config.misalignment_sigma_deg) ** 2 if config.estimate_misalignment else 0.0
         )
-        P[DVL_SCALE, DVL_SCALE] = config.dvl_scale_sigma**2
+        P[DVL_SCALE, DVL_SCALE] = config.noise.dvl_scale_sigma**2
         P[GYRO_BIAS, GYRO_BIAS] = np.deg2rad(config.gyro_bias_sigma_deg_per_s) ** 2
         self.kf = _filter(x, P)
         # the steps since the last flush: their Jacobians' product (vehicle block), pending
@@ -219,7 +221,7 @@ class LineEkf:
         self._index: dict[int, int] = {}  # landmark id -> index of its rho in the state
         self._first_line_w: dict[int, FloatArray] = {}  # each landmark's first estimate (FEJ)
         self._kernel = robust_kernel(config.robust, config.robust_k)
-        self._var_walk = np.deg2rad(config.ahrs_bias_walk_deg_per_sqrt_s) ** 2  # rad^2/s
+        self._var_walk = np.deg2rad(config.noise.ahrs_bias_walk_deg_per_sqrt_s) ** 2  # rad^2/s
         self._pose_lin = np.zeros(3)  # the pose the vote's Jacobians are taken at (FEJ)
         self._xy_first = (float(wTb0[0]), float(wTb0[1]))  # the position as first predicted
         self._last_ahrs_t = -np.inf
@@ -306,7 +308,7 @@ class LineEkf:
         P_vv[...] = F @ P_vv @ F.T
         P_vv[0, 0] += step.var_xy_m2
         P_vv[1, 1] += step.var_xy_m2
-        P_vv[2, 2] += step.var_yaw_rad2(self.config.gyro_sigma_radps)
+        P_vv[2, 2] += step.var_yaw_rad2(self.config.noise.gyro_sigma_rad_per_s)
         P_vv[3, 3] += self._var_walk * step.dt_s
         self._Phi = F @ self._Phi
         self._pending = True
@@ -362,7 +364,7 @@ class LineEkf:
         self._last_ahrs_t = t_s
         self._flush()
         x, P = self.kf.x, self.kf.P
-        r = float(np.deg2rad(self.config.ahrs_white_sigma_deg) ** 2)
+        r = float(np.deg2rad(self.config.noise.ahrs_white_sigma_deg) ** 2)
         nu = float(wrap_angle(yaw_body_rad - (float(x[YAW]) + float(x[AHRS_BIAS]))))
         S = float(P[YAW, YAW] + 2.0 * P[YAW, AHRS_BIAS] + P[AHRS_BIAS, AHRS_BIAS] + r)
         self.heading_innovations.append((t_s, nu, S))
@@ -534,7 +536,7 @@ class LineEkf:
             out["state_misalignment_deg"] = float(np.rad2deg(x[MISALIGNMENT]))
             sd = np.sqrt(P[MISALIGNMENT, MISALIGNMENT])
             out["state_misalignment_sd_deg"] = float(np.rad2deg(sd))
-        if self.config.dvl_scale_sigma > 0.0:
+        if self.config.noise.dvl_scale_sigma > 0.0:
             out["state_dvl_scale"] = float(x[DVL_SCALE])
             out["state_dvl_scale_sd"] = float(np.sqrt(P[DVL_SCALE, DVL_SCALE]))
         if self._gyro_s > 0.0:

@@ -7,8 +7,8 @@ import argparse
 import math
 from dataclasses import replace
 
-from sonarslam.datasets.settings import SettingError
 from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.settings import SettingError
 from sonarslam.slam.cli.common import EPILOG, Subparsers, add_poses, add_quiet, add_source, number
 from sonarslam.slam.run.calibration import (
     calibrate_ahrs_deviation,

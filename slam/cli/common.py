@@ -7,7 +7,7 @@ import math
 from collections.abc import Callable
 from typing import NoReturn, Protocol
 
-from sonarslam.datasets.settings import SettingError, coerce
+from sonarslam.settings import SettingError, coerce
 from sonarslam.slam.run.sources import POSE_SOURCES
 
 __all__ = [
@@ -32,7 +32,7 @@ class Parser(argparse.ArgumentParser):
 def number(
     kind: type, low: float | None = None, high: float | None = None, low_open: bool = False
 ) -> Callable[[str], float | int]:
-    """An argparse ``type``: a finite ``float`` or a whole ``int`` (:mod:`sonarslam.datasets.settings`'s
+    """An argparse ``type``: a finite ``float`` or a whole ``int`` (:mod:`sonarslam.settings`'s
     grammar: no ``nan``, ``inf``, ``1_0``) within ``[low, high]`` (``(low, ...`` when
     ``low_open``)."""
 

@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from importlib.metadata import PackageNotFoundError, version
 
 from sonarslam.datasets.errors import DataError, DataWarning
-from sonarslam.datasets.settings import SettingError
+from sonarslam.settings import SettingError
 from sonarslam.slam.cli import (
     calibrate,
     demo,

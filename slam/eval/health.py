@@ -46,8 +46,8 @@ import numpy as np
 from scipy.stats import binom, chi2
 
 from sonarslam.datasets.errors import DataWarning
-from sonarslam.datasets.settings import bounded, check_fields
 from sonarslam.features.geometry import FloatArray, wrap_angle
+from sonarslam.settings import bounded, check_fields
 from sonarslam.slam.io.trajectory import Trajectory
 
 __all__ = [

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from sonarslam.datasets.settings import SettingError
+from sonarslam.settings import SettingError
 
 __all__ = [
     "atomic_path",
@@ -180,7 +180,7 @@ def _first_existing(path: Path) -> Path:
 
 def check_output_dir(path: str | Path, option: str = "--out") -> Path:
     """``path`` if it is a directory that exists or can be created, and can be written;
-    :class:`sonarslam.datasets.settings.SettingError` naming ``option`` otherwise. Creates nothing."""
+    :class:`sonarslam.settings.SettingError` naming ``option`` otherwise. Creates nothing."""
     p = Path(path)
     if p.exists() and not p.is_dir():
         raise SettingError(option, f"{p} exists and is not a directory")
@@ -194,7 +194,7 @@ def check_output_dir(path: str | Path, option: str = "--out") -> Path:
 
 def check_output_file(path: str | Path, suffix: str, option: str = "--out") -> Path:
     """``path`` if it names a ``suffix`` file whose directory exists or can be created, and can
-    be written; :class:`sonarslam.datasets.settings.SettingError` naming ``option`` otherwise."""
+    be written; :class:`sonarslam.settings.SettingError` naming ``option`` otherwise."""
     p = Path(path)
     if p.suffix.lower() != suffix:
         raise SettingError(option, f"must name a {suffix} file, got {str(path)!r}")

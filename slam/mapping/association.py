@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
-from sonarslam.datasets.settings import bounded, check_fields, one_of
 from sonarslam.features.geometry import FLIP_RHO, FloatArray, along_line, line_difference
+from sonarslam.settings import bounded, check_fields, one_of
 
 __all__ = [
     "AssociationConfig",

@@ -28,7 +28,6 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
-from sonarslam.datasets.settings import bounded, check_fields
 from sonarslam.features.geometry import (
     FLIP_RHO,
     FloatArray,
@@ -40,6 +39,7 @@ from sonarslam.features.geometry import (
     transform_points,
 )
 from sonarslam.features.line import LineFeature
+from sonarslam.settings import bounded, check_fields
 from sonarslam.slam.mapping.association import (
     AssociationConfig,
     AssociationProblem,
@@ -70,8 +70,8 @@ __all__ = [
 @dataclass(frozen=True)
 class LandmarkConfig:
     """Settings of the landmark layer (every back end's configuration extends this). Each
-    field's range is in its metadata (:func:`sonarslam.datasets.settings.bounded`), checked by
-    :func:`sonarslam.datasets.settings.check_fields` for this class and every subclass.
+    field's range is in its metadata (:func:`sonarslam.settings.bounded`), checked by
+    :func:`sonarslam.settings.check_fields` for this class and every subclass.
 
     Attributes
     ----------

@@ -126,10 +126,10 @@ class MotionStep:
         )
         object.__setattr__(self, "var_xy_m2", var)
 
-    def var_yaw_rad2(self, gyro_sigma_radps: float) -> float:
+    def var_yaw_rad2(self, gyro_sigma_rad_per_s: float) -> float:
         """Heading variance of the step (rad^2): a yaw-rate noise ``(dt sigma)^2`` (the back
         end's) plus the AHRS gap's (:attr:`var_yaw_gap_rad2`)."""
-        return (self.dt_s * gyro_sigma_radps) ** 2 + self.var_yaw_gap_rad2
+        return (self.dt_s * gyro_sigma_rad_per_s) ** 2 + self.var_yaw_gap_rad2
 
     @property
     def var_xy_white_m2(self) -> float:
@@ -142,7 +142,7 @@ def motion_step(
     t_s: float,
     v_b_mps: npt.ArrayLike,
     sigma_v_mps: float,
-    yaw_rate_radps: float,
+    yaw_rate_rad_per_s: float,
     held_from_s: float,
     var_yaw_gap_rad2: float = 0.0,
     from_gyro: bool = False,
@@ -161,7 +161,7 @@ def motion_step(
         dt_s=dt,
         dx_m=dt * float(v[0]),
         dy_m=dt * float(v[1]),
-        dyaw_rad=dt * float(yaw_rate_radps),
+        dyaw_rad=dt * float(yaw_rate_rad_per_s),
         sigma_v_mps=float(sigma_v_mps),
         held_s=max(t_s - held_from_s, dt),
         var_yaw_gap_rad2=float(var_yaw_gap_rad2),
@@ -390,7 +390,7 @@ def gyro_bias_against_heading(
     if t.size < 2:
         return 0.0, float("inf")
     yaw = np.unwrap(attitude.yaw_rad)
-    turned = np.concatenate([[0.0], np.cumsum(attitude.yaw_rate_radps[:-1] * np.diff(t))])
+    turned = np.concatenate([[0.0], np.cumsum(attitude.yaw_rate_rad_per_s[:-1] * np.diff(t))])
     w = np.floor((t - t[0]) / window_s).astype(np.int64)
     first = np.flatnonzero(np.diff(w, prepend=-1))  # the first sample of each window
     last = np.append(first[1:] - 1, t.size - 1)
@@ -413,7 +413,7 @@ def dead_reckoning(
     start_cov: npt.ArrayLike,
     t0_s: float,
     t1_s: float,
-    noise: MotionNoise | None = None,
+    noise: MotionNoise,
     ahrs_deviation_rad: tuple[float, float] = (0.0, 0.0),
 ) -> Trajectory:
     """Dead reckoning from DVL velocity and AHRS heading on the AHRS timeline (10 Hz marina).
@@ -429,7 +429,6 @@ def dead_reckoning(
     Trajectory
         Poses and covariances at ``t0_s`` and every AHRS sample in ``(t0_s, t1_s]``.
     """
-    noise = noise or MotionNoise()
     inside = (attitude.t > t0_s) & (attitude.t <= t1_s)
     t_ahrs = np.concatenate([[t0_s], attitude.t[inside]])
     t = _with_gap_times(t_ahrs, dvl.t, noise.ahrs_stale_s)

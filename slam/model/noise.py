@@ -7,12 +7,14 @@ factor graph's odometry and the front end's odometry chain alike.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import gtsam
 import numpy as np
 import numpy.typing as npt
 
+from sonarslam.datasets.config import NoiseConfig
 from sonarslam.features.geometry import FloatArray
 
 __all__ = [
@@ -31,7 +33,9 @@ ROBUST_KERNELS = ("huber", "cauchy")
 
 @dataclass(frozen=True)
 class MotionNoise:
-    """Noise of the motion model.
+    """Noise of the motion model, in the units the model integrates: built from a dataset's
+    ``[noise]`` (:meth:`from_config`), whose :class:`sonarslam.datasets.config.NoiseConfig` is
+    the one place of each value; no defaults of its own.
 
     Attributes
     ----------
@@ -50,28 +54,46 @@ class MotionNoise:
     dvl_nominal_scatter_mps : float
         The scatter of the DVL when it works as usual (m/s): its excess over this is white
         velocity noise added to ``dvl_sigma_mps`` (:func:`dvl_sample_sigma`).
+    gap_yaw_rate_sigma_rad_per_s : float
+        The vehicle's yaw rate nobody measures while the AHRS is silent, as a 1-sigma (rad/s).
     dvl_stale_s : float
         A valid DVL sample older than this (s) is stale: the DVL is in a gap (no rows, or rows
-        without lock), handled as a dropout (:func:`sonarslam.slam.model.motion.velocity_input`). The
-        dataset's DVL gap threshold (:mod:`sonarslam.datasets.gates`); infinite: only rows without
-        bottom lock make a dropout.
+        without lock), handled as a dropout (:func:`sonarslam.slam.model.motion.velocity_input`).
+        The dataset's DVL gap threshold (:mod:`sonarslam.datasets.gates`); infinite: only rows
+        without bottom lock make a dropout.
     ahrs_stale_s : float
         An AHRS sample older than this (s) is stale: the AHRS is in a gap; the heading is held
         (dead reckoning) or not turned (closed loops), and its variance grows at
-        ``gap_yaw_rate_sigma_radps``.
-    gap_yaw_rate_sigma_radps : float
-        The vehicle's yaw rate nobody measures while the AHRS is silent, as a 1-sigma (rad/s).
+        ``gap_yaw_rate_sigma_rad_per_s``.
     """
 
-    dvl_sigma_mps: float = 0.05
-    ahrs_sigma_rad: float = float(np.deg2rad(2.0))
-    dvl_max_gap_s: float = 10.0
-    gap_sigma_mps: float = 0.3
-    dvl_scatter_window_s: float = 0.0
-    dvl_nominal_scatter_mps: float = 0.0
+    dvl_sigma_mps: float
+    ahrs_sigma_rad: float
+    dvl_max_gap_s: float
+    gap_sigma_mps: float
+    dvl_scatter_window_s: float
+    dvl_nominal_scatter_mps: float
+    gap_yaw_rate_sigma_rad_per_s: float
     dvl_stale_s: float = float("inf")
     ahrs_stale_s: float = float("inf")
-    gap_yaw_rate_sigma_radps: float = float(np.deg2rad(1.0))
+
+    @classmethod
+    def from_config(
+        cls, noise: NoiseConfig, dvl_stale_s: float = math.inf, ahrs_stale_s: float = math.inf
+    ) -> MotionNoise:
+        """The motion model's noise from a dataset's ``[noise]``; ``dvl_stale_s`` and
+        ``ahrs_stale_s`` are the dataset's gap thresholds (s; infinite: no gaps)."""
+        return cls(
+            dvl_sigma_mps=noise.dvl_sigma_mps,
+            ahrs_sigma_rad=float(np.deg2rad(noise.ahrs_sigma_deg)),
+            dvl_max_gap_s=noise.dvl_max_gap_s,
+            gap_sigma_mps=noise.dvl_gap_sigma_mps,
+            dvl_scatter_window_s=noise.dvl_scatter_window_s,
+            dvl_nominal_scatter_mps=noise.dvl_nominal_scatter_mps,
+            gap_yaw_rate_sigma_rad_per_s=float(np.deg2rad(noise.ahrs_gap_yaw_rate_sigma_deg_per_s)),
+            dvl_stale_s=dvl_stale_s,
+            ahrs_stale_s=ahrs_stale_s,
+        )
 
     def ahrs_gap_variance(self, t_prev_s: float, t_s: float, t_ahrs_s: float) -> float:
         """Heading variance (rad^2) a step from ``t_prev_s`` to ``t_s`` adds when the newest
@@ -86,7 +108,7 @@ class MotionNoise:
         """Heading variance (rad^2) added after an AHRS sample has been held ``stale_for_s``
         seconds past :attr:`ahrs_stale_s` (0 before)."""
         over = np.maximum(np.asarray(stale_for_s, dtype=np.float64), 0.0)
-        return np.asarray((self.gap_yaw_rate_sigma_radps * over) ** 2)
+        return np.asarray((self.gap_yaw_rate_sigma_rad_per_s * over) ** 2)
 
 
 def held_velocity_variance_step(

@@ -155,7 +155,7 @@ def run_closed_loop(
                     yaw_rate = float(wrap_angle(yaw_b - prev_yaw[1])) / (rec.t - prev_yaw[0])
                 prev_yaw = (rec.t, yaw_b)
             else:
-                yaw_rate = rec.yaw_rate_radps
+                yaw_rate = rec.yaw_rate_rad_per_s
             backend.update_heading(rec.t, yaw_b)
             t_ahrs = rec.t
             traj_t.append(rec.t)

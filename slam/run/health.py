@@ -74,8 +74,8 @@ def health_inputs(dataset: Dataset, result: ClosedLoopResult) -> HealthInputs:
         created[j] = min(created.get(j, f.t), f.t)
     m = backend.metrics()
     t0 = float(result.trajectory.t_s[0])
-    walk = float(np.deg2rad(cfg.ahrs_bias_walk_deg_per_sqrt_s))
-    bias_sigma = float(np.deg2rad(cfg.ahrs_bias_sigma_deg))
+    walk = float(np.deg2rad(cfg.noise.ahrs_bias_walk_deg_per_sqrt_s))
+    bias_sigma = float(np.deg2rad(cfg.noise.ahrs_bias_sigma_deg))
     states = []
     if "state_ahrs_bias_deg" in m:
         sigma = float(np.rad2deg(np.sqrt(bias_sigma**2 + walk**2 * (t_end - t0))))
@@ -90,7 +90,9 @@ def health_inputs(dataset: Dataset, result: ClosedLoopResult) -> HealthInputs:
             )
         )
     if "state_dvl_scale" in m:
-        states.append(StateValue("DVL scale", float(m["state_dvl_scale"]), cfg.dvl_scale_sigma, ""))
+        states.append(
+            StateValue("DVL scale", float(m["state_dvl_scale"]), cfg.noise.dvl_scale_sigma, "")
+        )
     gyro_sigma = getattr(cfg, "gyro_bias_sigma_deg_per_s", None)
     if "state_gyro_bias_deg_per_s" in m and gyro_sigma is not None:
         states.append(

@@ -10,8 +10,9 @@
 * A dataset's calibration of the sensors' noise (``[noise]`` of its ``sonarslam.toml``,
   :class:`sonarslam.datasets.config.NoiseConfig`) goes over the preset and the defaults, under a TOML
   file's and the settings: a line's systematic error (``line_sigma_rho_m``,
-  ``line_sigma_theta_deg``) into the extractor, the AHRS bias's random walk and the DVL's
-  scale-factor error into the back end (:func:`noise_settings`).
+  ``line_sigma_theta_deg``) into the extractor (:func:`noise_settings`), the whole table into
+  the back end as its ``noise`` (the AHRS's white noise, bias and walk, the gyro's noise, the
+  DVL's scale-factor error).
 * Settings given as ``SCOPE.FIELD=VALUE`` (``sonarslam run --set``, ``sonarslam sweep --grid``):
   ``SCOPE`` is ``extractor`` (:class:`sonarslam.features.extractor.ExtractorConfig`), ``scans`` (the scan
   matcher, :class:`sonarslam.features.scans.ScanConfig`, when the back end's ``constraints`` hold
@@ -20,15 +21,15 @@
   :class:`sonarslam.slam.backends.isam2.graph.GraphConfig`); ``FIELD`` is a field of that frozen
   dataclass, nested by dots (``ekf.association.gate_probability``); ``<backend>.association``
   is short for ``<backend>.association.method``. Every value is checked against the field's
-  type and the dataclass's ranges (:mod:`sonarslam.datasets.settings`, the mechanism that also checks
-  ``sonarslam.toml``): a wrong one is a :class:`sonarslam.datasets.settings.SettingError` naming it.
+  type and the dataclass's ranges (:mod:`sonarslam.settings`, the mechanism that also checks
+  ``sonarslam.toml``): a wrong one is a :class:`sonarslam.settings.SettingError` naming it.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -37,16 +38,11 @@ import numpy as np
 from sonarslam.datasets.config import NoiseConfig
 from sonarslam.datasets.errors import DataError
 from sonarslam.datasets.records import BeamSeries
-from sonarslam.datasets.settings import (
-    SettingError,
-    parse_text,
-    read_toml,
-    replace_checked,
-    toml_line,
-)
 from sonarslam.datasets.source import Dataset
+from sonarslam.datasets.toml import read_toml, toml_line
 from sonarslam.features.config import ExtractorConfig
 from sonarslam.features.scans import ScanConfig
+from sonarslam.settings import SettingError, parse_text, replace_checked
 from sonarslam.slam.backends.base import BackendConfig
 from sonarslam.slam.backends.registry import backend_spec
 from sonarslam.slam.model.motion import gyro_bias_against_heading
@@ -109,8 +105,8 @@ EXTRACTOR_PRESETS: dict[str, ExtractorConfig] = {
     # the same over a 180 deg sector and 10 votes without the odometry's uncertainty: more,
     # shorter lines whose covariance describes the sonar's own noise only
     "marina-fit": _MARINA.replace(sector_deg=180.0, min_votes=10, pose_uncertainty=False),
-    # the paper's overlap-ratio ellipse and its centre (the closed loops' preset until the
-    # line-quality benchmark found its lines inside the echo band: README)
+    # the paper's overlap-ratio ellipse and its centre (docs/results.md: why the closed loops
+    # take the fit instead)
     "marina-seed": _MARINA.replace(covariance_method="seed"),
 }
 
@@ -169,11 +165,7 @@ def noise_settings(noise: NoiseConfig | None) -> tuple[dict[str, Any], dict[str,
         "line_sigma_rho_m": noise.line_sigma_rho_m,
         "line_sigma_theta_rad": math.radians(noise.line_sigma_theta_deg),
     }
-    backend = {
-        "ahrs_bias_walk_deg_per_sqrt_s": noise.ahrs_bias_walk_deg_per_sqrt_s,
-        "dvl_scale_sigma": noise.dvl_scale_sigma,
-    }
-    return ext, backend
+    return ext, {"noise": noise}
 
 
 def extractor_config(
@@ -251,7 +243,7 @@ def backend_config(
 ) -> BackendConfig:
     """Back end ``name``'s default configuration with a dataset's ``noise`` calibration
     (:func:`noise_settings`) and ``overrides`` (dotted names) over it."""
-    defaults = replace(backend_spec(name).config_type(), **noise_settings(noise)[1])
+    defaults = backend_spec(name).config_type(**noise_settings(noise)[1])
     return apply_overrides(defaults, overrides or {}, prefix=f"{name}.")
 
 
@@ -321,7 +313,7 @@ def check_combination(dataset: Dataset, backend: str) -> None:
 
     The factor graph has no gyro-bias state (the EKF has, :mod:`sonarslam.slam.backends.ekf`): with the
     gyro's rate and a walking AHRS bias, a gyro bias is taken for the walk and the heading
-    spins away (the marina, walk 0.15 deg/sqrt(s): ATE 97 m, exit 0). Refused when the data
+    spins away (docs/calibration.md gives the marina's figures). Refused when the data
     show such a bias (:func:`sonarslam.slam.model.motion.gyro_bias_against_heading`, GPS-free); an
     unbiased gyro (the simulated drift world's) is fine.
     """
@@ -345,8 +337,17 @@ def check_combination(dataset: Dataset, backend: str) -> None:
 
 
 _ALIASES = {"association": "association.method"}
+#: Back-end settings that moved or were renamed, with their new names: an old one is a
+#: SettingError naming the new one (not an alias: one name per setting).
+RENAMED_SETTINGS = {
+    "ahrs_white_sigma_deg": "noise.ahrs_white_sigma_deg",
+    "ahrs_bias_sigma_deg": "noise.ahrs_bias_sigma_deg",
+    "ahrs_bias_walk_deg_per_sqrt_s": "noise.ahrs_bias_walk_deg_per_sqrt_s",
+    "gyro_sigma_radps": "noise.gyro_sigma_rad_per_s",
+    "dvl_scale_sigma": "noise.dvl_scale_sigma",
+}
 
-#: A setting's value as typed on the command line (:func:`sonarslam.datasets.settings.parse_text`).
+#: A setting's value as typed on the command line (:func:`sonarslam.settings.parse_text`).
 parse_value = parse_text
 
 
@@ -365,8 +366,12 @@ def parse_settings(specs: Iterable[str]) -> dict[str, Any]:
 
 def apply_overrides(config: Any, overrides: dict[str, Any], prefix: str = "") -> Any:
     """``config`` with dotted fields (``"association.method"``, aliases too) replaced, each
-    value checked against its field (:func:`sonarslam.datasets.settings.replace_checked`); ``prefix``
+    value checked against its field (:func:`sonarslam.settings.replace_checked`); ``prefix``
     names the scope in messages. Raises SettingError."""
+    for name in overrides:
+        if name in RENAMED_SETTINGS and isinstance(config, BackendConfig):
+            new = f"{prefix}{RENAMED_SETTINGS[name]}"
+            raise SettingError(f"{prefix}{name}", f"was renamed {new} (the dataset's [noise])")
     resolved = {_ALIASES.get(name, name): value for name, value in overrides.items()}
     return replace_checked(config, resolved, prefix=prefix)
 

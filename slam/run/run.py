@@ -23,8 +23,8 @@ import pandas as pd
 
 from sonarslam.datasets.config import dump_dataset_config
 from sonarslam.datasets.errors import DataError, DataWarning
-from sonarslam.datasets.settings import SettingError
 from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.settings import SettingError
 from sonarslam.slam.backends.registry import BACKENDS, backend_spec
 from sonarslam.slam.io.files import check_output_dir
 from sonarslam.slam.io.trajectory import Trajectory

@@ -29,9 +29,8 @@ __all__ = ["Setting", "unit_of", "dataset_settings", "run_settings"]
 _UNITS = [
     ("_deg_per_sqrt_s", "deg/sqrt(s)"),
     ("_deg_per_s", "deg/s"),
-    ("_dps", "deg/s"),
     ("_mps", "m/s"),
-    ("_radps", "rad/s"),
+    ("_rad_per_s", "rad/s"),
     ("_m", "m"),
     ("_deg", "deg"),
     ("_rad", "rad"),
@@ -126,7 +125,7 @@ def run_settings(dataset: Dataset) -> list[Setting]:
     preset = preset_for(dataset.beams)
     noise = dataset.config.noise
     from_noise = {f"extractor.{k}" for k in noise_settings(noise)[0]}
-    from_noise |= {f"{b}.{k}" for b in BACKENDS for k in noise_settings(noise)[1]}
+    from_noise |= {f"{b}.noise.{f.name}" for b in BACKENDS for f in dataclasses.fields(noise)}
 
     def source_of(name: str, default: str) -> str:
         return (

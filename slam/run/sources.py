@@ -36,12 +36,8 @@ def motion_noise(dataset: Dataset) -> MotionNoise:
     n = dataset.config.noise
     gaps = dataset.report.gaps
     inf = float("inf")
-    return MotionNoise(
-        dvl_sigma_mps=n.dvl_sigma_mps,
-        ahrs_sigma_rad=float(np.deg2rad(n.ahrs_sigma_deg)),
-        dvl_max_gap_s=n.dvl_max_gap_s,
-        dvl_scatter_window_s=n.dvl_scatter_window_s,
-        dvl_nominal_scatter_mps=n.dvl_nominal_scatter_mps,
+    return MotionNoise.from_config(
+        n,
         dvl_stale_s=gaps["dvl"].threshold_s if "dvl" in gaps else inf,
         ahrs_stale_s=gaps["ahrs"].threshold_s if "ahrs" in gaps else inf,
     )

@@ -41,10 +41,11 @@ from dask.distributed import Client, LocalCluster, as_completed
 from tqdm import tqdm
 
 from sonarslam.datasets.errors import DataError, DataWarning
-from sonarslam.datasets.settings import SettingError, read_toml
 from sonarslam.datasets.simulator import HELD_BACK_SEED_MIN, simulate
 from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.datasets.toml import read_toml
 from sonarslam.features.geometry import compose, inverse
+from sonarslam.settings import SettingError
 from sonarslam.slam.backends.registry import BACKENDS
 from sonarslam.slam.eval.ate import ate_against_truth
 from sonarslam.slam.eval.consistency import NeesSeries, anees, nees_on_grid, nees_series

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from sonarslam.datasets.settings import bounded, one_of
+from sonarslam.settings import bounded, one_of
 from sonarslam.slam.backends.base import BackendConfig
 
 __all__ = ["GraphConfig"]
@@ -13,7 +13,8 @@ __all__ = ["GraphConfig"]
 
 @dataclass(frozen=True)
 class GraphConfig(BackendConfig):
-    """Settings of the factor graph: :class:`sonarslam.slam.backends.base.BackendConfig`'s and
+    """Settings of the factor graph: those of :class:`sonarslam.slam.backends.base.BackendConfig`
+    and the following.
 
     Attributes
     ----------
@@ -22,8 +23,9 @@ class GraphConfig(BackendConfig):
     dvl_noise : {"hold", "white"}
         How the velocity noise adds up. ``"hold"``: the error of a held DVL sample is one draw
         for the whole hold (:func:`sonarslam.slam.model.noise.held_velocity_variance_step`, the EKF's
-        model). ``"white"``: independent per motion step, ``(dt * sigma)**2`` each, which with a
-        1.5 Hz DVL and 20 records a second makes the position variance ~20x too small.
+        model). ``"white"``: independent per motion step, ``(dt * sigma)**2`` each: a held
+        sample's one error counted as a new one at every step, which understates the position
+        variance by about the number of steps per hold (docs/calibration.md).
     node_period_s : float
         A pose node at least this often (s); votes with lines add theirs.
     min_node_gap_s : float
@@ -108,7 +110,7 @@ class GraphConfig(BackendConfig):
     scan_consecutive: bool = True
     revisit_radius_m: float = bounded(10.0, 0.0, math.inf)
     revisit_gate_probability: float = bounded(0.99, 0.0, 1.0, low_open=True, high_open=True)
-    revisit_min_gap_s: float = 60.0
+    revisit_min_gap_s: float = bounded(60.0, 0.0, math.inf)
     revisit_candidates: int = bounded(4, 0, math.inf)
     revisits_per_scan: int = bounded(2, 0, math.inf)
     scan_compatibility_probability: float = bounded(0.999, 0.0, 1.0, low_open=True, high_open=True)

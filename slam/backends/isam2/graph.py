@@ -129,7 +129,7 @@ class LineIsam2:
         self.graph = gtsam.NonlinearFactorGraph()  # every factor, for batch LM and saving
         self.records: list[FactorRecord] = []
         self.map = LandmarkMap(config, self.bTs)
-        self.odometry = NodeOdometry(self.t_s, config.gyro_sigma_radps, config.dvl_noise)
+        self.odometry = NodeOdometry(self.t_s, config.noise.gyro_sigma_rad_per_s, config.dvl_noise)
         self.nodes = NodeTable()
         self._pending = gtsam.NonlinearFactorGraph()
         self._pending_values = gtsam.Values()
@@ -140,7 +140,7 @@ class LineIsam2:
         self.vote_wall_s: list[float] = []  # wall time of each update_lines (s)
         self._after: AfterVote | None = None  # the estimate after the last vote's update
         self._n_nodes = 0
-        self._var_walk = np.deg2rad(config.ahrs_bias_walk_deg_per_sqrt_s) ** 2  # rad^2/s
+        self._var_walk = np.deg2rad(config.noise.ahrs_bias_walk_deg_per_sqrt_s) ** 2  # rad^2/s
         self._bias_estimate = float(np.deg2rad(config.ahrs_bias_prior_deg))  # the newest node's
         self._last_node_t = -np.inf
         self._last_heading_t = -np.inf
@@ -260,11 +260,11 @@ class LineIsam2:
                 FactorRecord.of(FactorKind.BETWEEN_VECTOR, [B(k - 1), B(k)], [0.0], [[var]])
             )
             self._pending_values.insert(B(k), np.array([self._bias_estimate]))
-        if cfg.estimate_misalignment or cfg.estimate_gyro_scale or cfg.dvl_scale_sigma > 0.0:
+        if cfg.estimate_misalignment or cfg.estimate_gyro_scale or cfg.noise.dvl_scale_sigma > 0.0:
             keys = [X(k - 1), X(k)]
             keys += [D(0)] if cfg.estimate_misalignment else []
             keys += [G(0)] if cfg.estimate_gyro_scale else []
-            keys += [K(0)] if cfg.dvl_scale_sigma > 0.0 else []
+            keys += [K(0)] if cfg.noise.dvl_scale_sigma > 0.0 else []
             terms = OdometryTerms(rel.yaw_raw, (rel.jx, rel.jy), self.odometry.node_scale)
             record = FactorRecord.of(
                 FactorKind.DVL_GYRO_ODOMETRY, keys, rel.pose, local_covariance(rel), odometry=terms
@@ -278,7 +278,7 @@ class LineIsam2:
         heading = self.odometry.heading_at_node()
         if heading is not None:
             z, var = heading
-            var += np.deg2rad(cfg.ahrs_white_sigma_deg) ** 2 / n_headings
+            var += np.deg2rad(cfg.noise.ahrs_white_sigma_deg) ** 2 / n_headings
             keys = [X(k), self._bias_key(k)]
             self._add_factor(FactorRecord.of(FactorKind.HEADING_BIAS, keys, [z], [[var]]))
         self._pending_values.insert(X(k), gtsam.Pose2(*self.pose))
@@ -324,7 +324,7 @@ class LineIsam2:
         if self.config.estimate_gyro_scale:
             scale = float(self.isam.calculateEstimateVector(G(0))[0])
         gain = 1.0
-        if self.config.dvl_scale_sigma > 0.0:
+        if self.config.noise.dvl_scale_sigma > 0.0:
             gain += float(self.isam.calculateEstimateVector(K(0))[0])
         self.odometry.re_anchor(delta, scale, gain)
         self._bias_estimate = float(self.isam.calculateEstimateVector(self._bias_key(k))[0])
@@ -649,7 +649,7 @@ class LineIsam2:
         terms = [("ahrs_bias", self._bias_key(self._n_nodes - 1), True)]
         if self.config.estimate_misalignment:
             terms.append(("misalignment", int(D(0)), True))
-        if self.config.dvl_scale_sigma > 0.0:
+        if self.config.noise.dvl_scale_sigma > 0.0:
             terms.append(("dvl_scale", int(K(0)), False))
         for name, key, degrees in terms:
             v, sd = float(values.atVector(key)[0]), float(np.sqrt(marginal(key)[0, 0]))

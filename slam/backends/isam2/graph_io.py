@@ -333,7 +333,7 @@ def start_records(
     records = [FactorRecord.of(FactorKind.POSE_TRANSLATION_PRIOR, [X(0)], wTb0[:2], P0[:2, :2])]
     values = gtsam.Values()
     b0 = np.deg2rad(config.ahrs_bias_prior_deg)
-    var_b = np.deg2rad(config.ahrs_bias_sigma_deg) ** 2
+    var_b = np.deg2rad(config.noise.ahrs_bias_sigma_deg) ** 2
     records.append(FactorRecord.of(prior, [B(0)], [b0], [[var_b]]))
     values.insert(B(0), np.array([b0]))
     if config.estimate_misalignment:
@@ -343,11 +343,11 @@ def start_records(
     if config.estimate_gyro_scale:
         records.append(FactorRecord.of(prior, [G(0)], [1.0], [[config.gyro_scale_sigma**2]]))
         values.insert(G(0), np.ones(1))
-    if config.dvl_scale_sigma > 0.0:
-        records.append(FactorRecord.of(prior, [K(0)], [0.0], [[config.dvl_scale_sigma**2]]))
+    if config.noise.dvl_scale_sigma > 0.0:
+        records.append(FactorRecord.of(prior, [K(0)], [0.0], [[config.noise.dvl_scale_sigma**2]]))
         values.insert(K(0), np.zeros(1))
     values.insert(X(0), gtsam.Pose2(*wTb0))
-    var_white = np.deg2rad(config.ahrs_white_sigma_deg) ** 2
+    var_white = np.deg2rad(config.noise.ahrs_white_sigma_deg) ** 2
     records.append(FactorRecord.of(FactorKind.HEADING_BIAS, [X(0), B(0)], [wTb0[2]], [[var_white]]))
     return records, values
 

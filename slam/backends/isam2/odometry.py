@@ -78,14 +78,14 @@ class NodeOdometry:
     ----------
     t0_s : float
         Start of the chain (Unix s).
-    gyro_sigma_radps : float
+    gyro_sigma_rad_per_s : float
         Yaw-rate noise of the motion model (rad/s).
     dvl_noise : {"hold", "white"}
         How the velocity noise adds up (:class:`sonarslam.slam.backends.isam2.graph.GraphConfig`).
     """
 
-    def __init__(self, t0_s: float, gyro_sigma_radps: float, dvl_noise: str = "hold") -> None:
-        self.gyro_sigma_radps = gyro_sigma_radps
+    def __init__(self, t0_s: float, gyro_sigma_rad_per_s: float, dvl_noise: str = "hold") -> None:
+        self.gyro_sigma_rad_per_s = gyro_sigma_rad_per_s
         self.dvl_noise = dvl_noise
         self.chain = OdometryChain(t0_s)
         self.since_node = RelativeMotion()
@@ -99,7 +99,7 @@ class NodeOdometry:
     def step(self, step: MotionStep) -> FloatArray:
         """Integrate one motion step; returns the relative motion ``bTb'`` applied."""
         qv = step.var_xy_m2 if self.dvl_noise == "hold" else step.var_xy_white_m2
-        qr = step.var_yaw_rad2(self.gyro_sigma_radps)
+        qr = step.var_yaw_rad2(self.gyro_sigma_rad_per_s)
         syaw = self.scale * step.dyaw_rad
         # the odometry factor's measurement: delta = 0, the gyro scale of the node's start
         self.since_node.step(step.dx_m, step.dy_m, syaw, qv, qr, step.dyaw_rad)

@@ -1,18 +1,23 @@
 """Typed settings: every value from a file or the command line checked against the frozen
 dataclass it sets, by one mechanism.
 
+This module belongs to no layer: every layer of :mod:`sonarslam` may import it and it imports
+none of them (``tests/test_layers.py``).
+
 ``sonarslam.toml`` and ``run --config`` (:func:`sonarslam.datasets.config.load_dataset_config`),
 ``extract --config``, ``run --set SCOPE.FIELD=VALUE`` and the sweep's grid
 (:mod:`sonarslam.slam.run.presets`) all end in :func:`replace_checked`: each dotted name must be a field
 of the dataclass (nested dataclasses by dots); its value must have the field's annotated type
 (:func:`coerce`: a whole number for an ``int``, a finite number for a ``float``, ``true`` /
 ``false`` for a ``bool``, a string for a ``str``, ``None`` only where the field allows it, a
-table for a nested dataclass); then the dataclass is built, and its own ``__post_init__``
-checks the ranges. Anything wrong is a :class:`SettingError` naming the key; a file's loader
-turns it into a :class:`sonarslam.datasets.errors.DataError` naming the file too.
+table for a nested dataclass); then the dataclass is built, and its ``__post_init__`` checks
+the ranges and choices written in its fields' metadata (:func:`bounded`, :func:`one_of`,
+:func:`check_fields`). Anything wrong is a :class:`SettingError` naming the key; a file's loader
+(:mod:`sonarslam.datasets.toml`) turns it into a :class:`sonarslam.datasets.errors.DataError`
+naming the file and line too.
 
 Text from the command line is parsed by the same grammar as the logs' numbers
-(:data:`sonarslam.datasets.logfile.NUMBER`): ``nan``, ``inf``, ``1_000`` or ``0x10`` are not numbers.
+(:data:`NUMBER`): ``nan``, ``inf``, ``1_000`` or ``0x10`` are not numbers.
 """
 
 from __future__ import annotations
@@ -20,32 +25,28 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
-import tomllib
 import types
 import typing
 from collections.abc import Mapping
 from functools import cache
-from pathlib import Path
 from typing import Any, TypeVar
 
-from sonarslam.datasets.errors import DataError
-from sonarslam.datasets.logfile import NUMBER, read_text, split_lines
-
 __all__ = [
+    "NUMBER",
     "SettingError",
     "parse_text",
     "coerce",
     "field_types",
     "replace_checked",
-    "check_within",
     "Range",
     "bounded",
     "one_of",
     "check_fields",
-    "read_toml",
-    "toml_line",
 ]
 
+#: The grammar of a number in every text input: the logs (:mod:`sonarslam.datasets.logfile`)
+#: and numbers given on the command line.
+NUMBER = r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
 _NUMBER_RE = re.compile(NUMBER)
 _INT_RE = re.compile(r"[+-]?[0-9]+")
 _NONE_TEXT = ("none", "null")
@@ -53,44 +54,7 @@ _NONE_TEXT = ("none", "null")
 MAX_INT = 10**9
 
 
-def read_toml(path: str | Path) -> tuple[dict[str, Any], str]:
-    """A TOML file (UTF-8, :func:`sonarslam.datasets.logfile.read_text`) and its text; a syntax error is
-    a :class:`DataError` with its line (the last line when the parser ran out of document)."""
-    p = Path(path)
-    text = read_text(p, "utf-8")
-    try:
-        return tomllib.loads(text), text
-    except tomllib.TOMLDecodeError as exc:
-        found = re.search(r"at line (\d+)", str(exc))
-        line = int(found.group(1)) if found else None
-        if line is None and "end of document" in str(exc):
-            line = max(len(split_lines(text)[0]), 1)
-        raise DataError(p, line, f"TOML syntax error: {exc}") from None
-
-
-_TABLE_HEADER = re.compile(r"\[\s*([^\[\]]+?)\s*\]\s*(?:#.*)?")
-_KEY = re.compile(r"\s*\"?([A-Za-z0-9_.-]+)\"?\s*=")
-
-
-def toml_line(text: str, table: str, key: str | None = None) -> int | None:
-    """The physical line of ``key = ...`` in ``[table]`` of a TOML text (``table`` dotted,
-    ``""`` for the top level), or of the ``[table]`` header when ``key`` is None; None when not
-    written that way (an inline table, a dotted key)."""
-    current = ""
-    for number, raw in enumerate(split_lines(text)[0], start=1):
-        header = _TABLE_HEADER.fullmatch(raw.strip())
-        if header is not None:
-            current = re.sub(r"\s*\.\s*", ".", header.group(1)).replace('"', "")
-            if key is None and current == table:
-                return number
-            continue
-        found = _KEY.match(raw)
-        if key is not None and found is not None and current == table and found.group(1) == key:
-            return number
-    return None
-
-
-def check_within(
+def _check_within(
     name: str,
     value: float,
     low: float,
@@ -98,9 +62,9 @@ def check_within(
     low_open: bool = False,
     high_open: bool = False,
 ) -> None:
-    """For a dataclass's ``__post_init__``: ValueError unless ``low <= value <= high``
-    (``low < value`` when ``low_open``, ``value < high`` when ``high_open``), in the words
-    :func:`replace_checked` reports with the key."""
+    """ValueError unless ``low <= value <= high`` (``low < value`` when ``low_open``,
+    ``value < high`` when ``high_open``), in the words :func:`replace_checked` reports with the
+    key."""
     ok = (value > low if low_open else value >= low) and (
         value < high if high_open else value <= high
     )
@@ -138,14 +102,17 @@ def one_of(default: _T, *choices: object) -> _T:
 
 
 def check_fields(obj: Any) -> None:
-    """The one check of a configuration dataclass's fields: each field's range
-    (:func:`bounded`) and choices (:func:`one_of`), in the words :func:`replace_checked`
-    reports with the key. ValueError naming the first field out of them."""
+    """The one check of a configuration dataclass's fields, for its ``__post_init__``: each
+    field's range (:func:`bounded`; every element of a tuple) and choices (:func:`one_of`), in
+    the words :func:`replace_checked` reports with the key. ValueError naming the first field
+    out of them. What ties two fields together (``max_range_m > min_range_m``) the class checks
+    after this, naming the field it refuses."""
     for f in dataclasses.fields(obj):
         value = getattr(obj, f.name)
         r = f.metadata.get("range")
         if r is not None and value is not None:
-            check_within(f.name, value, r.low, r.high, r.low_open, r.high_open)
+            for v in value if isinstance(value, tuple) else (value,):
+                _check_within(f.name, v, r.low, r.high, r.low_open, r.high_open)
         choices = f.metadata.get("choices")
         if choices is not None and value not in choices:
             said = ", ".join(repr(c) for c in choices)
@@ -164,7 +131,7 @@ class SettingError(ValueError):
 
 def parse_text(text: str) -> Any:
     """A value typed on the command line, by its look: ``true``/``false``, ``none``/``null``,
-    a whole number, a number (:data:`sonarslam.datasets.logfile.NUMBER`), else the text itself.
+    a whole number, a number (:data:`NUMBER`), else the text itself.
 
     :func:`coerce` then checks it against the field it sets (``"10"`` is fine for a float).
     """
