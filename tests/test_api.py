@@ -18,9 +18,9 @@ import gtsam
 import numpy as np
 import pytest
 from gtsam.symbol_shorthand import L, X
+from sonarslam.datasets.settings import SettingError
 
 import sonarslam
-from sonarslam.datasets.settings import SettingError
 from sonarslam.datasets.source import open_dataset
 from sonarslam.features.geometry import (
     compose,
@@ -112,18 +112,6 @@ def test_every_public_name_resolves_to_a_documented_object(name: str) -> None:
     ]
     missing = [p for p in named if p not in doc]
     assert missing == [], f"{name} does not document {missing}"
-
-
-def test_no_two_classes_share_a_name() -> None:
-    seen: dict[str, str] = {}
-    for pkg in ("sonar", "features", "datasets", "slam"):
-        for path in sorted((ROOT / pkg).rglob("*.py")):
-            for node in ast.walk(ast.parse(path.read_text())):
-                if isinstance(node, ast.ClassDef):
-                    where = f"{path.relative_to(ROOT)}:{node.lineno}"
-                    assert node.name not in seen, f"{node.name}: {seen[node.name]} and {where}"
-                    seen[node.name] = where
-    assert "TrueMotion" in seen and "Trajectory" in seen
 
 
 # -- GTSAM's local frame -----------------------------------------------------------------------

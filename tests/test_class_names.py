@@ -10,10 +10,6 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 LAYERS = ("sonar", "features", "datasets", "slam")
 
-#: The one pair allowed, until the rename of the simulator's truth path (issue 28, item 2, on
-#: the public-API branch) lands: then this entry matches nothing and may go.
-PENDING_RENAME = {"Trajectory": {"datasets/simulator/path.py", "slam/io/trajectory.py"}}
-
 
 def _classes() -> dict[str, set[str]]:
     """Every class defined anywhere in the layers and the neutral modules, by name."""
@@ -31,7 +27,4 @@ def test_no_two_classes_share_a_name():
     classes = _classes()
     assert len(classes) > 100
     shared = {name: where for name, where in classes.items() if len(where) > 1}
-    for name, where in PENDING_RENAME.items():
-        if shared.get(name) == where:
-            del shared[name]
     assert shared == {}, f"classes sharing a name: {shared}"
