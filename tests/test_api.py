@@ -18,7 +18,6 @@ import gtsam
 import numpy as np
 import pytest
 from gtsam.symbol_shorthand import L, X
-from sonarslam.datasets.settings import SettingError
 
 import sonarslam
 from sonarslam.datasets.source import open_dataset
@@ -30,6 +29,7 @@ from sonarslam.features.geometry import (
     transform_points,
 )
 from sonarslam.features.line import LineFeature
+from sonarslam.settings import SettingError
 from sonarslam.slam.backends.isam2.config import GraphConfig
 from sonarslam.slam.backends.isam2.factors import line_factor
 from sonarslam.slam.mapping.landmarks import LandmarkConfig, LandmarkMap

@@ -6,6 +6,7 @@ folder name."""
 from __future__ import annotations
 
 import ast
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -20,9 +21,18 @@ HF_DATASETS = "datasets==5.2.0"
 
 
 def _build_wheel(out: Path) -> Path:
+    """The wheel, built from a copy of the sources: an in-tree build would leave ``build/`` in
+    the clone, whose stale copies of moved modules the next wheel would carry."""
+    src = out.parent / "src"
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
+    src.mkdir()
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
+        shutil.copy2(ROOT / name, src / name)
+    for folder in ("sonarslam", *LAYERS):
+        shutil.copytree(ROOT / folder, src / folder, symlinks=True, ignore=ignore)
     subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q",
-         "-w", str(out), str(ROOT)],
+         "-w", str(out), str(src)],
         check=True, capture_output=True, text=True,
     )  # fmt: skip
     (wheel,) = out.glob("sonarslam-*.whl")

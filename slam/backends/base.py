@@ -14,7 +14,7 @@ back end registers in :mod:`sonarslam.slam.backends.registry`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
