@@ -2,20 +2,34 @@
 
 from __future__ import annotations
 
+import importlib
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 from evo.core.geometry import umeyama_alignment
 
-from sonarslam.datasets.simulator import simulate
+from sonarslam.datasets.simulator import KINDS, simulate
 from sonarslam.datasets.source import open_dataset
+from sonarslam.slam.cli.common import POSES
 from sonarslam.slam.cli.main import build_parser, main
+from sonarslam.slam.cli.parsers import (
+    BACKENDS,
+    COMMANDS,
+    EXTRACTOR_PRESETS,
+    SIM_DURATION_S,
+    WORLDS,
+)
 from sonarslam.slam.eval.ate import ate_against_gps
 from sonarslam.slam.eval.truth import truth_trajectory
 from sonarslam.slam.io.trajectory import read_tum
+from sonarslam.slam.run.demo import SIM_DURATION_S as DEMO_SIM_DURATION_S
+from sonarslam.slam.run.presets import EXTRACTOR_PRESETS as PRESETS
 from sonarslam.slam.run.presets import SettingError, check_settings, run_config
-from sonarslam.slam.run.sources import dead_reckoning_trajectory
+from sonarslam.slam.run.run import backend_names
+from sonarslam.slam.run.sources import POSE_SOURCES, dead_reckoning_trajectory
 
 
 @pytest.fixture(scope="module")
@@ -37,6 +51,90 @@ def test_every_command_has_help(capsys):
         assert exc.value.code == 0
         out = capsys.readouterr().out
         assert "usage: sonarslam " + name in out and "SONARSLAM_DATA" in out
+
+
+#: What ``--version`` and ``--help`` must not import: each costs seconds on the 2-core machine
+#: (the whole library imported 2,295 modules in 7.7-14 s; benchmarks/cli_startup.py times it).
+HEAVY = ("gtsam", "numba", "matplotlib", "scipy", "pandas", "dask", "distributed", "evo", "shapely")
+
+
+def _imported_after(code: str) -> dict[str, object]:
+    """Run ``code`` in a fresh interpreter; the top-level packages it left in ``sys.modules``
+    and what it printed."""
+    probe = (
+        "import contextlib, io, json, sys\n"
+        "out = io.StringIO()\n"
+        f"with contextlib.redirect_stdout(out):\n    {code}\n"
+        "print(json.dumps({'modules': sorted({m.split('.')[0] for m in sys.modules}),"
+        " 'n': len(sys.modules), 'out': out.getvalue()}))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, check=True, timeout=120
+    )
+    return json.loads(done.stdout)  # type: ignore[no-any-return]
+
+
+def test_version_and_help_import_nothing_heavy():
+    """``sonarslam --version``, ``--help`` and every ``COMMAND --help`` build the parsers from
+    argparse alone: the library (and its gtsam, numba, matplotlib, ...) is imported only by the
+    command that runs."""
+    calls = [["--version"], ["--help"], *([name, "--help"] for name, _, _ in COMMANDS)]
+    code = (
+        "from sonarslam.slam.cli.main import main\n"
+        f"    for argv in {calls!r}:\n"
+        "        try:\n            main(argv)\n"
+        "        except SystemExit as exc:\n            assert exc.code == 0, (argv, exc.code)"
+    )
+    seen = _imported_after(code)
+    assert set(HEAVY).isdisjoint(seen["modules"]), set(HEAVY) & set(seen["modules"])
+    assert "sonarslam.slam.run" not in seen["modules"]
+    assert str(seen["out"]).startswith("sonarslam ") and "usage: sonarslam sweep" in seen["out"]
+    assert int(seen["n"]) < 400  # the library imported 2,295
+
+
+def test_the_parsers_offer_the_registries_choices():
+    """The parsers spell out the registries' names (so that they import nothing); the same."""
+    assert POSES == tuple(sorted(POSE_SOURCES))
+    assert BACKENDS == tuple(backend_names())
+    assert EXTRACTOR_PRESETS == tuple(sorted(PRESETS))
+    assert WORLDS == KINDS
+    assert SIM_DURATION_S == DEMO_SIM_DURATION_S
+    # and every command module runs: its command(args) is there
+    for name, _, module in COMMANDS:
+        assert callable(importlib.import_module(module).command), name
+
+
+def test_a_sweep_without_dask_names_the_extra(tmp_path, capsys, monkeypatch):
+    """Without dask (``sys.modules[name] = None``: its import fails as if it were not installed)
+    a sweep on Dask says which extra to install, in one line, exit 1, before it simulates."""
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)
+    argv = ["sweep", "--seeds", "0", "--world", "harbour", "--out", str(tmp_path / "o")]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        "sonarslam sweep: error: a sweep on Dask needs dask, which is not installed:"
+        " pip install 'sonarslam[sweep]'"
+    ]
+    assert not (tmp_path / "o" / "sim").exists()
+
+
+def test_a_drawn_world_without_shapely_names_the_extra(tmp_path):
+    """Without shapely the simulator still imports (its fixed worlds do not need it) and a drawn
+    world says which extra to install, in one line, exit 1 (a fresh interpreter: shapely is
+    blocked before anything imports it)."""
+    code = (
+        "import sys; sys.modules['shapely'] = None\n"
+        "from sonarslam.slam.cli.main import main\n"
+        f"sys.exit(main(['simulate', 'drawn', '--out', {str(tmp_path / 'o')!r}]))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=tmp_path
+    )
+    assert done.returncode == 1, done.stderr
+    assert done.stderr.strip().splitlines() == [
+        "sonarslam simulate: error: a drawn world needs shapely, which is not installed:"
+        " pip install 'sonarslam[sim]'"
+    ]
 
 
 def test_known_errors_are_one_line_and_exit_1(tmp_path, capsys, monkeypatch):

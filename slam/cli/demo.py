@@ -5,28 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from sonarslam.slam.cli.common import EPILOG, Subparsers, add_quiet
 from sonarslam.slam.io.files import check_output_dir
-from sonarslam.slam.run.demo import SIM_DURATION_S, demo_source, main_job
+from sonarslam.slam.run.demo import demo_source, main_job
 from sonarslam.slam.run.run import results_table, summary_line
-
-
-def add_parser(sub: Subparsers) -> None:
-    p = sub.add_parser(
-        "demo",
-        help="the main job (make run): both closed loops and dead reckoning on the marina or, "
-        "without it, a simulated harbour",
-        epilog=EPILOG,
-    )
-    p.add_argument("--out", default="out", help="output directory (default out)")
-    p.add_argument(
-        "--sim-duration",
-        type=float,
-        default=SIM_DURATION_S,
-        help=f"length of the simulated harbour when there is no marina (s, default {SIM_DURATION_S:g})",
-    )
-    add_quiet(p)
-    p.set_defaults(func=command)
 
 
 def command(args: argparse.Namespace) -> int:
