@@ -6,11 +6,13 @@ import importlib
 import json
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
 from evo.core.geometry import umeyama_alignment
 
+from sonarslam.datasets.errors import DataWarning
 from sonarslam.datasets.simulator import KINDS, simulate
 from sonarslam.datasets.source import open_dataset
 from sonarslam.slam.cli.common import POSES
@@ -24,11 +26,11 @@ from sonarslam.slam.cli.parsers import (
 )
 from sonarslam.slam.eval.ate import ate_against_gps
 from sonarslam.slam.eval.truth import truth_trajectory
-from sonarslam.slam.io.trajectory import read_tum
+from sonarslam.slam.io.trajectory import Trajectory, read_tum
 from sonarslam.slam.run.demo import SIM_DURATION_S as DEMO_SIM_DURATION_S
 from sonarslam.slam.run.presets import EXTRACTOR_PRESETS as PRESETS
 from sonarslam.slam.run.presets import SettingError, check_settings, run_config
-from sonarslam.slam.run.run import backend_names
+from sonarslam.slam.run.run import RunResult, backend_names, results_table
 from sonarslam.slam.run.sources import POSE_SOURCES, dead_reckoning_trajectory
 
 
@@ -135,6 +137,62 @@ def test_a_drawn_world_without_shapely_names_the_extra(tmp_path):
         "sonarslam simulate: error: a drawn world needs shapely, which is not installed:"
         " pip install 'sonarslam[sim]'"
     ]
+
+
+def test_each_warning_is_printed_once_per_command(monkeypatch, capsys):
+    """A data warning is printed once however often the command meets it (the demo opens its
+    dataset for each run: its DVL gap was printed four times), on one line."""
+
+    def command(args):
+        for text in ("a.log: 1 gap of the DVL\n  longer", "a.log: 1 gap of the DVL longer"):
+            warnings.warn(text, DataWarning, stacklevel=1)
+        warnings.warn("b.log: another", DataWarning, stacklevel=1)
+        return 0
+
+    monkeypatch.setattr(importlib.import_module("sonarslam.slam.cli.info"), "command", command)
+    assert main(["info", "anything"]) == 0
+    assert capsys.readouterr().err.splitlines() == [
+        "warning: a.log: 1 gap of the DVL longer",
+        "warning: b.log: another",
+    ]
+
+
+def _result(backend, metrics, others=()):
+    t = np.array([0.0, 1.0])
+    tr = Trajectory(t, np.zeros((2, 3)))
+    return RunResult(
+        backend, tr, {"backend": backend, **metrics}, trajectories=dict.fromkeys(others, tr)
+    )
+
+
+def test_the_demo_table_is_against_the_truth_on_simulated_runs():
+    """On simulated runs the table's figures are against the simulator's truth (its heading
+    says so), then against the simulated GPS; on real data against GPS over both spans."""
+    sim = {
+        "ate_truth_mean_m": 1.04, "ate_truth_max_m": 1.73,
+        "ate_truth_aligned_mean_m": 0.08, "ate_truth_aligned_max_m": 0.2,
+        "ate_truth_smoothed_mean_m": 0.9, "ate_truth_smoothed_max_m": 1.5,
+        "ate_truth_aligned_smoothed_mean_m": 0.07, "ate_truth_aligned_smoothed_max_m": 0.3,
+        "ate_mean_m": 1.31, "ate_max_m": 3.28, "ate_aligned_mean_m": 0.87,
+        "ate_mean_smoothed_m": 1.3, "ate_max_smoothed_m": 3.48, "ate_aligned_mean_smoothed_m": 0.86,
+        "ate_sonar_mean_m": 1.31, "ate_sonar_max_m": 3.28,
+    }  # fmt: skip
+    lines = results_table([_result("isam2", sim, ["smoothed"])]).splitlines()
+    assert lines[0].split("|")[2].strip() == "truth mean / max (m)"
+    assert lines[0].split("|")[4].strip() == "simulated GPS mean / max (m)"
+    assert [c.strip() for c in lines[2].split("|")[1:-1]] == [
+        "isam2 online", "1.04 / 1.73", "0.08 / 0.20", "1.31 / 3.28", "0.87",
+    ]  # fmt: skip
+    assert [c.strip() for c in lines[3].split("|")[1:-1]] == [
+        "isam2 smoothed", "0.90 / 1.50", "0.07 / 0.30", "1.30 / 3.48", "0.86",
+    ]  # fmt: skip
+    real = {k: v for k, v in sim.items() if "truth" not in k}
+    real |= {"ate_sonar_aligned_mean_m": 0.5, "ate_sonar_aligned_max_m": 0.9}
+    lines = results_table([_result("ekf", real)]).splitlines()
+    assert lines[0].split("|")[2].strip() == "sonar span mean / max (m)"
+    assert [c.strip() for c in lines[2].split("|")[1:-1]] == [
+        "ekf", "1.31 / 3.28", "0.50 / 0.90", "1.31 / 3.28", "0.87",
+    ]  # fmt: skip
 
 
 def test_known_errors_are_one_line_and_exit_1(tmp_path, capsys, monkeypatch):

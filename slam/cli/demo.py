@@ -26,11 +26,23 @@ def command(args: argparse.Namespace) -> int:
         print("\nResults (ATE against GPS, no alignment):")
     for r in results:
         print("  " + summary_line(r.metrics))
-    print("\nEvery trajectory, as published (no alignment) and after a rigid SE(2) fit:\n")
+    if source.simulated:
+        print(
+            "\nEvery trajectory against the simulator's truth, then against its simulated GPS"
+            " (the whole run), as published (no alignment) and after a rigid SE(2) fit:\n"
+        )
+    else:
+        print(
+            "\nEvery trajectory against GPS, as published (no alignment) and after a rigid SE(2) fit:\n"
+        )
     print(results_table(results))
     print("\nOutputs and pictures:")
     what = "the simulated GPS" if source.simulated else "GPS"
-    print(f"  {Path(args.out).resolve()}  (*_scans_gps.png: the sonar map with {what} poses)")
+    print(
+        f"  {Path(args.out).resolve()}  (*_trajectories.png: every estimate against"
+        f" {'the truth' if source.simulated else 'GPS'}; *_scans_gps.png: the sonar map with"
+        f" {what} poses)"
+    )
     for r in results:
         if r.out_dir is not None:
             pics = ", ".join(p.name for p in sorted(r.out_dir.glob("*.png")))

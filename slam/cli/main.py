@@ -50,7 +50,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     with warnings.catch_warnings():
         warnings.simplefilter("always", DataWarning)
-        warnings.showwarning = _show_warning
+        warnings.showwarning = _OnceEach()
         try:
             # the command's module, and with it the library, only now (parsers.COMMANDS)
             return int(importlib.import_module(args.implementation).command(args))
@@ -66,16 +66,27 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 1
 
 
-def _show_warning(
-    message: Warning | str,
-    category: type[Warning],
-    filename: str,
-    lineno: int,
-    file: object = None,
-    line: str | None = None,
-) -> None:
-    """A warning as one line on stderr: ``warning: <message>``."""
-    print(f"warning: {' '.join(str(message).split())}", file=sys.stderr)
+class _OnceEach:
+    """``warnings.showwarning`` of a command: a warning as one line on stderr, ``warning:
+    <message>``, each message once (a command that opens its dataset for several runs would
+    print the same data warning for each)."""
+
+    def __init__(self) -> None:
+        self.shown: set[str] = set()
+
+    def __call__(
+        self,
+        message: Warning | str,
+        category: type[Warning],
+        filename: str,
+        lineno: int,
+        file: object = None,
+        line: str | None = None,
+    ) -> None:
+        text = " ".join(str(message).split())
+        if text not in self.shown:
+            self.shown.add(text)
+            print(f"warning: {text}", file=sys.stderr)
 
 
 def _one_line(exc: Exception) -> str:
