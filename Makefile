@@ -1,7 +1,8 @@
 # Two commands do everything on a fresh machine: `make run` and `make test`.
-# Both create or refresh .venv first. `make run` installs the runtime dependencies only
-# (.[run]: what `pip install .` gives); `make test`, `make lint` and `make venv` add the
-# development tools (.[dev]: pytest, ruff, mypy, jupyter for the notebooks, scikit-image).
+# Both create or refresh .venv first. `make run` installs the runtime dependencies only (what
+# `pip install .` gives: the demo needs no extra); `make test`, `make lint` and `make venv` add
+# the development tools and every optional extra (.[dev]: pytest, ruff, mypy, jupyter for the
+# notebooks, scikit-image; .[sim]: shapely for the drawn worlds; .[sweep]: dask, distributed).
 # .venv is rebuilt only when $(PYTHON)'s version (implementation and major.minor: what its
 # wheels are built for) differs from the one it was made with (make test PYTHON=python3.13),
 # not when the same version sits at another path; it is reinstalled when pyproject.toml or

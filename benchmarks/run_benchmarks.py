@@ -2,6 +2,8 @@
 
 * ``machine_speed.py`` (first): the machine's reference workloads, pure Python and numpy, in
   the same run as the figures below (the README's speed table divides by them);
+* ``cli_startup.py``: how fast ``sonarslam --version``, ``--help`` and ``COMMAND --help``
+  answer, pinned to one core, and how many modules each imports;
 * ``extractor_speed.py``: real-time factor of the whole marina extraction on one core, time per
   beam, and voting one sector against scikit-image's ``hough_line``;
 * ``extractor_consistency.py``: the pool test over 50 seeds and the NEES of both covariance
@@ -31,6 +33,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 SCRIPTS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
     ("machine_speed.py", "out/machine_speed.json", ()),
+    ("cli_startup.py", "out/cli_startup.json", ()),
     ("extractor_speed.py", "out/extractor_speed.json", ()),
     ("extractor_consistency.py", "out/extractor_consistency.json", ()),
     ("simulator_speed.py", "out/simulator_speed.json", ()),

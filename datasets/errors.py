@@ -1,10 +1,10 @@
-"""The project's own exception and warning for bad input data."""
+"""The project's own exceptions and warning: bad input data, an optional dependency missing."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["DataError", "DataWarning"]
+__all__ = ["DataError", "DataWarning", "MissingExtraError"]
 
 
 class DataError(ValueError):
@@ -30,3 +30,26 @@ class DataError(ValueError):
 
 class DataWarning(UserWarning):
     """A row was skipped safely; the message names the file, line and count."""
+
+
+class MissingExtraError(ImportError):
+    """A feature needs an optional dependency that is not installed; names the extra that
+    installs it (``pyproject.toml``'s ``[project.optional-dependencies]``).
+
+    Parameters
+    ----------
+    extra : str
+        The extra, e.g. ``"sweep"``: ``pip install 'sonarslam[sweep]'``.
+    feature : str
+        What needs it, e.g. ``"a sweep on Dask"``.
+    missing : ModuleNotFoundError
+        The failed import (its ``name`` is the missing module).
+    """
+
+    def __init__(self, extra: str, feature: str, missing: ModuleNotFoundError) -> None:
+        self.extra = extra
+        module = (missing.name or "?").split(".")[0]
+        super().__init__(
+            f"{feature} needs {module}, which is not installed: pip install 'sonarslam[{extra}]'",
+            name=missing.name,
+        )

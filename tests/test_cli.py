@@ -2,20 +2,36 @@
 
 from __future__ import annotations
 
+import importlib
 import json
+import subprocess
+import sys
+import warnings
 
 import numpy as np
 import pytest
 from evo.core.geometry import umeyama_alignment
 
-from sonarslam.datasets.simulator import simulate
+from sonarslam.datasets.errors import DataWarning
+from sonarslam.datasets.simulator import KINDS, simulate
 from sonarslam.datasets.source import open_dataset
+from sonarslam.slam.cli.common import POSES
 from sonarslam.slam.cli.main import build_parser, main
+from sonarslam.slam.cli.parsers import (
+    BACKENDS,
+    COMMANDS,
+    EXTRACTOR_PRESETS,
+    SIM_DURATION_S,
+    WORLDS,
+)
 from sonarslam.slam.eval.ate import ate_against_gps
 from sonarslam.slam.eval.truth import truth_trajectory
-from sonarslam.slam.io.trajectory import read_tum
+from sonarslam.slam.io.trajectory import Trajectory, read_tum
+from sonarslam.slam.run.demo import SIM_DURATION_S as DEMO_SIM_DURATION_S
+from sonarslam.slam.run.presets import EXTRACTOR_PRESETS as PRESETS
 from sonarslam.slam.run.presets import SettingError, check_settings, run_config
-from sonarslam.slam.run.sources import dead_reckoning_trajectory
+from sonarslam.slam.run.run import RunResult, backend_names, results_table
+from sonarslam.slam.run.sources import POSE_SOURCES, dead_reckoning_trajectory
 
 
 @pytest.fixture(scope="module")
@@ -37,6 +53,146 @@ def test_every_command_has_help(capsys):
         assert exc.value.code == 0
         out = capsys.readouterr().out
         assert "usage: sonarslam " + name in out and "SONARSLAM_DATA" in out
+
+
+#: What ``--version`` and ``--help`` must not import: each costs seconds on the 2-core machine
+#: (the whole library imported 2,295 modules in 7.7-14 s; benchmarks/cli_startup.py times it).
+HEAVY = ("gtsam", "numba", "matplotlib", "scipy", "pandas", "dask", "distributed", "evo", "shapely")
+
+
+def _imported_after(code: str) -> dict[str, object]:
+    """Run ``code`` in a fresh interpreter; the top-level packages it left in ``sys.modules``
+    and what it printed."""
+    probe = (
+        "import contextlib, io, json, sys\n"
+        "out = io.StringIO()\n"
+        f"with contextlib.redirect_stdout(out):\n    {code}\n"
+        "print(json.dumps({'modules': sorted({m.split('.')[0] for m in sys.modules}),"
+        " 'n': len(sys.modules), 'out': out.getvalue()}))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, check=True, timeout=120
+    )
+    return json.loads(done.stdout)  # type: ignore[no-any-return]
+
+
+def test_version_and_help_import_nothing_heavy():
+    """``sonarslam --version``, ``--help`` and every ``COMMAND --help`` build the parsers from
+    argparse alone: the library (and its gtsam, numba, matplotlib, ...) is imported only by the
+    command that runs."""
+    calls = [["--version"], ["--help"], *([name, "--help"] for name, _, _ in COMMANDS)]
+    code = (
+        "from sonarslam.slam.cli.main import main\n"
+        f"    for argv in {calls!r}:\n"
+        "        try:\n            main(argv)\n"
+        "        except SystemExit as exc:\n            assert exc.code == 0, (argv, exc.code)"
+    )
+    seen = _imported_after(code)
+    assert set(HEAVY).isdisjoint(seen["modules"]), set(HEAVY) & set(seen["modules"])
+    assert "sonarslam.slam.run" not in seen["modules"]
+    assert str(seen["out"]).startswith("sonarslam ") and "usage: sonarslam sweep" in seen["out"]
+    assert int(seen["n"]) < 400  # the library imported 2,295
+
+
+def test_the_parsers_offer_the_registries_choices():
+    """The parsers spell out the registries' names (so that they import nothing); the same."""
+    assert POSES == tuple(sorted(POSE_SOURCES))
+    assert BACKENDS == tuple(backend_names())
+    assert EXTRACTOR_PRESETS == tuple(sorted(PRESETS))
+    assert WORLDS == KINDS
+    assert SIM_DURATION_S == DEMO_SIM_DURATION_S
+    # and every command module runs: its command(args) is there
+    for name, _, module in COMMANDS:
+        assert callable(importlib.import_module(module).command), name
+
+
+def test_a_sweep_without_dask_names_the_extra(tmp_path, capsys, monkeypatch):
+    """Without dask (``sys.modules[name] = None``: its import fails as if it were not installed)
+    a sweep on Dask says which extra to install, in one line, exit 1, before it simulates."""
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)
+    argv = ["sweep", "--seeds", "0", "--world", "harbour", "--out", str(tmp_path / "o")]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        "sonarslam sweep: error: a sweep on Dask needs dask, which is not installed:"
+        " pip install 'sonarslam[sweep]'"
+    ]
+    assert not (tmp_path / "o" / "sim").exists()
+
+
+def test_a_drawn_world_without_shapely_names_the_extra(tmp_path):
+    """Without shapely the simulator still imports (its fixed worlds do not need it) and a drawn
+    world says which extra to install, in one line, exit 1 (a fresh interpreter: shapely is
+    blocked before anything imports it)."""
+    code = (
+        "import sys; sys.modules['shapely'] = None\n"
+        "from sonarslam.slam.cli.main import main\n"
+        f"sys.exit(main(['simulate', 'drawn', '--out', {str(tmp_path / 'o')!r}]))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=tmp_path
+    )
+    assert done.returncode == 1, done.stderr
+    assert done.stderr.strip().splitlines() == [
+        "sonarslam simulate: error: a drawn world needs shapely, which is not installed:"
+        " pip install 'sonarslam[sim]'"
+    ]
+
+
+def test_each_warning_is_printed_once_per_command(monkeypatch, capsys):
+    """A data warning is printed once however often the command meets it (the demo opens its
+    dataset for each run: its DVL gap was printed four times), on one line."""
+
+    def command(args):
+        for text in ("a.log: 1 gap of the DVL\n  longer", "a.log: 1 gap of the DVL longer"):
+            warnings.warn(text, DataWarning, stacklevel=1)
+        warnings.warn("b.log: another", DataWarning, stacklevel=1)
+        return 0
+
+    monkeypatch.setattr(importlib.import_module("sonarslam.slam.cli.info"), "command", command)
+    assert main(["info", "anything"]) == 0
+    assert capsys.readouterr().err.splitlines() == [
+        "warning: a.log: 1 gap of the DVL longer",
+        "warning: b.log: another",
+    ]
+
+
+def _result(backend, metrics, others=()):
+    t = np.array([0.0, 1.0])
+    tr = Trajectory(t, np.zeros((2, 3)))
+    return RunResult(
+        backend, tr, {"backend": backend, **metrics}, trajectories=dict.fromkeys(others, tr)
+    )
+
+
+def test_the_demo_table_is_against_the_truth_on_simulated_runs():
+    """On simulated runs the table's figures are against the simulator's truth (its heading
+    says so), then against the simulated GPS; on real data against GPS over both spans."""
+    sim = {
+        "ate_truth_mean_m": 1.04, "ate_truth_max_m": 1.73,
+        "ate_truth_aligned_mean_m": 0.08, "ate_truth_aligned_max_m": 0.2,
+        "ate_truth_smoothed_mean_m": 0.9, "ate_truth_smoothed_max_m": 1.5,
+        "ate_truth_aligned_smoothed_mean_m": 0.07, "ate_truth_aligned_smoothed_max_m": 0.3,
+        "ate_mean_m": 1.31, "ate_max_m": 3.28, "ate_aligned_mean_m": 0.87,
+        "ate_mean_smoothed_m": 1.3, "ate_max_smoothed_m": 3.48, "ate_aligned_mean_smoothed_m": 0.86,
+        "ate_sonar_mean_m": 1.31, "ate_sonar_max_m": 3.28,
+    }  # fmt: skip
+    lines = results_table([_result("isam2", sim, ["smoothed"])]).splitlines()
+    assert lines[0].split("|")[2].strip() == "truth mean / max (m)"
+    assert lines[0].split("|")[4].strip() == "simulated GPS mean / max (m)"
+    assert [c.strip() for c in lines[2].split("|")[1:-1]] == [
+        "isam2 online", "1.04 / 1.73", "0.08 / 0.20", "1.31 / 3.28", "0.87",
+    ]  # fmt: skip
+    assert [c.strip() for c in lines[3].split("|")[1:-1]] == [
+        "isam2 smoothed", "0.90 / 1.50", "0.07 / 0.30", "1.30 / 3.48", "0.86",
+    ]  # fmt: skip
+    real = {k: v for k, v in sim.items() if "truth" not in k}
+    real |= {"ate_sonar_aligned_mean_m": 0.5, "ate_sonar_aligned_max_m": 0.9}
+    lines = results_table([_result("ekf", real)]).splitlines()
+    assert lines[0].split("|")[2].strip() == "sonar span mean / max (m)"
+    assert [c.strip() for c in lines[2].split("|")[1:-1]] == [
+        "ekf", "1.31 / 3.28", "0.50 / 0.90", "1.31 / 3.28", "0.87",
+    ]  # fmt: skip
 
 
 def test_known_errors_are_one_line_and_exit_1(tmp_path, capsys, monkeypatch):

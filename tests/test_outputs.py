@@ -15,10 +15,16 @@ from pathlib import Path
 import gtsam
 import numpy as np
 import pytest
+from matplotlib.figure import Figure
 
 from sonarslam.datasets.simulator import simulate
+from sonarslam.datasets.source import open_dataset
 from sonarslam.slam.backends.isam2.g2o import G2O_EDGE_TYPES, graph_json_to_g2o
 from sonarslam.slam.backends.isam2.graph_io import FactorRecord, key_of, load_graph
+from sonarslam.slam.eval.ate import ate_against_gps, ate_errors, truth_errors
+from sonarslam.slam.eval.truth import truth_trajectory
+from sonarslam.slam.io.maps import MapLayers, draw_map, trajectory_style
+from sonarslam.slam.io.plots import ate_legend
 from sonarslam.slam.run.metrics import RunMetrics
 from sonarslam.slam.run.run import run
 
@@ -192,3 +198,71 @@ def test_metrics_record_the_code_settings_and_data_of_the_run(runs):
     assert settings_digest("isam2", config_text, other) != mine
     assert settings_digest("isam2", config_text + "\n# edited", r.config) != mine
     assert runs["dr"].metrics["provenance"]["dataset_sha256"] == p["dataset_sha256"]
+
+
+def test_report_png_legend_gives_the_metrics_figures_over_each_named_span(runs):
+    """report.png's legend (:func:`ate_legend`) names its spans and gives metrics.json's figures:
+    against GPS the whole run's (``ate_*``), the smoothed trajectory's too, and the sonar
+    span's (``ate_sonar_*``: here every fix, so one figure says so; over a part of the run, the
+    part's); against the truth the whole run's (``ate_truth_*``)."""
+    isam2 = runs["isam2"]
+    dataset = open_dataset(isam2.out_dir.parent / "h3")
+    span = dataset.sonar_span_s
+    assert span is not None
+    m = isam2.metrics
+    assert m["ate_sonar_n"] == m["ate_n"]  # the sonar runs from the first fix to the last
+    for name, tr in [("", isam2.trajectory), ("_smoothed", isam2.trajectories["smoothed"])]:
+        legend = ate_legend("iSAM2", *ate_errors(tr, dataset.gps), span)
+        assert m[f"ate_sonar{name}_mean_m"] == m[f"ate_mean{name}_m"]
+        whole = m[f"ate_mean{name}_m"], m[f"ate_max{name}_m"]
+        assert legend == (
+            f"iSAM2: whole run mean {whole[0]:.2f} m, max {whole[1]:.2f} m (all of it in the"
+            " sonar span)"
+        )
+    part = (span[0] + 30.0, span[1] - 40.0)
+    inside = ate_against_gps(isam2.trajectory, dataset.gps, part)
+    legend = ate_legend("iSAM2", *ate_errors(isam2.trajectory, dataset.gps), part)
+    assert legend == (
+        f"iSAM2: sonar span mean {inside.ate_mean_m:.2f} m, max {inside.ate_max_m:.2f} m;"
+        f" whole run mean {m['ate_mean_m']:.2f} m, max {m['ate_max_m']:.2f} m"
+    )
+    truth = truth_trajectory(dataset)
+    legend = ate_legend("iSAM2", *truth_errors(isam2.trajectory, truth))
+    assert legend == (
+        f"iSAM2: whole run mean {m['ate_truth_mean_m']:.2f} m, max {m['ate_truth_max_m']:.2f} m"
+    )
+
+
+def test_estimates_drawn_together_differ_in_colour_and_line_style():
+    """Dead reckoning and every closed-loop estimate (report.png, the demo's trajectories.png)
+    differ from one another in colour and from dead reckoning and the reference in line style
+    too; the colours are Okabe and Ito's, which stay apart for colour-blind readers."""
+    okabe_ito = {
+        "#000000",
+        "#E69F00",
+        "#56B4E9",
+        "#009E73",
+        "#F0E442",
+        "#0072B2",
+        "#D55E00",
+        "#CC79A7",
+    }
+    estimates = ["dr", "ekf", "isam2", "isam2_smoothed", "isam2_batch"]
+    styles = [trajectory_style(n) for n in estimates]
+    assert len({s.colour for s in styles}) == len(styles)
+    assert {s.colour for s in styles} <= okabe_ito
+    dr, gps = trajectory_style("dr"), trajectory_style("gps")
+    assert all(s.linestyle not in (dr.linestyle, gps.linestyle) for s in styles[1:])
+    assert trajectory_style("other").label == "other"
+
+
+def test_map_png_writes_each_landmark_id_by_its_segment():
+    """map.png names each landmark by its map.json id, at the middle of its segment."""
+    segments = [np.array([[0.0, 0.0], [10.0, 0.0]]), np.array([[0.0, 5.0], [0.0, 15.0]])]
+    layers = MapLayers(np.zeros((0, 2)), segments_w=segments, segment_ids=[3, 17])
+    ax = Figure().subplots()
+    draw_map(ax, layers, (np.array([-5.0, -5.0]), np.array([20.0, 20.0])))
+    assert {(t.get_text(), tuple(np.round(t.xy, 6))) for t in ax.texts} == {
+        ("3", (5.0, 0.0)),
+        ("17", (0.0, 10.0)),
+    }

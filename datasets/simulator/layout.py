@@ -30,13 +30,21 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import shapely
-from shapely.geometry import Point, Polygon, box
-from shapely.geometry.base import BaseGeometry
 
+from sonarslam.datasets.errors import MissingExtraError
 from sonarslam.datasets.simulator.path import route_samples
 from sonarslam.datasets.simulator.world import World, clearance_m, inside, rotate_points
 from sonarslam.features.geometry import FloatArray
+
+# shapely is the 'sim' extra: only the drawn worlds need it, the fixed ones and the rest of the
+# simulator import without it (drawn_world names the extra when it is missing)
+_SHAPELY_MISSING: ModuleNotFoundError | None = None
+try:
+    import shapely
+    from shapely.geometry import Point, Polygon, box
+    from shapely.geometry.base import BaseGeometry
+except ModuleNotFoundError as missing:
+    _SHAPELY_MISSING = missing
 
 __all__ = [
     "ROUTE_CLEARANCE_M",
@@ -594,7 +602,11 @@ def drawn_world(rng: np.random.Generator) -> World:
     ------
     RuntimeError
         If no valid world comes out of :data:`_MAX_DRAWS` draws (never seen).
+    MissingExtraError
+        If shapely (the ``sim`` extra) is not installed.
     """
+    if _SHAPELY_MISSING is not None:
+        raise MissingExtraError("sim", "a drawn world", _SHAPELY_MISSING)
     n_basins = int(rng.choice([1, 2, 3], p=[0.3, 0.4, 0.3]))  # drawn once: no bias to the easy
     reasons: dict[str, int] = {}
     for _ in range(_MAX_DRAWS):

@@ -9,7 +9,6 @@ from dataclasses import replace
 
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.settings import SettingError
-from sonarslam.slam.cli.common import EPILOG, Subparsers, add_poses, add_quiet, add_source, number
 from sonarslam.slam.run.calibration import (
     calibrate_ahrs_deviation,
     calibrate_ahrs_yaw,
@@ -19,61 +18,6 @@ from sonarslam.slam.run.calibration import (
 from sonarslam.slam.run.closed_loop import ClosedLoopResult
 from sonarslam.slam.run.sonar_calibration import calibrate_line_noise, calibrate_range_offset
 from sonarslam.slam.run.sources import pose_source_by_name
-
-
-def add_parser(sub: Subparsers) -> None:
-    p = sub.add_parser(
-        "calibrate",
-        help="GPS-free calibrations: sonar yaw by map sharpness; --ahrs, --ahrs-deviation,"
-        " --range-offset, --line-noise",
-        epilog=EPILOG,
-    )
-    add_source(p)
-    add_poses(p, "dr", ": GPS-free")
-    p.add_argument(
-        "--window",
-        type=number(float, 0.0, 86400.0, low_open=True),
-        default=120.0,
-        help="entropy window (s, default 120)",
-    )
-    p.add_argument(
-        "--ahrs",
-        action="store_true",
-        help="the AHRS mounting yaw from the DVL's own compass instead (GPS-free)",
-    )
-    p.add_argument(
-        "--ahrs-deviation",
-        action="store_true",
-        help="the AHRS heading's deviation B sin(yaw) + C cos(yaw) from the sonar lines of EKF"
-        " closed loops instead (GPS-free; one closed loop per iteration)",
-    )
-    p.add_argument(
-        "--iterations",
-        type=number(int, 1, 100),
-        default=4,
-        help="closed loops for --ahrs-deviation (default 4)",
-    )
-    p.add_argument(
-        "--range-offset",
-        action="store_true",
-        help="the range offset of the kept echoes from the beams' rising edges instead"
-        " (GPS-free; [sonar] range_offset_m)",
-    )
-    p.add_argument(
-        "--line-noise",
-        action="store_true",
-        help="a line's systematic error from pairs of lines of one wall seen 14-30 s apart with"
-        " dead-reckoning poses instead (GPS-free; [noise] line_sigma_rho_m, line_sigma_theta_deg);"
-        " with --range-offset too, the lines are measured with the offset just found",
-    )
-    p.add_argument(
-        "--config",
-        metavar="TOML",
-        help="a partial sonarslam.toml over the dataset's own (e.g. [sonar] range_offset_m), as"
-        " for run",
-    )
-    add_quiet(p)
-    p.set_defaults(func=command)
 
 
 def _ahrs_deviation(args: argparse.Namespace) -> int:

@@ -8,7 +8,6 @@ from collections.abc import Callable
 from typing import NoReturn, Protocol
 
 from sonarslam.settings import SettingError, coerce
-from sonarslam.slam.run.sources import POSE_SOURCES
 
 __all__ = [
     "EPILOG",
@@ -18,7 +17,12 @@ __all__ = [
     "add_poses",
     "add_quiet",
     "number",
+    "POSES",
 ]
+
+#: ``--poses``: :data:`sonarslam.slam.run.sources.POSE_SOURCES`, sorted (spelled out so that the
+#: parsers import nothing of the library; ``tests/test_cli.py`` checks they are the same).
+POSES = ("dr", "gps", "truth")
 
 
 class Parser(argparse.ArgumentParser):
@@ -72,11 +76,11 @@ def add_source(p: argparse.ArgumentParser) -> None:
 
 
 def add_poses(p: argparse.ArgumentParser, default: str, note: str = "") -> None:
-    """``--poses``: one of :data:`sonarslam.slam.run.sources.POSE_SOURCES`."""
+    """``--poses``: one of :data:`POSES`."""
     p.add_argument(
         "--poses",
         default=default,
-        choices=sorted(POSE_SOURCES),
+        choices=POSES,
         help=f"pose source: gps (GPS+AHRS), dr (dead reckoning), truth (simulated only);"
         f" default {default}{note}",
     )

@@ -5,30 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from sonarslam.slam.cli.common import EPILOG, Subparsers, add_poses, add_quiet, add_source
 from sonarslam.slam.run.extraction import extract
-from sonarslam.slam.run.presets import EXTRACTOR_PRESETS
-
-
-def add_parser(sub: Subparsers) -> None:
-    p = sub.add_parser(
-        "extract", help="extract line features with a pose source and draw them", epilog=EPILOG
-    )
-    add_source(p)
-    add_poses(p, "gps")
-    p.add_argument("--out", required=True, help="output directory")
-    p.add_argument(
-        "--config", default=None, help="TOML of extractor settings over the preset ([extractor])"
-    )
-    p.add_argument(
-        "--preset",
-        default=None,
-        choices=sorted(EXTRACTOR_PRESETS),
-        help="extractor preset (slam/run/presets.py; default: marina for thresholded beams, "
-        "default for raw ones, as the closed loops)",
-    )
-    add_quiet(p)
-    p.set_defaults(func=command)
 
 
 def command(args: argparse.Namespace) -> int:

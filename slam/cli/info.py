@@ -6,18 +6,9 @@ import argparse
 import math
 
 from sonarslam.datasets.source import open_dataset
-from sonarslam.slam.cli.common import EPILOG, Subparsers, add_source
 from sonarslam.slam.model.motion import gyro_bias_against_heading
 from sonarslam.slam.run.settings import Setting, dataset_settings, run_settings
 from sonarslam.slam.run.sources import DR_IGNORES, dvl_quality, start_pose
-
-
-def add_parser(sub: Subparsers) -> None:
-    p = sub.add_parser(
-        "info", help="what a dataset holds, every setting with its unit and source", epilog=EPILOG
-    )
-    add_source(p)
-    p.set_defaults(func=command)
 
 
 def command(args: argparse.Namespace) -> int:

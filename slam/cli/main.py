@@ -1,36 +1,28 @@
-"""The ``sonarslam`` command: builds the parser from the command modules, runs one, and turns
-every known error into one line on stderr, no traceback: exit 2 for usage (a wrong option,
-a setting that does not fit its field, an ``--out`` that cannot be written), exit 1 for data
-(:class:`sonarslam.datasets.errors.DataError` naming the file and line, other input that cannot be run,
-a file that cannot be written)."""
+"""The ``sonarslam`` command: builds the parser from :mod:`sonarslam.slam.cli.parsers` (light:
+``--version`` and every ``--help`` answer without importing the library), imports the module of
+the one command that runs, and turns every known error into one line on stderr, no traceback:
+exit 2 for usage (a wrong option, a setting that does not fit its field, an ``--out`` that
+cannot be written), exit 1 for data (:class:`sonarslam.datasets.errors.DataError` naming the
+file and line, other input that cannot be run, a file that cannot be written) and for an
+optional dependency that is not installed (:class:`~sonarslam.datasets.errors.MissingExtraError`
+naming the extra)."""
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 import warnings
 from collections.abc import Sequence
 from importlib.metadata import PackageNotFoundError, version
+from typing import cast
 
-from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.errors import DataError, DataWarning, MissingExtraError
 from sonarslam.settings import SettingError
-from sonarslam.slam.cli import (
-    calibrate,
-    demo,
-    extract,
-    info,
-    plot_scans,
-    report,
-    run,
-    simulate,
-    sweep,
-)
-from sonarslam.slam.cli.common import EPILOG, Parser
+from sonarslam.slam.cli.common import EPILOG, Parser, Subparsers
+from sonarslam.slam.cli.parsers import COMMANDS
 
 __all__ = ["main", "build_parser"]
-
-#: The command modules, in ``--help`` order; each has ``add_parser`` and ``command``.
-COMMANDS = (simulate, run, plot_scans, extract, demo, calibrate, info, report, sweep)
 
 
 def _version() -> str:
@@ -48,8 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"sonarslam {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in COMMANDS:
-        module.add_parser(sub)
+    for _name, add_parser, module in COMMANDS:
+        add_parser(cast(Subparsers, sub)).set_defaults(implementation=module)
     return parser
 
 
@@ -58,13 +50,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     with warnings.catch_warnings():
         warnings.simplefilter("always", DataWarning)
-        warnings.showwarning = _show_warning
+        warnings.showwarning = _OnceEach()
         try:
-            return int(args.func(args))
+            # the command's module, and with it the library, only now (parsers.COMMANDS)
+            return int(importlib.import_module(args.implementation).command(args))
         except SettingError as exc:
             print(f"sonarslam {args.command}: error: {exc}", file=sys.stderr)
             return 2
-        except (DataError, ValueError) as exc:
+        except (DataError, ValueError, MissingExtraError) as exc:
             print(f"sonarslam {args.command}: error: {_one_line(exc)}", file=sys.stderr)
             return 1
         except OSError as exc:  # writing the outputs: disk full, permissions
@@ -73,16 +66,27 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 1
 
 
-def _show_warning(
-    message: Warning | str,
-    category: type[Warning],
-    filename: str,
-    lineno: int,
-    file: object = None,
-    line: str | None = None,
-) -> None:
-    """A warning as one line on stderr: ``warning: <message>``."""
-    print(f"warning: {' '.join(str(message).split())}", file=sys.stderr)
+class _OnceEach:
+    """``warnings.showwarning`` of a command: a warning as one line on stderr, ``warning:
+    <message>``, each message once (a command that opens its dataset for several runs would
+    print the same data warning for each)."""
+
+    def __init__(self) -> None:
+        self.shown: set[str] = set()
+
+    def __call__(
+        self,
+        message: Warning | str,
+        category: type[Warning],
+        filename: str,
+        lineno: int,
+        file: object = None,
+        line: str | None = None,
+    ) -> None:
+        text = " ".join(str(message).split())
+        if text not in self.shown:
+            self.shown.add(text)
+            print(f"warning: {text}", file=sys.stderr)
 
 
 def _one_line(exc: Exception) -> str:

@@ -6,29 +6,11 @@ import argparse
 
 from sonarslam.datasets.source import open_dataset
 from sonarslam.features.projection import project_beams
-from sonarslam.slam.cli.common import EPILOG, Subparsers, add_poses, add_source, number
 from sonarslam.slam.eval.truth import truth_walls
 from sonarslam.slam.io.files import check_output_file, make_output_dir, write_atomic
 from sonarslam.slam.io.maps import plot_scans
 from sonarslam.slam.run.presets import map_min_intensity
 from sonarslam.slam.run.sources import pose_source_by_name
-
-
-def add_parser(sub: Subparsers) -> None:
-    p = sub.add_parser(
-        "plot-scans", help="project the sonar bins into the world and draw them", epilog=EPILOG
-    )
-    add_source(p)
-    add_poses(p, "gps")
-    p.add_argument("--out", default="out/scans.png", help="PNG file (default out/scans.png)")
-    p.add_argument(
-        "--min-intensity",
-        type=number(int, 0, 255),
-        default=None,
-        help="smallest intensity drawn, 0-255 (default: every bin of thresholded beams, the "
-        "extractor's threshold for raw beams)",
-    )
-    p.set_defaults(func=command)
 
 
 def command(args: argparse.Namespace) -> int:

@@ -4,34 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from sonarslam.slam.cli.common import EPILOG, Subparsers, number
 from sonarslam.slam.io.files import check_output_dir
 from sonarslam.slam.run.report import report
-
-
-def add_parser(sub: Subparsers) -> None:
-    p = sub.add_parser(
-        "report",
-        help="side-by-side report of run directories: table, maps, errors, NEES",
-        epilog=EPILOG,
-    )
-    p.add_argument("dirs", nargs="+", help="run directories written by 'sonarslam run'")
-    p.add_argument("--out", required=True, help="output directory (report.md and PNGs)")
-    p.add_argument(
-        "--rpe-delta",
-        type=number(float, 0.0, 1e6, low_open=True),
-        default=10.0,
-        help="path length of evo's RPE (m, default 10)",
-    )
-    p.add_argument(
-        "--align", action="store_true", help="Umeyama-align before evo's APE/RPE (default none)"
-    )
-    p.add_argument(
-        "--no-source",
-        action="store_true",
-        help="do not re-open the runs' datasets (no reprojected map, no truth)",
-    )
-    p.set_defaults(func=command)
 
 
 def command(args: argparse.Namespace) -> int:

@@ -6,53 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from sonarslam.slam.cli.common import EPILOG, Subparsers, add_quiet, add_source
 from sonarslam.slam.run.presets import parse_settings
-from sonarslam.slam.run.run import backend_names, run, summary_line
-
-
-def add_parser(sub: Subparsers) -> None:
-    p = sub.add_parser(
-        "run",
-        help="run a back end and evaluate it against GPS (and the truth on simulated data)",
-        epilog=EPILOG,
-    )
-    add_source(p)
-    p.add_argument(
-        "--backend",
-        default="dr",
-        choices=backend_names(),
-        help="dr (dead reckoning), gps (GPS+AHRS), ekf, isam2 (default dr)",
-    )
-    p.add_argument("--out", required=True, help="output directory")
-    add_quiet(p)
-    p.add_argument(
-        "--batch",
-        action="store_true",
-        help="isam2 only: a final batch Levenberg-Marquardt pass (isam2_batch.tum, ate_*_batch_m)",
-    )
-    p.add_argument(
-        "--config",
-        default=None,
-        help="a sonarslam.toml-format file whose keys replace the dataset's calibration"
-        " (e.g. [mounting.ahrs] yaw_deg); the one used is written to OUT/config_used.toml",
-    )
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="SCOPE.FIELD=VALUE",
-        help="an extractor or back-end setting, repeatable: extractor.max_range_m=25,"
-        " ekf.extent_margin_m=10, isam2.robust=cauchy, isam2.association=nn (fields of"
-        " ExtractorConfig, EkfConfig, GraphConfig); recorded in metrics.json",
-    )
-    p.add_argument(
-        "--strict",
-        action="store_true",
-        help="exit 1 when the health monitor finds the closed loop inconsistent with its own"
-        " model (metrics.json health_*; the outputs are written all the same)",
-    )
-    p.set_defaults(func=command)
+from sonarslam.slam.run.run import run, summary_line
 
 
 def command(args: argparse.Namespace) -> int:

@@ -28,6 +28,8 @@ from sonarslam.slam.io.trajectory import Trajectory
 
 __all__ = [
     "TRAJECTORY_STYLES",
+    "TrajectoryStyle",
+    "trajectory_style",
     "MapLayers",
     "data_box",
     "draw_map",
@@ -39,15 +41,34 @@ __all__ = [
     "landmark_layers",
 ]
 
-#: Colour and label of each trajectory name (others: matplotlib's cycle, the name itself).
-TRAJECTORY_STYLES: dict[str, tuple[str, str]] = {
-    "truth": ("k", "truth (simulator)"),
-    "gps": ("0.35", "GPS + AHRS"),
-    "dr": ("tab:red", "dead reckoning"),
-    "ekf": ("tab:blue", "EKF"),
-    "isam2": ("tab:green", "iSAM2"),
-    "isam2_smoothed": ("tab:olive", "iSAM2 smoothed"),
+
+@dataclass(frozen=True)
+class TrajectoryStyle:
+    """How a trajectory is drawn: its colour, line style and legend name."""
+
+    colour: str | None
+    linestyle: str | tuple[float, tuple[float, ...]]
+    label: str
+
+
+#: How each trajectory name is drawn: the colours of Okabe and Ito's palette ("Color Universal
+#: Design", 2008: told apart with every common colour-vision deficiency) and a line style of its
+#: own, so that two estimates drawn over each other stay apart in grey as well.
+TRAJECTORY_STYLES: dict[str, TrajectoryStyle] = {
+    "truth": TrajectoryStyle("#000000", "-", "truth (simulator)"),
+    "gps": TrajectoryStyle("#7f7f7f", "--", "GPS + AHRS"),
+    "dr": TrajectoryStyle("#D55E00", "-.", "dead reckoning"),
+    "ekf": TrajectoryStyle("#0072B2", "-", "EKF"),
+    "isam2": TrajectoryStyle("#009E73", "-", "iSAM2 (online)"),
+    "isam2_smoothed": TrajectoryStyle("#CC79A7", (0, (6, 1.5, 1, 1.5, 1, 1.5)), "iSAM2 smoothed"),
+    "isam2_batch": TrajectoryStyle("#56B4E9", ":", "iSAM2 batch"),
 }
+
+
+def trajectory_style(name: str) -> TrajectoryStyle:
+    """:data:`TRAJECTORY_STYLES`'s style of ``name``; another name: matplotlib's next colour,
+    a solid line and the name itself."""
+    return TRAJECTORY_STYLES.get(name, TrajectoryStyle(None, "-", name))
 
 
 @dataclass(frozen=True)
@@ -71,6 +92,9 @@ class MapLayers:
     shaded : sequence of int
         Indices of the segments whose band is shaded; every band is drawn as a thin outline
         (a shaded band of every landmark hides the map).
+    segment_ids : sequence
+        Empty, or one name per segment written beside it (a landmark's ``map.json`` id, which
+        ``lines.jsonl`` names).
     """
 
     points_w: FloatArray
@@ -80,6 +104,7 @@ class MapLayers:
     walls_w: FloatArray | None = None
     segment_label: str = "landmark"
     shaded: Sequence[int] = ()
+    segment_ids: Sequence[object] = ()
 
 
 #: Colour of the segments and their bands: stands out on the grey-to-black bins and beside the
@@ -147,16 +172,41 @@ def _draw_trajectories(ax: Axes, trajectories: dict[str, Trajectory]) -> None:
     order = {"truth": 0, "gps": 1, "dr": 2}
     for name in sorted(trajectories, key=lambda n: order.get(n, 3)):
         tr = trajectories[name]
-        colour, label = TRAJECTORY_STYLES.get(name, (None, name))
+        style = trajectory_style(name)
         ref = name in ("truth", "gps")
         ax.plot(
             tr.poses_wTb[:, 0],
             tr.poses_wTb[:, 1],
-            "--" if name == "gps" else "-",
+            ls=style.linestyle,
             lw=1.2 if ref else 1.0,
-            color=colour,
-            label=label,
+            color=style.colour,
+            label=style.label,
             zorder=10 + order.get(name, 3),
+        )
+
+
+def _draw_ids(
+    ax: Axes,
+    segments_w: Sequence[FloatArray],
+    ids: Sequence[object],
+    lo: FloatArray,
+    hi: FloatArray,
+) -> None:
+    """Each segment's id at its middle (inside the box), haloed in white to read on the bins."""
+    for segment, name in zip(segments_w, ids, strict=True):
+        mid = np.asarray(segment, dtype=np.float64).mean(axis=0)
+        if np.any(mid < lo) or np.any(mid > hi):
+            continue
+        ax.annotate(
+            str(name),
+            (float(mid[0]), float(mid[1])),
+            fontsize=7,
+            fontweight="bold",
+            color="#8c3c00",
+            ha="center",
+            va="center",
+            zorder=20,  # over the trajectories: a landmark seen from where the vehicle loitered
+            path_effects=[path_effects.withStroke(linewidth=2.5, foreground="white")],
         )
 
 
@@ -204,6 +254,8 @@ def draw_map(ax: Axes, layers: MapLayers, box: tuple[FloatArray, FloatArray]) ->
             ],
         )
         ax.add_collection(lines, autolim=False)
+        if layers.segment_ids:
+            _draw_ids(ax, layers.segments_w, layers.segment_ids, lo, hi)
     _draw_trajectories(ax, layers.trajectories)
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])

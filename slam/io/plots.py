@@ -21,10 +21,11 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 
 from sonarslam.features.geometry import FloatArray
-from sonarslam.slam.io.maps import TRAJECTORY_STYLES, MapLayers, data_box, draw_map
+from sonarslam.slam.io.maps import MapLayers, data_box, draw_map, trajectory_style
 from sonarslam.slam.io.trajectory import Trajectory
 
 __all__ = [
+    "ate_legend",
     "plot_trajectories",
     "plot_segment_ate",
     "plot_error_bounds",
@@ -71,6 +72,28 @@ def _time_axis(
         ax.axvspan(b, t1_s - t0_s, color="0.5", alpha=0.15, lw=0, label=label)
 
 
+def ate_legend(
+    label: str,
+    t_s: FloatArray,
+    errors_m: FloatArray,
+    sonar_span_s: tuple[float, float] | None = None,
+) -> str:
+    """An estimate's legend entry: its ATE (mean and max of the position errors ``errors_m`` at
+    the times ``t_s``, Unix s) over the sonar span (the errors inside ``sonar_span_s``, as
+    ``metrics.json``'s ``ate_sonar_*``) when one is given and holds errors, and over the whole
+    run (``ate_*``), each span named (one figure when the sonar span holds every error)."""
+    whole = f"whole run mean {errors_m.mean():.2f} m, max {errors_m.max():.2f} m"
+    if sonar_span_s is None:
+        return f"{label}: {whole}"
+    inside = (t_s >= sonar_span_s[0]) & (t_s <= sonar_span_s[1])
+    if not inside.any():
+        return f"{label}: {whole}"
+    if inside.all():
+        return f"{label}: {whole} (all of it in the sonar span)"
+    e = errors_m[inside]
+    return f"{label}: sonar span mean {e.mean():.2f} m, max {e.max():.2f} m; {whole}"
+
+
 def plot_trajectories(
     path: str | Path,
     trajectories: dict[str, Trajectory],
@@ -82,13 +105,14 @@ def plot_trajectories(
 ) -> Path:
     """Trajectories in the plane (left, cropped to them; the true walls of a simulated run) and
     their position error against ``reference`` in time (right), the times outside the sonar span
-    shaded; one legend below both.
+    shaded; one legend below both, each estimate with its ATE over the sonar span and the whole
+    run (:func:`ate_legend`).
 
-    ``trajectories`` holds the reference (``"gps"`` or ``"truth"``) and the estimates by name
-    (:data:`sonarslam.slam.io.maps.TRAJECTORY_STYLES`); ``errors`` maps an estimate's name to its times
-    (Unix s) and errors (m).
+    ``trajectories`` holds the reference (``"gps"`` or ``"truth"``) and the estimates by name,
+    drawn in :func:`sonarslam.slam.io.maps.trajectory_style`; ``errors`` maps an estimate's
+    name to its times (Unix s) and errors (m).
     """
-    fig = Figure(figsize=(13, 6.8), dpi=110, layout="constrained")
+    fig = Figure(figsize=(13, 7.2), dpi=110, layout="constrained")
     (ax, ax2) = fig.subplots(1, 2, width_ratios=[1.0, 1.3])
     layers = MapLayers(np.zeros((0, 2)), trajectories, walls_w=walls_w)
     draw_map(ax, layers, data_box(layers))
@@ -98,24 +122,25 @@ def plot_trajectories(
     order = {"dr": 0}
     for name in sorted(errors, key=lambda n: order.get(n, 1)):
         t, e = errors[name]
-        colour, label = TRAJECTORY_STYLES.get(name, (None, name))
+        style = trajectory_style(name)
         ax2.plot(
             t - t0,
             e,
             lw=1.0,
-            color=colour,
-            label=f"{label}: mean {e.mean():.2f} m, max {e.max():.2f} m",
+            ls=style.linestyle,
+            color=style.colour,
+            label=ate_legend(style.label, t, e, sonar_span_s),
         )
     ax2.set_xlabel("time since the start (s)")
     ax2.set_ylabel(f"position error against {reference} (m)")
     ax2.set_ylim(bottom=0.0)
     ax2.grid(True, lw=0.3)
     # the references and walls from the plane, the estimates with their figures from the errors
-    estimates = {TRAJECTORY_STYLES.get(n, (None, n))[1] for n in errors}
+    estimates = {trajectory_style(n).label for n in errors}
     left = [(h, lab) for h, lab in zip(*ax.get_legend_handles_labels(), strict=True)]
     handles = [(h, lab) for h, lab in left if lab not in estimates]
     handles += list(zip(*ax2.get_legend_handles_labels(), strict=True))
-    fig.legend(*zip(*handles, strict=True), loc="outside lower center", ncols=3, fontsize="small")
+    fig.legend(*zip(*handles, strict=True), loc="outside lower center", ncols=2, fontsize="small")
     fig.suptitle(title)
     out = Path(path)
     fig.savefig(out, bbox_inches="tight")
@@ -137,7 +162,7 @@ def plot_segment_ate(
     edges_s : ndarray, shape (K + 1,)
         Segment edges, seconds since the start.
     stats : dict of str to (ndarray (K,), ndarray (K,))
-        A method's name (:data:`sonarslam.slam.io.maps.TRAJECTORY_STYLES`) to the mean and max error (m)
+        A method's name (:func:`sonarslam.slam.io.maps.trajectory_style`) to the mean and max error (m)
         of each segment (NaN: no fix there).
     sonar_end_s : float, optional
         When the sonar stops, seconds since the start (a dashed line).
@@ -148,10 +173,10 @@ def plot_segment_ate(
     width = 0.8 / max(len(stats), 1)
     x = np.arange(k)
     for i, (name, (mean, peak)) in enumerate(stats.items()):
-        colour, label = TRAJECTORY_STYLES.get(name, (None, name))
+        style = trajectory_style(name)
         xs = x - 0.4 + (i + 0.5) * width
-        ax.bar(xs, mean, width * 0.9, color=colour, alpha=0.8, label=f"{label}: mean")
-        ax.plot(xs, peak, "_", color=colour, ms=10, mew=2)
+        ax.bar(xs, mean, width * 0.9, color=style.colour, alpha=0.8, label=f"{style.label}: mean")
+        ax.plot(xs, peak, "_", color=style.colour, ms=10, mew=2)
     ax.plot([], [], "_", color="k", ms=10, mew=2, label="max of the segment")
     if sonar_end_s is not None and sonar_end_s < edges_s[-1]:
         pos = float(np.interp(sonar_end_s, edges_s, np.arange(k + 1) - 0.5))

@@ -13,6 +13,8 @@ from sonarslam.features.projection import project_beams
 from sonarslam.slam.eval.truth import truth_walls
 from sonarslam.slam.io.files import write_atomic
 from sonarslam.slam.io.maps import plot_scans
+from sonarslam.slam.io.trajectory import trajectory_stem
+from sonarslam.slam.run.outputs import plot_estimates
 from sonarslam.slam.run.presets import map_min_intensity
 from sonarslam.slam.run.run import RunResult, run
 from sonarslam.slam.run.sources import gps_ahrs_trajectory
@@ -68,8 +70,10 @@ def main_job(
     source: DemoSource | None = None,
     duration_s: float = SIM_DURATION_S,
 ) -> list[RunResult]:
-    """Run :data:`DEMO_BACKENDS` (``isam2`` with its batch pass) into ``out_dir/<name>-<backend>`` and draw
-    ``out_dir/<name>_scans_gps.png``; returns the run results (dead reckoning first).
+    """Run :data:`DEMO_BACKENDS` (``isam2`` with its batch pass) into ``out_dir/<name>-<backend>``
+    and draw ``out_dir/<name>_scans_gps.png`` (the sonar map with GPS poses) and
+    ``out_dir/<name>_trajectories.png`` (every estimate against the reference); returns the run
+    results (dead reckoning first).
 
     ``source``: :func:`demo_source`'s choice (default: made here); ``duration_s``: the length of
     the simulated harbour when there is no marina (s).
@@ -104,5 +108,15 @@ def main_job(
     write_atomic(
         out / f"{chosen.name}_scans_gps.png",
         lambda p: plot_scans(p, points, {"gps": gps}, title, walls),
+    )
+    # every estimate in one picture, each with the figures of its row of the results table
+    estimates = {
+        trajectory_stem(r.backend, name): tr
+        for r in results
+        for name, tr in [(None, r.trajectory), *r.trajectories.items()]
+    }
+    write_atomic(
+        out / f"{chosen.name}_trajectories.png",
+        lambda p: plot_estimates(p, dataset, estimates, "every estimate"),
     )
     return results

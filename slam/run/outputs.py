@@ -4,7 +4,8 @@
   baseline) and its covariances ``<backend>_cov.npz``; ``gps.tum`` (the GPS fixes inside the
   run with the AHRS heading: the ATE's reference); on simulated data ``truth.tum`` (the true
   poses inside the run); ``metrics.json``, ``config_used.toml`` (the dataset configuration
-  used), ``report.png`` (trajectories against the reference beside dead reckoning).
+  used), ``report.png`` (the run's estimates, a factor graph's smoothed and batch ones too,
+  beside dead reckoning against the reference).
   Every estimate is written at its own times and, interpolated, at the reference's times inside
   its span (:func:`sonarslam.slam.io.trajectory.with_samples_at`): ``evo_ape tum gps.tum ekf.tum`` pairs
   the same poses as ``metrics.json``'s ATE and prints its figures;
@@ -57,7 +58,7 @@ from sonarslam.slam.run.closed_loop import ClosedLoopResult
 from sonarslam.slam.run.presets import map_min_intensity
 from sonarslam.slam.run.sources import DR_IGNORES, dead_reckoning_trajectory, gps_ahrs_trajectory
 
-__all__ = ["write_run"]
+__all__ = ["write_run", "plot_estimates"]
 
 
 def write_run(
@@ -103,7 +104,7 @@ def write_run(
     files.append(
         write_atomic(
             out / "report.png",
-            lambda p: _report_figure(p, dataset, backend, trajectory, metrics),
+            lambda p: _report_figure(p, dataset, backend, trajectory, trajectories),
         )
     )
     return files
@@ -121,35 +122,68 @@ def _walls(dataset: Dataset) -> np.ndarray | None:
 
 
 def _report_figure(
-    path: Path, dataset: Dataset, backend: str, trajectory: Trajectory, metrics: dict[str, Any]
+    path: Path,
+    dataset: Dataset,
+    backend: str,
+    trajectory: Trajectory,
+    trajectories: dict[str, Trajectory],
 ) -> None:
-    """report.png: the run beside dead reckoning against its reference, in the plane and in time."""
-    assert dataset.gps is not None
-    ref_name, ref = _reference(dataset)
-    t0, t1 = trajectory.span_s
-    drawn = {ref_name: ref.clip(t0, t1), backend: trajectory}
+    """report.png: the run's estimates (a factor graph's online, smoothed and batch ones) beside
+    dead reckoning (:func:`plot_estimates`)."""
+    drawn = {backend: trajectory}
+    drawn |= {trajectory_stem(backend, name): tr for name, tr in trajectories.items()}
     if backend != "dr":  # dead reckoning beside every other back end, as the baseline
         drawn["dr"] = dead_reckoning_trajectory(dataset)
+    plot_estimates(path, dataset, drawn, backend, span_s=trajectory.span_s)
+
+
+def plot_estimates(
+    path: Path,
+    dataset: Dataset,
+    estimates: dict[str, Trajectory],
+    what: str,
+    span_s: tuple[float, float] | None = None,
+) -> Path:
+    """Estimates against the dataset's reference (the simulator's truth, else GPS), in the
+    plane and in time (:func:`sonarslam.slam.io.plots.plot_trajectories`), each with its ATE
+    without alignment over the sonar span and the whole run (the figures of ``metrics.json``).
+
+    Parameters
+    ----------
+    path : Path
+        The PNG.
+    estimates : dict of str to Trajectory
+        By their style names (``dr``, ``ekf``, ``isam2``, ``isam2_smoothed``, ...:
+        :func:`sonarslam.slam.io.maps.trajectory_style`).
+    what : str
+        What the title calls them.
+    span_s : (float, float), optional
+        The reference is drawn over it (Unix s; default the estimates' whole span).
+    """
+    assert dataset.gps is not None
+    ref_name, ref = _reference(dataset)
+    t0 = min(tr.span_s[0] for tr in estimates.values()) if span_s is None else span_s[0]
+    t1 = max(tr.span_s[1] for tr in estimates.values()) if span_s is None else span_s[1]
     errors = {
         name: truth_errors(tr, ref) if ref_name == "truth" else ate_errors(tr, dataset.gps)
-        for name, tr in drawn.items()
-        if name != ref_name
+        for name, tr in estimates.items()
     }
-    m, key = metrics, "ate_truth" if ref_name == "truth" else "ate"
-    spans = f"whole run mean {m[key + '_mean_m']:.2f} m, max {m[key + '_max_m']:.2f} m"
-    if "ate_sonar_mean_m" in m and ref_name == "gps":
-        spans = (
-            f"sonar span mean {m['ate_sonar_mean_m']:.2f} m, max {m['ate_sonar_max_m']:.2f} m; "
-            + spans
-        )
     reference = "the truth" if ref_name == "truth" else "GPS"
-    plot_trajectories(
+    span = dataset.sonar_span_s
+    spans = "over the whole run"
+    if span is not None and (span[0] > t0 or span[1] < t1):
+        a, b = max(span[0] - t0, 0.0), min(span[1], t1) - t0
+        spans = (
+            f"over the sonar span ({a:.0f} to {b:.0f} s: first to last beam; the rest shaded)"
+            " and the whole run"
+        )
+    return plot_trajectories(
         path,
-        drawn,
+        {ref_name: ref.clip(t0, t1), **estimates},
         errors,
-        f"{dataset.name}: {backend} against {reference}: {spans}",
+        f"{dataset.name}: {what} against {reference}, ATE without alignment {spans}",
         reference,
-        dataset.sonar_span_s,
+        span,
         _walls(dataset),
     )
 
@@ -186,10 +220,11 @@ def _write_closed_loop(
         segments,
         bands,
         _walls(dataset),
+        segment_ids=[lm["id"] for lm in landmarks],
     )
     title = (
-        f"{dataset.name}: {backend}, {len(landmarks)} landmarks with 95 % bands over the sonar"
-        " bins projected with its trajectory"
+        f"{dataset.name}: {backend}, {len(landmarks)} landmarks (id, 95 % band) on"
+        " the sonar bins projected with its trajectory"
     )
     files.append(write_atomic(out / "map.png", lambda p: plot_map(p, layers, title)))
     return files

@@ -164,12 +164,19 @@ def map_figure(run: RunData, label: str, out: Path) -> Path | None:
     )
     segments, bands = landmark_layers(run.landmarks, points)
     ref = {"truth": run.truth.clip(t0, t1)} if run.truth is not None else {"gps": run.gps}
-    layers = MapLayers(points, {**ref, run.backend: run.trajectory}, segments, bands, _walls(run))
+    layers = MapLayers(
+        points,
+        {**ref, run.backend: run.trajectory},
+        segments,
+        bands,
+        _walls(run),
+        segment_ids=[lm["id"] for lm in run.landmarks],
+    )
     return plot_map(
         out,
         layers,
-        f"{run.dataset_name}: {label}, {len(segments)} landmarks with 95 % bands over the bins"
-        " projected with its trajectory",
+        f"{run.dataset_name}: {label}, {len(segments)} landmarks (id, 95 % band) on"
+        " the bins projected with its trajectory",
     )
 
 

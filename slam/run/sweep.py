@@ -33,14 +33,14 @@ import warnings
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
-from dask.distributed import Client, LocalCluster, as_completed
 from tqdm import tqdm
 
-from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.errors import DataError, DataWarning, MissingExtraError
 from sonarslam.datasets.simulator import HELD_BACK_SEED_MIN, simulate
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.datasets.toml import read_toml
@@ -68,6 +68,9 @@ from sonarslam.slam.run.sweep_summary import (
     world_columns,
     worst_seeds,
 )
+
+if TYPE_CHECKING:
+    from dask.distributed import Client, LocalCluster
 
 __all__ = [
     "SweepTask",
@@ -366,17 +369,28 @@ class SweepResult:
     spread: str = ""
 
 
-def _client(scheduler: str | None, n_workers: int) -> tuple[Client, LocalCluster | None]:
+def _distributed() -> ModuleType:
+    """``dask.distributed``, or the error naming the extra that installs it."""
+    try:
+        import dask.distributed  # lazy: the 'sweep' extra, needed by a Dask scheduler only
+    except ModuleNotFoundError as missing:
+        raise MissingExtraError("sweep", "a sweep on Dask", missing) from None
+    return dask.distributed
+
+
+def _client(
+    distributed: ModuleType, scheduler: str | None, n_workers: int
+) -> tuple[Client, LocalCluster | None]:
     if scheduler:
-        return Client(scheduler), None
-    cluster = LocalCluster(
+        return distributed.Client(scheduler), None
+    cluster = distributed.LocalCluster(
         n_workers=n_workers,
         threads_per_worker=1,
         processes=True,
         dashboard_address=":0",  # a free port: several clusters may run at once
         silence_logs=logging.ERROR,
     )
-    return Client(cluster), cluster
+    return distributed.Client(cluster), cluster
 
 
 def _world_picture(
@@ -528,12 +542,13 @@ def sweep(
     tasks = expand_tasks(seeds, backends, grid)
     if n_workers < 1:
         raise SettingError("--workers", f"must be at least 1, got {n_workers}")
+    distributed = None if scheduler == "synchronous" else _distributed()
     out = make_output_dir(out_dir)
     cache = Path(cache_dir) if cache_dir is not None else out / "sim"
     results: list[dict[str, Any] | None] = [None] * len(tasks)
     bar = tqdm(total=len(tasks), desc="sweep", unit="run", disable=not progress)
     folders: dict[int, str] = {}
-    if scheduler == "synchronous":
+    if distributed is None:  # synchronous
         sims = {s: simulate_cached(world, s, duration_s, cache) for s in dict.fromkeys(seeds)}
         folders = dict(sims)
         cals = {s: calibrate_cached(f) if calibrate else None for s, f in sims.items()}
@@ -543,7 +558,7 @@ def sweep(
             )
             bar.update()
     else:
-        client, cluster = _client(scheduler, n_workers)
+        client, cluster = _client(distributed, scheduler, n_workers)
         try:
             sim_futures = {
                 s: client.submit(
@@ -568,7 +583,7 @@ def sweep(
                 ): i
                 for i, task in enumerate(tasks)
             }
-            for fut in as_completed(futures):
+            for fut in distributed.as_completed(futures):
                 results[futures[fut]] = fut.result()
                 bar.update()
             folders = {s: str(f.result()) for s, f in sim_futures.items()}
