@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from sonarslam.datasets.records import GpsSeries
-from sonarslam.slam.eval.ate import ate_against_gps
+from sonarslam.slam.eval.ate import ate_against_gps, ate_errors
 from sonarslam.slam.eval.consistency import (
     anees,
     chi2_band,
@@ -373,3 +373,15 @@ def test_the_true_trajectory_projects_the_sharpest_map(simulated):
     assert rigid == pytest.approx(sharp, abs=0.01)
     dr = run_backend(ds, "dr").metrics
     assert dr["map_entropy_nats"] > sharp
+
+
+def test_the_aligned_ate_of_a_vehicle_that_did_not_move_is_the_centroid_fit() -> None:
+    """A stationary run gives a rank-0 cross-covariance, which evo's Umeyama refuses: every
+    rotation fits equally, so the aligned errors are those of the centroids' translation."""
+    t = np.arange(10.0)
+    est = Trajectory(t, np.tile([2.0, -1.0, 0.3], (10, 1)))
+    rng = np.random.default_rng(3)
+    en_m = np.array([5.0, 4.0]) + rng.normal(0.0, 0.2, (10, 2))
+    gps = GpsSeries(t, en_m, (42.0, 3.0))
+    _, errors = ate_errors(est, gps, align=True)
+    np.testing.assert_allclose(errors, np.hypot(*(en_m.mean(axis=0) - en_m).T), atol=1e-12)

@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from evo.core.geometry import umeyama_alignment
+from evo.core.geometry import GeometryException, umeyama_alignment
 
 from sonarslam.datasets.records import GpsSeries
 from sonarslam.features.geometry import FloatArray
@@ -63,10 +63,15 @@ def _inside(
 
 def _rigid_fit(est: FloatArray, ref: FloatArray) -> FloatArray:
     """``est`` (N, 2) moved by the rotation and translation (no scale) that best fit it onto
-    ``ref`` in least squares (``evo.core.geometry.umeyama_alignment``, Umeyama 1991)."""
+    ``ref`` in least squares (``evo.core.geometry.umeyama_alignment``, Umeyama 1991). Where
+    either set is a single point repeated (a vehicle that did not move), every rotation fits
+    equally well and the fit is the translation of the centroids."""
     if est.shape[0] < 2:
         return est
-    r, t, _ = umeyama_alignment(est.T, ref.T, False)
+    try:
+        r, t, _ = umeyama_alignment(est.T, ref.T, False)
+    except GeometryException:  # rank-0 cross-covariance: the rotation is undetermined
+        return np.asarray(est - est.mean(axis=0) + ref.mean(axis=0))
     return np.asarray((r @ est.T).T + t)
 
 
