@@ -89,7 +89,7 @@ class ScanConfig:
     beams_per_scan: int = 0
     run_gap_m: float = 1.0
     min_range_m: float = 1.0
-    max_range_m: float | None = 30.0
+    max_range_m: float | None = None
     intensity_threshold: float = 60.0
     submap_scans: int = 3
     normal_radius_m: float = 3.0
@@ -100,7 +100,7 @@ class ScanConfig:
     iterations: int = 30
     kernel_k: float = 2.5
     min_sigma_m: float = 0.05
-    degenerate_share: float = 0.1
+    degenerate_share: float = 0.05
     free_sigma: float = 100.0
     cov_scale: float = 4.0
     floor_sigma_m: float = 0.15
