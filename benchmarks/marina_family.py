@@ -276,7 +276,12 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         family = [p for p in family if p.name in wanted]
     args.out.mkdir(parents=True, exist_ok=True)
-    jobs = [(b, p) for b in backends for p in family]
+    # dead reckoning takes no extractor or back-end settings (``sonarslam run`` refuses them):
+    # under those members it is the default run, not a member of its own family
+    jobs = [(b, p) for b in backends for p in family if not (b == "dr" and p.settings)]
+    skipped = sorted({p.name for p in family if p.settings} if "dr" in backends else set())
+    if skipped:
+        notes.append(f"dead reckoning: {', '.join(skipped)} left out (it takes no such setting)")
     wall0 = time.perf_counter()
     with ThreadPoolExecutor(max_workers=args.workers) as pool:
         results = list(pool.map(lambda job: run_one(args.source, job[0], job[1], args.out), jobs))
