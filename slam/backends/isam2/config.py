@@ -88,6 +88,11 @@ class GraphConfig(BackendConfig):
     scan_compatibility_probability : float
         A revisit registration is kept when its relative pose is compatible with the graph's
         prediction (chi2(3) of the difference with the sum of both covariances) within this.
+    batch_optimizer : {"lm", "gnc"}
+        The final batch pass (``--batch``): Levenberg-Marquardt on the graph as the loop built
+        it, or graduated non-convexity choosing the revisits jointly among every one the
+        registration accepted, the compatibility gate's rejects included
+        (:meth:`sonarslam.slam.backends.isam2.graph.LineIsam2.optimize_batch`).
     """
 
     ahrs_bias_prior_deg: float = bounded(0.0, -180.0, 180.0)
@@ -114,3 +119,4 @@ class GraphConfig(BackendConfig):
     revisit_candidates: int = bounded(4, 0, math.inf)
     revisits_per_scan: int = bounded(2, 0, math.inf)
     scan_compatibility_probability: float = bounded(0.999, 0.0, 1.0, low_open=True, high_open=True)
+    batch_optimizer: str = one_of("lm", "lm", "gnc")

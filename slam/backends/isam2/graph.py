@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import gtsam
@@ -127,6 +127,7 @@ class LineIsam2:
         params.relinearizeSkip = config.relinearize_skip
         self.isam = gtsam.ISAM2(params)
         self.graph = gtsam.NonlinearFactorGraph()  # every factor, for batch LM and saving
+        self._gnc_stats: dict[str, int] = {}
         self.records: list[FactorRecord] = []
         self.map = LandmarkMap(config, self.bTs)
         self.odometry = NodeOdometry(self.t_s, config.noise.gyro_sigma_rad_per_s, config.dvl_noise)
@@ -577,13 +578,84 @@ class LineIsam2:
         if params is None:
             params = gtsam.LevenbergMarquardtParams()
             params.setMaxIterations(20)  # from the iSAM2 estimate it is a polish
-        values = gtsam.LevenbergMarquardtOptimizer(
-            self.graph, self.isam.calculateEstimate(), params
-        ).optimize()
+        if self.config.batch_optimizer == "gnc":
+            values = self._optimize_gnc(params)
+        else:
+            values = gtsam.LevenbergMarquardtOptimizer(
+                self.graph, self.isam.calculateEstimate(), params
+            ).optimize()
         self._batch = values
         self._stale = True
         self.refresh(all_nodes=True)
         self._set_anchor(pose_of(values.atPose2(X(self._n_nodes - 1))))
+        return values
+
+    def _optimize_gnc(self, params: gtsam.LevenbergMarquardtParams) -> gtsam.Values:
+        """The revisits chosen jointly by graduated non-convexity with the truncated least
+        squares loss (GNC-TLS: Yang, Antonante, Tzoumas, Carlone 2020, "Graduated non-convexity
+        for robust spatial perception", eqs. 12-14; GTSAM's ``GncLMOptimizer`` cannot clone this
+        graph's ``CustomFactor``s, so the loop is here): every revisit the registration
+        accepted, those the compatibility gate kept and those it did not
+        (:attr:`ScanConstraints.loose_revisits`), with its Gaussian noise (GNC's loss replaces
+        the kernel); every other factor a known inlier. With ``r^2`` a revisit's squared
+        Mahalanobis residual and ``c^2`` chi2(3) at ``scan_compatibility_probability`` (the
+        online gate's), its weight is 1 for ``r^2 <= mu / (mu + 1) c^2``, 0 beyond
+        ``(mu + 1) / mu c^2`` and ``c / r sqrt(mu (mu + 1)) - mu`` between; a Levenberg-Marquardt
+        pass at the weights (``cov / w``), ``mu`` from ``c^2 / (2 max r^2 - c^2)`` times 1.4
+        each step until the weights settle. ``gnc_revisits_*`` in :meth:`metrics`."""
+        loose = self.scans.loose_revisits if self.scans is not None else []
+        known = gtsam.NonlinearFactorGraph()
+        revisits: list[FactorRecord] = []
+        for record in [*self.records, *loose]:
+            if record.constraint == "scan-revisit":
+                revisits.append(replace(record, robust=None))
+            else:
+                known.add(record.to_gtsam())
+        c2 = float(chi2.ppf(self.config.scan_compatibility_probability, 3))
+        values = self.isam.calculateEstimate()
+        plain = [r.to_gtsam() for r in revisits]
+
+        def squared(v: gtsam.Values) -> FloatArray:
+            return np.array([2.0 * f.error(v) for f in plain])
+
+        def optimise(weights: FloatArray, start: gtsam.Values) -> gtsam.Values:
+            graph = gtsam.NonlinearFactorGraph(known)
+            for record, w in zip(revisits, weights, strict=True):
+                if w > 1e-6:
+                    graph.add(replace(record, cov=record.cov / w).to_gtsam())
+            return gtsam.LevenbergMarquardtOptimizer(graph, start, params).optimize()
+
+        weights = np.ones(len(revisits))
+        r2 = squared(values)
+        mu = c2 / max(2.0 * float(r2.max(initial=0.0)) - c2, 1e-9)
+        steps = 0
+        while r2.size and r2.max() > c2 and steps < 100:
+            lo, hi = mu / (mu + 1.0) * c2, (mu + 1.0) / mu * c2
+            r = np.sqrt(np.maximum(r2, 1e-12))
+            new = np.where(
+                r2 <= lo,
+                1.0,
+                np.where(r2 >= hi, 0.0, np.sqrt(c2) / r * np.sqrt(mu * (mu + 1.0)) - mu),
+            )
+            new = np.clip(new, 0.0, 1.0)
+            values = optimise(new, values)
+            r2 = squared(values)
+            settled = np.abs(new - weights).sum() < 1e-3 * max(len(new), 1)
+            weights = new
+            steps += 1
+            if settled and np.all((weights < 1e-6) | (weights > 1.0 - 1e-6)):
+                break
+            mu *= 1.4
+        values = optimise(weights, values)
+        n_loose = len(loose)
+        self._gnc_stats = {
+            "gnc_revisits_candidates": len(revisits),
+            "gnc_revisits_inliers": int(np.sum(weights > 0.5)),
+            "gnc_revisits_loose_inliers": int(np.sum(weights[len(weights) - n_loose :] > 0.5))
+            if n_loose
+            else 0,
+            "gnc_steps": steps,
+        }
         return values
 
     def _marginals(self) -> Callable[[int], FloatArray]:
@@ -633,6 +705,7 @@ class LineIsam2:
         out: dict[str, float | int] = {f"isam2_{k}_s": float(v) for k, v in self.timing_s.items()}
         if self.scans is not None:
             out.update(self.scans.metrics())
+        out.update(self._gnc_stats)
         update_ms = 1e3 * np.array([wall for _, wall, _ in self.update_log])
         if update_ms.size:
             out["isam2_updates"] = int(update_ms.size)

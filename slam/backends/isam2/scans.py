@@ -150,6 +150,9 @@ class ScanConstraints:
         self.graph = graph
         self.config = config
         self.log = ScanLog()
+        #: Revisits the registration accepted and the graph's compatibility gate did not: the
+        #: loose candidates a joint inlier choice may still take (``batch_optimizer = "gnc"``).
+        self.loose_revisits: list[FactorRecord] = []
         self._t: list[float] = []  # reference time of each scan
         self._cov: list[FloatArray] = []  # cached marginal (world) of each scan's node
         self._gate = float(chi2.ppf(config.revisit_gate_probability, 1))
@@ -160,7 +163,12 @@ class ScanConstraints:
         return None if cfg.scan_robust is None else Robust(cfg.scan_robust, cfg.scan_robust_k)
 
     def _add_between(self, j: int, k: int, reg: Registration, kind: str) -> None:
-        """``BetweenFactorPose2`` between the nodes of scans ``j`` and ``k`` from ``jTk``."""
+        """``BetweenFactorPose2`` between the nodes of scans ``j`` and ``k`` from ``jTk``,
+        into the graph."""
+        self.graph.add_scan_factor(self._record(j, k, reg, kind))
+
+    def _record(self, j: int, k: int, reg: Registration, kind: str) -> FactorRecord:
+        """The ``BetweenFactorPose2`` record between the nodes of scans ``j`` and ``k``."""
         (nj, jn_T_j), (nk, kn_T_k) = self.log.nodes[j], self.log.nodes[k]
         a = compose(jn_T_j, reg.z)
         z = compose(a, inverse(kn_T_k))
@@ -169,7 +177,7 @@ class ScanConstraints:
         J = J2_a @ J1_z
         cov = J @ reg.cov @ J.T
         A = local_to_world(-float(z[2]))  # plain -> the measurement's local tangent
-        record = FactorRecord.of(
+        return FactorRecord.of(
             FactorKind.BETWEEN_POSE,
             [X(nj), X(nk)],
             z,
@@ -177,7 +185,6 @@ class ScanConstraints:
             robust=self._robust(),
             constraint=f"scan-{kind}",
         )
-        self.graph.add_scan_factor(record)
 
     def add_scan(self, scan: Scan, matcher: ScanMatcher) -> None:
         """A new scan (the newest of ``matcher``): its node, the consecutive constraint, the
@@ -289,6 +296,7 @@ class ScanConstraints:
             self.log.pairs[-1]["accepted"] = ok
             if not ok and reg.accepted:
                 self.log.pairs[-1]["reason"] = "incompatible with the graph"
+                self.loose_revisits.append(self._record(j, k, reg, "revisit"))
             if ok:
                 self._add_between(j, k, reg, "revisit")
                 added = True
