@@ -199,3 +199,24 @@ def test_calibrated_records_round_trip_through_json():
         back = FactorRecord.from_json(rec.to_json())
         assert back.keys == rec.keys
         assert np.allclose(back.to_gtsam().unwhitenedError(v), rec.to_gtsam().unwhitenedError(v))
+
+
+def test_the_heading_error_track_round_trips_and_names_a_bad_line(tmp_path):
+    import pytest
+
+    from sonarslam.datasets.errors import DataError
+    from sonarslam.slam.io.states import read_heading_error, write_heading_error
+
+    t = 1.7e9 + np.arange(5.0)
+    b = np.deg2rad([0.1, -0.2, 0.3, 1.0, 2.0])
+    sd = np.deg2rad([2.0, 1.9, 1.8, 1.7, 1.6])
+    path = write_heading_error(tmp_path / "heading_error.csv", t, b, sd)
+    t2, b2, sd2 = read_heading_error(path)
+    assert (
+        np.allclose(t2, t) and np.allclose(b2, np.rad2deg(b)) and np.allclose(sd2, np.rad2deg(sd))
+    )
+    text = path.read_text().splitlines()
+    text[3] = "1700000002.0,abc,1.0"
+    path.write_text("\n".join(text) + "\n")
+    with pytest.raises(DataError, match=r"heading_error.csv.*4"):
+        read_heading_error(path)

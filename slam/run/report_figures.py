@@ -166,7 +166,7 @@ def calibration_lines(run: RunData) -> list[str]:
     sd."""
     m = run.metrics
     return [
-        f"- {label}: {m[key]:.4g} ± {m[sd]:.2g} {unit} (1σ)".rstrip()
+        f"- {label}: {m[key]:.6g} ± {m[sd]:.2g} {unit} (1σ)".replace("  ", " ")
         for label, key, sd, unit in _CALIBRATION
         if key in m and sd in m
     ]

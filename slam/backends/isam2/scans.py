@@ -179,7 +179,7 @@ class ScanConstraints:
         J = J2_a @ J1_z
         cov = J @ reg.cov @ J.T
         A = local_to_world(-float(z[2]))  # plain -> the measurement's local tangent
-        calibration = self.graph.calibration_keys()
+        calibration = self.graph.calibration_keys() if self.config.scan_calibration else []
         if calibration:
             record = FactorRecord.of(
                 FactorKind.SCAN_CALIBRATED,
