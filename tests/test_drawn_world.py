@@ -213,3 +213,83 @@ def test_a_curve_is_one_truth_unit_for_the_association_scores() -> None:
     with_unit = association_scores(feats, [7, 7], walls, truth, np.zeros(3), wall_curve=curve)
     per_facet = association_scores(feats, [7, 7], walls, truth, np.zeros(3))
     assert with_unit.precision == 1.0 and per_facet.precision == 0.5
+
+
+def test_drawn_worlds_carry_the_marinas_calibration_errors_untold() -> None:
+    """Issue 29's error budget: the sonar mounting is off ``sonarslam.toml``'s by up to
+    0.2 m / 0.5 deg, the range scale by 1-4 %, and the heading has a 2 deg place field."""
+    from sonarslam.datasets.simulator.scenario import (
+        DRAWN_HEADING_FIELD_DEG,
+        DRAWN_MOUNT_OFFSET_MAX,
+        DRAWN_RANGE_SCALE_ERROR,
+        SONAR_MOUNTING,
+    )
+
+    scales, offsets = [], []
+    for seed in range(20):
+        sc = make_scenario("drawn", seed)
+        told = sc.dataset_config().sonar_mounting
+        assert (told.x_m, told.y_m, told.yaw_rad) == (
+            SONAR_MOUNTING.x_m,
+            SONAR_MOUNTING.y_m,
+            SONAR_MOUNTING.yaw_rad,
+        )
+        true = sc.sonar_mounting
+        d = np.array(
+            [true.x_m - told.x_m, true.y_m - told.y_m, np.rad2deg(true.yaw_rad - told.yaw_rad)]
+        )
+        assert np.all(np.abs(d) <= DRAWN_MOUNT_OFFSET_MAX)
+        offsets.append(d)
+        assert sc.errors is not None and sc.errors.ahrs_heading_field_deg == DRAWN_HEADING_FIELD_DEG
+        scales.append(sc.errors.sonar_range_scale)
+    err = np.abs(np.array(scales) - 1.0)
+    assert np.all((err >= DRAWN_RANGE_SCALE_ERROR[0]) & (err <= DRAWN_RANGE_SCALE_ERROR[1]))
+    assert min(scales) < 1.0 < max(scales)  # both signs
+    assert np.all(np.std(offsets, axis=0) > 0.3 * np.array(DRAWN_MOUNT_OFFSET_MAX))
+    # the drift world keeps its errors as they were
+    drift = make_scenario("drift", 0)
+    assert drift.errors is not None and drift.errors.sonar_range_scale == 1.0
+    assert drift.sonar_mounting_told is None
+
+
+def test_the_heading_field_has_its_rms_and_wavelength() -> None:
+    from sonarslam.datasets.simulator.sensors import heading_field
+
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(-2000, 2000, (20000, 2))
+    rms = [
+        np.sqrt(np.mean(heading_field(xy, 2.0, 80.0, np.random.default_rng(s)) ** 2))
+        for s in range(20)
+    ]
+    assert np.mean(rms) == pytest.approx(2.0, rel=0.1)
+    # smooth at a metre, decorrelated over a wavelength
+    p = rng.uniform(-200, 200, (5000, 2))
+    a = heading_field(p, 2.0, 80.0, np.random.default_rng(7))
+    near = heading_field(p + [1.0, 0.0], 2.0, 80.0, np.random.default_rng(7))
+    assert np.sqrt(np.mean((a - near) ** 2)) < 0.25
+
+
+def test_the_sonar_logs_echoes_at_the_scaled_range() -> None:
+    """An echo from a wall at range r peaks at ``range_scale * r`` in the bins."""
+    sc = make_scenario("pool", 0)
+    w = make_world(sc)
+    rng = np.random.default_rng(0)
+    wTb = np.tile([0.0, 0.0, 0.3], (36, 1))
+    angles = np.linspace(0.0, 2 * np.pi, 36, endpoint=False)
+    from sonarslam.datasets.simulator.msis import EchoModel, beam_axis_hits
+
+    quiet = EchoModel(
+        speckle=False, clutter_prob_per_bin=0.0, false_return_prob_per_beam=0.0, dead_zone_m=0.0
+    )
+    peaks = []
+    for scale in (1.0, 1.04):
+        img = render_intensities(
+            w, sc.head, sc.sonar_mounting, wTb, angles, rng, quiet, range_scale=scale
+        )
+        peaks.append(np.argmax(img.astype(float), axis=1) * sc.head.bin_size_m)
+    r, _ = beam_axis_hits(w, sc.head, sc.sonar_mounting, wTb, angles)
+    ok = np.isfinite(r) & (r > 1.0) & (r < 0.9 * sc.head.range_max_m / 1.04)
+    assert ok.sum() > 20
+    assert np.median(peaks[1][ok] - 1.04 * peaks[0][ok]) == pytest.approx(
+        0.0, abs=2 * sc.head.bin_size_m
+    )

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -42,6 +43,10 @@ def test_the_dvl_scale_error_is_found(drift: str, name: str) -> None:
     b_forward = truth["errors"]["dvl_bias_mps"][1]
     expected = 1.0 / (1.0 + k_true + b_forward / make_scenario("drift", 2).speed_mps) - 1.0
     config = run_config(ds.beams, name, noise=ds.config.noise)
+    if name == "isam2":
+        # lines measure distances in the sonar's ranges: with the range scale a state too they
+        # observe only the ratio of the two scales, so the sonar is the reference here
+        config = replace(config, backend=replace(config.backend, range_scale_sigma=0.0))
     spec = backend_spec(name)
     mounting = ds.config.sonar_mounting
     res = run_closed_loop(

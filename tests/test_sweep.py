@@ -349,7 +349,7 @@ def test_the_gauge_floor_is_the_start_pose_error_carried_over_the_run(tmp_path, 
     sc = make_scenario("drawn", 7, 120.0)
     assert sc.errors is not None
     noise = replace(sc.noise, gps_sigma_m=1e-6, ahrs_sigma_deg=0.0, ahrs_bias_deg=bias_deg)
-    errors = replace(sc.errors, ahrs_heading_walk_deg_per_sqrt_s=0.0)
+    errors = replace(sc.errors, ahrs_heading_walk_deg_per_sqrt_s=0.0, ahrs_heading_field_deg=0.0)
     sim = simulate_records(replace(sc, noise=noise, errors=errors))
     dataset = open_dataset(write_dataset(sim, tmp_path))
     truth = truth_trajectory(dataset)

@@ -255,6 +255,7 @@ def render_intensities(
     rng: np.random.Generator,
     echo: EchoModel | None = None,
     range_offset_m: float = 0.0,
+    range_scale: float = 1.0,
 ) -> npt.NDArray[np.uint8]:
     """Raw intensities of beams (see the module docstring for the model).
 
@@ -273,6 +274,8 @@ def render_intensities(
     echo : EchoModel, optional
     range_offset_m : float
         How far behind the wall face the echo peaks (m, >= 0; see the module docstring).
+    range_scale : float
+        An echo from true range ``r`` is logged at ``range_scale * r`` (a sound-speed error).
 
     Returns
     -------
@@ -287,7 +290,7 @@ def render_intensities(
     for i in range(0, poses.shape[0], _CHUNK_BEAMS):
         sl = slice(i, i + _CHUNK_BEAMS)
         out[sl] = _render_chunk(
-            world, head, mounting, poses[sl], angles[sl], rng, echo, range_offset_m
+            world, head, mounting, poses[sl], angles[sl], rng, echo, range_offset_m, range_scale
         )
     return out
 
@@ -335,6 +338,7 @@ def _render_chunk(
     rng: np.random.Generator,
     echo: EchoModel,
     range_offset_m: float,
+    range_scale: float = 1.0,
 ) -> npt.NDArray[np.uint8]:
     n_beams, n_bins = wTb.shape[0], head.n_bins
     r_bins = bin_range_m(np.arange(n_bins), head.bin_size_m)  # (N,) raw: the echo's own range
@@ -347,6 +351,8 @@ def _render_chunk(
     near = _walls_near(world.walls_m, wTs[:, :2], head.range_max_m + 2.0 * head.bin_size_m)
     r, inc, j = first_hits(world.walls_m[near], wTs[:, :2], ray_angles)  # (B, R)
     hit_wall = near[j]
+    if range_scale != 1.0:
+        r = r * range_scale  # where the sonar logs the echo
 
     fade_span = echo.incidence_cutoff_rad - echo.incidence_fade_start_rad
     fade = np.clip((echo.incidence_cutoff_rad - inc) / fade_span, 0.0, 1.0)
@@ -411,6 +417,7 @@ def simulate_msis(
     sector_rad: float | None = None,
     echo: EchoModel | None = None,
     range_offset_m: float = 0.0,
+    range_scale: float = 1.0,
 ) -> list[SonarBeam]:
     """All beams of a run: times, head angles and raw intensities.
 
@@ -430,6 +437,8 @@ def simulate_msis(
     echo : EchoModel, optional
     range_offset_m : float
         How far behind the wall face the echo peaks (m; see the module docstring).
+    range_scale : float
+        An echo from true range ``r`` is logged at ``range_scale * r``.
 
     Returns
     -------
@@ -441,7 +450,7 @@ def simulate_msis(
     t = beam_times(n, rate_hz, t0, rng)
     a = transducer_angles(n, head.step_rad, start_rad, sector_rad)
     intensities = render_intensities(
-        world, head, mounting, trajectory.poses(t), a, rng, echo, range_offset_m
+        world, head, mounting, trajectory.poses(t), a, rng, echo, range_offset_m, range_scale
     )
     return [
         SonarBeam(t=float(t[k]), transducer_angle_rad=float(a[k]), intensities=intensities[k])

@@ -69,6 +69,10 @@ __all__ = [
     "DRIFT_DVL_BIAS_MAX_MPS",
     "DRIFT_HEADING_WALK_DEG_PER_SQRT_S",
     "DRIFT_ECHO_RANGE_OFFSET_M",
+    "DRAWN_RANGE_SCALE_ERROR",
+    "DRAWN_MOUNT_OFFSET_MAX",
+    "DRAWN_HEADING_FIELD_DEG",
+    "DRAWN_HEADING_FIELD_WAVELENGTH_M",
     "draw_drift_errors",
     "make_scenario",
     "make_world",
@@ -121,6 +125,24 @@ DRIFT_HEADING_WALK_DEG_PER_SQRT_S = 0.15
 #: Drift world: the echo peaks this far behind the wall face (m).
 DRIFT_ECHO_RANGE_OFFSET_M = 0.25
 
+# Drawn worlds' calibration errors (issue 29): the marina's measured disagreements, so that the
+# estimators' defaults chosen on drawn worlds transfer to it.
+
+#: Drawn worlds: the sonar's range-scale error ``|s - 1|``, uniform in this range with a random
+#: sign: the marina's consecutive scan registrations and the DVL disagree on distances by 4 %.
+DRAWN_RANGE_SCALE_ERROR = (0.01, 0.04)
+#: Drawn worlds: the true sonar mounting is ``sonarslam.toml``'s plus offsets uniform in
+#: +- these (x and y m, yaw deg), unknown to the estimators: the marina's lever arm is not
+#: surveyed (``x = y = 0`` in its calibration; a user cannot know it to better than +-0.2 m)
+#: and its entropy-calibrated yaw moves the results by tenths of a metre at +-0.25 deg.
+DRAWN_MOUNT_OFFSET_MAX = (0.2, 0.2, 0.5)
+#: Drawn worlds: RMS of the place-dependent AHRS heading disturbance (deg) and its wavelength
+#: (m), on top of the walk: rigid fits of the marina's dead reckoning onto GPS over 200 s
+#: windows rotate by -4 deg to +2 deg over the run (a 6 deg span in a ~150 m harbour; walk
+#: and place field together).
+DRAWN_HEADING_FIELD_DEG = 2.0
+DRAWN_HEADING_FIELD_WAVELENGTH_M = 80.0
+
 
 @dataclass(frozen=True)
 class Scenario:
@@ -160,6 +182,9 @@ class Scenario:
     ahrs_bias_sigma_deg : float or None
         The AHRS constant bias's specification (1-sigma, deg) when it is drawn per seed; None:
         the estimators are told ``noise.ahrs_bias_deg`` itself (a fixed, known-size bias).
+    sonar_mounting_told : Mounting or None
+        The sonar mounting written to ``sonarslam.toml`` when it is not the true one (the
+        estimators' prior); None: the true ``sonar_mounting``.
     path_rate_hz, dvl_rate_hz, ahrs_rate_hz, gps_rate_hz : float
         Sampling rates of the truth and the sensors (Hz).
     """
@@ -181,6 +206,7 @@ class Scenario:
     pool_sonar_yaw_rad: float = math.radians(10.0)
     origin: GeodeticOrigin = MARINA_ORIGIN
     ahrs_bias_sigma_deg: float | None = None
+    sonar_mounting_told: Mounting | None = None
     path_rate_hz: float = 50.0
     dvl_rate_hz: float = 1.5
     ahrs_rate_hz: float = 10.0
@@ -201,7 +227,11 @@ class Scenario:
         bias_deg = n.ahrs_bias_deg if self.ahrs_bias_sigma_deg is None else self.ahrs_bias_sigma_deg
         return DatasetConfig(
             sonar=self.head,
-            sonar_mounting=self.sonar_mounting,
+            sonar_mounting=(
+                self.sonar_mounting
+                if self.sonar_mounting_told is None
+                else self.sonar_mounting_told
+            ),
             dvl_mounting=self.dvl_mounting,
             ahrs_mounting=self.ahrs_mounting,
             noise=NoiseConfig(
@@ -276,13 +306,32 @@ def make_scenario(kind: str, seed: int, duration_s: float | None = None) -> Scen
     if kind == "drawn":
         streams = _seed_streams(seed, kind)
         bias_deg = float(streams["bias"].normal(0.0, AHRS_BIAS_SIGMA_DEG))
+        cal = streams["calibration"]
+        lo, hi = DRAWN_RANGE_SCALE_ERROR
+        range_scale = 1.0 + (1.0 if cal.random() < 0.5 else -1.0) * float(cal.uniform(lo, hi))
+        dx, dy, dyaw_deg = (float(cal.uniform(-m, m)) for m in DRAWN_MOUNT_OFFSET_MAX)
+        told = SONAR_MOUNTING
+        true_mount = Mounting(
+            x_m=told.x_m + dx,
+            y_m=told.y_m + dy,
+            yaw_rad=told.yaw_rad + math.radians(dyaw_deg),
+            source="simulator truth (sonarslam.toml has the mounting without its drawn offsets)",
+        )
+        errors = replace(
+            draw_drift_errors(streams["errors"]),
+            sonar_range_scale=range_scale,
+            ahrs_heading_field_deg=DRAWN_HEADING_FIELD_DEG,
+            ahrs_heading_field_wavelength_m=DRAWN_HEADING_FIELD_WAVELENGTH_M,
+        )
         return Scenario(
             kind=kind,
             seed=seed,
             duration_s=duration,
-            errors=draw_drift_errors(streams["errors"]),
+            errors=errors,
             noise=SensorNoise(ahrs_bias_deg=bias_deg),
             ahrs_bias_sigma_deg=AHRS_BIAS_SIGMA_DEG,
+            sonar_mounting=true_mount,
+            sonar_mounting_told=told,
         )
     return Scenario(kind=kind, seed=seed, duration_s=duration)
 
@@ -291,7 +340,18 @@ def _seed_streams(seed: int, kind: str) -> dict[str, np.random.Generator]:
     """One independent generator per component, from the seed and the kind (so that two kinds
     with the same seed do not share their noise). Names are only ever appended: spawning more
     children leaves the earlier ones, and so the older kinds' runs, as they were."""
-    names = ("world", "path", "sonar", "dvl", "ahrs", "gps", "errors", "heading_walk", "bias")
+    names = (
+        "world",
+        "path",
+        "sonar",
+        "dvl",
+        "ahrs",
+        "gps",
+        "errors",
+        "heading_walk",
+        "bias",
+        "calibration",
+    )
     root = np.random.SeedSequence([seed, KINDS.index(kind)])
     return {n: np.random.default_rng(c) for n, c in zip(names, root.spawn(len(names)), strict=True)}
 
@@ -427,6 +487,7 @@ def simulate_records(scenario: Scenario) -> Simulation:
         sector_rad=scenario.sector_rad,
         echo=scenario.echo,
         range_offset_m=0.0 if errors is None else errors.echo_range_offset_m,
+        range_scale=1.0 if errors is None else errors.sonar_range_scale,
     )
     t_beam = np.array([b.t for b in beams])
     a_beam = np.array([b.transducer_angle_rad for b in beams])

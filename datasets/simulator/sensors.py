@@ -136,12 +136,24 @@ class DriftErrors:
     echo_range_offset_m : float
         How far behind the wall face the sonar's echo peaks (m); its leading edge (half the
         peak, rising) stays on the wall face (:mod:`sonarslam.datasets.simulator.msis`).
+    sonar_range_scale : float
+        ``s``: the sonar logs an echo from true range ``r`` at ``s * r`` (a sound-speed error;
+        1: none).
+    ahrs_heading_field_deg : float
+        RMS of a place-dependent disturbance of the AHRS heading (deg, a magnetic field bent by
+        steel walls and hulls): :func:`heading_field` at the vehicle's position, added to the
+        walk; 0: none.
+    ahrs_heading_field_wavelength_m : float
+        Its wavelength (m).
     """
 
     dvl_scale_factor: float = bounded(0.0, -0.5, 0.5, low_open=True, high_open=True)
     dvl_bias_mps: tuple[float, float] = (0.0, 0.0)
     ahrs_heading_walk_deg_per_sqrt_s: float = bounded(0.0, 0.0, math.inf)
     echo_range_offset_m: float = bounded(0.0, 0.0, math.inf)
+    sonar_range_scale: float = bounded(1.0, 0.5, 1.5, low_open=True, high_open=True)
+    ahrs_heading_field_deg: float = bounded(0.0, 0.0, math.inf)
+    ahrs_heading_field_wavelength_m: float = bounded(80.0, 0.0, math.inf, low_open=True)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -205,7 +217,8 @@ class AhrsSamples:
     acc_mps2 : ndarray, shape (N, 3)
         Specific force along the MTi axes (m/s^2); ``acc_z`` is about ``-9.81``.
     heading_walk_deg : ndarray, shape (N,) or None
-        The random walk in ``heading_deg`` (deg, clockwise like the heading); None without one.
+        The slowly varying error in ``heading_deg`` (deg, clockwise like the heading): the random
+        walk plus the place-dependent field (:class:`DriftErrors`); None without either.
     """
 
     t_s: FloatArray = field(repr=False)
@@ -274,6 +287,25 @@ def heading_random_walk(
         return np.zeros(0)
     steps = sigma_deg_per_sqrt_s * np.sqrt(np.diff(t)) * rng.normal(0.0, 1.0, t.size - 1)
     return np.concatenate([[0.0], np.cumsum(steps)])
+
+
+#: Plane waves summed by :func:`heading_field`.
+HEADING_FIELD_WAVES = 4
+
+
+def heading_field(
+    xy_m: FloatArray, rms_deg: float, wavelength_m: float, rng: np.random.Generator
+) -> FloatArray:
+    """A smooth random field of heading disturbance over the plane, at the points ``xy_m``
+    (m, shape (N, 2)): ``rms * sqrt(2 / W) * sum_i cos(2 pi u_i . p / wavelength + phi_i)``
+    over :data:`HEADING_FIELD_WAVES` waves of random directions ``u_i`` and phases ``phi_i``
+    (drawn from ``rng``); RMS ``rms_deg`` over the plane, shape (N,), deg."""
+    a = rng.uniform(0.0, 2.0 * np.pi, HEADING_FIELD_WAVES)
+    phi = rng.uniform(0.0, 2.0 * np.pi, HEADING_FIELD_WAVES)
+    u = np.column_stack([np.cos(a), np.sin(a)])
+    k = 2.0 * np.pi / wavelength_m
+    waves = np.cos(k * (np.asarray(xy_m, dtype=np.float64) @ u.T) + phi)
+    return np.asarray(rms_deg * np.sqrt(2.0 / HEADING_FIELD_WAVES) * waves.sum(axis=1))
 
 
 def _dropouts(t0_s: float, t1_s: float, noise: SensorNoise, rng: np.random.Generator) -> FloatArray:
@@ -415,6 +447,18 @@ def simulate_ahrs(
         if walk_rng is None:
             raise ValueError("simulate_ahrs: a heading random walk needs walk_rng")
         walk = heading_random_walk(t, errors.ahrs_heading_walk_deg_per_sqrt_s, walk_rng)
+    if errors is not None and errors.ahrs_heading_field_deg > 0.0:
+        if walk_rng is None:
+            raise ValueError("simulate_ahrs: a heading field needs walk_rng")
+        # drawn after the walk from its stream: the walk of a world without the field is kept
+        place = heading_field(
+            trajectory.poses(t)[:, :2],
+            errors.ahrs_heading_field_deg,
+            errors.ahrs_heading_field_wavelength_m,
+            walk_rng,
+        )
+        walk = place if walk is None else walk + place
+    if walk is not None:
         heading = heading + walk
     heading = heading + rng.normal(0.0, noise.ahrs_sigma_deg, n)
     heading = np.rad2deg(wrap_angle(np.deg2rad(heading)))

@@ -61,6 +61,7 @@ from sonarslam.slam.backends.base import (
     ids_of_features,
     vote_observations,
 )
+from sonarslam.slam.io.states import HEADING_ERROR_FILE, write_heading_error
 from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.mapping.landmarks import LandmarkMap
 from sonarslam.slam.mapping.vote import AfterVote, Belief, Decision, LandmarkBelief
@@ -222,6 +223,7 @@ class LineEkf:
         self._first_line_w: dict[int, FloatArray] = {}  # each landmark's first estimate (FEJ)
         self._kernel = robust_kernel(config.robust, config.robust_k)
         self._var_walk = np.deg2rad(config.noise.ahrs_bias_walk_deg_per_sqrt_s) ** 2  # rad^2/s
+        self.heading_error: list[tuple[float, float, float]] = []  # (t, b rad, var rad^2)
         self._pose_lin = np.zeros(3)  # the pose the vote's Jacobians are taken at (FEJ)
         self._xy_first = (float(wTb0[0]), float(wTb0[1]))  # the position as first predicted
         self._last_ahrs_t = -np.inf
@@ -373,6 +375,9 @@ class LineEkf:
         self.kf.x, self.kf.P = scalar_joseph_update(x, P, h, nu, r)
         self._normalise()
         self._own_stats["ahrs_updates"] += 1
+        if self._var_walk > 0.0:  # the filtered heading error's track (heading_error.csv)
+            b = self.kf.x[AHRS_BIAS]
+            self.heading_error.append((t_s, float(b), float(self.kf.P[AHRS_BIAS, AHRS_BIAS])))
         return True
 
     def predict_line(self, landmark_id: int) -> tuple[FloatArray, FloatArray]:
@@ -547,4 +552,9 @@ class LineEkf:
         return out
 
     def save(self, out_dir: Path) -> list[Path]:
-        return []
+        """The filtered AHRS heading error's track ``heading_error.csv`` when it walks
+        (:mod:`sonarslam.slam.io.states`); nothing else."""
+        if not self.heading_error:
+            return []
+        t, b, var = (np.array(c) for c in zip(*self.heading_error, strict=True))
+        return [write_heading_error(Path(out_dir) / HEADING_ERROR_FILE, t, b, np.sqrt(var))]

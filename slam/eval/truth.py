@@ -49,6 +49,23 @@ def truth_trajectory(dataset: Dataset) -> Trajectory:
     return Trajectory(poses[:, 0].copy(), np.column_stack([xy, wrap_angle(poses[:, 3])]))
 
 
+def truth_heading_error(dataset: Dataset) -> tuple[FloatArray, FloatArray] | None:
+    """The simulated AHRS's true heading error in the estimators' sense (the AHRS measures
+    ``yaw + b``): ``b = -(constant bias + walk and place field)``, the logged heading being
+    clockwise. ``(t_s, b_deg)``, shapes (N,); None for a dataset without truth. (The deviation
+    with heading, zero in the simulator's worlds, is left out.)"""
+    truth = dataset.truth
+    if truth is None:
+        return None
+    bias = float(truth.get("noise", {}).get("ahrs_bias_deg", 0.0))
+    walk = truth.get("ahrs_heading_walk")
+    if walk is None:
+        t = np.asarray(truth["body_poses"]["rows"], dtype=np.float64)[:, 0]
+        return t, np.full(t.size, -bias)
+    rows = np.asarray(walk["rows"], dtype=np.float64)
+    return rows[:, 0].copy(), -(bias + rows[:, 1])
+
+
 def truth_walls(dataset: Dataset) -> FloatArray:
     """The simulator's wall segments (W, 2, 2) in the readers' frame (world minus the first fix)."""
     if dataset.truth is None or "walls_m" not in dataset.truth:

@@ -473,3 +473,48 @@ def plot_worlds(
     out = Path(path)
     fig.savefig(out, bbox_inches="tight")
     return out
+
+
+def plot_heading_error(
+    path: str | Path,
+    t_s: FloatArray,
+    b_deg: FloatArray,
+    sd_deg: FloatArray,
+    title: str,
+    truth: tuple[FloatArray, FloatArray] | None = None,
+) -> Path:
+    """The AHRS heading error's track in time with its 2-sigma band (and the true error of a
+    simulated run, ``(t_s, b_deg)``, with the share of it inside the band).
+
+    Parameters
+    ----------
+    t_s, b_deg, sd_deg : ndarray, shape (N,)
+        Unix s, the estimate and its sd (deg).
+    """
+    fig = Figure(figsize=(12, 3.6), dpi=100, layout="constrained")
+    ax = fig.subplots()
+    t0 = float(t_s[0]) if t_s.size else 0.0
+    tt = t_s - t0
+    ax.fill_between(
+        tt, b_deg - 2 * sd_deg, b_deg + 2 * sd_deg, color="tab:blue", alpha=0.2, label="±2σ"
+    )
+    ax.plot(tt, b_deg, color="tab:blue", lw=1.0, label="estimate")
+    if truth is not None and t_s.size:
+        t_true, b_true = truth
+        at = np.interp(t_s, t_true, b_true)
+        inside = float(np.mean(np.abs(at - b_deg) <= 2 * sd_deg))
+        ax.plot(
+            t_true - t0,
+            b_true,
+            color="black",
+            lw=0.8,
+            label=f"truth ({100 * inside:.0f} % of the nodes inside ±2σ)",
+        )
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("heading error b (deg)")
+    ax.grid(True, lw=0.3)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+    ax.set_title(title)
+    out = Path(path)
+    fig.savefig(out, bbox_inches="tight")
+    return out

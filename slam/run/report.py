@@ -17,7 +17,12 @@ re-opens the run's dataset when it is still there, and writes into ``OUT``:
   run's trajectory, with its reference and the true walls of a simulated run;
 * ``errors_<run>.png``: East, North (and heading, against the truth) errors in time with the
   3-sigma bounds of the trajectory covariances (and of the GPS noise against GPS);
-* ``nees_<run>.png``: pose and position NEES in time with their chi2 bands (simulated runs).
+* ``nees_<run>.png``: pose and position NEES in time with their chi2 bands (simulated runs);
+* ``heading_error_<run>.png``: the AHRS heading error's track with its 2-sigma band (runs whose
+  heading error walks, ``heading_error.csv``), with the simulator's true error.
+
+Under each run's figures, its calibration estimates (``state_*`` of ``metrics.json``) with their
+sd.
 """
 
 from __future__ import annotations
@@ -42,7 +47,9 @@ from sonarslam.slam.eval.published import PUBLISHED
 from sonarslam.slam.run.report_data import DISPLAY_NAMES, RunData, evaluate_run, load_run
 from sonarslam.slam.run.report_figures import (
     SegmentTable,
+    calibration_lines,
     error_figure,
+    heading_error_figure,
     map_figure,
     nees_figure,
     segment_figure,
@@ -416,9 +423,14 @@ def report(
         figs.append(error_figure(run, lab, out / f"errors_{tag}.png"))
         if run.truth is not None and run.trajectory.covs is not None:
             figs.append(nees_figure(run, lab, out / f"nees_{tag}.png"))
+        heading = heading_error_figure(run, lab, out / f"heading_error_{tag}.png")
+        if heading is not None:
+            figs.append(heading)
         figures += figs
         md += [f"### {lab} on {run.dataset_name} (`{run.name}`)", ""]
         md += [f"- {note}" for note in run.notes] + ([""] if run.notes else [])
+        calibration = calibration_lines(run)
+        md += calibration + ([""] if calibration else [])
         md += [f"![{p.stem}]({p.name})\n" for p in figs]
     path = out / "report.md"
     path.write_text("\n".join(md) + "\n")

@@ -17,14 +17,16 @@ from evo.core.geometry import umeyama_alignment
 from sonarslam.features.projection import project_beams
 from sonarslam.slam.eval.ate import ate_errors, truth_errors
 from sonarslam.slam.eval.consistency import chi2_band, nees_series, pose_errors
-from sonarslam.slam.eval.truth import truth_walls
+from sonarslam.slam.eval.truth import truth_heading_error, truth_walls
 from sonarslam.slam.io.maps import MapLayers, landmark_layers, plot_map
 from sonarslam.slam.io.plots import (
     plot_error_bounds,
+    plot_heading_error,
     plot_nees,
     plot_segment_ate,
     plot_trajectories,
 )
+from sonarslam.slam.io.states import HEADING_ERROR_FILE, read_heading_error
 from sonarslam.slam.io.trajectory import FloatArray, Trajectory, cov_file
 from sonarslam.slam.run.presets import map_min_intensity
 from sonarslam.slam.run.report_data import RunData
@@ -36,6 +38,8 @@ __all__ = [
     "segment_table",
     "error_figure",
     "nees_figure",
+    "heading_error_figure",
+    "calibration_lines",
     "map_figure",
     "trajectory_figure",
     "segment_figure",
@@ -132,6 +136,40 @@ def error_figure(run: RunData, label: str, out: Path) -> Path:
     )
     aligned = _aligned_errors(run.trajectory.poses(t)[:, :2], ref_xy)
     return plot_error_bounds(out, t, e, s, title, ref_name, "±3σ, own covariance", aligned)
+
+
+def heading_error_figure(run: RunData, label: str, out: Path) -> Path | None:
+    """The run's AHRS heading error track (``heading_error.csv``) with its 2-sigma band, and the
+    simulator's true error; None when the run has no track (a constant bias)."""
+    path = run.run_dir / HEADING_ERROR_FILE
+    if not path.exists():
+        return None
+    t, b, sd = read_heading_error(path)
+    truth = truth_heading_error(run.dataset) if run.dataset is not None else None
+    title = f"{run.dataset_name}: {label}, AHRS heading error b (the AHRS measures yaw + b)"
+    return plot_heading_error(out, t, b, sd, title, truth)
+
+
+#: The calibration estimates of ``metrics.json``: (label, key, its sd's key, unit).
+_CALIBRATION = (
+    ("sonar mounting x", "state_sonar_x_m", "state_sonar_x_sd_m", "m"),
+    ("sonar mounting y", "state_sonar_y_m", "state_sonar_y_sd_m", "m"),
+    ("sonar mounting yaw", "state_sonar_yaw_deg", "state_sonar_yaw_sd_deg", "deg"),
+    ("sonar range scale", "state_sonar_range_scale", "state_sonar_range_scale_sd", ""),
+    ("AHRS heading error (end)", "state_ahrs_bias_deg", "state_ahrs_bias_sd_deg", "deg"),
+    ("DVL scale k", "state_dvl_scale", "state_dvl_scale_sd", ""),
+)
+
+
+def calibration_lines(run: RunData) -> list[str]:
+    """One Markdown list item per calibration estimate of the run's ``metrics.json``, with its
+    sd."""
+    m = run.metrics
+    return [
+        f"- {label}: {m[key]:.6g} ± {m[sd]:.2g} {unit} (1σ)".replace("  ", " ")
+        for label, key, sd, unit in _CALIBRATION
+        if key in m and sd in m
+    ]
 
 
 def nees_figure(run: RunData, label: str, out: Path) -> Path:

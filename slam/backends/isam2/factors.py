@@ -20,6 +20,9 @@ Variables (keys from :mod:`gtsam.symbol_shorthand`):
   vehicle moves along ``R(yaw + delta) v_b`` (as :class:`sonarslam.slam.backends.ekf.LineEkf`).
 * ``G(0)``: optional constant scale of the gyro's yaw rate (the odometry's heading change is
   ``s`` times the gyro's integral).
+* ``C(0)``: optional sonar mounting ``bTs`` ``(x_m, y_m, yaw_rad)``, a size-3 ``Vector`` shared by
+  every line and scan observation; ``R(0)``: optional sonar range scale ``s`` (size 1): the
+  models of :mod:`sonarslam.slam.model.calibration`.
 
 Every factor here is a ``gtsam.CustomFactor`` around a plain function that returns the error and
 its analytic Jacobians (``tests/test_factor_graph.py`` checks them against
@@ -35,12 +38,15 @@ import numpy as np
 import numpy.typing as npt
 
 from sonarslam.features.geometry import FloatArray, wrap_angle
+from sonarslam.slam.model.calibration import line_residual_calibrated, scan_residual
 from sonarslam.slam.model.lines import line_residual
 from sonarslam.slam.model.noise import robust_kernel
 
 __all__ = [
     "noise_model",
     "line_factor",
+    "calibrated_line_factor",
+    "calibrated_scan_factor",
     "line_equality_residual",
     "line_equality_factor",
     "heading_residual",
@@ -112,6 +118,112 @@ def line_factor(
         return e
 
     return gtsam.CustomFactor(noise_model(cov, robust, robust_k), [pose_key, line_key], error)
+
+
+def _pose(values: gtsam.Values, key: int) -> FloatArray:
+    p = values.atPose2(key)
+    return np.array([p.x(), p.y(), p.theta()])
+
+
+def calibrated_line_factor(
+    pose_key: int,
+    line_key: int,
+    z: npt.ArrayLike,
+    cov: npt.ArrayLike,
+    kTb: npt.ArrayLike,
+    bTs: npt.ArrayLike,
+    mount_key: int | None = None,
+    scale_key: int | None = None,
+    robust: str | None = None,
+    robust_k: float = 1.345,
+) -> gtsam.CustomFactor:
+    """A line observation on ``X(k)``, ``L(j)`` and the sonar's calibration: the mounting
+    ``C(0)`` (or the constant ``bTs`` without ``mount_key``) and the range scale ``R(0)`` (or 1
+    without ``scale_key``); error :func:`sonarslam.slam.model.calibration.line_residual_calibrated`.
+
+    Parameters
+    ----------
+    z, cov
+        The measured line in the sonar frame and its covariance.
+    kTb : array_like, shape (3,)
+        The body's pose at the observation in node ``k``'s frame (a constant).
+    bTs : array_like, shape (3,)
+        The mounting when it is not a variable.
+    """
+    z_m = np.asarray(z, dtype=np.float64).copy()
+    kTb_m = np.asarray(kTb, dtype=np.float64).copy()
+    bTs_m = np.asarray(bTs, dtype=np.float64).copy()
+    keys = [pose_key, line_key]
+    i_mount = i_scale = None
+    if mount_key is not None:
+        keys.append(mount_key)
+        i_mount = len(keys) - 1
+    if scale_key is not None:
+        keys.append(scale_key)
+        i_scale = len(keys) - 1
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> FloatArray:
+        k = this.keys()
+        mount = bTs_m if i_mount is None else np.asarray(values.atVector(k[i_mount]))
+        scale = 1.0 if i_scale is None else float(values.atVector(k[i_scale])[0])
+        e, H_pose, H_line, H_mount, H_scale = line_residual_calibrated(
+            z_m, _pose(values, k[0]), values.atVector(k[1]), kTb_m, mount, scale
+        )
+        if H is not None:
+            H[0] = H_pose
+            H[1] = H_line
+            if i_mount is not None:
+                H[i_mount] = H_mount
+            if i_scale is not None:
+                H[i_scale] = H_scale
+        return e
+
+    return gtsam.CustomFactor(noise_model(cov, robust, robust_k), keys, error)
+
+
+def calibrated_scan_factor(
+    key_i: int,
+    key_j: int,
+    z: npt.ArrayLike,
+    cov: npt.ArrayLike,
+    bTs_assumed: npt.ArrayLike,
+    mount_key: int | None = None,
+    scale_key: int | None = None,
+    robust: str | None = None,
+    robust_k: float = 1.0,
+) -> gtsam.CustomFactor:
+    """A scan registration ``z`` (``iTj`` of the body nodes, measured with the front end's
+    mounting ``bTs_assumed``) on ``X(i)``, ``X(j)``, the mounting ``C(0)`` and the range scale
+    ``R(0)`` (either may be absent: the assumed mounting, scale 1); error
+    :func:`sonarslam.slam.model.calibration.scan_residual`, ``cov`` in ``z``'s local tangent."""
+    z_m = np.asarray(z, dtype=np.float64).copy()
+    a = np.asarray(bTs_assumed, dtype=np.float64).copy()
+    keys = [key_i, key_j]
+    i_mount = i_scale = None
+    if mount_key is not None:
+        keys.append(mount_key)
+        i_mount = len(keys) - 1
+    if scale_key is not None:
+        keys.append(scale_key)
+        i_scale = len(keys) - 1
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> FloatArray:
+        k = this.keys()
+        mount = a if i_mount is None else np.asarray(values.atVector(k[i_mount]))
+        scale = 1.0 if i_scale is None else float(values.atVector(k[i_scale])[0])
+        e, H_i, H_j, H_mount, H_scale = scan_residual(
+            z_m, _pose(values, k[0]), _pose(values, k[1]), mount, scale, a
+        )
+        if H is not None:
+            H[0] = H_i
+            H[1] = H_j
+            if i_mount is not None:
+                H[i_mount] = H_mount
+            if i_scale is not None:
+                H[i_scale] = H_scale
+        return e
+
+    return gtsam.CustomFactor(noise_model(cov, robust, robust_k), keys, error)
 
 
 def line_equality_residual(

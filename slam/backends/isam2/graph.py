@@ -45,10 +45,10 @@ from pathlib import Path
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, D, G, K, L, X
+from gtsam.symbol_shorthand import B, C, D, G, K, L, R, X
 from scipy.stats import chi2
 
-from sonarslam.features.geometry import FloatArray, compose, line_difference
+from sonarslam.features.geometry import FloatArray, compose, inverse, line_difference
 from sonarslam.features.line import LineFeature
 from sonarslam.features.pose_source import PoseSource
 from sonarslam.features.scans import Scan, ScanMatcher
@@ -73,6 +73,7 @@ from sonarslam.slam.backends.isam2.graph_io import (
 from sonarslam.slam.backends.isam2.odometry import NodeOdometry, local_covariance
 from sonarslam.slam.backends.isam2.pose_source import NodeTable, SmoothedPoseSource
 from sonarslam.slam.backends.isam2.scans import ScanConstraints
+from sonarslam.slam.io.states import HEADING_ERROR_FILE, write_heading_error
 from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.mapping.landmarks import Landmark, LandmarkMap
 from sonarslam.slam.mapping.vote import (
@@ -159,7 +160,7 @@ class LineIsam2:
         self._anchor_cov_rows: tuple[tuple[float, ...], ...] = ((0.0,) * 3,) * 3
 
         self.scans = ScanConstraints(self, config) if "scans" in config.constraint_kinds else None
-        records, values = start_records(np.asarray(wTb0), np.asarray(P0), config)
+        records, values = start_records(np.asarray(wTb0), np.asarray(P0), config, self.bTs)
         for record in records:
             self._add_factor(record)
         self._pending_values = values
@@ -507,10 +508,29 @@ class LineIsam2:
             self._lm_cov[j] = J[3 + 2 * c : 5 + 2 * c, 3 + 2 * c : 5 + 2 * c].copy()
         return joint_covariance(J, self._anchor_pose, self.odometry.since_anchor)
 
+    def calibration_keys(self) -> list[int]:
+        """The keys of the sonar's calibration variables: ``C(0)`` (mounting) and ``R(0)``
+        (range scale) when estimated."""
+        cfg = self.config
+        return [int(C(0))] * cfg.estimate_sonar_mount + [int(R(0))] * (cfg.range_scale_sigma > 0)
+
     def _add_line_factor(self, node: NodeAnchor, f: LineFeature, lm_id: int) -> None:
         k, bTs = node.node, node.bTs
         cfg = self.config
         robust = None if cfg.robust is None else Robust(cfg.robust, cfg.robust_k)
+        if cfg.calibrated:
+            self._add_factor(
+                FactorRecord.of(
+                    FactorKind.LINE_OBSERVATION_CALIBRATED,
+                    [X(k), L(lm_id), *self.calibration_keys()],
+                    f.z,
+                    np.asarray(f.cov) * cfg.line_cov_scale,
+                    bTs=self.bTs.copy(),
+                    kTb=compose(np.asarray(bTs, dtype=np.float64), inverse(self.bTs)),
+                    robust=robust,
+                )
+            )
+            return
         self._add_factor(
             FactorRecord.of(
                 FactorKind.LINE_OBSERVATION,
@@ -730,10 +750,40 @@ class LineIsam2:
             scale = float(np.rad2deg(1.0)) if degrees else 1.0
             out[f"state_{name}{unit}"] = scale * v
             out[f"state_{name}_sd{unit}"] = scale * sd
+        if self.config.estimate_sonar_mount:
+            c = np.asarray(values.atVector(C(0)))
+            sd_c = np.sqrt(np.diag(marginal(C(0))))
+            for i, (name, f) in enumerate((("x_m", 1.0), ("y_m", 1.0), ("yaw_deg", 180 / np.pi))):
+                base, unit = name.rsplit("_", 1)
+                out[f"state_sonar_{base}_{unit}"] = f * float(c[i])
+                out[f"state_sonar_{base}_sd_{unit}"] = f * float(sd_c[i])
+        if self.config.range_scale_sigma > 0.0:
+            out["state_sonar_range_scale"] = float(values.atVector(R(0))[0])
+            out["state_sonar_range_scale_sd"] = float(np.sqrt(marginal(R(0))[0, 0]))
         return out
 
+    def heading_error_track(self) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+        """The AHRS heading error ``b`` at every node with its marginal sd, when it walks
+        (``ahrs_bias_walk_deg_per_sqrt_s > 0``: one ``B(k)`` per node); None for a constant bias.
+
+        Returns
+        -------
+        t_s, b_rad, sd_rad : ndarray, shape (N,)
+            Node times (Unix s), the estimate and its sd (rad).
+        """
+        if self._var_walk <= 0.0:
+            return None
+        marginal = self._marginals()
+        values = self.estimate()
+        n = self._n_nodes
+        b = np.array([float(values.atVector(B(k))[0]) for k in range(n)])
+        sd = np.sqrt([float(marginal(B(k))[0, 0]) for k in range(n)])
+        return self.nodes.t_s[:n].copy(), b, sd
+
     def save(self, out_dir: Path) -> list[Path]:
-        """``graph.json`` (:func:`sonarslam.slam.backends.isam2.graph_io.save_graph`)."""
+        """``graph.json`` (:func:`sonarslam.slam.backends.isam2.graph_io.save_graph`) and, when the
+        AHRS heading error walks, its smoothed track ``heading_error.csv``
+        (:mod:`sonarslam.slam.io.states`)."""
         path = Path(out_dir) / "graph.json"
         values = self.estimate()
         meta = {
@@ -742,4 +792,8 @@ class LineIsam2:
             "config": {k: v for k, v in asdict(self.config).items() if k != "association"},
         }
         save_graph(path, self.records, values, meta)
-        return [path]
+        out = [path]
+        track = self.heading_error_track()
+        if track is not None:
+            out.append(write_heading_error(Path(out_dir) / HEADING_ERROR_FILE, *track))
+        return out

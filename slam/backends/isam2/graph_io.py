@@ -21,11 +21,13 @@ from typing import Any
 import gtsam
 import numpy as np
 import numpy.typing as npt
-from gtsam.symbol_shorthand import B, D, G, K, X
+from gtsam.symbol_shorthand import B, C, D, G, K, R, X
 
 from sonarslam.features.geometry import FloatArray
 from sonarslam.slam.backends.isam2.config import GraphConfig
 from sonarslam.slam.backends.isam2.factors import (
+    calibrated_line_factor,
+    calibrated_scan_factor,
     heading_factor,
     line_equality_factor,
     line_factor,
@@ -78,6 +80,8 @@ class FactorKind(Enum):
     DVL_GYRO_ODOMETRY = "DvlGyroOdometry"
     LINE_EQUALITY = "LineEquality"
     LINE_OBSERVATION = "LineObservation"
+    LINE_OBSERVATION_CALIBRATED = "LineObservationCalibrated"
+    SCAN_CALIBRATED = "ScanRegistrationCalibrated"
 
 
 @dataclass(frozen=True)
@@ -116,7 +120,11 @@ class FactorRecord:
     cov : ndarray, shape (d, d)
         The covariance of the factor's error (``noiseModel.Gaussian``).
     bTs : ndarray, shape (3,), optional
-        The sonar mounting of a ``LineObservation``.
+        The sonar mounting of a ``LineObservation``; of the calibrated kinds, the mounting
+        assumed (the front end's, and the factor's when the mounting is not a variable).
+    kTb : ndarray, shape (3,), optional
+        Of a ``LineObservationCalibrated``: the body's pose at the observation in its node's
+        frame.
     robust : Robust, optional
         A kernel (``LineObservation``, ``BetweenFactorPose2``).
     odometry : OdometryTerms, optional
@@ -133,6 +141,7 @@ class FactorRecord:
     robust: Robust | None = None
     odometry: OdometryTerms | None = None
     constraint: str | None = None
+    kTb: FloatArray | None = None
 
     @classmethod
     def of(
@@ -172,7 +181,9 @@ class FactorRecord:
             out["scale0"] = self.odometry.scale0
         if self.bTs is not None:
             out["bTs"] = self.bTs.tolist()
-        if self.robust is not None or self.kind is FactorKind.LINE_OBSERVATION:
+        if self.kTb is not None:
+            out["kTb"] = self.kTb.tolist()
+        if self.robust is not None or self.kind in _LINE_KINDS:
             out["robust"] = None if self.robust is None else asdict(self.robust)
         if self.constraint is not None:
             out["constraint"] = self.constraint
@@ -195,6 +206,7 @@ class FactorRecord:
                 jx, jy = (float(v) for v in item["d_t_d_scale"])
                 odometry = OdometryTerms(float(item["yaw_raw"]), (jx, jy), float(item["scale0"]))
             bTs = item.get("bTs")
+            kTb = item.get("kTb")
             record = cls.of(
                 kind,
                 keys,
@@ -204,6 +216,7 @@ class FactorRecord:
                 robust=None if robust is None else Robust(robust["kernel"], float(robust["k"])),
                 odometry=odometry,
                 constraint=item.get("constraint"),
+                kTb=None if kTb is None else np.asarray(kTb, dtype=np.float64),
             )
         except (KeyError, TypeError, ValueError, IndexError) as e:
             raise ValueError(f"{where}: {item.get('type', '?')!r} factor: {e!r}") from e
@@ -217,10 +230,11 @@ class FactorRecord:
                 f"{where}: {kind.value} factor: measurement of shape {record.z.shape}, expected"
                 f" {size if size is not None else 'a vector'}"
             )
-        if record.bTs is not None and record.bTs.shape != (3,):
-            raise ValueError(
-                f"{where}: {kind.value} factor: bTs of shape {record.bTs.shape}, expected (3,)"
-            )
+        for name, pose in (("bTs", record.bTs), ("kTb", record.kTb)):
+            if pose is not None and pose.shape != (3,):
+                raise ValueError(
+                    f"{where}: {kind.value} factor: {name} of shape {pose.shape}, expected (3,)"
+                )
         if record.robust is not None and record.robust.kernel not in ("huber", "cauchy"):
             raise ValueError(
                 f"{where}: {kind.value} factor: robust kernel {record.robust.kernel!r},"
@@ -231,9 +245,15 @@ class FactorRecord:
                 f"{where}: {kind.value} factor: covariance {record.cov.shape} does not match"
                 f" the measurement's {record.z.size} values"
             )
-        if kind is FactorKind.LINE_OBSERVATION and record.bTs is None:
-            raise ValueError(f"{where}: LineObservation factor without bTs")
+        if kind in _NEEDS_BTS and record.bTs is None:
+            raise ValueError(f"{where}: {kind.value} factor without bTs")
+        if kind is FactorKind.LINE_OBSERVATION_CALIBRATED and record.kTb is None:
+            raise ValueError(f"{where}: {kind.value} factor without kTb")
         return record
+
+
+_LINE_KINDS = (FactorKind.LINE_OBSERVATION, FactorKind.LINE_OBSERVATION_CALIBRATED)
+_NEEDS_BTS = (*_LINE_KINDS, FactorKind.SCAN_CALIBRATED)
 
 
 #: How many keys a factor of each kind takes (the others: two).
@@ -242,6 +262,8 @@ _N_KEYS = {
     FactorKind.PRIOR_POSE: (1, 1),
     FactorKind.PRIOR_VECTOR: (1, 1),
     FactorKind.DVL_GYRO_ODOMETRY: (2, 5),
+    FactorKind.LINE_OBSERVATION_CALIBRATED: (2, 4),
+    FactorKind.SCAN_CALIBRATED: (2, 4),
 }
 
 
@@ -254,6 +276,8 @@ _Z_SIZE = {
     FactorKind.DVL_GYRO_ODOMETRY: 3,
     FactorKind.LINE_EQUALITY: 1,
     FactorKind.LINE_OBSERVATION: 2,
+    FactorKind.LINE_OBSERVATION_CALIBRATED: 2,
+    FactorKind.SCAN_CALIBRATED: 3,
 }
 
 
@@ -297,6 +321,47 @@ def _line_observation(record: FactorRecord) -> gtsam.NonlinearFactor:
     )
 
 
+def _calibration_keys(record: FactorRecord) -> dict[str, int]:
+    """The mounting ``C(0)`` and range scale ``R(0)`` among a calibrated factor's keys, by
+    their symbol's character."""
+    return {chr(gtsam.Symbol(k).chr()): k for k in record.keys[2:]}
+
+
+def _line_calibrated(record: FactorRecord) -> gtsam.NonlinearFactor:
+    assert record.bTs is not None and record.kTb is not None, "checked when read or made"
+    by_char = _calibration_keys(record)
+    robust = record.robust
+    return calibrated_line_factor(
+        record.keys[0],
+        record.keys[1],
+        record.z,
+        record.cov,
+        record.kTb,
+        record.bTs,
+        mount_key=by_char.get("c"),
+        scale_key=by_char.get("r"),
+        robust=None if robust is None else robust.kernel,
+        robust_k=1.345 if robust is None else robust.k,
+    )
+
+
+def _scan_calibrated(record: FactorRecord) -> gtsam.NonlinearFactor:
+    assert record.bTs is not None, "checked when read or made"
+    by_char = _calibration_keys(record)
+    robust = record.robust
+    return calibrated_scan_factor(
+        record.keys[0],
+        record.keys[1],
+        record.z,
+        record.cov,
+        record.bTs,
+        mount_key=by_char.get("c"),
+        scale_key=by_char.get("r"),
+        robust=None if robust is None else robust.kernel,
+        robust_k=1.0 if robust is None else robust.k,
+    )
+
+
 _BUILDERS: dict[FactorKind, Callable[[FactorRecord], gtsam.NonlinearFactor]] = {
     FactorKind.POSE_TRANSLATION_PRIOR: lambda r: gtsam.PoseTranslationPrior2D(
         r.keys[0], r.z, noise_model(r.cov)
@@ -319,14 +384,17 @@ _BUILDERS: dict[FactorKind, Callable[[FactorRecord], gtsam.NonlinearFactor]] = {
         r.keys[0], r.keys[1], bool(r.z[0]), np.sqrt(np.diag(r.cov))
     ),
     FactorKind.LINE_OBSERVATION: _line_observation,
+    FactorKind.LINE_OBSERVATION_CALIBRATED: _line_calibrated,
+    FactorKind.SCAN_CALIBRATED: _scan_calibrated,
 }
 
 
 def start_records(
-    wTb0: FloatArray, P0: FloatArray, config: GraphConfig
+    wTb0: FloatArray, P0: FloatArray, config: GraphConfig, bTs: FloatArray | None = None
 ) -> tuple[list[FactorRecord], gtsam.Values]:
     """The factors and initial values of a graph's start: a prior on the start position,
-    the AHRS bias ``B(0)`` (and ``D(0)``, ``G(0)``, ``K(0)`` when estimated) with their priors, and the
+    the AHRS bias ``B(0)`` (and ``D(0)``, ``G(0)``, ``K(0)``, the sonar mounting ``C(0)`` around
+    ``bTs``, the range scale ``R(0)`` around 1, when estimated) with their priors, and the
     start heading as an AHRS heading factor on ``X(0)`` (the start yaw came from the AHRS, so it
     carries the bias; its white noise is ``ahrs_white_sigma_deg``'s, P0's heading is not used)."""
     prior = FactorKind.PRIOR_VECTOR
@@ -346,6 +414,21 @@ def start_records(
     if config.noise.dvl_scale_sigma > 0.0:
         records.append(FactorRecord.of(prior, [K(0)], [0.0], [[config.noise.dvl_scale_sigma**2]]))
         values.insert(K(0), np.zeros(1))
+    if config.estimate_sonar_mount:
+        if bTs is None:
+            raise ValueError("start_records: estimate_sonar_mount needs the mounting bTs")
+        cov_c = np.diag(
+            [
+                config.sonar_mount_sigma_m**2,
+                config.sonar_mount_sigma_m**2,
+                np.deg2rad(config.sonar_mount_sigma_deg) ** 2,
+            ]
+        )
+        records.append(FactorRecord.of(prior, [C(0)], bTs, cov_c))
+        values.insert(C(0), np.asarray(bTs, dtype=np.float64))
+    if config.range_scale_sigma > 0.0:
+        records.append(FactorRecord.of(prior, [R(0)], [1.0], [[config.range_scale_sigma**2]]))
+        values.insert(R(0), np.ones(1))
     values.insert(X(0), gtsam.Pose2(*wTb0))
     var_white = np.deg2rad(config.noise.ahrs_white_sigma_deg) ** 2
     records.append(FactorRecord.of(FactorKind.HEADING_BIAS, [X(0), B(0)], [wTb0[2]], [[var_white]]))
@@ -396,6 +479,13 @@ def save_graph(
     * ``LineObservation`` on ``(x, l)``: ``[rho, theta]`` in the sonar frame, plus ``"bTs"``
       ``[x, y, yaw]`` and ``"robust"`` (``null`` or ``{"kernel": "huber", "k": 1.345}``);
       error :func:`sonarslam.slam.model.lines.line_residual`;
+    * ``LineObservationCalibrated`` on ``(x, l[, c][, r])``: as ``LineObservation`` with the
+      sonar mounting ``c`` and range scale ``r`` as variables, plus ``"kTb"`` (the body at the
+      observation in the node's frame) and ``"bTs"`` (the mounting when ``c`` is absent); error
+      :func:`sonarslam.slam.model.calibration.line_residual_calibrated`;
+    * ``ScanRegistrationCalibrated`` on ``(x_i, x_j[, c][, r])``: ``[x, y, yaw]`` a scan
+      registration, ``"bTs"`` the mounting the front end assumed, ``"robust"``, ``"constraint"``;
+      error :func:`sonarslam.slam.model.calibration.scan_residual`;
     * ``LineEquality`` on ``(l_keep, l_drop)``: ``[flipped]`` (0 or 1), a diagonal covariance;
       two landmarks found to be one wall (:func:`sonarslam.slam.backends.isam2.factors.line_equality_residual`).
 

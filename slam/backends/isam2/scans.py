@@ -63,6 +63,16 @@ class ScanGraph(Protocol):
     @property
     def isam(self) -> gtsam.ISAM2: ...
 
+    @property
+    def bTs(self) -> FloatArray:
+        """The sonar mounting the front end assumed (the scans' points are in the body frame
+        through it)."""
+        ...
+
+    def calibration_keys(self) -> list[int]:
+        """The keys of the sonar's calibration variables (none when not estimated)."""
+        ...
+
     def node_now(self) -> tuple[int, FloatArray]:
         """A node now (or the newest) and the body pose now in its frame."""
         ...
@@ -177,6 +187,17 @@ class ScanConstraints:
         J = J2_a @ J1_z
         cov = J @ reg.cov @ J.T
         A = local_to_world(-float(z[2]))  # plain -> the measurement's local tangent
+        calibration = self.graph.calibration_keys() if self.config.scan_calibration else []
+        if calibration:
+            return FactorRecord.of(
+                FactorKind.SCAN_CALIBRATED,
+                [X(nj), X(nk), *calibration],
+                z,
+                A @ cov @ A.T,
+                bTs=np.asarray(self.graph.bTs, dtype=np.float64).copy(),
+                robust=self._robust(),
+                constraint=f"scan-{kind}",
+            )
         return FactorRecord.of(
             FactorKind.BETWEEN_POSE,
             [X(nj), X(nk)],
