@@ -11,7 +11,9 @@ A directory (searched to two levels deep) holds, by file-name suffix:
 ``*_SETUP.log``             ``range_m bin_size_m step_rad`` of the head (optional)
 ``sonarslam.toml``          sonar settings, sensor mountings, noise (optional, see
                             :mod:`sonarslam.datasets.config`; keys it leaves out take neutral
-                            defaults); without it, the marina's calibration
+                            defaults); without it, the marina's calibration for the marina's
+                            own logs (``_040825_1735_*``) and neutral settings for any other
+                            run, said by a warning and :attr:`Dataset.calibration`
 ``truth.json``              the simulator's ground truth (optional)
 ==========================  ===========================================================
 
@@ -40,9 +42,25 @@ from sonarslam.datasets.logfile import read_text
 from sonarslam.datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti, read_setup
 from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries, Record
 
-__all__ = ["Dataset", "open_dataset", "resolve_source", "data_root", "read_truth"]
+__all__ = [
+    "Dataset",
+    "open_dataset",
+    "resolve_source",
+    "data_root",
+    "read_truth",
+    "is_marina",
+    "NEUTRAL_CALIBRATION",
+]
 
 ENV_VAR = "SONARSLAM_DATA"
+#: The marina's logs are named ``_040825_1735_<sensor>.log`` (25 August 2004, 17:35): a
+#: directory holding them without a ``sonarslam.toml`` takes :data:`MARINA_CONFIG`.
+MARINA_LOG_PREFIX = "_040825_1735_"
+#: :attr:`Dataset.calibration` of a run that is not the marina and has no ``sonarslam.toml``.
+NEUTRAL_CALIBRATION = (
+    "neutral: no sonarslam.toml, so identity mountings, no clock offset and default noise"
+    " (write one: sonarslam calibrate SOURCE --write SOURCE/sonarslam.toml, docs/data.md)"
+)
 NAMED_SOURCES = ("marina",)
 #: Where the marina comes from and its layout, in one line (errors of a missing named source).
 MARINA_LAYOUT_HINT = (
@@ -66,6 +84,13 @@ class Dataset:
     gps: GpsSeries | None
     truth: dict[str, Any] | None = None
     report: SensorReport = field(default_factory=SensorReport)
+    #: Where :attr:`config` came from: the ``sonarslam.toml`` read, the marina's calibration,
+    #: or :data:`NEUTRAL_CALIBRATION` (``run`` prints it, ``metrics.json`` records it).
+    calibration: str = ""
+    #: The start position ``(x_m, y_m, yaw_rad)`` in the local East-North frame a user gave
+    #: (``--start``; yaw NaN: none given, else checked against the AHRS's); None: the first GPS
+    #: fix, or the origin without GPS (see :func:`sonarslam.slam.run.sources.start_pose`).
+    start_enu: tuple[float, float, float] | None = None
 
     @property
     def nav_span_s(self) -> tuple[float, float]:
@@ -168,7 +193,7 @@ def open_dataset(source: str | Path, config_override: str | Path | None = None) 
         pass the readers are gated with warnings (:mod:`sonarslam.datasets.gates`).
     """
     root = resolve_source(source)
-    config = _config(root, config_override)
+    config, calibration = _config(root, config_override)
     report = SensorReport()
     gates = config.gates
     dvl_path = _find_one(root, "*_DVL.log", required=True)
@@ -192,6 +217,7 @@ def open_dataset(source: str | Path, config_override: str | Path | None = None) 
         gps=gps,
         truth=read_truth(truth_path) if truth_path is not None else None,
         report=report,
+        calibration=calibration,
     )
 
 
@@ -231,13 +257,27 @@ def _check_overlap(root: Path, dvl: DvlSeries, attitude: AttitudeSeries) -> None
         )
 
 
-def _config(root: Path, config_override: str | Path | None) -> DatasetConfig:
-    """The dataset's configuration: its ``sonarslam.toml`` (else the marina's, with the head
-    of ``*_SETUP.log``), then the override's keys."""
+def is_marina(root: Path) -> bool:
+    """True for a directory holding the marina's own DVL log (:data:`MARINA_LOG_PREFIX`)."""
+    name = f"{MARINA_LOG_PREFIX}DVL.log"
+    return (root / name).is_file() or any(root.glob(f"*/{name}"))
+
+
+def _config(root: Path, config_override: str | Path | None) -> tuple[DatasetConfig, str]:
+    """The dataset's configuration and where it came from: its ``sonarslam.toml``; else the
+    marina's calibration for the marina's logs, neutral settings for any other (a
+    :class:`DataWarning` says so); with the head of ``*_SETUP.log``; then the override's keys."""
     toml = _find_one(root, "sonarslam.toml", required=False)
     # a sonarslam.toml starts from neutral defaults (no clock offset, identity mountings): a
-    # partial file must not inherit the marina's calibration silently
-    config = load_dataset_config(toml) if toml else MARINA_CONFIG
+    # partial file must not inherit the marina's calibration silently, nor may another run
+    if toml is not None:
+        config, calibration = load_dataset_config(toml), str(toml)
+    elif is_marina(root):
+        config, calibration = MARINA_CONFIG, "marina calibration (MARINA_CONFIG)"
+    else:
+        config, calibration = DatasetConfig(), NEUTRAL_CALIBRATION
+        if config_override is None:
+            warnings.warn(f"{root}: {NEUTRAL_CALIBRATION}", DataWarning, stacklevel=3)
     setup = _find_one(root, "*_SETUP.log", required=False)
     if setup is not None and toml is None:
         range_m, bin_m, step_rad = read_setup(setup)
@@ -247,7 +287,8 @@ def _config(root: Path, config_override: str | Path | None) -> DatasetConfig:
         config = replace(config, sonar=head)
     if config_override is not None:
         config = load_dataset_config(config_override, base=config)
-    return config
+        calibration = f"{calibration}; over it {config_override}"
+    return config, calibration
 
 
 def _beams(root: Path, config: DatasetConfig) -> tuple[BeamSeries, Path]:

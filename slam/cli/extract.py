@@ -3,9 +3,18 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
-from sonarslam.slam.cli.common import EPILOG, Subparsers, add_poses, add_quiet, add_source
+from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.slam.cli.common import (
+    EPILOG,
+    Subparsers,
+    add_poses,
+    add_quiet,
+    add_source,
+    add_start,
+)
 from sonarslam.slam.run.extraction import extract
 from sonarslam.slam.run.presets import EXTRACTOR_PRESETS
 
@@ -27,13 +36,17 @@ def add_parser(sub: Subparsers) -> None:
         help="extractor preset (slam/run/presets.py; default: marina for thresholded beams, "
         "default for raw ones, as the closed loops)",
     )
+    add_start(p)
     add_quiet(p)
     p.set_defaults(func=command)
 
 
 def command(args: argparse.Namespace) -> int:
+    source: str | Dataset = args.source
+    if args.start is not None:
+        source = replace(open_dataset(args.source), start_enu=args.start)
     result = extract(
-        args.source,
+        source,
         args.poses,
         args.out,
         config_path=args.config,

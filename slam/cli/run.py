@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from sonarslam.slam.cli.common import EPILOG, Subparsers, add_quiet, add_source
+from sonarslam.slam.cli.common import EPILOG, Subparsers, add_quiet, add_source, add_start
 from sonarslam.slam.run.presets import parse_settings
 from sonarslam.slam.run.run import backend_names, run, summary_line
 
@@ -25,6 +25,7 @@ def add_parser(sub: Subparsers) -> None:
         help="dr (dead reckoning), gps (GPS+AHRS), ekf, isam2 (default dr)",
     )
     p.add_argument("--out", required=True, help="output directory")
+    add_start(p)
     add_quiet(p)
     p.add_argument(
         "--batch",
@@ -64,8 +65,11 @@ def command(args: argparse.Namespace) -> int:
         batch=args.batch,
         config=args.config,
         settings=parse_settings(args.set),
+        start_enu=args.start,
     )
     m = result.metrics
+    print(f"calibration: {m['calibration']}")
+    print(f"start pose: {m['start_pose']}; evaluation: {m['evaluation']}")
     if "extractor_preset" in m:
         print(f"extractor preset: {m['extractor_preset']} (slam/run/presets.py)")
     print(summary_line(m))

@@ -71,7 +71,6 @@ def write_run(
 ) -> list[Path]:
     """Write a run's files into ``out`` (created); returns the files written, in order (what
     was in ``out`` before, another run's files, is not among them)."""
-    assert dataset.gps is not None, "a run has GPS (checked by run_backend)"
     make_output_dir(out)
     used = dump_dataset_config(dataset.config)
     if backend == "dr":
@@ -79,17 +78,19 @@ def write_run(
     files = [write_text(out / "config_used.toml", used)]
     t0, t1 = trajectory.span_s
     gps = dataset.gps
-    gps_tr = gps_ahrs_trajectory(dataset)
-    gps_in = (gps.t >= t0) & (gps.t <= t1)
-    # the raw fixes (the ATE reference), with the AHRS heading for a full pose
-    gps_pose = np.column_stack([gps.en_m[gps_in], gps_tr.poses(gps.t[gps_in])[:, 2]])
-    gps_in_tr = Trajectory(gps.t[gps_in], gps_pose)
-    files.append(write_atomic(out / GPS_FILE, lambda p: write_tum(p, gps_in_tr)))
-    reference_t = gps.t
+    reference_t = np.zeros(0)
+    if gps is not None:  # without GPS no gps.tum: the run has no ATE reference
+        gps_tr = gps_ahrs_trajectory(dataset)
+        gps_in = (gps.t >= t0) & (gps.t <= t1)
+        # the raw fixes (the ATE reference), with the AHRS heading for a full pose
+        gps_pose = np.column_stack([gps.en_m[gps_in], gps_tr.poses(gps.t[gps_in])[:, 2]])
+        gps_in_tr = Trajectory(gps.t[gps_in], gps_pose)
+        files.append(write_atomic(out / GPS_FILE, lambda p: write_tum(p, gps_in_tr)))
+        reference_t = gps.t
     if dataset.truth is not None:
         truth = truth_trajectory(dataset).clip(t0, t1)
         files.append(write_atomic(out / TRUTH_FILE, lambda p: write_tum(p, truth)))
-        reference_t = np.concatenate([gps.t, truth.t_s])
+        reference_t = np.concatenate([reference_t, truth.t_s])
     for name, tr in [(None, trajectory), *trajectories.items()]:
         stem = trajectory_stem(backend, name)
         dense = with_samples_at(tr, reference_t)
@@ -109,11 +110,13 @@ def write_run(
     return files
 
 
-def _reference(dataset: Dataset) -> tuple[str, Trajectory]:
-    """The reference of a run's pictures: the simulator's truth, else GPS + AHRS."""
+def _reference(dataset: Dataset) -> tuple[str, Trajectory] | None:
+    """The reference of a run's pictures: the simulator's truth, else GPS + AHRS, else none."""
     if dataset.truth is not None:
         return "truth", truth_trajectory(dataset)
-    return "gps", gps_ahrs_trajectory(dataset)
+    if dataset.gps is not None:
+        return "gps", gps_ahrs_trajectory(dataset)
+    return None
 
 
 def _walls(dataset: Dataset) -> np.ndarray | None:
@@ -124,14 +127,18 @@ def _report_figure(
     path: Path, dataset: Dataset, backend: str, trajectory: Trajectory, metrics: dict[str, Any]
 ) -> None:
     """report.png: the run beside dead reckoning against its reference, in the plane and in time."""
-    assert dataset.gps is not None
-    ref_name, ref = _reference(dataset)
+    found = _reference(dataset)
+    if found is None:
+        _report_figure_without_reference(path, dataset, backend, trajectory, metrics)
+        return
+    ref_name, ref = found
+    assert ref_name == "truth" or dataset.gps is not None
     t0, t1 = trajectory.span_s
     drawn = {ref_name: ref.clip(t0, t1), backend: trajectory}
     if backend != "dr":  # dead reckoning beside every other back end, as the baseline
         drawn["dr"] = dead_reckoning_trajectory(dataset)
     errors = {
-        name: truth_errors(tr, ref) if ref_name == "truth" else ate_errors(tr, dataset.gps)
+        name: truth_errors(tr, ref) if ref_name == "truth" else ate_errors(tr, dataset.gps)  # type: ignore[arg-type]
         for name, tr in drawn.items()
         if name != ref_name
     }
@@ -149,6 +156,27 @@ def _report_figure(
         errors,
         f"{dataset.name}: {backend} against {reference}: {spans}",
         reference,
+        dataset.sonar_span_s,
+        _walls(dataset),
+    )
+
+
+def _report_figure_without_reference(
+    path: Path, dataset: Dataset, backend: str, trajectory: Trajectory, metrics: dict[str, Any]
+) -> None:
+    """report.png of a run with neither GPS nor truth: the trajectories in the plane (the run
+    beside dead reckoning), no position error (there is nothing to measure it against)."""
+    drawn = {backend: trajectory}
+    if backend != "dr":
+        drawn["dr"] = dead_reckoning_trajectory(dataset)
+    entropy = metrics.get("map_entropy_nats")
+    sharp = f"map entropy {entropy:.3f} nats" if entropy is not None else "no map"
+    plot_trajectories(
+        path,
+        drawn,
+        {},
+        f"{dataset.name}: {backend}, no GPS (no position error): {sharp}",
+        "no reference",
         dataset.sonar_span_s,
         _walls(dataset),
     )
@@ -178,11 +206,14 @@ def _write_closed_loop(
         result.trajectory,
         map_min_intensity(beams),
     )
-    ref_name, ref = _reference(dataset)
+    reference = _reference(dataset)
+    drawn = {backend: result.trajectory}
+    if reference is not None:
+        drawn = {reference[0]: reference[1].clip(t0, t1), **drawn}
     segments, bands = landmark_layers(landmarks, points)
     layers = MapLayers(
         points,
-        {ref_name: ref.clip(t0, t1), backend: result.trajectory},
+        drawn,
         segments,
         bands,
         _walls(dataset),
