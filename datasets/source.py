@@ -201,7 +201,7 @@ def open_dataset(source: str | Path, config_override: str | Path | None = None) 
     assert dvl_path is not None and mti_path is not None
     dvl = gate_dvl(read_dvl(dvl_path), gates, report)
     attitude = gate_attitude(read_mti(mti_path), gates, report)
-    _check_overlap(root, dvl, attitude)
+    check_overlap(root, dvl, attitude)
     gps_path = _find_one(root, "*_DGPS.log", required=False)
     gps = gate_gps(read_dgps(gps_path), gates, report) if gps_path is not None else None
     beams, sonar_path = _beams(root, config)
@@ -227,7 +227,7 @@ MIN_OVERLAP_SHARE = 0.5
 MIN_OVERLAP_S = 60.0
 
 
-def _check_overlap(root: Path, dvl: DvlSeries, attitude: AttitudeSeries) -> None:
+def check_overlap(root: Path, dvl: DvlSeries, attitude: AttitudeSeries) -> None:
     """A log of one row (a span of 0 s), logs that do not overlap: :class:`DataError`; an
     overlap shorter than a minute or than half their span: a :class:`DataWarning`."""
     for series, name in ((dvl, "DVL"), (attitude, "AHRS")):

@@ -15,7 +15,9 @@ import numpy as np
 import pytest
 
 from sonarslam.datasets.config import MARINA_CONFIG, DatasetConfig, load_dataset_config
-from sonarslam.datasets.errors import DataWarning
+from sonarslam.datasets.arrays import dataset_from_arrays
+from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.geodesy import local_en_to_geodetic
 from sonarslam.datasets.source import NEUTRAL_CALIBRATION, Dataset, is_marina, open_dataset
 from sonarslam.slam.cli.main import main
 from sonarslam.slam.io.trajectory import read_tum
@@ -155,3 +157,82 @@ def test_start_pose_given_and_extract_and_calibrate_without_gps(
     with pytest.raises(SystemExit, match="2"):
         main(["run", str(src), "--out", str(tmp_path / "y"), "--start", "1,2,3,4"])
     assert "must be X,Y or X,Y,YAW" in capsys.readouterr().err
+
+
+def _arrays_of(d: Dataset) -> dict[str, object]:
+    """The keyword arguments of dataset_from_arrays that rebuild ``d`` (before its gates)."""
+    gps = d.gps
+    assert gps is not None
+    lat, lon = local_en_to_geodetic(gps.en_m[:, 0], gps.en_m[:, 1], *gps.origin_lat_lon_deg)
+    beams = d.beams.shifted(-d.config.sonar_time_offset_s)
+    return {
+        "beam_t_s": beams.t_s,
+        "beam_angle_rad": beams.transducer_angle_rad,
+        "beam_intensities": beams.intensities,
+        "dvl_t_s": d.dvl.t,
+        "dvl_v_mps": d.dvl.v_mps,
+        "dvl_valid": d.dvl.valid,
+        "ahrs_t_s": d.attitude.t,
+        "ahrs_yaw_rad": d.attitude.yaw_rad,
+        "ahrs_yaw_rate_radps": d.attitude.yaw_rate_radps,
+        "gps_t_s": gps.t,
+        "gps_lat_lon_deg": np.column_stack([lat, lon]),
+    }
+
+
+def test_a_dataset_from_arrays_is_the_directorys_and_is_gated(harbour: Path) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        d = open_dataset(harbour)
+        a = dataset_from_arrays(d.config, name="h", **_arrays_of(d))  # type: ignore[arg-type]
+    assert a.calibration.startswith("given with the arrays")
+    np.testing.assert_array_equal(a.beams.intensities, d.beams.intensities)
+    np.testing.assert_allclose(a.beams.t_s, d.beams.t_s, rtol=0, atol=1e-6)
+    assert a.gps is not None and d.gps is not None
+    np.testing.assert_allclose(a.gps.en_m, d.gps.en_m, rtol=0, atol=1e-6)
+    dr_a, dr_d = dead_reckoning_trajectory(a), dead_reckoning_trajectory(d)
+    np.testing.assert_allclose(dr_a.poses_wTb, dr_d.poses_wTb, rtol=0, atol=1e-6)
+    # the gates run: a stamp repeated, a DVL spike, a GPS outlier are counted as from a file
+    kw = _arrays_of(d)
+    t = np.array(kw["ahrs_t_s"])
+    t[10] = t[9]
+    v = np.array(kw["dvl_v_mps"])
+    v[20] = [9.0, 0.0]
+    ll = np.array(kw["gps_lat_lon_deg"])
+    ll[50, 0] += 0.01  # ~1.1 km north
+    kw.update(ahrs_t_s=t, dvl_v_mps=v, gps_lat_lon_deg=ll)
+    with pytest.warns(DataWarning, match="repeating a stamp"):
+        g = dataset_from_arrays(d.config, **kw)  # type: ignore[arg-type]
+    assert g.report.counts["ahrs_repeated_stamps"] == 1
+    assert g.report.counts["dvl_speed_spikes"] == 1
+    assert g.report.counts["gps_outliers"] == 1
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"dvl_t_s": "backwards"}, r"<arrays>: dvl_t_s: row 5 \(.*\) is earlier than row 4"),
+        ({"ahrs_yaw_rad": "nan"}, r"ahrs_yaw_rad: row 7 is not finite"),
+        ({"beam_intensities": "bins"}, r"beam_intensities must have shape \(\d+, 500\)"),
+        ({"gps_lat_lon_deg": None}, "gps_t_s and gps_lat_lon_deg go together"),
+    ],
+)
+def test_bad_arrays_are_named(harbour: Path, change: dict[str, object], message: str) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        d = open_dataset(harbour)
+    kw = _arrays_of(d)
+    key, how = next(iter(change.items()))
+    value = None if how is None else np.array(kw[key])
+    if how == "backwards":
+        assert value is not None
+        value[5] = value[4] - 1.0
+    elif how == "nan":
+        assert value is not None
+        value[7] = np.nan
+    elif how == "bins":
+        assert value is not None
+        value = value[:, :100]
+    kw[key] = value
+    with pytest.raises(DataError, match=message):
+        dataset_from_arrays(d.config, **kw)  # type: ignore[arg-type]
