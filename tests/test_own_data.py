@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sonarslam.datasets.config import MARINA_CONFIG, DatasetConfig, load_dataset_config
 from sonarslam.datasets.arrays import dataset_from_arrays
+from sonarslam.datasets.config import MARINA_CONFIG, DatasetConfig, load_dataset_config
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.geodesy import local_en_to_geodetic
 from sonarslam.datasets.source import NEUTRAL_CALIBRATION, Dataset, is_marina, open_dataset
