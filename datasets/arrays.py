@@ -24,11 +24,11 @@ import numpy as np
 import numpy.typing as npt
 
 from sonarslam.datasets.config import DatasetConfig
+from sonarslam.datasets.dataset import Dataset, check_overlap
 from sonarslam.datasets.errors import DataError
 from sonarslam.datasets.gates import SensorReport, gate_attitude, gate_beams, gate_dvl, gate_gps
 from sonarslam.datasets.geodesy import geodetic_to_local_en
 from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries
-from sonarslam.datasets.source import Dataset, check_overlap
 
 __all__ = ["dataset_from_arrays", "gated_dataset"]
 

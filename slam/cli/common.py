@@ -57,8 +57,8 @@ def number(
 
 
 EPILOG = (
-    "Data: a SOURCE is a directory in the marina layout (docs/data.md) or the named source 'marina', "
-    "found under $SONARSLAM_DATA/marina."
+    "Data: a SOURCE is a directory in the marina layout, a ROS 1 or ROS 2 bag (docs/data.md) or the"
+    " named source 'marina', found under $SONARSLAM_DATA/marina."
 )
 
 
@@ -70,7 +70,9 @@ class Subparsers(Protocol):
 
 def add_source(p: argparse.ArgumentParser) -> None:
     """The positional SOURCE of a command that reads a dataset."""
-    p.add_argument("source", help="dataset directory or 'marina'")
+    p.add_argument(
+        "source", help="dataset directory, ROS bag (.bag, .mcap, ROS 2 bag directory) or 'marina'"
+    )
 
 
 def add_poses(p: argparse.ArgumentParser, default: str, note: str = "") -> None:

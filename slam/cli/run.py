@@ -26,6 +26,12 @@ def add_parser(sub: Subparsers) -> None:
     )
     p.add_argument("--out", required=True, help="output directory")
     add_start(p)
+    p.add_argument(
+        "--topics",
+        metavar="TOML",
+        help="a bag's roles: [topics] sonar, dvl, imu, gps = topic names (default: by message"
+        " type, or [topics] of the bag's sonarslam.toml)",
+    )
     add_quiet(p)
     p.add_argument(
         "--batch",
@@ -66,6 +72,7 @@ def command(args: argparse.Namespace) -> int:
         config=args.config,
         settings=parse_settings(args.set),
         start_enu=args.start,
+        topics_file=args.topics,
     )
     m = result.metrics
     print(f"calibration: {m['calibration']}")

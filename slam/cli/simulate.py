@@ -3,8 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import shutil
+import tempfile
+import warnings
+from pathlib import Path
 
+from sonarslam.datasets.errors import DataWarning
+from sonarslam.datasets.rosbag import BAG_KINDS, write_bag
+from sonarslam.datasets.settings import SettingError
 from sonarslam.datasets.simulator import KINDS, simulate
+from sonarslam.datasets.source import open_dataset
 from sonarslam.slam.cli.common import EPILOG, Subparsers, number
 from sonarslam.slam.io.files import check_output_dir
 
@@ -27,11 +35,46 @@ def add_parser(sub: Subparsers) -> None:
         default=None,
         help="seconds of simulated time (default per world)",
     )
+    p.add_argument(
+        "--bag",
+        choices=BAG_KINDS,
+        default=None,
+        help="write a ROS bag instead of the marina layout: ros1 (OUT/<run>.bag), mcap or sqlite3"
+        " (OUT is the ROS 2 bag directory); sonarslam.toml and truth.json go with it",
+    )
     p.set_defaults(func=command)
 
 
 def command(args: argparse.Namespace) -> int:
     check_output_dir(args.out)
-    out = simulate(args.kind, seed=args.seed, out_dir=args.out, duration_s=args.duration)
-    print(f"simulated {args.kind} (seed {args.seed}) written to {out}")
+    if (
+        args.bag in ("mcap", "sqlite3")
+        and Path(args.out).exists()
+        and any(Path(args.out).iterdir())
+    ):
+        raise SettingError(
+            "--out", f"{args.out} is not empty: a ROS 2 bag is a directory of its own"
+        )
+    if args.bag is None:
+        out = simulate(args.kind, seed=args.seed, out_dir=args.out, duration_s=args.duration)
+        print(f"simulated {args.kind} (seed {args.seed}) written to {out}")
+        return 0
+    with tempfile.TemporaryDirectory() as tmp:
+        layout = simulate(
+            args.kind, seed=args.seed, out_dir=Path(tmp) / "run", duration_s=args.duration
+        )
+        with warnings.catch_warnings():  # the sensors' gaps are the simulator's own: said below
+            warnings.simplefilter("ignore", DataWarning)
+            dataset = open_dataset(layout)
+        out = Path(args.out)
+        if args.bag == "ros1":
+            out.mkdir(parents=True, exist_ok=True)
+            bag = write_bag(dataset, out / f"{Path(layout).name}.bag", "ros1")
+        else:
+            if out.exists():
+                out.rmdir()  # an empty directory (check_output_dir): rosbags creates its own
+            bag = write_bag(dataset, out, args.bag)
+        for name in ("sonarslam.toml", "truth.json"):
+            shutil.copy(Path(layout) / name, out / name)
+    print(f"simulated {args.kind} (seed {args.seed}) written as a {args.bag} bag: {bag}")
     return 0
