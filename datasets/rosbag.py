@@ -55,7 +55,7 @@ from sonarslam.datasets.arrays import gated_dataset
 from sonarslam.datasets.config import DatasetConfig, load_dataset_config
 from sonarslam.datasets.dataset import NEUTRAL_CALIBRATION, Dataset, read_truth
 from sonarslam.datasets.errors import DataError, DataWarning
-from sonarslam.datasets.geodesy import geodetic_to_local_en
+from sonarslam.datasets.geodesy import geodetic_to_local_en, local_en_to_geodetic
 from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries
 
 __all__ = [
@@ -564,8 +564,6 @@ def _messages(store: Any, d: Dataset) -> Iterator[tuple[float, str, Any]]:
     items.sort()
     lat_lon = None
     if d.gps is not None:
-        from sonarslam.datasets.geodesy import local_en_to_geodetic
-
         lat, lon = local_en_to_geodetic(
             d.gps.en_m[:, 0], d.gps.en_m[:, 1], *d.gps.origin_lat_lon_deg
         )
