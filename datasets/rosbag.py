@@ -119,7 +119,11 @@ def _beside(bag: Path, name: str) -> Path | None:
 
 def _typestore() -> Any:
     """ROS 2 Humble's types plus the Ping360 drivers' (:data:`CUSTOM_MSG_DEFINITIONS`)."""
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+    from rosbags.typesys import (  # lazy: only bags load rosbags
+        Stores,
+        get_types_from_msg,
+        get_typestore,
+    )
 
     store = get_typestore(Stores.ROS2_HUMBLE)
     types: dict[str, Any] = {}
@@ -144,7 +148,7 @@ class _Reader:
     """An open bag (``rosbags.highlevel.AnyReader``) whose errors are :class:`DataError`."""
 
     def __init__(self, bag: Path) -> None:
-        from rosbags.highlevel import AnyReader, AnyReaderError
+        from rosbags.highlevel import AnyReader, AnyReaderError  # lazy: only bags load rosbags
 
         self.bag = bag
         paths = [bag]
@@ -630,9 +634,9 @@ def write_bag(d: Dataset, path: str | Path, kind: str) -> Path:
     (``Imu``) and GPS (``NavSatFix``) as a bag: ``kind`` ``"ros1"`` (``path`` a ``.bag`` file),
     ``"mcap"`` or ``"sqlite3"`` (``path`` a ROS 2 bag directory). Each message's receive time
     is its stamp. Returns ``path``."""
-    from rosbags.rosbag1 import Writer as Writer1
-    from rosbags.rosbag2 import StoragePlugin
-    from rosbags.rosbag2 import Writer as Writer2
+    from rosbags.rosbag1 import Writer as Writer1  # lazy: only bags load rosbags
+    from rosbags.rosbag2 import StoragePlugin  # lazy: only bags load rosbags
+    from rosbags.rosbag2 import Writer as Writer2  # lazy: only bags load rosbags
 
     if kind not in BAG_KINDS:
         raise ValueError(f"bag kind must be one of {BAG_KINDS}, got {kind!r}")
