@@ -12,8 +12,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sonarslam.datasets.errors import DataWarning
-from sonarslam.datasets.rosbag import bag_topics, is_bag, write_bag
+from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.rosbag import (
+    CLOCK_JUMP_S,
+    _messages,
+    _stamp_of,
+    _typestore,
+    bag_topics,
+    is_bag,
+    open_bag,
+    write_bag,
+)
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.slam.cli.main import main
 from sonarslam.slam.run.sources import dead_reckoning_trajectory
@@ -107,3 +116,202 @@ def test_simulate_writes_a_bag(tmp_path: Path) -> None:
         warnings.simplefilter("ignore", DataWarning)
         d = open_dataset(out)
     assert len(d.beams) > 100 and d.truth is not None
+
+
+def _write_ros1(d: Dataset, path: Path, change: Callable[[str, int, float], float]) -> Path:
+    """``d`` as a ROS 1 bag whose header stamps are ``change(role, index, t)`` (the receive
+    times stay ``t``): out-of-order stamps and clock jumps."""
+    from rosbags.rosbag1 import Writer
+
+    store = _typestore()
+    types = {
+        "sonar": "sensor_msgs/msg/LaserScan",
+        "dvl": "geometry_msgs/msg/TwistWithCovarianceStamped",
+        "imu": "sensor_msgs/msg/Imu",
+        "gps": "sensor_msgs/msg/NavSatFix",
+    }
+    counts = dict.fromkeys(types, 0)
+    with Writer(path) as w:
+        conns = {r: w.add_connection(f"/{r}", ty, typestore=store) for r, ty in types.items()}
+        for t, role, msg in _messages(store, d):
+            msg.header.stamp = _stamp_of(store, change(role, counts[role], t))
+            counts[role] += 1
+            w.write(conns[role], int(round(t * 1e9)), store.serialize_ros1(msg, types[role]))
+    return path
+
+
+@pytest.fixture(scope="module")
+def short(layout: Dataset) -> Dataset:
+    """The harbour's first 60 s (bad bags are made of it)."""
+    t0 = layout.nav_span_s[0]
+    keep_a, keep_d = layout.attitude.t < t0 + 60, layout.dvl.t < t0 + 60
+    from dataclasses import replace
+
+    from sonarslam.datasets.records import AttitudeSeries, DvlSeries
+
+    a, v = layout.attitude, layout.dvl
+    return replace(
+        layout,
+        beams=layout.beams.between(0.0, t0 + 60),
+        attitude=AttitudeSeries(a.t[keep_a], a.yaw_rad[keep_a], a.yaw_rate_radps[keep_a]),
+        dvl=DvlSeries(v.t[keep_d], v.v_mps[keep_d], v.valid[keep_d], v.heading_rad[keep_d]),
+        gps=None,
+    )
+
+
+def test_out_of_order_stamps_are_counted_and_sorted(short: Dataset, tmp_path: Path) -> None:
+    def swap(role: str, i: int, t: float) -> float:
+        return t + 0.15 if role == "imu" and i == 20 else t  # later than the next (10 Hz)
+
+    bag = _write_ros1(short, tmp_path / "ooo.bag", swap)
+    with pytest.warns(DataWarning, match=r"topic /imu \(imu\): 1 message\(s\) stamped earlier"):
+        d = open_bag(bag)
+    assert d.report.counts["imu_out_of_order"] == 1
+    assert np.all(np.diff(d.attitude.t) >= 0)
+
+
+def test_a_clock_jump_is_an_error_naming_the_topic_and_message(
+    short: Dataset, tmp_path: Path
+) -> None:
+    def jump(role: str, i: int, t: float) -> float:
+        return t + 3600.0 if role == "dvl" and i >= 40 else t
+
+    bag = _write_ros1(short, tmp_path / "jump.bag", jump)
+    with pytest.raises(
+        DataError, match=r"jump.bag: topic /dvl \(dvl\) message 40: its stamp jumps \+3600"
+    ):
+        open_bag(bag)
+    assert CLOCK_JUMP_S == 1.0
+
+
+def test_missing_role_wrong_type_and_truncated_bags_are_one_line(
+    short: Dataset, bags: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from dataclasses import replace
+
+    # no sonar topic: the bag's topics are listed with the types that would do
+    no_sonar = replace(short, beams=short.beams[:0])
+    bag = tmp_path / "nosonar.bag"
+    from rosbags.rosbag1 import Writer
+
+    store = _typestore()
+    with Writer(bag) as w:
+        c = w.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=store)
+        c2 = w.add_connection(
+            "/dvl", "geometry_msgs/msg/TwistWithCovarianceStamped", typestore=store
+        )
+        for t, role, msg in _messages(store, no_sonar):
+            if role == "imu":
+                w.write(c, int(t * 1e9), store.serialize_ros1(msg, "sensor_msgs/msg/Imu"))
+            elif role == "dvl":
+                w.write(
+                    c2,
+                    int(t * 1e9),
+                    store.serialize_ros1(msg, "geometry_msgs/msg/TwistWithCovarianceStamped"),
+                )
+    with pytest.raises(
+        DataError,
+        match=r"nosonar.bag: no topic for the sonar \(types: sonar: sensor_msgs/msg/LaserScan",
+    ):
+        open_bag(bag)
+    # a topic named for a role it cannot play
+    topics = tmp_path / "topics.toml"
+    topics.write_text('[topics]\nsonar = "/imu/data"\n')
+    with pytest.raises(
+        DataError, match=r"topic /imu/data is sensor_msgs/msg/Imu, which cannot be the sonar"
+    ):
+        open_bag(bags["ros1"], topics_file=topics)
+    topics.write_text('[topics]\ndvl = "/nowhere"\n')
+    with pytest.raises(DataError, match=r"\[topics\] dvl = '/nowhere': no such topic"):
+        open_bag(bags["ros1"], topics_file=topics)
+    # a bag cut short: one line on the command line, no traceback
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    data = bags["ros1"].read_bytes()
+    (cut / "run.bag").write_bytes(data[: len(data) // 2])
+    assert main(["info", str(cut / "run.bag")]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cut/run.bag" in err and "Traceback" not in err
+    mcap = next(bags["mcap"].glob("*.mcap"))
+    (cut / "half.mcap").write_bytes(mcap.read_bytes()[: mcap.stat().st_size // 2])
+    assert main(["run", str(cut / "half.mcap"), "--out", str(tmp_path / "o"), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "half.mcap" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("kind", ["ros1", "sqlite3"])
+def test_ping360_messages_give_beams_in_radians_and_metres(
+    kind: str, short: Dataset, tmp_path: Path
+) -> None:
+    """SonarPing360 (gradians, profile_data, range) in a ROS 2 sqlite3 bag, whose types come
+    from CUSTOM_MSG_DEFINITIONS; SonarEcho (radians) in a ROS 1 bag, which carries its own."""
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import StoragePlugin
+    from rosbags.rosbag2 import Writer as Writer2
+
+    store = _typestore()
+    T = store.types
+    ping = (
+        "bluerobotics_sonar_msgs/msg/SonarPing360"
+        if kind == "sqlite3"
+        else "ping360_sonar/msg/SonarEcho"
+    )
+    types = {
+        "sonar": ping,
+        "dvl": "geometry_msgs/msg/TwistWithCovarianceStamped",
+        "imu": "sensor_msgs/msg/Imu",
+    }
+    n, range_m = short.config.sonar.n_bins, 50
+    grads: list[int] = []
+
+    def sonar(msg: object) -> object:
+        grad = int(round(float(msg.angle_min) / (np.pi / 200.0))) % 400  # type: ignore[attr-defined]
+        grads.append(grad)
+        bins = np.asarray(msg.intensities, dtype=np.uint8)  # type: ignore[attr-defined]
+        h = msg.header  # type: ignore[attr-defined]
+        if kind == "sqlite3":
+            return T[ping](
+                header=h,
+                distance=0.0,
+                mode=1,
+                gain_setting=1,
+                angle=grad,
+                transmit_duration=10,
+                sample_period=80,
+                transmit_frequency=750,
+                range=float(range_m),
+                profile_data=bins,
+            )
+        return T[ping](
+            header=h,
+            angle=grad * np.pi / 200.0,
+            gain=1,
+            number_of_samples=n,
+            transmit_frequency=750,
+            speed_of_sound=1500,
+            range=range_m,
+            intensities=bins,
+        )
+
+    def serialize(msg: object, ty: str) -> bytes:
+        return store.serialize_ros1(msg, ty) if kind == "ros1" else store.serialize_cdr(msg, ty)
+
+    path = tmp_path / ("p.bag" if kind == "ros1" else "p")
+    w = (
+        Writer1(path)
+        if kind == "ros1"
+        else Writer2(path, version=9, storage_plugin=StoragePlugin.SQLITE3)
+    )
+    with w:
+        conns = {r: w.add_connection(f"/{r}", ty, typestore=store) for r, ty in types.items()}
+        for t, role, msg in _messages(store, short):
+            if role in conns:
+                out = sonar(msg) if role == "sonar" else msg
+                w.write(conns[role], int(round(t * 1e9)), serialize(out, types[role]))
+    with pytest.warns(DataWarning, match="neutral"):
+        d = open_bag(path)
+    np.testing.assert_allclose(
+        d.beams.transducer_angle_rad, np.array(grads) * np.pi / 200.0, atol=1e-6
+    )
+    np.testing.assert_array_equal(d.beams.intensities, short.beams.intensities)
+    assert d.config.sonar.n_bins == n and d.config.sonar.bin_size_m == pytest.approx(range_m / n)
