@@ -50,7 +50,8 @@ __all__ = [
 
 ENV_VAR = "SONARSLAM_DATA"
 #: The marina's logs are named ``_040825_1735_<sensor>.log`` (25 August 2004, 17:35): a
-#: directory holding them without a ``sonarslam.toml`` takes :data:`MARINA_CONFIG`.
+#: directory holding them (or the marina's keyframes) without a ``sonarslam.toml`` takes
+#: :data:`MARINA_CONFIG`.
 MARINA_LOG_PREFIX = "_040825_1735_"
 NAMED_SOURCES = ("marina",)
 #: Where the marina comes from and its layout, in one line (errors of a missing named source).
@@ -163,9 +164,11 @@ def open_dataset(
 
 
 def is_marina(root: Path) -> bool:
-    """True for a directory holding the marina's own DVL log (:data:`MARINA_LOG_PREFIX`)."""
-    name = f"{MARINA_LOG_PREFIX}DVL.log"
-    return (root / name).is_file() or any(root.glob(f"*/{name}"))
+    """True for a directory of the marina: its own DVL log (:data:`MARINA_LOG_PREFIX`), or its
+    thresholded keyframes (``keyFrameTimeStamps.csv``, a format only the marina has; the test
+    suite's windows of the marina rename the logs and keep them)."""
+    names = (f"{MARINA_LOG_PREFIX}DVL.log", "keyFrameTimeStamps.csv")
+    return any((root / n).is_file() or any(root.glob(f"*/{n}")) for n in names)
 
 
 def _config(root: Path, config_override: str | Path | None) -> tuple[DatasetConfig, str]:

@@ -58,6 +58,10 @@ def test_marina_logs_are_recognised_by_their_name(tmp_path: Path) -> None:
     assert not is_marina(tmp_path)
     (tmp_path / "logs" / "_040825_1735_DVL.log").write_text("")
     assert is_marina(tmp_path)
+    other = tmp_path / "other"
+    (other / "keyframes").mkdir(parents=True)
+    (other / "keyframes" / "keyFrameTimeStamps.csv").write_text("")
+    assert is_marina(other)
 
 
 def test_the_marina_keeps_its_calibration(marina: Dataset) -> None:

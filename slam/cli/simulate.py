@@ -69,7 +69,8 @@ def command(args: argparse.Namespace) -> int:
         out = Path(args.out)
         if args.bag == "ros1":
             out.mkdir(parents=True, exist_ok=True)
-            bag = write_bag(dataset, out / f"{Path(layout).name}.bag", "ros1")
+            prefix = next(Path(layout).glob("*_DVL.log")).name.removesuffix("_DVL.log")
+            bag = write_bag(dataset, out / f"{prefix}.bag", "ros1")
         else:
             if out.exists():
                 out.rmdir()  # an empty directory (check_output_dir): rosbags creates its own
