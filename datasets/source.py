@@ -11,7 +11,9 @@ A directory (searched to two levels deep) holds, by file-name suffix:
 ``*_SETUP.log``             ``range_m bin_size_m step_rad`` of the head (optional)
 ``sonarslam.toml``          sonar settings, sensor mountings, noise (optional, see
                             :mod:`sonarslam.datasets.config`; keys it leaves out take neutral
-                            defaults); without it, the marina's calibration
+                            defaults); without it, the marina's calibration for the marina's
+                            own logs (``_040825_1735_*``) and neutral settings for any other
+                            run, said by a warning and :attr:`Dataset.calibration`
 ``truth.json``              the simulator's ground truth (optional)
 ==========================  ===========================================================
 
@@ -20,29 +22,37 @@ A directory (searched to two levels deep) holds, by file-name suffix:
 
 from __future__ import annotations
 
-import heapq
-import json
 import os
 import warnings
-from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
-from typing import Any
-
-import numpy as np
 
 from sonarslam.datasets.config import MARINA_CONFIG, DatasetConfig, load_dataset_config
+from sonarslam.datasets.dataset import NEUTRAL_CALIBRATION, Dataset, check_overlap, read_truth
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.gates import SensorReport, gate_attitude, gate_beams, gate_dvl, gate_gps
 from sonarslam.datasets.islog import read_is_log
 from sonarslam.datasets.keyframes import read_keyframes
-from sonarslam.datasets.logfile import read_text
 from sonarslam.datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti, read_setup
-from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries, Record
+from sonarslam.datasets.records import BeamSeries
+from sonarslam.datasets.rosbag import is_bag, open_bag
 
-__all__ = ["Dataset", "open_dataset", "resolve_source", "data_root", "read_truth"]
+__all__ = [
+    "Dataset",
+    "open_dataset",
+    "resolve_source",
+    "data_root",
+    "read_truth",
+    "is_marina",
+    "NEUTRAL_CALIBRATION",
+    "check_overlap",
+]
 
 ENV_VAR = "SONARSLAM_DATA"
+#: The marina's logs are named ``_040825_1735_<sensor>.log`` (25 August 2004, 17:35): a
+#: directory holding them (or the marina's keyframes) without a ``sonarslam.toml`` takes
+#: :data:`MARINA_CONFIG`.
+MARINA_LOG_PREFIX = "_040825_1735_"
 NAMED_SOURCES = ("marina",)
 #: Where the marina comes from and its layout, in one line (errors of a missing named source).
 MARINA_LAYOUT_HINT = (
@@ -52,84 +62,6 @@ MARINA_LAYOUT_HINT = (
 )
 
 
-@dataclass(frozen=True, eq=False)
-class Dataset:
-    """All the logs of one run, read and checked (:func:`open_dataset`).
-
-    Attributes
-    ----------
-    name : str
-        The run's name (its files' prefix).
-    root : Path
-        Its folder.
-    config : DatasetConfig
-        Its ``sonarslam.toml``: the sonar head (``config.sonar``), the mountings ``bTs`` of
-        the sonar, DVL and AHRS, the sensors' noise.
-    beams : BeamSeries
-        Sonar beams in time order.
-    dvl : DvlSeries
-        DVL velocities in the DVL frame (m/s).
-    attitude : AttitudeSeries
-        AHRS headings (rad, CCW from East) and yaw rates.
-    gps : GpsSeries or None
-        GPS fixes in the readers' local East-North frame (m; origin at the first fix).
-    truth : dict or None
-        A simulated run's ``truth.json`` (:func:`read_truth`).
-    report : SensorReport
-        What the gates dropped and the sensors' gaps (:mod:`sonarslam.datasets.gates`).
-    """
-
-    name: str
-    root: Path
-    config: DatasetConfig
-    beams: BeamSeries
-    dvl: DvlSeries
-    attitude: AttitudeSeries
-    gps: GpsSeries | None
-    truth: dict[str, Any] | None = None
-    report: SensorReport = field(default_factory=SensorReport)
-
-    @property
-    def nav_span_s(self) -> tuple[float, float]:
-        """Time span covered by both DVL and AHRS (Unix s): where the vehicle can be navigated."""
-        return (
-            max(float(self.dvl.t[0]), float(self.attitude.t[0])),
-            min(float(self.dvl.t[-1]), float(self.attitude.t[-1])),
-        )
-
-    @property
-    def sonar_span_s(self) -> tuple[float, float] | None:
-        """First and last sonar beam inside :attr:`nav_span_s` (Unix s), None without beams
-        there: where line features can correct the navigation."""
-        beams = self.nav_beams()
-        return (float(beams[0].t), float(beams[-1].t)) if beams else None
-
-    def nav_beams(self) -> BeamSeries:
-        """The beams inside :attr:`nav_span_s` (the marina sonar starts ~183 s earlier)."""
-        return self.beams.between(*self.nav_span_s)
-
-    def stream(
-        self, t_start_s: float | None = None, t_end_s: float | None = None
-    ) -> Iterator[Record]:
-        """All records merged in time order (ties: AHRS, DVL, GPS, then sonar)."""
-        lo = -float("inf") if t_start_s is None else t_start_s
-        hi = float("inf") if t_end_s is None else t_end_s
-
-        def keyed(records: Sequence[Any], rank: int) -> Iterator[tuple[float, int, int, Any]]:
-            for i, r in enumerate(records):
-                if lo <= r.t <= hi:
-                    yield (r.t, rank, i, r)
-
-        streams = [
-            keyed(self.attitude.records(), 0),
-            keyed(self.dvl.records(), 1),
-            keyed(self.gps.records() if self.gps is not None else [], 2),
-            keyed(self.beams.between(lo, hi), 3),
-        ]
-        for item in heapq.merge(*streams):
-            yield item[3]
-
-
 def data_root() -> Path | None:
     """``$SONARSLAM_DATA`` as a path, or None when unset."""
     value = os.environ.get(ENV_VAR)
@@ -137,9 +69,9 @@ def data_root() -> Path | None:
 
 
 def resolve_source(source: str | Path) -> Path:
-    """A named source (``marina``) under ``$SONARSLAM_DATA``, or a directory path."""
+    """A named source (``marina``) under ``$SONARSLAM_DATA``, a directory or a ROS bag."""
     path = Path(source)
-    if path.is_dir():
+    if path.is_dir() or is_bag(path):
         return path
     if str(source) in NAMED_SOURCES:
         root = data_root()
@@ -170,17 +102,24 @@ def _find_one(root: Path, pattern: str, required: bool) -> Path | None:
     return found[0] if found else None
 
 
-def open_dataset(source: str | Path, config_override: str | Path | None = None) -> Dataset:
-    """Read a dataset directory (or a named source) into a :class:`Dataset`.
+def open_dataset(
+    source: str | Path,
+    config_override: str | Path | None = None,
+    topics_file: str | Path | None = None,
+) -> Dataset:
+    """Read a dataset directory, a ROS bag or a named source into a :class:`Dataset`.
 
     Parameters
     ----------
     source : str or Path
-        A directory in the marina layout, or a named source (``"marina"``).
+        A directory in the marina layout, a ROS 1 ``.bag``, a ROS 2 bag (directory or ``.mcap``;
+        :func:`sonarslam.datasets.rosbag.open_bag`), or a named source (``"marina"``).
     config_override : str or Path, optional
         A ``sonarslam.toml``-format file whose keys replace those of the dataset's own
         configuration (its ``sonarslam.toml``, else the marina calibration); keys it leaves out
         keep the dataset's values. For trying another calibration without editing the data.
+    topics_file : str or Path, optional
+        A bag's roles (``[topics]``: ``sonar``, ``dvl``, ``imu``, ``gps``), for a bag only.
 
     Raises
     ------
@@ -190,7 +129,13 @@ def open_dataset(source: str | Path, config_override: str | Path | None = None) 
         pass the readers are gated with warnings (:mod:`sonarslam.datasets.gates`).
     """
     root = resolve_source(source)
-    config = _config(root, config_override)
+    if is_bag(root):
+        return open_bag(root, config_override, topics_file)
+    if topics_file is not None:
+        raise DataError(
+            Path(topics_file), None, "--topics is for ROS bags; the source is a directory"
+        )
+    config, calibration = _config(root, config_override)
     report = SensorReport()
     gates = config.gates
     dvl_path = _find_one(root, "*_DVL.log", required=True)
@@ -198,7 +143,7 @@ def open_dataset(source: str | Path, config_override: str | Path | None = None) 
     assert dvl_path is not None and mti_path is not None
     dvl = gate_dvl(read_dvl(dvl_path), gates, report)
     attitude = gate_attitude(read_mti(mti_path), gates, report)
-    _check_overlap(root, dvl, attitude)
+    check_overlap(root, dvl, attitude)
     gps_path = _find_one(root, "*_DGPS.log", required=False)
     gps = gate_gps(read_dgps(gps_path), gates, report) if gps_path is not None else None
     beams, sonar_path = _beams(root, config)
@@ -214,52 +159,33 @@ def open_dataset(source: str | Path, config_override: str | Path | None = None) 
         gps=gps,
         truth=read_truth(truth_path) if truth_path is not None else None,
         report=report,
+        calibration=calibration,
     )
 
 
-#: DVL and AHRS that overlap for less than this share of their logs' span, or for less than
-#: :data:`MIN_OVERLAP_S`, give a run of that overlap only: a warning says so.
-MIN_OVERLAP_SHARE = 0.5
-MIN_OVERLAP_S = 60.0
+def is_marina(root: Path) -> bool:
+    """True for a directory of the marina: its own DVL log (:data:`MARINA_LOG_PREFIX`), or its
+    thresholded keyframes (``keyFrameTimeStamps.csv``, a format only the marina has; the test
+    suite's windows of the marina rename the logs and keep them)."""
+    names = (f"{MARINA_LOG_PREFIX}DVL.log", "keyFrameTimeStamps.csv")
+    return any((root / n).is_file() or any(root.glob(f"*/{n}")) for n in names)
 
 
-def _check_overlap(root: Path, dvl: DvlSeries, attitude: AttitudeSeries) -> None:
-    """A log of one row (a span of 0 s), logs that do not overlap: :class:`DataError`; an
-    overlap shorter than a minute or than half their span: a :class:`DataWarning`."""
-    for series, name in ((dvl, "DVL"), (attitude, "AHRS")):
-        if series.t.size < 2 or series.t[-1] <= series.t[0]:
-            raise DataError(
-                series.path or root,
-                None,
-                f"the {name} log has {series.t.size} row(s) spanning"
-                f" {series.t[-1] - series.t[0]:.3f} s: a run needs a time span to navigate",
-            )
-    t0, t1 = max(dvl.t[0], attitude.t[0]), min(dvl.t[-1], attitude.t[-1])
-    if t1 <= t0:
-        raise DataError(
-            root,
-            None,
-            f"the DVL ({dvl.t[0]:.3f}-{dvl.t[-1]:.3f} s) and AHRS ({attitude.t[0]:.3f}-"
-            f"{attitude.t[-1]:.3f} s) logs do not overlap in time",
-        )
-    whole = max(dvl.t[-1], attitude.t[-1]) - min(dvl.t[0], attitude.t[0])
-    if t1 - t0 < MIN_OVERLAP_S or t1 - t0 < MIN_OVERLAP_SHARE * whole:
-        warnings.warn(
-            f"{root}: the DVL and AHRS overlap for {t1 - t0:.1f} s ({t0:.3f}-{t1:.3f} s) of"
-            f" their {whole:.1f} s (less than {MIN_OVERLAP_S:.0f} s or"
-            f" {MIN_OVERLAP_SHARE:.0%}): the run covers that overlap only",
-            DataWarning,
-            stacklevel=3,
-        )
-
-
-def _config(root: Path, config_override: str | Path | None) -> DatasetConfig:
-    """The dataset's configuration: its ``sonarslam.toml`` (else the marina's, with the head
-    of ``*_SETUP.log``), then the override's keys."""
+def _config(root: Path, config_override: str | Path | None) -> tuple[DatasetConfig, str]:
+    """The dataset's configuration and where it came from: its ``sonarslam.toml``; else the
+    marina's calibration for the marina's logs, neutral settings for any other (a
+    :class:`DataWarning` says so); with the head of ``*_SETUP.log``; then the override's keys."""
     toml = _find_one(root, "sonarslam.toml", required=False)
     # a sonarslam.toml starts from neutral defaults (no clock offset, identity mountings): a
-    # partial file must not inherit the marina's calibration silently
-    config = load_dataset_config(toml) if toml else MARINA_CONFIG
+    # partial file must not inherit the marina's calibration silently, nor may another run
+    if toml is not None:
+        config, calibration = load_dataset_config(toml), str(toml)
+    elif is_marina(root):
+        config, calibration = MARINA_CONFIG, "marina calibration (MARINA_CONFIG)"
+    else:
+        config, calibration = DatasetConfig(), NEUTRAL_CALIBRATION
+        if config_override is None:
+            warnings.warn(f"{root}: {NEUTRAL_CALIBRATION}", DataWarning, stacklevel=3)
     setup = _find_one(root, "*_SETUP.log", required=False)
     if setup is not None and toml is None:
         range_m, bin_m, step_rad = read_setup(setup)
@@ -269,7 +195,8 @@ def _config(root: Path, config_override: str | Path | None) -> DatasetConfig:
         config = replace(config, sonar=head)
     if config_override is not None:
         config = load_dataset_config(config_override, base=config)
-    return config
+        calibration = f"{calibration}; over it {config_override}"
+    return config, calibration
 
 
 def _beams(root: Path, config: DatasetConfig) -> tuple[BeamSeries, Path]:
@@ -299,49 +226,3 @@ def _beams(root: Path, config: DatasetConfig) -> tuple[BeamSeries, Path]:
     if config.sonar_time_offset_s:
         beams = beams.shifted(config.sonar_time_offset_s)
     return beams, source
-
-
-def _reject_constant(name: str) -> Any:
-    raise ValueError(f"{name} is not a number in strict JSON")
-
-
-def _finite_array(path: Path, data: Any, key: str, shape: tuple[int | None, ...]) -> None:
-    """DataError unless ``data`` is an array of finite numbers of ``shape`` (None: any)."""
-    try:
-        a = np.asarray(data, dtype=np.float64)
-    except (ValueError, TypeError, OverflowError):
-        raise DataError(path, None, f"{key} is not an array of numbers") from None
-    if a.ndim != len(shape) or any(
-        n is not None and n != m for n, m in zip(shape, a.shape, strict=True)
-    ):
-        raise DataError(path, None, f"{key} must have shape {shape}, got {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise DataError(path, None, f"{key} holds a value that is not a finite number")
-
-
-def read_truth(path: str | Path) -> dict[str, Any]:
-    """``truth.json`` of a simulated run (UTF-8, strict JSON: no NaN or Infinity), with the
-    parts the evaluation uses checked: ``body_poses.rows`` (N, 4) finite with non-decreasing
-    times, ``first_fix_enu_m`` (2,) and ``walls_m`` (W, 2, 2) when present."""
-    p = Path(path)
-    text = read_text(p, "utf-8")
-    try:
-        data = json.loads(text, parse_constant=_reject_constant)
-    except json.JSONDecodeError as exc:
-        raise DataError(p, exc.lineno, f"not JSON: {exc.msg}") from None
-    except (ValueError, RecursionError) as exc:
-        raise DataError(p, None, f"not JSON: {exc}") from None
-    if not isinstance(data, dict):
-        raise DataError(p, None, "must be a JSON object")
-    poses = data.get("body_poses")
-    if not isinstance(poses, dict) or "rows" not in poses:
-        raise DataError(p, None, "body_poses.rows missing")
-    _finite_array(p, poses["rows"], "body_poses.rows", (None, 4))
-    t = np.asarray(poses["rows"], dtype=np.float64)[:, 0]
-    if t.size == 0 or np.any(np.diff(t) < 0):
-        raise DataError(p, None, "body_poses.rows: no rows, or times going backwards")
-    if "first_fix_enu_m" in data:
-        _finite_array(p, data["first_fix_enu_m"], "first_fix_enu_m", (2,))
-    if "walls_m" in data:
-        _finite_array(p, data["walls_m"], "walls_m", (None, 2, 2))
-    return data

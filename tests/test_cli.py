@@ -13,6 +13,7 @@ import pytest
 from evo.core.geometry import umeyama_alignment
 
 from sonarslam.datasets.errors import DataWarning
+from sonarslam.datasets.rosbag import BAG_KINDS
 from sonarslam.datasets.simulator import KINDS, simulate
 from sonarslam.datasets.source import open_dataset
 from sonarslam.slam.cli.common import POSES
@@ -24,6 +25,7 @@ from sonarslam.slam.cli.parsers import (
     SIM_DURATION_S,
     WORLDS,
 )
+from sonarslam.slam.cli.parsers import BAG_KINDS as PARSER_BAG_KINDS
 from sonarslam.slam.eval.ate import ate_against_gps
 from sonarslam.slam.eval.truth import truth_trajectory
 from sonarslam.slam.io.trajectory import Trajectory, read_tum
@@ -100,6 +102,7 @@ def test_the_parsers_offer_the_registries_choices():
     assert BACKENDS == tuple(backend_names())
     assert EXTRACTOR_PRESETS == tuple(sorted(PRESETS))
     assert WORLDS == KINDS
+    assert PARSER_BAG_KINDS == BAG_KINDS
     assert SIM_DURATION_S == DEMO_SIM_DURATION_S
     # and every command module runs: its command(args) is there
     for name, _, module in COMMANDS:

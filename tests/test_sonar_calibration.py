@@ -101,7 +101,8 @@ def test_the_command_measures_the_lines_with_the_offset_it_just_found(
     drift: Dataset, capsys: pytest.CaptureFixture[str]
 ) -> None:
     assert main(["calibrate", str(drift.root), "--range-offset", "--line-noise", "--quiet"]) == 0
-    offset_line, noise_line = capsys.readouterr().out.strip().splitlines()
+    calibration_line, offset_line, noise_line = capsys.readouterr().out.strip().splitlines()
+    assert calibration_line.startswith(f"calibration of {drift.name}: ")
     offset = float(offset_line.split("peak - half-rise): ")[1].split(" m")[0])
     assert 0.05 < offset < 0.25
     assert f"with range offset {offset:.3f} m" in noise_line

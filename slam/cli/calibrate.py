@@ -6,7 +6,9 @@ from __future__ import annotations
 import argparse
 import math
 from dataclasses import replace
+from pathlib import Path
 
+from sonarslam.datasets.config import DatasetConfig, dump_dataset_config
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.settings import SettingError
 from sonarslam.slam.run.calibration import (
@@ -20,8 +22,24 @@ from sonarslam.slam.run.sonar_calibration import calibrate_line_noise, calibrate
 from sonarslam.slam.run.sources import pose_source_by_name
 
 
-def _ahrs_deviation(args: argparse.Namespace) -> int:
+def _open(args: argparse.Namespace) -> Dataset:
     dataset = open_dataset(args.source, config_override=args.config)
+    if args.start is not None:
+        dataset = replace(dataset, start_enu=args.start)
+    print(f"calibration of {dataset.name}: {dataset.calibration}")
+    return dataset
+
+
+def _write(args: argparse.Namespace, config: DatasetConfig) -> None:
+    """--write: the whole calibration, with what was found, to a sonarslam.toml."""
+    if args.write:
+        path = Path(args.write)
+        path.write_text(dump_dataset_config(config), encoding="utf-8")
+        print(f"written: {path}")
+
+
+def _ahrs_deviation(args: argparse.Namespace) -> int:
+    dataset = _open(args)
     b0, c0 = (math.degrees(v) for v in dataset.config.ahrs_deviation_rad)
     print(
         f"AHRS deviation from the EKF's line re-observations (GPS-free), from [{b0:.2f}, {c0:.2f}] deg:"
@@ -44,12 +62,14 @@ def _ahrs_deviation(args: argparse.Namespace) -> int:
         )
     b, c = (math.degrees(v) for v in steps[-1][0])
     print(f"put it under [motion] as ahrs_deviation_deg = [{b:.2f}, {c:.2f}]")
+    b_rad, c_rad = (float(v) for v in steps[-1][0])
+    _write(args, replace(dataset.config, ahrs_deviation_rad=(b_rad, c_rad)))
     return 0
 
 
 def _sonar(args: argparse.Namespace) -> int:
     """--range-offset and/or --line-noise; with both, the lines see the offset just found."""
-    dataset = open_dataset(args.source, config_override=args.config)
+    dataset = _open(args)
     if args.range_offset:
         fit = calibrate_range_offset(dataset)
         print(
@@ -60,11 +80,12 @@ def _sonar(args: argparse.Namespace) -> int:
         sonar = replace(dataset.config.sonar, range_offset_m=fit.offset_m)
         dataset = replace(dataset, config=replace(dataset.config, sonar=sonar))
     if args.line_noise:
-        _line_noise(dataset)
+        dataset = replace(dataset, config=_line_noise(dataset))
+    _write(args, dataset.config)
     return 0
 
 
-def _line_noise(dataset: Dataset) -> None:
+def _line_noise(dataset: Dataset) -> DatasetConfig:
     fit = calibrate_line_noise(dataset)
     n = dataset.config.noise
     print(
@@ -76,6 +97,12 @@ def _line_noise(dataset: Dataset) -> None:
         f"1.39), {100 * fit.outside_99_after:.1f} % outside the 99 % gate; put them under "
         f"[noise] as line_sigma_rho_m and line_sigma_theta_deg"
     )
+    noise = replace(
+        n,
+        line_sigma_rho_m=float(fit.sigma_rho_m),
+        line_sigma_theta_deg=float(math.degrees(fit.sigma_theta_rad)),
+    )
+    return replace(dataset.config, noise=noise)
 
 
 def command(args: argparse.Namespace) -> int:
@@ -97,7 +124,7 @@ def command(args: argparse.Namespace) -> int:
         return _ahrs_deviation(args)
     if args.range_offset or args.line_noise:
         return _sonar(args)
-    dataset = open_dataset(args.source, config_override=args.config)
+    dataset = _open(args)
     if args.ahrs:
         fit = calibrate_ahrs_yaw(dataset)
         amp = math.degrees(math.hypot(*fit.harmonics_rad[:2]))
@@ -116,6 +143,12 @@ def command(args: argparse.Namespace) -> int:
             f"  the residual's RMS change over a lag (deg): {change} (a walking bias grows as"
             " sqrt(lag): [noise] ahrs_bias_walk_deg_per_sqrt_s)"
         )
+        mount = replace(
+            dataset.config.ahrs_mounting,
+            yaw_rad=float(fit.ahrs_yaw_rad),
+            source="sonarslam calibrate --ahrs (GPS-free)",
+        )
+        _write(args, replace(dataset.config, ahrs_mounting=mount))
         return 0
     poses = pose_source_by_name(dataset, args.poses)
     result = calibrate_sonar_yaw(dataset, poses, window_s=args.window)
@@ -124,4 +157,10 @@ def command(args: argparse.Namespace) -> int:
         f"sonar mounting yaw with {args.poses} poses: {math.degrees(result.best_yaw_rad):.2f} deg "
         f"(configured: {current:.2f} deg); put it under [mounting.sonar] yaw_deg in sonarslam.toml"
     )
+    mount = replace(
+        dataset.config.sonar_mounting,
+        yaw_rad=float(result.best_yaw_rad),
+        source=f"map entropy over {args.poses} poses (sonarslam calibrate)",
+    )
+    _write(args, replace(dataset.config, sonar_mounting=mount))
     return 0

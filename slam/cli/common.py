@@ -16,6 +16,8 @@ __all__ = [
     "add_source",
     "add_poses",
     "add_quiet",
+    "add_start",
+    "parse_start",
     "number",
     "POSES",
 ]
@@ -59,8 +61,8 @@ def number(
 
 
 EPILOG = (
-    "Data: a SOURCE is a directory in the marina layout (docs/data.md) or the named source 'marina', "
-    "found under $SONARSLAM_DATA/marina."
+    "Data: a SOURCE is a directory in the marina layout, a ROS 1 or ROS 2 bag (docs/data.md) or the"
+    " named source 'marina', found under $SONARSLAM_DATA/marina."
 )
 
 
@@ -72,7 +74,9 @@ class Subparsers(Protocol):
 
 def add_source(p: argparse.ArgumentParser) -> None:
     """The positional SOURCE of a command that reads a dataset."""
-    p.add_argument("source", help="dataset directory or 'marina'")
+    p.add_argument(
+        "source", help="dataset directory, ROS bag (.bag, .mcap, ROS 2 bag directory) or 'marina'"
+    )
 
 
 def add_poses(p: argparse.ArgumentParser, default: str, note: str = "") -> None:
@@ -89,3 +93,28 @@ def add_poses(p: argparse.ArgumentParser, default: str, note: str = "") -> None:
 def add_quiet(p: argparse.ArgumentParser) -> None:
     """``--quiet``: no progress bars."""
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def parse_start(text: str) -> tuple[float, float, float]:
+    """``X,Y`` or ``X,Y,YAW`` (m, m, deg CCW from East) to ``(x_m, y_m, yaw_rad)`` (yaw NaN
+    when left out); an argparse ``type``."""
+    parts = text.split(",")
+    if len(parts) not in (2, 3):
+        raise argparse.ArgumentTypeError(f"must be X,Y or X,Y,YAW (m, m, deg), got {text!r}")
+    values = [float(number(float)(v.strip())) for v in parts]
+    yaw = math.radians(values[2]) if len(values) == 3 else math.nan
+    return values[0], values[1], yaw
+
+
+def add_start(p: argparse.ArgumentParser) -> None:
+    """``--start X,Y[,YAW]``: the start position a user gives (runs without GPS start at the
+    origin); the heading is always the AHRS's, a YAW given is checked against it."""
+    p.add_argument(
+        "--start",
+        type=parse_start,
+        default=None,
+        metavar="X,Y[,YAW]",
+        help="start position in the local East-North frame (m); default: the first GPS fix, or"
+        " without GPS the origin. The heading is the AHRS's: a YAW given (deg CCW from East) must"
+        " agree with it within 3 [noise] ahrs_sigma_deg",
+    )

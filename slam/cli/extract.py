@@ -3,14 +3,19 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
+from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.slam.run.extraction import extract
 
 
 def command(args: argparse.Namespace) -> int:
+    source: str | Dataset = args.source
+    if args.start is not None:
+        source = replace(open_dataset(args.source), start_enu=args.start)
     result = extract(
-        args.source,
+        source,
         args.poses,
         args.out,
         config_path=args.config,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
+from sonarslam.datasets.rosbag import bag_topics, is_bag
 from sonarslam.datasets.source import open_dataset
 from sonarslam.slam.model.motion import gyro_bias_against_heading
 from sonarslam.slam.run.settings import Setting, dataset_settings, run_settings
@@ -12,7 +13,16 @@ from sonarslam.slam.run.sources import DR_IGNORES, dvl_quality, start_pose
 
 
 def command(args: argparse.Namespace) -> int:
-    d = open_dataset(args.source)
+    if is_bag(args.source):
+        topics = bag_topics(args.source, args.topics)
+        print(f"{args.source}: {len(topics)} topics (role: what sonarslam reads it as)")
+        width = max((len(t.topic) for t in topics), default=5)
+        for t in topics:
+            role = t.role or "-"
+            print(
+                f"  {t.topic:<{width}}  {t.msgtype:<46} {t.count:>8} msgs {t.rate_hz:>8.2f} Hz  {role}"
+            )
+    d = open_dataset(args.source, topics_file=args.topics)
     t0, t1 = d.nav_span_s
     print(f"{d.name}: {d.root}")
     nav = d.nav_beams()

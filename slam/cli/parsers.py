@@ -18,10 +18,11 @@ from sonarslam.slam.cli.common import (
     add_poses,
     add_quiet,
     add_source,
+    add_start,
     number,
 )
 
-__all__ = ["COMMANDS", "BACKENDS", "EXTRACTOR_PRESETS", "WORLDS", "SIM_DURATION_S"]
+__all__ = ["COMMANDS", "BACKENDS", "BAG_KINDS", "EXTRACTOR_PRESETS", "WORLDS", "SIM_DURATION_S"]
 
 #: ``--backend``: :func:`sonarslam.slam.run.run.backend_names` (the baselines, then the closed
 #: loops of :data:`sonarslam.slam.backends.registry.BACKENDS`).
@@ -30,6 +31,8 @@ BACKENDS = ("dr", "gps", "ekf", "isam2")
 EXTRACTOR_PRESETS = ("default", "marina", "marina-fit", "marina-seed")
 #: The simulated worlds: :data:`sonarslam.datasets.simulator.KINDS`.
 WORLDS = ("pool", "harbour", "random", "drift", "drawn")
+#: ``simulate --bag``: :data:`sonarslam.datasets.rosbag.BAG_KINDS`.
+BAG_KINDS = ("ros1", "mcap", "sqlite3")
 #: ``demo --sim-duration``'s default: :data:`sonarslam.slam.run.demo.SIM_DURATION_S` (s).
 SIM_DURATION_S = 600.0
 
@@ -52,6 +55,13 @@ def _simulate(sub: Subparsers) -> argparse.ArgumentParser:
         default=None,
         help="seconds of simulated time (default per world)",
     )
+    p.add_argument(
+        "--bag",
+        choices=BAG_KINDS,
+        default=None,
+        help="write a ROS bag instead of the marina layout: ros1 (OUT/<run>.bag), mcap or sqlite3"
+        " (OUT is the ROS 2 bag directory); sonarslam.toml and truth.json go with it",
+    )
     return p
 
 
@@ -69,6 +79,13 @@ def _run(sub: Subparsers) -> argparse.ArgumentParser:
         help="dr (dead reckoning), gps (GPS+AHRS), ekf, isam2 (default dr)",
     )
     p.add_argument("--out", required=True, help="output directory")
+    add_start(p)
+    p.add_argument(
+        "--topics",
+        metavar="TOML",
+        help="a bag's roles: [topics] sonar, dvl, imu, gps = topic names (default: by message"
+        " type, or [topics] of the bag's sonarslam.toml)",
+    )
     add_quiet(p)
     p.add_argument(
         "--batch",
@@ -133,6 +150,7 @@ def _extract(sub: Subparsers) -> argparse.ArgumentParser:
         help="extractor preset (slam/run/presets.py; default: marina for thresholded beams, "
         "default for raw ones, as the closed loops)",
     )
+    add_start(p)
     add_quiet(p)
     return p
 
@@ -206,6 +224,13 @@ def _calibrate(sub: Subparsers) -> argparse.ArgumentParser:
         help="a partial sonarslam.toml over the dataset's own (e.g. [sonar] range_offset_m), as"
         " for run",
     )
+    p.add_argument(
+        "--write",
+        metavar="TOML",
+        help="write the dataset's calibration with the value(s) found to this sonarslam.toml"
+        " (every key; an existing file is replaced)",
+    )
+    add_start(p)
     add_quiet(p)
     return p
 
@@ -215,6 +240,12 @@ def _info(sub: Subparsers) -> argparse.ArgumentParser:
         "info", help="what a dataset holds, every setting with its unit and source", epilog=EPILOG
     )
     add_source(p)
+    p.add_argument(
+        "--topics",
+        metavar="TOML",
+        help="a bag's roles: [topics] sonar, dvl, imu, gps = topic names (default: by message"
+        " type, or [topics] of the bag's sonarslam.toml)",
+    )
     return p
 
 

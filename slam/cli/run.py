@@ -19,8 +19,12 @@ def command(args: argparse.Namespace) -> int:
         batch=args.batch,
         config=args.config,
         settings=parse_settings(args.set),
+        start_enu=args.start,
+        topics_file=args.topics,
     )
     m = result.metrics
+    print(f"calibration: {m['calibration']}")
+    print(f"start pose: {m['start_pose']}; evaluation: {m['evaluation']}")
     if "extractor_preset" in m:
         print(f"extractor preset: {m['extractor_preset']} (slam/run/presets.py)")
     print(summary_line(m))

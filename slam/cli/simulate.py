@@ -3,13 +3,50 @@
 from __future__ import annotations
 
 import argparse
+import shutil
+import tempfile
+import warnings
+from pathlib import Path
 
+from sonarslam.datasets.errors import DataWarning
+from sonarslam.datasets.rosbag import write_bag
 from sonarslam.datasets.simulator import simulate
+from sonarslam.datasets.source import open_dataset
+from sonarslam.settings import SettingError
 from sonarslam.slam.io.files import check_output_dir
 
 
 def command(args: argparse.Namespace) -> int:
     check_output_dir(args.out)
-    out = simulate(args.kind, seed=args.seed, out_dir=args.out, duration_s=args.duration)
-    print(f"simulated {args.kind} (seed {args.seed}) written to {out}")
+    if (
+        args.bag in ("mcap", "sqlite3")
+        and Path(args.out).exists()
+        and any(Path(args.out).iterdir())
+    ):
+        raise SettingError(
+            "--out", f"{args.out} is not empty: a ROS 2 bag is a directory of its own"
+        )
+    if args.bag is None:
+        out = simulate(args.kind, seed=args.seed, out_dir=args.out, duration_s=args.duration)
+        print(f"simulated {args.kind} (seed {args.seed}) written to {out}")
+        return 0
+    with tempfile.TemporaryDirectory() as tmp:
+        layout = simulate(
+            args.kind, seed=args.seed, out_dir=Path(tmp) / "run", duration_s=args.duration
+        )
+        with warnings.catch_warnings():  # the sensors' gaps are the simulator's own: said below
+            warnings.simplefilter("ignore", DataWarning)
+            dataset = open_dataset(layout)
+        out = Path(args.out)
+        if args.bag == "ros1":
+            out.mkdir(parents=True, exist_ok=True)
+            prefix = next(Path(layout).glob("*_DVL.log")).name.removesuffix("_DVL.log")
+            bag = write_bag(dataset, out / f"{prefix}.bag", "ros1")
+        else:
+            if out.exists():
+                out.rmdir()  # an empty directory (check_output_dir): rosbags creates its own
+            bag = write_bag(dataset, out, args.bag)
+        for name in ("sonarslam.toml", "truth.json"):
+            shutil.copy(Path(layout) / name, out / name)
+    print(f"simulated {args.kind} (seed {args.seed}) written as a {args.bag} bag: {bag}")
     return 0

@@ -3,6 +3,9 @@ association scores and landmark extents of a closed loop against them.
 
 The readers put every dataset in the local frame of its first GPS fix; the simulator's truth is
 in its own world frame, so everything here is shifted by ``first_fix_enu_m`` (``truth.json``).
+Without GPS the run's frame has its origin where the run starts (the start of the navigation
+span, or the pose a user gave): the truth is shifted so that its position there is that origin
+(its headings are East-referenced in both frames, so no rotation).
 """
 
 from __future__ import annotations
@@ -44,8 +47,7 @@ def truth_trajectory(dataset: Dataset) -> Trajectory:
         raise ValueError(f"{dataset.root}: no truth.json (only simulated datasets have one)")
     truth = dataset.truth
     poses = np.asarray(truth["body_poses"]["rows"], dtype=np.float64)  # t, x, y, yaw (world frame)
-    offset = np.asarray(truth.get("first_fix_enu_m", [0.0, 0.0]), dtype=np.float64)
-    xy = poses[:, 1:3] - offset
+    xy = poses[:, 1:3] - _offset(dataset)
     return Trajectory(poses[:, 0].copy(), np.column_stack([xy, wrap_angle(poses[:, 3])]))
 
 
@@ -72,8 +74,20 @@ def truth_walls(dataset: Dataset) -> FloatArray:
         raise ValueError(
             f"{dataset.root}: no walls in truth.json (only simulated datasets have them)"
         )
-    offset = np.asarray(dataset.truth.get("first_fix_enu_m", [0.0, 0.0]), dtype=np.float64)
-    return np.asarray(dataset.truth["walls_m"], dtype=np.float64) - offset
+    return np.asarray(dataset.truth["walls_m"], dtype=np.float64) - _offset(dataset)
+
+
+def _offset(dataset: Dataset) -> FloatArray:
+    """World minus the readers' frame (m): the first GPS fix's world position; without GPS, the
+    true position at the navigation's start minus the start position given (or the origin)."""
+    assert dataset.truth is not None
+    if dataset.gps is not None:
+        return np.asarray(dataset.truth.get("first_fix_enu_m", [0.0, 0.0]), dtype=np.float64)
+    rows = np.asarray(dataset.truth["body_poses"]["rows"], dtype=np.float64)
+    t0 = dataset.nav_span_s[0]
+    at = np.array([np.interp(t0, rows[:, 0], rows[:, 1]), np.interp(t0, rows[:, 0], rows[:, 2])])
+    given = np.zeros(2) if dataset.start_enu is None else np.asarray(dataset.start_enu[:2])
+    return at - given
 
 
 def wall_lines_world(walls_m: npt.ArrayLike) -> FloatArray:

@@ -83,8 +83,8 @@ class TrajectoryFigures:
     )
 
     name: str
-    ate: AteResult
-    ate_aligned: AteResult
+    ate: AteResult | None
+    ate_aligned: AteResult | None
     sonar_span_s: tuple[float, float] | None = None
     ate_sonar: AteResult | None = None
     ate_sonar_aligned: AteResult | None = None
@@ -94,7 +94,9 @@ class TrajectoryFigures:
 
     def whole_json(self) -> dict[str, JsonValue]:
         """The whole run's ATE: every figure for the run's own trajectory, mean and max for
-        another one."""
+        another one; nothing without GPS."""
+        if self.ate is None or self.ate_aligned is None:
+            return {}
         if not self.name:
             return {**self.ate.as_dict(), **self.ate_aligned.as_dict("ate_aligned")}
         n = self.name
@@ -152,7 +154,7 @@ class DataFigures:
     dvl_rows: int
     dvl_invalid_rows: int
     dvl_quality: Mapping[str, float]
-    gps_uncovered_s: float
+    gps_uncovered_s: float | None  # None without GPS
     faults_and_gaps: Mapping[str, JsonValue]
 
     @property
@@ -167,7 +169,7 @@ class DataFigures:
             "dvl_rows": self.dvl_rows,
             "dvl_invalid_rows": self.dvl_invalid_rows,
             **self.dvl_quality,
-            "gps_uncovered_s": self.gps_uncovered_s,
+            **({} if self.gps_uncovered_s is None else {"gps_uncovered_s": self.gps_uncovered_s}),
             **self.faults_and_gaps,
         }
 
@@ -296,7 +298,14 @@ class RunMetrics:
         run is written.
     """
 
-    KEYS: ClassVar[tuple[str, ...]] = ("source", "backend", "provenance")
+    KEYS: ClassVar[tuple[str, ...]] = (
+        "source",
+        "backend",
+        "calibration",
+        "evaluation",
+        "start_pose",
+        "provenance",
+    )
 
     source: str
     backend: str
@@ -305,12 +314,21 @@ class RunMetrics:
     closed_loop: ClosedLoopFigures | None = None
     others: list[TrajectoryFigures] = field(default_factory=list)
     provenance: dict[str, JsonValue] | None = None
+    #: where the dataset's calibration came from (:attr:`sonarslam.datasets.source.Dataset.calibration`)
+    calibration: str = ""
+    #: what the run is measured against: "gps", "gps and truth", or "no GPS: ..."
+    evaluation: str = ""
+    #: where the start pose came from (:func:`sonarslam.slam.run.sources.start_pose_origin`)
+    start_pose: str = ""
 
     def to_json(self) -> dict[str, JsonValue]:
         """The one flat object of ``metrics.json``."""
         out: dict[str, JsonValue] = {
             "source": self.source,
             "backend": self.backend,
+            "calibration": self.calibration,
+            "evaluation": self.evaluation,
+            "start_pose": self.start_pose,
             **self.trajectory.whole_json(),
             **self.trajectory.span_json(),
             **self.data.to_json(),
@@ -353,11 +371,12 @@ def trajectory_figures(dataset: Dataset, trajectory: Trajectory, name: str) -> T
     over the whole run; and its map's entropy. ``name``: "" for the run's own trajectory, else
     the back end's name of it (``"smoothed"``)."""
     gps = dataset.gps
-    assert gps is not None
     span = dataset.sonar_span_s
-    inside = span is not None and bool(np.any(_in(gps.t, span, trajectory.span_s)))
+    inside = (
+        gps is not None and span is not None and bool(np.any(_in(gps.t, span, trajectory.span_s)))
+    )
     sonar: tuple[AteResult | None, AteResult | None] = (None, None)
-    if span is not None and inside:
+    if gps is not None and span is not None and inside:
         sonar = (
             ate_against_gps(trajectory, gps, span),
             ate_against_gps(trajectory, gps, span, align=True),
@@ -371,8 +390,8 @@ def trajectory_figures(dataset: Dataset, trajectory: Trajectory, name: str) -> T
         )
     return TrajectoryFigures(
         name=name,
-        ate=ate_against_gps(trajectory, gps),
-        ate_aligned=ate_against_gps(trajectory, gps, align=True),
+        ate=ate_against_gps(trajectory, gps) if gps is not None else None,
+        ate_aligned=ate_against_gps(trajectory, gps, align=True) if gps is not None else None,
         sonar_span_s=(span[0], span[1]) if span is not None and inside else None,
         ate_sonar=sonar[0],
         ate_sonar_aligned=sonar[1],

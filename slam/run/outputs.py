@@ -72,7 +72,6 @@ def write_run(
 ) -> list[Path]:
     """Write a run's files into ``out`` (created); returns the files written, in order (what
     was in ``out`` before, another run's files, is not among them)."""
-    assert dataset.gps is not None, "a run has GPS (checked by run_backend)"
     make_output_dir(out)
     used = dump_dataset_config(dataset.config)
     if backend == "dr":
@@ -80,17 +79,19 @@ def write_run(
     files = [write_text(out / "config_used.toml", used)]
     t0, t1 = trajectory.span_s
     gps = dataset.gps
-    gps_tr = gps_ahrs_trajectory(dataset)
-    gps_in = (gps.t >= t0) & (gps.t <= t1)
-    # the raw fixes (the ATE reference), with the AHRS heading for a full pose
-    gps_pose = np.column_stack([gps.en_m[gps_in], gps_tr.poses(gps.t[gps_in])[:, 2]])
-    gps_in_tr = Trajectory(gps.t[gps_in], gps_pose)
-    files.append(write_atomic(out / GPS_FILE, lambda p: write_tum(p, gps_in_tr)))
-    reference_t = gps.t
+    reference_t = np.zeros(0)
+    if gps is not None:  # without GPS no gps.tum: the run has no ATE reference
+        gps_tr = gps_ahrs_trajectory(dataset)
+        gps_in = (gps.t >= t0) & (gps.t <= t1)
+        # the raw fixes (the ATE reference), with the AHRS heading for a full pose
+        gps_pose = np.column_stack([gps.en_m[gps_in], gps_tr.poses(gps.t[gps_in])[:, 2]])
+        gps_in_tr = Trajectory(gps.t[gps_in], gps_pose)
+        files.append(write_atomic(out / GPS_FILE, lambda p: write_tum(p, gps_in_tr)))
+        reference_t = gps.t
     if dataset.truth is not None:
         truth = truth_trajectory(dataset).clip(t0, t1)
         files.append(write_atomic(out / TRUTH_FILE, lambda p: write_tum(p, truth)))
-        reference_t = np.concatenate([gps.t, truth.t_s])
+        reference_t = np.concatenate([reference_t, truth.t_s])
     for name, tr in [(None, trajectory), *trajectories.items()]:
         stem = trajectory_stem(backend, name)
         dense = with_samples_at(tr, reference_t)
@@ -104,17 +105,19 @@ def write_run(
     files.append(
         write_atomic(
             out / "report.png",
-            lambda p: _report_figure(p, dataset, backend, trajectory, trajectories),
+            lambda p: _report_figure(p, dataset, backend, trajectory, trajectories, metrics),
         )
     )
     return files
 
 
-def _reference(dataset: Dataset) -> tuple[str, Trajectory]:
-    """The reference of a run's pictures: the simulator's truth, else GPS + AHRS."""
+def _reference(dataset: Dataset) -> tuple[str, Trajectory] | None:
+    """The reference of a run's pictures: the simulator's truth, else GPS + AHRS, else none."""
     if dataset.truth is not None:
         return "truth", truth_trajectory(dataset)
-    return "gps", gps_ahrs_trajectory(dataset)
+    if dataset.gps is not None:
+        return "gps", gps_ahrs_trajectory(dataset)
+    return None
 
 
 def _walls(dataset: Dataset) -> np.ndarray | None:
@@ -127,9 +130,14 @@ def _report_figure(
     backend: str,
     trajectory: Trajectory,
     trajectories: dict[str, Trajectory],
+    metrics: dict[str, Any],
 ) -> None:
     """report.png: the run's estimates (a factor graph's online, smoothed and batch ones) beside
-    dead reckoning (:func:`plot_estimates`)."""
+    dead reckoning against its reference (:func:`plot_estimates`); a run with neither GPS nor
+    truth draws its trajectories alone (:func:`_report_figure_without_reference`)."""
+    if _reference(dataset) is None:
+        _report_figure_without_reference(path, dataset, backend, trajectory, metrics)
+        return
     drawn = {backend: trajectory}
     drawn |= {trajectory_stem(backend, name): tr for name, tr in trajectories.items()}
     if backend != "dr":  # dead reckoning beside every other back end, as the baseline
@@ -160,12 +168,14 @@ def plot_estimates(
     span_s : (float, float), optional
         The reference is drawn over it (Unix s; default the estimates' whole span).
     """
-    assert dataset.gps is not None
-    ref_name, ref = _reference(dataset)
+    found = _reference(dataset)
+    assert found is not None, "plot_estimates needs GPS or the truth"
+    ref_name, ref = found
+    gps = dataset.gps
     t0 = min(tr.span_s[0] for tr in estimates.values()) if span_s is None else span_s[0]
     t1 = max(tr.span_s[1] for tr in estimates.values()) if span_s is None else span_s[1]
     errors = {
-        name: truth_errors(tr, ref) if ref_name == "truth" else ate_errors(tr, dataset.gps)
+        name: truth_errors(tr, ref) if gps is None or ref_name == "truth" else ate_errors(tr, gps)
         for name, tr in estimates.items()
     }
     reference = "the truth" if ref_name == "truth" else "GPS"
@@ -184,6 +194,27 @@ def plot_estimates(
         f"{dataset.name}: {what} against {reference}, ATE without alignment {spans}",
         reference,
         span,
+        _walls(dataset),
+    )
+
+
+def _report_figure_without_reference(
+    path: Path, dataset: Dataset, backend: str, trajectory: Trajectory, metrics: dict[str, Any]
+) -> None:
+    """report.png of a run with neither GPS nor truth: the trajectories in the plane (the run
+    beside dead reckoning), no position error (there is nothing to measure it against)."""
+    drawn = {backend: trajectory}
+    if backend != "dr":
+        drawn["dr"] = dead_reckoning_trajectory(dataset)
+    entropy = metrics.get("map_entropy_nats")
+    sharp = f"map entropy {entropy:.3f} nats" if entropy is not None else "no map"
+    plot_trajectories(
+        path,
+        drawn,
+        {},
+        f"{dataset.name}: {backend}, no GPS (no position error): {sharp}",
+        "no reference",
+        dataset.sonar_span_s,
         _walls(dataset),
     )
 
@@ -212,11 +243,14 @@ def _write_closed_loop(
         result.trajectory,
         map_min_intensity(beams),
     )
-    ref_name, ref = _reference(dataset)
+    reference = _reference(dataset)
+    drawn = {backend: result.trajectory}
+    if reference is not None:
+        drawn = {reference[0]: reference[1].clip(t0, t1), **drawn}
     segments, bands = landmark_layers(landmarks, points)
     layers = MapLayers(
         points,
-        {ref_name: ref.clip(t0, t1), backend: result.trajectory},
+        drawn,
         segments,
         bands,
         _walls(dataset),

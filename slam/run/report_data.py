@@ -86,6 +86,12 @@ def load_run(run_dir: str | Path, open_source: bool = True) -> RunData:
         raise FileNotFoundError(f"{run}: no metrics.json (not a run directory of sonarslam run)")
     metrics = json.loads((run / "metrics.json").read_text())
     stem = trajectory_stem(str(metrics.get("backend", "")))
+    if not (run / GPS_FILE).is_file() and "ate_mean_m" not in metrics:
+        raise ValueError(
+            f"{run}: a run without GPS ({metrics.get('evaluation', 'no ATE')}): report compares"
+            " runs against gps.tum; see the run's own report.png, map.png and metrics.json"
+            " map_entropy_nats"
+        )
     for name in (f"{stem}.tum", GPS_FILE):
         if not (run / name).is_file():
             raise FileNotFoundError(f"{run}: no {name} (not a run directory of sonarslam run)")

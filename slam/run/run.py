@@ -45,7 +45,7 @@ from sonarslam.slam.run.presets import (
     run_config,
 )
 from sonarslam.slam.run.provenance import provenance
-from sonarslam.slam.run.sources import POSE_SOURCES, dvl_quality
+from sonarslam.slam.run.sources import POSE_SOURCES, dvl_quality, start_pose_origin
 
 __all__ = [
     "BASELINES",
@@ -148,8 +148,6 @@ def run_backend(
         trajectories (``ate_mean_smoothed_m``, ...) and, on simulated data, the association
         scores against the true walls (``truth_*``).
     """
-    if dataset.gps is None:
-        raise DataError(dataset.root, None, "runs need *_DGPS.log for the start pose and the ATE")
     if backend not in backend_names():
         raise SettingError("--backend", f"must be one of {backend_names()}, got {backend!r}")
     loop: ClosedLoopFigures | None = None
@@ -183,6 +181,9 @@ def run_backend(
         data=_data_figures(dataset, trajectory, wall_s),
         closed_loop=loop,
         others=[trajectory_figures(dataset, tr, name) for name, tr in trajectories.items()],
+        calibration=dataset.calibration,
+        evaluation=evaluation(dataset),
+        start_pose=start_pose_origin(dataset),
     )
     return RunResult(
         backend, trajectory, figures.to_json(), result, config, trajectories, figures=figures
@@ -313,11 +314,24 @@ def _check_finite(dataset: Dataset, backend: str, trajectory: Trajectory) -> Non
         )
 
 
-def _gps_uncovered_s(dataset: Dataset, trajectory: Trajectory) -> float:
+def evaluation(dataset: Dataset) -> str:
+    """What a run of ``dataset`` is measured against (``metrics.json evaluation``): GPS (the
+    ruler, never an input), the simulator's truth, or without either the map's entropy
+    (``map_entropy_nats``, lower is sharper) and the pictures only."""
+    if dataset.gps is not None:
+        return "gps and truth" if dataset.truth is not None else "gps"
+    if dataset.truth is not None:
+        return "truth (no GPS)"
+    return "no GPS: no ATE; the map's entropy (map_entropy_nats) and the pictures"
+
+
+def _gps_uncovered_s(dataset: Dataset, trajectory: Trajectory) -> float | None:
     """How much of the run the GPS covers (``gps_uncovered_s``: the run's time before the
     first and after the last fix), with a warning naming the span when a gap of the GPS's
-    threshold is left uncovered: the ATE is then over the covered part only."""
-    assert dataset.gps is not None
+    threshold is left uncovered: the ATE is then over the covered part only. None without
+    GPS."""
+    if dataset.gps is None:
+        return None
     t0, t1 = trajectory.span_s
     g = dataset.gps.t
     inside = g[(g >= t0) & (g <= t1)]
@@ -343,6 +357,8 @@ def run(
     batch: bool = False,
     config: str | Path | None = None,
     settings: dict[str, Any] | None = None,
+    start_enu: tuple[float, float, float] | None = None,
+    topics_file: str | Path | None = None,
 ) -> RunResult:
     """Open a dataset, run a back end on it (:func:`run_backend`) and write the run directory
     (:func:`sonarslam.slam.run.outputs.write_run`).
@@ -366,7 +382,9 @@ def run(
         check_settings(backend, settings)
     if batch and (backend in BASELINES or not backend_spec(backend).smoother):
         raise SettingError("--batch", f"back end {backend!r} does not smooth")
-    dataset = open_dataset(source, config_override=config)
+    dataset = open_dataset(source, config_override=config, topics_file=topics_file)
+    if start_enu is not None:
+        dataset = replace(dataset, start_enu=start_enu)
     result = run_backend(dataset, backend, settings, progress=progress, batch=batch)
     assert result.figures is not None
     result.figures.provenance = provenance(
@@ -402,6 +420,14 @@ def summary_line(metrics: dict[str, Any]) -> str:
             f"against the truth ATE mean {m['ate_truth_mean_m']:.2f} m, max "
             f"{m['ate_truth_max_m']:.2f} (rigidly aligned {m['ate_truth_aligned_mean_m']:.2f}); "
             "against the simulated GPS: "
+        )
+    if "ate_mean_m" not in m:
+        entropy = m.get("map_entropy_nats")
+        sharp = f"map entropy {entropy:.3f} nats" if entropy is not None else "no map"
+        truth = truth.replace("against the simulated GPS: ", "")
+        return (
+            f"{m['backend']}: {truth}{m['evaluation']}: {sharp}; {m['data_s']:.0f} s of data in"
+            f" {m['wall_s']:.2f} s ({m['realtime_factor']:.0f}x real time)"
         )
     return (
         f"{m['backend']}: {truth}{sonar}ATE mean {m['ate_mean_m']:.2f} m, sd {m['ate_sd_m']:.2f}, "

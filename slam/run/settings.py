@@ -3,7 +3,8 @@
 
 * The dataset's settings (``sonarslam.toml``'s keys, :func:`sonarslam.datasets.config.config_tables`): from
   the dataset's own ``sonarslam.toml``, else its ``*_SETUP.log`` (the head) and the marina
-  calibration (``datasets.config.MARINA_CONFIG``, README "Calibration"); keys a
+  calibration (``datasets.config.MARINA_CONFIG``, README "Calibration") for the marina's logs,
+  neutral defaults for any other; keys a
   ``sonarslam.toml`` leaves out take the neutral defaults of ``DatasetConfig``.
 * The run settings (``--set SCOPE.FIELD=VALUE``, :mod:`sonarslam.slam.run.presets`): the extractor preset
   of the dataset's beams and each back end's defaults.
@@ -100,8 +101,10 @@ def dataset_settings(dataset: Dataset) -> list[Setting]:
                 )
             elif table == "sonar" and key in ("n_bins", "bin_size_m", "step_deg") and setup:
                 source = setup[0].name
-            else:
+            elif dataset.calibration.startswith("marina"):
                 source = "marina calibration (MARINA_CONFIG)"
+            else:  # open_dataset: not the marina, no sonarslam.toml
+                source = "neutral default (no sonarslam.toml)"
             if mounting_source and key == "yaw_deg":
                 source += f": {mounting_source}"
             out.append(Setting(f"[{table}] {key}", value, unit_of(key), source))

@@ -22,6 +22,7 @@ from sonarslam.slam.model.noise import MotionNoise, dvl_scatter
 __all__ = [
     "motion_noise",
     "start_pose",
+    "start_pose_origin",
     "gps_ahrs_trajectory",
     "dead_reckoning_trajectory",
     "dvl_quality",
@@ -71,29 +72,66 @@ def dvl_quality(dataset: Dataset) -> dict[str, float]:
 
 def _require_gps(dataset: Dataset) -> GpsSeries:
     if dataset.gps is None:
-        raise ValueError(f"{dataset.root}: no *_DGPS.log, so no start pose nor ground truth")
+        raise ValueError(
+            f"{dataset.root}: no GPS (*_DGPS.log or a NavSatFix topic), so no GPS trajectory:"
+            " take --poses dr"
+        )
     return dataset.gps
+
+
+def start_pose_origin(dataset: Dataset) -> str:
+    """Where :func:`start_pose` takes the start from, in words (``metrics.json start_pose``)."""
+    if dataset.start_enu is not None:
+        x, y, _ = dataset.start_enu
+        where = "the first GPS fix's time" if dataset.gps is not None else "the navigation's start"
+        return f"given (--start {x:g},{y:g}) at {where}, heading from the AHRS"
+    if dataset.gps is not None:
+        return "the first GPS fix inside the navigation span, heading from the AHRS"
+    return "no GPS: the origin at the navigation's start, heading from the AHRS"
 
 
 def start_pose(dataset: Dataset) -> tuple[float, FloatArray, FloatArray]:
     """Start time, pose and covariance of every estimator (the ATE protocol).
 
-    The start is the first GPS fix inside the navigation span; its position is that fix, its
-    yaw the heading sensor's (through the AHRS mounting).
+    With GPS, the start is the first GPS fix inside the navigation span; its position is that
+    fix, its yaw the heading sensor's (through the AHRS mounting). Without GPS, the start is the
+    start of the navigation span (DVL and AHRS both logging) at the origin of the local frame,
+    its yaw the heading sensor's. A position the user gave (:attr:`Dataset.start_enu`,
+    ``--start``) replaces the position at the same time; a heading given with it must agree with
+    the AHRS's within 3 ``ahrs_sigma_deg`` (``ValueError`` otherwise): the heading is always the
+    AHRS's. The covariance is
+    ``diag(gps_sigma_m^2, gps_sigma_m^2, ahrs_sigma^2)`` in every case.
     """
-    gps = _require_gps(dataset)
     t_nav0, t_nav1 = dataset.nav_span_s
-    inside = np.flatnonzero((gps.t >= t_nav0) & (gps.t <= t_nav1))
-    if inside.size == 0:
-        raise ValueError(f"{dataset.root}: no GPS fix inside the navigation span")
-    i = int(inside[0])
-    t0 = float(gps.t[i])
+    if dataset.gps is not None:
+        gps = dataset.gps
+        inside = np.flatnonzero((gps.t >= t_nav0) & (gps.t <= t_nav1))
+        if inside.size == 0:
+            raise ValueError(f"{dataset.root}: no GPS fix inside the navigation span")
+        i = int(inside[0])
+        t0 = float(gps.t[i])
+        xy = (float(gps.en_m[i, 0]), float(gps.en_m[i, 1]))
+    else:
+        t0, xy = float(t_nav0), (0.0, 0.0)
     yaw_a = np.interp(t0, dataset.attitude.t, np.unwrap(dataset.attitude.yaw_rad))
     psi = float(body_yaw(yaw_a, dataset.config.ahrs_mounting, dataset.config.ahrs_deviation_rad))
     sigma_gps = dataset.config.noise.gps_sigma_m
     sigma_yaw = np.deg2rad(dataset.config.noise.ahrs_sigma_deg)
+    if dataset.start_enu is not None:
+        xy = (dataset.start_enu[0], dataset.start_enu[1])
+        given = dataset.start_enu[2]
+        miss = (given - psi + np.pi) % (2.0 * np.pi) - np.pi
+        if np.isfinite(given) and abs(miss) > 3.0 * sigma_yaw:
+            # every estimator takes its heading from the AHRS: a start heading that disagrees
+            # with it is a wrong AHRS mounting (or a wrong --start), never overridden here
+            raise ValueError(
+                f"{dataset.root}: --start heading {np.rad2deg(given):.1f} deg differs from the"
+                f" AHRS's {np.rad2deg(psi):.1f} deg at the start by more than 3 sigma"
+                f" ({3.0 * np.rad2deg(sigma_yaw):.1f} deg): the heading comes from the AHRS;"
+                " set [mounting.ahrs] yaw_deg, or leave the heading out (--start X,Y)"
+            )
     cov = np.diag([sigma_gps**2, sigma_gps**2, sigma_yaw**2])
-    return t0, np.array([gps.en_m[i, 0], gps.en_m[i, 1], psi]), cov
+    return t0, np.array([xy[0], xy[1], psi]), cov
 
 
 def dead_reckoning_trajectory(dataset: Dataset) -> Trajectory:

@@ -1,0 +1,196 @@
+"""The :class:`Dataset` of one run (however it was read), the DVL/AHRS overlap check and the
+simulator's ``truth.json``; the readers are :mod:`sonarslam.datasets.source` (directories),
+:mod:`sonarslam.datasets.arrays` (numpy arrays) and :mod:`sonarslam.datasets.rosbag` (ROS bags)."""
+
+from __future__ import annotations
+
+import heapq
+import json
+import warnings
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sonarslam.datasets.config import DatasetConfig
+from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.gates import SensorReport
+from sonarslam.datasets.logfile import read_text
+from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries, Record
+
+__all__ = ["Dataset", "NEUTRAL_CALIBRATION", "check_overlap", "read_truth"]
+
+#: :attr:`Dataset.calibration` of a run that is not the marina and has no ``sonarslam.toml``.
+NEUTRAL_CALIBRATION = (
+    "neutral: no sonarslam.toml, so identity mountings, no clock offset and default noise"
+    " (write one: sonarslam calibrate SOURCE --write SOURCE/sonarslam.toml, docs/data.md)"
+)
+
+
+@dataclass(frozen=True, eq=False)
+class Dataset:
+    """All the logs of one run, read and checked (:func:`sonarslam.datasets.source.open_dataset`).
+
+    Attributes
+    ----------
+    name : str
+        The run's name (its files' prefix).
+    root : Path
+        Its folder.
+    config : DatasetConfig
+        Its ``sonarslam.toml``: the sonar head (``config.sonar``), the mountings ``bTs`` of
+        the sonar, DVL and AHRS, the sensors' noise.
+    beams : BeamSeries
+        Sonar beams in time order.
+    dvl : DvlSeries
+        DVL velocities in the DVL frame (m/s).
+    attitude : AttitudeSeries
+        AHRS headings (rad, CCW from East) and yaw rates.
+    gps : GpsSeries or None
+        GPS fixes in the readers' local East-North frame (m; origin at the first fix).
+    truth : dict or None
+        A simulated run's ``truth.json`` (:func:`read_truth`).
+    report : SensorReport
+        What the gates dropped and the sensors' gaps (:mod:`sonarslam.datasets.gates`).
+    """
+
+    name: str
+    root: Path
+    config: DatasetConfig
+    beams: BeamSeries
+    dvl: DvlSeries
+    attitude: AttitudeSeries
+    gps: GpsSeries | None
+    truth: dict[str, Any] | None = None
+    report: SensorReport = field(default_factory=SensorReport)
+    #: Where :attr:`config` came from: the ``sonarslam.toml`` read, the marina's calibration,
+    #: or :data:`NEUTRAL_CALIBRATION` (``run`` prints it, ``metrics.json`` records it).
+    calibration: str = ""
+    #: The start position ``(x_m, y_m, yaw_rad)`` in the local East-North frame a user gave
+    #: (``--start``; yaw NaN: none given, else checked against the AHRS's); None: the first GPS
+    #: fix, or the origin without GPS (see :func:`sonarslam.slam.run.sources.start_pose`).
+    start_enu: tuple[float, float, float] | None = None
+
+    @property
+    def nav_span_s(self) -> tuple[float, float]:
+        """Time span covered by both DVL and AHRS (Unix s): where the vehicle can be navigated."""
+        return (
+            max(float(self.dvl.t[0]), float(self.attitude.t[0])),
+            min(float(self.dvl.t[-1]), float(self.attitude.t[-1])),
+        )
+
+    @property
+    def sonar_span_s(self) -> tuple[float, float] | None:
+        """First and last sonar beam inside :attr:`nav_span_s` (Unix s), None without beams
+        there: where line features can correct the navigation."""
+        beams = self.nav_beams()
+        return (float(beams[0].t), float(beams[-1].t)) if beams else None
+
+    def nav_beams(self) -> BeamSeries:
+        """The beams inside :attr:`nav_span_s` (the marina sonar starts ~183 s earlier)."""
+        return self.beams.between(*self.nav_span_s)
+
+    def stream(
+        self, t_start_s: float | None = None, t_end_s: float | None = None
+    ) -> Iterator[Record]:
+        """All records merged in time order (ties: AHRS, DVL, GPS, then sonar)."""
+        lo = -float("inf") if t_start_s is None else t_start_s
+        hi = float("inf") if t_end_s is None else t_end_s
+
+        def keyed(records: Sequence[Any], rank: int) -> Iterator[tuple[float, int, int, Any]]:
+            for i, r in enumerate(records):
+                if lo <= r.t <= hi:
+                    yield (r.t, rank, i, r)
+
+        streams = [
+            keyed(self.attitude.records(), 0),
+            keyed(self.dvl.records(), 1),
+            keyed(self.gps.records() if self.gps is not None else [], 2),
+            keyed(self.beams.between(lo, hi), 3),
+        ]
+        for item in heapq.merge(*streams):
+            yield item[3]
+
+
+#: DVL and AHRS that overlap for less than this share of their logs' span, or for less than
+#: :data:`MIN_OVERLAP_S`, give a run of that overlap only: a warning says so.
+MIN_OVERLAP_SHARE = 0.5
+MIN_OVERLAP_S = 60.0
+
+
+def check_overlap(root: Path, dvl: DvlSeries, attitude: AttitudeSeries) -> None:
+    """A log of one row (a span of 0 s), logs that do not overlap: :class:`DataError`; an
+    overlap shorter than a minute or than half their span: a :class:`DataWarning`."""
+    for series, name in ((dvl, "DVL"), (attitude, "AHRS")):
+        if series.t.size < 2 or series.t[-1] <= series.t[0]:
+            raise DataError(
+                series.path or root,
+                None,
+                f"the {name} log has {series.t.size} row(s) spanning"
+                f" {series.t[-1] - series.t[0]:.3f} s: a run needs a time span to navigate",
+            )
+    t0, t1 = max(dvl.t[0], attitude.t[0]), min(dvl.t[-1], attitude.t[-1])
+    if t1 <= t0:
+        raise DataError(
+            root,
+            None,
+            f"the DVL ({dvl.t[0]:.3f}-{dvl.t[-1]:.3f} s) and AHRS ({attitude.t[0]:.3f}-"
+            f"{attitude.t[-1]:.3f} s) logs do not overlap in time",
+        )
+    whole = max(dvl.t[-1], attitude.t[-1]) - min(dvl.t[0], attitude.t[0])
+    if t1 - t0 < MIN_OVERLAP_S or t1 - t0 < MIN_OVERLAP_SHARE * whole:
+        warnings.warn(
+            f"{root}: the DVL and AHRS overlap for {t1 - t0:.1f} s ({t0:.3f}-{t1:.3f} s) of"
+            f" their {whole:.1f} s (less than {MIN_OVERLAP_S:.0f} s or"
+            f" {MIN_OVERLAP_SHARE:.0%}): the run covers that overlap only",
+            DataWarning,
+            stacklevel=3,
+        )
+
+
+def _reject_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a number in strict JSON")
+
+
+def _finite_array(path: Path, data: Any, key: str, shape: tuple[int | None, ...]) -> None:
+    """DataError unless ``data`` is an array of finite numbers of ``shape`` (None: any)."""
+    try:
+        a = np.asarray(data, dtype=np.float64)
+    except (ValueError, TypeError, OverflowError):
+        raise DataError(path, None, f"{key} is not an array of numbers") from None
+    if a.ndim != len(shape) or any(
+        n is not None and n != m for n, m in zip(shape, a.shape, strict=True)
+    ):
+        raise DataError(path, None, f"{key} must have shape {shape}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise DataError(path, None, f"{key} holds a value that is not a finite number")
+
+
+def read_truth(path: str | Path) -> dict[str, Any]:
+    """``truth.json`` of a simulated run (UTF-8, strict JSON: no NaN or Infinity), with the
+    parts the evaluation uses checked: ``body_poses.rows`` (N, 4) finite with non-decreasing
+    times, ``first_fix_enu_m`` (2,) and ``walls_m`` (W, 2, 2) when present."""
+    p = Path(path)
+    text = read_text(p, "utf-8")
+    try:
+        data = json.loads(text, parse_constant=_reject_constant)
+    except json.JSONDecodeError as exc:
+        raise DataError(p, exc.lineno, f"not JSON: {exc.msg}") from None
+    except (ValueError, RecursionError) as exc:
+        raise DataError(p, None, f"not JSON: {exc}") from None
+    if not isinstance(data, dict):
+        raise DataError(p, None, "must be a JSON object")
+    poses = data.get("body_poses")
+    if not isinstance(poses, dict) or "rows" not in poses:
+        raise DataError(p, None, "body_poses.rows missing")
+    _finite_array(p, poses["rows"], "body_poses.rows", (None, 4))
+    t = np.asarray(poses["rows"], dtype=np.float64)[:, 0]
+    if t.size == 0 or np.any(np.diff(t) < 0):
+        raise DataError(p, None, "body_poses.rows: no rows, or times going backwards")
+    if "first_fix_enu_m" in data:
+        _finite_array(p, data["first_fix_enu_m"], "first_fix_enu_m", (2,))
+    if "walls_m" in data:
+        _finite_array(p, data["walls_m"], "walls_m", (None, 2, 2))
+    return data
