@@ -12,7 +12,8 @@ The names a user needs are here (:data:`__all__`; the guide is ``docs/api.md``):
   :func:`line_factor` is the GTSAM factor of one observation, :func:`line_prediction` a
   filter's measurement model and :func:`world_observation` its new landmark's line;
   :class:`LandmarkConfig` the rules;
-* data and runs: :func:`open_dataset` (a :class:`Dataset`), :func:`dead_reckoning_trajectory`,
+* data and runs: :func:`open_dataset` (a :class:`Dataset` from a directory or a ROS bag;
+  :func:`dataset_from_arrays` from numpy arrays), :func:`dead_reckoning_trajectory`,
   :func:`run_backend` with a typed :class:`RunConfig`, and the simulator
   (:func:`make_scenario`, :func:`simulate_records` in memory, :func:`simulate` to files).
 
@@ -29,8 +30,10 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # the names as a type checker sees them; at run time they load on first use
+    from sonarslam.datasets.arrays import dataset_from_arrays
+    from sonarslam.datasets.dataset import Dataset
     from sonarslam.datasets.simulator import make_scenario, simulate, simulate_records
-    from sonarslam.datasets.source import Dataset, open_dataset
+    from sonarslam.datasets.source import open_dataset
     from sonarslam.features.config import ExtractorConfig
     from sonarslam.features.extractor import LineExtractor
     from sonarslam.features.line import LineFeature
@@ -68,7 +71,8 @@ _HOMES: dict[str, str] = {
     "line_factor": "sonarslam.slam.backends.isam2.factors",
     # data and runs
     "open_dataset": "sonarslam.datasets.source",
-    "Dataset": "sonarslam.datasets.source",
+    "Dataset": "sonarslam.datasets.dataset",
+    "dataset_from_arrays": "sonarslam.datasets.arrays",
     "dead_reckoning_trajectory": "sonarslam.slam.run.sources",
     "run_backend": "sonarslam.slam.run.run",
     "RunConfig": "sonarslam.slam.run.presets",
@@ -88,6 +92,7 @@ __all__ = [
     "PoseSource",
     "RunConfig",
     "WorldBelief",
+    "dataset_from_arrays",
     "dead_reckoning_trajectory",
     "extractor_preset",
     "gtsam_belief",
