@@ -6,7 +6,8 @@ layer's innovations and associations (:class:`sonarslam.slam.mapping.landmarks.L
 final constants of :meth:`sonarslam.slam.backends.base.Backend.metrics` (``state_*``), and the logs a
 back end keeps beyond those when it has them: ``heading_innovations`` (the EKF's AHRS updates)
 and the scan constraints' pairs (iSAM2 with ``scans``). Dead reckoning from the same sensors
-is the reference the estimate must stay near. Nothing here reads GPS or the truth.
+is the reference the estimate must stay near. Nothing here reads GPS; the simulator's truth,
+on simulated data only, feeds the ``nees`` check.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from sonarslam.slam.eval.health import (
     StateValue,
     assess,
 )
+from sonarslam.slam.eval.truth import truth_trajectory
 from sonarslam.slam.model.motion import body_yaw
 from sonarslam.slam.run.closed_loop import ClosedLoopResult
 from sonarslam.slam.run.sources import dead_reckoning_trajectory
@@ -109,6 +111,7 @@ def health_inputs(dataset: Dataset, result: ClosedLoopResult) -> HealthInputs:
         landmark_created_s=np.array(sorted(created.values())),
         reobserved_s=np.array(reobserved),
         states=states,
+        truth=truth_trajectory(dataset) if dataset.truth is not None else None,
     )
 
 
