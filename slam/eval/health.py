@@ -57,7 +57,7 @@ from scipy.stats import binom, chi2
 from sonarslam.datasets.errors import DataWarning
 from sonarslam.datasets.settings import bounded, check_fields
 from sonarslam.features.geometry import FloatArray, wrap_angle
-from sonarslam.slam.eval.consistency import nees_series
+from sonarslam.slam.eval.consistency import nees_series, window_median_gate
 from sonarslam.slam.io.trajectory import Trajectory
 
 __all__ = [
@@ -319,7 +319,7 @@ def _check_nees(
     edges = _windows(float(t[0]), float(t[-1]), cfg.window_s)
     which = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, edges.size - 2)
     present = np.unique(which)
-    gate = float(chi2.ppf(1.0 - cfg.false_alarm / (2.0 * present.size), series.dof))
+    gate = window_median_gate(series.dof, int(present.size), cfg.false_alarm)
     medians = np.full(edges.size - 1, -np.inf)
     for w in present:
         medians[w] = float(np.median(values[which == w]))

@@ -30,7 +30,7 @@ from sonarslam.slam.model.motion import body_yaw
 from sonarslam.slam.run.closed_loop import ClosedLoopResult
 from sonarslam.slam.run.sources import dead_reckoning_trajectory
 
-__all__ = ["health_inputs", "monitor_run"]
+__all__ = ["nis_streams", "health_inputs", "monitor_run"]
 
 
 def _scan_pairs(backend: Any) -> list[dict[str, Any]]:
@@ -39,12 +39,12 @@ def _scan_pairs(backend: Any) -> list[dict[str, Any]]:
     return list(getattr(log, "pairs", []))
 
 
-def health_inputs(dataset: Dataset, result: ClosedLoopResult) -> HealthInputs:
-    """What the monitor reads of a closed loop's run (module docstring)."""
+def nis_streams(result: ClosedLoopResult) -> list[NisStream]:
+    """The NIS a closed loop logged, per kind: ``line`` (the landmark layer's updates),
+    ``heading`` (the EKF's AHRS updates), ``scan`` (iSAM2's kept scan revisits)."""
     backend = result.backend
     cfg = backend.config
     lm = backend.map
-    t_end = float(result.trajectory.t_s[-1])
     gate = cfg.association.gate_probability
     streams = []
     if lm.innovations:
@@ -63,6 +63,16 @@ def health_inputs(dataset: Dataset, result: ClosedLoopResult) -> HealthInputs:
         streams.append(
             NisStream("scan", t, nis, 3, getattr(cfg, "scan_compatibility_probability", None))
         )
+    return streams
+
+
+def health_inputs(dataset: Dataset, result: ClosedLoopResult) -> HealthInputs:
+    """What the monitor reads of a closed loop's run (module docstring)."""
+    backend = result.backend
+    cfg = backend.config
+    lm = backend.map
+    t_end = float(result.trajectory.t_s[-1])
+    streams = nis_streams(result)
     created: dict[int, float] = {}
     reobserved = []
     for t_s, _, j in lm.association_log:
