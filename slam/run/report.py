@@ -17,13 +17,16 @@ re-opens the run's dataset when it is still there, and writes into ``OUT``:
   run's trajectory, with its reference and the true walls of a simulated run;
 * ``errors_<run>.png``: East, North (and heading, against the truth) errors in time with the
   3-sigma bounds of the trajectory covariances (and of the GPS noise against GPS);
-* ``nees_<run>.png``: pose and position NEES in time with their chi2 bands (simulated runs).
+* ``nees_<run>.png``: pose and position NEES in time with their chi2 bands (simulated runs);
+* ``consistency_<run>.png``: the run's own ``consistency.png`` (NEES against the truth or GPS,
+  and a closed loop's NIS: :mod:`sonarslam.slam.run.consistency_figure`), when it wrote one.
 """
 
 from __future__ import annotations
 
 import math
 import re
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -416,6 +419,9 @@ def report(
         figs.append(error_figure(run, lab, out / f"errors_{tag}.png"))
         if run.truth is not None and run.trajectory.covs is not None:
             figs.append(nees_figure(run, lab, out / f"nees_{tag}.png"))
+        if (run.run_dir / "consistency.png").is_file():  # the NIS is in the run's files only
+            figs.append(out / f"consistency_{tag}.png")
+            shutil.copyfile(run.run_dir / "consistency.png", figs[-1])
         figures += figs
         md += [f"### {lab} on {run.dataset_name} (`{run.name}`)", ""]
         md += [f"- {note}" for note in run.notes] + ([""] if run.notes else [])
