@@ -7,7 +7,9 @@ alarm when the monitor flags anything (``health_ok`` false). Faults, on the firs
 MTi's bias) and the configuration lets the AHRS bias walk (0.15 deg/sqrt(s), as the run of the
 issue): the EKF with its gyro-bias state held at 0 (prior 1e-6 deg/s) and iSAM2 (which has
 none; the runner refuses the combination, so it is run through the closed loop here); and the
-line covariances taken 100 times too small (``line_cov_scale`` 0.01). Serial, one core:
+line covariances taken 100 times too small (``line_cov_scale`` 0.01); and the AHRS bias's prior
+sigma taken as 0.05 deg against the simulated 2 deg (``ahrs_bias_sigma_deg``), which only the
+NEES against the truth can see. ``--duration-s`` shortens the runs. Serial, one core:
 ``taskset -c 0 .venv/bin/python benchmarks/health_monitor.py``.
 """
 
@@ -32,8 +34,14 @@ from sonarslam.slam.run.run import run_backend
 from sonarslam.slam.run.sweep import parse_seeds
 
 
-def _dataset(kind: str, seed: int, folder: Path, gyro_bias_rad_per_s: float = 0.0) -> Dataset:
-    scenario = make_scenario(kind, seed)
+def _dataset(
+    kind: str,
+    seed: int,
+    folder: Path,
+    gyro_bias_rad_per_s: float = 0.0,
+    duration_s: float | None = None,
+) -> Dataset:
+    scenario = make_scenario(kind, seed, duration_s)
     if gyro_bias_rad_per_s:
         scenario = replace(
             scenario, noise=replace(scenario.noise, ahrs_gyro_bias_rad_per_s=gyro_bias_rad_per_s)
@@ -78,6 +86,7 @@ def main() -> int:
     ap.add_argument("--seeds", default="10000-10019")
     ap.add_argument("--backends", default="ekf,isam2")
     ap.add_argument("--fault-seeds", type=int, default=5)
+    ap.add_argument("--duration-s", type=float, default=None, help="default: the kind's own")
     args = ap.parse_args()
     seeds = parse_seeds(args.seeds)
     backends = args.backends.split(",")
@@ -86,7 +95,7 @@ def main() -> int:
     work = Path(tempfile.mkdtemp(prefix="sonarslam-health-"))
     t0 = time.perf_counter()
     for i, seed in enumerate(seeds):
-        ds = _dataset(args.kind, seed, work / f"clean{seed}")
+        ds = _dataset(args.kind, seed, work / f"clean{seed}", duration_s=args.duration_s)
         for b in backends:
             m = _quiet(_run, ds, b, {})
             if not m["health_ok"]:
@@ -94,7 +103,7 @@ def main() -> int:
             print(f"clean {args.kind} {seed} {b}: {m['health_line']}", flush=True)
         if i >= args.fault_seeds:
             continue
-        bad = _walking(_dataset(args.kind, seed, work / f"gyro{seed}", 0.01), 0.15)
+        bad = _walking(_dataset(args.kind, seed, work / f"gyro{seed}", 0.01, args.duration_s), 0.15)
         faults: dict[str, tuple[Any, Dataset, str, dict[str, Any]]] = {
             "ekf, gyro bias unmodelled + walk": (
                 _monitored,
@@ -105,6 +114,13 @@ def main() -> int:
             "isam2, gyro bias + walk": (_monitored, bad, "isam2", {}),
             "ekf, lines 100x overconfident": (_run, ds, "ekf", {"ekf.line_cov_scale": 0.01}),
             "isam2, lines 100x overconfident": (_run, ds, "isam2", {"isam2.line_cov_scale": 0.01}),
+            "ekf, AHRS bias prior 0.05 deg": (_run, ds, "ekf", {"ekf.ahrs_bias_sigma_deg": 0.05}),
+            "isam2, AHRS bias prior 0.05 deg": (
+                _run,
+                ds,
+                "isam2",
+                {"isam2.ahrs_bias_sigma_deg": 0.05},
+            ),
         }
         for name, (call, data, backend, settings) in faults.items():
             m = _quiet(call, data, backend, settings)
@@ -112,7 +128,10 @@ def main() -> int:
             print(
                 f"fault {name} {seed}: {m['health_flagged']} {m['health_first_issue']}", flush=True
             )
-    print(f"\n{args.kind}, seeds {args.seeds}, {time.perf_counter() - t0:.0f} s")
+    print(
+        f"\n{args.kind}, seeds {args.seeds}, {args.duration_s or 'default'} s of data,"
+        f" {time.perf_counter() - t0:.0f} s wall"
+    )
     for b in backends:
         print(f"false alarms {b}: {len(alarms[b])} / {len(seeds)}")
         for a in alarms[b]:

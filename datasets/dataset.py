@@ -54,6 +54,13 @@ class Dataset:
         A simulated run's ``truth.json`` (:func:`read_truth`).
     report : SensorReport
         What the gates dropped and the sensors' gaps (:mod:`sonarslam.datasets.gates`).
+    calibration : str
+        Where ``config`` came from: the ``sonarslam.toml`` read, the marina's calibration, or
+        :data:`NEUTRAL_CALIBRATION` (``run`` prints it, ``metrics.json`` records it).
+    start_enu : (float, float, float) or None
+        The start ``(x_m, y_m, yaw_rad)`` in the local East-North frame a user gave
+        (``--start``; yaw NaN: none given, else checked against the AHRS's); None: the first
+        GPS fix, or the origin without GPS (:func:`sonarslam.slam.run.sources.start_pose`).
     """
 
     name: str
@@ -65,12 +72,7 @@ class Dataset:
     gps: GpsSeries | None
     truth: dict[str, Any] | None = None
     report: SensorReport = field(default_factory=SensorReport)
-    #: Where :attr:`config` came from: the ``sonarslam.toml`` read, the marina's calibration,
-    #: or :data:`NEUTRAL_CALIBRATION` (``run`` prints it, ``metrics.json`` records it).
     calibration: str = ""
-    #: The start position ``(x_m, y_m, yaw_rad)`` in the local East-North frame a user gave
-    #: (``--start``; yaw NaN: none given, else checked against the AHRS's); None: the first GPS
-    #: fix, or the origin without GPS (see :func:`sonarslam.slam.run.sources.start_pose`).
     start_enu: tuple[float, float, float] | None = None
 
     @property

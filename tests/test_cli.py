@@ -260,6 +260,7 @@ def test_run_dr_writes_what_it_measured(short_harbour, tmp_path):
     gps_t = read_tum(out / "gps.tum").t_s
     assert np.isin(np.round(gps_t, 4), np.round(tum.t_s, 4)).all()
     assert (out / "report.png").stat().st_size > 10_000
+    assert (out / "consistency.png").stat().st_size > 10_000  # the NEES against the truth
 
 
 def test_run_ekf_maps_the_true_walls(short_harbour, tmp_path):
@@ -268,6 +269,7 @@ def test_run_ekf_maps_the_true_walls(short_harbour, tmp_path):
     metrics = json.loads((out / "metrics.json").read_text())
     landmarks = json.loads((out / "map.json").read_text())["landmarks"]
     assert metrics["landmarks"] == len(landmarks) >= 3
+    assert (out / "consistency.png").stat().st_size > 10_000  # NEES and the NIS of each kind
     assert metrics["assoc_associated"] > 0.5 * metrics["assoc_observations"]
     ds = open_dataset(short_harbour)
     offset = np.asarray(ds.truth["first_fix_enu_m"])

@@ -8,13 +8,17 @@ import pytest
 from sonarslam.datasets.records import GpsSeries
 from sonarslam.slam.eval.ate import ate_against_gps, ate_errors
 from sonarslam.slam.eval.consistency import (
+    NeesSeries,
     anees,
     chi2_band,
+    gps_position_nees,
     mean_nees_band,
     nees,
     nees_on_grid,
     nees_series,
     nis,
+    window_median_gate,
+    window_medians,
 )
 from sonarslam.slam.eval.evo_metrics import evo_ape, evo_rpe
 from sonarslam.slam.io.trajectory import (
@@ -160,6 +164,35 @@ def test_nis_of_known_innovations():
     s = nis([0.0, 1.0], [[0.3, 0.0], [0.0, 0.02]], [np.diag([0.09, 1.0]), np.diag([1.0, 1e-4])])
     np.testing.assert_allclose(s.nees, [1.0, 4.0], atol=1e-12)
     assert s.dof == 2
+
+
+def test_gps_position_nees_adds_the_gps_sigma_and_keeps_the_fixes_inside():
+    t = T0_S + np.arange(3.0)
+    covs = np.stack([np.diag([1.0, 4.0, 0.01]), np.diag([0.25, 0.25, 0.01]), np.eye(3)])
+    est = Trajectory(t, np.array([[3.0, 4.0, 0.0]] * 3), covs)
+    # fixes at 0 (the first sample's covariance), 1.5 (the second's: last at or before), and
+    # two outside the estimate's span
+    gps_t = T0_S + np.array([-1.0, 0.0, 1.5, 9.0])
+    s = gps_position_nees(est, gps_t, np.zeros((4, 2)), gps_sigma_m=1.0)
+    assert s.dof == 2 and s.t_s.tolist() == [T0_S, T0_S + 1.5]
+    # (3, 4) off with diag(1 + 1, 4 + 1): 9/2 + 16/5; with diag(1.25, 1.25): 25/1.25
+    np.testing.assert_allclose(s.nees, [9.0 / 2.0 + 16.0 / 5.0, 25.0 / 1.25], rtol=1e-12)
+    with pytest.raises(ValueError, match="covariances"):
+        gps_position_nees(Trajectory(t, est.poses_wTb), gps_t, np.zeros((4, 2)), 1.0)
+
+
+def test_window_medians_and_their_gate():
+    t = T0_S + np.arange(0.0, 250.0, 1.0)
+    v = np.where(t - T0_S < 120.0, 1.0, 5.0)
+    v[130] = 1e6  # one outlier does not move a median
+    edges, med = window_medians(NeesSeries(t, v, 3), 120.0)
+    np.testing.assert_allclose(edges - T0_S, [0.0, 120.0, 240.0, 360.0])
+    np.testing.assert_allclose(med, [1.0, 5.0, 5.0])
+    # chi2.ppf(1 - 0.01 / (2 * 3), 3) and chi2.ppf(1 - 0.01 / 2, 2)
+    assert window_median_gate(3, 3, 0.01) == pytest.approx(15.1831, abs=1e-4)
+    assert window_median_gate(2, 1, 0.01) == pytest.approx(10.5966, abs=1e-4)
+    with pytest.raises(ValueError):
+        window_median_gate(3, 0, 0.01)
 
 
 def test_chi2_bands_match_the_tables():

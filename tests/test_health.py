@@ -137,6 +137,69 @@ def test_landmarks_created_instead_of_reobserved_are_flagged() -> None:
     assert report.issues[0].t0_s >= T0 + 960.0
 
 
+def _truth_of(tr: Trajectory, rng: np.random.Generator, rho: float = 0.99) -> Trajectory:
+    """A truth that the estimate ``tr`` is off by a slowly drifting error (AR(1) with ``rho`` per
+    sample) whose marginal is N(0, P_k) at each sample: a consistent estimate."""
+    assert tr.covs is not None
+    w = rng.normal(size=(tr.t_s.size, 3))
+    z = np.empty_like(w)
+    z[0] = w[0]
+    for k in range(1, z.shape[0]):
+        z[k] = rho * z[k - 1] + np.sqrt(1.0 - rho**2) * w[k]
+    e = np.einsum("kij,kj->ki", np.linalg.cholesky(tr.covs), z)
+    return Trajectory(tr.t_s, tr.poses_wTb - e)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_consistent_nees_against_the_truth_raises_nothing(seed: int) -> None:
+    rng = np.random.default_rng(100 + seed)
+    inputs = _inputs(rng)
+    report = assess(replace(inputs, truth=_truth_of(inputs.trajectory, rng)))
+    assert report.ok, report.line()
+    assert report.metrics()["health_nees_windows"] == 10
+
+
+def test_a_covariance_ten_times_too_small_trips_the_nees_check() -> None:
+    rng = np.random.default_rng(8)
+    inputs = _inputs(rng)
+    tr = inputs.trajectory
+    truth = _truth_of(tr, rng)
+    assert tr.covs is not None
+    covs = tr.covs.copy()
+    covs[tr.t_s >= T0 + 600.0] /= 10.0  # overconfident from 600 s on
+    report = assess(replace(inputs, trajectory=Trajectory(tr.t_s, tr.poses_wTb, covs), truth=truth))
+    assert {i.check for i in report.issues} == {"nees"}, report.line()
+    # only the windows after 600 s, most of them (a 10x NEES median is 23.7, the limit 17.7)
+    assert all(i.t0_s >= T0 + 600.0 - 1e-6 for i in report.issues)
+    covered = sum(i.t1_s - i.t0_s for i in report.issues)
+    assert covered >= 0.6 * 600.0, covered
+    assert all("median NEES" in i.cause and "against the truth" in i.cause for i in report.issues)
+    m = report.metrics()
+    assert m["health_nees_flagged"] == len(report.issues) and m["health_flagged"] == ["nees"]
+
+
+def test_the_nees_check_holds_its_level_on_fully_correlated_windows() -> None:
+    """The worst case for a window: one error held over all of its samples (the median is one
+    chi2(3) draw). The check still raises at most ``false_alarm`` of consistent runs (here about
+    half of it: Markov's factor 2 is the price of assuming nothing about the correlation)."""
+    rng = np.random.default_rng(9)
+    cfg = HealthConfig(false_alarm=0.2)
+    tr = _trajectory(rng)
+    assert tr.covs is not None
+    chol = np.linalg.cholesky(tr.covs)
+    window = ((tr.t_s - T0) // cfg.window_s).astype(int)
+    # the NEES check alone: no NIS, no dead reckoning, no AHRS
+    base = HealthInputs(tr, None, np.zeros(0), np.zeros(0), 0.0, 0.0)
+    trials, raised = 400, 0
+    for _ in range(trials):
+        z = rng.normal(size=(window.max() + 1, 3))[window]
+        truth = Trajectory(tr.t_s, tr.poses_wTb - np.einsum("kij,kj->ki", chol, z))
+        report = assess(replace(base, trajectory=tr, truth=truth), cfg)
+        raised += "nees" in report.checks_flagged()
+    rate = raised / trials
+    assert 0.03 <= rate <= cfg.false_alarm + 3.0 * np.sqrt(0.2 * 0.8 / trials), rate
+
+
 def test_the_median_bound_holds_its_level() -> None:
     """Distribution-free: the lower bound exceeds the true median in at most alpha of the
     windows (chi2(2) samples, 2,000 windows of 30)."""
@@ -204,6 +267,29 @@ def test_clean_simulated_runs_are_healthy(gyro_harbour, backend):
     m = _quiet_run(gyro_harbour["clean"], backend)
     assert m["health_ok"], m["health_first_issue"]
     assert m["health_nis_line_windows"] >= 1 and m["health_departure_windows"] >= 2
+    assert m["health_nees_windows"] >= 2 and m["health_nees_flagged"] == 0
+
+
+@pytest.mark.parametrize("backend", ["ekf", "isam2"])
+def test_an_overconfident_ahrs_bias_prior_is_flagged_by_the_nees_alone(gyro_harbour, backend):
+    """The simulated AHRS reads 2 deg off; told its bias is 0 +- 0.05 deg, either back end
+    follows it with a heading variance 1,600 times too small. Nothing GPS-free sees it (the
+    estimate agrees with the AHRS and with dead reckoning); the NEES against the truth does,
+    and the run warns."""
+    import warnings
+
+    from sonarslam.datasets.errors import DataWarning
+    from sonarslam.slam.run.run import run_backend
+
+    ds = gyro_harbour["clean"]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        m = run_backend(ds, backend, {f"{backend}.ahrs_bias_sigma_deg": 0.05}).metrics
+    assert m["health_flagged"] == ["nees"], m["health_first_issue"]
+    assert m["health_ok"] is False and m["health_nees_flagged"] >= 1
+    assert "median NEES" in m["health_first_issue"] and "(nees)" in m["health_line"]
+    said = [str(w.message) for w in caught if issubclass(w.category, DataWarning)]
+    assert any(w.startswith("health: nees at 0-") for w in said), said
 
 
 def test_an_unmodelled_gyro_bias_with_a_walking_ahrs_bias_trips_the_monitor(gyro_harbour):

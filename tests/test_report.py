@@ -136,7 +136,9 @@ def test_report_table_holds_each_runs_numbers(runs, tmp_path):
         if prov["git_commit"] is not None:
             assert prov["git_commit"][:12] in cells[2]
     names = sorted(p.name for p in res.figures)
-    assert names == [
+    assert names == [  # each run's own consistency.png (dr's written before its covariances went)
+        "consistency_h5-dr.png",
+        "consistency_h5-ekf.png",
         "errors_h5-dr.png",
         "errors_h5-ekf.png",
         "map_h5-ekf.png",

@@ -6,6 +6,11 @@
 * NIS of the innovations when a back end logs them (:func:`nis`);
 * the one-sided gate of one chi2 value (:func:`chi2_gate`), whose exceedances a consistent
   estimator has with the gate's complement probability;
+* windows of one run (:func:`window_medians`) and the gate of their medians that holds its
+  level whatever the correlation of a window's samples (:func:`window_median_gate`), which the
+  health monitor and the run's ``consistency.png`` share;
+* the position NEES against GPS fixes with GPS's own sigma added (:func:`gps_position_nees`),
+  for real data;
 * ANEES over N Monte Carlo runs: at each time the mean of the N NEES, whose two-sided 95 %
   band is ``chi2.ppf([0.025, 0.975], N dof) / N`` (Bar-Shalom, Li, Kirubarajan 2001, 5.4.2).
 
@@ -40,6 +45,9 @@ __all__ = [
     "mean_nees_band",
     "nees_on_grid",
     "anees",
+    "window_medians",
+    "window_median_gate",
+    "gps_position_nees",
 ]
 
 #: Probability of the two-sided consistency bands.
@@ -278,3 +286,60 @@ def anees(
         lo[n == m], hi[n == m] = mean_nees_band(int(m), dof, probability)
     grid = np.arange(X.shape[1], dtype=np.float64) if t_rel_s is None else np.asarray(t_rel_s)
     return AneesResult(grid, mean, n, dof, lo, hi, probability)
+
+
+def window_medians(series: NeesSeries, window_s: float) -> tuple[FloatArray, FloatArray]:
+    """Medians of a series in consecutive windows of ``window_s`` from its first time.
+
+    Returns
+    -------
+    edges_s : ndarray, shape (W + 1,)
+        Window edges (Unix s).
+    medians : ndarray, shape (W,)
+        Median of each window's values; NaN for a window without values.
+    """
+    t, v = series.t_s, series.nees
+    if t.size == 0:
+        return np.zeros(1), np.zeros(0)
+    n = max(int(np.ceil((t[-1] - t[0]) / window_s)), 1)
+    edges = t[0] + window_s * np.arange(n + 1, dtype=np.float64)
+    which = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, n - 1)
+    medians = np.full(n, np.nan)
+    for w in np.unique(which):
+        medians[w] = float(np.median(v[which == w]))
+    return edges, medians
+
+
+def window_median_gate(dof: int, n_windows: int, false_alarm: float) -> float:
+    """The gate of ``n_windows`` window medians of chi2(``dof``) values that a consistent run
+    exceeds anywhere with probability at most ``false_alarm``, whatever the correlation of the
+    values inside a window: ``chi2.ppf(1 - false_alarm / (2 W), dof)``. A median beyond ``c``
+    needs half of the window's values beyond it, whose probability is at most twice that of one
+    value (Markov's inequality on their count); Bonferroni over the windows."""
+    if n_windows < 1:
+        raise ValueError(f"need n_windows >= 1, got {n_windows}")
+    return chi2_gate(dof, 1.0 - false_alarm / (2.0 * n_windows))
+
+
+def gps_position_nees(
+    estimate: Trajectory, gps_t_s: npt.ArrayLike, gps_en_m: npt.ArrayLike, gps_sigma_m: float
+) -> NeesSeries:
+    """Position NEES (2 dof) of an estimate at the GPS fixes inside its span, with the
+    estimate's position covariance (its last sample at or before the fix) plus GPS's own
+    ``gps_sigma_m**2 I``: ``d^T (P_xy + sigma^2 I)^-1 d``, ``d`` the estimate minus the fix.
+
+    Position only: a GPS fix has no heading (the heading beside it in ``gps.tum`` is the
+    AHRS's, which the estimators are given). Fix errors are not independent in time (GPS
+    drifts), so judge it in windows (:func:`window_medians`, :func:`window_median_gate`).
+    """
+    if estimate.covs is None:
+        raise ValueError("NEES needs the trajectory covariances (trajectory_cov.npz)")
+    t = np.asarray(gps_t_s, dtype=np.float64)
+    en = np.asarray(gps_en_m, dtype=np.float64)
+    lo, hi = estimate.span_s
+    inside = (t >= lo) & (t <= hi)
+    t, en = t[inside], en[inside]
+    d = estimate.poses(t)[:, :2] - en
+    j = np.clip(np.searchsorted(estimate.t_s, t, side="right") - 1, 0, estimate.t_s.size - 1)
+    S = np.asarray(estimate.covs)[j, :2, :2] + gps_sigma_m**2 * np.eye(2)
+    return NeesSeries(t, nees(d, S), 2)

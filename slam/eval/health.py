@@ -12,6 +12,15 @@ innovations of a consistent filter are white with the covariance it predicts):
     NIS is beyond ``nis_scale_max`` times the chi2 median (the innovations are that many times their predicted variance). A
     median with a bound, not a mean: the association gate truncates the line NIS, and one
     outlier must not flag a window.
+``nees``
+    Simulated runs only (the simulator's truth, never GPS): the pose NEES of the estimate's own
+    samples (:func:`sonarslam.slam.eval.consistency.nees_series`, chi2(3) when consistent) in
+    windows of ``window_s``; a window is flagged when its median NEES is beyond
+    ``chi2.ppf(1 - false_alarm / (2 W), 3)`` over ``W`` windows. The samples of a window are
+    strongly correlated (one error drifts slowly), so no independence is assumed: a median beyond
+    ``c`` needs half the samples beyond it, whose chance is at most twice that of one sample
+    (Markov's inequality on their count), hence the 2. Overconfidence only: a NEES far below
+    its band (an estimate too cautious) is not an inconsistency that misleads a gate.
 ``departure``
     The estimate against dead reckoning (the same sensors without the corrections): the
     squared Mahalanobis distance of their positions with the *sum* of the two covariances
@@ -48,6 +57,7 @@ from scipy.stats import binom, chi2
 from sonarslam.datasets.errors import DataWarning
 from sonarslam.features.geometry import FloatArray, wrap_angle
 from sonarslam.settings import bounded, check_fields
+from sonarslam.slam.eval.consistency import nees_series, window_median_gate
 from sonarslam.slam.io.trajectory import Trajectory
 
 __all__ = [
@@ -143,6 +153,8 @@ class HealthInputs:
     reobserved_s : ndarray, shape (A,)
         When a line was associated with an existing landmark (Unix s).
     states : list of StateValue
+    truth : Trajectory or None
+        The simulator's true poses (simulated runs only): the ``nees`` check.
     """
 
     trajectory: Trajectory
@@ -155,6 +167,7 @@ class HealthInputs:
     landmark_created_s: FloatArray = field(default_factory=lambda: np.zeros(0))
     reobserved_s: FloatArray = field(default_factory=lambda: np.zeros(0))
     states: Sequence[StateValue] = ()
+    truth: Trajectory | None = None
 
 
 @dataclass(frozen=True)
@@ -290,6 +303,40 @@ def _check_nis(stream: NisStream, cfg: HealthConfig) -> tuple[list[HealthIssue],
             )
         )
     return issues, len(groups)
+
+
+def _check_nees(
+    trajectory: Trajectory, truth: Trajectory, cfg: HealthConfig
+) -> tuple[list[HealthIssue], int]:
+    """Windows whose median pose NEES against the truth is beyond the Bonferroni-corrected
+    chi2(3) gate, doubled for correlated samples (module docstring)."""
+    series = nees_series(trajectory, truth, "pose")
+    t, values = series.t_s, series.nees
+    ok = np.isfinite(values)
+    t, values = t[ok], values[ok]
+    if t.size < cfg.min_updates:
+        return [], 0
+    edges = _windows(float(t[0]), float(t[-1]), cfg.window_s)
+    which = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, edges.size - 2)
+    present = np.unique(which)
+    gate = window_median_gate(series.dof, int(present.size), cfg.false_alarm)
+    medians = np.full(edges.size - 1, -np.inf)
+    for w in present:
+        medians[w] = float(np.median(values[which == w]))
+    issues = []
+    for a, b, g in _spans(edges, medians > gate):
+        worst = g[int(np.argmax(medians[g]))]
+        issues.append(
+            HealthIssue(
+                "nees",
+                f"the pose error is beyond its covariance: median NEES {medians[worst]:.1f}"
+                f" against the truth over {cfg.window_s:g} s (chi2({series.dof}) median"
+                f" {chi2.ppf(0.5, series.dof):.2f}; limit {gate:.1f})",
+                max(a, float(t[0])),
+                min(b, float(t[-1])),
+            )
+        )
+    return issues, int(present.size)
 
 
 def _check_departure(
@@ -446,6 +493,9 @@ def assess(inputs: HealthInputs, config: HealthConfig | None = None) -> HealthRe
         found, n = _check_nis(stream, cfg)
         issues += found
         judged[f"nis_{stream.kind}"] = n
+    if inputs.truth is not None and inputs.trajectory.covs is not None:
+        found, judged["nees"] = _check_nees(inputs.trajectory, inputs.truth, cfg)
+        issues += found
     if inputs.reference is not None and inputs.trajectory.covs is not None:
         if inputs.reference.covs is not None:
             found, judged["departure"] = _check_departure(inputs.trajectory, inputs.reference, cfg)

@@ -6,7 +6,8 @@ layer's innovations and associations (:class:`sonarslam.slam.mapping.landmarks.L
 final constants of :meth:`sonarslam.slam.backends.base.Backend.metrics` (``state_*``), and the logs a
 back end keeps beyond those when it has them: ``heading_innovations`` (the EKF's AHRS updates)
 and the scan constraints' pairs (iSAM2 with ``scans``). Dead reckoning from the same sensors
-is the reference the estimate must stay near. Nothing here reads GPS or the truth.
+is the reference the estimate must stay near. Nothing here reads GPS; the simulator's truth,
+on simulated data only, feeds the ``nees`` check.
 """
 
 from __future__ import annotations
@@ -24,11 +25,12 @@ from sonarslam.slam.eval.health import (
     StateValue,
     assess,
 )
+from sonarslam.slam.eval.truth import truth_trajectory
 from sonarslam.slam.model.motion import body_yaw
 from sonarslam.slam.run.closed_loop import ClosedLoopResult
 from sonarslam.slam.run.sources import dead_reckoning_trajectory
 
-__all__ = ["health_inputs", "monitor_run"]
+__all__ = ["nis_streams", "health_inputs", "monitor_run"]
 
 
 def _scan_pairs(backend: Any) -> list[dict[str, Any]]:
@@ -37,12 +39,12 @@ def _scan_pairs(backend: Any) -> list[dict[str, Any]]:
     return list(getattr(log, "pairs", []))
 
 
-def health_inputs(dataset: Dataset, result: ClosedLoopResult) -> HealthInputs:
-    """What the monitor reads of a closed loop's run (module docstring)."""
+def nis_streams(result: ClosedLoopResult) -> list[NisStream]:
+    """The NIS a closed loop logged, per kind: ``line`` (the landmark layer's updates),
+    ``heading`` (the EKF's AHRS updates), ``scan`` (iSAM2's kept scan revisits)."""
     backend = result.backend
     cfg = backend.config
     lm = backend.map
-    t_end = float(result.trajectory.t_s[-1])
     gate = cfg.association.gate_probability
     streams = []
     if lm.innovations:
@@ -61,6 +63,16 @@ def health_inputs(dataset: Dataset, result: ClosedLoopResult) -> HealthInputs:
         streams.append(
             NisStream("scan", t, nis, 3, getattr(cfg, "scan_compatibility_probability", None))
         )
+    return streams
+
+
+def health_inputs(dataset: Dataset, result: ClosedLoopResult) -> HealthInputs:
+    """What the monitor reads of a closed loop's run (module docstring)."""
+    backend = result.backend
+    cfg = backend.config
+    lm = backend.map
+    t_end = float(result.trajectory.t_s[-1])
+    streams = nis_streams(result)
     created: dict[int, float] = {}
     reobserved = []
     for t_s, _, j in lm.association_log:
@@ -111,6 +123,7 @@ def health_inputs(dataset: Dataset, result: ClosedLoopResult) -> HealthInputs:
         landmark_created_s=np.array(sorted(created.values())),
         reobserved_s=np.array(reobserved),
         states=states,
+        truth=truth_trajectory(dataset) if dataset.truth is not None else None,
     )
 
 

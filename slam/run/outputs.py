@@ -5,7 +5,9 @@
   run with the AHRS heading: the ATE's reference); on simulated data ``truth.tum`` (the true
   poses inside the run); ``metrics.json``, ``config_used.toml`` (the dataset configuration
   used), ``report.png`` (the run's estimates, a factor graph's smoothed and batch ones too,
-  beside dead reckoning against the reference).
+  beside dead reckoning against the reference), ``consistency.png`` when the trajectory has
+  covariances (NEES against the truth or GPS, and a closed loop's NIS, in time with their chi2
+  bands: :mod:`sonarslam.slam.run.consistency_figure`).
   Every estimate is written at its own times and, interpolated, at the reference's times inside
   its span (:func:`sonarslam.slam.io.trajectory.with_samples_at`): ``evo_ape tum gps.tum ekf.tum`` pairs
   the same poses as ``metrics.json``'s ATE and prints its figures;
@@ -55,6 +57,8 @@ from sonarslam.slam.io.trajectory import (
     write_tum,
 )
 from sonarslam.slam.run.closed_loop import ClosedLoopResult
+from sonarslam.slam.run.consistency_figure import CONSISTENCY_FILE, write_consistency_figure
+from sonarslam.slam.run.health import nis_streams
 from sonarslam.slam.run.presets import map_min_intensity
 from sonarslam.slam.run.sources import DR_IGNORES, dead_reckoning_trajectory, gps_ahrs_trajectory
 
@@ -108,6 +112,14 @@ def write_run(
             lambda p: _report_figure(p, dataset, backend, trajectory, trajectories, metrics),
         )
     )
+    if trajectory.covs is not None:
+        streams = nis_streams(closed_loop) if closed_loop is not None else []
+        files.append(
+            write_atomic(
+                out / CONSISTENCY_FILE,
+                lambda p: write_consistency_figure(p, dataset, backend, trajectory, streams),
+            )
+        )
     return files
 
 

@@ -19,7 +19,9 @@ re-opens the run's dataset when it is still there, and writes into ``OUT``:
   3-sigma bounds of the trajectory covariances (and of the GPS noise against GPS);
 * ``nees_<run>.png``: pose and position NEES in time with their chi2 bands (simulated runs);
 * ``heading_error_<run>.png``: the AHRS heading error's track with its 2-sigma band (runs whose
-  heading error walks, ``heading_error.csv``), with the simulator's true error.
+  heading error walks, ``heading_error.csv``), with the simulator's true error;
+* ``consistency_<run>.png``: the run's own ``consistency.png`` (NEES against the truth or GPS,
+  and a closed loop's NIS: :mod:`sonarslam.slam.run.consistency_figure`), when it wrote one.
 
 Under each run's figures, its calibration estimates (``state_*`` of ``metrics.json``) with their
 sd.
@@ -29,6 +31,7 @@ from __future__ import annotations
 
 import math
 import re
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -426,6 +429,9 @@ def report(
         heading = heading_error_figure(run, lab, out / f"heading_error_{tag}.png")
         if heading is not None:
             figs.append(heading)
+        if (run.run_dir / "consistency.png").is_file():  # the NIS is in the run's files only
+            figs.append(out / f"consistency_{tag}.png")
+            shutil.copyfile(run.run_dir / "consistency.png", figs[-1])
         figures += figs
         md += [f"### {lab} on {run.dataset_name} (`{run.name}`)", ""]
         md += [f"- {note}" for note in run.notes] + ([""] if run.notes else [])
