@@ -114,12 +114,17 @@ def main() -> int:
             "isam2, gyro bias + walk": (_monitored, bad, "isam2", {}),
             "ekf, lines 100x overconfident": (_run, ds, "ekf", {"ekf.line_cov_scale": 0.01}),
             "isam2, lines 100x overconfident": (_run, ds, "isam2", {"isam2.line_cov_scale": 0.01}),
-            "ekf, AHRS bias prior 0.05 deg": (_run, ds, "ekf", {"ekf.ahrs_bias_sigma_deg": 0.05}),
+            "ekf, AHRS bias prior 0.05 deg": (
+                _run,
+                ds,
+                "ekf",
+                {"ekf.noise.ahrs_bias_sigma_deg": 0.05},
+            ),
             "isam2, AHRS bias prior 0.05 deg": (
                 _run,
                 ds,
                 "isam2",
-                {"isam2.ahrs_bias_sigma_deg": 0.05},
+                {"isam2.noise.ahrs_bias_sigma_deg": 0.05},
             ),
         }
         for name, (call, data, backend, settings) in faults.items():

@@ -284,7 +284,7 @@ def test_an_overconfident_ahrs_bias_prior_is_flagged_by_the_nees_alone(gyro_harb
     ds = gyro_harbour["clean"]
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        m = run_backend(ds, backend, {f"{backend}.ahrs_bias_sigma_deg": 0.05}).metrics
+        m = run_backend(ds, backend, {f"{backend}.noise.ahrs_bias_sigma_deg": 0.05}).metrics
     assert m["health_flagged"] == ["nees"], m["health_first_issue"]
     assert m["health_ok"] is False and m["health_nees_flagged"] >= 1
     assert "median NEES" in m["health_first_issue"] and "(nees)" in m["health_line"]
