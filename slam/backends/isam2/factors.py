@@ -153,29 +153,18 @@ def calibrated_line_factor(
     z_m = np.asarray(z, dtype=np.float64).copy()
     kTb_m = np.asarray(kTb, dtype=np.float64).copy()
     bTs_m = np.asarray(bTs, dtype=np.float64).copy()
-    keys = [pose_key, line_key]
-    i_mount = i_scale = None
-    if mount_key is not None:
-        keys.append(mount_key)
-        i_mount = len(keys) - 1
-    if scale_key is not None:
-        keys.append(scale_key)
-        i_scale = len(keys) - 1
+    keys, i_mount, i_scale = _with_calibration([pose_key, line_key], mount_key, scale_key)
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> FloatArray:
         k = this.keys()
-        mount = bTs_m if i_mount is None else np.asarray(values.atVector(k[i_mount]))
-        scale = 1.0 if i_scale is None else float(values.atVector(k[i_scale])[0])
+        mount, scale = _calibration(values, k, i_mount, i_scale, bTs_m)
         e, H_pose, H_line, H_mount, H_scale = line_residual_calibrated(
             z_m, _pose(values, k[0]), values.atVector(k[1]), kTb_m, mount, scale
         )
         if H is not None:
             H[0] = H_pose
             H[1] = H_line
-            if i_mount is not None:
-                H[i_mount] = H_mount
-            if i_scale is not None:
-                H[i_scale] = H_scale
+            _set_calibration_jacobians(H, i_mount, i_scale, H_mount, H_scale)
         return e
 
     return gtsam.CustomFactor(noise_model(cov, robust, robust_k), keys, error)
@@ -198,29 +187,18 @@ def calibrated_scan_factor(
     :func:`sonarslam.slam.model.calibration.scan_residual`, ``cov`` in ``z``'s local tangent."""
     z_m = np.asarray(z, dtype=np.float64).copy()
     a = np.asarray(bTs_assumed, dtype=np.float64).copy()
-    keys = [key_i, key_j]
-    i_mount = i_scale = None
-    if mount_key is not None:
-        keys.append(mount_key)
-        i_mount = len(keys) - 1
-    if scale_key is not None:
-        keys.append(scale_key)
-        i_scale = len(keys) - 1
+    keys, i_mount, i_scale = _with_calibration([key_i, key_j], mount_key, scale_key)
 
     def error(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> FloatArray:
         k = this.keys()
-        mount = a if i_mount is None else np.asarray(values.atVector(k[i_mount]))
-        scale = 1.0 if i_scale is None else float(values.atVector(k[i_scale])[0])
+        mount, scale = _calibration(values, k, i_mount, i_scale, a)
         e, H_i, H_j, H_mount, H_scale = scan_residual(
             z_m, _pose(values, k[0]), _pose(values, k[1]), mount, scale, a
         )
         if H is not None:
             H[0] = H_i
             H[1] = H_j
-            if i_mount is not None:
-                H[i_mount] = H_mount
-            if i_scale is not None:
-                H[i_scale] = H_scale
+            _set_calibration_jacobians(H, i_mount, i_scale, H_mount, H_scale)
         return e
 
     return gtsam.CustomFactor(noise_model(cov, robust, robust_k), keys, error)
@@ -457,3 +435,38 @@ def odometry_factor(
         return e
 
     return gtsam.CustomFactor(noise_model(cov), keys, error)
+
+
+def _with_calibration(
+    keys: list[int], mount_key: int | None, scale_key: int | None
+) -> tuple[list[int], int | None, int | None]:
+    """``keys`` with the mounting's and the range scale's keys appended where they are
+    variables, and the positions of the two (None: a constant)."""
+    i_mount = i_scale = None
+    if mount_key is not None:
+        keys.append(mount_key)
+        i_mount = len(keys) - 1
+    if scale_key is not None:
+        keys.append(scale_key)
+        i_scale = len(keys) - 1
+    return keys, i_mount, i_scale
+
+
+def _calibration(
+    values: gtsam.Values, k: Any, i_mount: int | None, i_scale: int | None, bTs: FloatArray
+) -> tuple[FloatArray, float]:
+    """The mounting ``(x_m, y_m, yaw_rad)`` and the range scale at ``values`` (the constant
+    ``bTs`` and 1 where they are not variables)."""
+    mount = bTs if i_mount is None else np.asarray(values.atVector(k[i_mount]))
+    scale = 1.0 if i_scale is None else float(values.atVector(k[i_scale])[0])
+    return mount, scale
+
+
+def _set_calibration_jacobians(
+    H: Any, i_mount: int | None, i_scale: int | None, H_mount: FloatArray, H_scale: FloatArray
+) -> None:
+    """The error's Jacobians in the mounting and the range scale, where they are variables."""
+    if i_mount is not None:
+        H[i_mount] = H_mount
+    if i_scale is not None:
+        H[i_scale] = H_scale
