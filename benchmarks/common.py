@@ -9,6 +9,7 @@ import os
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
+import json  # noqa: E402
 import tempfile  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -36,3 +37,13 @@ def open_run(source: str) -> tuple[str, Dataset]:
     out = Path(tempfile.mkdtemp(prefix="benchmark_"))
     label = "simulated harbour seed 1, 600 s: the marina was not found under $SONARSLAM_DATA"
     return label, open_dataset(simulate("harbour", 1, out))
+
+
+def write_result(result: dict[str, object], out: Path | None) -> None:
+    """A benchmark's result as indented JSON to ``out`` (its folder made), said on stdout; nothing
+    when ``out`` is None."""
+    if out is None:
+        return
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(result, indent=1) + "\n")
+    print(f"written {out}")

@@ -26,6 +26,7 @@ the floor is optimistic by what the ruler's error over a pair moves the estimate
 from __future__ import annotations
 
 import common  # noqa: F401  # first: one BLAS thread  # isort: skip
+from common import write_result  # isort: skip
 
 import argparse
 import json
@@ -164,10 +165,7 @@ def main(argv: list[str] | None = None) -> int:
         f"gap to the floor (sonar span mean): {g['sonar_mean_m']:+.2f} m, aligned"
         f" {g['sonar_aligned_mean_m']:+.2f} m"
     )
-    if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(result, indent=1) + "\n")
-        print(f"written {args.out}")
+    write_result(result, args.out)
     return 0
 
 

@@ -31,6 +31,7 @@ GPS is the ruler only; nothing here feeds an estimator.
 from __future__ import annotations
 
 import common  # noqa: F401  # first: one BLAS thread  # isort: skip
+from common import write_result  # isort: skip
 
 import argparse
 import json
@@ -186,10 +187,7 @@ def main(argv: list[str] | None = None) -> int:
         "product_vs_reference_accepted",
     ):
         print(f"  {key:34s} {f.format(**result[key])}")
-    if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(result, indent=1) + "\n")
-        print(f"written {args.out}")
+    write_result(result, args.out)
     return 0
 
 

@@ -31,9 +31,9 @@ python benchmarks/marina_registration.py [--source marina|DIR] [--set scans.FIEL
 from __future__ import annotations
 
 import common  # noqa: F401  # first: one BLAS thread  # isort: skip
+from common import write_result  # isort: skip
 
 import argparse
-import json
 import sys
 import time
 from collections import Counter
@@ -295,10 +295,7 @@ def main(argv: list[str] | None = None) -> int:
             f" against dead reckoning: NIS median {c['nis_median']:.2f} (chi2(3): 2.37); their"
             f" covariance x{c['cov_scale']:.2f} makes it chi2(3)'s (scans.revisit_cov_scale)"
         )
-    if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(result, indent=1) + "\n")
-        print(f"written {args.out}")
+    write_result(result, args.out)
     return 0
 
 
