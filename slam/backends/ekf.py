@@ -13,7 +13,7 @@ State ``x = [x, y, psi, b, delta, k, g, rho_1, theta_1, ..., rho_L, theta_L]``:
 * ``g``: the gyro's yaw-rate bias (rad/s), a constant with prior ``gyro_bias_sigma_deg_per_s``:
   a step whose heading change integrates the gyro turns by ``dyaw - g dt``
   (:attr:`sonarslam.slam.model.motion.MotionStep.gyro_dt_s`); the AHRS headings observe it. Left
-  out, a gyro bias (docs/calibration.md gives the marina's) is taken for the AHRS bias's walk
+  out, a gyro bias (docs/design-decisions.md) is taken for the AHRS bias's walk
   when the bias walks, and the heading spins away; with the AHRS heading's own change as the rate
   (``yaw_rate_source = "heading"``) no step involves it and it stays at its prior;
 * world lines ``(rho_w, theta_w)`` (:mod:`sonarslam.features.geometry` conventions), one per active
@@ -158,8 +158,8 @@ class EkfConfig(BackendConfig):
         :meth:`LineEkf.predict_line`).
     gyro_bias_sigma_deg_per_s : float
         Prior 1-sigma of the gyro's constant yaw-rate bias ``g`` (deg/s); used only on steps
-        that integrate the gyro (``[motion] yaw_rate_source = "gyro"``). docs/calibration.md
-        says how its default was chosen.
+        that integrate the gyro (``[motion] yaw_rate_source = "gyro"``); why its default:
+        docs/design-decisions.md.
     """
 
     side_gate: bool = False

@@ -1,5 +1,5 @@
 """Observation models with the sonar's calibration as state: its mounting ``bTs`` and its range
-scale ``s`` (issue 29, item 3).
+scale ``s``.
 
 The sonar logs an echo from true range ``r`` at ``s * r`` (a sound-speed error): every point it
 sees is scaled by ``s`` about the sonar head, which leaves directions as they are. So

@@ -384,8 +384,8 @@ def gyro_bias_against_heading(
     """The gyro's yaw-rate bias measured against the AHRS heading's own change, GPS-free:
     over windows of ``window_s``, the gyro's integral minus the heading's change (unwrapped)
     per second; their median and its standard error (from the median absolute deviation),
-    rad/s. A window's heading noise enters once, not at every sample. The marina's MTi:
-    -0.66 deg/s, steady over the run. ``(0, inf)`` with fewer than 5 windows."""
+    rad/s. A window's heading noise enters once, not at every sample. ``(0, inf)`` with fewer
+    than 5 windows (docs/calibration.md gives the marina MTi's)."""
     t = attitude.t
     if t.size < 2:
         return 0.0, float("inf")

@@ -49,8 +49,8 @@ class YawSearch:
 
 
 #: A sonar calibration needs this many full turns of the head inside the navigation span: the
-#: map-sharpness search over fewer (39 beams gave 162.25 deg against the 154.75 calibrated)
-#: has almost no overlapping views of a wall to sharpen.
+#: map-sharpness search over fewer has almost no overlapping views of a wall to sharpen
+#: (docs/design-decisions.md).
 MIN_CALIBRATION_TURNS = 10
 
 
@@ -197,7 +197,7 @@ def calibrate_ahrs_yaw(dataset: Dataset, harmonics: int = 1) -> CompassFit:
     errs by ``B sin psi + C cos psi`` around the heading ``psi``, which averages to zero over
     *all headings*, not over the run's time (a run spends unequal time at each heading). So the
     constant is fitted together with ``harmonics`` harmonics of the AHRS heading, least
-    squares over every DVL row (the marina's figures: README, "Calibration").
+    squares over every DVL row (the marina's figures: docs/calibration.md).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""The files of a run directory (``sonarslam run --out DIR``; the README's table of outputs).
+"""The files of a run directory (``sonarslam run --out DIR``; docs/outputs.md's table).
 
 * ``<backend>.tum`` (``dr.tum``, ``ekf.tum``, ``isam2.tum``; ``gps_ahrs.tum`` for the ``gps``
   baseline) and its covariances ``<backend>_cov.npz``; ``gps.tum`` (the GPS fixes inside the

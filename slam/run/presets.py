@@ -73,7 +73,7 @@ _DEG = math.pi / 180.0
 #: range, 3 deg beam; beams are 0/255 masks (a third party's threshold, first 10 bins dropped),
 #: with runs of returns metres thick. The first return of each run votes and the line is
 #: the least-squares fit through those leading edges ("fit": the wall's face; the paper's
-#: overlap-ratio ellipse's centre sits inside the echo band, README "Line features on the
+#: overlap-ratio ellipse's centre sits inside the echo band, docs/results.md, "Line features on the
 #: marina"); the fit's covariance describes the echoes' own noise, the rest of a line's error is
 #: the dataset's calibrated systematic error (``[noise] line_sigma_*``, sonarslam calibrate
 #: --line-noise) added to it; a 360 deg sector gives longer segments; the odometry's uncertainty
@@ -115,8 +115,8 @@ EXTRACTOR_PRESETS: dict[str, ExtractorConfig] = {
 #: registration beyond its Hessian (``floor_sigma_m``, ``floor_sigma_deg``). ``default`` (raw
 #: beams): measured on the simulator against its truth (``benchmarks/marina_registration.py
 #: --source DIR``: NEES of revisits in their band); ``marina`` (thresholded keyframes): the
-#: scatter of consecutive registrations about dead reckoning's relative pose, GPS-free (README,
-#: "Scan matching").
+#: scatter of consecutive registrations about dead reckoning's relative pose, GPS-free
+#: (docs/scan-matching.md).
 SCAN_PRESETS: dict[str, ScanConfig] = {
     "default": ScanConfig(),
     "marina": ScanConfig(floor_sigma_m=0.5, floor_sigma_deg=1.0),
@@ -313,7 +313,7 @@ def check_combination(dataset: Dataset, backend: str) -> None:
 
     The factor graph has no gyro-bias state (the EKF has, :mod:`sonarslam.slam.backends.ekf`): with the
     gyro's rate and a walking AHRS bias, a gyro bias is taken for the walk and the heading
-    spins away (docs/calibration.md gives the marina's figures). Refused when the data
+    spins away (docs/design-decisions.md). Refused when the data
     show such a bias (:func:`sonarslam.slam.model.motion.gyro_bias_against_heading`, GPS-free); an
     unbiased gyro (the simulated drift world's) is fine.
     """

@@ -25,7 +25,7 @@ class GraphConfig(BackendConfig):
         for the whole hold (:func:`sonarslam.slam.model.noise.held_velocity_variance_step`, the EKF's
         model). ``"white"``: independent per motion step, ``(dt * sigma)**2`` each: a held
         sample's one error counted as a new one at every step, which understates the position
-        variance by about the number of steps per hold (docs/calibration.md).
+        variance by about the number of steps per hold (docs/design-decisions.md).
     node_period_s : float
         A pose node at least this often (s); votes with lines add theirs.
     min_node_gap_s : float
@@ -42,26 +42,23 @@ class GraphConfig(BackendConfig):
     estimate_sonar_mount : bool
         Estimate the sonar mounting ``bTs`` ``(x, y, yaw)``, one variable ``C(0)`` shared by every
         line and scan observation (:mod:`sonarslam.slam.model.calibration`), with the dataset's
-        mounting as the prior mean. Off by default for now: on the drawn tuning worlds (seeds
-        0-9) it recovered the mounting and range scale and lowered the mean smoothed ATE, but
-        it is not yet default (docs/calibration.md, ``benchmarks/calibration_drawn.py``).
+        mounting as the prior mean. Off by default (docs/design-decisions.md, "Sonar
+        calibration as state").
     sonar_mount_sigma_m : float
         Its prior 1-sigma in x and in y (m): a lever arm a user measures with a tape, or not at
-        all (the marina's is not surveyed; issue 29 counts +-0.2 m among what a user cannot know).
+        all.
     sonar_mount_sigma_deg : float
-        Its prior 1-sigma in yaw (deg): the marina's yaw comes from a map-entropy calibration
-        whose results move by tenths of a metre at +-0.25 deg (issue 29).
+        Its prior 1-sigma in yaw (deg): a yaw calibrated from the sonar's own map (``sonarslam
+        calibrate``) is known to a fraction of a degree.
     range_scale_sigma : float
         Prior 1-sigma of the sonar's range scale ``s`` around 1 (an echo from range ``r`` is
         logged at ``s * r``: a sound-speed error), ``R(0)``, shared as the mounting; 0: not
-        estimated (``s = 1``). The marina's consecutive scan registrations and its DVL disagree
-        on distances by 4 % (issue 29). The drawn worlds' choice is 0.04 (off by default, as the
-        mounting).
+        estimated (``s = 1``, the default; docs/design-decisions.md gives the sizes these
+        priors are chosen for).
     scan_calibration : bool
         The scan constraints take the mounting and range scale too
-        (``ScanRegistrationCalibrated``); False: they stay ``BetweenFactorPose2`` on the body
-        nodes. Off by default: on drawn tuning worlds with ``lines,scans`` it did not help
-        (docs/calibration.md).
+        (``ScanRegistrationCalibrated``); False (the default): they stay ``BetweenFactorPose2``
+        on the body nodes.
     robust : {None, "huber", "cauchy"}
         As :class:`sonarslam.slam.backends.base.BackendConfig`; Huber by default here (heavy-tailed line
         errors on thick echo bands).
