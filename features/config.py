@@ -114,7 +114,7 @@ class ExtractorConfig:
         it are removed with its voters, *at any incidence* (from every beam that faces it). A wall
         also returns echoes beyond ``beta``; the sonar model cannot give them to the wall's
         line, so left in the store they vote for spurious lines a few degrees off the wall
-        (docs/calibration.md gives the simulator's figures). Not in the paper (it removes the
+        (docs/design-decisions.md). Not in the paper (it removes the
         voters only); 0 disables.
     """
 

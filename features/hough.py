@@ -43,7 +43,8 @@ Two ways to cast the votes (both vectorised over all bins, no Python loop per bi
   eq. 3 allows for them (``|theta - theta_h| <= beta``) is computed in closed form (at the ends and the
   middle of the cell's normals; ``cos`` is monotone away from 0), and every rho cell it meets gets
   one vote. The ``(bin, cell)`` pairs are distinct by construction, so no deduplication is needed;
-  no gaps open in rho at long range (as a fixed ``h`` does); and it is several times faster.
+  no gaps open in rho at long range (as a fixed ``h`` does); and its work grows with the cells a
+  bin meets, not with ``h * p`` samples.
   Its votes are those of ``"samples"`` with dense ``h`` and ``p`` (checked in ``tests/test_hough.py``).
 
 Compiled kernel

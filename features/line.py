@@ -57,7 +57,7 @@ class LineFeature:
         return transform_points(self.wTr, self.endpoints_r)
 
     def to_json(self) -> dict[str, Any]:
-        """One ``lines.jsonl`` object (see README)."""
+        """One ``lines.jsonl`` object (docs/outputs.md)."""
         return {
             "t": float(self.t),
             "x": float(self.wTr[0]),

@@ -56,7 +56,7 @@ echo by ``c`` along its bearing, its residual by ``a_i c`` with ``a_i = cos(thet
 sqrt(12)`` (the wall is known to be somewhere in its bin, uniformly): the peak bin of a raw echo
 lies a fraction of a bin beyond the wall, which does not average down with the number of
 voters. ``benchmarks/extractor_consistency.py`` measures the NEES with and without the term
-(README, "Results on the simulator").
+(docs/simulator.md).
 
 Optionally the pose uncertainty is added: the relative pose of each beam with respect to R is
 taken as a random walk backwards from R, ``Cov(d_k, d_l) = Q(t_max(k, l))`` with

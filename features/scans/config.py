@@ -65,13 +65,14 @@ class ScanConfig:
     floor_sigma_m, floor_sigma_deg : float
         A systematic error added in the constrained directions, per axis (m) and in yaw (deg):
         what the scans' own noise does not explain (the same wall's echo band seen from
-        elsewhere, the motion correction). The README says how it was measured (GPS-free).
+        elsewhere, the motion correction). docs/scan-matching.md says how it was chosen
+        (GPS-free).
     revisit_cov_scale : float
         Factor on a revisit registration's covariance (submap to submap, from another pass):
         the same walls seen from elsewhere, at other ranges and incidences, whose echo bands'
         leading edges move with the view, which a floor measured on consecutive scans does not
-        hold. The README says how the marina's was measured (GPS-free: short revisits against
-        dead reckoning).
+        hold. docs/scan-matching.md says how the marina's was chosen (GPS-free: short revisits
+        against dead reckoning).
     starts_sigma : float
         With the guess's covariance given (:meth:`sonarslam.features.scans.matcher.ScanMatcher.register`
         for revisits), ICP also starts from the guess moved by this many sigmas either way
