@@ -69,7 +69,7 @@ a wrong one is a ``DataError`` naming the file and the key. Keys a file leaves o
 neutral defaults of :class:`DatasetConfig` (no clock offset,
 identity mountings); the simulator writes every key. Without a file, a dataset gets the marina's
 calibration (see ``MARINA_CONFIG`` and the
-README's "Calibration" section for how each number was found and whether GPS was used).
+docs/calibration.md for how each number was found and whether GPS was used).
 """
 
 from __future__ import annotations
@@ -230,8 +230,8 @@ class GateConfig:
 
 #: What turns the estimators' heading between AHRS samples (``[motion] yaw_rate_source``):
 #: ``"gyro"``, the logged yaw rate; ``"heading"``, the change of the AHRS heading since its
-#: previous sample (causal). A gyro bias the estimators do not model (the marina's MTi, README
-#: "Calibration") runs the closed-loop heading off the compass between heading updates.
+#: previous sample (causal). A gyro bias the estimators do not model (the marina's MTi,
+#: docs/calibration.md) runs the closed-loop heading off the compass between heading updates.
 YAW_RATE_SOURCES = ("gyro", "heading")
 #: Largest clock offset of the sonar (s): a day.
 MAX_TIME_OFFSET_S = 86400.0
@@ -265,7 +265,7 @@ class DatasetConfig:
             )
 
 
-#: The abandoned marina (Ribas et al. 2008). How each mounting was calibrated is in README.md.
+#: The abandoned marina (Ribas et al. 2008). How each mounting was calibrated is in docs/calibration.md.
 MARINA_CONFIG = DatasetConfig(
     sonar=SonarHead(
         n_bins=500,
@@ -291,7 +291,7 @@ MARINA_CONFIG = DatasetConfig(
     # dvl_sigma_mps is the drift-causing part of the DVL's error (most of its scatter is the
     # vehicle's wobble); the nominal scatter is its usual level, the excess over it is added
     # (slam.model.noise.dvl_sample_sigma; sonarslam info prints the quantiles; GPS-free; the
-    # figures are in README.md, "Calibration").
+    # figures are in docs/calibration.md).
     noise=NoiseConfig(
         dvl_sigma_mps=0.05,
         ahrs_sigma_deg=2.0,

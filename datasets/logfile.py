@@ -23,7 +23,7 @@ Every reader of a text file goes through here (the logs, the keyframe CSV and PC
   or digits of a whole number) of the same columns in every complete row, or when that column is
   not used; otherwise it is skipped as cut, with the warning below.
 
-The policy for bad input, shared by every reader (README, "Bad input"):
+The policy for bad input, shared by every reader (docs/bad-input.md):
 
 =========================================  ============================================
 input                                      result

@@ -15,7 +15,7 @@ bias drawn per seed too). ``harbour`` and ``drift`` are fixed layouts (only the 
 change with the seed): regression tests and figures; ``drawn`` is the one whose worlds differ.
 
 Seeds from :data:`HELD_BACK_SEED_MIN` on are held back: nothing is tuned on them, and the
-README's headline figures on the simulator come from them.
+figures on the simulator that count (docs/simulator.md) come from them.
 """
 
 from __future__ import annotations
@@ -125,21 +125,18 @@ DRIFT_HEADING_WALK_DEG_PER_SQRT_S = 0.15
 #: Drift world: the echo peaks this far behind the wall face (m).
 DRIFT_ECHO_RANGE_OFFSET_M = 0.25
 
-# Drawn worlds' calibration errors (issue 29): the marina's measured disagreements, so that the
-# estimators' defaults chosen on drawn worlds transfer to it.
+# Drawn worlds' calibration errors, none of them told to the estimators: sized as the marina's
+# own disagreements (docs/design-decisions.md, "The drawn worlds' calibration errors"), so that
+# defaults chosen on drawn worlds transfer to it.
 
 #: Drawn worlds: the sonar's range-scale error ``|s - 1|``, uniform in this range with a random
-#: sign: the marina's consecutive scan registrations and the DVL disagree on distances by 4 %.
+#: sign.
 DRAWN_RANGE_SCALE_ERROR = (0.01, 0.04)
 #: Drawn worlds: the true sonar mounting is ``sonarslam.toml``'s plus offsets uniform in
-#: +- these (x and y m, yaw deg), unknown to the estimators: the marina's lever arm is not
-#: surveyed (``x = y = 0`` in its calibration; a user cannot know it to better than +-0.2 m)
-#: and its entropy-calibrated yaw moves the results by tenths of a metre at +-0.25 deg.
+#: +- these (x and y m, yaw deg), unknown to the estimators.
 DRAWN_MOUNT_OFFSET_MAX = (0.2, 0.2, 0.5)
 #: Drawn worlds: RMS of the place-dependent AHRS heading disturbance (deg) and its wavelength
-#: (m), on top of the walk: rigid fits of the marina's dead reckoning onto GPS over 200 s
-#: windows rotate by -4 deg to +2 deg over the run (a 6 deg span in a ~150 m harbour; walk
-#: and place field together).
+#: (m), on top of the walk.
 DRAWN_HEADING_FIELD_DEG = 2.0
 DRAWN_HEADING_FIELD_WAVELENGTH_M = 80.0
 

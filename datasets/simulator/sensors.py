@@ -87,7 +87,7 @@ class SensorNoise:
     dvl_degraded_from_s : float or None
         From this many seconds after the start, the DVL's white noise is
         ``dvl_degraded_sigma_mps`` instead (as the marina's DVL degrades at the end of its run:
-        README); None: never.
+        docs/results.md); None: never.
     dvl_degraded_sigma_mps : float
         The DVL's white noise once degraded (m/s).
     """
