@@ -217,6 +217,155 @@ def docstring_share(root: Path = ROOT) -> tuple[int, int, int]:
     return doc, comment, total
 
 
+# -- the public API's numpydoc ------------------------------------------------------------------
+
+#: numpydoc's section names.
+SECTIONS = (
+    "Parameters",
+    "Other Parameters",
+    "Attributes",
+    "Methods",
+    "Returns",
+    "Yields",
+    "Receives",
+    "Raises",
+    "Warns",
+    "Warnings",
+    "See Also",
+    "Notes",
+    "References",
+    "Examples",
+)
+_HEADER = re.compile(r"^([A-Z][\w ]*)\n(-+)[ \t]*$", re.MULTILINE)
+
+
+def _sections(doc: str) -> tuple[dict[str, str], list[str]]:
+    """A cleaned docstring's sections by name, and what is malformed in their headers."""
+    heads = list(_HEADER.finditer(doc))
+    out, problems = {}, []
+    for i, m in enumerate(heads):
+        name, rule = m.group(1), m.group(2)
+        if name not in SECTIONS:
+            problems.append(f"unknown section {name!r}")
+        if len(rule) != len(name):
+            problems.append(f"the underline of {name!r} is {len(rule)} long, not {len(name)}")
+        out[name] = doc[m.end() : heads[i + 1].start() if i + 1 < len(heads) else len(doc)]
+    return out, problems
+
+
+def _entries(body: str) -> list[str]:
+    """The names a Parameters or Attributes section documents (``a, b : type`` gives both)."""
+    names = []
+    for line in body.splitlines():
+        if line.strip() and not line[0].isspace():
+            names += [n.strip() for n in line.split(" : ")[0].split(",") if n.strip()]
+    return names
+
+
+def _signature(node: ast.FunctionDef | ast.AsyncFunctionDef) -> list[str]:
+    a = node.args
+    names = [x.arg for x in [*a.posonlyargs, *a.args, *a.kwonlyargs]]
+    names += [f"*{a.vararg.arg}"] if a.vararg else []
+    names += [f"**{a.kwarg.arg}"] if a.kwarg else []
+    return [n for n in names if n not in ("self", "cls")]
+
+
+def _check_callable(label: str, params: list[str], doc: str) -> list[str]:
+    """A Parameters section lists exactly ``params``; without one, each is named in the text."""
+    sections, problems = _sections(doc)
+    problems = [f"{label}: {p}" for p in problems]
+    if "Parameters" in sections:
+        documented = {n.lstrip("*") for n in _entries(sections["Parameters"])}
+        wanted = {p.lstrip("*") for p in params}
+        if wanted - documented:
+            problems.append(f"{label}: Parameters lacks {sorted(wanted - documented)}")
+        if documented - wanted:
+            problems.append(
+                f"{label}: Parameters names {sorted(documented - wanted)}, not in the signature"
+            )
+    else:
+        unnamed = [p for p in params if p.lstrip("*") not in doc]
+        if unnamed:
+            problems.append(f"{label}: {unnamed} not described (no Parameters section)")
+    return problems
+
+
+def _definition(module: str, name: str, root: Path) -> tuple[ast.AST, Path]:
+    """The ``def`` or ``class`` of ``name`` in ``module`` (``sonarslam.x.y``), following one
+    package's ``from .. import name``."""
+    rel = Path(*module.split(".")[1:])
+    path = root / rel / "__init__.py" if (root / rel).is_dir() else root / rel.with_suffix(".py")
+    tree = ast.parse(path.read_text())
+    for node in tree.body:
+        if isinstance(node, ast.ClassDef | ast.FunctionDef) and node.name == name:
+            return node, path
+    for node in tree.body:
+        if (
+            isinstance(node, ast.ImportFrom)
+            and node.module
+            and name in [a.name for a in node.names]
+        ):
+            return _definition(node.module, name, root)
+    raise LookupError(f"{name} is not defined in {path}")
+
+
+def public_api_problems(root: Path = ROOT) -> list[str]:
+    """What is malformed or missing in the numpydoc of ``sonarslam.__all__``'s names, read
+    from the source (nothing is imported): section headers, every parameter of each function,
+    of each public method and of a plain class's constructor documented, every field of a
+    dataclass in its Attributes."""
+    homes: dict[str, str] = {}
+    for node in ast.parse((root / "sonarslam" / "__init__.py").read_text()).body:
+        if isinstance(node, ast.AnnAssign) and getattr(node.target, "id", "") == "_HOMES":
+            homes = ast.literal_eval(node.value)
+    if not homes:
+        raise LookupError("sonarslam/__init__.py has no _HOMES table")
+    problems: list[str] = []
+    for name, module in sorted(homes.items()):
+        node, _ = _definition(module, name, root)
+        assert isinstance(node, ast.ClassDef | ast.FunctionDef)
+        doc = ast.get_docstring(node) or ""
+        if not doc:
+            problems.append(f"{name}: no docstring")
+            continue
+        if isinstance(node, ast.FunctionDef):
+            problems += _check_callable(name, _signature(node), doc)
+            continue
+        sections, bad = _sections(doc)
+        problems += [f"{name}: {p}" for p in bad]
+        is_dataclass = any("dataclass" in ast.unparse(d) for d in node.decorator_list)
+        is_protocol = any(ast.unparse(b) == "Protocol" for b in node.bases)
+        if is_dataclass:
+            fields = [
+                s.target.id
+                for s in node.body
+                if isinstance(s, ast.AnnAssign)
+                and isinstance(s.target, ast.Name)
+                and not s.target.id.startswith("_")
+                and "ClassVar" not in ast.unparse(s.annotation)
+            ]
+            documented = _entries(sections.get("Attributes", "")) + _entries(
+                sections.get("Parameters", "")
+            )
+            missing = [f for f in fields if f not in documented]
+            if missing:
+                problems.append(f"{name}: fields not in Attributes {missing}")
+        for item in node.body:
+            if not isinstance(item, ast.FunctionDef):
+                continue
+            if item.name == "__init__" and not is_dataclass and not is_protocol:
+                problems += _check_callable(f"{name}()", _signature(item), doc)
+            elif not item.name.startswith("_"):
+                item_doc = ast.get_docstring(item) or ""
+                if not item_doc:
+                    problems.append(f"{name}.{item.name}: no docstring")
+                    continue
+                is_property = any(ast.unparse(d).endswith("property") for d in item.decorator_list)
+                params = [] if is_property else _signature(item)
+                problems += _check_callable(f"{name}.{item.name}", params, item_doc)
+    return problems
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--review", action="store_true", help="list the review candidates too")
@@ -226,6 +375,8 @@ def main(argv: list[str] | None = None) -> int:
     review = audit(REVIEW, args.root)
     for h in strong + (review if args.review else []):
         print(f"{h.path}:{h.line}: [{h.kind}, {h.marker}] ...{h.text}...")
+    for problem in public_api_problems(args.root):
+        print(f"public API: {problem}")
     doc, comment, total = docstring_share(args.root)
     print(
         f"strong markers: {len(strong)} in {len({(h.path, h.line) for h in strong})} passages;"

@@ -97,7 +97,18 @@ class Dataset:
     def stream(
         self, t_start_s: float | None = None, t_end_s: float | None = None
     ) -> Iterator[Record]:
-        """All records merged in time order (ties: AHRS, DVL, GPS, then sonar)."""
+        """All records merged in time order (ties: AHRS, DVL, GPS, then sonar).
+
+        Parameters
+        ----------
+        t_start_s, t_end_s : float, optional
+            Keep the records with ``t_start_s <= t <= t_end_s`` (Unix s); default: all.
+
+        Yields
+        ------
+        Record
+            One sensor sample at a time, its time ``t`` never decreasing.
+        """
         lo = -float("inf") if t_start_s is None else t_start_s
         hi = float("inf") if t_end_s is None else t_end_s
 

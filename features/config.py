@@ -168,17 +168,40 @@ class ExtractorConfig:
     def from_dict(cls, values: dict[str, Any], prefix: str = "") -> ExtractorConfig:
         """Config from a mapping of field names over the defaults, each value checked like
         every other setting (:func:`sonarslam.settings.replace_checked`: type, range, known
-        name). Raises :class:`sonarslam.settings.SettingError` naming the key (``prefix``
-        before it)."""
+        name).
+
+        Parameters
+        ----------
+        values : dict of str to value
+            Field names and values; fields left out keep their defaults.
+        prefix : str
+            Put before a key in error messages (a file and table, say).
+
+        Raises
+        ------
+        sonarslam.settings.SettingError
+            Naming the key (``prefix`` before it).
+        """
         return replace_checked(cls(), values, prefix=prefix, parse_strings=False)
 
     @classmethod
     def from_toml(cls, path: str | Path, table: str | None = "extractor") -> ExtractorConfig:
-        """Load from a TOML file: the ``[extractor]`` table if present, else the top level.
+        """Load from a TOML file: the ``table`` table if present, else the top level.
 
-        Fields left out take their defaults; ``None`` fields are left out to stay None. A
-        wrong key or value is a :class:`sonarslam.settings.SettingError` naming the file and
-        the key (``sonarslam run --config`` also gives its line).
+        Fields left out take their defaults; ``None`` fields are left out to stay None.
+
+        Parameters
+        ----------
+        path : str or Path
+            A TOML file.
+        table : str or None
+            The table to read (default ``"extractor"``); None: the top level.
+
+        Raises
+        ------
+        sonarslam.settings.SettingError
+            A wrong key or value, naming the file and the key (``sonarslam run --config`` also
+            gives its line).
         """
         with open(path, "rb") as f:
             data = tomllib.load(f)
@@ -192,5 +215,7 @@ class ExtractorConfig:
         return asdict(self)
 
     def replace(self, **changes: Any) -> ExtractorConfig:
-        """A copy with some fields changed."""
+        """A copy with the fields ``changes`` names set to their values, checked as at
+        construction: a value out of range is a ``ValueError`` naming the field, an unknown
+        field a ``TypeError``."""
         return replace(self, **changes)

@@ -109,3 +109,35 @@ def test_the_fast_comment_scan_finds_what_tokenize_finds():
         (t.start[0], t.string.lstrip("#:").strip()) for t in tokens if t.type == tokenize.COMMENT
     ]
     assert audit.comments(source) == expected == [(1, "one"), (4, "two"), (5, "three"), (6, "four")]
+
+
+def test_the_public_api_has_well_formed_numpydoc():
+    """Every name of ``sonarslam.__all__`` (read from the source): section headers underlined to
+    their length, each parameter documented, each dataclass field in Attributes."""
+    assert audit.public_api_problems() == []
+
+
+def test_the_numpydoc_check_finds_planted_faults(tmp_path: Path):
+    (tmp_path / "sonarslam").mkdir()
+    (tmp_path / "sonarslam" / "__init__.py").write_text(
+        '_HOMES: dict[str, str] = {"f": "sonarslam.m", "C": "sonarslam.m"}\n'
+    )
+    (tmp_path / "m.py").write_text(
+        "from dataclasses import dataclass\n\n\n"
+        "def f(a, b, *, c=1):\n"
+        '    """Do.\n\n    Parameters\n    ---------\n    a : float\n    z : int\n    """\n\n\n'
+        "@dataclass\n"
+        "class C:\n"
+        '    """Data.\n\n    Attributes\n    ----------\n    x : float\n    """\n\n'
+        "    x: float\n"
+        "    y: float\n\n"
+        "    def g(self, q):\n"
+        '        """Nothing about it."""\n'
+    )
+    assert sorted(audit.public_api_problems(tmp_path)) == [
+        "C.g: ['q'] not described (no Parameters section)",
+        "C: fields not in Attributes ['y']",
+        "f: Parameters lacks ['b', 'c']",
+        "f: Parameters names ['z'], not in the signature",
+        "f: the underline of 'Parameters' is 9 long, not 10",
+    ]

@@ -236,9 +236,27 @@ class LandmarkAssociation:
         return decision
 
     def applied(self, belief: WorldBelief) -> None:
-        """Your estimate right after applying the last decision (its new landmarks included):
-        the pose and the lines (and, when duplicates are merged, their joint covariance) that
-        the next :meth:`decide` settles the extents and looks for duplicates with."""
+        """Report your estimate right after applying the last decision (its new landmarks
+        included): the pose and the lines (and, when duplicates are merged, their joint
+        covariance) that the next :meth:`decide` settles the extents and looks for duplicates
+        with.
+
+        Parameters
+        ----------
+        belief : WorldBelief
+            Your estimate after the update, in world coordinates, with one line per landmark
+            the association has made (``belief.k == len(self.map.landmarks)``); its ``cov``
+            is needed when duplicates are merged (``merge_gate_probability``).
+
+        Raises
+        ------
+        RuntimeError
+            No decision is waiting to be reported (call :meth:`decide` first).
+        ValueError
+            ``belief`` holds another number of landmarks than the association made (the
+            decision's new landmarks were not added), or ``belief.cov`` is None when duplicates
+            are merged.
+        """
         decision = self._pending
         if decision is None:
             raise RuntimeError("LandmarkAssociation.applied: no decision to report (decide first)")

@@ -136,9 +136,28 @@ def start_pose(dataset: Dataset) -> tuple[float, FloatArray, FloatArray]:
 
 def dead_reckoning_trajectory(dataset: Dataset) -> Trajectory:
     """Dead reckoning of a ``dataset`` (DVL velocities rotated by the AHRS heading) over its
-    navigation span, from the ATE protocol's start pose (the first GPS fix with the AHRS
-    heading): body poses ``wTb`` ``(x_m, y_m, yaw_rad)`` in the readers' local East-North frame
-    with their covariances, a :class:`sonarslam.features.pose_source.PoseSource`."""
+    navigation span, from the ATE protocol's start pose (:func:`start_pose`: the first GPS fix
+    with the AHRS heading).
+
+    Parameters
+    ----------
+    dataset : Dataset
+        An opened dataset; its ``[noise]`` settings give the motion noise
+        (:func:`motion_noise`).
+
+    Returns
+    -------
+    Trajectory
+        Body poses ``wTb`` ``(x_m, y_m, yaw_rad)`` in the readers' local East-North frame with
+        their covariances, on the AHRS timeline; a
+        :class:`sonarslam.features.pose_source.PoseSource`.
+
+    Raises
+    ------
+    ValueError
+        No GPS fix inside the navigation span, or a given start heading that disagrees with the
+        AHRS (:func:`start_pose`).
+    """
     t0, pose0, cov0 = start_pose(dataset)
     return dead_reckoning(
         dataset.attitude,
