@@ -1,7 +1,6 @@
 """The front end's lines as factors in your own iSAM2 graph (docs/api.md, example 2)."""
 
 import gtsam
-import numpy as np
 from gtsam.symbol_shorthand import L, X
 
 import sonarslam
@@ -20,31 +19,23 @@ def pose(t_s: float) -> gtsam.Pose2:
 
 
 def belief(k: int, marginals: gtsam.ISAM2 | None = None) -> sonarslam.WorldBelief:
-    """Pose X(k) and every landmark (their joint marginal in world x, y, yaw if asked)."""
-    keys = [L(j) for j in range(len(association.map.landmarks))]
+    keys = [L(j) for j in range(len(association.map.landmarks))]  # pose X(k), every landmark
     return sonarslam.gtsam_belief(isam.calculateEstimate(), X(k), keys, marginals)
 
 
-isam, k, t_k = gtsam.ISAM2(), 0, float(odometry.t_s[0])
-graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+isam, graph, values = gtsam.ISAM2(), gtsam.NonlinearFactorGraph(), gtsam.Values()
+k, t_k = 0, float(odometry.t_s[0])
 graph.add(gtsam.PriorFactorPose2(X(0), pose(t_k), gtsam.noiseModel.Diagonal.Sigmas([1, 1, 0.05])))
 values.insert(X(0), pose(t_k))
-isam.update(graph, values)
-for beam in ds.nav_beams():
-    lines = extractor.add(beam)  # a vote's lines, in the sonar frame at the newest beam
-    if not lines:
-        continue
+for lines in filter(None, map(extractor.add, ds.nav_beams())):  # each vote's lines (frame R)
     step = pose(t_k).between(pose(lines[0].t))  # a pose node per vote, and the odometry to it
-    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-    sigmas = [0.05 + 0.05 * np.hypot(step.x(), step.y())] * 2 + [0.01]
-    graph.add(
-        gtsam.BetweenFactorPose2(X(k), X(k + 1), step, gtsam.noiseModel.Diagonal.Sigmas(sigmas))
-    )
-    values.insert(X(k + 1), isam.calculateEstimatePose2(X(k)).compose(step))
-    isam.update(graph, values)
-    k, t_k = k + 1, lines[0].t
-    decision = association.decide(lines, belief(k, isam), pose_key=X(k))
-    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()  # merges: none by default
+    sigma_m = 0.05 + 0.05 * (step.x() ** 2 + step.y() ** 2) ** 0.5  # 5 cm + 5 % of the step
+    noise = gtsam.noiseModel.Diagonal.Sigmas([sigma_m, sigma_m, 0.01])
+    graph.add(gtsam.BetweenFactorPose2(X(k), X(k + 1), step, noise))
+    values.insert(X(k + 1), pose(lines[0].t))  # its first guess: the odometry's pose
+    isam.update(graph, values)  # with X(0)'s prior the first time
+    k, t_k, graph, values = k + 1, lines[0].t, gtsam.NonlinearFactorGraph(), gtsam.Values()
+    decision = association.decide(lines, belief(k, isam), pose_key=X(k))  # no merges by default
     for j, line in decision.updates:  # an observation of landmark j
         graph.add(sonarslam.line_factor(X(k), L(j), line.z, line.cov, bTs))
     for new in decision.new_landmarks:  # with every observation that made it, at its pose
@@ -53,6 +44,7 @@ for beam in ds.nav_beams():
             graph.add(sonarslam.line_factor(anchor.node, L(new.id), line.z, line.cov, bTs))
     isam.update(graph, values)
     association.applied(belief(k))  # the estimate after the update, before the next vote
+    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
 
 final = belief(k)
 print(f"{k} poses, {final.k} landmarks")
