@@ -19,9 +19,9 @@ peaks behind the wall face: pulse length, rough faces) the profile at ``delta = 
     (1 + tail_fraction) exp(-(delta - d)^2 / (2 s^2)),  s = d / sqrt(2 ln 2),   delta < d
     exp(-(delta - d)^2 / (2 sigma^2)) + tail_fraction exp(-(delta - d) / tail_m), delta >= d
 
-so it peaks ``d`` behind the wall and its leading edge (half the peak, rising) is on the wall face. Walls closer than ``dead_zone_m`` return nothing:
-those bins hold the transducer's ringing, decaying from ``ringing_level`` at range 0 to a few
-counts at ``dead_zone_m``. The echo and the ringing are multiplied by unit-mean Rayleigh speckle
+so it peaks ``d`` behind the wall and its leading edge (half the peak, rising) is on the wall
+face. Walls closer than ``dead_zone_m`` return nothing: those bins hold the transducer's ringing,
+decaying from ``ringing_level`` at range 0 to a few counts at ``dead_zone_m``. The echo and the ringing are multiplied by unit-mean Rayleigh speckle
 (independent per bin); Rayleigh background noise whose mean grows linearly with range (the
 head's time-varying gain), sparse clutter (exponential blobs) and, in a few beams, a false return
 (a 1-3 bin spike) are added; the result is rounded and clipped to 0-255.
