@@ -68,8 +68,8 @@ Every value is checked against the field it sets (type, finite, range: :mod:`son
 a wrong one is a ``DataError`` naming the file and the key. Keys a file leaves out take the
 neutral defaults of :class:`DatasetConfig` (no clock offset,
 identity mountings); the simulator writes every key. Without a file, a dataset gets the marina's
-calibration (see ``MARINA_CONFIG`` and the
-docs/calibration.md for how each number was found and whether GPS was used).
+calibration (``MARINA_CONFIG``; docs/calibration.md says how each number was found and
+whether GPS was used).
 """
 
 from __future__ import annotations
@@ -239,7 +239,40 @@ MAX_TIME_OFFSET_S = 86400.0
 
 @dataclass(frozen=True)
 class DatasetConfig:
-    """Everything about a dataset that is not in its logs."""
+    """Everything about a dataset that is not in its logs: the ``sonarslam.toml`` of the module
+    docstring, angles in radians.
+
+    Attributes
+    ----------
+    sonar : SonarHead
+        The sonar head's geometry and its range offset (``[sonar]``).
+    sonar_mounting, dvl_mounting, ahrs_mounting : Mounting
+        Each sensor's frame in the body frame (x forward, y left), ``bTs``, ``bTd``, ``bTa``
+        (``[mounting.*]``); identity by default.
+    noise : NoiseConfig
+        The 1-sigma sensor noise every estimator takes (``[noise]``).
+    keyframe_scan_direction : {-1, 1}
+        Keyframe datasets only (``[keyframes] scan_direction``): -1, the head turns toward
+        decreasing angle, so a scan's ``i``-th beam has angle index ``-i mod n``; +1, the other way.
+    sonar_time_offset_s : float
+        Added to the sonar's log times to put its beams on the navigation clock (s;
+        ``[sonar] time_offset_s``), within +- :data:`MAX_TIME_OFFSET_S`.
+    yaw_rate_source : {"gyro", "heading"}
+        What turns the estimators' heading between AHRS samples (``[motion]``,
+        :data:`YAW_RATE_SOURCES`).
+    ahrs_deviation_rad : (float, float)
+        ``(B, C)``: the AHRS yaw errs by ``B sin(psi) + C cos(psi)`` around the body yaw
+        ``psi`` (rad, each within +-pi/2; ``[motion] ahrs_deviation_deg``); the motion model
+        takes it off.
+    gates : GateConfig
+        Plausibility of the sensors' samples (``[gates]``).
+
+    Raises
+    ------
+    ValueError
+        A field out of its range, or ``yaw_rate_source = "heading"`` with a walking AHRS bias
+        (the heading would follow the walk).
+    """
 
     sonar: SonarHead = field(default_factory=SonarHead)
     sonar_mounting: Mounting = field(default_factory=Mounting)

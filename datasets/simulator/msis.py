@@ -21,10 +21,11 @@ peaks behind the wall face: pulse length, rough faces) the profile at ``delta = 
 
 so it peaks ``d`` behind the wall and its leading edge (half the peak, rising) is on the wall
 face. Walls closer than ``dead_zone_m`` return nothing: those bins hold the transducer's ringing,
-decaying from ``ringing_level`` at range 0 to a few counts at ``dead_zone_m``. The echo and the ringing are multiplied by unit-mean Rayleigh speckle
-(independent per bin); Rayleigh background noise whose mean grows linearly with range (the
-head's time-varying gain), sparse clutter (exponential blobs) and, in a few beams, a false return
-(a 1-3 bin spike) are added; the result is rounded and clipped to 0-255.
+decaying from ``ringing_level`` at range 0 to a few counts at ``dead_zone_m``. The echo and
+the ringing are multiplied by unit-mean Rayleigh speckle (independent per bin); Rayleigh
+background noise whose mean grows linearly with range (the head's time-varying gain), sparse
+clutter (exponential blobs) and, in a few beams, a false return (a 1-3 bin spike) are added; the
+result is rounded and clipped to 0-255.
 """
 
 from __future__ import annotations
@@ -61,6 +62,41 @@ class EchoModel:
     """Parameters of the echo, noise and dead zone of :func:`render_intensities`.
 
     Intensities are in the head's 0-255 counts. See the module docstring for the model.
+
+    Attributes
+    ----------
+    n_rays : int
+        Sub-rays the horizontal beam is cast as, with Gaussian weights over its -3 dB width.
+    echo_gain : float
+        Amplitude of a wall's echo at normal incidence and range 0 (counts), before the
+        weights, the incidence and the range decay.
+    incidence_exponent : float
+        The echo falls as ``cos(phi) ** incidence_exponent`` with the incidence ``phi``.
+    incidence_fade_start_rad, incidence_cutoff_rad : float
+        The echo fades smoothly from full at the first incidence to none at the second (rad,
+        in ``(0, pi/2]``, the first smaller): grazing walls return nothing.
+    range_decay_per_m : float
+        The echo falls as ``exp(-range_decay_per_m * r)`` with range ``r`` (1/m).
+    pulse_sigma_bins : float
+        Standard deviation of the echo's Gaussian pulse along the beam (bins).
+    tail_m, tail_fraction : float
+        The exponential tail behind the wall: its length (m; a world's own wall band replaces
+        it) and its height relative to the pulse's peak.
+    speckle : bool
+        Multiply the echo and the ringing by unit-mean Rayleigh speckle, independent per bin.
+    background_near, background_far : float
+        Mean of the Rayleigh background noise at range 0 and at the head's maximum range
+        (counts), linear in between.
+    clutter_prob_per_bin, clutter_mean : float
+        Probability that a bin holds clutter, and the clutter's mean (counts, exponential).
+    false_return_prob_per_beam : float
+        Probability that a beam holds one false return, a spike of 1-3 bins at a uniform range.
+    false_return_min, false_return_max : float
+        Its height is uniform in this range (counts).
+    dead_zone_m : float
+        Walls nearer than this return nothing (m); its bins hold the transducer's ringing.
+    ringing_level : float
+        The ringing at range 0 (counts), decaying as ``exp(-4 r / dead_zone_m)``.
     """
 
     n_rays: int = bounded(9, 1, 10_000)
