@@ -186,7 +186,19 @@ class HealthIssue:
 
 @dataclass
 class HealthReport:
-    """The monitor's verdict: the issues, and per check how many windows it judged."""
+    """The monitor's verdict.
+
+    Attributes
+    ----------
+    issues : list of HealthIssue
+        Each inconsistency found, in order.
+    judged : dict of str to int
+        Per check, how many windows (or states) it judged.
+    t_ref_s : float
+        The estimate's first time (Unix s): issue messages give times from it.
+    config : HealthConfig
+        The limits the checks used.
+    """
 
     issues: list[HealthIssue]
     judged: dict[str, int]
