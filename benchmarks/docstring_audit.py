@@ -375,14 +375,16 @@ def main(argv: list[str] | None = None) -> int:
     review = audit(REVIEW, args.root)
     for h in strong + (review if args.review else []):
         print(f"{h.path}:{h.line}: [{h.kind}, {h.marker}] ...{h.text}...")
-    for problem in public_api_problems(args.root):
+    api = public_api_problems(args.root) if (args.root / "sonarslam").is_dir() else []
+    for problem in api:
         print(f"public API: {problem}")
     doc, comment, total = docstring_share(args.root)
     print(
         f"strong markers: {len(strong)} in {len({(h.path, h.line) for h in strong})} passages;"
         f" review candidates: {len(review)} in {len({(h.path, h.line) for h in review})} passages;"
         f" of {total} non-blank lines, docstrings {doc} ({100 * doc / total:.1f} %),"
-        f" comment lines {comment} ({100 * comment / total:.1f} %)"
+        f" comment lines {comment} ({100 * comment / total:.1f} %);"
+        f" public API numpydoc problems: {len(api)}"
     )
     return 0
 
