@@ -127,15 +127,16 @@ class Dataset:
             yield item[3]
 
 
-#: DVL and AHRS that overlap for less than this share of their logs' span, or for less than
-#: :data:`MIN_OVERLAP_S`, give a run of that overlap only: a warning says so.
+#: DVL and AHRS whose overlap covers less than this share of their logs' span, or leaves out
+#: more than :data:`MAX_LEFT_OUT_S` of it, give a run of that overlap only: a warning says so.
 MIN_OVERLAP_SHARE = 0.5
-MIN_OVERLAP_S = 60.0
+MAX_LEFT_OUT_S = 60.0
 
 
 def check_overlap(root: Path, dvl: DvlSeries, attitude: AttitudeSeries) -> None:
     """A log of one row (a span of 0 s), logs that do not overlap: :class:`DataError`; an
-    overlap shorter than a minute or than half their span: a :class:`DataWarning`."""
+    overlap that leaves out more than a minute or more than half of their span: a
+    :class:`DataWarning` (the run covers the overlap only)."""
     for series, name in ((dvl, "DVL"), (attitude, "AHRS")):
         if series.t.size < 2 or series.t[-1] <= series.t[0]:
             raise DataError(
@@ -153,11 +154,11 @@ def check_overlap(root: Path, dvl: DvlSeries, attitude: AttitudeSeries) -> None:
             f"{attitude.t[-1]:.3f} s) logs do not overlap in time",
         )
     whole = max(dvl.t[-1], attitude.t[-1]) - min(dvl.t[0], attitude.t[0])
-    if t1 - t0 < MIN_OVERLAP_S or t1 - t0 < MIN_OVERLAP_SHARE * whole:
+    if whole - (t1 - t0) > MAX_LEFT_OUT_S or t1 - t0 < MIN_OVERLAP_SHARE * whole:
         warnings.warn(
             f"{root}: the DVL and AHRS overlap for {t1 - t0:.1f} s ({t0:.3f}-{t1:.3f} s) of"
-            f" their {whole:.1f} s (less than {MIN_OVERLAP_S:.0f} s or"
-            f" {MIN_OVERLAP_SHARE:.0%}): the run covers that overlap only",
+            f" their {whole:.1f} s (it leaves out more than {MAX_LEFT_OUT_S:.0f} s or"
+            f" {1 - MIN_OVERLAP_SHARE:.0%}): the run covers that overlap only",
             DataWarning,
             stacklevel=3,
         )

@@ -109,7 +109,12 @@ __all__ = [
 
 
 def __getattr__(name: str) -> Any:
-    """A public name, imported from its module on first use and kept here (PEP 562)."""
+    """A public name, imported from its module on first use and kept here (PEP 562);
+    ``__version__`` is the installed distribution's version."""
+    if name == "__version__":
+        from importlib.metadata import version
+
+        return version("sonarslam")
     home = _HOMES.get(name)
     if home is None:
         raise AttributeError(f"module 'sonarslam' has no attribute {name!r}")

@@ -90,6 +90,13 @@ def test_the_public_names_are_one_table() -> None:
         _ = sonarslam.Trajectory
 
 
+def test_the_version_is_the_installed_distributions() -> None:
+    from importlib.metadata import version
+
+    assert sonarslam.__version__ == version("sonarslam")
+    assert sonarslam.__version__.count(".") >= 1
+
+
 @pytest.mark.parametrize("name", sonarslam.__all__)
 def test_every_public_name_resolves_to_a_documented_object(name: str) -> None:
     obj = getattr(sonarslam, name)

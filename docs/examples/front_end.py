@@ -7,10 +7,10 @@ import sonarslam
 sim = sonarslam.simulate_records(sonarslam.make_scenario("harbour", seed=0, duration_s=60.0))
 head, mounting = sim.scenario.head, sim.scenario.sonar_mounting
 extractor = sonarslam.LineExtractor(
-    sonarslam.extractor_preset("default"),
+    sonarslam.extractor_preset("default"),  # the raw beams' preset
     head,
     mounting,
-    sim.trajectory,  # raw beams' preset
+    sim.trajectory,  # the PoseSource: the vehicle's pose at any beam time
 )
 lines = [line for beam in sim.beams for line in extractor.add(beam)]  # one beam at a time
 for line in lines:  # (rho, theta) in the sonar frame of the vote, with its covariance

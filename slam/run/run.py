@@ -117,7 +117,8 @@ def run_backend(
     Parameters
     ----------
     dataset : Dataset
-        With GPS (start pose and ATE).
+        With GPS, the start pose is the first fix and the ATE is taken against GPS; without
+        it, the start is the origin with the AHRS heading and no ATE is given.
     backend : str
         One of :func:`backend_names`.
     settings : dict, optional
