@@ -386,6 +386,7 @@ class _Column:
         self.last_log_s = -math.inf
         self.out_of_order = 0
         self.repeated = 0
+        self.first_fault: dict[str, int] = {}  # "out_of_order", "repeated" -> message index
 
     def _grow(self) -> None:
         self.capacity += max(self.capacity // 2, 16)
@@ -415,8 +416,10 @@ class _Column:
                 )
             if t < self.last_t:
                 self.out_of_order += 1
+                self.first_fault.setdefault("out_of_order", index)
             elif t == self.last_t:
                 self.repeated += 1
+                self.first_fault.setdefault("repeated", index)
         if bins is not None:
             if self.bins is None:
                 self.bins = np.empty((self.capacity, bins.size), dtype=np.uint8)
@@ -446,10 +449,19 @@ class _Column:
         bins = self.bins[: self.n] if self.bins is not None else None
         if bins is not None and self.capacity > self.n:  # an index that overcounted
             bins = bins.copy()
+        if self.repeated:
+            warnings.warn(
+                f"{bag}: topic {self.topic} ({self.role}): {self.repeated} message(s) with the"
+                f" stamp of the one before (the first: message {self.first_fault['repeated']});"
+                " the gates keep the first of a stamp",
+                DataWarning,
+                stacklevel=3,
+            )
         if self.out_of_order:
             warnings.warn(
                 f"{bag}: topic {self.topic} ({self.role}): {self.out_of_order} message(s) stamped"
-                " earlier than the one before, sorted by stamp",
+                f" earlier than the one before (the first: message"
+                f" {self.first_fault['out_of_order']}), sorted by stamp",
                 DataWarning,
                 stacklevel=3,
             )
@@ -714,6 +726,7 @@ def open_bag(
     dvl, att = _dvl(p, columns["dvl"]), _imu(p, columns["imu"])
     gps = _gps(p, columns["gps"]) if "gps" in columns and columns["gps"].n else None
     counts = {f"{role}_out_of_order": c.out_of_order for role, c in columns.items()}
+    counts.update({f"{role}_repeated": c.repeated for role, c in columns.items()})
     truth = _beside(p, "truth.json")
     name = p.stem if p.is_file() else p.name
     d = gated_dataset(

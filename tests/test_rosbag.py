@@ -87,7 +87,11 @@ def test_a_bag_reads_as_the_directory(kind: str, bags: dict[str, Path], layout: 
     np.testing.assert_allclose(d.gps.en_m, layout.gps.en_m, rtol=0, atol=GPS_TOL_M)
     assert d.report.counts == {
         **layout.report.counts,
-        **{f"{r}_out_of_order": 0 for r in ("sonar", "dvl", "imu", "gps")},
+        **{
+            f"{r}_{c}": 0
+            for r in ("sonar", "dvl", "imu", "gps")
+            for c in ("out_of_order", "repeated")
+        },
     }
     # the same trajectory: dead reckoning reads no beams, so to the last bit
     a, b = dead_reckoning_trajectory(d), dead_reckoning_trajectory(layout)
