@@ -20,6 +20,7 @@ from sonarslam.slam.cli.common import (
     add_source,
     add_start,
     number,
+    parse_loop,
 )
 
 __all__ = ["COMMANDS", "BACKENDS", "BAG_KINDS", "EXTRACTOR_PRESETS", "WORLDS", "SIM_DURATION_S"]
@@ -83,8 +84,19 @@ def _run(sub: Subparsers) -> argparse.ArgumentParser:
     p.add_argument(
         "--topics",
         metavar="TOML",
-        help="a bag's roles: [topics] sonar, dvl, imu, gps = topic names (default: by message"
-        " type, or [topics] of the bag's sonarslam.toml)",
+        help="a bag's roles: [topics] sonar, dvl, imu, gps = topic names, or a preset's name"
+        " (caves); default: by message type, [topics] of the bag's sonarslam.toml, or the preset"
+        " whose topics the bag has",
+    )
+    p.add_argument(
+        "--loop",
+        type=parse_loop,
+        action="append",
+        default=[],
+        metavar="T0,T1",
+        help="the vehicle was at one place at T0 and T1 (s from the start of the navigation),"
+        " repeatable: the loop-closure error of the run and of dead reckoning there"
+        " (metrics.json loop_*); without GPS, loops are also found (slam/eval/loops.py)",
     )
     add_quiet(p)
     p.add_argument(
