@@ -1048,17 +1048,72 @@ def _messages(store: Any, d: Dataset) -> Iterator[tuple[float, str, Any]]:
         yield t, role, msg
 
 
-def write_bag(d: Dataset, path: str | Path, kind: str) -> Path:
+#: The caves data set's frames of its sensors, below ``sparus`` (the preset's base frame).
+CAVES_FRAMES = {"sonar": "sonar_micron", "dvl": "dvl_linkquest", "imu": "imu_adis"}
+
+
+def _caves_messages(store: Any, d: Dataset) -> Iterator[tuple[float, str, Any]]:
+    """:func:`_messages` in the caves data set's shape (:data:`TOPIC_PRESETS` ``caves``): the
+    DVL as ``LinkquestDvl`` (``velocityinst``, flag 1 with bottom lock), each message's frame
+    the sensor's, and at every AHRS message a ``/tf`` with the vehicle (``world -> sparus``, at
+    the origin: the data set's own is its dead reckoning) and the sensor offsets (the
+    dataset's mountings); no GPS."""
+    T = store.types
+    z3, z4 = np.zeros(3), np.zeros(4)
+    mounts = {
+        CAVES_FRAMES["sonar"]: d.config.sonar_mounting,
+        CAVES_FRAMES["dvl"]: d.config.dvl_mounting,
+        CAVES_FRAMES["imu"]: d.config.ahrs_mounting,
+    }
+
+    def tf(t: float, parent: str, child: str, x: float, y: float, yaw: float) -> Any:
+        return T["geometry_msgs/msg/TransformStamped"](
+            header=T["std_msgs/msg/Header"](stamp=_stamp_of(store, t), frame_id=parent),
+            child_frame_id=child,
+            transform=T["geometry_msgs/msg/Transform"](
+                translation=T["geometry_msgs/msg/Vector3"](x=x, y=y, z=0.0),
+                rotation=T["geometry_msgs/msg/Quaternion"](
+                    x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)
+                ),
+            ),
+        )
+
+    for t, role, msg in _messages(store, replace(d, gps=None)):
+        msg.header.frame_id = CAVES_FRAMES[role]
+        if role == "dvl":
+            v = msg.twist.twist.linear
+            ok = int(msg.twist.covariance[0] >= 0.0)
+            msg = T["cirs_girona_cala_viuda/msg/LinkquestDvl"](
+                header=msg.header, errcode="", datagood=np.full(4, ok, np.int32),
+                altitudebeam=z4, bottomvelocitybeam=z4, watervelocitybeam=z4,
+                watervelocitycredit=z4, velocityinst=np.array([v.x, v.y, 0.0]),
+                velocityinstflag=ok, velocityearth=z3, velocityearthflag=0,
+                watervelocityinst=z3, watervelocityinstflag=0, watervelocityearth=z3,
+                watervelocityearthflag=0, roll=0.0, pitch=0.0, heading=0.0, altitude=0.0,
+                temperature=0.0, pressure=0.0, salinity=0.0, soundspeed=1500.0, rawdata="",
+            )  # fmt: skip
+        yield t, role, msg
+        if role == "imu":
+            tfs = [tf(t, "world", "sparus", 0.0, 0.0, 0.0)]
+            tfs += [tf(t, "sparus", f, m.x_m, m.y_m, m.yaw_rad) for f, m in mounts.items()]
+            yield t, "tf", T["tf2_msgs/msg/TFMessage"](transforms=tfs)
+
+
+def write_bag(d: Dataset, path: str | Path, kind: str, preset: str | None = None) -> Path:
     """Write a dataset's beams (``LaserScan``), DVL (``TwistWithCovarianceStamped``), AHRS
     (``Imu``) and GPS (``NavSatFix``) as a bag: ``kind`` ``"ros1"`` (``path`` a ``.bag`` file),
     ``"mcap"`` or ``"sqlite3"`` (``path`` a ROS 2 bag directory). Each message's receive time
-    is its stamp. Returns ``path``."""
+    is its stamp. ``preset="caves"``: in the caves data set's shape instead
+    (:func:`_caves_messages`: its topics, its DVL message, its frames on ``/tf``). Returns
+    ``path``."""
     from rosbags.rosbag1 import Writer as Writer1  # lazy: only bags load rosbags
     from rosbags.rosbag2 import StoragePlugin  # lazy: only bags load rosbags
     from rosbags.rosbag2 import Writer as Writer2  # lazy: only bags load rosbags
 
     if kind not in BAG_KINDS:
         raise ValueError(f"bag kind must be one of {BAG_KINDS}, got {kind!r}")
+    if preset not in (None, "caves"):
+        raise ValueError(f"bag preset must be None or 'caves', got {preset!r}")
     p = Path(path)
     store = _typestore()
     types = {
@@ -1067,20 +1122,26 @@ def write_bag(d: Dataset, path: str | Path, kind: str) -> Path:
         "imu": "sensor_msgs/msg/Imu",
         "gps": "sensor_msgs/msg/NavSatFix",
     }
+    topics = dict(WRITTEN_TOPICS)
     roles = [r for r in ROLES if r != "gps" or d.gps is not None]
+    messages = _messages(store, d)
+    if preset == "caves":
+        caves = TOPIC_PRESETS["caves"]
+        topics = {r: caves[r] for r in ("sonar", "dvl", "imu")} | {"tf": "/tf"}
+        types |= {"dvl": "cirs_girona_cala_viuda/msg/LinkquestDvl", "tf": "tf2_msgs/msg/TFMessage"}
+        roles = list(topics)
+        messages = _caves_messages(store, d)
     if kind == "ros1":
         with Writer1(p) as w1:
-            conns = {
-                r: w1.add_connection(WRITTEN_TOPICS[r], types[r], typestore=store) for r in roles
-            }
-            for t, role, msg in _messages(store, d):
+            conns = {r: w1.add_connection(topics[r], types[r], typestore=store) for r in roles}
+            for t, role, msg in messages:
                 raw = store.serialize_ros1(msg, types[role])
                 w1.write(conns[role], int(round(t * 1e9)), raw)
         return p
     plugin = StoragePlugin.MCAP if kind == "mcap" else StoragePlugin.SQLITE3
     with Writer2(p, version=9, storage_plugin=plugin) as w2:
-        conns = {r: w2.add_connection(WRITTEN_TOPICS[r], types[r], typestore=store) for r in roles}
-        for t, role, msg in _messages(store, d):
+        conns = {r: w2.add_connection(topics[r], types[r], typestore=store) for r in roles}
+        for t, role, msg in messages:
             raw = store.serialize_cdr(msg, types[role])
             w2.write(conns[role], int(round(t * 1e9)), raw)
     return p

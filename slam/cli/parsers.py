@@ -63,6 +63,14 @@ def _simulate(sub: Subparsers) -> argparse.ArgumentParser:
         help="write a ROS bag instead of the marina layout: ros1 (OUT/<run>.bag), mcap or sqlite3"
         " (OUT is the ROS 2 bag directory); sonarslam.toml and truth.json go with it",
     )
+    p.add_argument(
+        "--preset",
+        choices=("caves",),
+        default=None,
+        help="with --bag: in the shape of the Girona caves data set (its topics, its LinkQuest DVL"
+        " message, the sensor offsets on /tf, no GPS); the sonarslam.toml written has no"
+        " [mounting.*] tables (the transforms give them)",
+    )
     return p
 
 
