@@ -229,6 +229,14 @@ class _Reader:
 
         self.bag = bag
         paths = [bag]
+        # a FIFO, a device or a directory in place of a bag's file would block or read without
+        # end inside rosbags' (and sqlite's) own calls, beyond any signal: refused first
+        files = (
+            [bag] if not bag.is_dir() else [f for f in bag.iterdir() if f.name != "metadata.yaml"]
+        )
+        for f in files:
+            if f.suffix in (".bag", ".mcap", ".db3") and not f.is_file():
+                raise DataError(f, None, "not a regular file (a bag's data must be one)")
         try:
             self.reader = AnyReader(paths, default_typestore=_typestore())
             self.reader.open()
