@@ -4,12 +4,15 @@ Writes a ROS 1 bag (or ROS 2 MCAP) of a Ping360-like rig at realistic rates (son
 ``LaserScan`` beams of 1200 bins at 25 Hz, DVL 5 Hz, IMU 50 Hz, GPS 1 Hz; a vehicle turning
 slowly at 0.5 m/s) for each length asked, then reads each in a fresh process
 (:func:`sonarslam.datasets.rosbag.open_bag`, the gates included) and reports its wall time, the
-real-time factor, the process's peak resident memory and the beams' own array (which a run
-holds; the reading adds to it what does not grow with the bag)::
+real-time factor, the process's peak resident memory (``VmHWM``, which ``exec`` resets: the
+``ru_maxrss`` of a child keeps its parent's peak across ``exec``), the output arrays (beams,
+DVL, AHRS, GPS: necessarily as long as the bag) and the reader's overhead, the peak above the
+memory before reading and the output arrays: what must not grow with the bag's length::
 
-    taskset -c 1 .venv/bin/python benchmarks/bag_reading.py --minutes 5 20 --kind ros1
+    taskset -c 1 .venv/bin/python benchmarks/bag_reading.py --minutes 5 20 60 --kind ros1 \
+        --dir /tmp/bag_bench
 
-Target (issue 30): >= 50x real time on one core.
+Target (issue 30): >= 50x real time on one core; an overhead that does not grow with length.
 """
 
 from __future__ import annotations
@@ -118,26 +121,41 @@ def write(path: Path, minutes: float, kind: str) -> Path:
     return path
 
 
+def _hwm_mb() -> float:
+    """This process's peak resident memory (MB) since its ``exec``."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return float(line.split()[1]) / 1024.0
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # not Linux
+
+
 def read(path: Path) -> dict[str, float]:
-    """Read one bag in this process: wall time, data span, peak RSS, the beams' bytes."""
+    """Read one bag in this process: wall time, data span, peak RSS, the output arrays."""
     from sonarslam.datasets.errors import DataWarning
     from sonarslam.datasets.rosbag import open_bag
 
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    before = _hwm_mb()
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DataWarning)
         d = open_bag(path)
     wall = time.perf_counter() - t0
     span = float(d.attitude.t[-1] - d.attitude.t[0])
+    b, v, a, g = d.beams, d.dvl, d.attitude, d.gps
+    arrays = [b.intensities, b.t_s, b.transducer_angle_rad, v.t, v.v_mps, v.valid, a.t, a.yaw_rad]
+    arrays += [a.yaw_rate_rad_per_s] + ([g.t, g.en_m] if g is not None else [])
+    outputs = sum(x.nbytes for x in arrays) / 2**20
+    peak = _hwm_mb()
     return {
         "wall_s": wall,
         "data_s": span,
         "realtime_factor": span / wall,
-        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "peak_rss_mb": peak,
         "rss_before_read_mb": before,
-        "beams_mb": d.beams.intensities.nbytes / 2**20,
-        "beams": len(d.beams),
+        "beams_mb": b.intensities.nbytes / 2**20,
+        "outputs_mb": outputs,
+        "overhead_mb": peak - before - outputs,
+        "beams": len(b),
     }
 
 
@@ -145,6 +163,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--minutes", type=float, nargs="+", default=[5.0, 20.0])
     ap.add_argument("--kind", choices=("ros1", "mcap"), default="ros1")
+    ap.add_argument("--dir", help="write the bags here and keep them (reused when present)")
     ap.add_argument("--read", help=argparse.SUPPRESS)  # the child process: read this bag
     args = ap.parse_args()
     if args.read:
@@ -152,9 +171,13 @@ def main() -> int:
         return 0
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(args.dir) if args.dir else Path(tmp)
+        folder.mkdir(parents=True, exist_ok=True)
         for minutes in args.minutes:
             name = f"bench_{minutes:g}min" + (".bag" if args.kind == "ros1" else "")
-            path = write(Path(tmp) / name, minutes, args.kind)
+            path = folder / name
+            if not (args.dir and path.exists()):
+                write(path, minutes, args.kind)
             out = subprocess.run(
                 [sys.executable, __file__, "--read", str(path)],
                 check=True,

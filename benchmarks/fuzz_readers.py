@@ -8,7 +8,8 @@ Prints one row per target: cases, accepted, data errors (and how many name a lin
 exceptions, hangs (no answer in 10 s), and cases the oracle found wrong (an accepted value
 that is not finite or not what the file says, a value cut short and kept, a broken promise of
 the gates, an error naming another file or a line the mutation did not touch); then up to
-five examples of each problem. The seeds are the marina's slices when ``$SONARSLAM_DATA`` holds
+five examples of each problem; then the named bad bags of issue 30 (``tests/fuzz_inputs.bad_bags``:
+what each must give and what it gave). The seeds are the marina's slices when ``$SONARSLAM_DATA`` holds
 it, a 20 s simulated harbour's otherwise. The process's memory is capped (4 GiB of address
 space) so that a reader that reads without end fails here instead of exhausting the machine.
 """
@@ -26,6 +27,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the fuzzer lives in tests/
 
+from tests.fuzz_inputs import bad_bags  # noqa: E402
 from tests.fuzzing import build_seeds, fuzz, summarise  # noqa: E402
 
 MEMORY_CAP_BYTES = 4 * 2**30
@@ -67,6 +69,10 @@ def main() -> None:
             print(f"  {target}, {status}, {first!r}: {n}")
         for o in bad[:5]:
             print(f"\n--- {o.target} {o.status} after {o.mutation}\n{o.message}\n{o.problems}")
+    bags = _bad_bags(work, seeds)
+    print("\n| bad bag | must give | gave |\n|---|---|---|")
+    for name, expect, gave in bags:
+        print(f"| {name} | {expect} | {gave} |")
     mutations = Counter(o.mutation.split(":")[0] for o in outcomes)
     print("\nmutations:", ", ".join(f"{k} {v}" for k, v in sorted(mutations.items())))
     if args.out:
@@ -78,11 +84,36 @@ def main() -> None:
                     "seeds": label,
                     "wall_s": wall_s,
                     "table": rows,
+                    "bad_bags": bags,
                     "problems": [o.__dict__ for o in bad],
                 },
                 indent=1,
             )
         )
+
+
+def _bad_bags(work: Path, seeds: dict) -> list[tuple[str, str, str]]:
+    """Each named bad bag read: (name, what it must give, what it gave in one line)."""
+    import warnings
+
+    from sonarslam.datasets.errors import DataError
+    from sonarslam.datasets.rosbag import open_bag
+
+    out = []
+    for case in bad_bags(work / "bad_bags", seeds["bag_ros1"]):
+        expect = case.expect + (f" ({case.count})" if case.count else "")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                d = open_bag(case.path, topics_file=case.topics)
+                counts = {k: v for k, v in d.report.counts.items() if v and k == case.count}
+                gave = f"read, {len(caught)} warning(s), {counts or 'no count'}"
+            except DataError as exc:
+                gave = f"DataError: {exc}"
+            except Exception as exc:  # a bug: what the fuzz suite exists to find
+                gave = f"FOREIGN {type(exc).__name__}: {exc}"
+        out.append((case.name, expect, gave[:200]))
+    return out
 
 
 if __name__ == "__main__":

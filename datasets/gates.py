@@ -173,6 +173,10 @@ def gate_dvl(dvl: DvlSeries, gates: GateConfig, report: SensorReport) -> DvlSeri
     return out
 
 
+#: Samples of the AHRS heading-jump pass held as Python floats at a time.
+ATTITUDE_BLOCK = 1 << 13
+
+
 def _gyro_integral(t_s: FloatArray, rate_rad_per_s: FloatArray) -> FloatArray:
     """Trapezoidal integral of the yaw rate from the first sample (rad), shape (N,)."""
     steps = 0.5 * (rate_rad_per_s[1:] + rate_rad_per_s[:-1]) * np.diff(t_s)
@@ -193,14 +197,18 @@ def gate_attitude(att: AttitudeSeries, gates: GateConfig, report: SensorReport) 
         math.radians(gates.ahrs_jump_drift_deg_per_s),
     )
     good = np.ones(t.size, dtype=bool)
-    ref = 0
-    ts, ys, gs = t.tolist(), yaw.tolist(), gyro.tolist()  # plain floats: one pass of 10^4-10^5
-    for k in range(1, t.size):
-        miss = (ys[k] - ys[ref] - (gs[k] - gs[ref]) + math.pi) % (2.0 * math.pi) - math.pi
-        if abs(miss) <= tol0 + drift * (ts[k] - ts[ref]):
-            ref = k
-        else:
-            good[k] = False
+    # one pass in plain floats (10^4-10^6 samples), a block at a time: the lists of floats cost
+    # 4x the arrays, so a block bounds them whatever the run's length
+    ref_t, ref_y, ref_g = (float(t[0]), float(yaw[0]), float(gyro[0])) if t.size else (0, 0, 0)
+    for a in range(1, t.size, ATTITUDE_BLOCK):
+        b = min(a + ATTITUDE_BLOCK, t.size)
+        ts, ys, gs = t[a:b].tolist(), yaw[a:b].tolist(), gyro[a:b].tolist()
+        for k in range(b - a):
+            miss = (ys[k] - ref_y - (gs[k] - ref_g) + math.pi) % (2.0 * math.pi) - math.pi
+            if abs(miss) <= tol0 + drift * (ts[k] - ref_t):
+                ref_t, ref_y, ref_g = ts[k], ys[k], gs[k]
+            else:
+                good[a + k] = False
     jumps = int((~good).sum())
     report.counts["ahrs_repeated_stamps"] = int(repeat.sum())
     report.counts["ahrs_rate_spikes"] = int(spike.sum())

@@ -45,7 +45,7 @@ import math
 import tomllib
 import warnings
 from collections.abc import Iterator
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -57,6 +57,7 @@ from sonarslam.datasets.dataset import NEUTRAL_CALIBRATION, Dataset, read_truth
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.geodesy import geodetic_to_local_en, local_en_to_geodetic
 from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries
+from sonarslam.sonar.beam import Mounting
 
 __all__ = [
     "ROLES",
@@ -77,18 +78,34 @@ ROLE_TYPES: dict[str, tuple[str, ...]] = {
         "sensor_msgs/msg/LaserScan",
         "ping360_sonar/msg/SonarEcho",
         "bluerobotics_sonar_msgs/msg/SonarPing360",
+        "marine_acoustic_msgs/msg/ProjectedSonarImage",
     ),
-    "dvl": ("geometry_msgs/msg/TwistWithCovarianceStamped", "nav_msgs/msg/Odometry"),
+    "dvl": (
+        "geometry_msgs/msg/TwistWithCovarianceStamped",
+        "nav_msgs/msg/Odometry",
+        "dvl_msgs/msg/DVL",
+        "waterlinked_a50_ros_driver/msg/DVL",
+        "marine_acoustic_msgs/msg/Dvl",
+        "cirs_girona_cala_viuda/msg/LinkquestDvl",
+    ),
     "imu": ("sensor_msgs/msg/Imu",),
     "gps": ("sensor_msgs/msg/NavSatFix",),
 }
+#: Water Linked's DVL message: ROS 2 (``dvl_msgs``) and ROS 1 (``waterlinked_a50_ros_driver``).
+WATERLINKED_DVL_TYPES = ("dvl_msgs/msg/DVL", "waterlinked_a50_ros_driver/msg/DVL")
 REQUIRED_ROLES = ("sonar", "dvl", "imu")
 #: A stamp whose step differs from the bag's own (receive) clock's step by more than this (s)
 #: is a clock jump: an error, never a trajectory bent by it.
 CLOCK_JUMP_S = 1.0
-#: The Ping360 drivers' messages, for bags that carry no definitions (ROS 2 sqlite3), written
-#: from the drivers' public ``.msg`` files (``ping360_sonar``: CentraleNantesRobotics;
-#: ``bluerobotics_sonar_msgs``: itskalvik/bluerobotics_sonar).
+#: Custom messages, for bags that carry no definitions (ROS 2 sqlite3), written from the drivers'
+#: public ``.msg`` files: ``ping360_sonar`` (CentraleNantesRobotics); ``bluerobotics_sonar_msgs``
+#: (itskalvik/bluerobotics_sonar); Water Linked's DVL (waterlinked/dvl-a50-ros-driver,
+#: ``msg/DVL.msg`` and ``msg/DVLBeam.msg`` at e86b038, ROS 1; the same fields are taken as the
+#: ROS 2 ``dvl_msgs``'s); ``marine_acoustic_msgs`` 2.0.2 (apl-ocean-engineering/marine_msgs at
+#: 88e39b6: ``Dvl``, ``ProjectedSonarImage``, ``PingInfo``, ``SonarImageData``); the caves data
+#: set's DVL (``cirs_girona_cala_viuda/msg/LinkquestDvl``: PickNikRobotics/cirs_girona_cala_viuda
+#: at 366029a, the ROS 2 port of the data set, whose field names are the ROS 1 original's in
+#: lower case: ``velocityInst`` -> ``velocityinst``; a ROS 1 bag carries its own).
 CUSTOM_MSG_DEFINITIONS = {
     "ping360_sonar/msg/SonarEcho": (
         "std_msgs/Header header\nfloat32 angle\nuint8 gain\nuint16 number_of_samples\n"
@@ -99,7 +116,67 @@ CUSTOM_MSG_DEFINITIONS = {
         "uint16 transmit_duration\nuint16 sample_period\nuint16 transmit_frequency\n"
         "float32 range\nuint8[] profile_data\n"
     ),
+    "dvl_msgs/msg/DVLBeam": (
+        "int64 id\nfloat64 velocity\nfloat64 distance\nfloat64 rssi\nfloat64 nsd\nbool valid\n"
+    ),
+    "dvl_msgs/msg/DVL": (
+        "std_msgs/Header header\nfloat64 time\ngeometry_msgs/Vector3 velocity\nfloat64 fom\n"
+        "float64 altitude\ndvl_msgs/DVLBeam[] beams\nbool velocity_valid\nint64 status\n"
+        "string form\n"
+    ),
+    "marine_acoustic_msgs/msg/Dvl": (
+        "uint8 DVL_MODE_BOTTOM=1\nuint8 DVL_MODE_WATER=2\nuint8 DVL_TYPE_PISTON=0\n"
+        "uint8 DVL_TYPE_PHASED_ARRAY=1\nstd_msgs/Header header\nuint8 velocity_mode\n"
+        "uint8 dvl_type\ngeometry_msgs/Vector3 velocity\nfloat64[9] velocity_covar\n"
+        "float64 altitude\nfloat64 course_gnd\nfloat64 speed_gnd\nuint8 num_good_beams\n"
+        "float32 sound_speed\nbool beam_ranges_valid\nbool beam_velocities_valid\n"
+        "geometry_msgs/Vector3[4] beam_unit_vec\nfloat64[4] range\nfloat32[4] range_covar\n"
+        "float32[4] beam_quality\nfloat32[4] beam_velocity\nfloat32[4] beam_velocity_covar\n"
+    ),
+    "marine_acoustic_msgs/msg/PingInfo": (
+        "float32 frequency\nfloat32 sound_speed\nfloat32[] tx_beamwidths\nfloat32[] rx_beamwidths\n"
+    ),
+    "marine_acoustic_msgs/msg/SonarImageData": (
+        "bool is_bigendian\nuint32 DTYPE_UINT8=0\nuint32 DTYPE_INT8=1\nuint32 DTYPE_UINT16=2\n"
+        "uint32 DTYPE_INT16=3\nuint32 DTYPE_UINT32=4\nuint32 DTYPE_INT32=5\n"
+        "uint32 DTYPE_UINT64=6\nuint32 DTYPE_INT64=7\nuint32 DTYPE_FLOAT32=8\n"
+        "uint32 DTYPE_FLOAT64=9\nuint32 dtype\nuint32 beam_count\nuint8[] data\n"
+    ),
+    "marine_acoustic_msgs/msg/ProjectedSonarImage": (
+        "std_msgs/Header header\nmarine_acoustic_msgs/PingInfo ping_info\n"
+        "geometry_msgs/Vector3[] beam_directions\nfloat32[] ranges\n"
+        "marine_acoustic_msgs/SonarImageData image\n"
+    ),
+    "cirs_girona_cala_viuda/msg/LinkquestDvl": (
+        "std_msgs/Header header\nstring errcode\nint32[4] datagood\nfloat64[4] altitudebeam\n"
+        "float64[4] bottomvelocitybeam\nfloat64[4] watervelocitybeam\n"
+        "float64[4] watervelocitycredit\nfloat64[3] velocityinst\nint32 velocityinstflag\n"
+        "float64[3] velocityearth\nint32 velocityearthflag\nfloat64[3] watervelocityinst\n"
+        "int32 watervelocityinstflag\nfloat64[3] watervelocityearth\n"
+        "int32 watervelocityearthflag\nfloat64 roll\nfloat64 pitch\nfloat64 heading\n"
+        "float64 altitude\nfloat64 temperature\nfloat64 pressure\nfloat64 salinity\n"
+        "float64 soundspeed\nstring rawdata\n"
+    ),
 }
+#: Named sets of topics (``--topics NAME`` or ``preset = "NAME"`` under ``[topics]``), each
+#: with the base frame of its transforms. ``caves``: the Girona underwater caves data set
+#: (Mallios et al., IJRR 2017; a Sparus II AUV): its topics and types as listed by the ROS 2
+#: port's ``data/metadata.yaml`` (PickNikRobotics/cirs_girona_cala_viuda), its frames as the
+#: port's rviz tree shows them (``world -> sparus -> sonar_micron, dvl_linkquest, imu_adis,
+#: ...``, the sensor offsets on ``/tf``, no ``/tf_static``). The Micron (horizontal MSIS) is
+#: ``/sonar_micron_ros`` (``/sonar_seaking_ros`` is the vertical profiler); the ADIS16480 IMU
+#: ``/imu_adis_ros`` (``/imu_xsens_mti_ros`` the second IMU); the LinkQuest DVL
+#: ``/dvl_linkquest`` (``/odometry`` is the vehicle's own dead reckoning, not a DVL).
+TOPIC_PRESETS: dict[str, dict[str, str]] = {
+    "caves": {
+        "sonar": "/sonar_micron_ros",
+        "dvl": "/dvl_linkquest",
+        "imu": "/imu_adis_ros",
+        "base_frame": "sparus",
+    },
+}
+#: The keys of ``[topics]`` besides the roles.
+TOPIC_KEYS = ("preset", "base_frame")
 GRADIANS_TO_RAD = math.pi / 200.0
 
 
@@ -152,6 +229,14 @@ class _Reader:
 
         self.bag = bag
         paths = [bag]
+        # a FIFO, a device or a directory in place of a bag's file would block or read without
+        # end inside rosbags' (and sqlite's) own calls, beyond any signal: refused first
+        files = (
+            [bag] if not bag.is_dir() else [f for f in bag.iterdir() if f.name != "metadata.yaml"]
+        )
+        for f in files:
+            if f.suffix in (".bag", ".mcap", ".db3") and not f.is_file():
+                raise DataError(f, None, "not a regular file (a bag's data must be one)")
         try:
             self.reader = AnyReader(paths, default_typestore=_typestore())
             self.reader.open()
@@ -175,7 +260,11 @@ def _one_line(exc: BaseException) -> str:
 
 
 def _topics_table(bag: Path, topics_file: str | Path | None) -> tuple[dict[str, str], Path | None]:
-    """``[topics]`` of ``--topics``, else of the bag's ``sonarslam.toml``; role -> topic."""
+    """``[topics]`` of ``--topics`` (a file, or a name of :data:`TOPIC_PRESETS`), else of the
+    bag's ``sonarslam.toml``; role (or ``base_frame``) -> name. A ``preset`` key brings the
+    preset's names, the file's own keys going over them."""
+    if topics_file is not None and str(topics_file) in TOPIC_PRESETS:
+        return dict(TOPIC_PRESETS[str(topics_file)]), None
     path = Path(topics_file) if topics_file is not None else _beside(bag, "sonarslam.toml")
     if path is None:
         return {}, None
@@ -186,13 +275,41 @@ def _topics_table(bag: Path, topics_file: str | Path | None) -> tuple[dict[str, 
     table = data.get("topics", {})
     if not isinstance(table, dict):
         raise DataError(path, None, "[topics] must be a table of role = topic")
-    unknown = sorted(set(table) - set(ROLES))
+    unknown = sorted(set(table) - set(ROLES) - set(TOPIC_KEYS))
     if unknown:
-        raise DataError(path, None, f"[topics]: unknown role(s) {unknown}; allowed: {list(ROLES)}")
+        raise DataError(
+            path,
+            None,
+            f"[topics]: unknown key(s) {unknown}; allowed: {[*ROLES, *TOPIC_KEYS]}",
+        )
     for role, topic in table.items():
         if not isinstance(topic, str) or not topic:
-            raise DataError(path, None, f"[topics] {role} must be a topic name, got {topic!r}")
-    return dict(table), path
+            raise DataError(path, None, f"[topics] {role} must be a name, got {topic!r}")
+    out: dict[str, str] = {}
+    if "preset" in table:
+        if table["preset"] not in TOPIC_PRESETS:
+            raise DataError(
+                path,
+                None,
+                f"[topics] preset = {table['preset']!r}: no such preset ({', '.join(TOPIC_PRESETS)})",
+            )
+        out.update(TOPIC_PRESETS[table.pop("preset")])
+    out.update(table)
+    return out, path
+
+
+def _with_preset(types: dict[str, str], table: dict[str, str]) -> dict[str, str]:
+    """``table``, or without one the preset the bag's topics are (:func:`_preset_of`)."""
+    preset = _preset_of(types) if not table else None
+    return dict(TOPIC_PRESETS[preset]) if preset is not None else table
+
+
+def _preset_of(types: dict[str, str]) -> str | None:
+    """The preset whose every role topic the bag has, with a type that fits the role."""
+    for name, preset in TOPIC_PRESETS.items():
+        if all(types.get(preset[role], "") in ROLE_TYPES[role] for role in ROLES if role in preset):
+            return name
+    return None
 
 
 def _roles(
@@ -200,6 +317,7 @@ def _roles(
 ) -> dict[str, str]:
     """Role -> topic: ``[topics]`` where given (checked), else the one topic of a fitting type."""
     out: dict[str, str] = {}
+    table = _with_preset(types, table)
     for role in ROLES:
         if role in table:
             topic = table[role]
@@ -256,20 +374,45 @@ def _stamp(msg: Any) -> float:
     return float(s.sec) + 1e-9 * float(s.nanosec)
 
 
-@dataclass
 class _Column:
-    """One role's decoded messages, in the bag's order, with their stamp checks."""
+    """One role's decoded messages, in the bag's order, with their stamp checks.
 
-    role: str
-    topic: str
-    t: list[float] = field(default_factory=list)
-    rows: list[Any] = field(default_factory=list)
-    last_t: float = -math.inf
-    last_log_s: float = -math.inf
-    out_of_order: int = 0
+    The rows go into numpy arrays preallocated from the bag's own message count of the topic
+    (grown by half when a bag's index undercounts), so that reading keeps the output arrays
+    and a constant overhead, never a Python object per message."""
 
-    def add(self, bag: Path, index: int, t: float, log_s: float, row: Any) -> None:
-        if self.t:
+    def __init__(self, role: str, topic: str, count: int) -> None:
+        self.role, self.topic = role, topic
+        self.n = 0
+        self.capacity = max(int(count), 16)
+        self.t = np.empty(self.capacity, dtype=np.float64)
+        width = ROW_WIDTH[role]
+        self.rows = np.empty((self.capacity, width), dtype=np.float64)
+        self.bins: np.ndarray | None = None  # sonar: (capacity, n_bins) uint8
+        self.frame = ""
+        self.last_t = -math.inf
+        self.last_log_s = -math.inf
+        self.out_of_order = 0
+        self.repeated = 0
+        self.first_fault: dict[str, int] = {}  # "out_of_order", "repeated" -> message index
+
+    def _grow(self) -> None:
+        self.capacity += max(self.capacity // 2, 16)
+        self.t = np.resize(self.t, self.capacity)
+        self.rows = np.resize(self.rows, (self.capacity, self.rows.shape[1]))
+        if self.bins is not None:
+            self.bins = np.resize(self.bins, (self.capacity, self.bins.shape[1]))
+
+    def add(
+        self,
+        bag: Path,
+        index: int,
+        t: float,
+        log_s: float,
+        row: tuple[float, ...],
+        bins: np.ndarray | None = None,
+    ) -> None:
+        if self.n:
             jump = (t - self.last_t) - (log_s - self.last_log_s)
             if abs(jump) > CLOCK_JUMP_S:
                 raise DataError(
@@ -281,21 +424,73 @@ class _Column:
                 )
             if t < self.last_t:
                 self.out_of_order += 1
-        self.t.append(t)
-        self.rows.append(row)
+                self.first_fault.setdefault("out_of_order", index)
+            elif t == self.last_t:
+                self.repeated += 1
+                self.first_fault.setdefault("repeated", index)
+        if bins is not None:
+            if self.bins is None:
+                self.bins = np.empty((self.capacity, bins.size), dtype=np.uint8)
+            elif bins.size != self.bins.shape[1] or not math.isclose(
+                row[1], self.rows[0, 1], rel_tol=1e-4
+            ):
+                raise DataError(
+                    bag,
+                    None,
+                    f"topic {self.topic} message {index}: a beam of {bins.size} bins of"
+                    f" {row[1]:g} m after {self.bins.shape[1]} bins of {self.rows[0, 1]:g} m (the"
+                    " head's range changed: one run a range)",
+                )
+        if self.n == self.capacity:
+            self._grow()
+        self.t[self.n] = t
+        self.rows[self.n] = row
+        if bins is not None and self.bins is not None:
+            self.bins[self.n] = bins
+        self.n += 1
         self.last_t, self.last_log_s = t, log_s
 
-    def order(self, bag: Path) -> np.ndarray:
-        """The indices that sort the stamps (a warning counts the messages out of order)."""
-        t = np.asarray(self.t, dtype=np.float64)
-        if self.out_of_order:
+    def arrays(self, bag: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """``(t, rows, bins)`` trimmed to the messages read and sorted by stamp (a warning
+        counts the messages out of order; only then are the arrays copied)."""
+        t, rows = self.t[: self.n], self.rows[: self.n]
+        bins = self.bins[: self.n] if self.bins is not None else None
+        if bins is not None and self.capacity > self.n:  # an index that overcounted
+            bins = bins.copy()
+        if self.repeated:
             warnings.warn(
-                f"{bag}: topic {self.topic} ({self.role}): {self.out_of_order} message(s) stamped"
-                " earlier than the one before, sorted by stamp",
+                f"{bag}: topic {self.topic} ({self.role}): {self.repeated} message(s) with the"
+                f" stamp of the one before (the first: message {self.first_fault['repeated']});"
+                " the gates keep the first of a stamp",
                 DataWarning,
                 stacklevel=3,
             )
-        return np.argsort(t, kind="stable")
+        if self.out_of_order:
+            warnings.warn(
+                f"{bag}: topic {self.topic} ({self.role}): {self.out_of_order} message(s) stamped"
+                f" earlier than the one before (the first: message"
+                f" {self.first_fault['out_of_order']}), sorted by stamp",
+                DataWarning,
+                stacklevel=3,
+            )
+            order = np.argsort(t, kind="stable")
+            t, rows = t[order], rows[order]
+            bins = bins[order] if bins is not None else None
+        return t, rows, bins
+
+
+#: Floats per row of each role: sonar (angle rad, bin size m), dvl (vx, vy, valid, sigma m/s or
+#: NaN), imu (yaw, yaw rate), gps (lat, lon, fix).
+ROW_WIDTH = {"sonar": 2, "dvl": 4, "imu": 2, "gps": 3}
+
+
+def _field(msg: Any, *names: str) -> Any:
+    """The first of ``names`` the message has (a definition's spellings differ between its
+    ROS 1 original and its ROS 2 port: ``velocityInst``, ``velocityinst``)."""
+    for name in names:
+        if hasattr(msg, name):
+            return getattr(msg, name)
+    raise AttributeError(f"none of the fields {', '.join(names)}")
 
 
 def _sonar_row(msgtype: str, msg: Any) -> tuple[float, float, np.ndarray]:
@@ -307,16 +502,56 @@ def _sonar_row(msgtype: str, msg: Any) -> tuple[float, float, np.ndarray]:
     if msgtype == "ping360_sonar/msg/SonarEcho":
         bins = np.asarray(msg.intensities, dtype=np.uint8)
         return float(msg.angle), float(msg.range) / max(bins.size, 1), bins
+    if msgtype == "marine_acoustic_msgs/msg/ProjectedSonarImage":
+        return _projected_row(msg)
     bins = np.asarray(msg.profile_data, dtype=np.uint8)
     return float(msg.angle) * GRADIANS_TO_RAD, float(msg.range) / max(bins.size, 1), bins
 
 
-def _dvl_row(msgtype: str, msg: Any) -> tuple[float, float, bool]:
-    tw = msg.twist
-    vx, vy = float(tw.twist.linear.x), float(tw.twist.linear.y)
-    var = float(tw.covariance[0])
-    ok = math.isfinite(vx) and math.isfinite(vy) and not var < 0.0
-    return (vx if ok else 0.0), (vy if ok else 0.0), ok
+def _projected_row(msg: Any) -> tuple[float, float, np.ndarray]:
+    """One beam of a ``ProjectedSonarImage``: its azimuth (rotation about the sonar's x axis,
+    up, from its z axis, forward: ``atan2(-d_y, d_z)`` of the beam direction ``d``,
+    counter-clockwise seen from above), 8-bit samples, bin size ``ranges[-1] / n``."""
+    image = msg.image
+    if int(image.beam_count) != 1 or len(msg.beam_directions) != 1:
+        raise ValueError(
+            f"{int(image.beam_count)} beams ({len(msg.beam_directions)} directions): one beam a"
+            " message is read (a mechanically scanned head)"
+        )
+    if int(image.dtype) != 0:  # SonarImageData.DTYPE_UINT8
+        raise ValueError(f"image dtype {int(image.dtype)}: only 8-bit samples (0) are read")
+    bins = np.asarray(image.data, dtype=np.uint8)
+    ranges = np.asarray(msg.ranges, dtype=np.float64)
+    if ranges.size != bins.size or bins.size == 0:
+        raise ValueError(f"{bins.size} samples for {ranges.size} ranges")
+    d = msg.beam_directions[0]
+    return math.atan2(-float(d.y), float(d.z)), float(ranges[-1]) / bins.size, bins
+
+
+def _dvl_row(msgtype: str, msg: Any) -> tuple[float, float, float, float]:
+    """(vx, vy m/s in the DVL frame, bottom lock 1/0, the message's own 1-sigma m/s or NaN)."""
+    sigma = math.nan
+    if msgtype in ("geometry_msgs/msg/TwistWithCovarianceStamped", "nav_msgs/msg/Odometry"):
+        tw = msg.twist
+        vx, vy = float(tw.twist.linear.x), float(tw.twist.linear.y)
+        var = float(tw.covariance[0])
+        ok = not var < 0.0
+        sigma = math.sqrt(var) if var > 0.0 else math.nan
+    elif msgtype in WATERLINKED_DVL_TYPES:
+        vx, vy = float(msg.velocity.x), float(msg.velocity.y)
+        ok = bool(msg.velocity_valid)
+        sigma = float(msg.fom)  # Water Linked: the velocities' figure of merit (m/s)
+    elif msgtype == "marine_acoustic_msgs/msg/Dvl":
+        vx, vy = float(msg.velocity.x), float(msg.velocity.y)
+        ok = int(msg.velocity_mode) == 1 and int(msg.num_good_beams) >= 3  # bottom track
+        var = float(msg.velocity_covar[0])  # -1: not known
+        sigma = math.sqrt(var) if var > 0.0 else math.nan
+    else:  # cirs_girona_cala_viuda/msg/LinkquestDvl: the instrument-frame velocity
+        v = _field(msg, "velocityInst", "velocityinst", "velocity_inst")
+        vx, vy = float(v[0]), float(v[1])
+        ok = int(_field(msg, "velocityInstFlag", "velocityinstflag", "velocity_inst_flag")) == 1
+    ok = ok and math.isfinite(vx) and math.isfinite(vy)
+    return (vx if ok else 0.0), (vy if ok else 0.0), float(ok), sigma if ok else math.nan
 
 
 def _imu_row(msg: Any) -> tuple[float, float]:
@@ -325,51 +560,74 @@ def _imu_row(msg: Any) -> tuple[float, float]:
     return yaw, float(msg.angular_velocity.z)
 
 
-def _gps_row(msg: Any) -> tuple[float, float, bool]:
+def _gps_row(msg: Any) -> tuple[float, float, float]:
     lat, lon = float(msg.latitude), float(msg.longitude)
     fix = int(msg.status.status) >= 0 and math.isfinite(lat) and math.isfinite(lon)
-    return lat, lon, fix and not (lat == 0.0 and lon == 0.0)
+    return lat, lon, float(fix and not (lat == 0.0 and lon == 0.0))
 
 
-def _read_columns(bag: Path, roles: dict[str, str]) -> tuple[dict[str, _Column], dict[str, str]]:
-    """One pass over the bag's messages of the roles' topics."""
-    columns = {role: _Column(role, topic) for role, topic in roles.items()}
+TF_TOPICS = ("/tf_static", "/tf")
+
+
+def _read_columns(
+    bag: Path, roles: dict[str, str]
+) -> tuple[dict[str, _Column], dict[tuple[str, str], Any]]:
+    """One pass over the bag's messages of the roles' topics (and its transforms: every
+    ``/tf_static`` message; ``/tf`` only without ``/tf_static``, until each role's frame is
+    linked); the columns and the transforms ``(parent, child) -> Transform``."""
     by_topic = {topic: role for role, topic in roles.items()}
     with _Reader(bag) as r:
         reader = r.reader
-        conns = [c for c in reader.connections if c.topic in by_topic]
-        types = {c.topic: c.msgtype for c in conns}
-        counts = dict.fromkeys(by_topic, 0)
+        info = reader.topics
+        columns = {
+            role: _Column(role, topic, info[topic].msgcount) for role, topic in roles.items()
+        }
+        tf_topic = next((t for t in TF_TOPICS if t in info), None)
+        conns = [c for c in reader.connections if c.topic in by_topic or c.topic == tf_topic]
+        counts = dict.fromkeys([*by_topic, tf_topic], 0)
+        edges: dict[tuple[str, str], Any] = {}
+        tf_done = tf_topic is None
         topic = ""
         try:
             for conn, log_ns, raw in reader.messages(connections=conns):
                 topic = conn.topic
-                role = by_topic[topic]
                 index = counts[topic]
                 counts[topic] += 1
+                if topic == tf_topic:
+                    if not tf_done:
+                        msg = _decode(bag, reader, raw, conn.msgtype, topic, index)
+                        for tf in msg.transforms:
+                            key = (tf.header.frame_id.lstrip("/"), tf.child_frame_id.lstrip("/"))
+                            edges.setdefault(key, tf.transform)
+                        tf_done = topic == "/tf" and index % 50 == 49 and _linked(columns, edges)
+                    continue
+                role = by_topic[topic]
+                msg = _decode(bag, reader, raw, conn.msgtype, topic, index)
                 try:
-                    msg = reader.deserialize(raw, conn.msgtype)
-                except Exception as exc:
+                    if role == "sonar":
+                        angle, size_m, bins = _sonar_row(conn.msgtype, msg)
+                        row: tuple[float, ...] = (angle, size_m)
+                    elif role == "dvl":
+                        row, bins = _dvl_row(conn.msgtype, msg), None
+                    elif role == "imu":
+                        row, bins = _imu_row(msg), None
+                    else:
+                        row, bins = _gps_row(msg), None
+                except (AttributeError, ValueError, TypeError, IndexError) as exc:
                     raise DataError(
                         bag,
                         None,
-                        f"topic {topic} ({conn.msgtype}) message {index}: cannot be decoded:"
-                        f" {_one_line(exc)}",
+                        f"topic {topic} ({conn.msgtype}) message {index}: {_one_line(exc)}",
                     ) from None
-                if role == "sonar":
-                    row: Any = _sonar_row(conn.msgtype, msg)
-                elif role == "dvl":
-                    row = _dvl_row(conn.msgtype, msg)
-                elif role == "imu":
-                    row = _imu_row(msg)
-                else:
-                    row = _gps_row(msg)
                 t = _stamp(msg)
                 if not math.isfinite(t) or t <= 0.0:
                     raise DataError(
                         bag, None, f"topic {topic} message {index}: stamp {t!r} is not a time"
                     )
-                columns[role].add(bag, index, t, log_ns * 1e-9, row)
+                column = columns[role]
+                if not column.n:
+                    column.frame = str(msg.header.frame_id).lstrip("/")
+                column.add(bag, index, t, log_ns * 1e-9, row, bins)
         except DataError:
             raise
         except Exception as exc:  # a bag cut short, a bad chunk: where the reading stopped
@@ -377,7 +635,24 @@ def _read_columns(bag: Path, roles: dict[str, str]) -> tuple[dict[str, _Column],
             raise DataError(
                 bag, None, f"the bag cannot be read on{where}: {_one_line(exc)}"
             ) from None
-    return columns, types
+    return columns, edges
+
+
+def _decode(bag: Path, reader: Any, raw: bytes, msgtype: str, topic: str, index: int) -> Any:
+    try:
+        return reader.deserialize(raw, msgtype)
+    except Exception as exc:
+        raise DataError(
+            bag,
+            None,
+            f"topic {topic} ({msgtype}) message {index}: cannot be decoded: {_one_line(exc)}",
+        ) from None
+
+
+def _linked(columns: dict[str, _Column], edges: dict[tuple[str, str], Any]) -> bool:
+    """Every role with a message has its frame in the transforms read so far."""
+    children = {c for _, c in edges}
+    return all(c.frame in children for c in columns.values() if c.n and c.frame)
 
 
 def open_bag(
@@ -387,10 +662,16 @@ def open_bag(
 ) -> Dataset:
     """Read a bag into a gated :class:`Dataset` (module docstring).
 
-    The configuration is the bag's ``sonarslam.toml`` (inside a bag directory or beside a bag
-    file) or else neutral (a :class:`DataWarning`, :data:`NEUTRAL_CALIBRATION`); the head's
-    ``n_bins`` and ``bin_size_m`` are the messages' own (a ``sonarslam.toml`` that says
-    otherwise is a :class:`DataError`); ``config_override`` keys go on top.
+    The configuration, lowest first: neutral (:data:`NEUTRAL_CALIBRATION`); the mountings of the
+    sonar, DVL and IMU from the bag's transforms (``/tf_static``, else the constant sensor
+    offsets on ``/tf``: each message's ``header.frame_id`` below the base frame, ``base_link``
+    or ``[topics] base_frame`` or the sensors' nearest common parent); the bag's
+    ``sonarslam.toml`` (inside a bag directory or beside a bag file), whose ``[mounting.X]``
+    table replaces the transforms' mounting of X whole; ``config_override``'s keys. Without
+    a ``sonarslam.toml`` nor transforms a :class:`DataWarning` says the run is neutral.
+    :attr:`Dataset.calibration` says which came from where. The head's ``n_bins`` and
+    ``bin_size_m`` are the messages' own (a ``sonarslam.toml`` that says otherwise is a
+    :class:`DataError`).
     """
     p = Path(bag)
     if not is_bag(p):
@@ -398,6 +679,7 @@ def open_bag(
     table, table_path = _topics_table(p, topics_file)
     with _Reader(p) as r:
         types = {t: i.msgtype or "" for t, i in r.reader.topics.items()}
+    table = _with_preset(types, table)
     roles = _roles(p, types, table, table_path)
     missing = [role for role in REQUIRED_ROLES if role not in roles]
     if missing:
@@ -409,21 +691,30 @@ def open_bag(
             + "; ".join(f"{m}: {', '.join(ROLE_TYPES[m])}" for m in missing)
             + f"); the bag's topics: {listing}",
         )
-    columns, _ = _read_columns(p, roles)
+    columns, edges = _read_columns(p, roles)
     for role in REQUIRED_ROLES:
-        if not columns[role].t:
+        if not columns[role].n:
             raise DataError(p, None, f"topic {roles[role]} ({role}) has no message")
+    mountings, tf_line = tf_mountings(p, columns, edges, table.get("base_frame"))
     toml = _beside(p, "sonarslam.toml")
+    config = _with_mountings(DatasetConfig(), mountings, toml)
     if toml is not None:
-        config, calibration = load_dataset_config(toml), str(toml)
+        config, calibration = load_dataset_config(toml, base=config), str(toml)
+        if tf_line:
+            calibration += f"; {tf_line}, where it has no [mounting.*] table"
+    elif tf_line:
+        calibration = f"neutral but {tf_line}: no sonarslam.toml"
     else:
-        config, calibration = DatasetConfig(), NEUTRAL_CALIBRATION
+        calibration = NEUTRAL_CALIBRATION
         if config_override is None:
             warnings.warn(f"{p}: {NEUTRAL_CALIBRATION}", DataWarning, stacklevel=2)
     if config_override is not None:
         config = load_dataset_config(config_override, base=config)
         calibration = f"{calibration}; over it {config_override}"
-    beams = _beams(p, columns["sonar"], config)
+    dvl_note = _dvl_sigma_note(p, columns["dvl"], config)
+    if dvl_note:
+        calibration = f"{calibration}; {dvl_note}"
+    beams = _beams(p, columns["sonar"])
     sonar_head = replace(config.sonar, n_bins=beams[1], bin_size_m=beams[2])
     if (
         toml is not None
@@ -441,8 +732,9 @@ def open_bag(
     if config.sonar_time_offset_s:
         series = series.shifted(config.sonar_time_offset_s)
     dvl, att = _dvl(p, columns["dvl"]), _imu(p, columns["imu"])
-    gps = _gps(p, columns["gps"]) if "gps" in columns and columns["gps"].t else None
+    gps = _gps(p, columns["gps"]) if "gps" in columns and columns["gps"].n else None
     counts = {f"{role}_out_of_order": c.out_of_order for role, c in columns.items()}
+    counts.update({f"{role}_repeated": c.repeated for role, c in columns.items()})
     truth = _beside(p, "truth.json")
     name = p.stem if p.is_file() else p.name
     d = gated_dataset(
@@ -468,51 +760,51 @@ def _file_sets_head(toml: Path) -> bool:
     return isinstance(sonar, dict) and ("n_bins" in sonar or "bin_size_m" in sonar)
 
 
-def _beams(bag: Path, col: _Column, config: DatasetConfig) -> tuple[BeamSeries, int, float]:
-    order = col.order(bag)
-    first = col.rows[0]
-    n_bins, bin_m = int(first[2].size), float(first[1])
+def _beams(bag: Path, col: _Column) -> tuple[BeamSeries, int, float]:
+    t, rows, bins = col.arrays(bag)
+    assert bins is not None
+    n_bins, bin_m = int(bins.shape[1]), float(rows[0, 1])
     if n_bins == 0 or not bin_m > 0.0:
         raise DataError(
             bag, None, f"topic {col.topic} message 0: a beam of {n_bins} bins over {bin_m:g} m"
         )
-    data = np.empty((len(col.rows), n_bins), dtype=np.uint8)
-    angles = np.empty(len(col.rows))
-    for k, i in enumerate(order):
-        angle, size_m, bins = col.rows[i]
-        if bins.size != n_bins or not math.isclose(size_m, bin_m, rel_tol=1e-4):
-            raise DataError(
-                bag,
-                None,
-                f"topic {col.topic} message {int(i)}: a beam of {bins.size} bins of {size_m:g} m"
-                f" after {n_bins} bins of {bin_m:g} m (the head's range changed: one run a"
-                " range)",
-            )
-        data[k] = bins
-        angles[k] = angle
-    col.rows.clear()  # the beams now live in ``data`` only
-    t = np.asarray(col.t, dtype=np.float64)[order]
-    return BeamSeries(t, angles, data, False), n_bins, bin_m
+    col.bins = None  # the beams now live in the series only
+    return BeamSeries(t, rows[:, 0].copy(), bins, False), n_bins, bin_m
 
 
 def _dvl(bag: Path, col: _Column) -> DvlSeries:
-    order = col.order(bag)
-    rows = np.asarray(col.rows, dtype=np.float64)[order]
-    t = np.asarray(col.t, dtype=np.float64)[order]
+    t, rows, _ = col.arrays(bag)
     return DvlSeries(t, rows[:, :2].copy(), rows[:, 2] > 0.5, np.full(t.size, np.nan), bag)
 
 
+def _dvl_sigma_note(bag: Path, col: _Column, config: DatasetConfig) -> str:
+    """The DVL messages' own 1-sigma (a covariance, or Water Linked's figure of merit) beside
+    the ``[noise] dvl_sigma_mps`` the estimators take; a warning when the median exceeds it."""
+    sigma = col.rows[: col.n, 3]
+    sigma = sigma[np.isfinite(sigma)]
+    if not sigma.size:
+        return ""
+    median = float(np.median(sigma))
+    note = (
+        f"DVL: the messages' own sigma (median {median:.3g} m/s over {sigma.size}) is not an"
+        f" input; the estimators take [noise] dvl_sigma_mps = {config.noise.dvl_sigma_mps:g}"
+    )
+    if median > config.noise.dvl_sigma_mps:
+        warnings.warn(
+            f"{bag}: topic {col.topic}: {note} (set it in sonarslam.toml)",
+            DataWarning,
+            stacklevel=3,
+        )
+    return note
+
+
 def _imu(bag: Path, col: _Column) -> AttitudeSeries:
-    order = col.order(bag)
-    rows = np.asarray(col.rows, dtype=np.float64)[order]
-    t = np.asarray(col.t, dtype=np.float64)[order]
+    t, rows, _ = col.arrays(bag)
     return AttitudeSeries(t, rows[:, 0].copy(), rows[:, 1].copy(), bag)
 
 
 def _gps(bag: Path, col: _Column) -> GpsSeries:
-    order = col.order(bag)
-    rows = np.asarray(col.rows, dtype=np.float64)[order]
-    t = np.asarray(col.t, dtype=np.float64)[order]
+    t, rows, _ = col.arrays(bag)
     fix = rows[:, 2] > 0.5
     if not fix.any():
         raise DataError(bag, None, f"topic {col.topic} (gps): no message with a fix")
@@ -522,6 +814,141 @@ def _gps(bag: Path, col: _Column) -> GpsSeries:
     lon = np.where(fix, rows[:, 1], lon0)
     en = geodetic_to_local_en(lat, lon, lat0, lon0)
     return GpsSeries(t, en, (lat0, lon0), fix, bag)
+
+
+# -- sensor mountings from the bag's transforms -------------------------------------------------
+
+#: The roles whose frames are mountings (the GPS is a ruler) and their DatasetConfig field.
+MOUNTED_ROLES = {"sonar": "sonar_mounting", "dvl": "dvl_mounting", "imu": "ahrs_mounting"}
+#: A sonar whose frame's z axis leans further than this from the base's (deg) is not a
+#: horizontal head: an error rather than a map drawn in the wrong plane.
+MAX_SONAR_TILT_DEG = 25.0
+
+
+def _quat_matrix(q: Any) -> np.ndarray:
+    x, y, z, w = float(q.x), float(q.y), float(q.z), float(q.w)
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if not n > 0.0 or not math.isfinite(n):
+        raise ValueError(f"rotation ({x}, {y}, {z}, {w}) is not a quaternion")
+    x, y, z, w = x / n, y / n, z / n, w / n
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def _chain(
+    edges: dict[tuple[str, str], Any], base: str, frame: str
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(R, p)`` of ``frame`` in ``base`` (``base`` -> ... -> ``frame`` by the transforms'
+    parent links), or None when ``frame`` does not hang below ``base``."""
+    parent = {c: (p, tf) for (p, c), tf in edges.items()}
+    R, p = np.eye(3), np.zeros(3)
+    node, seen = frame, set()
+    while node != base:
+        if node not in parent or node in seen:
+            return None
+        seen.add(node)
+        up, tf = parent[node]
+        Ru = _quat_matrix(tf.rotation)
+        pu = np.array([float(tf.translation.x), float(tf.translation.y), float(tf.translation.z)])
+        R, p = Ru @ R, Ru @ p + pu
+        node = up
+    return R, p
+
+
+def _ancestors(edges: dict[tuple[str, str], Any], frame: str) -> list[str]:
+    parent = {c: p for p, c in edges}
+    out = [frame]
+    while out[-1] in parent and parent[out[-1]] not in out:
+        out.append(parent[out[-1]])
+    return out
+
+
+def _base_frame(edges: dict[tuple[str, str], Any], frames: list[str], given: str | None) -> str:
+    """The base frame: the one given, else ``base_link`` when the transforms have it, else the
+    nearest frame that is an ancestor of (or is) every sensor frame."""
+    if given:
+        return given
+    if any("base_link" in pair for pair in edges):
+        return "base_link"
+    chains = [_ancestors(edges, f) for f in frames]
+    common = set(chains[0]).intersection(*chains[1:]) if chains else set()
+    return next((f for f in chains[0] if f in common), "") if chains else ""
+
+
+def tf_mountings(
+    bag: Path,
+    columns: dict[str, _Column],
+    edges: dict[tuple[str, str], Any],
+    base_frame: str | None,
+) -> tuple[dict[str, Mounting], str]:
+    """The mountings (``bTs``: x, y, yaw of the sensor frame's x axis in the base's plane) of
+    the roles whose ``header.frame_id`` hangs below the base frame in the bag's transforms;
+    and a line saying which (empty when none)."""
+    frames = {
+        role: columns[role].frame
+        for role in MOUNTED_ROLES
+        if role in columns and columns[role].n and columns[role].frame
+    }
+    if not edges or not frames:
+        return {}, ""
+    base = _base_frame(edges, sorted(set(frames.values())), base_frame)
+    out: dict[str, Mounting] = {}
+    said = []
+    for role, frame in frames.items():
+        try:
+            found = _chain(edges, base, frame) if base else None
+        except ValueError as exc:
+            raise DataError(bag, None, f"transform of frame {frame}: {exc}") from None
+        if found is None:
+            continue
+        R, p = found
+        if role == "sonar" and abs(R[2, 2]) < math.cos(math.radians(MAX_SONAR_TILT_DEG)):
+            raise DataError(
+                bag,
+                None,
+                f"the sonar's frame {frame} leans {math.degrees(math.acos(min(1.0, abs(R[2, 2])))):.0f}"
+                f" deg from {base}'s z axis: not a horizontal head",
+            )
+        yaw = math.atan2(R[1, 0], R[0, 0])
+        flipped = role == "sonar" and R[2, 2] < 0.0
+        if flipped:
+            warnings.warn(
+                f"{bag}: the sonar's frame {frame} is upside down in {base}: its angles turn"
+                " the other way ([sonar] angle_sense in sonarslam.toml)",
+                DataWarning,
+                stacklevel=3,
+            )
+        source = f"transforms of {bag.name}: {base} -> {frame}"
+        out[role] = Mounting(x_m=float(p[0]), y_m=float(p[1]), yaw_rad=yaw, source=source)
+        said.append(f"{role} ({frame})")
+    line = f"mountings of {', '.join(said)} from the bag's transforms (base {base})" if said else ""
+    return out, line
+
+
+def _with_mountings(
+    config: DatasetConfig, mountings: dict[str, Mounting], toml: Path | None
+) -> DatasetConfig:
+    """``config`` with the transforms' mountings, except those a ``sonarslam.toml`` sets with a
+    ``[mounting.<sensor>]`` table (the file wins, table by table)."""
+    tables: set[str] = set()
+    if toml is not None:
+        try:
+            data = tomllib.loads(toml.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+            data = {}  # load_dataset_config names the problem
+        mounting = data.get("mounting", {})
+        tables = set(mounting) if isinstance(mounting, dict) else set()
+    changes: dict[str, Any] = {
+        MOUNTED_ROLES[role]: m
+        for role, m in mountings.items()
+        if MOUNTED_ROLES[role].removesuffix("_mounting") not in tables
+    }
+    return replace(config, **changes)
 
 
 # -- writing (the simulator's round trips) -----------------------------------------------------
@@ -629,17 +1056,72 @@ def _messages(store: Any, d: Dataset) -> Iterator[tuple[float, str, Any]]:
         yield t, role, msg
 
 
-def write_bag(d: Dataset, path: str | Path, kind: str) -> Path:
+#: The caves data set's frames of its sensors, below ``sparus`` (the preset's base frame).
+CAVES_FRAMES = {"sonar": "sonar_micron", "dvl": "dvl_linkquest", "imu": "imu_adis"}
+
+
+def _caves_messages(store: Any, d: Dataset) -> Iterator[tuple[float, str, Any]]:
+    """:func:`_messages` in the caves data set's shape (:data:`TOPIC_PRESETS` ``caves``): the
+    DVL as ``LinkquestDvl`` (``velocityinst``, flag 1 with bottom lock), each message's frame
+    the sensor's, and at every AHRS message a ``/tf`` with the vehicle (``world -> sparus``, at
+    the origin: the data set's own is its dead reckoning) and the sensor offsets (the
+    dataset's mountings); no GPS."""
+    T = store.types
+    z3, z4 = np.zeros(3), np.zeros(4)
+    mounts = {
+        CAVES_FRAMES["sonar"]: d.config.sonar_mounting,
+        CAVES_FRAMES["dvl"]: d.config.dvl_mounting,
+        CAVES_FRAMES["imu"]: d.config.ahrs_mounting,
+    }
+
+    def tf(t: float, parent: str, child: str, x: float, y: float, yaw: float) -> Any:
+        return T["geometry_msgs/msg/TransformStamped"](
+            header=T["std_msgs/msg/Header"](stamp=_stamp_of(store, t), frame_id=parent),
+            child_frame_id=child,
+            transform=T["geometry_msgs/msg/Transform"](
+                translation=T["geometry_msgs/msg/Vector3"](x=x, y=y, z=0.0),
+                rotation=T["geometry_msgs/msg/Quaternion"](
+                    x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)
+                ),
+            ),
+        )
+
+    for t, role, msg in _messages(store, replace(d, gps=None)):
+        msg.header.frame_id = CAVES_FRAMES[role]
+        if role == "dvl":
+            v = msg.twist.twist.linear
+            ok = int(msg.twist.covariance[0] >= 0.0)
+            msg = T["cirs_girona_cala_viuda/msg/LinkquestDvl"](
+                header=msg.header, errcode="", datagood=np.full(4, ok, np.int32),
+                altitudebeam=z4, bottomvelocitybeam=z4, watervelocitybeam=z4,
+                watervelocitycredit=z4, velocityinst=np.array([v.x, v.y, 0.0]),
+                velocityinstflag=ok, velocityearth=z3, velocityearthflag=0,
+                watervelocityinst=z3, watervelocityinstflag=0, watervelocityearth=z3,
+                watervelocityearthflag=0, roll=0.0, pitch=0.0, heading=0.0, altitude=0.0,
+                temperature=0.0, pressure=0.0, salinity=0.0, soundspeed=1500.0, rawdata="",
+            )  # fmt: skip
+        yield t, role, msg
+        if role == "imu":
+            tfs = [tf(t, "world", "sparus", 0.0, 0.0, 0.0)]
+            tfs += [tf(t, "sparus", f, m.x_m, m.y_m, m.yaw_rad) for f, m in mounts.items()]
+            yield t, "tf", T["tf2_msgs/msg/TFMessage"](transforms=tfs)
+
+
+def write_bag(d: Dataset, path: str | Path, kind: str, preset: str | None = None) -> Path:
     """Write a dataset's beams (``LaserScan``), DVL (``TwistWithCovarianceStamped``), AHRS
     (``Imu``) and GPS (``NavSatFix``) as a bag: ``kind`` ``"ros1"`` (``path`` a ``.bag`` file),
     ``"mcap"`` or ``"sqlite3"`` (``path`` a ROS 2 bag directory). Each message's receive time
-    is its stamp. Returns ``path``."""
+    is its stamp. ``preset="caves"``: in the caves data set's shape instead
+    (:func:`_caves_messages`: its topics, its DVL message, its frames on ``/tf``). Returns
+    ``path``."""
     from rosbags.rosbag1 import Writer as Writer1  # lazy: only bags load rosbags
     from rosbags.rosbag2 import StoragePlugin  # lazy: only bags load rosbags
     from rosbags.rosbag2 import Writer as Writer2  # lazy: only bags load rosbags
 
     if kind not in BAG_KINDS:
         raise ValueError(f"bag kind must be one of {BAG_KINDS}, got {kind!r}")
+    if preset not in (None, "caves"):
+        raise ValueError(f"bag preset must be None or 'caves', got {preset!r}")
     p = Path(path)
     store = _typestore()
     types = {
@@ -648,20 +1130,26 @@ def write_bag(d: Dataset, path: str | Path, kind: str) -> Path:
         "imu": "sensor_msgs/msg/Imu",
         "gps": "sensor_msgs/msg/NavSatFix",
     }
+    topics = dict(WRITTEN_TOPICS)
     roles = [r for r in ROLES if r != "gps" or d.gps is not None]
+    messages = _messages(store, d)
+    if preset == "caves":
+        caves = TOPIC_PRESETS["caves"]
+        topics = {r: caves[r] for r in ("sonar", "dvl", "imu")} | {"tf": "/tf"}
+        types |= {"dvl": "cirs_girona_cala_viuda/msg/LinkquestDvl", "tf": "tf2_msgs/msg/TFMessage"}
+        roles = list(topics)
+        messages = _caves_messages(store, d)
     if kind == "ros1":
         with Writer1(p) as w1:
-            conns = {
-                r: w1.add_connection(WRITTEN_TOPICS[r], types[r], typestore=store) for r in roles
-            }
-            for t, role, msg in _messages(store, d):
+            conns = {r: w1.add_connection(topics[r], types[r], typestore=store) for r in roles}
+            for t, role, msg in messages:
                 raw = store.serialize_ros1(msg, types[role])
                 w1.write(conns[role], int(round(t * 1e9)), raw)
         return p
     plugin = StoragePlugin.MCAP if kind == "mcap" else StoragePlugin.SQLITE3
     with Writer2(p, version=9, storage_plugin=plugin) as w2:
-        conns = {r: w2.add_connection(WRITTEN_TOPICS[r], types[r], typestore=store) for r in roles}
-        for t, role, msg in _messages(store, d):
+        conns = {r: w2.add_connection(topics[r], types[r], typestore=store) for r in roles}
+        for t, role, msg in messages:
             raw = store.serialize_cdr(msg, types[role])
             w2.write(conns[role], int(round(t * 1e9)), raw)
     return p

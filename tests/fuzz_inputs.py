@@ -12,12 +12,13 @@ import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from sonarslam.datasets.config import MARINA_CONFIG, dump_dataset_config
 from sonarslam.datasets.errors import DataWarning
 from sonarslam.datasets.marina import read_is_timestamps
 from sonarslam.datasets.simulator import simulate
-from sonarslam.datasets.source import data_root, open_dataset
+from sonarslam.datasets.source import Dataset, data_root, open_dataset
 
 __all__ = [
     "REF_NUMBER",
@@ -31,6 +32,9 @@ __all__ = [
     "Mutation",
     "mutate",
     "write_case",
+    "BadBag",
+    "bag_seeds",
+    "bad_bags",
 ]
 
 # --- the reference tokenizer: the rules of datasets/logfile.py, written again, plainly --------
@@ -264,6 +268,7 @@ def build_seeds(work: Path) -> dict[str, Seed]:
     seeds["truth"] = Seed(
         "truth.json", {"truth.json": json.dumps(truth, indent=0).encode()}, "truth.json"
     )
+    seeds.update(bag_seeds(work, sim["dataset"]))
     seeds["extractor_toml"] = Seed(
         "extract --config",
         {"x.toml": b"[extractor]\nmin_votes = 12\nmax_range_m = 25.0\n"},
@@ -478,3 +483,224 @@ def write_case(folder: Path, seed: Seed, m: Mutation) -> Path:
         else:
             target.write_bytes(bytes(random.Random(len(m.file)).randrange(256) for _ in range(300)))
     return folder / seed.primary
+
+
+# --- ROS bags: seeds for the mutations, and the named bad bags ---------------------------------
+
+#: Seconds of the simulated harbour a bag seed holds (small: every case writes and reads it)
+BAG_SEED_S = 4.0
+
+
+def _seed_dataset(work: Path, files: dict[str, bytes]) -> Dataset:
+    """The simulated dataset seed's first :data:`BAG_SEED_S` seconds, opened."""
+    from dataclasses import replace
+
+    from sonarslam.datasets.records import AttitudeSeries, DvlSeries
+
+    folder = work / "bag_source"
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, data in files.items():
+        (folder / name).write_bytes(data)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        d = open_dataset(folder)
+    t0 = d.nav_span_s[0]
+    a, v = d.attitude, d.dvl
+    ka, kv = a.t < t0 + BAG_SEED_S, v.t < t0 + BAG_SEED_S
+    return replace(
+        d,
+        beams=d.beams.between(0.0, t0 + BAG_SEED_S),
+        attitude=AttitudeSeries(a.t[ka], a.yaw_rad[ka], a.yaw_rate_rad_per_s[ka]),
+        dvl=DvlSeries(v.t[kv], v.v_mps[kv], v.valid[kv], v.heading_rad[kv]),
+        gps=None,
+    )
+
+
+def _files(root: Path) -> dict[str, bytes]:
+    return {
+        str(f.relative_to(root)): f.read_bytes() for f in sorted(root.rglob("*")) if f.is_file()
+    }
+
+
+def bag_seeds(work: Path, dataset_seed: Seed) -> dict[str, Seed]:
+    """A few seconds of the simulated harbour as a ROS 1 bag, a ROS 2 MCAP bag and a ROS 2
+    sqlite3 bag (each with the run's sonarslam.toml), for the ``open_bag`` targets."""
+    from sonarslam.datasets.rosbag import write_bag
+
+    d = _seed_dataset(work, dataset_seed.files)
+    toml = dataset_seed.files["sonarslam.toml"]
+    out = {}
+    for kind in ("ros1", "mcap", "sqlite3"):
+        folder = work / f"bag_{kind}"
+        folder.mkdir(parents=True, exist_ok=True)
+        path = write_bag(d, folder / ("run.bag" if kind == "ros1" else "bag"), kind)
+        (folder if kind == "ros1" else path).joinpath("sonarslam.toml").write_bytes(toml)
+        files = _files(folder)
+        primary = (
+            "run.bag" if kind == "ros1" else next(f for f in files if f.endswith(("mcap", "db3")))
+        )
+        out[f"bag_{kind}"] = Seed(f"simulated {kind} bag", files, primary)
+    return out
+
+
+@dataclass
+class BadBag:
+    """A bag made bad on purpose and what reading it must give: ``expect`` "error" (a
+    DataError whose message matches every regular expression of ``says``: the file, the
+    topic, the message's index) or "warning" (read, with ``count`` of the report's counts
+    above zero and a warning matching ``says``) or "read" (read as it is)."""
+
+    name: str
+    path: Path
+    expect: str
+    says: tuple[str, ...]
+    count: str = ""
+    topics: Path | None = None
+
+
+def bad_bags(work: Path, seed: Seed) -> list[BadBag]:
+    """The bad bags of issue 30 (custom types with no definition, repeated, out-of-order and
+    jumping stamps, a wrong type on a role topic, files cut short), made from a seed of
+    :func:`bag_seeds` (``bag_ros1``) and the dataset it was written from."""
+    import sqlite3
+
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import StoragePlugin
+    from rosbags.rosbag2 import Writer as Writer2
+    from rosbags.typesys import get_types_from_msg
+
+    from sonarslam.datasets.rosbag import WRITTEN_TOPICS, _messages, _stamp_of, _typestore
+
+    work.mkdir(parents=True, exist_ok=True)
+    src = work / "src"
+    write_case(src, seed, Mutation("none", "", None, seed.primary))
+    from sonarslam.datasets.rosbag import open_bag
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        d = open_bag(src / "run.bag")
+    store = _typestore()
+    store.register(get_types_from_msg("std_msgs/Header header\nfloat64 x\n", "acme_msgs/msg/Thing"))
+    types = {
+        "sonar": "sensor_msgs/msg/LaserScan",
+        "dvl": "geometry_msgs/msg/TwistWithCovarianceStamped",
+        "imu": "sensor_msgs/msg/Imu",
+    }
+
+    def write(
+        name: str, kind: str, edit: Callable[[str, int, float], list[float]], extra: bool = False
+    ) -> Path:
+        """The seed's messages, each written at the stamps ``edit(role, index, t)`` gives
+        (none: dropped; two: repeated), received at ``t``; ``extra``: an /acme topic of a
+        custom type beside them."""
+        path = work / name
+        counts = dict.fromkeys(types, 0)
+        ser = store.serialize_ros1 if kind == "ros1" else store.serialize_cdr
+        w: Any = (
+            Writer1(path)
+            if kind == "ros1"
+            else Writer2(path, version=9, storage_plugin=StoragePlugin.SQLITE3)
+        )
+        with w:
+            conns = {
+                r: w.add_connection(WRITTEN_TOPICS[r], ty, typestore=store)
+                for r, ty in types.items()
+            }
+            acme = (
+                w.add_connection("/acme", "acme_msgs/msg/Thing", typestore=store) if extra else None
+            )
+            T = store.types
+            for t, role, msg in _messages(store, d):
+                if role not in conns:
+                    continue
+                for stamp in edit(role, counts[role], t):
+                    msg.header.stamp = _stamp_of(store, stamp)
+                    w.write(conns[role], int(round(t * 1e9)), ser(msg, types[role]))
+                counts[role] += 1
+                if acme is not None and role == "imu":
+                    thing = T["acme_msgs/msg/Thing"](header=msg.header, x=1.0)
+                    w.write(acme, int(round(t * 1e9)), ser(thing, "acme_msgs/msg/Thing"))
+        if kind == "sqlite3":  # a ROS 2 Humble bag: no definitions stored
+            db = sqlite3.connect(next(path.glob("*.db3")))
+            db.execute("DELETE FROM message_definitions")
+            db.commit()
+            db.close()
+        return path
+
+    same: Callable[[str, int, float], list[float]] = lambda role, i, t: [t]  # noqa: E731
+    out = [
+        BadBag(
+            "custom type with no definition beside the roles",
+            write("acme", "sqlite3", same, extra=True),
+            "read",
+            (),
+        ),
+    ]
+    topics = work / "acme_topics.toml"
+    topics.write_text('[topics]\ndvl = "/acme"\n')
+    out.append(
+        BadBag(
+            "custom type with no definition on a role topic",
+            out[0].path,
+            "error",
+            (r"acme", r"topic /acme is acme_msgs/msg/Thing, which cannot be the dvl"),
+            topics=topics,
+        )
+    )
+    out.append(
+        BadBag(
+            "repeated stamps",
+            write("repeat.bag", "ros1", lambda r, i, t: [t, t] if r == "dvl" and i == 3 else [t]),
+            "warning",
+            (
+                r"repeat.bag: topic /dvl/twist \(dvl\): 1 message\(s\) with the stamp of the"
+                r" one before \(the first: message 4\)",
+                r"repeat.bag: dropped 1 row\(s\) repeating a stamp",
+            ),
+            count="dvl_repeated",
+        )
+    )
+    out.append(
+        BadBag(
+            "out-of-order stamps",
+            write("ooo.bag", "ros1", lambda r, i, t: [t + 0.15] if r == "imu" and i == 10 else [t]),
+            "warning",
+            (r"ooo.bag: topic /imu/data \(imu\): 1 message\(s\) stamped earlier.*message 11",),
+            count="imu_out_of_order",
+        )
+    )
+    out.append(
+        BadBag(
+            "a clock jump",
+            write(
+                "jump.bag", "ros1", lambda r, i, t: [t + 3600.0] if r == "imu" and i >= 20 else [t]
+            ),
+            "error",
+            (r"jump.bag", r"topic /imu/data \(imu\) message 20: its stamp jumps \+3600"),
+        )
+    )
+    wrong = work / "wrong_topics.toml"
+    wrong.write_text('[topics]\nsonar = "/imu/data"\n')
+    out.append(
+        BadBag(
+            "a wrong type on a role topic",
+            src / "run.bag",
+            "error",
+            (r"run.bag", r"topic /imu/data is sensor_msgs/msg/Imu, which cannot be the sonar"),
+            topics=wrong,
+        )
+    )
+    for kind in ("ros1", "mcap", "sqlite3"):
+        from sonarslam.datasets.rosbag import write_bag
+
+        (work / f"full_{kind}").mkdir(exist_ok=True)
+        full = write_bag(d, work / f"full_{kind}" / ("run.bag" if kind == "ros1" else "bag"), kind)
+        data_file = (
+            full
+            if kind == "ros1"
+            else next(f for f in full.iterdir() if f.suffix in (".mcap", ".db3"))
+        )
+        data = data_file.read_bytes()
+        data_file.write_bytes(data[: len(data) * 2 // 3])
+        out.append(BadBag(f"truncated {kind}", full, "error", (re.escape(str(full)),)))
+    return out

@@ -42,6 +42,7 @@ from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.islog import read_is_log
 from sonarslam.datasets.keyframes import read_keyframe_times, read_pcd_xy
 from sonarslam.datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti, read_setup
+from sonarslam.datasets.rosbag import open_bag
 from sonarslam.datasets.source import open_dataset, read_truth
 from sonarslam.settings import SettingError
 from sonarslam.slam.run.presets import (
@@ -320,7 +321,18 @@ TARGETS: dict[str, Target] = {
     "open_dataset": Target(
         "dataset", lambda p: open_dataset(_dataset_root(p)), check_opened_dataset
     ),
+    **{
+        f"open_bag {kind}": Target(
+            f"bag_{kind}", lambda p: open_bag(_bag_root(p)), check_opened_dataset
+        )
+        for kind in ("ros1", "mcap", "sqlite3")
+    },
 }
+
+
+def _bag_root(primary: Path) -> Path:
+    """The bag a seed's file belongs to: a ``.bag`` itself, else its ROS 2 bag directory."""
+    return primary if primary.suffix == ".bag" else primary.parent
 
 
 def _dataset_root(primary: Path) -> Path:

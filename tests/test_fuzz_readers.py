@@ -65,7 +65,18 @@ def test_seeded_mutations_give_a_data_error_or_right_values(seeds, tmp_path, tar
 
 
 @pytest.mark.parametrize("kind", ["directory", "fifo", "dev_zero", "symlink_loop", "empty"])
-@pytest.mark.parametrize("target", ["read_dvl", "read_pcd_xy", "load_dataset_config", "read_truth"])
+@pytest.mark.parametrize(
+    "target",
+    [
+        "read_dvl",
+        "read_pcd_xy",
+        "load_dataset_config",
+        "read_truth",
+        "open_bag ros1",
+        "open_bag mcap",
+        "open_bag sqlite3",
+    ],
+)
 def test_special_files_are_refused_before_reading(seeds, tmp_path, target, kind):
     seed = seeds[TARGETS[target].seed]
     m = Mutation("special", kind, None, seed.primary, kind)
@@ -238,3 +249,36 @@ def test_fuzzing_is_seeded(seeds, tmp_path):
     assert [(o.target, o.status, o.mutation) for o in a] == [
         (o.target, o.status, o.mutation) for o in b
     ]
+
+
+def test_bad_bags_are_one_error_or_a_counted_warning(seeds, tmp_path):
+    """Issue 30's bad bags (tests/fuzz_inputs.bad_bags): a DataError naming the bag (and the
+    topic and the message's index where one message is at fault), or a read with a counted
+    warning; never another exception."""
+    import warnings
+
+    from sonarslam.datasets.errors import DataWarning
+    from sonarslam.datasets.rosbag import open_bag
+    from tests.fuzz_inputs import bad_bags
+
+    cases = bad_bags(tmp_path, seeds["bag_ros1"])
+    assert len(cases) == 9
+    for case in cases:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            if case.expect == "error":
+                with pytest.raises(DataError) as info:
+                    open_bag(case.path, topics_file=case.topics)
+                message = str(info.value)
+                assert str(info.value.path) in message, case.name
+                for pattern in case.says:
+                    assert re.search(pattern, message), (case.name, pattern, message)
+                continue
+            d = open_bag(case.path, topics_file=case.topics)
+        said = " ".join(str(w.message) for w in caught if issubclass(w.category, DataWarning))
+        assert not [w for w in caught if not issubclass(w.category, DataWarning)], case.name
+        if case.expect == "warning":
+            assert d.report.counts[case.count] == 1, case.name
+            for pattern in case.says:
+                assert re.search(pattern, said), (case.name, pattern, said)
+        assert len(d.beams) > 0 and np.all(np.diff(d.attitude.t) > 0), case.name

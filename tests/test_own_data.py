@@ -114,7 +114,7 @@ def test_a_run_without_gps_starts_at_the_origin_and_says_what_it_measures(
         main(["run", str(src), "--backend", "ekf", "--out", str(tmp_path / "ekf"), "--quiet"]) == 0
     )
     out = capsys.readouterr().out
-    assert "start pose: no GPS: the origin" in out and "evaluation: truth (no GPS)" in out
+    assert "start pose: no GPS: the origin" in out and "evaluation: truth and loops (no GPS)" in out
     m = json.loads((tmp_path / "ekf" / "metrics.json").read_text())
     assert "ate_mean_m" not in m and "gps_uncovered_s" not in m
     assert not (tmp_path / "ekf" / "gps.tum").exists()
@@ -126,10 +126,19 @@ def test_a_run_without_gps_starts_at_the_origin_and_says_what_it_measures(
     bare = _copy(src, tmp_path / "bare", "truth.json")
     assert main(["run", str(bare), "--out", str(tmp_path / "dr"), "--quiet"]) == 0
     out = capsys.readouterr().out
-    assert "no GPS: no ATE; the map's entropy" in out
+    assert "no GPS: no ATE; the loop-closure error (loop_*), the map's entropy" in out
     assert {p.name for p in (tmp_path / "dr").iterdir()} >= {"dr.tum", "report.png", "metrics.json"}
-    assert main(["report", str(tmp_path / "dr"), "--out", str(tmp_path / "rep")]) == 1
-    assert "a run without GPS" in capsys.readouterr().err
+    # report takes it, with the EKF run, in its section of runs without GPS
+    assert (
+        main(
+            ["report", str(tmp_path / "dr"), str(tmp_path / "ekf"), "--out", str(tmp_path / "rep")]
+        )
+        == 0
+    )
+    out = capsys.readouterr().out
+    assert "dr [dr, bare]: no GPS; loops: 0 stated" in out and "ekf [ekf, nogps]: no GPS" in out
+    md = (tmp_path / "rep" / "report.md").read_text()
+    assert "## Runs without GPS" in md and (tmp_path / "rep" / "loops_bare.png").is_file()
 
 
 def test_start_pose_given_and_extract_and_calibrate_without_gps(

@@ -4,6 +4,7 @@ and ROS 2 MCAP and sqlite3 bags reads back as the directory reads, and a bad bag
 from __future__ import annotations
 
 import json
+import math
 import shutil
 import warnings
 from collections.abc import Callable
@@ -86,7 +87,11 @@ def test_a_bag_reads_as_the_directory(kind: str, bags: dict[str, Path], layout: 
     np.testing.assert_allclose(d.gps.en_m, layout.gps.en_m, rtol=0, atol=GPS_TOL_M)
     assert d.report.counts == {
         **layout.report.counts,
-        **{f"{r}_out_of_order": 0 for r in ("sonar", "dvl", "imu", "gps")},
+        **{
+            f"{r}_{c}": 0
+            for r in ("sonar", "dvl", "imu", "gps")
+            for c in ("out_of_order", "repeated")
+        },
     }
     # the same trajectory: dead reckoning reads no beams, so to the last bit
     a, b = dead_reckoning_trajectory(d), dead_reckoning_trajectory(layout)
@@ -315,3 +320,329 @@ def test_ping360_messages_give_beams_in_radians_and_metres(
     )
     np.testing.assert_array_equal(d.beams.intensities, short.beams.intensities)
     assert d.config.sonar.n_bins == n and d.config.sonar.bin_size_m == pytest.approx(range_m / n)
+
+
+# -- other DVL and sonar types, mountings from the transforms, the caves preset ---------------
+
+#: The caves data set's DVL as its ROS 1 bag defines it (the ROS 2 port lowers the names)
+LINKQUEST_ROS1 = (
+    "std_msgs/Header header\nstring errCode\nint32[4] dataGood\nfloat64[4] altitudeBeam\n"
+    "float64[4] bottomVelocityBeam\nfloat64[4] waterVelocityBeam\nfloat64[4] waterVelocityCredit\n"
+    "float64[3] velocityInst\nint32 velocityInstFlag\nfloat64[3] velocityEarth\n"
+    "int32 velocityEarthFlag\nfloat64[3] waterVelocityInst\nint32 waterVelocityInstFlag\n"
+    "float64[3] waterVelocityEarth\nint32 waterVelocityEarthFlag\nfloat64 roll\nfloat64 pitch\n"
+    "float64 heading\nfloat64 altitude\nfloat64 temperature\nfloat64 pressure\n"
+    "float64 salinity\nfloat64 soundSpeed\nstring rawData\n"
+)
+
+
+def _write(
+    path: Path,
+    kind: str,
+    store: object,
+    topics: dict[str, tuple[str, str]],
+    messages: list[tuple[float, str, object]],
+) -> Path:
+    """``messages`` (time, role, message) on ``topics`` (role -> (topic, type)) as a bag."""
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import StoragePlugin
+    from rosbags.rosbag2 import Writer as Writer2
+
+    w = (
+        Writer1(path)
+        if kind == "ros1"
+        else Writer2(path, version=9, storage_plugin=StoragePlugin.SQLITE3)
+    )
+    ser = store.serialize_ros1 if kind == "ros1" else store.serialize_cdr  # type: ignore[attr-defined]
+    with w:
+        conns = {
+            r: w.add_connection(topic, ty, typestore=store) for r, (topic, ty) in topics.items()
+        }
+        for t, role, msg in messages:
+            w.write(conns[role], int(round(t * 1e9)), ser(msg, topics[role][1]))
+    return path
+
+
+def _tf(store: object, t: float, parent: str, child: str, x: float, y: float, yaw: float) -> object:
+    T = store.types  # type: ignore[attr-defined]
+    return T["geometry_msgs/msg/TransformStamped"](
+        header=T["std_msgs/msg/Header"](stamp=_stamp_of(store, t), frame_id=parent),
+        child_frame_id=child,
+        transform=T["geometry_msgs/msg/Transform"](
+            translation=T["geometry_msgs/msg/Vector3"](x=x, y=y, z=0.1),
+            rotation=T["geometry_msgs/msg/Quaternion"](
+                x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)
+            ),
+        ),
+    )
+
+
+def test_water_linked_and_marine_acoustic_dvls_and_a_projected_sonar_image(
+    short: Dataset, tmp_path: Path
+) -> None:
+    """Water Linked's DVL (velocity_valid, fom) in a ROS 2 sqlite3 bag read with the driver's
+    definition; marine_acoustic_msgs Dvl (bottom mode, >= 3 good beams) with one-beam
+    ProjectedSonarImage sonar in a ROS 1 bag."""
+    store = _typestore()
+    T = store.types
+    vec = T["geometry_msgs/msg/Vector3"]
+    lost = set(range(5, 9))  # DVL messages without bottom lock
+    n = short.config.sonar.n_bins
+    ranges = (np.arange(1, n + 1) * short.config.sonar.bin_size_m).astype(np.float32)
+    for kind, dvl_type in (
+        ("sqlite3", "dvl_msgs/msg/DVL"),
+        ("ros1", "marine_acoustic_msgs/msg/Dvl"),
+    ):
+        msgs: list[tuple[float, str, object]] = []
+        k = 0
+        for t, role, msg in _messages(store, short):
+            h = msg.header  # type: ignore[attr-defined]
+            if role == "dvl":
+                v = msg.twist.twist.linear  # type: ignore[attr-defined]
+                ok = k not in lost and bool(short.dvl.valid[k])
+                if dvl_type == "dvl_msgs/msg/DVL":
+                    msg = T[dvl_type](
+                        header=h,
+                        time=0.0,
+                        velocity=v,
+                        fom=0.1,
+                        altitude=3.0,
+                        beams=[],
+                        velocity_valid=ok,
+                        status=0,
+                        form="json_v3",
+                    )
+                else:
+                    msg = T[dvl_type](
+                        header=h,
+                        velocity_mode=1,
+                        dvl_type=0,
+                        velocity=v,
+                        velocity_covar=np.full(9, -1.0),
+                        altitude=3.0,
+                        course_gnd=0.0,
+                        speed_gnd=0.0,
+                        num_good_beams=4 if ok else 2,
+                        sound_speed=1500.0,
+                        beam_ranges_valid=False,
+                        beam_velocities_valid=False,
+                        beam_unit_vec=[vec(x=0.0, y=0.0, z=1.0)] * 4,
+                        range=np.zeros(4),
+                        range_covar=np.zeros(4, np.float32),
+                        beam_quality=np.zeros(4, np.float32),
+                        beam_velocity=np.zeros(4, np.float32),
+                        beam_velocity_covar=np.zeros(4, np.float32),
+                    )
+                k += 1
+            elif role == "sonar" and kind == "ros1":
+                a = float(msg.angle_min)  # type: ignore[attr-defined]
+                msg = T["marine_acoustic_msgs/msg/ProjectedSonarImage"](
+                    header=h,
+                    ping_info=T["marine_acoustic_msgs/msg/PingInfo"](
+                        frequency=7e5,
+                        sound_speed=1500.0,
+                        tx_beamwidths=np.zeros(0, np.float32),
+                        rx_beamwidths=np.zeros(0, np.float32),
+                    ),
+                    beam_directions=[vec(x=0.0, y=-math.sin(a), z=math.cos(a))],
+                    ranges=ranges,
+                    image=T["marine_acoustic_msgs/msg/SonarImageData"](
+                        is_bigendian=False,
+                        dtype=0,
+                        beam_count=1,
+                        data=np.asarray(msg.intensities, dtype=np.uint8),  # type: ignore[attr-defined]
+                    ),
+                )
+            msgs.append((t, role, msg))
+        sonar = (
+            "marine_acoustic_msgs/msg/ProjectedSonarImage"
+            if kind == "ros1"
+            else "sensor_msgs/msg/LaserScan"
+        )
+        topics = {
+            "sonar": ("/s", sonar),
+            "dvl": ("/d", dvl_type),
+            "imu": ("/i", "sensor_msgs/msg/Imu"),
+        }
+        bag = _write(tmp_path / ("b.bag" if kind == "ros1" else "b"), kind, store, topics, msgs)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            d = open_bag(bag)
+        said = " ".join(str(w.message) for w in caught)
+        valid = short.dvl.valid.copy()
+        valid[sorted(lost)] = False
+        np.testing.assert_array_equal(d.dvl.valid, valid)
+        np.testing.assert_array_equal(d.dvl.v_mps[valid], short.dvl.v_mps[valid])
+        np.testing.assert_array_equal(d.beams.intensities, short.beams.intensities)
+        miss = np.angle(
+            np.exp(1j * (d.beams.transducer_angle_rad - short.beams.transducer_angle_rad))
+        )
+        assert np.max(np.abs(miss)) < 1e-6
+        if dvl_type == "dvl_msgs/msg/DVL":  # fom 0.1 m/s above the neutral 0.05: said
+            assert "median 0.1 m/s" in said and "dvl_sigma_mps = 0.05" in d.calibration
+        else:  # a covariance of -1 is unknown: nothing to say
+            assert "dvl_sigma_mps" not in d.calibration
+
+
+def _without_mountings(toml: str, keep: str = "") -> str:
+    """A sonarslam.toml's text without its [mounting.*] tables (but ``[mounting.<keep>]``)."""
+    out, skip = [], False
+    for line in toml.splitlines():
+        if line.startswith("["):
+            skip = line.startswith("[mounting.") and line != f"[mounting.{keep}]"
+        if not skip:
+            out.append(line)
+    return "\n".join(out) + "\n"
+
+
+def _caves_bag(short: Dataset, path: Path, kind: str, tf_topic: str) -> Path:
+    """``short`` in the shape of the caves data set: its topics and types (the Micron and the
+    SeaKing as LaserScan, two Imu, the LinkQuest DVL, the vehicle's /odometry), its frames
+    (``sparus`` -> sensors) on ``tf_topic``, no GPS; the mountings are the simulator's."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = _typestore()
+    if kind == "ros1":  # the original's spelling, carried by the bag
+        store = get_typestore(Stores.ROS2_HUMBLE)
+        store.register(
+            get_types_from_msg(LINKQUEST_ROS1, "cirs_girona_cala_viuda/msg/LinkquestDvl")
+        )
+    T = store.types
+    c = short.config
+    mounts = {
+        "sonar_micron": c.sonar_mounting,
+        "dvl_linkquest": c.dvl_mounting,
+        "imu_adis": c.ahrs_mounting,
+        "sonar_seaking": c.sonar_mounting,
+    }
+    topics = {
+        "sonar": ("/sonar_micron_ros", "sensor_msgs/msg/LaserScan"),
+        "seaking": ("/sonar_seaking_ros", "sensor_msgs/msg/LaserScan"),
+        "dvl": ("/dvl_linkquest", "cirs_girona_cala_viuda/msg/LinkquestDvl"),
+        "odometry": ("/odometry", "nav_msgs/msg/Odometry"),
+        "imu": ("/imu_adis_ros", "sensor_msgs/msg/Imu"),
+        "xsens": ("/imu_xsens_mti_ros", "sensor_msgs/msg/Imu"),
+        "tf": (tf_topic, "tf2_msgs/msg/TFMessage"),
+    }
+    frames = {"sonar": "sonar_micron", "dvl": "dvl_linkquest", "imu": "imu_adis"}
+    lower = kind != "ros1"
+    msgs: list[tuple[float, str, object]] = []
+    if tf_topic == "/tf_static":
+        t0 = float(short.attitude.t[0]) - 0.01
+        tfs = [_tf(store, t0, "sparus", f, m.x_m, m.y_m, m.yaw_rad) for f, m in mounts.items()]
+        msgs.append((t0, "tf", T["tf2_msgs/msg/TFMessage"](transforms=tfs)))
+    for t, role, msg in _messages(store, short):
+        msg.header.frame_id = frames[role]  # type: ignore[attr-defined]
+        if role == "dvl":
+            v = msg.twist.twist.linear  # type: ignore[attr-defined]
+            ok = int(msg.twist.covariance[0] >= 0)  # type: ignore[attr-defined]
+            z4, z3 = np.zeros(4), np.zeros(3)
+            fields = {
+                "errCode": "",
+                "dataGood": np.ones(4, np.int32),
+                "altitudeBeam": z4,
+                "bottomVelocityBeam": z4,
+                "waterVelocityBeam": z4,
+                "waterVelocityCredit": z4,
+                "velocityInst": np.array([v.x, v.y, 0.0]),
+                "velocityInstFlag": ok,
+                "velocityEarth": z3,
+                "velocityEarthFlag": 0,
+                "waterVelocityInst": z3,
+                "waterVelocityInstFlag": 0,
+                "waterVelocityEarth": z3,
+                "waterVelocityEarthFlag": 0,
+                "roll": 0.0,
+                "pitch": 0.0,
+                "heading": 0.0,
+                "altitude": 3.0,
+                "temperature": 14.0,
+                "pressure": 0.0,
+                "salinity": 0.0,
+                "soundSpeed": 1500.0,
+                "rawData": "",
+            }
+            if lower:
+                fields = {k.lower(): val for k, val in fields.items()}
+            h = msg.header  # type: ignore[attr-defined]
+            msgs.append(
+                (t, "dvl", T["cirs_girona_cala_viuda/msg/LinkquestDvl"](header=h, **fields))
+            )
+            odo = T["nav_msgs/msg/Odometry"](
+                header=T["std_msgs/msg/Header"](stamp=h.stamp, frame_id="world"),
+                child_frame_id="sparus",
+                pose=T["geometry_msgs/msg/PoseWithCovariance"](
+                    pose=T["geometry_msgs/msg/Pose"](
+                        position=T["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0),
+                        orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+                    ),
+                    covariance=np.zeros(36),
+                ),
+                twist=msg.twist,  # type: ignore[attr-defined]
+            )
+            msgs.append((t + 1e-4, "odometry", odo))
+            continue
+        msgs.append((t, role, msg))
+        if role == "sonar":
+            msgs.append((t, "seaking", msg))
+        if role == "imu":
+            msgs.append((t, "xsens", msg))
+            if tf_topic == "/tf":  # the vehicle's pose and the sensor offsets, at 10 Hz
+                tfs = [_tf(store, t, "world", "sparus", 0.0, 0.0, 0.0)]
+                tfs += [
+                    _tf(store, t, "sparus", f, m.x_m, m.y_m, m.yaw_rad) for f, m in mounts.items()
+                ]
+                msgs.append((t, "tf", T["tf2_msgs/msg/TFMessage"](transforms=tfs)))
+    msgs.sort(key=lambda m: m[0])
+    return _write(path, kind, store, topics, msgs)
+
+
+@pytest.mark.parametrize(("kind", "tf_topic"), [("ros1", "/tf"), ("sqlite3", "/tf_static")])
+def test_the_caves_preset_and_mountings_from_the_transforms(
+    kind: str,
+    tf_topic: str,
+    short: Dataset,
+    harbour: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A bag in the caves data set's shape is read by its preset (no [topics]: the Micron, the
+    ADIS IMU, the LinkQuest DVL although /odometry and a second sonar and IMU fit too) with the
+    mountings from its transforms; a sonarslam.toml's [mounting.X] table wins over them."""
+    bag = _caves_bag(short, tmp_path / ("caves.bag" if kind == "ros1" else "caves"), kind, tf_topic)
+    beside = tmp_path if kind == "ros1" else bag
+    toml = (harbour / "sonarslam.toml").read_text()
+    # the ROS 1 case keeps no mounting in its file; the ROS 2 case keeps the sonar's, moved
+    keep = "" if kind == "ros1" else "sonar"
+    (beside / "sonarslam.toml").write_text(
+        _without_mountings(toml, keep).replace("x_m = 0.3", "x_m = 0.5")
+    )
+    roles = {t.topic: t.role for t in bag_topics(bag)}
+    assert roles["/sonar_micron_ros"] == "sonar" and roles["/sonar_seaking_ros"] == ""
+    assert roles["/dvl_linkquest"] == "dvl" and roles["/odometry"] == ""
+    assert roles["/imu_adis_ros"] == "imu" and roles["/imu_xsens_mti_ros"] == ""
+    d = open_bag(bag)
+    assert d.gps is None
+    c = short.config
+    for got, want, name in (
+        (d.config.dvl_mounting, c.dvl_mounting, "dvl_linkquest"),
+        (d.config.ahrs_mounting, c.ahrs_mounting, "imu_adis"),
+    ):
+        assert got.as_pose() == pytest.approx(want.as_pose(), abs=1e-12)
+        assert got.source.endswith(f"sparus -> {name}")
+    if keep:
+        assert d.config.sonar_mounting.x_m == 0.5
+        assert d.config.sonar_mounting.source == "simulator truth"  # the file's
+        assert "where it has no [mounting.*] table" in d.calibration
+    else:
+        assert d.config.sonar_mounting.as_pose() == pytest.approx(c.sonar_mounting.as_pose())
+    np.testing.assert_array_equal(d.dvl.valid, short.dvl.valid)
+    np.testing.assert_array_equal(d.dvl.v_mps, short.dvl.v_mps)
+    np.testing.assert_array_equal(d.beams.intensities, short.beams.intensities)
+    a, b = dead_reckoning_trajectory(d), dead_reckoning_trajectory(short)
+    np.testing.assert_allclose(a.poses_wTb, b.poses_wTb, rtol=0, atol=1e-9)
+    # run prints where the mountings came from and metrics.json records it
+    assert main(["run", str(bag), "--backend", "dr", "--out", str(tmp_path / "r"), "--quiet"]) == 0
+    assert "from the bag's transforms (base sparus)" in capsys.readouterr().out
+    m = json.loads((tmp_path / "r" / "metrics.json").read_text())
+    assert "from the bag's transforms (base sparus)" in m["calibration"]

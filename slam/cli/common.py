@@ -106,6 +106,17 @@ def parse_start(text: str) -> tuple[float, float, float]:
     return values[0], values[1], yaw
 
 
+def parse_loop(text: str) -> tuple[float, float]:
+    """``T0,T1`` (s from the start of the navigation, ``0 <= T0 < T1``); an argparse ``type``."""
+    parts = text.split(",")
+    if len(parts) != 2:
+        raise argparse.ArgumentTypeError(f"must be T0,T1 (s from the start), got {text!r}")
+    t0, t1 = (float(number(float)(v.strip())) for v in parts)
+    if not 0.0 <= t0 < t1:
+        raise argparse.ArgumentTypeError(f"must have 0 <= T0 < T1, got {text!r}")
+    return t0, t1
+
+
 def add_start(p: argparse.ArgumentParser) -> None:
     """``--start X,Y[,YAW]``: the start position a user gives (runs without GPS start at the
     origin); the heading is always the AHRS's, a YAW given is checked against it."""

@@ -20,6 +20,7 @@ from sonarslam.slam.cli.common import (
     add_source,
     add_start,
     number,
+    parse_loop,
 )
 
 __all__ = ["COMMANDS", "BACKENDS", "BAG_KINDS", "EXTRACTOR_PRESETS", "WORLDS", "SIM_DURATION_S"]
@@ -62,6 +63,14 @@ def _simulate(sub: Subparsers) -> argparse.ArgumentParser:
         help="write a ROS bag instead of the marina layout: ros1 (OUT/<run>.bag), mcap or sqlite3"
         " (OUT is the ROS 2 bag directory); sonarslam.toml and truth.json go with it",
     )
+    p.add_argument(
+        "--preset",
+        choices=("caves",),
+        default=None,
+        help="with --bag: in the shape of the Girona caves data set (its topics, its LinkQuest DVL"
+        " message, the sensor offsets on /tf, no GPS); the sonarslam.toml written has no"
+        " [mounting.*] tables (the transforms give them)",
+    )
     return p
 
 
@@ -83,8 +92,19 @@ def _run(sub: Subparsers) -> argparse.ArgumentParser:
     p.add_argument(
         "--topics",
         metavar="TOML",
-        help="a bag's roles: [topics] sonar, dvl, imu, gps = topic names (default: by message"
-        " type, or [topics] of the bag's sonarslam.toml)",
+        help="a bag's roles: [topics] sonar, dvl, imu, gps = topic names, or a preset's name"
+        " (caves); default: by message type, [topics] of the bag's sonarslam.toml, or the preset"
+        " whose topics the bag has",
+    )
+    p.add_argument(
+        "--loop",
+        type=parse_loop,
+        action="append",
+        default=[],
+        metavar="T0,T1",
+        help="the vehicle was at one place at T0 and T1 (s from the start of the navigation),"
+        " repeatable: the loop-closure error of the run and of dead reckoning there"
+        " (metrics.json loop_*); without GPS, loops are also found (slam/eval/loops.py)",
     )
     add_quiet(p)
     p.add_argument(

@@ -6,6 +6,7 @@ import argparse
 
 from sonarslam.slam.io.files import check_output_dir
 from sonarslam.slam.run.report import report
+from sonarslam.slam.run.run import loop_line
 
 
 def command(args: argparse.Namespace) -> int:
@@ -18,6 +19,9 @@ def command(args: argparse.Namespace) -> int:
         open_sources=not args.no_source,
     )
     for row in result.rows:
+        if "loops" in row and row.get("ate_mean_m") is None:  # a run without GPS
+            print(f"{row['method']} [{row['run']}, {row['dataset']}]: no GPS; {loop_line(row)}")
+            continue
         if row.get("ate_n") is None:
             continue  # a published row
         sonar = (

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from sonarslam.slam.run.presets import parse_settings
-from sonarslam.slam.run.run import run, summary_line
+from sonarslam.slam.run.run import loop_line, run, summary_line
 
 
 def command(args: argparse.Namespace) -> int:
@@ -21,6 +21,7 @@ def command(args: argparse.Namespace) -> int:
         settings=parse_settings(args.set),
         start_enu=args.start,
         topics_file=args.topics,
+        loops_rel_s=args.loop,
     )
     m = result.metrics
     print(f"calibration: {m['calibration']}")
@@ -28,6 +29,8 @@ def command(args: argparse.Namespace) -> int:
     if "extractor_preset" in m:
         print(f"extractor preset: {m['extractor_preset']} (slam/run/presets.py)")
     print(summary_line(m))
+    if "loops" in m:
+        print(loop_line(m))
     if "health_line" in m:
         print(m["health_line"])
     out = result.out_dir.resolve() if result.out_dir else Path(args.out)

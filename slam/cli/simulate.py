@@ -26,6 +26,8 @@ def command(args: argparse.Namespace) -> int:
         raise SettingError(
             "--out", f"{args.out} is not empty: a ROS 2 bag is a directory of its own"
         )
+    if args.preset is not None and args.bag is None:
+        raise SettingError("--preset", "a preset is the shape of a bag: give --bag too")
     if args.bag is None:
         out = simulate(args.kind, seed=args.seed, out_dir=args.out, duration_s=args.duration)
         print(f"simulated {args.kind} (seed {args.seed}) written to {out}")
@@ -41,12 +43,26 @@ def command(args: argparse.Namespace) -> int:
         if args.bag == "ros1":
             out.mkdir(parents=True, exist_ok=True)
             prefix = next(Path(layout).glob("*_DVL.log")).name.removesuffix("_DVL.log")
-            bag = write_bag(dataset, out / f"{prefix}.bag", "ros1")
+            bag = write_bag(dataset, out / f"{prefix}.bag", "ros1", args.preset)
         else:
             if out.exists():
                 out.rmdir()  # an empty directory (check_output_dir): rosbags creates its own
-            bag = write_bag(dataset, out, args.bag)
-        for name in ("sonarslam.toml", "truth.json"):
-            shutil.copy(Path(layout) / name, out / name)
+            bag = write_bag(dataset, out, args.bag, args.preset)
+        shutil.copy(Path(layout) / "truth.json", out / "truth.json")
+        toml = (Path(layout) / "sonarslam.toml").read_text(encoding="utf-8")
+        if args.preset is not None:  # the mountings are the bag's transforms
+            toml = _without_mountings(toml)
+        (out / "sonarslam.toml").write_text(toml, encoding="utf-8")
     print(f"simulated {args.kind} (seed {args.seed}) written as a {args.bag} bag: {bag}")
     return 0
+
+
+def _without_mountings(toml: str) -> str:
+    """A ``sonarslam.toml``'s text without its ``[mounting.*]`` tables."""
+    out, skip = [], False
+    for line in toml.splitlines():
+        if line.startswith("["):
+            skip = line.startswith("[mounting.")
+        if not skip:
+            out.append(line)
+    return "\n".join(out) + "\n"

@@ -10,6 +10,7 @@ them (``*``, ``<name>`` and ``{a,b}`` as patterns), and a test checks the table 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -18,6 +19,7 @@ import numpy as np
 
 from sonarslam.datasets.source import Dataset
 from sonarslam.slam.eval.ate import AteResult, ate_against_gps, ate_against_truth
+from sonarslam.slam.eval.loops import Loop, LoopError
 from sonarslam.slam.eval.sharpness import trajectory_sharpness
 from sonarslam.slam.eval.truth import AssociationScores, association_against_truth, truth_trajectory
 from sonarslam.slam.io.trajectory import Trajectory
@@ -29,6 +31,7 @@ __all__ = [
     "TrajectoryFigures",
     "DataFigures",
     "ClosedLoopFigures",
+    "LoopFigures",
     "RunMetrics",
     "trajectory_figures",
     "closed_loop_figures",
@@ -278,6 +281,75 @@ class ClosedLoopFigures:
 
 
 @dataclass
+class LoopFigures:
+    """The loop-closure errors of a run (:mod:`sonarslam.slam.eval.loops`): the loops stated and
+    found, and each estimate's error at them (``""`` the run's own, ``"dr"`` dead reckoning,
+    the back end's others by name).
+
+    Attributes
+    ----------
+    radius_m : float
+        How near a return must come to be searched (m).
+    loops : list of Loop
+    errors : dict of str to list of LoopError
+        One error per loop for each estimate.
+    searched : bool
+        Whether loops were searched for (runs without GPS) besides the stated ones.
+    """
+
+    KEYS: ClassVar[tuple[str, ...]] = (
+        "loops_stated",
+        "loops_found",
+        "loop_radius_m",
+        "loop_error_mean_m",
+        "loop_error_max_m",
+        "loop_error_<name>_mean_m",
+        "loop_error_<name>_max_m",
+        "loops",
+    )
+
+    radius_m: float
+    loops: list[Loop]
+    errors: dict[str, list[LoopError]]
+    searched: bool
+
+    def to_json(self) -> dict[str, JsonValue]:
+        out: dict[str, JsonValue] = {
+            "loops_stated": sum(loop.how == "stated" for loop in self.loops),
+            "loops_found": sum(loop.how == "found" for loop in self.loops)
+            if self.searched
+            else None,
+            "loop_radius_m": self.radius_m,
+        }
+        for name, errors in self.errors.items():
+            tag = f"_{name}" if name else ""
+            values = [e.position_m for e in errors]
+            out[f"loop_error{tag}_mean_m"] = float(np.mean(values)) if values else None
+            out[f"loop_error{tag}_max_m"] = float(np.max(values)) if values else None
+        out["loops"] = [
+            {
+                "t0_s": loop.t0_s,
+                "t1_s": loop.t1_s,
+                "how": loop.how,
+                "t0Tt1": [_finite(v) for v in loop.t0Tt1],
+                "error_m": {
+                    name or "run": errors[k].position_m for name, errors in self.errors.items()
+                },
+                "error_heading_deg": {
+                    name or "run": _finite(errors[k].heading_deg)
+                    for name, errors in self.errors.items()
+                },
+            }
+            for k, loop in enumerate(self.loops)
+        ]
+        return out
+
+
+def _finite(v: float) -> float | None:
+    return float(v) if math.isfinite(v) else None
+
+
+@dataclass
 class RunMetrics:
     """Everything a run measured: ``metrics.json`` (:meth:`to_json`).
 
@@ -320,6 +392,8 @@ class RunMetrics:
     evaluation: str = ""
     #: where the start pose came from (:func:`sonarslam.slam.run.sources.start_pose_origin`)
     start_pose: str = ""
+    #: the loop-closure errors (runs without GPS, or with loops stated)
+    loops: LoopFigures | None = None
 
     def to_json(self) -> dict[str, JsonValue]:
         """The one flat object of ``metrics.json``."""
@@ -340,6 +414,8 @@ class RunMetrics:
             out.update(other.entropy_json())
             out.update(other.whole_json())
             out.update(other.span_json())
+        if self.loops is not None:
+            out.update(self.loops.to_json())
         if self.provenance is not None:
             out["provenance"] = self.provenance
         return out
@@ -347,7 +423,7 @@ class RunMetrics:
     @classmethod
     def key_patterns(cls) -> set[str]:
         """Every key (or key pattern) ``metrics.json`` may hold, as docs/outputs.md names them."""
-        records = (cls, TrajectoryFigures, DataFigures, ClosedLoopFigures)
+        records = (cls, TrajectoryFigures, DataFigures, ClosedLoopFigures, LoopFigures)
         return {key for record in records for key in record.KEYS}
 
 

@@ -59,6 +59,7 @@ from sonarslam.slam.run.report_figures import (
     segment_table,
     trajectory_figure,
 )
+from sonarslam.slam.run.report_free import gps_free_section, is_gps_free, load_gps_free
 
 __all__ = ["ReportResult", "report"]
 
@@ -377,7 +378,8 @@ def report(
         raise ValueError("report: give at least one run directory")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    runs = [load_run(d, open_source=open_sources) for d in run_dirs]
+    free = [load_gps_free(d) for d in run_dirs if is_gps_free(d)]
+    runs = [load_run(d, open_source=open_sources) for d in run_dirs if not is_gps_free(d)]
     labels = {str(r.run_dir): _label(r, runs) for r in runs}
     by_dataset: dict[str, list[RunData]] = {}
     for run in runs:
@@ -387,7 +389,7 @@ def report(
     md = [
         "# sonarslam report",
         "",
-        f"Runs: {', '.join(f'`{r.run_dir}`' for r in runs)}.",
+        f"Runs: {', '.join(f'`{r}`' for r in [*(x.run_dir for x in runs), *(x.run_dir for x in free)])}.",
         "",
         f"evo's APE is on `<backend>.tum` against `gps.tum` (translation, "
         f"{'Umeyama-aligned' if align else 'no alignment'}; its sd has ddof 0); evo's RPE is the "
@@ -410,6 +412,10 @@ def report(
         ]
         dataset_figs.append((name, figs))
         figures += figs
+    free_md, free_figs, free_rows = gps_free_section(free, out)
+    md += free_md
+    figures += free_figs
+    rows += free_rows
     md += _consistency(runs)
     md += _provenance(runs, labels)
     md += ["## Figures", ""]

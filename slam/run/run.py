@@ -26,6 +26,7 @@ from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.settings import SettingError
 from sonarslam.slam.backends.registry import BACKENDS, backend_spec
+from sonarslam.slam.eval.loops import find_loops, loop_errors, stated_loops
 from sonarslam.slam.io.files import check_output_dir
 from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.run.closed_loop import ClosedLoopResult, run_closed_loop
@@ -33,6 +34,7 @@ from sonarslam.slam.run.health import monitor_run
 from sonarslam.slam.run.metrics import (
     ClosedLoopFigures,
     DataFigures,
+    LoopFigures,
     RunMetrics,
     closed_loop_figures,
     trajectory_figures,
@@ -45,7 +47,12 @@ from sonarslam.slam.run.presets import (
     run_config,
 )
 from sonarslam.slam.run.provenance import provenance
-from sonarslam.slam.run.sources import POSE_SOURCES, dvl_quality, start_pose_origin
+from sonarslam.slam.run.sources import (
+    POSE_SOURCES,
+    dead_reckoning_trajectory,
+    dvl_quality,
+    start_pose_origin,
+)
 
 __all__ = [
     "BASELINES",
@@ -317,13 +324,16 @@ def _check_finite(dataset: Dataset, backend: str, trajectory: Trajectory) -> Non
 
 def evaluation(dataset: Dataset) -> str:
     """What a run of ``dataset`` is measured against (``metrics.json evaluation``): GPS (the
-    ruler, never an input), the simulator's truth, or without either the map's entropy
-    (``map_entropy_nats``, lower is sharper) and the pictures only."""
+    ruler, never an input), the simulator's truth, or without either the loop-closure error
+    (``loop_*``), the map's entropy (``map_entropy_nats``, lower is sharper) and the pictures."""
     if dataset.gps is not None:
         return "gps and truth" if dataset.truth is not None else "gps"
     if dataset.truth is not None:
-        return "truth (no GPS)"
-    return "no GPS: no ATE; the map's entropy (map_entropy_nats) and the pictures"
+        return "truth and loops (no GPS)"
+    return (
+        "no GPS: no ATE; the loop-closure error (loop_*), the map's entropy (map_entropy_nats)"
+        " and the pictures"
+    )
 
 
 def _gps_uncovered_s(dataset: Dataset, trajectory: Trajectory) -> float | None:
@@ -360,9 +370,14 @@ def run(
     settings: dict[str, Any] | None = None,
     start_enu: tuple[float, float, float] | None = None,
     topics_file: str | Path | None = None,
+    loops_rel_s: list[tuple[float, float]] | None = None,
 ) -> RunResult:
     """Open a dataset, run a back end on it (:func:`run_backend`) and write the run directory
     (:func:`sonarslam.slam.run.outputs.write_run`).
+
+    ``loops_rel_s``: pairs of times (s from the start of the navigation) at which the vehicle
+    was at one place; with them, or without GPS, the run measures the loop-closure error
+    (:func:`loop_figures`).
 
     ``config``: a ``sonarslam.toml``-format file whose keys replace the dataset's calibration
     (:func:`sonarslam.datasets.source.open_dataset`); the configuration used is written to
@@ -388,6 +403,8 @@ def run(
         dataset = replace(dataset, start_enu=start_enu)
     result = run_backend(dataset, backend, settings, progress=progress, batch=batch)
     assert result.figures is not None
+    if loops_rel_s or dataset.gps is None:
+        result.figures.loops = loop_figures(dataset, result, loops_rel_s or [])
     result.figures.provenance = provenance(
         backend, dataset.root, dump_dataset_config(dataset.config), result.config, batch
     )
@@ -403,6 +420,50 @@ def run(
     )
     result.out_dir = Path(out_dir)
     return result
+
+
+#: A found loop is a return within this share of the sonar's range (the scans overlap).
+LOOP_RADIUS_SHARE = 0.4
+
+
+def loop_figures(
+    dataset: Dataset, result: RunResult, loops_rel_s: list[tuple[float, float]]
+) -> LoopFigures:
+    """The loop-closure errors of a run (:mod:`sonarslam.slam.eval.loops`): the loops stated,
+    and without GPS those found along the run's own estimate within :data:`LOOP_RADIUS_SHARE`
+    of the sonar's range; at each, the error of the run's estimate, of its other estimates
+    and of dead reckoning."""
+    head = dataset.config.sonar
+    radius_m = LOOP_RADIUS_SHARE * head.n_bins * head.bin_size_m
+    loops = stated_loops(loops_rel_s, dataset.nav_span_s[0])
+    estimate = result.trajectory
+    searched = dataset.gps is None
+    if searched:
+        loops += find_loops(dataset, estimate, radius_m)
+    estimates: dict[str, Trajectory] = {"": estimate, **result.trajectories}
+    if result.backend != "dr":
+        estimates["dr"] = dead_reckoning_trajectory(dataset)
+    errors = {name: loop_errors(tr, loops) for name, tr in estimates.items()}
+    return LoopFigures(radius_m, loops, errors, searched)
+
+
+def loop_line(metrics: dict[str, Any]) -> str:
+    """One line of a run's loop-closure errors (``metrics.json`` ``loop_*``)."""
+    m = metrics
+    found = m.get("loops_found")
+    head = f"loops: {m['loops_stated']} stated" + (
+        f", {found} found (returns within {m['loop_radius_m']:.0f} m, confirmed by scan registration)"
+        if found is not None
+        else ""
+    )
+    if not m["loops"]:
+        return head + ": no loop-closure error"
+    parts = [
+        f"{'dead reckoning' if key == 'loop_error_dr_mean_m' else 'run' if key == 'loop_error_mean_m' else key[11:-7]}"
+        f" mean {m[key]:.2f} m, max {m[key.replace('_mean_', '_max_')]:.2f}"
+        for key in sorted(k for k in m if k.startswith("loop_error") and k.endswith("_mean_m"))
+    ]
+    return f"{head}; loop-closure error: {'; '.join(parts)}"
 
 
 def summary_line(metrics: dict[str, Any]) -> str:

@@ -1,0 +1,179 @@
+"""The loop-closure error without GPS: where the vehicle returns near a place it has been.
+
+A *loop* is a pair of times ``(t0, t1)`` at which the vehicle was near one place, and the
+relative pose ``t0Tt1`` it truly had between them:
+
+* **stated** by the user (``sonarslam run --loop T0,T1``, seconds from the start of the
+  navigation): the vehicle was at the same place at both times (a dock, a mooring, a marked
+  spot): the true relative position is zero, the heading is not stated;
+* **found** from an estimate and the map: every :data:`SAMPLE_S` the estimate is sampled;
+  a sample within ``radius_m`` of an earlier one that lies at least ``min_gap_s`` and
+  ``min_path_m`` of path before it is a candidate (the nearest such earlier sample; then the
+  search moves ``min_gap_s`` on); the sonar scan (one turn of the head, motion-corrected with
+  the estimate, :class:`sonarslam.features.scans.scan.ScanBuilder`) ending at each time is
+  registered onto the other (:func:`sonarslam.features.scans.icp.register_from`, from the
+  estimate's relative pose with a guess covariance of ``radius_m`` and 10 deg); an accepted
+  registration is the map's measure of the true ``t0Tt1``, independent of the drift between the
+  two times (the motion correction within one turn is the odometry's, locally right).
+
+The error of an estimate at a loop is the distance between its own relative position
+``between(wTb(t0), wTb(t1))[:2]`` and the loop's (zero for a stated loop), and for a found loop
+the heading difference too. Dead reckoning and every SLAM estimate are measured at the same
+loops, so that their errors compare. No GPS enters: without GPS this is the run's ruler beside
+the map's entropy; with GPS it is still computed only when loops are stated.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from sonarslam.datasets.source import Dataset
+from sonarslam.features.geometry import FloatArray, between, wrap_angle
+from sonarslam.features.pose_source import PoseSource
+from sonarslam.features.scans.config import ScanConfig
+from sonarslam.features.scans.icp import reference_lines, register_from
+from sonarslam.features.scans.scan import Scan, ScanBuilder
+
+__all__ = ["Loop", "LoopError", "SAMPLE_S", "stated_loops", "find_loops", "loop_errors"]
+
+#: The estimate is searched for returns at this step (s).
+SAMPLE_S = 2.0
+#: A found loop's guess covariance of the heading (deg, 1 sigma).
+GUESS_YAW_SIGMA_DEG = 10.0
+
+
+@dataclass(frozen=True)
+class Loop:
+    """Two times at one place and the true relative pose between them.
+
+    Attributes
+    ----------
+    t0_s, t1_s : float
+        The two times (Unix s), ``t0_s < t1_s``.
+    how : str
+        ``"stated"`` or ``"found"``.
+    t0Tt1 : ndarray, shape (3,)
+        The relative body pose ``(x_m, y_m, yaw_rad)`` of the map's registration (found), or
+        ``(0, 0, nan)`` (stated: the same place, the heading not stated).
+    """
+
+    t0_s: float
+    t1_s: float
+    how: str
+    t0Tt1: FloatArray
+
+
+@dataclass(frozen=True)
+class LoopError:
+    """An estimate's error at one loop: ``position_m`` (m) and ``heading_deg`` (deg, NaN for a
+    stated loop)."""
+
+    loop: Loop
+    position_m: float
+    heading_deg: float
+
+
+def stated_loops(pairs_rel_s: npt.ArrayLike, t_start_s: float) -> list[Loop]:
+    """Loops the user states: ``pairs_rel_s`` (K, 2) seconds from ``t_start_s`` (the start of
+    the navigation), each pair at one place."""
+    pairs = np.asarray(pairs_rel_s, dtype=np.float64).reshape(-1, 2)
+    return [
+        Loop(t_start_s + float(a), t_start_s + float(b), "stated", np.array([0.0, 0.0, np.nan]))
+        for a, b in pairs
+    ]
+
+
+def _scan_ending(
+    dataset: Dataset, t_s: float, source: PoseSource, config: ScanConfig
+) -> Scan | None:
+    """The scan of the turn of the head whose last beam is the last at or before ``t_s``."""
+    head = dataset.config.sonar
+    builder = ScanBuilder(config, head, dataset.config.sonar_mounting, source)
+    last = int(np.searchsorted(dataset.beams.t_s, t_s, side="right"))
+    first = last - builder.n_beams
+    if first < 0:
+        return None
+    scan = None
+    for i in range(first, last):
+        scan = builder.add(dataset.beams[i])
+    return scan
+
+
+def find_loops(
+    dataset: Dataset,
+    estimate: PoseSource,
+    radius_m: float,
+    min_gap_s: float = 60.0,
+    min_path_m: float = 30.0,
+    config: ScanConfig | None = None,
+) -> list[Loop]:
+    """The loops found along ``estimate`` and confirmed by registering their scans (module
+    docstring); only accepted registrations are loops."""
+    span = dataset.sonar_span_s
+    if span is None:
+        return []
+    config = config or ScanConfig()
+    t = np.arange(span[0] + SAMPLE_S, span[1], SAMPLE_S)
+    if t.size < 2:
+        return []
+    p = np.asarray(estimate.poses(t))
+    path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p[:, :2], axis=0).T))])
+    loops: list[Loop] = []
+    j, resume_s = 0, -math.inf
+    while j < t.size:
+        if t[j] < resume_s:
+            j += 1
+            continue
+        earlier = np.flatnonzero((t[j] - t >= min_gap_s) & (path[j] - path >= min_path_m))
+        if earlier.size:
+            d = np.hypot(*(p[earlier, :2] - p[j, :2]).T)
+            k = int(np.argmin(d))
+            if d[k] <= radius_m:
+                loop = _confirm(
+                    dataset, estimate, float(t[earlier[k]]), float(t[j]), radius_m, config
+                )
+                if loop is not None:
+                    loops.append(loop)
+                    resume_s = t[j] + min_gap_s
+        j += 1
+    return loops
+
+
+def _confirm(
+    dataset: Dataset,
+    estimate: PoseSource,
+    t0_s: float,
+    t1_s: float,
+    radius_m: float,
+    config: ScanConfig,
+) -> Loop | None:
+    a = _scan_ending(dataset, t0_s, estimate, config)
+    b = _scan_ending(dataset, t1_s, estimate, config)
+    if a is None or b is None or len(a.points_b) < 10 or len(b.points_b) < 10:
+        return None
+    guess = between(a.wTb_ref, b.wTb_ref)
+    cov = np.diag([radius_m**2, radius_m**2, math.radians(GUESS_YAW_SIGMA_DEG) ** 2])
+    reg = register_from(reference_lines(a.points_b, config), b.points_b, guess, cov, config)
+    if not reg.accepted:
+        return None
+    return Loop(a.t_ref_s, b.t_ref_s, "found", np.asarray(reg.z, dtype=np.float64))
+
+
+def loop_errors(estimate: PoseSource, loops: list[Loop]) -> list[LoopError]:
+    """``estimate``'s error at each loop (module docstring)."""
+    out = []
+    for loop in loops:
+        poses = np.asarray(estimate.poses(np.array([loop.t0_s, loop.t1_s])))
+        rel = between(poses[0], poses[1])
+        position = float(np.hypot(*(rel[:2] - loop.t0Tt1[:2])))
+        heading = (
+            math.degrees(abs(float(wrap_angle(rel[2] - loop.t0Tt1[2]))))
+            if np.isfinite(loop.t0Tt1[2])
+            else math.nan
+        )
+        out.append(LoopError(loop, position, heading))
+    return out

@@ -1,0 +1,82 @@
+"""The loop-closure error without GPS (issue 30, item 3): loops found along an estimate and
+confirmed by scan registration measure the truth's relative pose; an estimate's error at them
+is its relative pose's distance from the truth's."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sonarslam.datasets.errors import DataWarning
+from sonarslam.datasets.source import open_dataset
+from sonarslam.features.geometry import between
+from sonarslam.slam.cli.main import main
+from sonarslam.slam.eval.loops import find_loops, loop_errors, stated_loops
+from sonarslam.slam.eval.truth import truth_trajectory
+from sonarslam.slam.run.sources import dead_reckoning_trajectory
+
+#: How closely the scans' registration gives the truth's relative position (m): two turns of
+#: a head of 0.1 m bins, motion-corrected with dead reckoning
+REGISTRATION_TOL_M = 0.5
+
+
+@pytest.fixture(scope="module")
+def nogps(simulated: Callable[..., Path], tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The 300 s harbour (a lawnmower: its legs come back within 15 m) without its GPS."""
+    src = simulated("harbour", 2, 300.0)
+    dst = tmp_path_factory.mktemp("loops") / "nogps"
+    shutil.copytree(src, dst, ignore=shutil.ignore_patterns("*_DGPS.log"))
+    return dst
+
+
+def test_found_loops_measure_the_truth_and_dead_reckonings_error(nogps: Path) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        d = open_dataset(nogps)
+    assert d.gps is None and d.truth is not None
+    truth, dr = truth_trajectory(d), dead_reckoning_trajectory(d)
+    loops = find_loops(d, dr, radius_m=20.0)
+    assert len(loops) >= 2
+    for loop, at_truth, at_dr in zip(
+        loops, loop_errors(truth, loops), loop_errors(dr, loops), strict=True
+    ):
+        assert loop.how == "found" and loop.t1_s - loop.t0_s >= 60.0
+        # the registration is the truth's relative pose, to its tolerance
+        assert at_truth.position_m < REGISTRATION_TOL_M
+        # so dead reckoning's loop error is its drift between the two times, against the truth
+        t = np.array([loop.t0_s, loop.t1_s])
+        p_dr, p_truth = dr.poses(t), truth.poses(t)
+        drift = np.hypot(*(between(*p_dr)[:2] - between(*p_truth)[:2]))
+        assert abs(at_dr.position_m - drift) < REGISTRATION_TOL_M
+    # a stated loop: the same place at both times, so the error is the distance itself
+    stated = stated_loops([[20.0, 200.0]], d.nav_span_s[0])
+    p = truth.poses(np.array([stated[0].t0_s, stated[0].t1_s]))
+    err = loop_errors(truth, stated)[0]
+    assert err.position_m == pytest.approx(float(np.hypot(*between(p[0], p[1])[:2])))
+    assert np.isnan(err.heading_deg)
+
+
+def test_run_records_the_loops_of_the_run_and_of_dead_reckoning(
+    nogps: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "ekf"
+    args = ["run", str(nogps), "--backend", "ekf", "--out", str(out), "--quiet", "--loop", "20,200"]
+    assert main(args) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("loops:"))
+    assert line.startswith("loops: 1 stated, ") and "dead reckoning mean" in line
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["loops_stated"] == 1 and m["loops_found"] >= 2 and m["loop_radius_m"] == 20.0
+    assert len(m["loops"]) == 1 + m["loops_found"]
+    assert m["loops"][0]["how"] == "stated" and m["loops"][0]["t0Tt1"][2] is None
+    errors = [loop["error_m"] for loop in m["loops"]]
+    assert m["loop_error_mean_m"] == pytest.approx(np.mean([e["run"] for e in errors]))
+    assert m["loop_error_dr_max_m"] == pytest.approx(max(e["dr"] for e in errors))
+    with pytest.raises(SystemExit, match="2"):
+        main(["run", str(nogps), "--out", str(tmp_path / "bad"), "--loop", "200,20"])
+    assert "0 <= T0 < T1" in capsys.readouterr().err
