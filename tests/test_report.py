@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import re
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -201,3 +202,21 @@ def test_report_of_a_directory_that_is_no_run_is_one_line(tmp_path, capsys):
     assert main(["report", str(tmp_path), "--out", str(tmp_path / "o")]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no metrics.json" in err[0]
+
+
+def test_a_run_without_reference_draws_the_plane_alone(tmp_path: Path) -> None:
+    """No GPS, no truth: no error panel (its time axis would be Unix seconds), only the plane."""
+    import matplotlib.image
+
+    from sonarslam.slam.io.plots import plot_trajectories
+    from sonarslam.slam.io.trajectory import Trajectory
+
+    t = 1.7e9 + np.linspace(0.0, 100.0, 51)
+    poses = np.column_stack([np.linspace(0.0, 50.0, 51), np.zeros(51), np.zeros(51)])
+    drawn = {"dr": Trajectory(t, poses), "isam2": Trajectory(t, poses + [0.0, 1.0, 0.0])}
+    alone = plot_trajectories(tmp_path / "a.png", drawn, {}, "no reference", "no reference")
+    errors = {"isam2": (t, np.full(t.size, 1.0))}
+    both = plot_trajectories(tmp_path / "b.png", drawn, errors, "with errors", "GPS")
+    h_a, w_a = matplotlib.image.imread(alone).shape[:2]
+    h_b, w_b = matplotlib.image.imread(both).shape[:2]
+    assert w_a / h_a < 0.75 * (w_b / h_b)  # one panel against two side by side

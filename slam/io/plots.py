@@ -110,11 +110,21 @@ def plot_trajectories(
 
     ``trajectories`` holds the reference (``"gps"`` or ``"truth"``) and the estimates by name,
     drawn in :func:`sonarslam.slam.io.maps.trajectory_style`; ``errors`` maps an estimate's
-    name to its times (Unix s) and errors (m).
+    name to its times (Unix s) and errors (m). Without errors (a run with neither GPS nor
+    truth) the plane alone is drawn.
     """
+    layers = MapLayers(np.zeros((0, 2)), trajectories, walls_w=walls_w)
+    if not errors:
+        fig = Figure(figsize=(8, 7.2), dpi=110, layout="constrained")
+        ax = fig.subplots()
+        draw_map(ax, layers, data_box(layers))
+        fig.legend(loc="outside lower center", ncols=2, fontsize="small")
+        fig.suptitle(title)
+        out = Path(path)
+        fig.savefig(out, bbox_inches="tight")
+        return out
     fig = Figure(figsize=(13, 7.2), dpi=110, layout="constrained")
     (ax, ax2) = fig.subplots(1, 2, width_ratios=[1.0, 1.3])
-    layers = MapLayers(np.zeros((0, 2)), trajectories, walls_w=walls_w)
     draw_map(ax, layers, data_box(layers))
     t0 = min((float(t[0]) for t, _ in errors.values() if t.size), default=0.0)
     t1 = max((float(t[-1]) for t, _ in errors.values() if t.size), default=t0)
