@@ -272,6 +272,12 @@ def _topics_table(bag: Path, topics_file: str | Path | None) -> tuple[dict[str, 
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise DataError(path, None, f"cannot read [topics]: {_one_line(exc)}") from None
+    if topics_file is not None and "topics" not in data:  # a file given for its [topics]
+        raise DataError(
+            path,
+            None,
+            f"no [topics] table (its tables: {sorted(data)}): write [topics] role = topic",
+        )
     table = data.get("topics", {})
     if not isinstance(table, dict):
         raise DataError(path, None, "[topics] must be a table of role = topic")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import shutil
 import warnings
 from collections.abc import Callable
@@ -108,6 +109,11 @@ def test_info_lists_the_roles_and_run_takes_a_bag(
     assert main(["info", str(bags["mcap"])]) == 0
     out = capsys.readouterr().out
     assert "/dvl/twist" in out and "geometry_msgs/msg/TwistWithCovarianceStamped" in out
+    # the settings' source is the sonarslam.toml beside the bag, for a bag file and a directory
+    assert main(["info", str(bags["ros1"])]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"\[mounting\.sonar\] x_m .*sonarslam\.toml", out), out
+    assert "neutral default" not in out
     assert main(["run", str(bags["sqlite3"]), "--out", str(tmp_path / "r"), "--quiet"]) == 0
     m = json.loads((tmp_path / "r" / "metrics.json").read_text())
     assert m["calibration"].endswith("sonarslam.toml") and m["evaluation"] == "gps and truth"
@@ -228,6 +234,11 @@ def test_missing_role_wrong_type_and_truncated_bags_are_one_line(
         open_bag(bags["ros1"], topics_file=topics)
     topics.write_text('[topics]\ndvl = "/nowhere"\n')
     with pytest.raises(DataError, match=r"\[topics\] dvl = '/nowhere': no such topic"):
+        open_bag(bags["ros1"], topics_file=topics)
+    topics.write_text('[topic]\nsonar = "/sonar"\n')  # a misspelt table is not ignored
+    with pytest.raises(
+        DataError, match=r"topics.toml: no \[topics\] table \(its tables: \['topic'\]\)"
+    ):
         open_bag(bags["ros1"], topics_file=topics)
     # a bag cut short: one line on the command line, no traceback
     cut = tmp_path / "cut"

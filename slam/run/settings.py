@@ -70,7 +70,12 @@ class Setting:
 
 
 def _file_keys(root: Path) -> tuple[Path | None, dict[str, set[str]]]:
-    found = sorted(set(root.glob("sonarslam.toml")) | set(root.glob("*/sonarslam.toml")))
+    """The ``sonarslam.toml`` of a dataset (in its directory or one below; beside a bag or a
+    log file) and the keys it sets, by table."""
+    if root.is_dir():
+        found = sorted(set(root.glob("sonarslam.toml")) | set(root.glob("*/sonarslam.toml")))
+    else:
+        found = sorted(root.parent.glob("sonarslam.toml"))
     if not found:
         return None, {}
     with open(found[0], "rb") as f:
