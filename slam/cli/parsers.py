@@ -62,6 +62,12 @@ def _simulate(sub: Subparsers) -> argparse.ArgumentParser:
         help="write a ROS bag instead of the marina layout: ros1 (OUT/<run>.bag), mcap or sqlite3"
         " (OUT is the ROS 2 bag directory); sonarslam.toml and truth.json go with it",
     )
+    p.add_argument(
+        "--ping360",
+        action="store_true",
+        help="write the run as a Ping360 logs it instead: a Ping Viewer OUT/<start>.bin (a"
+        " Ping360-shaped head: whole gradians, 25 ns sample periods) and OUT/nav.bag",
+    )
     return p
 
 

@@ -21,6 +21,7 @@ def command(args: argparse.Namespace) -> int:
         settings=parse_settings(args.set),
         start_enu=args.start,
         topics_file=args.topics,
+        nav=args.nav,
     )
     m = result.metrics
     print(f"calibration: {m['calibration']}")
