@@ -664,8 +664,52 @@ def read_nav_csv(
         than its row before, a latitude or longitude out of range, no DVL or AHRS row.
     """
     p = Path(path)
-    text = read_text(p, "utf-8")
-    rows = csv.reader(io.StringIO(text, newline=""))
+    out: dict[str, array.array[float]] = {g: array.array("d") for g in _NAV_GROUPS}
+    with open_regular(p) as fh:
+        text = io.TextIOWrapper(fh, encoding="utf-8", newline="")
+        rows = csv.reader(text)
+        try:
+            _nav_rows(p, rows, out)
+        except UnicodeDecodeError:
+            read_text(p, "utf-8")  # the error again, with the line of the byte
+            raise DataError(p, None, "not UTF-8 text") from None
+        except csv.Error as exc:
+            raise DataError(p, rows.line_num, f"not a CSV row: {exc}") from None
+        finally:
+            text.detach()
+    for group in ("dvl", "ahrs"):
+        if not out[group]:
+            raise DataError(p, None, f"no {group.upper()} row")
+    dvl = np.frombuffer(out["dvl"]).reshape(-1, 4)
+    ahrs = np.frombuffer(out["ahrs"]).reshape(-1, 3)
+    rate: np.ndarray = ahrs[:, 2]
+    if np.isnan(rate).any():
+        if not np.isnan(rate).all():
+            raise DataError(p, None, "ahrs_yaw_rate_rad_per_s: every AHRS row, or none")
+        t_a = ahrs[:, 0]
+        rate = (
+            np.gradient(np.unwrap(ahrs[:, 1]), t_a)
+            if t_a.size > 1 and np.all(np.diff(t_a) > 0)
+            else np.zeros(t_a.size)
+        )
+    gps = None
+    if out["gps"]:
+        g = np.frombuffer(out["gps"]).reshape(-1, 3)
+        lat0, lon0 = float(g[0, 1]), float(g[0, 2])
+        en = geodetic_to_local_en(g[:, 1], g[:, 2], lat0, lon0)
+        gps = GpsSeries(g[:, 0].copy(), en, (lat0, lon0), None, p)
+    return (
+        DvlSeries(
+            dvl[:, 0].copy(), dvl[:, 1:3].copy(), dvl[:, 3] > 0.5, np.full(len(dvl), np.nan), p
+        ),
+        AttitudeSeries(ahrs[:, 0].copy(), ahrs[:, 1].copy(), np.asarray(rate, float).copy(), p),
+        gps,
+    )
+
+
+def _nav_rows(p: Path, rows: Any, out: dict[str, array.array[float]]) -> None:
+    """The rows of a navigation CSV (``csv.reader``) into ``out``: per sensor, its rows
+    flattened (DVL: t, vx, vy, valid; AHRS: t, yaw, rate or NaN; GPS: t, lat, lon)."""
     try:
         header = [h.strip() for h in next(rows)]
     except StopIteration:
@@ -684,7 +728,6 @@ def read_nav_csv(
     if missing or len(gps_cols) == 1:
         raise DataError(p, 1, f"header: missing column(s) {missing or list(_NAV_GROUPS['gps'])}")
     col = {h: i for i, h in enumerate(header)}
-    out: dict[str, list[list[float]]] = {"dvl": [], "ahrs": [], "gps": []}
     last = {"dvl": -math.inf, "ahrs": -math.inf, "gps": -math.inf}
     for cells in rows:
         number = rows.line_num
@@ -737,35 +780,7 @@ def read_nav_csv(
                 row.append(math.nan if rate_cell is None else rate_cell)
             elif abs(row[1]) > 90.0 or abs(row[2]) > 180.0:
                 raise DataError(p, number, "gps_lat_deg or gps_lon_deg out of range")
-            out[group].append(row)
-    for group in ("dvl", "ahrs"):
-        if not out[group]:
-            raise DataError(p, None, f"no {group.upper()} row")
-    dvl = np.array(out["dvl"])
-    ahrs = np.array(out["ahrs"])
-    rate: np.ndarray = ahrs[:, 2]
-    if np.isnan(rate).any():
-        if not np.isnan(rate).all():
-            raise DataError(p, None, "ahrs_yaw_rate_rad_per_s: every AHRS row, or none")
-        t_a = ahrs[:, 0]
-        rate = (
-            np.gradient(np.unwrap(ahrs[:, 1]), t_a)
-            if t_a.size > 1 and np.all(np.diff(t_a) > 0)
-            else np.zeros(t_a.size)
-        )
-    gps = None
-    if out["gps"]:
-        g = np.array(out["gps"])
-        lat0, lon0 = float(g[0, 1]), float(g[0, 2])
-        en = geodetic_to_local_en(g[:, 1], g[:, 2], lat0, lon0)
-        gps = GpsSeries(g[:, 0].copy(), en, (lat0, lon0), None, p)
-    return (
-        DvlSeries(
-            dvl[:, 0].copy(), dvl[:, 1:3].copy(), dvl[:, 3] > 0.5, np.full(len(dvl), np.nan), p
-        ),
-        AttitudeSeries(ahrs[:, 0].copy(), ahrs[:, 1].copy(), np.asarray(rate, float).copy(), p),
-        gps,
-    )
+            out[group].extend(row)
 
 
 def _bag_navigation(

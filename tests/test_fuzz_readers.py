@@ -65,7 +65,9 @@ def test_seeded_mutations_give_a_data_error_or_right_values(seeds, tmp_path, tar
 
 
 @pytest.mark.parametrize("kind", ["directory", "fifo", "dev_zero", "symlink_loop", "empty"])
-@pytest.mark.parametrize("target", ["read_dvl", "read_pcd_xy", "load_dataset_config", "read_truth"])
+@pytest.mark.parametrize(
+    "target", ["read_dvl", "read_pcd_xy", "load_dataset_config", "read_truth", "read_ping360_log"]
+)
 def test_special_files_are_refused_before_reading(seeds, tmp_path, target, kind):
     seed = seeds[TARGETS[target].seed]
     m = Mutation("special", kind, None, seed.primary, kind)
