@@ -142,6 +142,9 @@ GRADIANS_PER_TURN = 400
 BACK_JUMP_S = 1.0
 #: Longest message accepted (bytes): a ping-protocol frame of the largest payload.
 MAX_MESSAGE_BYTES = 8 + 0xFFFF + 2
+#: Beams this far (s) before or after the navigation's span: the file name read in the wrong
+#: time zone (an error saying so).
+ZONE_MISS_S = 900.0
 _DAY_MS = 86_400_000
 _NULL = 0xFFFFFFFF
 _U32 = struct.Struct(">I")
@@ -909,6 +912,14 @@ def open_ping360(
             settings = _settings(table, source, settings)
             sonar_keys.update(sonar)
             where = source if table else where
+    nav_path = Path(nav) if nav is not None else Path(settings.nav) if settings.nav else None
+    if nav_path is None:
+        raise DataError(
+            p,
+            None,
+            "a Ping360 log needs its navigation (DVL and AHRS): give --nav BAG_OR_CSV, or"
+            ' [ping360] nav = "nav.bag" in sonarslam.toml beside it (docs/data.md)',
+        )
     if toml is not None:
         config, calibration = load_dataset_config(toml), str(toml)
     else:
@@ -918,14 +929,6 @@ def open_ping360(
     if config_override is not None:
         config = load_dataset_config(config_override, base=config)
         calibration = f"{calibration}; over it {config_override}"
-    nav_path = Path(nav) if nav is not None else Path(settings.nav) if settings.nav else None
-    if nav_path is None:
-        raise DataError(
-            p,
-            None,
-            "a Ping360 log needs its navigation (DVL and AHRS): give --nav BAG_OR_CSV, or"
-            ' [ping360] nav = "nav.bag" in sonarslam.toml beside it (docs/data.md)',
-        )
     log = read_ping360_log(p, settings, where)
     n_bins = log.beams.intensities.shape[1]
     if ("n_bins" in sonar_keys and config.sonar.n_bins != n_bins) or (
@@ -971,11 +974,11 @@ def open_ping360(
 def _check_clocks(
     p: Path, beams: BeamSeries, dvl: DvlSeries, att: AttitudeSeries, settings: Ping360Settings
 ) -> None:
-    """Beams that miss the navigation's span altogether: the file name's clock (local time)
-    is the likely cause, said in one line."""
+    """Beams that miss the navigation's span by :data:`ZONE_MISS_S` or more: the file name's
+    clock (local time) is the likely cause, said in one line."""
     t0, t1 = max(dvl.t[0], att.t[0]), min(dvl.t[-1], att.t[-1])
     b0, b1 = float(beams.t_s[0]), float(beams.t_s[-1])
-    if b1 < t0 or b0 > t1:
+    if t0 - b1 >= ZONE_MISS_S or b0 - t1 >= ZONE_MISS_S:
         off_h = (t0 - b0) / 3600.0
         raise DataError(
             p,

@@ -321,3 +321,33 @@ def test_a_bin_needs_its_navigation_and_clocks_that_meet(binlog: Path, tmp_path:
     shutil.copy(nav, tmp_path / "x.bag")
     with pytest.raises(DataError, match=r"miss the navigation .* by \+5.00 h"):
         _open(alone)
+
+
+def test_auto_device_data_beams_and_bad_settings(small: Path) -> None:
+    """auto_device_data (2301, the head scanning on its own) is a beam as device_data is;
+    a [ping360] key that is not one is named."""
+    from brping import PingMessage, definitions
+
+    recs = _records(small)
+    msg = PingMessage(definitions.PING360_AUTO_DEVICE_DATA)
+    for name, value in dict(
+        mode=1, gain_setting=0, angle=398, transmit_duration=10, sample_period=1000,
+        transmit_frequency=750, start_angle=0, stop_angle=399, num_steps=2, delay=0,
+        number_of_samples=200, data_length=200,
+    ).items():  # fmt: skip
+        setattr(msg, name, value)
+    msg.data = bytearray(range(200))
+    raw = bytes(msg.pack_msg_data())
+    record = recs[0][1][: 4 + 24] + struct.pack(">I", len(raw)) + raw
+    data = small.read_bytes()
+    small.write_bytes(data[: recs[0][0]] + record + data[recs[0][0] + len(recs[0][1]) :])
+    log = read_ping360_log(small)
+    assert len(log.beams) == 6
+    assert log.beams.transducer_angle_rad[0] == pytest.approx(398 * math.pi / 200)
+    np.testing.assert_array_equal(log.beams.intensities[0], np.arange(200))
+    (small.parent / "sonarslam.toml").write_text("[ping360]\nsound_speed = 1480\n")
+    with pytest.raises(DataError, match=r"sonarslam.toml: unknown key\(s\) \['sound_speed'\]"):
+        _open(small, nav=small.parent / "nav.csv")
+    (small.parent / "sonarslam.toml").write_text("[ping360]\nspeed_of_sound_mps = 900\n")
+    with pytest.raises(DataError, match=r"\[ping360\]: .*speed_of_sound_mps"):
+        _open(small, nav=small.parent / "nav.csv")
