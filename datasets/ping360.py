@@ -116,6 +116,7 @@ __all__ = [
     "log_start_from_name",
     "read_ping360_log",
     "ping360_table",
+    "ping360_settings",
     "read_nav_csv",
     "open_ping360",
     "write_ping360_log",
@@ -873,6 +874,14 @@ def _settings(table: dict[str, Any], path: Path, base: Ping360Settings) -> Ping3
         return replace(base, **values)
     except (SettingError, ValueError) as exc:
         raise DataError(path, None, f"[ping360]: {exc}") from None
+
+
+def ping360_settings(toml: str | Path, base: Ping360Settings | None = None) -> Ping360Settings:
+    """The ``[ping360]`` table of a ``sonarslam.toml`` over ``base`` (default: the defaults),
+    checked: an unknown key, a value of the wrong type or out of range is a :class:`DataError`
+    naming the file; ``nav`` resolved against the file's folder."""
+    p = Path(toml)
+    return _settings(_table(p)[0], p, base or Ping360Settings())
 
 
 def open_ping360(
