@@ -4,7 +4,8 @@ simulator's round trip).
 
 The ``.bin`` layout (Ping Viewer's ``FileLink``/``LogSensorStruct``, written through Qt's
 ``QDataStream``, big-endian; ``src/link/filelink.cpp`` and ``src/link/logsensorstruct.cpp`` of
-github.com/bluerobotics/ping-viewer, and its ``examples/decode_sensor_binary_log.py``):
+github.com/bluerobotics/ping-viewer, and its ``examples/decode_sensor_binary_log.py``; read
+at ping-viewer commit 1ed4508 and ``bluerobotics-ping`` 0.2.5):
 
 * a header: the string ``"PingViewer sensor log file"``, the log version (int32, 1), five
   strings of Ping Viewer's build (hash, date, tag, OS name, OS version), the sensor family and
@@ -41,8 +42,8 @@ speed of sound a setting (:data:`SPEED_OF_SOUND_MPS`, 1500 m/s, as Ping Viewer's
 Angle sense: Ping Viewer adds the vehicle's MAVLink yaw (NED, clockwise seen from above) to the
 head angle to draw a north-up sonar (``Ping360::angle()`` in ``src/sensor/ping360.h``,
 ``_heading`` in ``src/sensor/ping360.cpp``) and draws angle 0 straight up and the angle growing
-clockwise (``qml/Ping360Visualizer.qml``): the head angle grows clockwise seen from above, zero
-at the head's forward mark. So ``[sonar] angle_sense = -1`` (the default) for a head mounted
+clockwise (``qml/Ping360Visualizer.qml``): the head angle grows clockwise seen from above, from
+the head's own zero (drawn as the vehicle's forward when the head is mounted straight). So ``[sonar] angle_sense = -1`` (the default) for a head mounted
 upright; a head mounted upside down turns the other way (``angle_sense = +1``), and where its
 zero points in the body is ``[mounting.sonar] yaw_deg``.
 
