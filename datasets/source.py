@@ -34,6 +34,7 @@ from sonarslam.datasets.gates import SensorReport, gate_attitude, gate_beams, ga
 from sonarslam.datasets.islog import read_is_log
 from sonarslam.datasets.keyframes import read_keyframes
 from sonarslam.datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti, read_setup
+from sonarslam.datasets.ping360 import is_ping360_log, open_ping360
 from sonarslam.datasets.records import BeamSeries
 from sonarslam.datasets.rosbag import is_bag, open_bag
 
@@ -69,9 +70,10 @@ def data_root() -> Path | None:
 
 
 def resolve_source(source: str | Path) -> Path:
-    """A named source (``marina``) under ``$SONARSLAM_DATA``, a directory or a ROS bag."""
+    """A named source (``marina``) under ``$SONARSLAM_DATA``, a directory, a ROS bag or a Ping
+    Viewer ``.bin`` log."""
     path = Path(source)
-    if path.is_dir() or is_bag(path):
+    if path.is_dir() or is_bag(path) or is_ping360_log(path):
         return path
     if str(source) in NAMED_SOURCES:
         root = data_root()
@@ -106,20 +108,26 @@ def open_dataset(
     source: str | Path,
     config_override: str | Path | None = None,
     topics_file: str | Path | None = None,
+    nav: str | Path | None = None,
 ) -> Dataset:
-    """Read a dataset directory, a ROS bag or a named source into a :class:`Dataset`.
+    """Read a dataset directory, a ROS bag, a Ping Viewer log or a named source into a
+    :class:`Dataset`.
 
     Parameters
     ----------
     source : str or Path
         A directory in the marina layout, a ROS 1 ``.bag``, a ROS 2 bag (directory or ``.mcap``;
-        :func:`sonarslam.datasets.rosbag.open_bag`), or a named source (``"marina"``).
+        :func:`sonarslam.datasets.rosbag.open_bag`), a Ping Viewer ``.bin`` log
+        (:func:`sonarslam.datasets.ping360.open_ping360`), or a named source (``"marina"``).
     config_override : str or Path, optional
         A ``sonarslam.toml``-format file whose keys replace those of the dataset's own
         configuration (its ``sonarslam.toml``, else the marina calibration); keys it leaves out
         keep the dataset's values. For trying another calibration without editing the data.
     topics_file : str or Path, optional
-        A bag's roles (``[topics]``: ``sonar``, ``dvl``, ``imu``, ``gps``), for a bag only.
+        A bag's roles (``[topics]``: ``sonar``, ``dvl``, ``imu``, ``gps``), for a bag or a
+        ``.bin``'s navigation bag.
+    nav : str or Path, optional
+        A ``.bin``'s navigation (a ROS bag or a CSV), over its ``[ping360] nav``.
 
     Raises
     ------
@@ -129,6 +137,10 @@ def open_dataset(
         pass the readers are gated with warnings (:mod:`sonarslam.datasets.gates`).
     """
     root = resolve_source(source)
+    if is_ping360_log(root):
+        return open_ping360(root, config_override, topics_file, nav)
+    if nav is not None:
+        raise DataError(Path(nav), None, "--nav is for a Ping Viewer .bin log")
     if is_bag(root):
         return open_bag(root, config_override, topics_file)
     if topics_file is not None:

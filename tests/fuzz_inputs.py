@@ -14,9 +14,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from sonarslam.datasets.config import MARINA_CONFIG, dump_dataset_config
 from sonarslam.datasets.errors import DataWarning
 from sonarslam.datasets.marina import read_is_timestamps
+from sonarslam.datasets.ping360 import write_ping360_log
 from sonarslam.datasets.simulator import simulate
 from sonarslam.datasets.source import Dataset, data_root, open_dataset
 
@@ -248,6 +251,17 @@ def _head_beams(path: Path, beams: int) -> bytes:
     return b"".join(lines[: 7 + beams])
 
 
+def _ping360_seed(work: Path) -> Seed:
+    """A Ping Viewer log of 12 beams of 200 samples (sonarslam's writer, as Ping Viewer lays
+    it out), elapsed stamps 70 ms apart."""
+    name = "20040825-173500000.bin"
+    rng = random.Random(360)
+    bins = np.array([[rng.randrange(256) for _ in range(200)] for _ in range(12)], np.uint8)
+    path = work / name
+    write_ping360_log(path, np.arange(12) * 70 + 400, (np.arange(12) * 2) % 400, bins, 900)
+    return Seed("Ping Viewer .bin", {name: path.read_bytes()}, name)
+
+
 def build_seeds(work: Path) -> dict[str, Seed]:
     """Every target's seed: the marina's slices when present (the raw IS log, the TOML and the
     truth from the simulator, which the marina has not), else the simulated ones."""
@@ -269,6 +283,7 @@ def build_seeds(work: Path) -> dict[str, Seed]:
         "truth.json", {"truth.json": json.dumps(truth, indent=0).encode()}, "truth.json"
     )
     seeds.update(bag_seeds(work, sim["dataset"]))
+    seeds["ping360"] = _ping360_seed(work)
     seeds["extractor_toml"] = Seed(
         "extract --config",
         {"x.toml": b"[extractor]\nmin_votes = 12\nmax_range_m = 25.0\n"},

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from sonarslam.datasets.config import _SCHEMA as TOML_SCHEMA  # what each key of the file sets
+from sonarslam.datasets.ping360 import read_ping360_log
 from sonarslam.datasets.source import Dataset
 from sonarslam.features.geometry import wrap_angle
 from tests.fuzz_inputs import Mutation, ref_lines, ref_rows
@@ -24,6 +25,7 @@ __all__ = [
     "check_stamps",
     "check_setup",
     "check_is_log",
+    "check_ping360",
     "check_pcd",
     "check_csv",
     "check_toml",
@@ -192,6 +194,40 @@ def check_is_log(
         (0, 2, *range(3, n_bins + 3)),
         lambda e: np.column_stack([e[:, 0], e[:, 2], e[:, 3:]]),
     )
+
+
+def check_ping360(
+    result: Any, mutated: bytes, original: bytes, m: Mutation, folder: Path
+) -> list[str]:
+    """A Ping Viewer log: every beam kept is one of the unmutated log's (its angle and
+    samples), in time order; a log cut short keeps the uncut log's first beams exactly."""
+    beams = result.beams
+    problems = _finite(beams.t_s, beams.transducer_angle_rad, result.bin_size_m)
+    if problems:
+        return problems
+    if len(beams) == 0:
+        return ["no beams, no error"]
+    if np.any(np.diff(beams.t_s) < 0) or np.any(beams.transducer_angle_rad >= 2 * math.pi):
+        return ["beams out of time order, or an angle of a turn or more"]
+    ref_path = folder / "reference" / m.file
+    ref_path.parent.mkdir(exist_ok=True)
+    ref_path.write_bytes(original)
+    ref = read_ping360_log(ref_path).beams
+    known = {
+        (round(a * 200 / math.pi), row.tobytes())
+        for a, row in zip(ref.transducer_angle_rad, ref.intensities, strict=True)
+    }
+    for a, row in zip(beams.transducer_angle_rad, beams.intensities, strict=True):
+        if (round(a * 200 / math.pi), row.tobytes()) not in known:
+            return ["a beam that is not in the log"]
+    if m.kind == "cut":
+        n = len(beams)
+        if not (
+            np.array_equal(beams.intensities, ref.intensities[:n])
+            and np.array_equal(beams.t_s, ref.t_s[:n])
+        ):
+            return ["a log cut short: the beams kept are not the uncut log's first"]
+    return []
 
 
 def _pcd_data_line(data: bytes) -> int | None:

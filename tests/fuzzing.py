@@ -42,6 +42,7 @@ from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.islog import read_is_log
 from sonarslam.datasets.keyframes import read_keyframe_times, read_pcd_xy
 from sonarslam.datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti, read_setup
+from sonarslam.datasets.ping360 import read_ping360_log
 from sonarslam.datasets.rosbag import open_bag
 from sonarslam.datasets.source import open_dataset, read_truth
 from sonarslam.settings import SettingError
@@ -70,6 +71,7 @@ from tests.fuzz_oracles import (
     check_mti,
     check_opened_dataset,
     check_pcd,
+    check_ping360,
     check_setup,
     check_stamps,
     check_toml,
@@ -312,6 +314,7 @@ TARGETS: dict[str, Target] = {
     "read_setup": Target("setup", read_setup, check_setup),
     "read_is_log": Target("is_log", lambda p: read_is_log(p, n_bins=500), check_is_log),
     "read_pcd_xy": Target("pcd", read_pcd_xy, check_pcd),
+    "read_ping360_log": Target("ping360", read_ping360_log, check_ping360),
     "read_keyframe_times": Target("csv", read_keyframe_times, check_csv),
     "load_dataset_config": Target("toml", load_dataset_config, check_toml),
     "read_truth": Target("truth", read_truth, check_truth),

@@ -15,6 +15,7 @@ import pytest
 
 import sonarslam.datasets.config as dataset_config
 from sonarslam.datasets.config import MARINA_CONFIG, config_tables, load_dataset_config
+from sonarslam.datasets.ping360 import ping360_settings
 from sonarslam.features.config import ExtractorConfig
 from sonarslam.features.scans import ScanConfig
 from sonarslam.settings import field_types
@@ -59,6 +60,11 @@ def test_every_toml_example_loads_through_the_loader(where: str, text: str, tmp_
     config = load_dataset_config(path)  # a DataError names the file, line and key
     written = tomllib.loads(text)
     tables = config_tables(config)
+    if "ping360" in written:  # a Ping Viewer log's own table, read by its own loader
+        ping = ping360_settings(path)
+        for key, value in written.pop("ping360").items():
+            got = getattr(ping, key)
+            assert (Path(got).name if key == "nav" else got) == value, f"{where}: [ping360] {key}"
     for table, key, value in _keys(written):
         if isinstance(value, float | int) and not isinstance(value, bool):
             assert tables[table][key] == pytest.approx(value), f"{where}: [{table}] {key}"

@@ -75,6 +75,7 @@ def test_seeded_mutations_give_a_data_error_or_right_values(seeds, tmp_path, tar
         "open_bag ros1",
         "open_bag mcap",
         "open_bag sqlite3",
+        "read_ping360_log",
     ],
 )
 def test_special_files_are_refused_before_reading(seeds, tmp_path, target, kind):

@@ -9,6 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from sonarslam.datasets.config import DatasetConfig, dump_dataset_config
+from sonarslam.datasets.ping360 import is_ping360_log, ping360_table
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.settings import SettingError
 from sonarslam.slam.run.calibration import (
@@ -23,7 +24,7 @@ from sonarslam.slam.run.sources import pose_source_by_name
 
 
 def _open(args: argparse.Namespace) -> Dataset:
-    dataset = open_dataset(args.source, config_override=args.config)
+    dataset = open_dataset(args.source, config_override=args.config, nav=args.nav)
     if args.start is not None:
         dataset = replace(dataset, start_enu=args.start)
     print(f"calibration of {dataset.name}: {dataset.calibration}")
@@ -31,10 +32,14 @@ def _open(args: argparse.Namespace) -> Dataset:
 
 
 def _write(args: argparse.Namespace, config: DatasetConfig) -> None:
-    """--write: the whole calibration, with what was found, to a sonarslam.toml."""
+    """--write: the whole calibration, with what was found, to a sonarslam.toml (a .bin's
+    [ping360] table kept)."""
     if args.write:
         path = Path(args.write)
-        path.write_text(dump_dataset_config(config), encoding="utf-8")
+        text = dump_dataset_config(config)
+        if is_ping360_log(args.source):
+            text += ping360_table(args.source, path, args.nav)
+        path.write_text(text, encoding="utf-8")
         print(f"written: {path}")
 
 

@@ -61,8 +61,9 @@ def number(
 
 
 EPILOG = (
-    "Data: a SOURCE is a directory in the marina layout, a ROS 1 or ROS 2 bag (docs/data.md) or the"
-    " named source 'marina', found under $SONARSLAM_DATA/marina."
+    "Data: a SOURCE is a directory in the marina layout, a ROS 1 or ROS 2 bag, a Ping Viewer .bin"
+    " log with its navigation (docs/data.md) or the named source 'marina', found under"
+    " $SONARSLAM_DATA/marina."
 )
 
 
@@ -75,7 +76,15 @@ class Subparsers(Protocol):
 def add_source(p: argparse.ArgumentParser) -> None:
     """The positional SOURCE of a command that reads a dataset."""
     p.add_argument(
-        "source", help="dataset directory, ROS bag (.bag, .mcap, ROS 2 bag directory) or 'marina'"
+        "source",
+        help="dataset directory, ROS bag (.bag, .mcap, ROS 2 bag directory), Ping Viewer .bin"
+        " or 'marina'",
+    )
+    p.add_argument(
+        "--nav",
+        metavar="BAG_OR_CSV",
+        help="a Ping Viewer .bin's navigation: a ROS bag (DVL, IMU, GPS topics) or a CSV"
+        " (docs/data.md; default: [ping360] nav of the sonarslam.toml beside the .bin)",
     )
 
 

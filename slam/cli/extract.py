@@ -12,8 +12,8 @@ from sonarslam.slam.run.extraction import extract
 
 def command(args: argparse.Namespace) -> int:
     source: str | Dataset = args.source
-    if args.start is not None:
-        source = replace(open_dataset(args.source), start_enu=args.start)
+    if args.start is not None or args.nav is not None:
+        source = replace(open_dataset(args.source, nav=args.nav), start_enu=args.start)
     result = extract(
         source,
         args.poses,

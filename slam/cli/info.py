@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
+from sonarslam.datasets.ping360 import is_ping360_log
 from sonarslam.datasets.rosbag import bag_topics, is_bag
 from sonarslam.datasets.source import open_dataset
 from sonarslam.slam.model.motion import gyro_bias_against_heading
@@ -22,9 +23,20 @@ def command(args: argparse.Namespace) -> int:
             print(
                 f"  {t.topic:<{width}}  {t.msgtype:<46} {t.count:>8} msgs {t.rate_hz:>8.2f} Hz  {role}"
             )
-    d = open_dataset(args.source, topics_file=args.topics)
+    d = open_dataset(args.source, topics_file=args.topics, nav=args.nav)
     t0, t1 = d.nav_span_s
     print(f"{d.name}: {d.root}")
+    if is_ping360_log(d.root):
+        c = d.report.counts
+        dropped = {
+            k.removeprefix("ping360_"): v for k, v in c.items() if k.startswith("ping360_") and v
+        }
+        print(
+            f"  Ping Viewer log: {len(d.beams)} beams of {d.config.sonar.n_bins} samples"
+            f" of {d.config.sonar.bin_size_m:.6g} m (sample period and [ping360]"
+            f" speed_of_sound_mps), step {d.config.sonar.step_rad * 200 / math.pi:g} gradians;"
+            f" other records: {dropped or 'none'}"
+        )
     nav = d.nav_beams()
     processed = ""
     if d.gps is not None and nav:

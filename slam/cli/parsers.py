@@ -71,6 +71,12 @@ def _simulate(sub: Subparsers) -> argparse.ArgumentParser:
         " message, the sensor offsets on /tf, no GPS); the sonarslam.toml written has no"
         " [mounting.*] tables (the transforms give them)",
     )
+    p.add_argument(
+        "--ping360",
+        action="store_true",
+        help="write the run as a Ping360 logs it instead: a Ping Viewer OUT/<start>.bin (a"
+        " Ping360-shaped head: whole gradians, 25 ns sample periods) and OUT/nav.bag",
+    )
     return p
 
 

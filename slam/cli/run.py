@@ -22,6 +22,7 @@ def command(args: argparse.Namespace) -> int:
         start_enu=args.start,
         topics_file=args.topics,
         loops_rel_s=args.loop,
+        nav=args.nav,
     )
     m = result.metrics
     print(f"calibration: {m['calibration']}")

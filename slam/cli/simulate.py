@@ -11,6 +11,7 @@ from pathlib import Path
 from sonarslam.datasets.errors import DataWarning
 from sonarslam.datasets.rosbag import write_bag
 from sonarslam.datasets.simulator import simulate
+from sonarslam.datasets.simulator.ping360 import simulate_ping360
 from sonarslam.datasets.source import open_dataset
 from sonarslam.settings import SettingError
 from sonarslam.slam.io.files import check_output_dir
@@ -18,6 +19,17 @@ from sonarslam.slam.io.files import check_output_dir
 
 def command(args: argparse.Namespace) -> int:
     check_output_dir(args.out)
+    if args.ping360:
+        if args.bag is not None:
+            raise SettingError("--ping360", "a Ping360 run's navigation is a ROS 1 bag: no --bag")
+        log = simulate_ping360(
+            args.kind, seed=args.seed, out_dir=args.out, duration_s=args.duration
+        )
+        print(
+            f"simulated {args.kind} (seed {args.seed}) written as a Ping360 logs it: {log}, with"
+            f" {log.parent / 'nav.bag'} and sonarslam.toml ([ping360] nav)"
+        )
+        return 0
     if (
         args.bag in ("mcap", "sqlite3")
         and Path(args.out).exists()

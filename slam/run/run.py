@@ -371,6 +371,7 @@ def run(
     start_enu: tuple[float, float, float] | None = None,
     topics_file: str | Path | None = None,
     loops_rel_s: list[tuple[float, float]] | None = None,
+    nav: str | Path | None = None,
 ) -> RunResult:
     """Open a dataset, run a back end on it (:func:`run_backend`) and write the run directory
     (:func:`sonarslam.slam.run.outputs.write_run`).
@@ -398,7 +399,7 @@ def run(
         check_settings(backend, settings)
     if batch and (backend in BASELINES or not backend_spec(backend).smoother):
         raise SettingError("--batch", f"back end {backend!r} does not smooth")
-    dataset = open_dataset(source, config_override=config, topics_file=topics_file)
+    dataset = open_dataset(source, config_override=config, topics_file=topics_file, nav=nav)
     if start_enu is not None:
         dataset = replace(dataset, start_enu=start_enu)
     result = run_backend(dataset, backend, settings, progress=progress, batch=batch)

@@ -90,17 +90,34 @@ def _file_keys(root: Path) -> tuple[Path | None, dict[str, set[str]]]:
     return found[0], keys
 
 
+#: The head's keys a Ping Viewer log gives (sonarslam.datasets.ping360) and where from.
+_PING360_HEAD_KEYS = {
+    "n_bins": "the .bin log (number_of_samples)",
+    "bin_size_m": "the .bin log (sample_period, [ping360] speed_of_sound_mps)",
+    "step_deg": "the .bin log (median angle change)",
+    "beam_width_deg": "the Ping360's datasheet (2 deg)",
+}
+
+
 def dataset_settings(dataset: Dataset) -> list[Setting]:
     """The dataset's settings, each with its unit and source (module docstring)."""
-    toml, in_file = _file_keys(dataset.root)
-    setup = sorted(dataset.root.glob("*_SETUP.log")) + sorted(dataset.root.glob("*/*_SETUP.log"))
+    # a bag file or a Ping Viewer .bin: its sonarslam.toml is the one beside it
+    folder = dataset.root if dataset.root.is_dir() else dataset.root.parent
+    toml, in_file = _file_keys(folder)
+    setup = sorted(folder.glob("*_SETUP.log")) + sorted(folder.glob("*/*_SETUP.log"))
+    ping360 = dataset.root.suffix == ".bin"  # its head's keys the file leaves out: the log's
     out = []
     for table, items in config_tables(dataset.config).items():
         mounting_source = items.get("source") if table.startswith("mounting.") else None
         for key, value in items.items():
             if key == "source":
                 continue
-            if toml is not None:
+            if ping360 and table == "sonar" and key in _PING360_HEAD_KEYS:
+                if key in ("n_bins", "bin_size_m") or key not in in_file.get(table, set()):
+                    source = _PING360_HEAD_KEYS[key]
+                else:
+                    source = toml.name if toml is not None else ""
+            elif toml is not None:
                 source = (
                     toml.name if key in in_file.get(table, set()) else "default (DatasetConfig)"
                 )

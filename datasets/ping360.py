@@ -1,0 +1,1109 @@
+"""Ping Viewer ``.bin`` logs of a Blue Robotics Ping360, with the navigation from a ROS bag or a
+CSV: read (streamed) into a :class:`sonarslam.datasets.dataset.Dataset`, and written (the
+simulator's round trip).
+
+The ``.bin`` layout (Ping Viewer's ``FileLink``/``LogSensorStruct``, written through Qt's
+``QDataStream``, big-endian; ``src/link/filelink.cpp`` and ``src/link/logsensorstruct.cpp`` of
+github.com/bluerobotics/ping-viewer, and its ``examples/decode_sensor_binary_log.py``; read
+at ping-viewer commit 1ed4508 and ``bluerobotics-ping`` 0.2.5):
+
+* a header: the string ``"PingViewer sensor log file"``, the log version (int32, 1), five
+  strings of Ping Viewer's build (hash, date, tag, OS name, OS version), the sensor family and
+  type (two int32);
+* then records, each a time stamp string ``"hh:mm:ss.zzz"`` and the raw bytes of one
+  ping-protocol message as the device sent it.
+
+A string is a uint32 byte count (``0xFFFFFFFF``: a null string) and its bytes: UTF-16
+big-endian as ``QDataStream`` writes a ``QString``; logs in UTF-8 exist too (the reference
+decoder takes UTF-8 unless the header string holds NUL bytes), so both are read, told apart by
+the header. A message's bytes are a uint32 count and the bytes.
+
+The time stamp is *not* a time of day: since July 2019 (ping-viewer commit f893d00) it is the
+time elapsed since the log was opened (``QElapsedTimer``) formatted as a time of day; the date
+and time of the start are only in the file name, ``yyyyMMdd-hhmmsszzz.bin``
+(``src/filemanager/filemanager.h``), in the logging computer's local time. Older logs stamped
+the computer's time of day. :attr:`Ping360Settings.stamps` ``"auto"`` takes the stamps as a
+time of day when the first one is nearer the file name's time of day than zero, else as elapsed
+time. A stamp more than 12 h earlier than the one before has crossed midnight (a day is added,
+counted ``ping360_midnight_wraps``); Qt writes an empty stamp after 24 h of logging, where Ping
+Viewer's own reader stops, and so does this one (a warning counts the bytes left).
+
+A message (ping-protocol, little-endian, as ``bluerobotics-ping``'s ``brping.PingMessage``
+packs it): ``"BR"``, payload length (uint16), message id (uint16), source and destination
+device ids (uint8 each), the payload, and a checksum (uint16, the sum of all bytes before it).
+The beams are ``device_data`` (2300) and ``auto_device_data`` (2301), decoded by
+``brping.PingMessage`` with the field layout of ``brping.definitions``: ``angle`` in gradians
+(0-399), ``sample_period`` in ticks of 25 ns, ``number_of_samples`` (200-1200 on the Ping360),
+``data`` the intensities (uint8, nearest first). Sample ``i`` (0-based) is bin ``i`` at range
+``(i + 1) * bin_size_m`` with ``bin_size_m = speed_of_sound * sample_period * 25 ns / 2``
+(:func:`sample_spacing_m`; Ping Viewer's ``Ping360::range()`` is that of the last sample), the
+speed of sound a setting (:data:`SPEED_OF_SOUND_MPS`, 1500 m/s, as Ping Viewer's default).
+
+Angle sense: Ping Viewer adds the vehicle's MAVLink yaw (NED, clockwise seen from above) to the
+head angle to draw a north-up sonar (``Ping360::angle()`` in ``src/sensor/ping360.h``,
+``_heading`` in ``src/sensor/ping360.cpp``) and draws angle 0 straight up and the angle growing
+clockwise (``qml/Ping360Visualizer.qml``): the head angle grows clockwise seen from above, from
+the head's own zero (drawn as the vehicle's forward when the head is mounted straight). So ``[sonar] angle_sense = -1`` (the default) for a head mounted
+upright; a head mounted upside down turns the other way (``angle_sense = +1``), and where its
+zero points in the body is ``[mounting.sonar] yaw_deg``.
+
+The rest of a run:
+
+* ``sonarslam.toml`` beside the ``.bin``: the calibration (without one, neutral mountings, as for
+  any source that is not the marina), and a ``[ping360]`` table (:class:`Ping360Settings`):
+  ``nav`` (the navigation, relative to the file), ``speed_of_sound_mps``, ``utc_offset_h`` (the
+  file name's clock: local time, UTC + this), ``start`` (an ISO 8601 date and time that replaces
+  the file name's), ``stamps``;
+* the navigation: a ROS bag (its DVL, IMU and optional GPS topics, read by
+  :mod:`sonarslam.datasets.rosbag`; a sonar topic in it is not read) or a CSV
+  (:func:`read_nav_csv`).
+
+The head's ``n_bins`` and ``bin_size_m`` are the log's (a ``sonarslam.toml`` that says otherwise
+is an error); its step is the median change of angle between beams and its beam width the
+Ping360's 2 deg (datasheet), unless ``sonarslam.toml`` sets them.
+
+Bad logs: a file that is not a Ping Viewer log, a record whose lengths are not a record's, a
+stamp that is not ``hh:mm:ss.zzz`` or jumps back more than :data:`BACK_JUMP_S` (less than 12 h),
+a change of sample period or sample count (one run, one range), a log without a beam: a
+:class:`DataError` naming the file, the record's index and its byte offset. A message with a
+bad checksum, a broken frame or an id the protocol does not define, a beam whose data does not
+match its sample count or whose angle is not 0-399: dropped and counted (``ping360_*``), with a
+:class:`DataWarning` naming the first; a log cut inside its last record: the record dropped,
+a warning.
+"""
+
+from __future__ import annotations
+
+import array
+import csv
+import io
+import math
+import re
+import struct
+import tomllib
+import warnings
+from collections.abc import Iterator
+from dataclasses import dataclass, replace
+from datetime import UTC, datetime, timedelta, timezone
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+import tomli_w
+
+from sonarslam.datasets import rosbag as rb
+from sonarslam.datasets.arrays import gated_dataset
+from sonarslam.datasets.config import DatasetConfig, load_dataset_config
+from sonarslam.datasets.dataset import NEUTRAL_CALIBRATION, Dataset, read_truth
+from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.geodesy import geodetic_to_local_en
+from sonarslam.datasets.logfile import open_regular, read_text
+from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries
+from sonarslam.datasets.rosbag import is_bag
+from sonarslam.settings import SettingError, bounded, check_fields, one_of
+
+__all__ = [
+    "LOG_HEADER",
+    "DEVICE_DATA",
+    "AUTO_DEVICE_DATA",
+    "SPEED_OF_SOUND_MPS",
+    "TICK_S",
+    "PING360_BEAM_WIDTH_DEG",
+    "NAV_CSV_COLUMNS",
+    "Ping360Settings",
+    "Ping360Log",
+    "is_ping360_log",
+    "sample_spacing_m",
+    "log_start_from_name",
+    "read_ping360_log",
+    "ping360_table",
+    "ping360_settings",
+    "read_nav_csv",
+    "open_ping360",
+    "write_ping360_log",
+    "log_file_name",
+]
+
+#: The header string of a Ping Viewer log (``LogSensorStruct::_validHeader``).
+LOG_HEADER = "PingViewer sensor log file"
+#: The log versions this reader knows (``LogSensorStruct::_actualVersion``).
+LOG_VERSIONS = (1,)
+#: ping-protocol ids of the Ping360's beams.
+DEVICE_DATA = 2300
+AUTO_DEVICE_DATA = 2301
+#: Speed of sound (m/s) unless ``[ping360] speed_of_sound_mps`` says otherwise (Ping Viewer's
+#: default, ``Ping360::_viewerDefaultSpeedOfSound``).
+SPEED_OF_SOUND_MPS = 1500.0
+#: One tick of ``sample_period`` (s).
+TICK_S = 25e-9
+#: The Ping360's horizontal beam width (deg, Blue Robotics' datasheet).
+PING360_BEAM_WIDTH_DEG = 2.0
+GRADIANS_PER_TURN = 400
+#: A beam stamp earlier than the one before by more than this (s, and less than 12 h) is a
+#: clock jump: an error; less is counted (``ping360_out_of_order``) and sorted.
+BACK_JUMP_S = 1.0
+#: Longest message accepted (bytes): a ping-protocol frame of the largest payload.
+MAX_MESSAGE_BYTES = 8 + 0xFFFF + 2
+#: Beams this far (s) before or after the navigation's span: the file name read in the wrong
+#: time zone (an error saying so).
+ZONE_MISS_S = 900.0
+_DAY_MS = 86_400_000
+_NULL = 0xFFFFFFFF
+_U32 = struct.Struct(">I")
+_I32 = struct.Struct(">i")
+_FRAME = struct.Struct("<2sHHBB")
+_STAMP = re.compile(r"(\d\d):([0-5]\d):([0-5]\d)\.(\d\d\d)")
+#: ``yyyyMMdd-hhmmsszzz`` in a file name (``FileManager::_fileName``).
+_NAME = re.compile(r"(\d{8})-(\d{9})")
+STAMP_KINDS = ("auto", "elapsed", "time_of_day")
+
+
+@dataclass(frozen=True)
+class Ping360Settings:
+    """The ``[ping360]`` table of a ``.bin``'s ``sonarslam.toml``.
+
+    Attributes
+    ----------
+    nav : str
+        The navigation: a ROS bag or a CSV (:func:`read_nav_csv`), relative to the
+        ``sonarslam.toml``; "" none (then ``--nav``).
+    speed_of_sound_mps : float
+        Speed of sound in the water (m/s): ``bin_size_m`` follows from it.
+    utc_offset_h : float
+        The file name's clock is UTC plus this (h): Ping Viewer names a log in the computer's
+        local time.
+    start : str
+        An ISO 8601 date and time (``2024-05-02T10:31:07.250+02:00``; without an offset,
+        ``utc_offset_h`` applies) that replaces the file name's; "" none.
+    stamps : str
+        ``"elapsed"`` (time since the log was opened, Ping Viewer since 2019),
+        ``"time_of_day"`` (older logs) or ``"auto"`` (module docstring).
+    """
+
+    nav: str = ""
+    speed_of_sound_mps: float = bounded(SPEED_OF_SOUND_MPS, 1300.0, 1700.0)
+    utc_offset_h: float = bounded(0.0, -14.0, 14.0)
+    start: str = ""
+    stamps: str = one_of("auto", *STAMP_KINDS)
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+def is_ping360_log(path: str | Path) -> bool:
+    """A ``.bin`` file (a Ping Viewer log, by its suffix: its content is checked on reading)."""
+    p = Path(path)
+    return p.suffix.lower() == ".bin" and p.is_file()
+
+
+def sample_spacing_m(sample_period_ticks: int, speed_of_sound_mps: float) -> float:
+    """Range between consecutive samples (m): sound's two-way travel in one sample period."""
+    return speed_of_sound_mps * (sample_period_ticks * TICK_S) / 2.0
+
+
+def log_start_from_name(path: str | Path, utc_offset_h: float = 0.0) -> int:
+    """The date and time in a Ping Viewer log's name (``yyyyMMdd-hhmmsszzz``) as Unix ms, the
+    name's clock being UTC + ``utc_offset_h``; a :class:`DataError` naming the file when its
+    name holds none."""
+    p = Path(path)
+    found = _NAME.search(p.stem)
+    when = None
+    if found is not None:
+        try:
+            when = datetime.strptime(found.group(1) + found.group(2) + "000", "%Y%m%d%H%M%S%f")
+        except ValueError:
+            when = None
+    if when is None:
+        raise DataError(
+            p,
+            None,
+            "the file name holds no Ping Viewer date and time (yyyyMMdd-hhmmsszzz.bin, e.g."
+            " 20211223-132558123.bin), and the log has none else: rename the file, or give"
+            ' [ping360] start = "2021-12-23T13:25:58.123+00:00" in sonarslam.toml beside it',
+        )
+    zone = timezone(timedelta(hours=utc_offset_h))
+    return _unix_ms(when.replace(tzinfo=zone))
+
+
+def _unix_ms(when: datetime) -> int:
+    delta = when - datetime(1970, 1, 1, tzinfo=UTC)
+    return (delta.days * 86_400 + delta.seconds) * 1000 + delta.microseconds // 1000
+
+
+def _start_ms(path: Path, settings: Ping360Settings, where: Path) -> int:
+    """The log's start (Unix ms): ``[ping360] start``, else the file name's."""
+    if not settings.start:
+        return log_start_from_name(path, settings.utc_offset_h)
+    try:
+        when = datetime.fromisoformat(settings.start)
+    except ValueError:
+        raise DataError(
+            where,
+            None,
+            f"[ping360] start = {settings.start!r} is not an ISO 8601 date and time"
+            " (2021-12-23T13:25:58.123+00:00)",
+        ) from None
+    if when.tzinfo is None:
+        when = when.replace(tzinfo=timezone(timedelta(hours=settings.utc_offset_h)))
+    return _unix_ms(when)
+
+
+# -- reading the log -------------------------------------------------------------------------
+
+
+class _Stream:
+    """A log's bytes read in order, with the offset of the next byte."""
+
+    def __init__(self, fh: IO[bytes], path: Path, size: int) -> None:
+        self.fh = fh
+        self.path = path
+        self.size = size
+        self.offset = 0
+
+    def take(self, n: int) -> bytes | None:
+        """``n`` bytes, or None when the file ends first."""
+        data = self.fh.read(n)
+        self.offset += len(data)
+        return data if len(data) == n else None
+
+
+def _header(s: _Stream) -> str:
+    """Read the header; the strings' encoding (``"utf-16-be"`` or ``"utf-8"``)."""
+    p = s.path
+    if s.size == 0:
+        raise DataError(p, None, "an empty file, not a Ping Viewer log")
+    raw = s.take(4)
+    n = _U32.unpack(raw)[0] if raw is not None else None
+    text = s.take(n) if n is not None and n <= 4 * len(LOG_HEADER) else None
+    encoding = ""
+    if text is not None:
+        for enc in ("utf-16-be", "utf-8"):
+            try:
+                if text.decode(enc) == LOG_HEADER:
+                    encoding = enc
+            except UnicodeDecodeError:
+                pass
+    if not encoding:
+        raise DataError(
+            p, None, f"not a Ping Viewer log: it does not start with the string {LOG_HEADER!r}"
+        )
+    raw = s.take(4)
+    version = _I32.unpack(raw)[0] if raw is not None else None
+    if version not in LOG_VERSIONS:
+        raise DataError(
+            p, None, f"Ping Viewer log version {version}: this reader knows {LOG_VERSIONS}"
+        )
+    for what in ("hash", "date", "tag", "OS name", "OS version"):
+        raw = s.take(4)
+        n = _U32.unpack(raw)[0] if raw is not None else None
+        if n is None or (n != _NULL and (n > 1024 or s.take(n) is None)):
+            raise DataError(
+                p, None, f"the header's Ping Viewer {what} (byte {s.offset}) is not a string"
+            )
+    if s.take(8) is None:
+        raise DataError(p, None, "the header ends before its sensor family and type")
+    return encoding
+
+
+@dataclass(frozen=True)
+class _Record:
+    index: int  # 0-based, in the file
+    offset: int  # byte offset of the record in the file
+    stamp_ms: int | None  # None: an empty stamp (the end, as Ping Viewer reads it)
+    message: bytes
+
+
+def _stamp_ms(s: _Stream, index: int, offset: int, raw: bytes, encoding: str) -> int:
+    try:
+        text = raw.decode(encoding)
+    except UnicodeDecodeError:
+        text = ""
+    found = _STAMP.fullmatch(text)
+    if found is None:
+        raise DataError(
+            s.path,
+            None,
+            f"record {index} (byte offset {offset}): time stamp {raw[:32]!r} is not hh:mm:ss.zzz",
+        )
+    h, m, sec, ms = (int(g) for g in found.groups())
+    return ((h * 60 + m) * 60 + sec) * 1000 + ms
+
+
+def _records(s: _Stream, encoding: str, counts: dict[str, int]) -> Iterator[_Record]:
+    """The records after the header, one at a time (module docstring for what ends them)."""
+    stamp_bytes = 24 if encoding == "utf-16-be" else 12
+    index = 0
+    while s.offset < s.size:
+        offset = s.offset
+        raw = s.take(4)
+        n = _U32.unpack(raw)[0] if raw is not None else None
+        if n is not None and n in (0, _NULL):
+            if s.size - s.offset > 0:
+                left = s.size - offset
+                warnings.warn(
+                    f"{s.path}: record {index} (byte offset {offset}) has no time stamp (Ping"
+                    " Viewer writes none after 24 h of logging, and stops reading there): the"
+                    f" {left} bytes from it on are not read",
+                    DataWarning,
+                    stacklevel=4,
+                )
+                counts["ping360_unread_bytes"] = left
+            return
+        if n is not None and n != stamp_bytes:
+            raise DataError(
+                s.path,
+                None,
+                f"record {index} (byte offset {offset}): a time stamp of {n} bytes, not"
+                f" {stamp_bytes} (a corrupt log)",
+            )
+        stamp = s.take(stamp_bytes) if n is not None else None
+        raw = s.take(4) if stamp is not None else None
+        size = _U32.unpack(raw)[0] if raw is not None else None
+        if size is not None and size != _NULL and size > MAX_MESSAGE_BYTES:
+            raise DataError(
+                s.path,
+                None,
+                f"record {index} (byte offset {offset}): a message of {size} bytes, more than a"
+                f" ping-protocol message ({MAX_MESSAGE_BYTES}; a corrupt log)",
+            )
+        message = b"" if size == _NULL else (s.take(size) if size is not None else None)
+        if stamp is None or message is None:
+            warnings.warn(
+                f"{s.path}: the log ends inside record {index} (byte offset {offset}): the"
+                " record is dropped",
+                DataWarning,
+                stacklevel=4,
+            )
+            counts["ping360_truncated_records"] = 1
+            return
+        yield _Record(index, offset, _stamp_ms(s, index, offset, stamp, encoding), message)
+        index += 1
+
+
+@dataclass
+class _Beam:
+    angle_grad: int
+    sample_period: int
+    data: bytes
+
+
+def _payloads() -> dict[int, Any]:
+    from brping import definitions  # lazy: only .bin logs load brping
+
+    return definitions.payload_dict_all  # type: ignore[no-any-return]
+
+
+def _decode(record: _Record, payloads: dict[int, Any]) -> tuple[str, _Beam | None]:
+    """What a record's message is (``"beam"``, ``"other"``, or the fault counted) and its
+    beam."""
+    from brping import PingMessage  # lazy: only .bin logs load brping
+
+    msg = record.message
+    if len(msg) < 10:
+        return "bad_messages", None
+    start, length, msg_id, _, _ = _FRAME.unpack_from(msg)
+    if start != b"BR" or length + 10 != len(msg):
+        return "bad_messages", None
+    if (sum(msg[:-2]) & 0xFFFF) != int.from_bytes(msg[-2:], "little"):
+        return "checksum_errors", None
+    if msg_id not in payloads:
+        return "unknown_messages", None
+    if msg_id not in (DEVICE_DATA, AUTO_DEVICE_DATA):
+        return "other_messages", None
+    if length < payloads[msg_id]["payload_length"]:
+        return "bad_messages", None
+    m = PingMessage(msg_data=msg)
+    data = bytes(m.data)
+    if m.data_length != len(data) or m.number_of_samples != len(data):
+        return "bad_messages", None
+    if not len(data):
+        return "other_messages", None  # a reply without a transmission
+    if not 0 <= m.angle < GRADIANS_PER_TURN or m.sample_period < 1:
+        return "bad_messages", None
+    return "beam", _Beam(int(m.angle), int(m.sample_period), data)
+
+
+@dataclass(frozen=True)
+class Ping360Log:
+    """The beams of a Ping Viewer log (:func:`read_ping360_log`).
+
+    Attributes
+    ----------
+    beams : BeamSeries
+        Times (Unix s), transducer angles (rad, ``gradians * pi / 200``), intensities
+        ``(N, n_samples)`` uint8, nearest sample first; in time order.
+    sample_period_ticks : int
+        ``sample_period`` of every beam (25 ns ticks).
+    bin_size_m : float
+        :func:`sample_spacing_m` at the settings' speed of sound (m).
+    step_grad : int
+        Median change of angle between consecutive beams (gradians); 0 with one beam.
+    start_ms : int
+        The log's start (Unix ms): the stamps' zero (elapsed) or the start's midnight
+        (time of day) is derived from it.
+    stamps : str
+        How the stamps were read: ``"elapsed"`` or ``"time_of_day"``.
+    records : int
+        Records read.
+    counts : dict
+        ``ping360_*`` counts: other messages, faults dropped (module docstring).
+    encoding : str
+        The log's strings: ``"utf-16-be"`` or ``"utf-8"``.
+    """
+
+    beams: BeamSeries
+    sample_period_ticks: int
+    bin_size_m: float
+    step_grad: int
+    start_ms: int
+    stamps: str
+    records: int
+    counts: dict[str, int]
+    encoding: str
+
+
+def read_ping360_log(
+    path: str | Path, settings: Ping360Settings | None = None, where: Path | None = None
+) -> Ping360Log:
+    """Read the Ping360 beams of a Ping Viewer ``.bin`` log, streamed: the file is read a
+    record at a time into one array of beams sized from the file (module docstring for the
+    layout, the times and the faults).
+
+    Parameters
+    ----------
+    path : str or Path
+    settings : Ping360Settings, optional
+        Speed of sound, the file name's clock, a start that replaces it, how to read stamps.
+    where : Path, optional
+        The file that gave ``settings`` (for its errors).
+
+    Raises
+    ------
+    DataError
+        Naming the file, and the record's index and byte offset where there is one.
+    """
+    p = Path(path)
+    settings = settings or Ping360Settings()
+    payloads = _payloads()
+    counts = {
+        f"ping360_{k}": 0
+        for k in (
+            "other_messages",
+            "bad_messages",
+            "checksum_errors",
+            "unknown_messages",
+            "out_of_order",
+            "midnight_wraps",
+            "truncated_records",
+        )
+    }
+    first_fault: dict[str, _Record] = {}
+    with open_regular(p) as fh:
+        size = fh.seek(0, io.SEEK_END)
+        fh.seek(0)
+        s = _Stream(fh, p, size)
+        encoding = _header(s)
+        stamp_bytes = 24 if encoding == "utf-16-be" else 12
+        data: np.ndarray | None = None
+        grads = array.array("H")
+        stamps = array.array("q")
+        n_bins, period, n = 0, 0, 0
+        records = 0
+        wraps, last_ms = 0, -1
+        first_stamp: int | None = None
+        for record in _records(s, encoding, counts):
+            records += 1
+            assert record.stamp_ms is not None
+            if first_stamp is None:
+                first_stamp = record.stamp_ms
+            kind, beam = _decode(record, payloads)
+            if beam is None:
+                counts[f"ping360_{kind}"] += 1
+                first_fault.setdefault(kind, record)
+                continue
+            if data is None:
+                n_bins, period = len(beam.data), beam.sample_period
+                # every record from here on a beam at most: the array holds them all, and
+                # beams are nearly all of a Ping360 log
+                smallest = 4 + stamp_bytes + 4 + 10 + 14 + n_bins
+                data = np.empty((max((size - record.offset) // smallest, 1), n_bins), np.uint8)
+            elif len(beam.data) != n_bins or beam.sample_period != period:
+                raise DataError(
+                    p,
+                    None,
+                    f"record {record.index} (byte offset {record.offset}): a beam of"
+                    f" {len(beam.data)} samples every {beam.sample_period} ticks after"
+                    f" {n_bins} every {period} (the range changed: one run a range; cut the"
+                    " log there)",
+                )
+            t_ms = record.stamp_ms + wraps * _DAY_MS
+            if last_ms >= 0 and t_ms < last_ms:
+                if last_ms - t_ms > _DAY_MS // 2:
+                    wraps += 1
+                    t_ms += _DAY_MS
+                    counts["ping360_midnight_wraps"] += 1
+                elif last_ms - t_ms > BACK_JUMP_S * 1000:
+                    raise DataError(
+                        p,
+                        None,
+                        f"record {record.index} (byte offset {record.offset}): its stamp is"
+                        f" {(last_ms - t_ms) / 1000:.3f} s earlier than the beam before (a"
+                        f" clock jump beyond {BACK_JUMP_S:g} s)",
+                    )
+                else:
+                    counts["ping360_out_of_order"] += 1
+            last_ms = max(last_ms, t_ms)
+            data[n] = np.frombuffer(beam.data, dtype=np.uint8)
+            grads.append(beam.angle_grad)
+            stamps.append(t_ms)
+            n += 1
+    if data is None or first_stamp is None:
+        found = ", ".join(f"{k} {v}" for k, v in counts.items() if v) or "no record"
+        raise DataError(
+            p, None, f"no Ping360 beam (device_data 2300, auto_device_data 2301): {found}"
+        )
+    _warn_faults(p, counts, first_fault)
+    start_ms = _start_ms(p, settings, where or p)
+    kind = settings.stamps
+    if kind == "auto":
+        tod = (start_ms + int(round(settings.utc_offset_h * 3_600_000))) % _DAY_MS
+        near_clock = abs(first_stamp - tod) < first_stamp
+        kind = "time_of_day" if near_clock else "elapsed"
+    base_ms = start_ms
+    if kind == "time_of_day":
+        local_ms = start_ms + int(round(settings.utc_offset_h * 3_600_000))
+        base_ms = start_ms - local_ms % _DAY_MS  # the start's (local) midnight
+    unix_ms = np.frombuffer(stamps, dtype=np.int64) + base_ms
+    order = np.argsort(unix_ms, kind="stable")
+    beams = BeamSeries(
+        (unix_ms[order] / 1000.0).astype(np.float64),
+        (np.frombuffer(grads, dtype=np.uint16)[order] * (math.pi / 200.0)).astype(np.float64),
+        data[:n][order] if counts["ping360_out_of_order"] else data[:n],
+        False,
+    )
+    if counts["ping360_out_of_order"]:
+        warnings.warn(
+            f"{p}: {counts['ping360_out_of_order']} beam(s) stamped earlier than the one before,"
+            " sorted by stamp",
+            DataWarning,
+            stacklevel=2,
+        )
+    return Ping360Log(
+        beams=beams,
+        sample_period_ticks=period,
+        bin_size_m=sample_spacing_m(period, settings.speed_of_sound_mps),
+        step_grad=_step_grad(np.frombuffer(grads, dtype=np.uint16)),
+        start_ms=start_ms,
+        stamps=kind,
+        records=records,
+        counts=counts,
+        encoding=encoding,
+    )
+
+
+def _step_grad(grads: np.ndarray) -> int:
+    """Median absolute change of angle between consecutive beams (gradians, wrapped)."""
+    if grads.size < 2:
+        return 0
+    d = np.mod(np.diff(grads.astype(np.int64)), GRADIANS_PER_TURN)
+    d = np.minimum(d, GRADIANS_PER_TURN - d)
+    d = d[d > 0]
+    return int(np.median(d)) if d.size else 0
+
+
+_FAULTS = {
+    "bad_messages": "a message that is not a well-formed Ping360 message (frame, lengths,"
+    " samples or angle)",
+    "checksum_errors": "a message whose checksum is wrong",
+    "unknown_messages": "a message id the ping protocol does not define",
+}
+
+
+def _warn_faults(p: Path, counts: dict[str, int], first: dict[str, _Record]) -> None:
+    for kind, what in _FAULTS.items():
+        n = counts[f"ping360_{kind}"]
+        if n:
+            r = first[kind]
+            warnings.warn(
+                f"{p}: {n} record(s) dropped, each {what}; the first is record {r.index} (byte"
+                f" offset {r.offset})",
+                DataWarning,
+                stacklevel=3,
+            )
+
+
+# -- the navigation ----------------------------------------------------------------------------
+
+#: The columns of a navigation CSV (header row required; any order; ``t_s`` and at least the
+#: DVL's and the AHRS's): name -> what it holds. A row holds the sensors sampled at its time:
+#: an empty cell is no sample.
+NAV_CSV_COLUMNS = {
+    "t_s": "time (Unix s, the sonar's clock)",
+    "dvl_vx_mps": "DVL bottom velocity along the DVL frame's x (m/s)",
+    "dvl_vy_mps": "DVL bottom velocity along the DVL frame's y (m/s)",
+    "dvl_valid": "1 with bottom lock, 0 without (optional column; default 1)",
+    "ahrs_yaw_enu_rad": "AHRS yaw, counter-clockwise from East (rad; REP-103 ENU; from a NED"
+    " heading psi: pi/2 - psi)",
+    "ahrs_yaw_rate_rad_per_s": "gyro z rate, counter-clockwise (rad/s; optional column)",
+    "gps_lat_deg": "WGS-84 latitude (deg; optional: a ruler, never an input)",
+    "gps_lon_deg": "WGS-84 longitude (deg)",
+}
+_NAV_GROUPS = {
+    "dvl": ("dvl_vx_mps", "dvl_vy_mps"),
+    "ahrs": ("ahrs_yaw_enu_rad",),
+    "gps": ("gps_lat_deg", "gps_lon_deg"),
+}
+_NAV_OPTIONAL = {"dvl_valid": "dvl", "ahrs_yaw_rate_rad_per_s": "ahrs"}
+
+
+def read_nav_csv(
+    path: str | Path,
+) -> tuple[DvlSeries, AttitudeSeries, GpsSeries | None]:
+    """The DVL, the AHRS and an optional GPS of a navigation CSV (:data:`NAV_CSV_COLUMNS`).
+
+    Raises
+    ------
+    DataError
+        Naming the file and the line: a missing or unknown column, a row of another number of
+        cells, a cell that is not a finite number, half a sensor's cells, a sensor's time earlier
+        than its row before, a latitude or longitude out of range, no DVL or AHRS row.
+    """
+    p = Path(path)
+    out: dict[str, array.array[float]] = {g: array.array("d") for g in _NAV_GROUPS}
+    with open_regular(p) as fh:
+        text = io.TextIOWrapper(fh, encoding="utf-8", newline="")
+        rows = csv.reader(text)
+        try:
+            _nav_rows(p, rows, out)
+        except UnicodeDecodeError:
+            read_text(p, "utf-8")  # the error again, with the line of the byte
+            raise DataError(p, None, "not UTF-8 text") from None
+        except csv.Error as exc:
+            raise DataError(p, rows.line_num, f"not a CSV row: {exc}") from None
+        finally:
+            text.detach()
+    for group in ("dvl", "ahrs"):
+        if not out[group]:
+            raise DataError(p, None, f"no {group.upper()} row")
+    dvl = np.frombuffer(out["dvl"]).reshape(-1, 4)
+    ahrs = np.frombuffer(out["ahrs"]).reshape(-1, 3)
+    rate: np.ndarray = ahrs[:, 2]
+    if np.isnan(rate).any():
+        if not np.isnan(rate).all():
+            raise DataError(p, None, "ahrs_yaw_rate_rad_per_s: every AHRS row, or none")
+        t_a = ahrs[:, 0]
+        rate = (
+            np.gradient(np.unwrap(ahrs[:, 1]), t_a)
+            if t_a.size > 1 and np.all(np.diff(t_a) > 0)
+            else np.zeros(t_a.size)
+        )
+    gps = None
+    if out["gps"]:
+        g = np.frombuffer(out["gps"]).reshape(-1, 3)
+        lat0, lon0 = float(g[0, 1]), float(g[0, 2])
+        en = geodetic_to_local_en(g[:, 1], g[:, 2], lat0, lon0)
+        gps = GpsSeries(g[:, 0].copy(), en, (lat0, lon0), None, p)
+    return (
+        DvlSeries(
+            dvl[:, 0].copy(), dvl[:, 1:3].copy(), dvl[:, 3] > 0.5, np.full(len(dvl), np.nan), p
+        ),
+        AttitudeSeries(ahrs[:, 0].copy(), ahrs[:, 1].copy(), np.asarray(rate, float).copy(), p),
+        gps,
+    )
+
+
+def _nav_rows(p: Path, rows: Any, out: dict[str, array.array[float]]) -> None:
+    """The rows of a navigation CSV (``csv.reader``) into ``out``: per sensor, its rows
+    flattened (DVL: t, vx, vy, valid; AHRS: t, yaw, rate or NaN; GPS: t, lat, lon)."""
+    try:
+        header = [h.strip() for h in next(rows)]
+    except StopIteration:
+        raise DataError(p, None, "an empty file: a navigation CSV needs a header row") from None
+    unknown = [h for h in header if h not in NAV_CSV_COLUMNS]
+    if unknown or len(set(header)) != len(header):
+        raise DataError(
+            p,
+            1,
+            f"header: unknown or repeated column(s) {unknown or header}; the columns are"
+            f" {list(NAV_CSV_COLUMNS)} (docs/data.md)",
+        )
+    need = ["t_s", *_NAV_GROUPS["dvl"], *_NAV_GROUPS["ahrs"]]
+    missing = [h for h in need if h not in header]
+    gps_cols = [h for h in _NAV_GROUPS["gps"] if h in header]
+    if missing or len(gps_cols) == 1:
+        raise DataError(p, 1, f"header: missing column(s) {missing or list(_NAV_GROUPS['gps'])}")
+    col = {h: i for i, h in enumerate(header)}
+    last = {"dvl": -math.inf, "ahrs": -math.inf, "gps": -math.inf}
+    for cells in rows:
+        number = rows.line_num
+        if not cells or all(not c.strip() for c in cells):
+            continue
+        if len(cells) != len(header):
+            raise DataError(p, number, f"{len(cells)} cells, the header has {len(header)}")
+        values: dict[str, float | None] = {}
+        for h, i in col.items():
+            cell = cells[i].strip()
+            if not cell:
+                values[h] = None
+                continue
+            try:
+                v = float(cell)
+            except ValueError:
+                v = math.nan
+            if not math.isfinite(v):
+                raise DataError(p, number, f"{h} = {cell!r} is not a finite number")
+            values[h] = v
+        t = values["t_s"]
+        if t is None:
+            raise DataError(p, number, "t_s is empty")
+        for group, names in _NAV_GROUPS.items():
+            got = [values.get(h) for h in names]
+            extra = [
+                h for h, g in _NAV_OPTIONAL.items() if g == group and values.get(h) is not None
+            ]
+            if all(v is None for v in got):
+                if extra:
+                    raise DataError(p, number, f"{extra[0]} without {', '.join(names)}")
+                continue
+            if any(v is None for v in got):
+                raise DataError(p, number, f"{', '.join(names)} go together: one is empty")
+            if t < last[group]:
+                raise DataError(
+                    p,
+                    number,
+                    f"t_s {t:.6f} is earlier than the {group}'s row before ({last[group]:.6f})",
+                )
+            last[group] = t
+            row = [t, *(float(v) for v in got if v is not None)]
+            if group == "dvl":
+                valid = values.get("dvl_valid")
+                if valid is not None and valid not in (0.0, 1.0):
+                    raise DataError(p, number, f"dvl_valid = {valid:g} is not 0 or 1")
+                row.append(1.0 if valid is None else valid)
+            elif group == "ahrs":
+                rate_cell = values.get("ahrs_yaw_rate_rad_per_s")
+                row.append(math.nan if rate_cell is None else rate_cell)
+            elif abs(row[1]) > 90.0 or abs(row[2]) > 180.0:
+                raise DataError(p, number, "gps_lat_deg or gps_lon_deg out of range")
+            out[group].extend(row)
+
+
+def _bag_navigation(
+    bag: Path, topics_file: str | Path | None
+) -> tuple[DvlSeries, AttitudeSeries, GpsSeries | None, dict[str, int]]:
+    """The DVL, IMU and GPS roles of a ROS bag (its sonar topics are not read)."""
+    table, table_path = rb._topics_table(bag, topics_file)
+    table = {role: topic for role, topic in table.items() if role != "sonar"}
+    with rb._Reader(bag) as r:
+        types = {t: i.msgtype or "" for t, i in r.reader.topics.items()}
+    nav_types = {t: ty for t, ty in types.items() if ty not in rb.ROLE_TYPES["sonar"]}
+    roles = rb._roles(bag, nav_types, table, table_path)
+    roles.pop("sonar", None)
+    missing = [role for role in ("dvl", "imu") if role not in roles]
+    if missing:
+        listing = ", ".join(f"{t} ({ty})" for t, ty in sorted(types.items())) or "none"
+        raise DataError(
+            bag,
+            None,
+            f"no topic for the {', '.join(missing)} of the Ping360's navigation (types: "
+            + "; ".join(f"{m}: {', '.join(rb.ROLE_TYPES[m])}" for m in missing)
+            + f"); the bag's topics: {listing}",
+        )
+    columns, _ = rb._read_columns(bag, roles)
+    for role in ("dvl", "imu"):
+        if not columns[role].t:
+            raise DataError(bag, None, f"topic {roles[role]} ({role}) has no message")
+    gps = rb._gps(bag, columns["gps"]) if "gps" in columns and columns["gps"].t else None
+    counts = {f"{role}_out_of_order": c.out_of_order for role, c in columns.items()}
+    return rb._dvl(bag, columns["dvl"]), rb._imu(bag, columns["imu"]), gps, counts
+
+
+def _navigation(
+    nav: Path, topics_file: str | Path | None
+) -> tuple[DvlSeries, AttitudeSeries, GpsSeries | None, dict[str, int]]:
+    if is_bag(nav):
+        return _bag_navigation(nav, topics_file)
+    if nav.suffix.lower() == ".csv":
+        if topics_file is not None:
+            raise DataError(Path(topics_file), None, "--topics is for a navigation bag, not a CSV")
+        dvl, att, gps = read_nav_csv(nav)
+        return dvl, att, gps, {}
+    if not nav.exists():
+        raise DataError(nav, None, "the Ping360's navigation: no such file or bag")
+    raise DataError(
+        nav,
+        None,
+        "the Ping360's navigation must be a ROS bag (.bag, .mcap, a bag directory) or a .csv",
+    )
+
+
+# -- the dataset ---------------------------------------------------------------------------------
+
+
+def _table(path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
+    """``[ping360]`` and ``[sonar]`` of a ``sonarslam.toml`` (the file's own keys)."""
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return {}, {}  # load_dataset_config names what is wrong with the file
+    ping, sonar = data.get("ping360", {}), data.get("sonar", {})
+    if not isinstance(ping, dict):
+        raise DataError(path, None, "[ping360] must be a table")
+    return ping, sonar if isinstance(sonar, dict) else {}
+
+
+def _settings(table: dict[str, Any], path: Path, base: Ping360Settings) -> Ping360Settings:
+    known = {"nav", "speed_of_sound_mps", "utc_offset_h", "start", "stamps"}
+    unknown = sorted(set(table) - known)
+    if unknown:
+        raise DataError(
+            path, None, f"unknown key(s) {unknown} in [ping360]; allowed: {sorted(known)}"
+        )
+    values = dict(table)
+    for key in ("nav", "start", "stamps"):
+        if key in values and not isinstance(values[key], str):
+            raise DataError(path, None, f"[ping360] {key} must be a string, got {values[key]!r}")
+    for key in ("speed_of_sound_mps", "utc_offset_h"):
+        v = values.get(key)
+        if key in values and (isinstance(v, bool) or not isinstance(v, (int, float))):
+            raise DataError(path, None, f"[ping360] {key} must be a number, got {v!r}")
+        if key in values:
+            values[key] = float(v)  # type: ignore[arg-type]
+    if values.get("nav"):
+        values["nav"] = str((path.parent / values["nav"]).resolve())
+    try:
+        return replace(base, **values)
+    except (SettingError, ValueError) as exc:
+        raise DataError(path, None, f"[ping360]: {exc}") from None
+
+
+def ping360_settings(toml: str | Path, base: Ping360Settings | None = None) -> Ping360Settings:
+    """The ``[ping360]`` table of a ``sonarslam.toml`` over ``base`` (default: the defaults),
+    checked: an unknown key, a value of the wrong type or out of range is a :class:`DataError`
+    naming the file; ``nav`` resolved against the file's folder."""
+    p = Path(toml)
+    return _settings(_table(p)[0], p, base or Ping360Settings())
+
+
+def open_ping360(
+    path: str | Path,
+    config_override: str | Path | None = None,
+    topics_file: str | Path | None = None,
+    nav: str | Path | None = None,
+) -> Dataset:
+    """A Ping Viewer ``.bin`` log and its navigation as a gated :class:`Dataset`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.bin``; its ``sonarslam.toml`` is the one beside it (module docstring).
+    config_override : str or Path, optional
+        A ``sonarslam.toml``-format file over it (its ``[ping360]`` keys too).
+    topics_file : str or Path, optional
+        The navigation bag's roles (``[topics]`` dvl, imu, gps).
+    nav : str or Path, optional
+        The navigation (a ROS bag or a CSV), over ``[ping360] nav``.
+
+    Raises
+    ------
+    DataError
+        No navigation given, and every fault of :func:`read_ping360_log`, :func:`read_nav_csv`
+        and the bag reader, naming the file.
+    """
+    p = Path(path)
+    beside = p.parent / "sonarslam.toml"
+    toml = beside if beside.is_file() else None
+    settings = Ping360Settings()
+    sonar_keys: dict[str, Any] = {}
+    where = p
+    for source in (toml, Path(config_override) if config_override is not None else None):
+        if source is not None:
+            table, sonar = _table(source)
+            settings = _settings(table, source, settings)
+            sonar_keys.update(sonar)
+            where = source if table else where
+    nav_path = Path(nav) if nav is not None else Path(settings.nav) if settings.nav else None
+    if nav_path is None:
+        raise DataError(
+            p,
+            None,
+            "a Ping360 log needs its navigation (DVL and AHRS): give --nav BAG_OR_CSV, or"
+            ' [ping360] nav = "nav.bag" in sonarslam.toml beside it (docs/data.md)',
+        )
+    if toml is not None:
+        config, calibration = load_dataset_config(toml), str(toml)
+    else:
+        config, calibration = DatasetConfig(), NEUTRAL_CALIBRATION
+        if config_override is None:
+            warnings.warn(f"{p}: {NEUTRAL_CALIBRATION}", DataWarning, stacklevel=3)
+    if config_override is not None:
+        config = load_dataset_config(config_override, base=config)
+        calibration = f"{calibration}; over it {config_override}"
+    log = read_ping360_log(p, settings, where)
+    n_bins = log.beams.intensities.shape[1]
+    if ("n_bins" in sonar_keys and config.sonar.n_bins != n_bins) or (
+        "bin_size_m" in sonar_keys and not math.isclose(config.sonar.bin_size_m, log.bin_size_m)
+    ):
+        raise DataError(
+            toml or Path(str(config_override)),
+            None,
+            f"[sonar] n_bins {config.sonar.n_bins}, bin_size_m {config.sonar.bin_size_m:g}: the"
+            f" log's beams have {n_bins} samples of {log.bin_size_m:g} m at"
+            f" {settings.speed_of_sound_mps:g} m/s (leave them out: the log's win; the speed of"
+            " sound is [ping360] speed_of_sound_mps)",
+        )
+    head = replace(config.sonar, n_bins=n_bins, bin_size_m=log.bin_size_m)
+    if "step_deg" not in sonar_keys and log.step_grad > 0:
+        head = replace(head, step_rad=log.step_grad * math.pi / 200.0)
+    if "beam_width_deg" not in sonar_keys:
+        head = replace(head, beam_width_rad=math.radians(PING360_BEAM_WIDTH_DEG))
+    config = replace(config, sonar=head)
+    beams = log.beams
+    if config.sonar_time_offset_s:
+        beams = beams.shifted(config.sonar_time_offset_s)
+    dvl, att, gps, nav_counts = _navigation(nav_path, topics_file)
+    _check_clocks(p, beams, dvl, att, settings)
+    truth = p.parent / "truth.json"
+    d = gated_dataset(
+        p.stem,
+        p,
+        config,
+        beams,
+        dvl,
+        att,
+        gps,
+        calibration,
+        truth=read_truth(truth) if truth.is_file() else None,
+        sonar_path=p,
+    )
+    d.report.counts.update(log.counts)
+    d.report.counts.update(nav_counts)
+    return d
+
+
+def _check_clocks(
+    p: Path, beams: BeamSeries, dvl: DvlSeries, att: AttitudeSeries, settings: Ping360Settings
+) -> None:
+    """Beams that miss the navigation's span by :data:`ZONE_MISS_S` or more: the file name's
+    clock (local time) is the likely cause, said in one line."""
+    t0, t1 = max(dvl.t[0], att.t[0]), min(dvl.t[-1], att.t[-1])
+    b0, b1 = float(beams.t_s[0]), float(beams.t_s[-1])
+    if t0 - b1 >= ZONE_MISS_S or b0 - t1 >= ZONE_MISS_S:
+        off_h = (t0 - b0) / 3600.0
+        raise DataError(
+            p,
+            None,
+            f"the beams ({b0:.3f}-{b1:.3f} s) miss the navigation ({t0:.3f}-{t1:.3f} s) by"
+            f" {off_h:+.2f} h: the log's start comes from its file name, read as UTC"
+            f"{settings.utc_offset_h:+g} h (Ping Viewer names it in the computer's local time):"
+            " set [ping360] utc_offset_h, or start, in sonarslam.toml",
+        )
+
+
+def ping360_table(log: str | Path, target: str | Path, nav: str | Path | None = None) -> str:
+    """The ``[ping360]`` table of a ``.bin``'s ``sonarslam.toml`` as TOML text, for a
+    ``sonarslam.toml`` written to ``target`` (``sonarslam calibrate --write``): its ``nav``
+    (``nav`` when given) relative to ``target``'s folder when it lies under it, else absolute;
+    "" when there is nothing to keep."""
+    p = Path(log)
+    toml = p.parent / "sonarslam.toml"
+    table = dict(_table(toml)[0]) if toml.is_file() else {}
+    if table.get("nav"):
+        table["nav"] = str((toml.parent / table["nav"]).resolve())
+    if nav is not None:
+        table["nav"] = str(Path(nav).resolve())
+    if not table:
+        return ""
+    if "nav" in table:
+        folder = Path(target).resolve().parent
+        nav_path = Path(table["nav"])
+        if nav_path.is_relative_to(folder):
+            table["nav"] = nav_path.relative_to(folder).as_posix()
+    return "\n" + tomli_w.dumps({"ping360": table})
+
+
+# -- writing (the simulator's round trip) ---------------------------------------------------------
+
+
+def log_file_name(start_ms: int) -> str:
+    """Ping Viewer's name of a log started at ``start_ms`` (Unix ms, named in UTC)."""
+    when = datetime.fromtimestamp(start_ms // 1000, tz=UTC)
+    return f"{when:%Y%m%d-%H%M%S}{start_ms % 1000:03d}.bin"
+
+
+def _qstring(text: str, encoding: str) -> bytes:
+    raw = text.encode(encoding)
+    return _U32.pack(len(raw)) + raw
+
+
+def write_ping360_log(
+    path: str | Path,
+    stamps_ms: np.ndarray,
+    angles_grad: np.ndarray,
+    intensities: np.ndarray,
+    sample_period_ticks: int,
+    encoding: str = "utf-16-be",
+    transmit_frequency_khz: int = 750,
+) -> Path:
+    """Write beams as a Ping Viewer log of ``device_data`` messages (packed by
+    ``brping.PingMessage``).
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.bin`` (its name should be :func:`log_file_name` of the start).
+    stamps_ms : array of int, shape (N,)
+        Each beam's stamp: ms since the log's start (below a day).
+    angles_grad : array of int, shape (N,)
+        Head angles (gradians, 0-399).
+    intensities : array of uint8, shape (N, n_samples)
+    sample_period_ticks : int
+        25 ns ticks between samples.
+    encoding : str
+        The strings' encoding: ``"utf-16-be"`` (``QDataStream``'s) or ``"utf-8"``.
+
+    Returns
+    -------
+    Path
+    """
+    from brping import PingMessage, definitions  # lazy: only .bin logs load brping
+
+    stamps = np.asarray(stamps_ms, dtype=np.int64)
+    grads = np.asarray(angles_grad, dtype=np.int64)
+    bins = np.asarray(intensities)
+    if (
+        bins.dtype != np.uint8
+        or bins.ndim != 2
+        or not stamps.shape == grads.shape == bins.shape[:1]
+    ):
+        raise ValueError("stamps (N,), angles (N,) and uint8 intensities (N, n) expected")
+    if np.any((grads < 0) | (grads >= GRADIANS_PER_TURN)):
+        raise ValueError("angles must be whole gradians 0-399")
+    if np.any((stamps < 0) | (stamps >= _DAY_MS)):
+        raise ValueError("stamps must be 0 to 24 h (ms)")
+    if not 1 <= sample_period_ticks <= 0xFFFF:
+        raise ValueError(f"sample period {sample_period_ticks} ticks is not a uint16")
+    p = Path(path)
+    with p.open("wb") as fh:
+        fh.write(_qstring(LOG_HEADER, encoding) + _I32.pack(LOG_VERSIONS[-1]))
+        for text in ("sonarslam", "", "", "", ""):
+            fh.write(_qstring(text, encoding))
+        fh.write(_I32.pack(1) + _I32.pack(2))  # SensorFamily::PING, PingDeviceType::PING360
+        for t_ms, grad, row in zip(stamps, grads, bins, strict=True):
+            h, rest = divmod(int(t_ms), 3_600_000)
+            m, rest = divmod(rest, 60_000)
+            s, ms = divmod(rest, 1000)
+            msg = PingMessage(definitions.PING360_DEVICE_DATA)
+            msg.mode = 1
+            msg.gain_setting = 1
+            msg.angle = int(grad)
+            msg.transmit_duration = 10
+            msg.sample_period = int(sample_period_ticks)
+            msg.transmit_frequency = transmit_frequency_khz
+            msg.number_of_samples = row.size
+            msg.data_length = row.size
+            msg.data = bytearray(row.tobytes())
+            raw = bytes(msg.pack_msg_data())
+            fh.write(_qstring(f"{h:02d}:{m:02d}:{s:02d}.{ms:03d}", encoding))
+            fh.write(_U32.pack(len(raw)) + raw)
+    return p

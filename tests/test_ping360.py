@@ -1,0 +1,353 @@
+"""Ping Viewer ``.bin`` logs of a Ping360 with their navigation (issue 30, items 1, 5 and 6): the
+simulator's Ping360-shaped run written as a ``.bin`` and a navigation bag (or CSV) reads back
+as the directory layout reads, and a bad log is one line or a counted warning."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import shutil
+import struct
+import tomllib
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sonarslam.datasets.dataset import Dataset
+from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.geodesy import local_en_to_geodetic
+from sonarslam.datasets.ping360 import (
+    LOG_HEADER,
+    NAV_CSV_COLUMNS,
+    Ping360Settings,
+    is_ping360_log,
+    log_file_name,
+    log_start_from_name,
+    ping360_table,
+    read_nav_csv,
+    read_ping360_log,
+    sample_spacing_m,
+    write_ping360_log,
+)
+from sonarslam.datasets.simulator.ping360 import ping360_head, write_ping360_run
+from sonarslam.datasets.simulator.scenario import make_scenario, simulate_records
+from sonarslam.datasets.simulator.writer import write_dataset
+from sonarslam.datasets.source import open_dataset
+from sonarslam.slam.cli.main import main
+from sonarslam.slam.run.sources import dead_reckoning_trajectory
+
+#: The .bin holds whole gradians; the simulator's angles are rounded to 1e-6 rad (its IS log):
+#: they agree to half of that (rad).
+ANGLE_TOL_RAD = 5e-7
+
+
+@pytest.fixture(scope="module")
+def layout(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 150 s harbour with a Ping360-shaped head, in the marina layout."""
+    scenario = make_scenario("harbour", 3, 150.0)
+    scenario = replace(scenario, head=ping360_head(scenario.head))
+    return write_dataset(simulate_records(scenario), tmp_path_factory.mktemp("p360") / "layout")
+
+
+@pytest.fixture(scope="module")
+def direct(layout: Path) -> Dataset:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        return open_dataset(layout)
+
+
+@pytest.fixture(scope="module")
+def binlog(direct: Dataset, layout: Path) -> Path:
+    return write_ping360_run(direct, layout.parent / "bin", layout)
+
+
+def _open(path: Path, **kw: object) -> Dataset:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        return open_dataset(path, **kw)  # type: ignore[arg-type]
+
+
+def _same_beams(d: Dataset, ref: Dataset) -> None:
+    np.testing.assert_array_equal(d.beams.intensities, ref.beams.intensities)  # u8: exact
+    np.testing.assert_array_equal(d.beams.t_s, ref.beams.t_s)  # whole ms both ways: exact
+    miss = np.angle(np.exp(1j * (d.beams.transducer_angle_rad - ref.beams.transducer_angle_rad)))
+    assert np.max(np.abs(miss)) < ANGLE_TOL_RAD
+
+
+def test_the_head_is_a_ping360s() -> None:
+    head = ping360_head(make_scenario("harbour", 0, 10.0).head)
+    # 500 samples every 5333 ticks of 25 ns at 1500 m/s (the marina head's 0.1 m, quantised)
+    assert head.n_bins == 500 and head.bin_size_m == sample_spacing_m(5333, 1500.0) == 0.09999375
+    assert head.step_rad == pytest.approx(2 * math.pi / 200) and head.angle_sense == -1
+    pool = ping360_head(make_scenario("pool", 0, 10.0).head)
+    assert pool.bin_size_m == pytest.approx(0.012) and pool.step_rad == pytest.approx(math.pi / 200)
+
+
+def test_a_bin_with_its_nav_bag_reads_as_the_directory(binlog: Path, direct: Dataset) -> None:
+    assert is_ping360_log(binlog) and binlog.name == log_file_name(
+        int(round(direct.beams.t_s[0] * 1000)) - 500
+    )
+    d = _open(binlog)
+    assert d.config == direct.config and d.calibration == str(binlog.parent / "sonarslam.toml")
+    _same_beams(d, direct)
+    np.testing.assert_array_equal(d.dvl.v_mps, direct.dvl.v_mps)
+    np.testing.assert_array_equal(d.attitude.t, direct.attitude.t)
+    assert d.truth is not None and d.gps is not None and direct.gps is not None
+    np.testing.assert_allclose(d.gps.en_m, direct.gps.en_m, rtol=0, atol=1e-6)
+    faults = {k: v for k, v in d.report.counts.items() if k.startswith("ping360_")}
+    assert set(faults.values()) == {0}
+    a, b = dead_reckoning_trajectory(d), dead_reckoning_trajectory(direct)
+    np.testing.assert_array_equal(a.t_s, b.t_s)
+    np.testing.assert_allclose(a.poses_wTb, b.poses_wTb, rtol=0, atol=1e-9)
+
+
+def _nav_csv(d: Dataset, path: Path) -> Path:
+    """``d``'s DVL, AHRS and GPS as a navigation CSV, one sensor a row."""
+    assert d.gps is not None
+    lat, lon = local_en_to_geodetic(d.gps.en_m[:, 0], d.gps.en_m[:, 1], *d.gps.origin_lat_lon_deg)
+    rows: list[tuple[float, int, dict[str, str]]] = []
+    for i, t in enumerate(d.dvl.t):
+        v = d.dvl.v_mps[i]
+        cells = {"dvl_vx_mps": repr(float(v[0])), "dvl_vy_mps": repr(float(v[1]))}
+        rows.append((t, 1, {**cells, "dvl_valid": str(int(d.dvl.valid[i]))}))
+    for i, t in enumerate(d.attitude.t):
+        rows.append(
+            (
+                t,
+                0,
+                {
+                    "ahrs_yaw_enu_rad": repr(float(d.attitude.yaw_rad[i])),
+                    "ahrs_yaw_rate_rad_per_s": repr(float(d.attitude.yaw_rate_rad_per_s[i])),
+                },
+            )
+        )
+    for i, t in enumerate(d.gps.t):
+        rows.append(
+            (t, 2, {"gps_lat_deg": repr(float(lat[i])), "gps_lon_deg": repr(float(lon[i]))})
+        )
+    rows.sort(key=lambda r: (r[0], r[1]))
+    with path.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(NAV_CSV_COLUMNS))
+        w.writeheader()
+        for t, _, cells in rows:
+            w.writerow({"t_s": repr(float(t)), **cells})
+    return path
+
+
+def test_a_nav_csv_gives_the_bags_navigation_and_run_takes_it(
+    binlog: Path, direct: Dataset, tmp_path: Path
+) -> None:
+    nav = _nav_csv(direct, tmp_path / "nav.csv")
+    d = _open(binlog, nav=nav)
+    _same_beams(d, direct)
+    np.testing.assert_array_equal(d.dvl.v_mps, direct.dvl.v_mps)
+    np.testing.assert_array_equal(d.dvl.valid, direct.dvl.valid)
+    np.testing.assert_array_equal(d.attitude.yaw_rad, direct.attitude.yaw_rad)
+    assert d.gps is not None and direct.gps is not None
+    np.testing.assert_allclose(d.gps.en_m, direct.gps.en_m, rtol=0, atol=1e-6)
+    a, b = dead_reckoning_trajectory(d), dead_reckoning_trajectory(direct)
+    np.testing.assert_allclose(a.poses_wTb, b.poses_wTb, rtol=0, atol=1e-9)
+    out = tmp_path / "run"
+    assert main(["run", str(binlog), "--nav", str(nav), "--out", str(out), "--quiet"]) == 0
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["evaluation"] == "gps and truth" and m["ate_truth_mean_m"] < 3.0
+    # calibrate --write keeps the .bin's [ping360] table, its nav relative to the new file
+    kept = ping360_table(binlog, binlog.parent / "new.toml", nav)
+    assert tomllib.loads(kept) == {"ping360": {"nav": str(nav), "speed_of_sound_mps": 1500.0}}
+    assert tomllib.loads(ping360_table(binlog, binlog.parent / "new.toml"))["ping360"]["nav"] == (
+        "nav.bag"
+    )
+    # a bad cell is named by its line
+    lines = nav.read_text().splitlines()
+    lines[5] = lines[5].replace(lines[5].split(",")[0], "soon", 1)
+    (tmp_path / "bad.csv").write_text("\n".join(lines) + "\n")
+    with pytest.raises(DataError, match=r"bad.csv:6: t_s = 'soon' is not a finite number"):
+        read_nav_csv(tmp_path / "bad.csv")
+
+
+def test_utf8_strings_and_time_of_day_stamps_crossing_midnight(tmp_path: Path) -> None:
+    """Older logs stamp the time of day (Ping Viewer before July 2019): a stamp more than 12 h
+    earlier has crossed midnight; UTF-8 strings read as UTF-16 ones."""
+    start_ms = 1_700_006_390_000  # 23:59:50 UTC
+    name = tmp_path / log_file_name(start_ms)
+    assert name.name == "20231114-235950000.bin"
+    tod = start_ms % 86_400_000
+    stamps = np.array([tod + 1000, tod + 5000, tod + 9900, 100, 4000])  # across midnight
+    bins = np.arange(5 * 300, dtype=np.int64).reshape(5, 300).astype(np.uint8)
+    for enc in ("utf-8", "utf-16-be"):
+        write_ping360_log(name, stamps, np.array([0, 1, 2, 3, 399]), bins, 80, encoding=enc)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # midnight is no fault: counted, not warned
+            log = read_ping360_log(name)
+        assert log.stamps == "time_of_day" and log.encoding == enc
+        assert log.counts["ping360_midnight_wraps"] == 1
+        t_ms = np.rint(log.beams.t_s * 1000).astype(np.int64)
+        np.testing.assert_array_equal(t_ms - start_ms, [1000, 5000, 9900, 10100, 14000])
+        np.testing.assert_allclose(log.beams.transducer_angle_rad[-1], 399 * math.pi / 200)
+        np.testing.assert_array_equal(log.beams.intensities, bins)
+        assert log.bin_size_m == pytest.approx(1500 * 80 * 25e-9 / 2)  # 1.5 mm
+    elapsed = read_ping360_log(name, Ping360Settings(stamps="elapsed"))
+    assert elapsed.stamps == "elapsed"
+    # read as elapsed time, the first stamp is nearly a day after the file name's time
+    assert elapsed.beams.t_s[0] == (start_ms + tod + 1000) / 1000.0
+
+
+def _message(msg_id: int, payload: bytes) -> bytes:
+    frame = struct.pack("<2sHHBB", b"BR", len(payload), msg_id, 1, 0) + payload
+    return frame + struct.pack("<H", sum(frame) & 0xFFFF)
+
+
+def _records(path: Path) -> list[tuple[int, bytes]]:
+    """(byte offset, bytes) of each record of a UTF-16 log written by write_ping360_log."""
+    data = path.read_bytes()
+    pos = 4 + 2 * len(LOG_HEADER) + 4 + 5 * 4 + 2 * len("sonarslam") + 8
+    out = []
+    while pos < len(data):
+        start = pos
+        pos += 4 + 24
+        (n,) = struct.unpack(">I", data[pos : pos + 4])
+        pos += 4 + n
+        out.append((start, data[start:pos]))
+    return out
+
+
+@pytest.fixture
+def small(tmp_path: Path) -> Path:
+    """Six beams of 200 samples, elapsed stamps 0.1 s apart."""
+    p = tmp_path / "20240502-103107250.bin"
+    bins = (np.arange(6 * 200).reshape(6, 200) % 251).astype(np.uint8)
+    write_ping360_log(p, np.arange(6) * 100 + 50, np.arange(6) * 2, bins, 1000)
+    return p
+
+
+def test_bad_messages_are_counted_and_dropped(small: Path) -> None:
+    recs = _records(small)
+    data = bytearray(small.read_bytes())
+    # record 1: a sample changed, the checksum not (a serial glitch)
+    data[recs[1][0] + 4 + 24 + 4 + 8 + 14 + 7] ^= 0xFF
+    # record 3: a message id the protocol does not define, well framed
+    unknown = _message(9999, b"\x00\x01")
+    stamp = recs[3][1][: 4 + 24]
+    bad = stamp + struct.pack(">I", len(unknown)) + unknown
+    out = bytes(data[: recs[3][0]]) + bad + bytes(data[recs[3][0] + len(recs[3][1]) :])
+    # a common message (1: ack) is another record, not a fault
+    ack = stamp + struct.pack(">I", 12) + _message(1, b"\x05\x00")
+    small.write_bytes(out + ack)
+    with pytest.warns(DataWarning) as caught:
+        log = read_ping360_log(small)
+    text = " ".join(str(w.message) for w in caught)
+    assert f"the first is record 1 (byte offset {recs[1][0]})" in text
+    assert f"the first is record 3 (byte offset {recs[3][0]})" in text
+    assert log.counts["ping360_checksum_errors"] == 1
+    assert log.counts["ping360_unknown_messages"] == 1
+    assert log.counts["ping360_other_messages"] == 1
+    # the beams left are at 0, 4, 8, 10 gradians: the median step is 4
+    assert len(log.beams) == 4 and log.step_grad == 4
+
+
+def test_a_log_cut_short_keeps_its_whole_records(small: Path) -> None:
+    recs = _records(small)
+    whole = read_ping360_log(small)
+    small.write_bytes(small.read_bytes()[: recs[4][0] + 100])
+    with pytest.warns(DataWarning, match=rf"ends inside record 4 \(byte offset {recs[4][0]}\)"):
+        cut = read_ping360_log(small)
+    assert cut.counts["ping360_truncated_records"] == 1
+    np.testing.assert_array_equal(cut.beams.intensities, whole.beams.intensities[:4])
+    np.testing.assert_array_equal(cut.beams.t_s, whole.beams.t_s[:4])
+
+
+@pytest.mark.parametrize(
+    ("damage", "message"),
+    [
+        ("empty", r"an empty file, not a Ping Viewer log"),
+        ("header", r"not a Ping Viewer log: it does not start with the string"),
+        ("stamp", r"record 2 \(byte offset \d+\): time stamp b'.*' is not hh:mm:ss.zzz"),
+        ("back", r"record 3 \(byte offset \d+\): its stamp is 2.000 s earlier .* clock jump"),
+        ("length", r"record 1 \(byte offset \d+\): a message of 4294967040 bytes"),
+        ("range", r"record 2 \(byte offset \d+\): a beam of 200 samples every 900 ticks after"),
+    ],
+)
+def test_a_bad_log_is_one_error_naming_the_record(small: Path, damage: str, message: str) -> None:
+    recs = _records(small)
+    data = bytearray(small.read_bytes())
+    if damage == "empty":
+        data = bytearray()
+    elif damage == "header":
+        data[10] ^= 0x20
+    elif damage == "stamp":
+        data[recs[2][0] + 4 + 5] = ord("x")
+    elif damage == "length":
+        data[recs[1][0] + 28 : recs[1][0] + 32] = struct.pack(">I", 0xFFFFFF00)
+    else:
+        bins = np.zeros((4, 200), np.uint8)
+        stamps = [50, 2150, 2300, 300] if damage == "back" else [0, 100, 200, 300]
+        periods = [1000, 1000, 900 if damage == "range" else 1000, 1000]
+        parts = []
+        for k in range(4):
+            tmp = small.parent / f"part{k}.bin"
+            write_ping360_log(tmp, np.array([stamps[k]]), np.array([k]), bins[:1], periods[k])
+            parts.append(_records(tmp)[0][1])
+        data = bytearray(small.read_bytes()[: recs[0][0]] + b"".join(parts))
+    small.write_bytes(bytes(data))
+    with pytest.raises(DataError, match=message) as err:
+        read_ping360_log(small)
+    assert str(small) in str(err.value)
+
+
+def test_the_date_comes_from_the_file_name_or_the_settings(small: Path, tmp_path: Path) -> None:
+    assert log_start_from_name(small) == 1_714_645_867_250  # 2024-05-02 10:31:07.250 UTC
+    assert log_start_from_name(small, utc_offset_h=2.0) == 1_714_645_867_250 - 7_200_000
+    renamed = tmp_path / "sonar.bin"
+    shutil.copy(small, renamed)
+    with pytest.raises(DataError, match=r"sonar.bin: the file name holds no Ping Viewer date"):
+        read_ping360_log(renamed)
+    log = read_ping360_log(renamed, Ping360Settings(start="2024-05-02T12:31:07.250+02:00"))
+    assert log.start_ms == 1_714_645_867_250 and log.beams.t_s[0] == 1_714_645_867.3
+
+
+def test_a_bin_needs_its_navigation_and_clocks_that_meet(binlog: Path, tmp_path: Path) -> None:
+    alone = tmp_path / binlog.name
+    shutil.copy(binlog, alone)
+    with pytest.raises(DataError, match=r"needs its navigation .* --nav BAG_OR_CSV"):
+        _open(alone)
+    nav = binlog.parent / "nav.bag"
+    assert _open(alone, nav=nav).calibration.startswith("neutral")  # never the marina's
+    # the file name read in the wrong zone: the beams miss the navigation, said in one line
+    (tmp_path / "sonarslam.toml").write_text('[ping360]\nnav = "x.bag"\nutc_offset_h = 5\n')
+    shutil.copy(nav, tmp_path / "x.bag")
+    with pytest.raises(DataError, match=r"miss the navigation .* by \+5.00 h"):
+        _open(alone)
+
+
+def test_auto_device_data_beams_and_bad_settings(small: Path) -> None:
+    """auto_device_data (2301, the head scanning on its own) is a beam as device_data is;
+    a [ping360] key that is not one is named."""
+    from brping import PingMessage, definitions
+
+    recs = _records(small)
+    msg = PingMessage(definitions.PING360_AUTO_DEVICE_DATA)
+    for name, value in dict(
+        mode=1, gain_setting=0, angle=398, transmit_duration=10, sample_period=1000,
+        transmit_frequency=750, start_angle=0, stop_angle=399, num_steps=2, delay=0,
+        number_of_samples=200, data_length=200,
+    ).items():  # fmt: skip
+        setattr(msg, name, value)
+    msg.data = bytearray(range(200))
+    raw = bytes(msg.pack_msg_data())
+    record = recs[0][1][: 4 + 24] + struct.pack(">I", len(raw)) + raw
+    data = small.read_bytes()
+    small.write_bytes(data[: recs[0][0]] + record + data[recs[0][0] + len(recs[0][1]) :])
+    log = read_ping360_log(small)
+    assert len(log.beams) == 6
+    assert log.beams.transducer_angle_rad[0] == pytest.approx(398 * math.pi / 200)
+    np.testing.assert_array_equal(log.beams.intensities[0], np.arange(200))
+    (small.parent / "sonarslam.toml").write_text("[ping360]\nsound_speed = 1480\n")
+    with pytest.raises(DataError, match=r"sonarslam.toml: unknown key\(s\) \['sound_speed'\]"):
+        _open(small, nav=small.parent / "nav.csv")
+    (small.parent / "sonarslam.toml").write_text("[ping360]\nspeed_of_sound_mps = 900\n")
+    with pytest.raises(DataError, match=r"\[ping360\]: .*speed_of_sound_mps"):
+        _open(small, nav=small.parent / "nav.csv")
