@@ -811,9 +811,9 @@ def _bag_navigation(
         )
     columns, _ = rb._read_columns(bag, roles)
     for role in ("dvl", "imu"):
-        if not columns[role].t:
+        if not columns[role].n:
             raise DataError(bag, None, f"topic {roles[role]} ({role}) has no message")
-    gps = rb._gps(bag, columns["gps"]) if "gps" in columns and columns["gps"].t else None
+    gps = rb._gps(bag, columns["gps"]) if "gps" in columns and columns["gps"].n else None
     counts = {f"{role}_out_of_order": c.out_of_order for role, c in columns.items()}
     return rb._dvl(bag, columns["dvl"]), rb._imu(bag, columns["imu"]), gps, counts
 
