@@ -18,6 +18,13 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import pytest  # noqa: E402
 from hypothesis import settings  # noqa: E402
 
+# numba's kernels are compiled at their modules' import (cache=True: into __pycache__, the first
+# time in a clone). Imported here, in the process that loads this file first (xdist's controller,
+# before it starts the workers), they are compiled once and every worker, CLI subprocess,
+# notebook kernel and Dask worker loads them from the cache; imported by each worker at
+# collection instead, a fresh clone compiled them in both workers at once (~10 s CPU each).
+import sonarslam.features.hough  # noqa: E402, F401
+import sonarslam.sonar.segmentation  # noqa: E402, F401
 from sonarslam.datasets.simulator import simulate  # noqa: E402
 from sonarslam.datasets.source import Dataset, data_root, open_dataset  # noqa: E402
 
