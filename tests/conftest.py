@@ -6,9 +6,19 @@ from __future__ import annotations
 import fcntl
 import os
 import shutil
+import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+
+# bytecode caches written, whatever PYTHONDONTWRITEBYTECODE says: the suite starts ~40 Python
+# processes (2 xdist workers, CLI subprocesses, notebook kernels, Dask workers, evo) and uv
+# installs .venv without .pyc files, so each of them compiled the library, numpy, pandas,
+# matplotlib, distributed, ... from source again (importing the sweep: 8.5 s of CPU against 3.0 s
+# with the caches), and pytest rewrote every test module's assertions in each worker. Set here,
+# in the controller, before it starts the workers: they and every subprocess inherit it.
+sys.dont_write_bytecode = False
+os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     # one BLAS thread per worker: the suite runs on 2 workers on 2 cores, where BLAS threads
@@ -18,6 +28,13 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import pytest  # noqa: E402
 from hypothesis import settings  # noqa: E402
 
+# numba's kernels are compiled at their modules' import (cache=True: into __pycache__, the first
+# time in a clone). Imported here, in the process that loads this file first (xdist's controller,
+# before it starts the workers), they are compiled once and every worker, CLI subprocess,
+# notebook kernel and Dask worker loads them from the cache; imported by each worker at
+# collection instead, a fresh clone compiled them in both workers at once (~10 s CPU each).
+import sonarslam.features.hough  # noqa: E402, F401
+import sonarslam.sonar.segmentation  # noqa: E402, F401
 from sonarslam.datasets.simulator import simulate  # noqa: E402
 from sonarslam.datasets.source import Dataset, data_root, open_dataset  # noqa: E402
 

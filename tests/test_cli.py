@@ -263,9 +263,17 @@ def test_run_dr_writes_what_it_measured(short_harbour, tmp_path):
     assert (out / "consistency.png").stat().st_size > 10_000  # the NEES against the truth
 
 
-def test_run_ekf_maps_the_true_walls(short_harbour, tmp_path):
-    out = tmp_path / "ekf"
+@pytest.fixture(scope="module")
+def ekf_default(short_harbour, tmp_path_factory):
+    """``sonarslam run`` of the short harbour with EKF and the default settings: the folder it
+    wrote, read by the tests that need this run (one run of the module instead of two)."""
+    out = tmp_path_factory.mktemp("ekf-default") / "ekf"
     assert main(["run", str(short_harbour), "--backend", "ekf", "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+def test_run_ekf_maps_the_true_walls(short_harbour, ekf_default):
+    out = ekf_default
     metrics = json.loads((out / "metrics.json").read_text())
     landmarks = json.loads((out / "map.json").read_text())["landmarks"]
     assert metrics["landmarks"] == len(landmarks) >= 3
@@ -337,7 +345,7 @@ def test_run_config_replaces_only_the_keys_it_gives(short_harbour, tmp_path, cap
     assert "heading.toml" in err and "yaw" in err
 
 
-def test_run_set_changes_the_settings_it_names(short_harbour, tmp_path, capsys):
+def test_run_set_changes_the_settings_it_names(short_harbour, ekf_default, tmp_path, capsys):
     """--set reaches the extractor and the back end, is recorded, and a wrong field is named."""
     out = tmp_path / "ekf-set"
     args = ["run", str(short_harbour), "--backend", "ekf", "--out", str(out), "--quiet"]
@@ -345,8 +353,7 @@ def test_run_set_changes_the_settings_it_names(short_harbour, tmp_path, capsys):
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["settings"] == {"extractor.max_range_m": 3, "ekf.min_rho_m": 2}
     # walls farther than 3 m are not seen: fewer lines than with the defaults
-    assert main([*args[:-2], str(tmp_path / "ekf"), "--quiet"]) == 0
-    default = json.loads((tmp_path / "ekf" / "metrics.json").read_text())
+    default = json.loads((ekf_default / "metrics.json").read_text())
     assert metrics["line_features"] < default["line_features"]
     # a setting that does not fit its field is a usage error: one line, exit 2
     assert main([*args, "--set", "ekf.no_such_field=1"]) == 2

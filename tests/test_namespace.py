@@ -30,11 +30,14 @@ def _build_wheel(out: Path) -> Path:
         shutil.copy2(ROOT / name, src / name)
     for folder in ("sonarslam", *LAYERS):
         shutil.copytree(ROOT / folder, src / folder, symlinks=True, ignore=ignore)
-    subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q",
-         "-w", str(out), str(src)],
-        check=True, capture_output=True, text=True,
-    )  # fmt: skip
+    # uv where the dev venv has it: the same isolated PEP 517 build as pip's, with the build
+    # backend from uv's cache (pip wheel: ~4 s of CPU, mostly installing setuptools again)
+    uv = Path(sys.executable).parent / "uv"
+    if uv.is_file():
+        build = [str(uv), "build", "--wheel", "-q", "-o", str(out), str(src)]
+    else:
+        build = [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(out), str(src)]
+    subprocess.run(build, check=True, capture_output=True, text=True)
     (wheel,) = out.glob("sonarslam-*.whl")
     return wheel
 

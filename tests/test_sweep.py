@@ -140,12 +140,14 @@ def test_extractor_override_reaches_the_front_end(cache):
 
 
 def test_sweep_on_a_local_cluster_gives_the_rows_of_direct_runs(cache, tmp_path, capsys):
-    """2 seeds x (dr, ekf with two association methods) on the default 2-process LocalCluster
-    (through the CLI): each dr row is the dead-reckoning ATE of its seed, each ekf row the one
-    of run_backend, and the summary's ANEES is that of nees.npz."""
+    """2 seeds x (dr, ekf with two association methods) on a LocalCluster (through the CLI):
+    each dr row is the dead-reckoning ATE of its seed, each ekf row the one of run_backend, and
+    the summary's ANEES is that of nees.npz. One worker process (--workers 1; the default is 2):
+    the tasks still cross a process boundary both ways, and each worker process costs ~9 s of
+    CPU to start (spawn, then distributed's and the library's imports)."""
     out = tmp_path / "sweep"
     argv = ["sweep", "--world", "harbour", "--seeds", "0-1", "--backend", "dr,ekf"]
-    argv += ["--duration", str(DURATION_S), "--grid", "ekf.association=jcbb,nn"]
+    argv += ["--duration", str(DURATION_S), "--grid", "ekf.association=jcbb,nn", "--workers", "1"]
     argv += ["--out", str(out), "--cache", str(cache)]
     assert main(argv + ["--quiet"]) == 0
     printed = capsys.readouterr().out
