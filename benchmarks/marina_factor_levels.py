@@ -23,7 +23,11 @@ DIR is an iSAM2 run directory (``sonarslam run marina --backend isam2 --out DIR`
 3. re-optimises each requested combination of families (``--graphs``, ``+``-joined family names,
    comma-separated; ``product`` is every factor of the run) with Levenberg-Marquardt from the
    run's saved values (the variables no factor of the combination touches are left out);
-4. scores each against the ruler over the sonar span: ATE mean / max unaligned, after a rigid
+4. with ``--cut-m M1,M2``, scores each combination with lines again with every landmark's
+   observations cut into stretches of ``M`` m along its line (by the foot of the sonar's
+   perpendicular on the line, at the run's saved estimate: GPS-free), each stretch its own
+   landmark (:func:`cut_lines`): how a landmark model of bounded length would do;
+5. scores each against the ruler over the sonar span: ATE mean / max unaligned, after a rigid
    SE(2) fit (mean / max), and the fit's shift (the mean displacement of the estimate's positions
    at the fixes, (x, y) in m: the opposite of where the estimate sits against the ruler).
 """
@@ -37,6 +41,7 @@ import argparse
 import json
 import sys
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -47,7 +52,13 @@ from evo.core.geometry import GeometryException, umeyama_alignment
 from sonarslam.datasets.errors import DataError
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.features.geometry import between, compose
-from sonarslam.slam.backends.isam2.graph_io import FactorKind, FactorRecord, Robust, key_of
+from sonarslam.slam.backends.isam2.graph_io import (
+    FactorKind,
+    FactorRecord,
+    Robust,
+    key_of,
+    pose_of,
+)
 from sonarslam.slam.eval.truth import truth_trajectory
 from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.run.sources import dead_reckoning_trajectory
@@ -156,7 +167,7 @@ def node_trajectory(values: gtsam.Values, node_t: dict[str, float]) -> Trajector
 
 def scores(tr: Trajectory, ruler_t: np.ndarray, ruler_xy: np.ndarray) -> dict[str, float]:
     """ATE (m) at the ruler's positions inside the trajectory's span: mean, max, aligned mean,
-    aligned max, the rigid fit's shift (step 4) and its translation (``fit_t``, the rotation about
+    aligned max, the rigid fit's shift (step 5) and its translation (``fit_t``, the rotation about
     the origin of the local frame)."""
     keep = (ruler_t >= tr.span_s[0]) & (ruler_t <= tr.span_s[1])
     est = tr.poses(ruler_t[keep])[:, :2]
@@ -214,6 +225,33 @@ def load_run(
     return doc, records, values, node_t, ds
 
 
+def cut_lines(
+    records: Sequence[FactorRecord], values: gtsam.Values, stretch_m: float
+) -> tuple[list[FactorRecord], gtsam.Values]:
+    """The records with each line observation moved to a landmark per ``stretch_m`` of its
+    landmark's line (step 4), and values with those landmarks (at their landmark's saved
+    line); the other records as they are. Line equalities are dropped."""
+    out_values = gtsam.Values(values)
+    out: list[FactorRecord] = []
+    stretches: dict[tuple[int, int], int] = {}
+    for r in records:
+        if r.kind is FactorKind.LINE_EQUALITY:
+            continue
+        if r.kind is not FactorKind.LINE_OBSERVATION:
+            out.append(r)
+            continue
+        assert r.bTs is not None, "a line observation has its mounting"
+        line = np.asarray(values.atVector(r.keys[1]))
+        wTs = compose(pose_of(values.atPose2(r.keys[0])), r.bTs)
+        along = -wTs[0] * np.sin(line[1]) + wTs[1] * np.cos(line[1])
+        which = (r.keys[1], int(np.floor(along / stretch_m)))
+        if which not in stretches:
+            stretches[which] = int(gtsam.Symbol("l", 100000 + len(stretches)).key())
+            out_values.insert(stretches[which], line)
+        out.append(replace(r, keys=(r.keys[0], stretches[which])))
+    return out, out_values
+
+
 def factor_levels(
     records: Sequence[FactorRecord],
     values: gtsam.Values,
@@ -250,6 +288,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--run", type=Path, required=True, help="an iSAM2 run directory")
     ap.add_argument("--reference", type=Path, default=None, help="a reference graph's JSON")
     ap.add_argument("--graphs", default=",".join(DEFAULT_GRAPHS), help="combinations to score")
+    ap.add_argument("--cut-m", default="", help="stretch lengths M1,M2 (m) to cut lines into")
     ap.add_argument("--out", type=Path, default=None, help="JSON of the scores")
     args = ap.parse_args(argv)
     try:
@@ -266,7 +305,13 @@ def main(argv: list[str] | None = None) -> int:
             return 1
     ruler_name, *ruler = ruler_of(ds)
     try:
-        rows = factor_levels(records, values, node_t, (ruler[0], ruler[1]), args.graphs.split(","))
+        graphs = args.graphs.split(",")
+        rows = factor_levels(records, values, node_t, (ruler[0], ruler[1]), graphs)
+        for stretch in (float(v) for v in args.cut_m.split(",") if v):
+            cut, cut_values = cut_lines(records, values, stretch)
+            with_lines = [g for g in graphs if g == "product" or "lines" in g.split("+")]
+            more = factor_levels(cut, cut_values, node_t, (ruler[0], ruler[1]), with_lines)
+            rows.update({f"{k}, lines cut every {stretch:g} m": v for k, v in more.items()})
     except ValueError as exc:
         print(f"marina_factor_levels: {exc}", file=sys.stderr)
         return 1
