@@ -27,6 +27,10 @@ DIR is an iSAM2 run directory (``sonarslam run marina --backend isam2 --out DIR`
    observations cut into stretches of ``M`` m along its line (by the foot of the sonar's
    perpendicular on the line, at the run's saved estimate: GPS-free), each stretch its own
    landmark (:func:`cut_lines`): how a landmark model of bounded length would do;
+   with ``--variants``, each combination with lines again with the line observations changed
+   one way at a time (:data:`LINE_VARIANTS`: covariance x2 or x4, σθ x2, σρ x2, θ shifted by
+   ∓0.52° (the issue's mean θ residual), only ρ < 30 m, no robust kernel): the tests of a
+   systematic error of the lines or of their covariance;
 5. scores each against the ruler over the sonar span: ATE mean / max unaligned, after a rigid
    SE(2) fit (mean / max), and the fit's shift (the mean displacement of the estimate's positions
    at the fixes, (x, y) in m: the opposite of where the estimate sits against the ruler).
@@ -40,7 +44,7 @@ from common import write_result  # isort: skip
 import argparse
 import json
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -225,6 +229,43 @@ def load_run(
     return doc, records, values, node_t, ds
 
 
+def _scaled(r: FactorRecord, a: float, b: float) -> FactorRecord:
+    d = np.diag([a, b])
+    return replace(r, cov=d @ r.cov @ d)
+
+
+def _theta_shifted(r: FactorRecord, deg: float) -> FactorRecord:
+    return replace(r, z=r.z - np.array([0.0, np.deg2rad(deg)]))
+
+
+#: One change of the line observations at a time (step 4's ``--variants``); None drops one.
+LINE_VARIANTS: dict[str, Callable[[FactorRecord], FactorRecord | None]] = {
+    "covariance x2": lambda r: _scaled(r, 2**0.5, 2**0.5),
+    "covariance x4": lambda r: _scaled(r, 2.0, 2.0),
+    "sigma theta x2": lambda r: _scaled(r, 1.0, 2.0),
+    "sigma rho x2": lambda r: _scaled(r, 2.0, 1.0),
+    "theta -0.52 deg": lambda r: _theta_shifted(r, 0.52),
+    "theta +0.52 deg": lambda r: _theta_shifted(r, -0.52),
+    "rho < 30 m": lambda r: r if abs(float(r.z[0])) < 30.0 else None,
+    "no robust kernel": lambda r: replace(r, robust=None),
+}
+
+
+def line_variant(
+    records: Sequence[FactorRecord], change: Callable[[FactorRecord], FactorRecord | None]
+) -> list[FactorRecord]:
+    """The records with ``change`` applied to every line observation (None drops it)."""
+    out = []
+    for r in records:
+        if r.kind is FactorKind.LINE_OBSERVATION:
+            changed = change(r)
+            if changed is not None:
+                out.append(changed)
+        else:
+            out.append(r)
+    return out
+
+
 def cut_lines(
     records: Sequence[FactorRecord], values: gtsam.Values, stretch_m: float
 ) -> tuple[list[FactorRecord], gtsam.Values]:
@@ -289,6 +330,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--reference", type=Path, default=None, help="a reference graph's JSON")
     ap.add_argument("--graphs", default=",".join(DEFAULT_GRAPHS), help="combinations to score")
     ap.add_argument("--cut-m", default="", help="stretch lengths M1,M2 (m) to cut lines into")
+    ap.add_argument("--variants", action="store_true", help="the line variants too (step 4)")
     ap.add_argument("--out", type=Path, default=None, help="JSON of the scores")
     args = ap.parse_args(argv)
     try:
@@ -312,6 +354,11 @@ def main(argv: list[str] | None = None) -> int:
             with_lines = [g for g in graphs if g == "product" or "lines" in g.split("+")]
             more = factor_levels(cut, cut_values, node_t, (ruler[0], ruler[1]), with_lines)
             rows.update({f"{k}, lines cut every {stretch:g} m": v for k, v in more.items()})
+        for label, change in LINE_VARIANTS.items() if args.variants else ():
+            with_lines = [g for g in graphs if g != "product" and "lines" in g.split("+")]
+            changed = line_variant(records, change)
+            more = factor_levels(changed, values, node_t, (ruler[0], ruler[1]), with_lines)
+            rows.update({f"{k}, {label}": v for k, v in more.items()})
     except ValueError as exc:
         print(f"marina_factor_levels: {exc}", file=sys.stderr)
         return 1
