@@ -166,3 +166,63 @@ def test_a_line_seen_in_both_representations_gets_the_extent_it_was_seen_over(ba
     (record,) = be.map_records()
     length = float(np.linalg.norm(np.subtract(*record["endpoints"])))
     assert length == pytest.approx(10.0, abs=0.5)
+
+
+def test_the_extent_gate_keeps_a_landmark_within_its_longest_extent():
+    """A wall along y = 5 (line (5, pi/2), along-line axis -x) whose landmark spans x in
+    [0, 30]: a segment at x in [35, 45] reaches it within a 10 m margin; with a 40 m limit the
+    grown extent (45 m) is too long, and a segment at x in [20, 38] (grown 38 m) is not; a
+    segment of 50 m alone may join (no landmark is cut shorter than one observation)."""
+    from sonarslam.features.geometry import along_line
+    from sonarslam.slam.mapping.association import extent_allowed
+
+    line = np.array([[5.0, np.pi / 2]])
+    s = along_line(line[0], np.array([[0.0, 5.0], [30.0, 5.0]]))
+    extent = np.array([[s.min(), s.max()]])
+    segments = np.array(
+        [
+            [[35.0, 5.0], [45.0, 5.0]],
+            [[20.0, 5.0], [38.0, 5.0]],
+            [[-10.0, 5.0], [40.0, 5.0]],
+            [[60.0, 5.0], [70.0, 5.0]],
+        ]
+    )
+    assert extent_allowed(line, extent, segments, 10.0)[:, 0].tolist() == [True] * 3 + [False]
+    limited = extent_allowed(line, extent, segments, 10.0, max_extent_m=40.0)
+    assert limited[:, 0].tolist() == [False, True, True, False]
+    # without the margin gate only the length limits
+    assert extent_allowed(line, extent, segments, None, 40.0)[:, 0].tolist() == [
+        False,
+        True,
+        True,
+        False,
+    ]
+
+
+def test_a_landmark_longer_than_its_limit_is_not_made_by_the_loop(tmp_path):
+    """EKF closed loop on 300 s of simulated harbour (seed 4): with ``max_extent_m = 20`` no
+    landmark's extent is longer than 20 m beyond what a single observation spans, and more
+    landmarks stand for the same walls than without the limit."""
+    from dataclasses import replace
+
+    from sonarslam.datasets.simulator import simulate
+    from sonarslam.datasets.source import open_dataset
+    from sonarslam.features.config import ExtractorConfig
+    from sonarslam.slam.backends.ekf import EkfConfig, LineEkf
+    from sonarslam.slam.run.closed_loop import run_closed_loop
+
+    ds = open_dataset(simulate("harbour", seed=4, out_dir=tmp_path / "h", duration_s=300.0))
+    mount = ds.config.sonar_mounting
+    lengths = {}
+    for limit in (None, 20.0):
+        cfg = replace(EkfConfig(), max_extent_m=limit)
+        res = run_closed_loop(
+            ds, lambda t, p, P, c=cfg: LineEkf(t, p, P, mount, c), ExtractorConfig(), progress=False
+        )
+        lengths[limit] = [
+            float(np.linalg.norm(np.subtract(*r["endpoints"]))) for r in res.backend.map_records()
+        ]
+    longest_segment_m = 15.0  # the extractor's segments on this world: at most ~the range
+    assert max(lengths[None]) > 20.0 + longest_segment_m
+    assert max(lengths[20.0]) <= 20.0 + longest_segment_m
+    assert len(lengths[20.0]) > len(lengths[None])

@@ -191,7 +191,11 @@ def associate(problem: AssociationProblem, config: AssociationConfig) -> list[in
 
 
 def extent_allowed(
-    lines_w: FloatArray, extents_m: FloatArray, segments_w: FloatArray, margin_m: float
+    lines_w: FloatArray,
+    extents_m: FloatArray,
+    segments_w: FloatArray,
+    margin_m: float | None,
+    max_extent_m: float | None = None,
 ) -> np.ndarray:
     """Which (observation, landmark) pairings overlap along the line, within a margin.
 
@@ -208,8 +212,12 @@ def extent_allowed(
         Their extents ``(s_min, s_max)`` along the line (:func:`sonarslam.features.geometry.along_line`).
     segments_w : ndarray, shape (m, 2, 2)
         Each observation's two end points in the world (m).
-    margin_m : float
-        How far beyond a landmark's extent an observation may start (m).
+    margin_m : float or None
+        How far beyond a landmark's extent an observation may start (m); None: any distance.
+    max_extent_m : float or None
+        The longest a landmark's extent may grow (m): a pairing is allowed only when the extent
+        grown by the observed segment is at most this long (or no longer than the longer of
+        the two alone). None: no limit.
 
     Returns
     -------
@@ -220,7 +228,13 @@ def extent_allowed(
     for j in range(k):
         s = along_line(lines_w[j], np.asarray(segments_w, dtype=np.float64).reshape(-1, 2))
         s = s.reshape(m, 2)
-        out[:, j] = (s.max(axis=1) >= extents_m[j, 0] - margin_m) & (
-            s.min(axis=1) <= extents_m[j, 1] + margin_m
-        )
+        lo, hi = s.min(axis=1), s.max(axis=1)
+        ok = np.ones(m, dtype=bool)
+        if margin_m is not None:
+            ok &= (hi >= extents_m[j, 0] - margin_m) & (lo <= extents_m[j, 1] + margin_m)
+        if max_extent_m is not None:
+            grown = np.maximum(hi, extents_m[j, 1]) - np.minimum(lo, extents_m[j, 0])
+            alone = np.maximum(hi - lo, extents_m[j, 1] - extents_m[j, 0])
+            ok &= grown <= np.maximum(max_extent_m, alone)
+        out[:, j] = ok
     return out

@@ -89,6 +89,12 @@ class LandmarkConfig:
         A landmark is paired only with observations whose world segment reaches its extent
         within this margin (m), :func:`sonarslam.slam.mapping.association.extent_allowed`; None: no extent
         gate. It keeps a landmark from spanning the gap to a collinear wall further on.
+    max_extent_m : float or None
+        A landmark is paired only with observations that keep its extent (grown by their
+        segment) at most this long (m), :func:`sonarslam.slam.mapping.association.extent_allowed`;
+        a longer stretch of the wall becomes another landmark. A wall that is not quite straight
+        over its length (or a heading error that depends on the place) makes one infinite line
+        for all of it pull the poses seen from its far ends. None: no limit.
     side_gate : bool
         A landmark (or tentative line) is paired only with observations made from the side of
         its line it was first seen from (:func:`sonarslam.slam.model.lines.sonar_side`).
@@ -113,6 +119,7 @@ class LandmarkConfig:
     tentative_max_age_s: float = bounded(60.0, 1e-3, 1e5)
     min_rho_m: float = bounded(1.0, 0.0, 1e3)
     extent_margin_m: float | None = bounded(10.0, 0.0, 1e4)
+    max_extent_m: float | None = bounded(None, 0.0, 1e5, low_open=True)
     side_gate: bool = True
     line_cov_scale: float = bounded(1.0, 1e-2, 1e2)
     merge_gate_probability: float | None = bounded(None, 0.0, 1.0, low_open=True, high_open=True)
@@ -261,19 +268,19 @@ class LandmarkMap:
         observations : list of LineFeature
         """
         cfg = self.config
-        if cfg.extent_margin_m is None and not cfg.side_gate:
+        if cfg.extent_margin_m is None and cfg.max_extent_m is None and not cfg.side_gate:
             return None
         m, k = len(observations), len(landmarks)
         out = np.ones((m, k), dtype=bool)
         if k == 0:
             return out
-        if cfg.extent_margin_m is not None:
+        if cfg.extent_margin_m is not None or cfg.max_extent_m is not None:
             wTs = compose(wTb, self.bTs)
             extents = np.array(
                 [lm.extent_on(line) for lm, line in zip(landmarks, lines_w, strict=True)]
             )
             segments = np.array([transform_points(wTs, f.endpoints_r) for f in observations])
-            out &= extent_allowed(lines_w, extents, segments, cfg.extent_margin_m)
+            out &= extent_allowed(lines_w, extents, segments, cfg.extent_margin_m, cfg.max_extent_m)
         if cfg.side_gate:
             sides = np.array([lm.side for lm in landmarks])
             out &= (sonar_side(wTb, lines_w, self.bTs) == sides)[None, :]
