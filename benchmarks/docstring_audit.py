@@ -43,7 +43,7 @@ STRONG: dict[str, str] = {
     "until found": r"\buntil (the|a)\b[^.]{0,60}\b(found|showed|measured)\b",
     "benchmark found": r"\bbenchmarks? (found|showed|measured|gave)\b",
     "x too": r"\d+(\.\d+)?\s*[x×]\s*too\b",
-    "no longer": r"\bno longer\b|\bpreviously\b|\bformerly\b|\bused to (be|give|sit|live|hold)\b",
+    "no longer": r"\bno longer\b(?! than)|\bpreviously\b|\bformerly\b|\bused to (be|give|sit|live|hold)\b",
     "was the default": r"\b(it|this|that) was the [\w' ]{0,30}?\b(preset|default)\b",
     "for now": r"\bfor now\b|\bnot yet (the )?default\b|\buntil this version\b",
     "before a change": r"\bbefore (this|that|the) (change|refusal|move|merge|rework|version)\b",
@@ -53,8 +53,10 @@ STRONG: dict[str, str] = {
         r"\b(marina|MTi)('s)?\b[^.;]{0,30}?(:|\bis\b|\breads\b|\bgave\b|\bgives\b)\s*"
         r"[-−~≈]?\d+(\.\d+)?\s*(m|deg|°|deg/s|°/s|%)(?![a-zA-Z_])"
     ),
-    "date": r"\b(19|20)\d\d-[01]\d(-[0-3]\d)?\b",
-    "commit": r"\bcommit [0-9a-f]{7,40}\b",
+    # an ISO date shown as a literal (``2024-05-02T10:31``) is an example, not history
+    "date": r"(?<!``)\b(19|20)\d\d-[01]\d(-[0-3]\d)?\b",
+    # "<another project> commit <hash>" cites the version of a source read; ours is history
+    "commit": r"(?:^|[(,;:.]\s*|\b(?:at|in|since|before|after|until|from|of)\s)commit [0-9a-f]{7,40}\b",
 }
 
 #: Wider candidates: read each, keep the legitimate ones.

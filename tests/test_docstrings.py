@@ -82,6 +82,9 @@ def test_the_detector_finds_planted_markers_in_docstrings_and_comments():
         "A line seen but not yet a landmark.",
         "bin 500 of the marina's 0.1 m bins is at 50.0 m",
         "chosen on the drawn tuning worlds; see docs/design-decisions.md",
+        "an extent no longer than the longer of the two",
+        "the layout read at ping-viewer commit 1ed4508",
+        "a start such as ``2024-05-02T10:31:07``",
     ],
 )
 def test_contract_prose_is_not_a_marker(text: str):
