@@ -152,7 +152,9 @@ class EkfConfig(BackendConfig):
     Attributes
     ----------
     side_gate : bool
-        As :class:`sonarslam.slam.mapping.landmarks.LandmarkConfig`; off for the EKF by default.
+        As :class:`sonarslam.slam.mapping.landmarks.LandmarkConfig`, on as there: without it
+        the EKF paired a wall's observations with the parallel face 4.9 m behind it (the
+        choice's measurements: docs/consistency.md).
     first_estimates_jacobians : bool
         FEJ-EKF: line Jacobians at the landmarks' first estimates (consistency; see
         :meth:`LineEkf.predict_line`).
@@ -162,7 +164,7 @@ class EkfConfig(BackendConfig):
         says how its default was chosen.
     """
 
-    side_gate: bool = False
+    side_gate: bool = True
     first_estimates_jacobians: bool = True
     gyro_bias_sigma_deg_per_s: float = bounded(1.0, 1e-6, 90.0)
 
