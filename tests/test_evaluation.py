@@ -418,3 +418,30 @@ def test_the_aligned_ate_of_a_vehicle_that_did_not_move_is_the_centroid_fit() ->
     gps = GpsSeries(t, en_m, (42.0, 3.0))
     _, errors = ate_errors(est, gps, align=True)
     np.testing.assert_allclose(errors, np.hypot(*(en_m.mean(axis=0) - en_m).T), atol=1e-12)
+
+
+def test_association_scores_see_far_walls_with_the_true_range_scale():
+    """A sonar that logs ranges 4 % short sees a wall 30 m off 1.2 m nearer: beyond the 1 m gate
+    of the truth unless the scores scale the true lines as the sonar did (a drawn world's
+    ``errors.sonar_range_scale``)."""
+    from types import SimpleNamespace
+
+    from sonarslam.features.geometry import compose, line_world_to_frame
+    from sonarslam.slam.eval.truth import association_scores
+    from sonarslam.slam.io.trajectory import Trajectory
+
+    walls = np.array([[[-50.0, 30.0], [50.0, 30.0]], [[8.0, -50.0], [8.0, 50.0]]])
+    truth = Trajectory(np.array([0.0, 100.0]), np.array([[0.0, 0.0, 0.3], [1.0, 0.0, 0.3]]))
+    bTs = np.array([0.3, 0.0, np.pi])
+    scale = 0.96
+    lines_w = [np.array([30.0, np.pi / 2]), np.array([8.0, 0.0])]
+    feats, lms = [], []
+    for k in range(10):
+        t = 10.0 * k
+        z = line_world_to_frame(lines_w[k % 2], compose(truth.poses([t])[0], bTs))[0]
+        feats.append(SimpleNamespace(t=t, z=z * np.array([scale, 1.0])))
+        lms.append(k % 2)
+    unscaled = association_scores(feats, lms, walls, truth, bTs)
+    assert unscaled.n_spurious == 5  # every far-wall line misses the gate
+    s = association_scores(feats, lms, walls, truth, bTs, range_scale=scale)
+    assert s.n_spurious == 0 and s.precision == pytest.approx(1.0)

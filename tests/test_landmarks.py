@@ -114,3 +114,32 @@ def test_reobservations_from_the_same_place_are_counted_once(kind: str) -> None:
         assert ids[2:] == [0] * 6  # associated every time after the two tentative views
         assert be.map.stats["associated"] - be.map.stats["reobservations_skipped"] == used
         assert be.map.stats["reobservations_skipped"] == 6 - used
+
+
+@pytest.mark.parametrize("kind", ["ekf", "isam2"])
+def test_the_far_face_of_a_breakwater_is_not_paired_with_the_near_one(kind: str) -> None:
+    """A breakwater's two faces, x = 10 and x = 10.5, each seen from its own side: after 20 m of
+    odometry (1 m of position sigma) the far face's line is inside the chi2 gate of the near
+    face's landmark, and only the side gate, on by default in both back ends, keeps them apart
+    (issue 31: the EKF without it paired such faces on drawn worlds)."""
+    be = _backend(kind)
+    near, far = np.array([10.0, 0.0]), np.array([10.5, 0.0])
+    t = 1.0
+    for _ in range(2):  # a tentative line, then a landmark: the near face, from x = 0
+        _see(be, t, [(near, _stretch(-10.0, 10.0))])
+        t += 1.0
+    assert len(be.map.active()) == 1
+    # drive to x = 20 along the breakwater's end, with a DVL sigma that leaves ~1 m
+    be.predict(motion_step(t - 1.0, t + 40.0, np.array([0.5, 0.0]), 0.05, 0.0, t - 1.0))
+    t += 41.0
+    assert be.pose[0] == pytest.approx(20.5, abs=1e-9)
+    ids = _see(be, t, [(far, np.array([[10.5, -10.0], [10.5, 10.0]]))])
+    assert ids == [None]  # a tentative line of its own, not the near face's landmark
+    assert be.map.stats["associated"] == 0
+    unguarded = _backend(kind, side_gate=False)
+    t = 1.0
+    for _ in range(2):
+        _see(unguarded, t, [(near, _stretch(-10.0, 10.0))])
+        t += 1.0
+    unguarded.predict(motion_step(t - 1.0, t + 40.0, np.array([0.5, 0.0]), 0.05, 0.0, t - 1.0))
+    assert _see(unguarded, t + 41.0, [(far, np.array([[10.5, -10.0], [10.5, 10.0]]))]) == [0]

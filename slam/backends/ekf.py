@@ -27,8 +27,8 @@ covariance at every record) and multiplies its Jacobian into their product ``Phi
 vehicle-landmark block takes ``Phi`` once, when the full covariance is next needed
 (:meth:`LineEkf._flush`), not 7 x n work per record. Updates are in the Joseph form with H
 evaluated at the predicted state: the AHRS heading by :func:`scalar_joseph_update` (rank 1,
-O(n^2)), each line observation in the sonar frame R (:func:`sonarslam.slam.model.lines.line_prediction`)
-by filterpy's. Which observation
+O(n^2), exactly symmetric), each line observation in the sonar frame R
+(:func:`sonarslam.slam.model.lines.line_prediction`) by filterpy's, its result symmetrised. Which observation
 updates which landmark, and when a new line becomes one, is the landmark layer's
 (:class:`sonarslam.slam.mapping.landmarks.LandmarkMap`); this class holds the filter state only.
 """
@@ -152,7 +152,9 @@ class EkfConfig(BackendConfig):
     Attributes
     ----------
     side_gate : bool
-        As :class:`sonarslam.slam.mapping.landmarks.LandmarkConfig`; off for the EKF by default.
+        As :class:`sonarslam.slam.mapping.landmarks.LandmarkConfig`, on as there: without it
+        the EKF paired a wall's observations with the parallel face 4.9 m behind it (the
+        choice's measurements: docs/consistency.md).
     first_estimates_jacobians : bool
         FEJ-EKF: line Jacobians at the landmarks' first estimates (consistency; see
         :meth:`LineEkf.predict_line`).
@@ -162,7 +164,7 @@ class EkfConfig(BackendConfig):
         docs/design-decisions.md.
     """
 
-    side_gate: bool = False
+    side_gate: bool = True
     first_estimates_jacobians: bool = True
     gyro_bias_sigma_deg_per_s: float = bounded(1.0, 1e-6, 90.0)
 
@@ -344,6 +346,12 @@ class LineEkf:
     ) -> None:
         self._flush()
         self.kf.update(z, lambda _x: H, lambda _x: hx, R=R, residual=residual)
+        # filterpy's Joseph form (I - K H) P (I - K H)^T + K R K^T is symmetric only to
+        # round-off, and nothing else symmetrises P: over hundreds of updates of a filter
+        # whose variances span 1e-8 to 1e2 the asymmetry grows until P is indefinite, a gate's
+        # squared Mahalanobis distance goes negative and any pairing passes it (docs/consistency.md)
+        P = self.kf.P
+        P[...] = 0.5 * (P + P.T)
         self._normalise()
 
     def _normalise(self) -> None:

@@ -32,6 +32,7 @@ from sonarslam.slam.io.trajectory import Trajectory
 __all__ = [
     "truth_trajectory",
     "truth_walls",
+    "true_sonar",
     "wall_lines_world",
     "wall_lines",
     "AssociationScores",
@@ -75,6 +76,17 @@ def truth_walls(dataset: Dataset) -> FloatArray:
             f"{dataset.root}: no walls in truth.json (only simulated datasets have them)"
         )
     return np.asarray(dataset.truth["walls_m"], dtype=np.float64) - _offset(dataset)
+
+
+def true_sonar(dataset: Dataset) -> tuple[FloatArray, float]:
+    """The simulated sonar's true mounting ``bTs`` (3,) (m, m, rad) and range scale (an echo
+    from range ``r`` logged at ``scale r``), from ``truth.json``; a world without drawn
+    calibration errors has the told mounting and scale 1."""
+    truth = dataset.truth or {}
+    told = dataset.config.sonar_mounting.as_pose()
+    m = truth.get("mountings", {}).get("sonar")
+    bTs = told if m is None else np.array([m["x_m"], m["y_m"], m["yaw_rad"]], dtype=np.float64)
+    return bTs, float(truth.get("errors", {}).get("sonar_range_scale", 1.0))
 
 
 def _offset(dataset: Dataset) -> FloatArray:
@@ -185,6 +197,7 @@ def association_scores(
     gate_theta_rad: float = float(np.deg2rad(5.0)),
     feature_seeds: list[int | None] | None = None,
     wall_curve: npt.ArrayLike | None = None,
+    range_scale: float = 1.0,
 ) -> AssociationScores:
     """Precision and recall of a run's associations (see :class:`AssociationScores`).
 
@@ -197,7 +210,7 @@ def association_scores(
     truth : Trajectory
         True body poses.
     bTs : ndarray, shape (3,)
-        Sonar mounting.
+        Sonar mounting (the true one).
     gate_rho_m, gate_theta_rad : float
         How close (m, rad) an observation must be to a true line to be of it.
     feature_seeds : list, optional
@@ -207,6 +220,9 @@ def association_scores(
         The curved stretch each wall is a facet of (-1: straight; a drawn world's
         ``truth.json`` ``walls.curve``): the facets of one curve are one truth unit, as
         the lines of its facets are not walls of their own.
+    range_scale : float
+        The sonar's true range scale: a line at distance ``rho`` is observed at
+        ``range_scale rho`` (:func:`true_sonar`).
     """
     lines, line_of_wall = wall_lines(walls_w)
     unit = np.arange(len(lines))  # the truth unit of each line
@@ -223,7 +239,8 @@ def association_scores(
         best: int | None = None
         best_cost = np.inf
         for k, lw in enumerate(lines):
-            nu, _ = line_difference(f.z, line_world_to_frame(lw, wTs)[0])
+            line_s = line_world_to_frame(lw, wTs)[0] * np.array([range_scale, 1.0])
+            nu, _ = line_difference(f.z, line_s)
             if abs(nu[0]) <= gate_rho_m and abs(nu[1]) <= gate_theta_rad:
                 cost = abs(nu[0]) / gate_rho_m + abs(nu[1]) / gate_theta_rad
                 if cost < best_cost:
@@ -270,16 +287,19 @@ def association_against_truth(
 ) -> AssociationScores:
     """:func:`association_scores` of a closed-loop run on a simulated dataset: its features,
     pairings and seeds (:class:`sonarslam.slam.run.closed_loop.ClosedLoopResult`) against the true walls
-    and poses."""
+    and poses, seen with the true sonar (:func:`true_sonar`: a drawn world's mounting and range
+    scale are not the told ones, and a far wall's lines would otherwise miss the gate)."""
     walls = (dataset.truth or {}).get("walls") or {}
+    bTs, scale = true_sonar(dataset)
     return association_scores(
         features,
         feature_landmarks,
         truth_walls(dataset),
         truth_trajectory(dataset),
-        dataset.config.sonar_mounting.as_pose(),
+        bTs,
         feature_seeds=feature_seeds,
         wall_curve=walls.get("curve"),
+        range_scale=scale,
     )
 
 
