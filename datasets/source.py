@@ -92,6 +92,13 @@ def resolve_source(source: str | Path) -> Path:
                 f"no {source!r} dataset under ${ENV_VAR}={root}: it must hold {MARINA_LAYOUT_HINT}",
             )
         return found
+    if not path.exists():
+        raise DataError(
+            path,
+            None,
+            "no such file or directory (a source is a directory, a ROS bag, a Ping Viewer .bin or"
+            f" a named source: {', '.join(NAMED_SOURCES)})",
+        )
     raise DataError(path, None, f"not a directory, nor a named source ({', '.join(NAMED_SOURCES)})")
 
 

@@ -174,7 +174,13 @@ def test_a_run_writes_strict_json_and_says_each_fault_on_one_line(harbour, tmp_p
     [
         (["run", "{src}", "--out", "{file}"], 2, "exists and is not a directory"),
         (["run", "{src}", "--out", "{file}/below"], 2, "is not a directory"),
-        (["run", "{tmp}/nowhere", "--out", "{tmp}/o"], 1, "not a directory, nor a named source"),
+        (["run", "{tmp}/nowhere", "--out", "{tmp}/o"], 1, "nowhere: no such file or directory"),
+        (
+            ["run", "{tmp}/nowhere.bag", "--out", "{tmp}/o"],
+            1,
+            "nowhere.bag: no such file or directory",
+        ),
+        (["run", "{file}", "--out", "{tmp}/o"], 1, "not a directory, nor a named source"),
         (
             [
                 "run",
