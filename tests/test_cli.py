@@ -205,7 +205,7 @@ def test_known_errors_are_one_line_and_exit_1(tmp_path, capsys, monkeypatch):
         == 1
     )
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "nowhere: not a directory" in err[0]
+    assert len(err) == 1 and "nowhere: no such file or directory" in err[0]
     assert main(["info", "marina"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "needs $SONARSLAM_DATA" in err[0]
