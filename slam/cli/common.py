@@ -88,6 +88,17 @@ def add_source(p: argparse.ArgumentParser) -> None:
     )
 
 
+def add_topics(p: argparse.ArgumentParser) -> None:
+    """``--topics``: which topic of a bag plays which role."""
+    p.add_argument(
+        "--topics",
+        metavar="TOML",
+        help="a bag's roles: [topics] sonar, dvl, imu, gps = topic names, or a preset's name"
+        " (caves); default: by message type, [topics] of the bag's sonarslam.toml, or the preset"
+        " whose topics the bag has",
+    )
+
+
 def add_poses(p: argparse.ArgumentParser, default: str, note: str = "") -> None:
     """``--poses``: one of :data:`POSES`."""
     p.add_argument(

@@ -19,6 +19,7 @@ from sonarslam.slam.cli.common import (
     add_quiet,
     add_source,
     add_start,
+    add_topics,
     number,
     parse_loop,
 )
@@ -95,13 +96,7 @@ def _run(sub: Subparsers) -> argparse.ArgumentParser:
     )
     p.add_argument("--out", required=True, help="output directory")
     add_start(p)
-    p.add_argument(
-        "--topics",
-        metavar="TOML",
-        help="a bag's roles: [topics] sonar, dvl, imu, gps = topic names, or a preset's name"
-        " (caves); default: by message type, [topics] of the bag's sonarslam.toml, or the preset"
-        " whose topics the bag has",
-    )
+    add_topics(p)
     p.add_argument(
         "--loop",
         type=parse_loop,
@@ -266,12 +261,7 @@ def _info(sub: Subparsers) -> argparse.ArgumentParser:
         "info", help="what a dataset holds, every setting with its unit and source", epilog=EPILOG
     )
     add_source(p)
-    p.add_argument(
-        "--topics",
-        metavar="TOML",
-        help="a bag's roles: [topics] sonar, dvl, imu, gps = topic names (default: by message"
-        " type, or [topics] of the bag's sonarslam.toml)",
-    )
+    add_topics(p)
     return p
 
 
