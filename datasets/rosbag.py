@@ -69,6 +69,7 @@ __all__ = [
     "bag_topics",
     "open_bag",
     "write_bag",
+    "transform_msg",
 ]
 
 ROLES = ("sonar", "dvl", "imu", "gps")
@@ -977,6 +978,31 @@ def _stamp_of(store: Any, t_s: float) -> Any:
     return store.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
 
 
+def transform_msg(
+    store: Any,
+    t: float,
+    parent: str,
+    child: str,
+    x_m: float,
+    y_m: float,
+    yaw_rad: float,
+    z_m: float = 0.0,
+) -> Any:
+    """A ``geometry_msgs/TransformStamped`` at ``t`` (Unix s): ``child`` in ``parent``'s frame,
+    at (``x_m``, ``y_m``, ``z_m``) and turned by ``yaw_rad`` about z."""
+    T = store.types
+    return T["geometry_msgs/msg/TransformStamped"](
+        header=T["std_msgs/msg/Header"](stamp=_stamp_of(store, t), frame_id=parent),
+        child_frame_id=child,
+        transform=T["geometry_msgs/msg/Transform"](
+            translation=T["geometry_msgs/msg/Vector3"](x=x_m, y=y_m, z=z_m),
+            rotation=T["geometry_msgs/msg/Quaternion"](
+                x=0.0, y=0.0, z=math.sin(yaw_rad / 2), w=math.cos(yaw_rad / 2)
+            ),
+        ),
+    )
+
+
 def _messages(store: Any, d: Dataset) -> Iterator[tuple[float, str, Any]]:
     """(time, role, message) of a dataset in time order: the inverse of :func:`open_bag`."""
     T = store.types
@@ -1080,18 +1106,6 @@ def _caves_messages(store: Any, d: Dataset) -> Iterator[tuple[float, str, Any]]:
         CAVES_FRAMES["imu"]: d.config.ahrs_mounting,
     }
 
-    def tf(t: float, parent: str, child: str, x: float, y: float, yaw: float) -> Any:
-        return T["geometry_msgs/msg/TransformStamped"](
-            header=T["std_msgs/msg/Header"](stamp=_stamp_of(store, t), frame_id=parent),
-            child_frame_id=child,
-            transform=T["geometry_msgs/msg/Transform"](
-                translation=T["geometry_msgs/msg/Vector3"](x=x, y=y, z=0.0),
-                rotation=T["geometry_msgs/msg/Quaternion"](
-                    x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)
-                ),
-            ),
-        )
-
     for t, role, msg in _messages(store, replace(d, gps=None)):
         msg.header.frame_id = CAVES_FRAMES[role]
         if role == "dvl":
@@ -1108,8 +1122,11 @@ def _caves_messages(store: Any, d: Dataset) -> Iterator[tuple[float, str, Any]]:
             )  # fmt: skip
         yield t, role, msg
         if role == "imu":
-            tfs = [tf(t, "world", "sparus", 0.0, 0.0, 0.0)]
-            tfs += [tf(t, "sparus", f, m.x_m, m.y_m, m.yaw_rad) for f, m in mounts.items()]
+            tfs = [transform_msg(store, t, "world", "sparus", 0.0, 0.0, 0.0)]
+            tfs += [
+                transform_msg(store, t, "sparus", f, m.x_m, m.y_m, m.yaw_rad)
+                for f, m in mounts.items()
+            ]
             yield t, "tf", T["tf2_msgs/msg/TFMessage"](transforms=tfs)
 
 

@@ -23,6 +23,7 @@ from sonarslam.datasets.rosbag import (
     bag_topics,
     is_bag,
     open_bag,
+    transform_msg,
     write_bag,
 )
 from sonarslam.datasets.source import Dataset, open_dataset
@@ -375,17 +376,8 @@ def _write(
 
 
 def _tf(store: object, t: float, parent: str, child: str, x: float, y: float, yaw: float) -> object:
-    T = store.types  # type: ignore[attr-defined]
-    return T["geometry_msgs/msg/TransformStamped"](
-        header=T["std_msgs/msg/Header"](stamp=_stamp_of(store, t), frame_id=parent),
-        child_frame_id=child,
-        transform=T["geometry_msgs/msg/Transform"](
-            translation=T["geometry_msgs/msg/Vector3"](x=x, y=y, z=0.1),
-            rotation=T["geometry_msgs/msg/Quaternion"](
-                x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)
-            ),
-        ),
-    )
+    """A transform 0.1 m above its parent (a tilt-free offset the reader must ignore)."""
+    return transform_msg(store, t, parent, child, x, y, yaw, z_m=0.1)
 
 
 def test_water_linked_and_marine_acoustic_dvls_and_a_projected_sonar_image(
