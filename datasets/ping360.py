@@ -799,20 +799,9 @@ def _bag_navigation(
     nav_types = {t: ty for t, ty in types.items() if ty not in rb.ROLE_TYPES["sonar"]}
     roles = rb._roles(bag, nav_types, table, table_path)
     roles.pop("sonar", None)
-    missing = [role for role in ("dvl", "imu") if role not in roles]
-    if missing:
-        listing = ", ".join(f"{t} ({ty})" for t, ty in sorted(types.items())) or "none"
-        raise DataError(
-            bag,
-            None,
-            f"no topic for the {', '.join(missing)} of the Ping360's navigation (types: "
-            + "; ".join(f"{m}: {', '.join(rb.ROLE_TYPES[m])}" for m in missing)
-            + f"); the bag's topics: {listing}",
-        )
-    columns, _ = rb._read_columns(bag, roles)
-    for role in ("dvl", "imu"):
-        if not columns[role].n:
-            raise DataError(bag, None, f"topic {roles[role]} ({role}) has no message")
+    columns, _ = rb._read_required(
+        bag, roles, types, ("dvl", "imu"), " of the Ping360's navigation"
+    )
     gps = rb._gps(bag, columns["gps"]) if "gps" in columns and columns["gps"].n else None
     counts = {f"{role}_out_of_order": c.out_of_order for role, c in columns.items()}
     return rb._dvl(bag, columns["dvl"]), rb._imu(bag, columns["imu"]), gps, counts

@@ -662,6 +662,33 @@ def _linked(columns: dict[str, _Column], edges: dict[tuple[str, str], Any]) -> b
     return all(c.frame in children for c in columns.values() if c.n and c.frame)
 
 
+def _read_required(
+    bag: Path,
+    roles: dict[str, str],
+    types: dict[str, str],
+    required: tuple[str, ...],
+    purpose: str = "",
+) -> tuple[dict[str, _Column], dict[tuple[str, str], Any]]:
+    """:func:`_read_columns` of ``roles``, after checking each ``required`` role has a topic
+    (else a :class:`DataError` listing the bag's ``types``, topic -> type; ``purpose`` follows
+    the missing roles' names) and then at least one message."""
+    missing = [role for role in required if role not in roles]
+    if missing:
+        listing = ", ".join(f"{t} ({ty})" for t, ty in sorted(types.items())) or "none"
+        raise DataError(
+            bag,
+            None,
+            f"no topic for the {', '.join(missing)}{purpose} (types: "
+            + "; ".join(f"{m}: {', '.join(ROLE_TYPES[m])}" for m in missing)
+            + f"); the bag's topics: {listing}",
+        )
+    columns, edges = _read_columns(bag, roles)
+    for role in required:
+        if not columns[role].n:
+            raise DataError(bag, None, f"topic {roles[role]} ({role}) has no message")
+    return columns, edges
+
+
 def open_bag(
     bag: str | Path,
     config_override: str | Path | None = None,
@@ -688,20 +715,7 @@ def open_bag(
         types = {t: i.msgtype or "" for t, i in r.reader.topics.items()}
     table = _with_preset(types, table)
     roles = _roles(p, types, table, table_path)
-    missing = [role for role in REQUIRED_ROLES if role not in roles]
-    if missing:
-        listing = ", ".join(f"{t} ({ty})" for t, ty in sorted(types.items())) or "none"
-        raise DataError(
-            p,
-            None,
-            f"no topic for the {', '.join(missing)} (types: "
-            + "; ".join(f"{m}: {', '.join(ROLE_TYPES[m])}" for m in missing)
-            + f"); the bag's topics: {listing}",
-        )
-    columns, edges = _read_columns(p, roles)
-    for role in REQUIRED_ROLES:
-        if not columns[role].n:
-            raise DataError(p, None, f"topic {roles[role]} ({role}) has no message")
+    columns, edges = _read_required(p, roles, types, REQUIRED_ROLES)
     mountings, tf_line = tf_mountings(p, columns, edges, table.get("base_frame"))
     toml = _beside(p, "sonarslam.toml")
     config = _with_mountings(DatasetConfig(), mountings, toml)
