@@ -362,6 +362,27 @@ def test_run_set_changes_the_settings_it_names(short_harbour, ekf_default, tmp_p
     assert "does not apply to back end 'ekf'" in capsys.readouterr().err
 
 
+def test_info_lists_what_run_would_take_with_config_and_set(short_harbour, tmp_path, capsys):
+    """info takes run's --config and --set: each value it lists is the one given, its source
+    names the option; a wrong setting is refused before anything is read."""
+    override = tmp_path / "offset.toml"
+    override.write_text("[sonar]\nrange_offset_m = 0.25\n")
+    sets = ["--set", "ekf.min_rho_m=2.5", "--set", "scans.kernel_k=2"]
+    assert main(["info", str(short_harbour), "--config", str(override), *sets]) == 0
+    rows = {
+        line.split()[0] if not line.startswith("  [") else " ".join(line.split()[:2]): line
+        for line in capsys.readouterr().out.splitlines()
+        if line.startswith("  ")
+    }
+    assert rows["[sonar] range_offset_m"].split()[2:5] == ["0.25", "m", "offset.toml"]
+    assert rows["ekf.min_rho_m"].split()[1:4] == ["2.5", "m", "--set"]
+    assert rows["scans.kernel_k"].split()[1:3] == ["2.0", "--set"]
+    assert rows["isam2.min_rho_m"].split()[-1] == "default"  # another scope untouched
+    assert main(["info", str(short_harbour), "--set", "ekf.no_such_field=1"]) == 2
+    captured = capsys.readouterr()
+    assert "no_such_field" in captured.err and captured.out == ""
+
+
 def test_scan_settings_are_taken_where_the_run_takes_scans():
     """``--set scans.*``: checked before the run and applied by run_config when the back end's
     constraints hold scans; refused with a line naming the setting otherwise."""

@@ -99,6 +99,26 @@ def add_topics(p: argparse.ArgumentParser) -> None:
     )
 
 
+def add_config_and_set(p: argparse.ArgumentParser) -> None:
+    """``--config`` (a ``sonarslam.toml`` over the dataset's) and ``--set`` (run settings), as
+    ``run`` takes them and ``info`` lists them."""
+    p.add_argument(
+        "--config",
+        default=None,
+        help="a sonarslam.toml-format file whose keys replace the dataset's calibration"
+        " (e.g. [mounting.ahrs] yaw_deg); the one used is written to OUT/config_used.toml",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SCOPE.FIELD=VALUE",
+        help="an extractor or back-end setting, repeatable: extractor.max_range_m=25,"
+        " ekf.extent_margin_m=10, isam2.robust=cauchy, isam2.association=nn (fields of"
+        " ExtractorConfig, EkfConfig, GraphConfig); recorded in metrics.json",
+    )
+
+
 def add_poses(p: argparse.ArgumentParser, default: str, note: str = "") -> None:
     """``--poses``: one of :data:`POSES`."""
     p.add_argument(

@@ -9,11 +9,14 @@ from sonarslam.datasets.ping360 import is_ping360_log
 from sonarslam.datasets.rosbag import bag_topics, is_bag
 from sonarslam.datasets.source import open_dataset
 from sonarslam.slam.model.motion import gyro_bias_against_heading
-from sonarslam.slam.run.settings import Setting, dataset_settings, run_settings
+from sonarslam.slam.run.presets import parse_settings
+from sonarslam.slam.run.settings import Setting, check_run_settings, dataset_settings, run_settings
 from sonarslam.slam.run.sources import DR_IGNORES, dvl_quality, start_pose
 
 
 def command(args: argparse.Namespace) -> int:
+    settings = parse_settings(args.set)
+    check_run_settings(settings)
     if is_bag(args.source):
         topics = bag_topics(args.source, args.topics)
         print(f"{args.source}: {len(topics)} topics (role: what sonarslam reads it as)")
@@ -23,7 +26,9 @@ def command(args: argparse.Namespace) -> int:
             print(
                 f"  {t.topic:<{width}}  {t.msgtype:<46} {t.count:>8} msgs {t.rate_hz:>8.2f} Hz  {role}"
             )
-    d = open_dataset(args.source, topics_file=args.topics, nav=args.nav)
+    d = open_dataset(
+        args.source, config_override=args.config, topics_file=args.topics, nav=args.nav
+    )
     t0, t1 = d.nav_span_s
     print(f"{d.name}: {d.root}")
     if is_ping360_log(d.root):
@@ -78,9 +83,9 @@ def command(args: argparse.Namespace) -> int:
         )
     else:
         print(f"  DVL sigma {n.dvl_sigma_mps} m/s (the scatter's excess is not added)")
-    _print_settings("dataset settings (sonarslam.toml keys)", dataset_settings(d))
+    _print_settings("dataset settings (sonarslam.toml keys)", dataset_settings(d, args.config))
     print(f"  dead reckoning (--backend dr) ignores: {', '.join(DR_IGNORES)}")
-    _print_settings("run settings (sonarslam run --set NAME=VALUE)", run_settings(d))
+    _print_settings("run settings (sonarslam run --set NAME=VALUE)", run_settings(d, settings))
     return 0
 
 

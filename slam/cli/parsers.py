@@ -15,6 +15,7 @@ from collections.abc import Callable
 from sonarslam.slam.cli.common import (
     EPILOG,
     Subparsers,
+    add_config_and_set,
     add_poses,
     add_quiet,
     add_source,
@@ -113,21 +114,7 @@ def _run(sub: Subparsers) -> argparse.ArgumentParser:
         action="store_true",
         help="isam2 only: a final batch Levenberg-Marquardt pass (isam2_batch.tum, ate_*_batch_m)",
     )
-    p.add_argument(
-        "--config",
-        default=None,
-        help="a sonarslam.toml-format file whose keys replace the dataset's calibration"
-        " (e.g. [mounting.ahrs] yaw_deg); the one used is written to OUT/config_used.toml",
-    )
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="SCOPE.FIELD=VALUE",
-        help="an extractor or back-end setting, repeatable: extractor.max_range_m=25,"
-        " ekf.extent_margin_m=10, isam2.robust=cauchy, isam2.association=nn (fields of"
-        " ExtractorConfig, EkfConfig, GraphConfig); recorded in metrics.json",
-    )
+    add_config_and_set(p)
     p.add_argument(
         "--strict",
         action="store_true",
@@ -262,6 +249,7 @@ def _info(sub: Subparsers) -> argparse.ArgumentParser:
     )
     add_source(p)
     add_topics(p)
+    add_config_and_set(p)
     return p
 
 

@@ -7,7 +7,8 @@
   neutral defaults for any other; keys a
   ``sonarslam.toml`` leaves out take the neutral defaults of ``DatasetConfig``.
 * The run settings (``--set SCOPE.FIELD=VALUE``, :mod:`sonarslam.slam.run.presets`): the extractor preset
-  of the dataset's beams and each back end's defaults.
+  of the dataset's beams, its scan matcher preset and each back end's defaults, with the
+  ``--set`` values given over them.
 
 Units are read off the names (``_m``: metres, ``_deg``, ``_rad``, ``_s``, ``_mps``: m/s, ...).
 """
@@ -22,10 +23,18 @@ from typing import Any
 
 from sonarslam.datasets.config import config_tables
 from sonarslam.datasets.source import Dataset
+from sonarslam.settings import SettingError
 from sonarslam.slam.backends.registry import BACKENDS
-from sonarslam.slam.run.presets import backend_config, extractor_config, noise_settings, preset_for
+from sonarslam.slam.run.presets import (
+    SCAN_PRESETS,
+    apply_overrides,
+    backend_config,
+    extractor_config,
+    noise_settings,
+    preset_for,
+)
 
-__all__ = ["Setting", "unit_of", "dataset_settings", "run_settings"]
+__all__ = ["Setting", "unit_of", "dataset_settings", "run_settings", "check_run_settings"]
 
 _UNITS = [
     ("_deg_per_sqrt_s", "deg/sqrt(s)"),
@@ -78,7 +87,12 @@ def _file_keys(root: Path) -> tuple[Path | None, dict[str, set[str]]]:
         found = sorted(root.parent.glob("sonarslam.toml"))
     if not found:
         return None, {}
-    with open(found[0], "rb") as f:
+    return found[0], _toml_keys(found[0])
+
+
+def _toml_keys(path: Path) -> dict[str, set[str]]:
+    """The keys a ``sonarslam.toml``-format file sets, by table (``mounting.sonar``)."""
+    with open(path, "rb") as f:
         data = tomllib.load(f)
     keys: dict[str, set[str]] = {}
     for table, inner in data.items():
@@ -87,7 +101,7 @@ def _file_keys(root: Path) -> tuple[Path | None, dict[str, set[str]]]:
                 keys[f"mounting.{sub}"] = set(items)
         elif isinstance(inner, dict):
             keys[table] = set(inner)
-    return found[0], keys
+    return keys
 
 
 #: The head's keys a Ping Viewer log gives (sonarslam.datasets.ping360) and where from.
@@ -99,11 +113,14 @@ _PING360_HEAD_KEYS = {
 }
 
 
-def dataset_settings(dataset: Dataset) -> list[Setting]:
-    """The dataset's settings, each with its unit and source (module docstring)."""
+def dataset_settings(dataset: Dataset, override: str | Path | None = None) -> list[Setting]:
+    """The dataset's settings, each with its unit and source (module docstring); the keys of
+    ``override`` (the ``sonarslam.toml``-format file the dataset was opened with,
+    ``open_dataset(config_override=...)``) name that file."""
     # a bag file or a Ping Viewer .bin: its sonarslam.toml is the one beside it
     folder = dataset.root if dataset.root.is_dir() else dataset.root.parent
     toml, in_file = _file_keys(folder)
+    over = _toml_keys(Path(override)) if override is not None else {}
     setup = sorted(folder.glob("*_SETUP.log")) + sorted(folder.glob("*/*_SETUP.log"))
     ping360 = dataset.root.suffix == ".bin"  # its head's keys the file leaves out: the log's
     out = []
@@ -129,6 +146,8 @@ def dataset_settings(dataset: Dataset) -> list[Setting]:
                 source = "neutral default (no sonarslam.toml)"
             if mounting_source and key == "yaw_deg":
                 source += f": {mounting_source}"
+            if key in over.get(table, set()):
+                source = f"{Path(override or '').name} (--config)"
             out.append(Setting(f"[{table}] {key}", value, unit_of(key), source))
     return out
 
@@ -144,35 +163,78 @@ def _flatten(prefix: str, config: Any) -> list[tuple[str, Any]]:
     return out
 
 
-def run_settings(dataset: Dataset) -> list[Setting]:
-    """The extractor preset of the dataset's beams and every back end's defaults, by their
-    ``--set`` names (``extractor.min_votes``, ``ekf.association.gate_probability``)."""
+def _by_scope(settings: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """``settings`` (``SCOPE.FIELD`` -> value) by scope, every scope of :func:`run_settings`
+    present. Raises SettingError for another scope."""
+    scopes = {"extractor", "scans", *BACKENDS}
+    given: dict[str, dict[str, Any]] = {scope: {} for scope in scopes}
+    for name, value in settings.items():
+        scope, _, field = name.partition(".")
+        if scope not in scopes:
+            raise SettingError(name, f"no such scope; the scopes are {sorted(scopes)}")
+        given[scope][field] = value
+    return given
+
+
+def check_run_settings(settings: dict[str, Any]) -> None:
+    """Check ``settings`` (``SCOPE.FIELD`` -> value) over the default configurations before a
+    dataset is read: scope, field, type and range (:func:`run_settings` applies them to the
+    dataset's presets). Raises SettingError."""
+    given = _by_scope(settings)
+    extractor_config("default", overrides=given["extractor"])
+    apply_overrides(SCAN_PRESETS["default"], given["scans"], prefix="scans.")
+    for backend in BACKENDS:
+        backend_config(backend, given[backend])
+
+
+def run_settings(dataset: Dataset, settings: dict[str, Any] | None = None) -> list[Setting]:
+    """The extractor preset of the dataset's beams, its scan matcher preset and every back
+    end's defaults, by their ``--set`` names (``extractor.min_votes``,
+    ``ekf.association.gate_probability``, ``scans.max_range_m``), with ``settings``
+    (``SCOPE.FIELD`` -> value, as ``sonarslam run --set``) over them, each checked against its
+    field.
+
+    Raises SettingError for a setting of no scope listed here or a wrong field or value.
+    """
+    given = _by_scope(settings or {})
     preset = preset_for(dataset.beams)
     noise = dataset.config.noise
     from_noise = {f"extractor.{k}" for k in noise_settings(noise)[0]}
     from_noise |= {f"{b}.noise.{f.name}" for b in BACKENDS for f in dataclasses.fields(noise)}
 
-    def source_of(name: str, default: str) -> str:
-        return (
-            "the dataset's [noise] (slam/run/presets.py: noise_settings)"
-            if name in from_noise
-            else default
-        )
+    def listed(prefix: str, default: Any, changed: Any, source: str) -> list[Setting]:
+        out = []
+        for (name, before), (_, value) in zip(
+            _flatten(prefix, default), _flatten(prefix, changed), strict=True
+        ):
+            if value != before or name.partition(".")[2] in given[prefix]:
+                where = "--set"
+            elif name in from_noise:
+                where = "the dataset's [noise] (slam/run/presets.py: noise_settings)"
+            else:
+                where = source
+            out.append(Setting(name, value, unit_of(name), where))
+        return out
 
-    out = [
-        Setting(
-            name,
-            value,
-            unit_of(name),
-            source_of(name, f"extractor preset {preset!r} (slam/run/presets.py)"),
-        )
-        for name, value in _flatten("extractor", extractor_config(preset, noise=noise))
-    ]
+    out = listed(
+        "extractor",
+        extractor_config(preset, noise=noise),
+        extractor_config(preset, noise=noise, overrides=given["extractor"]),
+        f"extractor preset {preset!r} (slam/run/presets.py)",
+    )
+    scans = SCAN_PRESETS.get(preset, SCAN_PRESETS["default"])
+    out += listed(
+        "scans",
+        scans,
+        apply_overrides(scans, given["scans"], prefix="scans."),
+        f"scan preset {preset if preset in SCAN_PRESETS else 'default'!r} (constraints with scans)",
+    )
     for backend in BACKENDS:
         config = backend_config(backend, noise=noise)
-        default = f"{type(config).__name__} default"
-        out += [
-            Setting(name, value, unit_of(name), source_of(name, default))
-            for name, value in _flatten(backend, config)
-        ]
+        out += listed(
+            backend,
+            config,
+            backend_config(backend, given[backend], noise=noise),
+            f"{type(config).__name__} default",
+        )
     return out
