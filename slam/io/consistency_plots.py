@@ -7,6 +7,7 @@ Matplotlib's object interface (``Figure``), as :mod:`sonarslam.slam.io.plots`.
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -65,7 +66,7 @@ def plot_consistency(
 ) -> Path:
     """One panel per :class:`ConsistencyPanel`, log scale, time from ``t0_s`` (s); a PNG."""
     n = max(len(panels), 1)
-    fig = Figure(figsize=(12, 2.6 * n + 0.8), dpi=100, layout="constrained")
+    fig = Figure(figsize=(9, 3.0 * n + 0.8), dpi=100, layout="constrained")
     axes = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
     for ax, p in zip(axes, panels, strict=False):
         lo, hi = p.band
@@ -78,7 +79,7 @@ def plot_consistency(
             ms=2.0,
             color="tab:blue",
             alpha=0.5,
-            label=f"{p.label} (K={v.size})",
+            label=textwrap.fill(f"{p.label} (K={v.size})", 64),
         )
         ax.axhspan(
             lo,
@@ -98,15 +99,25 @@ def plot_consistency(
                 label=p.window_label,
             )
         if p.limit is not None:
-            ax.axhline(p.limit, color="tab:red", ls="--", lw=1.0, label=p.limit_label)
+            ax.axhline(
+                p.limit, color="tab:red", ls="--", lw=1.0, label=textwrap.fill(p.limit_label, 64)
+            )
         ax.yaxis.set_major_formatter(FuncFormatter(_plain))
         ax.set_ylabel(f"chi2({p.dof}) units")
         ax.grid(True, which="both", lw=0.3)
-        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+        # above the panel, two columns: the data keep the figure's whole width
+        ax.legend(
+            loc="lower left",
+            bbox_to_anchor=(0.0, 1.0),
+            ncols=2,
+            fontsize="x-small",
+            frameon=False,
+            borderaxespad=0.2,
+        )
     if not panels:
         axes[0].text(0.5, 0.5, "no covariances: nothing to judge", ha="center", va="center")
     axes[-1].set_xlabel("time since the start (s)")
-    axes[0].set_title(title)
+    fig.suptitle(title)
     out = Path(path)
     fig.savefig(out, bbox_inches="tight")
     return out
