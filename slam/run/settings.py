@@ -144,7 +144,13 @@ def dataset_settings(dataset: Dataset, override: str | Path | None = None) -> li
                 source = "marina calibration (MARINA_CONFIG)"
             else:  # open_dataset: not the marina, no sonarslam.toml
                 source = "neutral default (no sonarslam.toml)"
-            if mounting_source and key == "yaw_deg":
+            if (
+                mounting_source
+                and mounting_source.startswith("transforms of")
+                and table not in in_file
+            ):
+                source = mounting_source  # a bag's /tf_static, not a neutral default
+            elif mounting_source and key == "yaw_deg":
                 source += f": {mounting_source}"
             if key in over.get(table, set()):
                 source = f"{Path(override or '').name} (--config)"
