@@ -163,12 +163,12 @@ def wall_lines(
 
 
 #: Two walls' lines closer than this near the walls (m) ...
-SAME_LINE_RHO_M = 0.15
-#: ... and at an angle below this (rad) are one truth unit for the association scores: one and a
-#: half range bins of the simulated head (0.1 m), about one sigma of an extracted line's own
-#: systematic error (calibrated 0.06-0.19 m and 0.5-1.1 deg on the drawn worlds, GPS-free): no
-#: gate tells such lines apart, and pairing an observation of one with the other's landmark moves
-#: the estimate by less than one line's error (docs/consistency.md).
+SAME_LINE_RHO_M = 0.1
+#: ... and at an angle below this (rad) are one truth unit for the association scores: one
+#: range bin of the simulated head (0.1 m), below one sigma of an extracted line's own systematic
+#: error (calibrated 0.06-0.19 m and 0.5-1.1 deg on the drawn worlds, GPS-free): no gate tells
+#: such lines apart, and pairing an observation of one with the other's landmark moves the
+#: estimate by less than one line's error (docs/consistency.md).
 SAME_LINE_THETA_RAD = float(np.deg2rad(0.5))
 
 
