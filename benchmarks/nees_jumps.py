@@ -65,7 +65,14 @@ from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.features.geometry import FloatArray, line_difference, wrap_angle
 from sonarslam.features.line import LineFeature
 from sonarslam.slam.eval.consistency import chi2_gate, nees_series, pose_errors
-from sonarslam.slam.eval.truth import true_sonar, truth_trajectory, truth_walls, wall_lines
+from sonarslam.slam.eval.truth import (
+    SAME_LINE_RHO_M,
+    SAME_LINE_THETA_RAD,
+    true_sonar,
+    truth_trajectory,
+    truth_units,
+    truth_walls,
+)
 from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.mapping.landmarks import LandmarkMap
 from sonarslam.slam.mapping.vote import Belief, Decision
@@ -89,6 +96,9 @@ INIT_GATE = chi2_gate(2, 0.99)
 OUTLIER_GATE = chi2_gate(2, 0.999)
 HEADING_GATE = chi2_gate(1, 0.999)
 START_GATE = chi2_gate(3, 0.99)  # the start pose's error against the prior it was given
+#: the truth units' collinearity tolerances, as the runs' association scores take them
+#: (:func:`sonarslam.slam.eval.truth.truth_units`)
+SAME_LINE = [SAME_LINE_RHO_M, SAME_LINE_THETA_RAD]
 START_WINDOW_S = 60.0  # a jump this soon after the start is the start's
 AFTER_JUMP_S = 30.0
 
@@ -108,15 +118,8 @@ class WorldTruth:
 
     @classmethod
     def of(cls, ds: Dataset) -> WorldTruth:
-        lines, line_of_wall = wall_lines(truth_walls(ds))
-        unit = np.arange(len(lines))
         curve = (ds.truth or {}).get("walls", {}).get("curve")
-        if curve is not None:
-            c = np.asarray(curve, dtype=np.int64)
-            for k in range(len(lines)):
-                of = c[line_of_wall == k]
-                if of.size and np.all(of >= 0) and np.all(of == of[0]):
-                    unit[k] = len(lines) + int(of[0])
+        lines, unit, _ = truth_units(truth_walls(ds), curve, *SAME_LINE)
         return cls(lines, unit, truth_trajectory(ds), *true_sonar(ds))
 
     def nearest(self, z: FloatArray, wTb: FloatArray) -> tuple[int | None, int | None]:
@@ -359,6 +362,78 @@ def _evidence(
     }
 
 
+def wrong_pairings(world: WorldTruth, run: Any) -> list[dict[str, Any]]:
+    """Every associated observation of a run (used or skipped by the landmark layer) whose
+    truth unit is not its landmark's (the landmark's unit: the most common of its
+    observations', as :func:`sonarslam.slam.eval.truth.association_scores` counts them), with
+    what the gates saw: the pairing's squared Mahalanobis distance (its innovation log), the
+    observation's offset from the landmark's true line and from its own nearest one (sonar
+    frame, true pose: beyond 1 m or 5 deg from every line an observation is *spurious*), how
+    many observations the landmark had taken and how old it was, and the walls' separation."""
+    cl = run.closed_loop
+    units = [world.feature_unit(f) for f in cl.features]
+    lm_obs: dict[int, Counter[int | None]] = {}
+    for (u, _), lm, sd in zip(units, cl.feature_landmarks, cl.feature_seeds, strict=True):
+        owner = lm if lm is not None else sd
+        if owner is not None:
+            lm_obs.setdefault(owner, Counter())[u] += 1
+    lm_unit = {j: c.most_common(1)[0][0] for j, c in lm_obs.items()}
+    innov = {(round(i.t_s, 6), i.landmark): i for i in cl.backend.map.innovations}
+    first_t: dict[int, float] = {}
+    seed_units: dict[int, Counter[int | None]] = {}
+    for f, (u, _), sd in zip(cl.features, units, cl.feature_seeds, strict=True):
+        if sd is not None:
+            first_t.setdefault(sd, f.t)
+            seed_units.setdefault(sd, Counter())[u] += 1
+    taken: Counter[int] = Counter()
+    out: list[dict[str, Any]] = []
+    for f, (u, _), lm in zip(cl.features, units, cl.feature_landmarks, strict=True):
+        if lm is None:
+            continue
+        first_t.setdefault(lm, f.t)
+        taken[lm] += 1
+        if u is not None and u == lm_unit.get(lm):
+            continue
+        wTb = world.true_pose(f.t)
+        row: dict[str, Any] = {
+            "t": float(f.t),
+            "landmark": lm,
+            "landmark_unit": lm_unit.get(lm),
+            "obs_unit": u,
+            "obs_z": [float(f.z[0]), float(np.rad2deg(f.z[1]))],
+            "landmark_taken": taken[lm] - 1,
+            "landmark_age_s": float(f.t - first_t[lm]),
+            "offset_own_line": _offset(world, f, wTb, None),
+            "offset_landmark_line": _offset(world, f, wTb, lm_unit.get(lm)),
+            "separation": _separation(world, lm_unit.get(lm), u, wTb),
+            "landmark_seed_units": dict(seed_units.get(lm, {})),
+        }
+        i = innov.get((round(f.t, 6), lm))
+        if i is not None:
+            row["d2"] = float(i.nu @ np.linalg.solve(i.S, i.nu))
+            row["nu"] = [float(i.nu[0]), float(np.rad2deg(i.nu[1]))]
+            row["sd_rho_m"] = float(np.sqrt(i.S[0, 0]))
+            row["sd_theta_deg"] = float(np.rad2deg(np.sqrt(i.S[1, 1])))
+        out.append(row)
+    return out
+
+
+def _offset(
+    world: WorldTruth, f: LineFeature, wTb: FloatArray, unit: int | None
+) -> dict[str, float] | None:
+    """The observation's smallest offset (m, deg) from the true lines of ``unit`` (None: from
+    every true line) in the sonar frame, with the true pose and sonar."""
+    ks = np.arange(len(world.lines)) if unit is None else np.flatnonzero(world.unit == unit)
+    best: dict[str, float] | None = None
+    for k in ks:
+        line = _line_in_sonar(world.lines[k], wTb, world.bTs) * np.array([world.range_scale, 1.0])
+        nu, _ = line_difference(np.asarray(f.z, dtype=np.float64), line)
+        d = {"rho_m": float(abs(nu[0])), "theta_deg": float(np.rad2deg(abs(nu[1])))}
+        if best is None or d["rho_m"] + d["theta_deg"] / 5 < best["rho_m"] + best["theta_deg"] / 5:
+            best = d
+    return best
+
+
 def _line_in_sonar(line_w: FloatArray, wTb: FloatArray, bTs: FloatArray) -> FloatArray:
     c, s = np.cos(wTb[2]), np.sin(wTb[2])
     xs = wTb[0] + c * bTs[0] - s * bTs[1]
@@ -418,6 +493,7 @@ def diagnose(
     window_s: float,
     revisit_s: float,
     oracle: bool,
+    pairings: bool = False,
 ) -> dict[str, Any]:
     """One run of one back end on one drawn world, and its jump's evidence if it jumps."""
     ds = _dataset(seed, cache)
@@ -446,6 +522,15 @@ def diagnose(
         "smoothed_ate_m": m.get("ate_truth_smoothed_mean_m"),
         "smoothed_ate_aligned_m": m.get("ate_truth_aligned_smoothed_mean_m"),
     }
+    heading = getattr(run.closed_loop.backend, "heading_innovations", None)
+    if heading:
+        h = np.asarray(heading, dtype=np.float64)
+        nis = h[:, 1] ** 2 / h[:, 2]
+        groups = [nis[i : i + 40] for i in range(0, nis.size, 40)]
+        row["heading_nis_median"] = float(np.median(nis))
+        row["heading_nis_window_medians"] = [round(float(np.median(g)), 3) for g in groups]
+    if pairings:
+        row["wrong_pairings"] = wrong_pairings(world, run)
     per_s = nees_series(run.trajectory, world.truth, "pose", period_s=1.0)
     row["nees_10s"] = per_s.nees[::10].round(2).tolist()
     e0 = pose_errors(run.trajectory, world.truth, run.trajectory.t_s[:1])[0]
@@ -549,6 +634,7 @@ def main() -> int:
     ap.add_argument(
         "--oracle", action="store_true", help="re-run jumping runs, wrong pairings vetoed"
     )
+    ap.add_argument("--pairings", action="store_true", help="list every wrong pairing of every run")
     ap.add_argument("--out", default=None, help="results JSON (rewritten after every run)")
     ap.add_argument("--table", default=None, help="only print the table of this results JSON")
     args = ap.parse_args()
@@ -575,6 +661,7 @@ def main() -> int:
                 args.window_s,
                 args.revisit_s,
                 args.oracle,
+                args.pairings,
             )
             rows.append(r)
             extra = f" cause: {r['cause']}" if r.get("cause") else ""

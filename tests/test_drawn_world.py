@@ -293,3 +293,33 @@ def test_the_sonar_logs_echoes_at_the_scaled_range() -> None:
     assert np.median(peaks[1][ok] - 1.04 * peaks[0][ok]) == pytest.approx(
         0.0, abs=2 * sc.head.bin_size_m
     )
+
+
+def test_walls_a_gate_cannot_tell_apart_are_one_truth_unit() -> None:
+    """Two quays on one line 40 m apart whose lines differ by 4 cm (drawn 5's walls 21 and 25,
+    docs/consistency.md) are one truth unit, as exactly collinear ones are: an observation of
+    either paired with the other's landmark is right. A parallel wall 0.58 m behind (drawn 7's
+    walls 100 and 104), one 2 deg off, and the same walls under the exact tolerances of before
+    stay apart."""
+    from sonarslam.slam.eval.truth import SAME_LINE_RHO_M, truth_units
+
+    walls = np.array(
+        [
+            [[0.0, 0.0], [30.0, 0.0]],  # quay A, y = 0
+            [[70.0, 0.04], [100.0, 0.04]],  # quay B, 4 cm off A's line
+            [[36.0, 0.58], [60.0, 0.58]],  # a step 0.58 m behind
+            [[0.0, 5.0], [30.0, 5.0 + 30.0 * np.tan(np.radians(2.0))]],  # 2 deg off y = 5
+            [[0.0, 5.0], [-30.0, 5.0]],  # y = 5, collinear with the start of the last
+        ]
+    )
+    lines, unit, line_of_wall = truth_units(walls)
+    u = unit[line_of_wall]
+    assert u[0] == u[1], (lines, unit)
+    assert len({u[0], u[2], u[3]}) == 3 and u[3] != u[4]
+    assert SAME_LINE_RHO_M <= 0.1  # one range bin: the step is well beyond it
+    exact = truth_units(walls, same_line_rho_m=1e-3, same_line_theta_rad=1e-4)
+    assert exact[1][exact[2]][0] != exact[1][exact[2]][1]
+    # a curve's facets stay one unit
+    curve = np.array([-1, -1, -1, 0, 0])
+    _, unit_c, low = truth_units(walls, wall_curve=curve)
+    assert unit_c[low][3] == unit_c[low][4] and unit_c[low][0] == unit_c[low][1]

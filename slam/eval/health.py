@@ -11,7 +11,9 @@ innovations of a consistent filter are white with the covariance it predicts):
     consecutive updates: a group is flagged when even the lower confidence bound of its median
     NIS is beyond ``nis_scale_max`` times the chi2 median (the innovations are that many times their predicted variance). A
     median with a bound, not a mean: the association gate truncates the line NIS, and one
-    outlier must not flag a window.
+    outlier must not flag a window. A group whose upper confidence bound of the median is
+    below ``nis_scale_min`` times the chi2 median is *under-confident*: a finding, not an issue
+    (below).
 ``nees``
     Simulated runs only (the simulator's truth, never GPS): the pose NEES of the estimate's own
     samples (:func:`sonarslam.slam.eval.consistency.nees_series`, chi2(3) when consistent) in
@@ -19,8 +21,9 @@ innovations of a consistent filter are white with the covariance it predicts):
     ``chi2.ppf(1 - false_alarm / (2 W), 3)`` over ``W`` windows. The samples of a window are
     strongly correlated (one error drifts slowly), so no independence is assumed: a median beyond
     ``c`` needs half the samples beyond it, whose chance is at most twice that of one sample
-    (Markov's inequality on their count), hence the 2. Overconfidence only: a NEES far below
-    its band (an estimate too cautious) is not an inconsistency that misleads a gate.
+    (Markov's inequality on their count), hence the 2. A window whose median NEES is below
+    ``chi2.ppf(false_alarm / (2 W), 3)`` (the same argument on the lower tail) is
+    *under-confident*: a finding, not an issue.
 ``departure``
     The estimate against dead reckoning (the same sensors without the corrections): the
     squared Mahalanobis distance of their positions with the *sum* of the two covariances
@@ -41,6 +44,13 @@ The chance thresholds are Bonferroni-corrected over a check's windows, so that a
 run raises a check with probability at most ``false_alarm``. :func:`assess` gives a
 :class:`HealthReport`: its issues (check, cause, time span), ``health_*`` figures for
 ``metrics.json``, one warning per issue, and a line for the report.
+
+Only overconfidence is an issue: an estimate that believes itself better than it is misleads
+every gate after it. The opposite, innovations or errors far *smaller* than their predicted
+covariance (a told noise too large, or a prediction that already holds the measurement it is
+compared with), is reported as a distinct *under-confident* finding (``HealthReport.findings``,
+``health_underconfident``): it wastes information but misleads no gate, so it neither warns nor
+makes the run unhealthy.
 """
 
 from __future__ import annotations
@@ -69,6 +79,7 @@ __all__ = [
     "HealthReport",
     "assess",
     "median_lower_bound",
+    "median_upper_bound",
 ]
 
 
@@ -89,6 +100,9 @@ class HealthConfig:
         hold a handful of line updates when the walls are far apart, too few to judge).
     nis_scale_max : float
         Largest factor by which the innovations may exceed their predicted variance.
+    nis_scale_min : float
+        A group of innovations whose median NIS is, with confidence, below this fraction of the
+        chi2 median is under-confident (a finding, not an issue).
     bias_sigmas : float
         A constant beyond this many prior sigmas is not a bias of the model.
     landmark_min_new : int
@@ -102,6 +116,7 @@ class HealthConfig:
     min_updates: int = bounded(10, 3, 10_000)
     nis_window_updates: int = bounded(40, 3, 100_000)
     nis_scale_max: float = bounded(1.5, 1.0, 1e3)
+    nis_scale_min: float = bounded(1.0 / 3.0, 1e-6, 1.0)
     bias_sigmas: float = bounded(10.0, 1.0, 1e3)
     landmark_min_new: int = bounded(5, 1, 10_000)
     landmark_new_share_max: float = bounded(0.5, 0.0, 1.0)
@@ -198,12 +213,16 @@ class HealthReport:
         The estimate's first time (Unix s): issue messages give times from it.
     config : HealthConfig
         The limits the checks used.
+    findings : list of HealthIssue
+        Each under-confident window (NIS or NEES far below its band), in order: reported, not
+        an inconsistency (the module docstring).
     """
 
     issues: list[HealthIssue]
     judged: dict[str, int]
     t_ref_s: float
     config: HealthConfig
+    findings: list[HealthIssue] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -211,6 +230,9 @@ class HealthReport:
 
     def checks_flagged(self) -> list[str]:
         return sorted({i.check for i in self.issues})
+
+    def checks_underconfident(self) -> list[str]:
+        return sorted({i.check for i in self.findings})
 
     def metrics(self) -> dict[str, Any]:
         """``health_*`` keys of ``metrics.json``."""
@@ -223,7 +245,12 @@ class HealthReport:
         for check, n in sorted(self.judged.items()):
             out[f"health_{check}_windows"] = n
             out[f"health_{check}_flagged"] = sum(i.check == check for i in self.issues)
+            out[f"health_{check}_underconfident"] = sum(i.check == check for i in self.findings)
         out["health_first_issue"] = self.issues[0].message(self.t_ref_s) if self.issues else None
+        out["health_underconfident"] = self.checks_underconfident()
+        out["health_first_finding"] = (
+            self.findings[0].message(self.t_ref_s) if self.findings else None
+        )
         return out
 
     def warn(self) -> None:
@@ -232,14 +259,22 @@ class HealthReport:
             warnings.warn(issue.message(self.t_ref_s), DataWarning, stacklevel=2)
 
     def line(self) -> str:
-        """One line for the report."""
+        """One line for the report; the under-confident checks after it, marked as such."""
         if self.ok:
             n = sum(self.judged.values())
-            return f"health: consistent ({n} windows and states judged, none flagged)"
-        return (
-            f"health: {len(self.issues)} inconsistencies ({', '.join(self.checks_flagged())});"
-            f" first: {self.issues[0].message(self.t_ref_s).removeprefix('health: ')}"
-        )
+            out = f"health: consistent ({n} windows and states judged, none flagged)"
+        else:
+            out = (
+                f"health: {len(self.issues)} inconsistencies"
+                f" ({', '.join(self.checks_flagged())});"
+                f" first: {self.issues[0].message(self.t_ref_s).removeprefix('health: ')}"
+            )
+        if self.findings:
+            out += (
+                f"; under-confident, not an error: {', '.join(self.checks_underconfident())}"
+                f" ({len(self.findings)} spans)"
+            )
+        return out
 
 
 def median_lower_bound(values: FloatArray, alpha: float) -> float:
@@ -254,6 +289,13 @@ def median_lower_bound(values: FloatArray, alpha: float) -> float:
     if k < 1:
         return -math.inf
     return float(x[k - 1])
+
+
+def median_upper_bound(values: FloatArray, alpha: float) -> float:
+    """A one-sided upper confidence bound, at level ``1 - alpha``, of the median of the
+    distribution ``values`` are drawn from: :func:`median_lower_bound` of the negated values,
+    negated (``+inf`` when ``n`` is too small)."""
+    return -median_lower_bound(-np.asarray(values, dtype=np.float64), alpha)
 
 
 def _windows(t0_s: float, t1_s: float, window_s: float) -> FloatArray:
@@ -283,23 +325,28 @@ def _groups(n: int, size: int) -> list[np.ndarray]:
     return [np.arange(a, b) for a, b in zip(edges[:-1], edges[1:], strict=True)]
 
 
-def _check_nis(stream: NisStream, cfg: HealthConfig) -> tuple[list[HealthIssue], int]:
+def _check_nis(
+    stream: NisStream, cfg: HealthConfig
+) -> tuple[list[HealthIssue], int, list[HealthIssue]]:
     """Groups of ``nis_window_updates`` consecutive updates whose median NIS is, with
-    confidence, beyond ``nis_scale_max`` chi2 medians."""
+    confidence, beyond ``nis_scale_max`` chi2 medians (issues); or below ``nis_scale_min``
+    of it (under-confident findings)."""
     p = stream.gate_probability
     # the median of chi2(dof) truncated at the gate: the quantile p / 2 of the untruncated one
     median = float(chi2.ppf(0.5 if p is None else p / 2.0, stream.dof))
     order = np.argsort(stream.t_s, kind="stable")
     t, nis = stream.t_s[order], stream.nis[order]
     if t.size < cfg.min_updates:
-        return [], 0
+        return [], 0, []
     groups = _groups(t.size, cfg.nis_window_updates)
     alpha = cfg.false_alarm / len(groups)
     flagged = np.zeros(len(groups), dtype=bool)
+    cautious = np.zeros(len(groups), dtype=bool)
     medians = np.zeros(len(groups))
     for w, g in enumerate(groups):
         medians[w] = float(np.median(nis[g]))
         flagged[w] = median_lower_bound(nis[g], alpha) > cfg.nis_scale_max * median
+        cautious[w] = median_upper_bound(nis[g], alpha) < cfg.nis_scale_min * median
     edges = np.array([t[g[0]] for g in groups] + [t[-1]])
     issues = []
     for _, _, run in _spans(edges, flagged):
@@ -314,20 +361,35 @@ def _check_nis(stream: NisStream, cfg: HealthConfig) -> tuple[list[HealthIssue],
                 float(t[groups[run[-1]][-1]]),
             )
         )
-    return issues, len(groups)
+    findings = []
+    for _, _, run in _spans(edges, cautious):
+        least = run[int(np.argmin(medians[run]))]
+        findings.append(
+            HealthIssue(
+                f"nis_{stream.kind}",
+                f"{stream.kind} innovations smaller than predicted: median NIS"
+                f" {medians[least]:.3f} over {groups[least].size} updates (chi2({stream.dof})"
+                f" median {median:.2f}; under-confident below {cfg.nis_scale_min:.3g}x): a told"
+                " noise too large, or a prediction that already holds the measurement",
+                float(t[groups[run[0]][0]]),
+                float(t[groups[run[-1]][-1]]),
+            )
+        )
+    return issues, len(groups), findings
 
 
 def _check_nees(
     trajectory: Trajectory, truth: Trajectory, cfg: HealthConfig
-) -> tuple[list[HealthIssue], int]:
+) -> tuple[list[HealthIssue], int, list[HealthIssue]]:
     """Windows whose median pose NEES against the truth is beyond the Bonferroni-corrected
-    chi2(3) gate, doubled for correlated samples (module docstring)."""
+    chi2(3) gate, doubled for correlated samples (issues), or below the same lower gate
+    (under-confident findings; module docstring)."""
     series = nees_series(trajectory, truth, "pose")
     t, values = series.t_s, series.nees
     ok = np.isfinite(values)
     t, values = t[ok], values[ok]
     if t.size < cfg.min_updates:
-        return [], 0
+        return [], 0, []
     edges = _windows(float(t[0]), float(t[-1]), cfg.window_s)
     which = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, edges.size - 2)
     present = np.unique(which)
@@ -335,6 +397,8 @@ def _check_nees(
     medians = np.full(edges.size - 1, -np.inf)
     for w in present:
         medians[w] = float(np.median(values[which == w]))
+    # the lower gate: a median below c needs half the samples below it (chance <= 2 F(c))
+    low = float(chi2.ppf(cfg.false_alarm / (2.0 * present.size), series.dof))
     issues = []
     for a, b, g in _spans(edges, medians > gate):
         worst = g[int(np.argmax(medians[g]))]
@@ -348,7 +412,21 @@ def _check_nees(
                 min(b, float(t[-1])),
             )
         )
-    return issues, int(present.size)
+    findings = []
+    cautious = np.isfinite(medians) & (medians < low)
+    for a, b, g in _spans(edges, cautious):
+        least = g[int(np.argmin(medians[g]))]
+        findings.append(
+            HealthIssue(
+                "nees",
+                f"the pose error is far within its covariance: median NEES {medians[least]:.3f}"
+                f" against the truth over {cfg.window_s:g} s (chi2({series.dof}) median"
+                f" {chi2.ppf(0.5, series.dof):.2f}; under-confident below {low:.3f})",
+                max(a, float(t[0])),
+                min(b, float(t[-1])),
+            )
+        )
+    return issues, int(present.size), findings
 
 
 def _check_departure(
@@ -500,14 +578,17 @@ def assess(inputs: HealthInputs, config: HealthConfig | None = None) -> HealthRe
     cfg = config or HealthConfig()
     lo, _ = inputs.trajectory.span_s
     issues: list[HealthIssue] = []
+    findings: list[HealthIssue] = []
     judged: dict[str, int] = {}
     for stream in inputs.nis:
-        found, n = _check_nis(stream, cfg)
+        found, n, cautious = _check_nis(stream, cfg)
         issues += found
+        findings += cautious
         judged[f"nis_{stream.kind}"] = n
     if inputs.truth is not None and inputs.trajectory.covs is not None:
-        found, judged["nees"] = _check_nees(inputs.trajectory, inputs.truth, cfg)
+        found, judged["nees"], cautious = _check_nees(inputs.trajectory, inputs.truth, cfg)
         issues += found
+        findings += cautious
     if inputs.reference is not None and inputs.trajectory.covs is not None:
         if inputs.reference.covs is not None:
             found, judged["departure"] = _check_departure(inputs.trajectory, inputs.reference, cfg)
@@ -519,4 +600,5 @@ def assess(inputs: HealthInputs, config: HealthConfig | None = None) -> HealthRe
     found, judged["landmarks"] = _check_landmarks(inputs, cfg)
     issues += found
     issues.sort(key=lambda i: (i.t0_s, i.check))
-    return HealthReport(issues, judged, lo, cfg)
+    findings.sort(key=lambda i: (i.t0_s, i.check))
+    return HealthReport(issues, judged, lo, cfg, findings)

@@ -35,6 +35,9 @@ __all__ = [
     "true_sonar",
     "wall_lines_world",
     "wall_lines",
+    "SAME_LINE_RHO_M",
+    "SAME_LINE_THETA_RAD",
+    "truth_units",
     "AssociationScores",
     "association_scores",
     "association_against_truth",
@@ -159,13 +162,92 @@ def wall_lines(
     return np.array(lines).reshape(-1, 2), np.array(line_of_wall, dtype=np.int64)
 
 
+#: Two walls' lines closer than this near the walls (m) ...
+SAME_LINE_RHO_M = 0.1
+#: ... and at an angle below this (rad) are one truth unit for the association scores: one
+#: range bin of the simulated head (0.1 m), below one sigma of an extracted line's own systematic
+#: error (calibrated 0.06-0.19 m and 0.5-1.1 deg on the drawn worlds, GPS-free): no gate tells
+#: such lines apart, and pairing an observation of one with the other's landmark moves the
+#: estimate by less than one line's error (docs/consistency.md).
+SAME_LINE_THETA_RAD = float(np.deg2rad(0.5))
+
+
+def truth_units(
+    walls_w: FloatArray,
+    wall_curve: npt.ArrayLike | None = None,
+    same_line_rho_m: float = SAME_LINE_RHO_M,
+    same_line_theta_rad: float = SAME_LINE_THETA_RAD,
+) -> tuple[FloatArray, np.ndarray, np.ndarray]:
+    """The distinct lines of wall segments and the truth unit of each
+    (:class:`AssociationScores`).
+
+    Parameters
+    ----------
+    walls_w : ndarray, shape (W, 2, 2)
+        Wall segments (m).
+    wall_curve : array_like of int, shape (W,), optional
+        The curved stretch each wall is a facet of (-1: straight): a curve's facets are one unit.
+    same_line_rho_m, same_line_theta_rad : float
+        Lines at an angle below ``same_line_theta_rad`` whose walls' end points lie within
+        ``same_line_rho_m`` of the other line are one unit (collinear walls); the defaults'
+        reasons at :data:`SAME_LINE_RHO_M`.
+
+    Returns
+    -------
+    lines : ndarray, shape (K, 2)
+        Distinct lines (:func:`wall_lines`).
+    unit : ndarray of int, shape (K,)
+        The truth unit of each line.
+    line_of_wall : ndarray of int, shape (W,)
+    """
+    walls = np.asarray(walls_w, dtype=np.float64).reshape(-1, 2, 2)
+    lines, line_of_wall = wall_lines(walls)
+    n = len(lines)
+    parent = list(range(n))
+
+    def root(k: int) -> int:
+        while parent[k] != k:
+            parent[k] = parent[parent[k]]
+            k = parent[k]
+        return k
+
+    if wall_curve is not None:
+        curve = np.asarray(wall_curve, dtype=np.int64)
+        first: dict[int, int] = {}
+        for k in range(n):
+            of = curve[line_of_wall == k]
+            if of.size and np.all(of >= 0) and np.all(of == of[0]):
+                c = int(of[0])
+                parent[root(k)] = root(first.setdefault(c, k))
+    ends = [walls[line_of_wall == k].reshape(-1, 2) for k in range(n)]
+    for a in range(n):
+        for b in range(a + 1, n):
+            if abs(float(wrap_angle(lines[a, 1] - lines[b, 1]))) > same_line_theta_rad and (
+                abs(float(wrap_angle(lines[a, 1] - lines[b, 1] - np.pi))) > same_line_theta_rad
+            ):
+                continue
+            if max(_distances(lines[b], ends[a]).max(), _distances(lines[a], ends[b]).max()) <= (
+                same_line_rho_m
+            ):
+                parent[root(a)] = root(b)
+    roots = [root(k) for k in range(n)]
+    relabel = {r: i for i, r in enumerate(dict.fromkeys(roots))}
+    return lines, np.array([relabel[r] for r in roots], dtype=np.int64), line_of_wall
+
+
+def _distances(line: FloatArray, points: FloatArray) -> FloatArray:
+    """Unsigned distances (m) of points (N, 2) from a line ``(rho, theta)``."""
+    return np.abs(points @ np.array([np.cos(line[1]), np.sin(line[1])]) - line[0])
+
+
 @dataclass(frozen=True)
 class AssociationScores:
     """Association quality against the simulator's walls.
 
     The truth unit is a wall's *line*: collinear wall segments (two quays on one line) are one
     line, because a line landmark ``(rho, theta)`` is the infinite line and pairing both with it
-    is right. An observation's true line is the one it matches within ``gate_rho_m`` and
+    is right; "collinear" within :data:`SAME_LINE_RHO_M` and :data:`SAME_LINE_THETA_RAD`
+    (:func:`truth_units`). An observation's true line is the one it matches within ``gate_rho_m`` and
     ``gate_theta_rad`` in its own frame, with the true pose; observations matching none are
     spurious. A landmark's line is the true line most of its observations come from. The facets
     of a curved stretch (a drawn world's rounded corners and coves) are one unit together: a
@@ -198,6 +280,8 @@ def association_scores(
     feature_seeds: list[int | None] | None = None,
     wall_curve: npt.ArrayLike | None = None,
     range_scale: float = 1.0,
+    same_line_rho_m: float = SAME_LINE_RHO_M,
+    same_line_theta_rad: float = SAME_LINE_THETA_RAD,
 ) -> AssociationScores:
     """Precision and recall of a run's associations (see :class:`AssociationScores`).
 
@@ -223,15 +307,11 @@ def association_scores(
     range_scale : float
         The sonar's true range scale: a line at distance ``rho`` is observed at
         ``range_scale rho`` (:func:`true_sonar`).
+    same_line_rho_m, same_line_theta_rad : float
+        Collinear walls within these are one unit (:func:`truth_units`); ``1e-3`` and ``1e-4``
+        count only exactly collinear walls as one, as the scores did before.
     """
-    lines, line_of_wall = wall_lines(walls_w)
-    unit = np.arange(len(lines))  # the truth unit of each line
-    if wall_curve is not None:
-        curve = np.asarray(wall_curve, dtype=np.int64)
-        for k in range(len(lines)):
-            of = curve[line_of_wall == k]
-            if of.size and np.all(of >= 0) and np.all(of == of[0]):
-                unit[k] = len(lines) + int(of[0])
+    lines, unit, _ = truth_units(walls_w, wall_curve, same_line_rho_m, same_line_theta_rad)
     seeds = feature_seeds if feature_seeds is not None else [None] * len(features)
     true_line: list[int | None] = []
     for f in features:

@@ -225,6 +225,9 @@ class ClosedLoopFigures:
         "health_line",
         "health_<check>_windows",
         "health_<check>_flagged",
+        "health_<check>_underconfident",
+        "health_underconfident",
+        "health_first_finding",
         "health_false_alarm",
     )
 
