@@ -262,7 +262,10 @@ class HealthReport:
         """One line for the report; the under-confident checks after it, marked as such."""
         if self.ok:
             n = sum(self.judged.values())
-            out = f"health: consistent ({n} windows and states judged, none flagged)"
+            out = (
+                f"health: no inconsistency found ({n} windows and states judged, each check at"
+                f" a {100 * self.config.false_alarm:g} % false-alarm rate)"
+            )
         else:
             out = (
                 f"health: {len(self.issues)} inconsistencies"
