@@ -57,6 +57,7 @@ from sonarslam.datasets.dataset import NEUTRAL_CALIBRATION, Dataset, read_truth
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.geodesy import geodetic_to_local_en, local_en_to_geodetic
 from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries
+from sonarslam.datasets.ros1bag import Ros1Bag
 from sonarslam.sonar.beam import Mounting
 
 __all__ = [
@@ -223,7 +224,9 @@ class TopicInfo:
 
 
 class _Reader:
-    """An open bag (``rosbags.highlevel.AnyReader``) whose errors are :class:`DataError`."""
+    """An open bag whose errors are :class:`DataError`: a ROS 1 ``.bag`` through
+    :class:`sonarslam.datasets.ros1bag.Ros1Bag` (chunk by chunk), a ROS 2 bag through
+    ``rosbags.highlevel.AnyReader``."""
 
     def __init__(self, bag: Path) -> None:
         from rosbags.highlevel import AnyReader, AnyReaderError  # lazy: only bags load rosbags
@@ -239,7 +242,11 @@ class _Reader:
             if f.suffix in (".bag", ".mcap", ".db3") and not f.is_file():
                 raise DataError(f, None, "not a regular file (a bag's data must be one)")
         try:
-            self.reader = AnyReader(paths, default_typestore=_typestore())
+            self.reader: Any
+            if bag.is_file() and bag.suffix == ".bag":  # chunk by chunk, no index of messages
+                self.reader = Ros1Bag(bag)
+            else:
+                self.reader = AnyReader(paths, default_typestore=_typestore())
             self.reader.open()
         except (AnyReaderError, OSError, ValueError, KeyError) as exc:
             raise DataError(bag, None, f"not a readable ROS bag: {_one_line(exc)}") from None
