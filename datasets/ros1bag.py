@@ -212,14 +212,14 @@ class Ros1Bag:
     def end_time(self) -> int:
         return int(self._chunk_end.max()) if self._chunk_end.size else 0
 
-    def deserialize(self, raw: bytes, msgtype: str) -> Any:
+    def deserialize(self, raw: bytes | memoryview, msgtype: str) -> Any:
         """A message of ``msgtype`` from its ROS 1 serialization."""
         return self.typestore.deserialize_ros1(raw, msgtype)
 
     # -- the messages ----------------------------------------------------------------------------
 
-    def messages(self, connections: Collection[Any] = ()) -> Iterator[tuple[Any, int, bytes]]:
-        """``(connection, receive time ns, serialized message)`` of ``connections`` (all when
+    def messages(self, connections: Collection[Any] = ()) -> Iterator[tuple[Any, int, memoryview]]:
+        """``(connection, receive time ns, serialized message: a view of its chunk)`` of ``connections`` (all when
         empty) in ``rosbags``' order (module docstring), one chunk in memory at a time (more
         only where chunks' time spans overlap)."""
         if self.bio is None:
@@ -234,7 +234,7 @@ class Ros1Bag:
             for k in np.lexsort((np.arange(self._chunk_start.size), self._chunk_start)).tolist()
             if self._chunk_conns[k] & bits
         ]
-        heap: list[tuple[int, int, int, int, Any, bytes]] = []
+        heap: list[tuple[int, int, int, int, Any, memoryview]] = []
         for k in chunks:
             start = int(self._chunk_start[k])
             while heap and heap[0][0] < start:
@@ -248,7 +248,7 @@ class Ros1Bag:
 
     def _chunk_messages(
         self, k: int, wanted: dict[int, tuple[int, Any]]
-    ) -> list[tuple[int, int, int, int, Any, bytes]]:
+    ) -> list[tuple[int, int, int, int, Any, memoryview]]:
         """The messages of chunk ``k`` (the index's order) of the connections ``wanted`` (id
         -> (rank, connection)): ``(time, rank, k, offset, connection, data)``."""
         from rosbags.rosbag1.reader import (  # lazy: only bags load rosbags
@@ -272,7 +272,8 @@ class Ros1Bag:
             )
         lo, hi = int(self._chunk_start[k]), int(self._chunk_end[k])
         chunk = io.BytesIO(data)
-        out = []
+        view = memoryview(data)  # the messages are views of the chunk, not copies
+        out: list[tuple[int, int, int, int, Any, memoryview]] = []
         while chunk.tell() < len(data):
             offset = chunk.tell()
             record = Header.read(chunk)
@@ -290,11 +291,13 @@ class Ros1Bag:
                     f"chunk at byte {pos}: a message at {time} ns outside the chunk's span"
                     f" [{lo}, {hi}) in the index"
                 )
+            begin = chunk.tell()
+            if begin + length > len(data):
+                raise Ros1BagError(f"chunk at byte {pos}: a message cut short")
             if conn in wanted:
                 rank, c = wanted[conn]
-                out.append((time, rank, k, offset, c, _exactly(chunk, length)))
-            else:
-                chunk.seek(length, io.SEEK_CUR)
+                out.append((time, rank, k, offset, c, view[begin : begin + length]))
+            chunk.seek(length, io.SEEK_CUR)
         return out
 
 
