@@ -55,7 +55,7 @@ The rest of a run:
   file name's clock: local time, UTC + this), ``start`` (an ISO 8601 date and time that replaces
   the file name's), ``stamps``;
 * the navigation: a ROS bag (its DVL, IMU and optional GPS topics, read by
-  :mod:`sonarslam.datasets.rosbag`; a sonar topic in it is not read) or a CSV
+  :func:`sonarslam.datasets.rosbag.read_roles`; a sonar topic in it is not read) or a CSV
   (:func:`read_nav_csv`).
 
 The head's ``n_bins`` and ``bin_size_m`` are the log's (a ``sonarslam.toml`` that says otherwise

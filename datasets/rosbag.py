@@ -2,7 +2,11 @@
 
 A bag is a ROS 1 ``.bag`` file, a ROS 2 bag directory (``metadata.yaml`` with ``.db3`` or
 ``.mcap`` files) or one ``.mcap`` file. Its messages are read one at a time in the bag's order
-(never the whole bag in memory; only the decoded arrays of the four roles are kept) and become a
+(a ROS 1 bag chunk by chunk, :class:`sonarslam.datasets.ros1bag.Ros1Bag`; a ROS 2 bag through
+``rosbags.highlevel.AnyReader``), never the whole bag in memory: each field of a role's rows goes
+into an array preallocated from the bag's count of its topic, and those arrays are the series.
+:func:`read_roles` reads any of the roles (the Ping360's navigation bag: the DVL, the IMU and the
+GPS); :func:`open_bag` reads the four and makes them a
 :class:`sonarslam.datasets.source.Dataset` through the same gates as the file readers
 (:func:`sonarslam.datasets.arrays.gated_dataset`).
 
