@@ -407,15 +407,20 @@ class _Column:
     are views of those arrays (:meth:`arrays`): reading keeps the output arrays and a constant
     overhead, never a Python object per message nor a second copy of a field."""
 
-    def __init__(self, role: str, topic: str, count: int) -> None:
+    def __init__(self, bag: Path, role: str, topic: str, count: int) -> None:
         self.role, self.topic = role, topic
         self.n = 0
         self.capacity = max(int(count), 16)
-        self.t = np.empty(self.capacity, dtype=np.float64)
-        self.fields = {
-            name: np.empty((self.capacity, *shape), dtype=dtype)
-            for name, shape, dtype in ROW_FIELDS[role]
-        }
+        try:
+            self.t = np.empty(self.capacity, dtype=np.float64)
+            self.fields = {
+                name: np.empty((self.capacity, *shape), dtype=dtype)
+                for name, shape, dtype in ROW_FIELDS[role]
+            }
+        except (MemoryError, ValueError):
+            raise DataError(
+                bag, None, f"topic {topic}: the bag's index counts {count} messages, beyond memory"
+            ) from None
         self.bins: np.ndarray | None = None  # sonar: (capacity, n_bins) uint8
         self.bin_m = math.nan  # sonar: the first beam's bin size (m)
         self.frame = ""
@@ -631,7 +636,9 @@ def _read_columns(
     by_topic = {topic: role for role, topic in roles.items()}
     reader = r.reader
     info = reader.topics
-    columns = {role: _Column(role, topic, info[topic].msgcount) for role, topic in roles.items()}
+    columns = {
+        role: _Column(bag, role, topic, info[topic].msgcount) for role, topic in roles.items()
+    }
     tf_topic = next((t for t in TF_TOPICS if t in info), None)
     conns = [c for c in reader.connections if c.topic in by_topic or c.topic == tf_topic]
     counts = dict.fromkeys([*by_topic, tf_topic], 0)

@@ -255,3 +255,13 @@ def test_a_bag_four_times_as_long_costs_no_more_above_its_arrays(
     long, long_out = _overhead(_write_bag(tmp_path / "long.bag", 120.0))
     assert long_out > 3.5 * short_out  # the outputs do grow with the bag
     assert long - short < GROWTH_TOL_BYTES, (short, long)
+
+
+def test_an_index_counting_more_messages_than_memory_is_an_error() -> None:
+    """The arrays are preallocated from the bag's count: a damaged count is one line naming
+    the bag and the topic, never a MemoryError."""
+    from sonarslam.datasets.errors import DataError
+    from sonarslam.datasets.rosbag import _Column
+
+    with pytest.raises(DataError, match=r"x\.bag: topic /imu: the bag's index counts 10{15}"):
+        _Column(Path("x.bag"), "imu", "/imu", 10**15)
