@@ -5,11 +5,19 @@ Writes a ROS 1 bag (or ROS 2 MCAP) of a Ping360-like rig at realistic rates (son
 slowly at 0.5 m/s) for each length asked, then reads each in a fresh process
 (:func:`sonarslam.datasets.rosbag.open_bag`, the gates included) and reports its wall time, the
 real-time factor, the process's peak resident memory (``VmHWM``, which ``exec`` resets: the
-``ru_maxrss`` of a child keeps its parent's peak across ``exec``), the output arrays (beams,
-DVL, AHRS, GPS: necessarily as long as the bag) and the reader's overhead, the peak above the
-memory before reading and the output arrays: what must not grow with the bag's length::
+``ru_maxrss`` of a child keeps its parent's peak across ``exec``), the output arrays and the
+reader's overhead::
 
-    taskset -c 1 .venv/bin/python benchmarks/bag_reading.py --minutes 5 20 60 --kind ros1 \
+    overhead = VmHWM after reading - VmHWM before reading - the dataset's arrays
+
+The dataset's arrays are every array the returned dataset holds (beams: intensities, times,
+angles; DVL: times, velocities, lock, heading; AHRS: times, yaw, rate; GPS: times, East-North),
+each counted as the buffer it is a view of: necessarily as long as the bag. "Before reading" is
+after Python, numpy and the project are imported, before ``rosbags`` is (its import and its
+typestore are in the overhead, a constant). The overhead is what must not grow with the bag's
+length. Each row also gives the machine's load (1-minute average) when it was measured::
+
+    taskset -c 1 .venv/bin/python benchmarks/bag_reading.py --minutes 5 20 60 120 --kind ros1 \
         --dir /tmp/bag_bench
 
 Target (issue 30): >= 50x real time on one core; an overhead that does not grow with length.
@@ -20,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import resource
 import subprocess
 import sys
@@ -64,7 +73,8 @@ def write(path: Path, minutes: float, kind: str) -> Path:
         writer: object = Writer1(path)
         serialize = store.serialize_ros1
     else:
-        writer = Writer2(path, version=9, storage_plugin=StoragePlugin.MCAP)
+        plugin = StoragePlugin.MCAP if kind == "mcap" else StoragePlugin.SQLITE3
+        writer = Writer2(path, version=9, storage_plugin=plugin)
         serialize = store.serialize_cdr
     with writer as w:  # type: ignore[attr-defined]
         conns = {r: w.add_connection(f"/{r}", ty, typestore=store) for r, ty in types.items()}
@@ -141,11 +151,15 @@ def read(path: Path) -> dict[str, float]:
         d = open_bag(path)
     wall = time.perf_counter() - t0
     span = float(d.attitude.t[-1] - d.attitude.t[0])
-    b, v, a, g = d.beams, d.dvl, d.attitude, d.gps
-    arrays = [b.intensities, b.t_s, b.transducer_angle_rad, v.t, v.v_mps, v.valid, a.t, a.yaw_rad]
-    arrays += [a.yaw_rate_rad_per_s] + ([g.t, g.en_m] if g is not None else [])
-    outputs = sum(x.nbytes for x in arrays) / 2**20
     peak = _hwm_mb()
+    b, v, a, g = d.beams, d.dvl, d.attitude, d.gps
+    arrays = [b.intensities, b.t_s, b.transducer_angle_rad, v.t, v.v_mps, v.valid, v.heading_rad]
+    arrays += [a.t, a.yaw_rad, a.yaw_rate_rad_per_s] + ([g.t, g.en_m] if g is not None else [])
+    # each as the buffer it is a view of (the readers' preallocated arrays), once
+    held = {
+        id(x.base if x.base is not None else x): x.base if x.base is not None else x for x in arrays
+    }
+    outputs = sum(x.nbytes for x in held.values()) / 2**20
     return {
         "wall_s": wall,
         "data_s": span,
@@ -156,13 +170,14 @@ def read(path: Path) -> dict[str, float]:
         "outputs_mb": outputs,
         "overhead_mb": peak - before - outputs,
         "beams": len(b),
+        "load_1min": os.getloadavg()[0],
     }
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--minutes", type=float, nargs="+", default=[5.0, 20.0])
-    ap.add_argument("--kind", choices=("ros1", "mcap"), default="ros1")
+    ap.add_argument("--kind", choices=("ros1", "mcap", "sqlite3"), default="ros1")
     ap.add_argument("--dir", help="write the bags here and keep them (reused when present)")
     ap.add_argument("--read", help=argparse.SUPPRESS)  # the child process: read this bag
     args = ap.parse_args()
@@ -174,7 +189,7 @@ def main() -> int:
         folder = Path(args.dir) if args.dir else Path(tmp)
         folder.mkdir(parents=True, exist_ok=True)
         for minutes in args.minutes:
-            name = f"bench_{minutes:g}min" + (".bag" if args.kind == "ros1" else "")
+            name = f"bench_{minutes:g}min_{args.kind}" + (".bag" if args.kind == "ros1" else "")
             path = folder / name
             if not (args.dir and path.exists()):
                 write(path, minutes, args.kind)

@@ -34,9 +34,10 @@ __all__ = ["dataset_from_arrays", "gated_dataset"]
 
 
 def _array(root: Path, name: str, value: npt.ArrayLike, shape: tuple[int | None, ...]) -> Any:
-    """``value`` as a float64 array of ``shape`` (None: any length) with finite values."""
+    """``value`` as a float64 array of ``shape`` (None: any length) with finite values: a copy
+    (the gates compact the navigation's arrays in place; the caller's stay as given)."""
     try:
-        a = np.asarray(value, dtype=np.float64)
+        a = np.array(value, dtype=np.float64)
     except (TypeError, ValueError):
         raise DataError(root, None, f"{name} is not an array of numbers") from None
     if a.ndim != len(shape) or any(
@@ -133,7 +134,7 @@ def dataset_from_arrays(
         raise DataError(where, None, f"beam_intensities must be uint8, got {bins.dtype}")
     dt = _times(where, "dvl_t_s", dvl_t_s)
     v = _array(where, "dvl_v_mps", dvl_v_mps, (dt.size, 2))
-    valid = np.ones(dt.size, dtype=bool) if dvl_valid is None else np.asarray(dvl_valid, bool)
+    valid = np.ones(dt.size, dtype=bool) if dvl_valid is None else np.array(dvl_valid, bool)
     if valid.shape != (dt.size,):
         raise DataError(where, None, f"dvl_valid must have shape ({dt.size},), got {valid.shape}")
     at = _times(where, "ahrs_t_s", ahrs_t_s)
@@ -188,7 +189,9 @@ def gated_dataset(
     sonar_path: Path | None = None,
 ) -> Dataset:
     """A dataset of series already read: the gates of :mod:`sonarslam.datasets.gates` and the
-    DVL/AHRS overlap check, as :func:`sonarslam.datasets.source.open_dataset` runs them."""
+    DVL/AHRS overlap check, as :func:`sonarslam.datasets.source.open_dataset` runs them. The
+    gates work in place: the DVL's and the AHRS's arrays must be the caller's own to change
+    (the dataset holds views of them)."""
     report = SensorReport()
     gates = config.gates
     dvl = gate_dvl(dvl, gates, report)

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -82,15 +83,81 @@ class Gaps:
         return float(np.max(self.spans_s[:, 1] - self.spans_s[:, 0], initial=0.0))
 
 
-def find_gaps(t_s: FloatArray, gates: GateConfig) -> Gaps:
-    """The gaps of a sensor's sample times (s, non-decreasing)."""
+#: Samples a pass of the gates holds as temporaries at a time: the gates work through a
+#: series in blocks, so that their memory beside the series' own arrays does not grow with
+#: its length (at most a bool a sample for the masks of what is dropped).
+BLOCK = 1 << 13
+
+
+def _positive_steps(t: FloatArray, mask: np.ndarray | None) -> Iterator[FloatArray]:
+    """The positive steps between consecutive samples of ``t`` (of ``t[mask]``), a block at
+    a time: the values of ``np.diff(t)[np.diff(t) > 0]``, in order."""
+    last: float | None = None
+    for a in range(0, t.size, BLOCK):
+        block = t[a : a + BLOCK] if mask is None else t[a : a + BLOCK][mask[a : a + BLOCK]]
+        if not block.size:
+            continue
+        steps = np.diff(block) if last is None else np.diff(block, prepend=last)
+        last = float(block[-1])
+        yield steps[steps > 0.0]
+
+
+def _kth_positive(blocks: Callable[[], Iterator[FloatArray]], k: int) -> float:
+    """The ``k``-th smallest (from 0) of positive finite floats given in blocks (re-read on
+    each pass): a radix selection over their bits (an order-preserving uint64 for positive
+    floats), 8 bits a pass, exact, in memory of a block and 256 counts."""
+    prefix = 0
+    for shift in range(56, -8, -8):
+        counts = np.zeros(256, dtype=np.int64)
+        high = np.uint64(shift + 8)
+        for block in blocks():
+            u = block.view(np.uint64)
+            if shift < 56:
+                u = u[(u >> high) == np.uint64(prefix >> (shift + 8))]
+            counts += np.bincount(
+                ((u >> np.uint64(shift)) & np.uint64(0xFF)).astype(np.intp), minlength=256
+            )
+        cum = np.cumsum(counts)
+        digit = int(np.searchsorted(cum, k, side="right"))
+        k -= int(cum[digit - 1]) if digit else 0
+        prefix |= digit << shift
+    return float(np.array([prefix], dtype=np.uint64).view(np.float64)[0])
+
+
+def _median_step(t: FloatArray, mask: np.ndarray | None) -> float:
+    """``np.median`` of the positive steps of ``t`` (of ``t[mask]``), 0 without any: the same
+    float, in memory of a block (:func:`_kth_positive`) rather than of three copies of ``t``."""
+
+    def blocks() -> Iterator[FloatArray]:
+        return _positive_steps(t, mask)
+
+    n = sum(b.size for b in blocks())
+    if not n:
+        return 0.0
+    upper = _kth_positive(blocks, n // 2)
+    if n % 2:
+        return upper
+    return float((np.float64(_kth_positive(blocks, n // 2 - 1)) + np.float64(upper)) / 2.0)
+
+
+def find_gaps(t_s: FloatArray, gates: GateConfig, mask: np.ndarray | None = None) -> Gaps:
+    """The gaps of a sensor's sample times (s, non-decreasing; only those of ``mask`` when
+    given), worked through in blocks (:data:`BLOCK`)."""
     t = np.asarray(t_s, dtype=np.float64)
-    dt = np.diff(t)
-    positive = dt[dt > 0.0]
-    period = float(np.median(positive)) if positive.size else 0.0
+    period = _median_step(t, mask)
     threshold = max(gates.gap_periods * period, gates.min_gap_s)
-    i = np.flatnonzero(dt > threshold)
-    return Gaps(threshold, np.column_stack([t[i], t[i + 1]]) if i.size else np.zeros((0, 2)))
+    spans: list[FloatArray] = []
+    last: float | None = None
+    for a in range(0, t.size, BLOCK):
+        block = t[a : a + BLOCK] if mask is None else t[a : a + BLOCK][mask[a : a + BLOCK]]
+        if not block.size:
+            continue
+        seq = block if last is None else np.concatenate([[last], block])
+        i = np.flatnonzero(np.diff(seq) > threshold)
+        if i.size:
+            spans.append(np.column_stack([seq[i], seq[i + 1]]))
+        last = float(block[-1])
+    return Gaps(threshold, np.concatenate(spans) if spans else np.zeros((0, 2)))
 
 
 @dataclass
@@ -141,68 +208,104 @@ def _warn_gaps(path: Path | None, sensor: str, gaps: Gaps, what: str) -> Gaps:
 
 def _later_repeats(t_s: FloatArray) -> np.ndarray:
     """(N,) bool: rows whose stamp equals the previous row's (time never decreases)."""
-    return np.concatenate([[False], np.diff(t_s) == 0.0])
+    out = np.zeros(t_s.size, dtype=bool)
+    np.equal(t_s[1:], t_s[:-1], out=out[1:])
+    return out
+
+
+def _compact(keep: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The rows of ``arrays`` where ``keep``, moved to the front of each in place (a block at
+    a time) and returned as views of that front."""
+    w = 0
+    for a in range(0, keep.size, BLOCK):
+        kb = keep[a : a + BLOCK]
+        m = int(kb.sum())
+        for x in arrays:
+            x[w : w + m] = x[a : a + BLOCK][kb]
+        w += m
+    return tuple(x[:w] for x in arrays)
 
 
 def gate_dvl(dvl: DvlSeries, gates: GateConfig, report: SensorReport) -> DvlSeries:
-    """Drop repeated stamps; flag rows faster than ``dvl_max_speed_mps`` as without lock."""
+    """Drop repeated stamps; flag rows faster than ``dvl_max_speed_mps`` as without lock.
+
+    In place: the series' arrays are compacted and its ``valid`` cleared where flagged, and the
+    series returned holds views of them (give it arrays it may change)."""
     repeat = _later_repeats(dvl.t)
-    keep = ~repeat
-    t, v, valid, heading = dvl.t[keep], dvl.v_mps[keep], dvl.valid[keep], dvl.heading_rad[keep]
-    with np.errstate(over="ignore"):
-        fast = valid & ~(np.hypot(v[:, 0], v[:, 1]) <= gates.dvl_max_speed_mps)
-    report.counts["dvl_repeated_stamps"] = int(repeat.sum())
-    report.counts["dvl_speed_spikes"] = int(fast.sum())
-    if repeat.any():
-        _warn(dvl.path, "DVL", f"dropped {int(repeat.sum())} row(s) repeating a stamp")
-    if fast.any():
+    n_repeat = int(repeat.sum())
+    t, v, valid, heading = dvl.t, dvl.v_mps, dvl.valid, dvl.heading_rad
+    if n_repeat:
+        t, v, valid, heading = _compact(~repeat, t, v, valid, heading)
+    del repeat
+    fast = np.zeros(t.size, dtype=bool)
+    for a in range(0, t.size, BLOCK):
+        vb = v[a : a + BLOCK]
+        with np.errstate(over="ignore"):
+            fast[a : a + BLOCK] = valid[a : a + BLOCK] & ~(
+                np.hypot(vb[:, 0], vb[:, 1]) <= gates.dvl_max_speed_mps
+            )
+    n_fast = int(fast.sum())
+    report.counts["dvl_repeated_stamps"] = n_repeat
+    report.counts["dvl_speed_spikes"] = n_fast
+    if n_repeat:
+        _warn(dvl.path, "DVL", f"dropped {n_repeat} row(s) repeating a stamp")
+    if n_fast:
         first = float(t[np.flatnonzero(fast)[0]])
         _warn(
             dvl.path,
             "DVL",
-            f"{int(fast.sum())} row(s) faster than {gates.dvl_max_speed_mps:g} m/s taken as"
+            f"{n_fast} row(s) faster than {gates.dvl_max_speed_mps:g} m/s taken as"
             f" without bottom lock (first at t={first:.3f} s)",
         )
-    out = DvlSeries(t.copy(), v.copy(), valid & ~fast, heading.copy(), dvl.path)
+        valid &= ~fast
+    out = DvlSeries(t, v, valid, heading, dvl.path)
     report.gaps["dvl"] = _warn_gaps(
         dvl.path,
         "DVL",
-        find_gaps(out.t[out.valid], gates),
+        find_gaps(out.t, gates, out.valid),
         "its velocity is held with a growing uncertainty, then taken as unknown",
     )
     return out
 
 
 #: Samples of the AHRS heading-jump pass held as Python floats at a time.
-ATTITUDE_BLOCK = 1 << 13
-
-
-def _gyro_integral(t_s: FloatArray, rate_rad_per_s: FloatArray) -> FloatArray:
-    """Trapezoidal integral of the yaw rate from the first sample (rad), shape (N,)."""
-    steps = 0.5 * (rate_rad_per_s[1:] + rate_rad_per_s[:-1]) * np.diff(t_s)
-    return np.concatenate([[0.0], np.cumsum(steps)])
+ATTITUDE_BLOCK = BLOCK
 
 
 def gate_attitude(att: AttitudeSeries, gates: GateConfig, report: SensorReport) -> AttitudeSeries:
-    """Drop repeated stamps, rate spikes and heading jumps the gyro does not explain."""
+    """Drop repeated stamps, rate spikes and heading jumps the gyro does not explain.
+
+    In place: the series' arrays are compacted, and the series returned holds views of them
+    (give it arrays it may change)."""
     repeat = _later_repeats(att.t)
-    spike = ~repeat & ~(
-        np.abs(att.yaw_rate_rad_per_s) <= math.radians(gates.ahrs_max_rate_deg_per_s)
-    )
-    keep = ~(repeat | spike)
-    t, yaw, rate = att.t[keep], att.yaw_rad[keep], att.yaw_rate_rad_per_s[keep]
-    gyro = _gyro_integral(t, rate)
+    limit = math.radians(gates.ahrs_max_rate_deg_per_s)
+    spike = np.zeros(att.t.size, dtype=bool)
+    for a in range(0, att.t.size, BLOCK):
+        spike[a : a + BLOCK] = ~repeat[a : a + BLOCK] & ~(
+            np.abs(att.yaw_rate_rad_per_s[a : a + BLOCK]) <= limit
+        )
+    n_repeat, n_spike = int(repeat.sum()), int(spike.sum())
+    t, yaw, rate = att.t, att.yaw_rad, att.yaw_rate_rad_per_s
+    if n_repeat or n_spike:
+        t, yaw, rate = _compact(~(repeat | spike), t, yaw, rate)
+    del repeat, spike
     tol0, drift = (
         math.radians(gates.ahrs_max_jump_deg),
         math.radians(gates.ahrs_jump_drift_deg_per_s),
     )
     good = np.ones(t.size, dtype=bool)
     # one pass in plain floats (10^4-10^6 samples), a block at a time: the lists of floats cost
-    # 4x the arrays, so a block bounds them whatever the run's length
-    ref_t, ref_y, ref_g = (float(t[0]), float(yaw[0]), float(gyro[0])) if t.size else (0, 0, 0)
+    # 4x the arrays, so a block bounds them whatever the run's length. The gyro's trapezoidal
+    # integral from the first sample (rad) is summed on, block by block, in the order
+    # np.cumsum sums it whole.
+    ref_t, ref_y, ref_g = (float(t[0]), float(yaw[0]), 0.0) if t.size else (0, 0, 0)
+    carry = 0.0
     for a in range(1, t.size, ATTITUDE_BLOCK):
         b = min(a + ATTITUDE_BLOCK, t.size)
-        ts, ys, gs = t[a:b].tolist(), yaw[a:b].tolist(), gyro[a:b].tolist()
+        steps = 0.5 * (rate[a:b] + rate[a - 1 : b - 1]) * (t[a:b] - t[a - 1 : b - 1])
+        gyro = np.cumsum(np.concatenate([[carry], steps]))[1:]
+        carry = float(gyro[-1])
+        ts, ys, gs = t[a:b].tolist(), yaw[a:b].tolist(), gyro.tolist()
         for k in range(b - a):
             miss = (ys[k] - ref_y - (gs[k] - ref_g) + math.pi) % (2.0 * math.pi) - math.pi
             if abs(miss) <= tol0 + drift * (ts[k] - ref_t):
@@ -210,17 +313,19 @@ def gate_attitude(att: AttitudeSeries, gates: GateConfig, report: SensorReport) 
             else:
                 good[a + k] = False
     jumps = int((~good).sum())
-    report.counts["ahrs_repeated_stamps"] = int(repeat.sum())
-    report.counts["ahrs_rate_spikes"] = int(spike.sum())
+    report.counts["ahrs_repeated_stamps"] = n_repeat
+    report.counts["ahrs_rate_spikes"] = n_spike
     report.counts["ahrs_heading_jumps"] = jumps
     for n, what in (
-        (int(repeat.sum()), "repeating a stamp"),
-        (int(spike.sum()), f"with a yaw rate beyond {gates.ahrs_max_rate_deg_per_s:g} deg/s"),
+        (n_repeat, "repeating a stamp"),
+        (n_spike, f"with a yaw rate beyond {gates.ahrs_max_rate_deg_per_s:g} deg/s"),
         (jumps, f"whose heading jumps more than {gates.ahrs_max_jump_deg:g} deg off the gyro's"),
     ):
         if n:
             _warn(att.path, "AHRS", f"dropped {n} sample(s) {what}")
-    out = AttitudeSeries(t[good].copy(), yaw[good].copy(), rate[good].copy(), att.path)
+    if jumps:
+        t, yaw, rate = _compact(good, t, yaw, rate)
+    out = AttitudeSeries(t, yaw, rate, att.path)
     report.gaps["ahrs"] = _warn_gaps(
         att.path,
         "AHRS",

@@ -55,7 +55,7 @@ The rest of a run:
   file name's clock: local time, UTC + this), ``start`` (an ISO 8601 date and time that replaces
   the file name's), ``stamps``;
 * the navigation: a ROS bag (its DVL, IMU and optional GPS topics, read by
-  :mod:`sonarslam.datasets.rosbag`; a sonar topic in it is not read) or a CSV
+  :func:`sonarslam.datasets.rosbag.read_roles`; a sonar topic in it is not read) or a CSV
   (:func:`read_nav_csv`).
 
 The head's ``n_bins`` and ``bin_size_m`` are the log's (a ``sonarslam.toml`` that says otherwise
@@ -91,7 +91,6 @@ from typing import IO, Any
 import numpy as np
 import tomli_w
 
-from sonarslam.datasets import rosbag as rb
 from sonarslam.datasets.arrays import gated_dataset
 from sonarslam.datasets.config import DatasetConfig, load_dataset_config
 from sonarslam.datasets.dataset import NEUTRAL_CALIBRATION, Dataset, read_truth
@@ -99,7 +98,7 @@ from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.geodesy import geodetic_to_local_en
 from sonarslam.datasets.logfile import open_regular, read_text
 from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries
-from sonarslam.datasets.rosbag import is_bag
+from sonarslam.datasets.rosbag import is_bag, read_roles
 from sonarslam.settings import SettingError, bounded, check_fields, one_of
 
 __all__ = [
@@ -792,19 +791,12 @@ def _bag_navigation(
     bag: Path, topics_file: str | Path | None
 ) -> tuple[DvlSeries, AttitudeSeries, GpsSeries | None, dict[str, int]]:
     """The DVL, IMU and GPS roles of a ROS bag (its sonar topics are not read)."""
-    table, table_path = rb._topics_table(bag, topics_file)
-    table = {role: topic for role, topic in table.items() if role != "sonar"}
-    with rb._Reader(bag) as r:
-        types = {t: i.msgtype or "" for t, i in r.reader.topics.items()}
-    nav_types = {t: ty for t, ty in types.items() if ty not in rb.ROLE_TYPES["sonar"]}
-    roles = rb._roles(bag, nav_types, table, table_path)
-    roles.pop("sonar", None)
-    columns, _ = rb._read_required(
-        bag, roles, types, ("dvl", "imu"), " of the Ping360's navigation"
+    read = read_roles(
+        bag, ("dvl", "imu", "gps"), ("dvl", "imu"), topics_file, " of the Ping360's navigation"
     )
-    gps = rb._gps(bag, columns["gps"]) if "gps" in columns and columns["gps"].n else None
-    counts = {f"{role}_out_of_order": c.out_of_order for role, c in columns.items()}
-    return rb._dvl(bag, columns["dvl"]), rb._imu(bag, columns["imu"]), gps, counts
+    assert read.dvl is not None and read.attitude is not None
+    counts = {k: v for k, v in read.counts.items() if k.endswith("_out_of_order")}
+    return read.dvl, read.attitude, read.gps, counts
 
 
 def _navigation(

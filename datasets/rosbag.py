@@ -2,7 +2,11 @@
 
 A bag is a ROS 1 ``.bag`` file, a ROS 2 bag directory (``metadata.yaml`` with ``.db3`` or
 ``.mcap`` files) or one ``.mcap`` file. Its messages are read one at a time in the bag's order
-(never the whole bag in memory; only the decoded arrays of the four roles are kept) and become a
+(a ROS 1 bag chunk by chunk, :class:`sonarslam.datasets.ros1bag.Ros1Bag`; a ROS 2 bag through
+``rosbags.highlevel.AnyReader``), never the whole bag in memory: each field of a role's rows goes
+into an array preallocated from the bag's count of its topic, and those arrays are the series.
+:func:`read_roles` reads any of the roles (the Ping360's navigation bag: the DVL, the IMU and the
+GPS); :func:`open_bag` reads the four and makes them a
 :class:`sonarslam.datasets.source.Dataset` through the same gates as the file readers
 (:func:`sonarslam.datasets.arrays.gated_dataset`).
 
@@ -57,6 +61,7 @@ from sonarslam.datasets.dataset import NEUTRAL_CALIBRATION, Dataset, read_truth
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.geodesy import geodetic_to_local_en, local_en_to_geodetic
 from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries
+from sonarslam.datasets.ros1bag import Ros1Bag
 from sonarslam.sonar.beam import Mounting
 
 __all__ = [
@@ -68,6 +73,8 @@ __all__ = [
     "is_bag",
     "bag_topics",
     "open_bag",
+    "read_roles",
+    "BagRoles",
     "write_bag",
     "transform_msg",
 ]
@@ -223,7 +230,9 @@ class TopicInfo:
 
 
 class _Reader:
-    """An open bag (``rosbags.highlevel.AnyReader``) whose errors are :class:`DataError`."""
+    """An open bag whose errors are :class:`DataError`: a ROS 1 ``.bag`` through
+    :class:`sonarslam.datasets.ros1bag.Ros1Bag` (chunk by chunk), a ROS 2 bag through
+    ``rosbags.highlevel.AnyReader``."""
 
     def __init__(self, bag: Path) -> None:
         from rosbags.highlevel import AnyReader, AnyReaderError  # lazy: only bags load rosbags
@@ -239,7 +248,11 @@ class _Reader:
             if f.suffix in (".bag", ".mcap", ".db3") and not f.is_file():
                 raise DataError(f, None, "not a regular file (a bag's data must be one)")
         try:
-            self.reader = AnyReader(paths, default_typestore=_typestore())
+            self.reader: Any
+            if bag.is_file() and bag.suffix == ".bag":  # chunk by chunk, no index of messages
+                self.reader = Ros1Bag(bag)
+            else:
+                self.reader = AnyReader(paths, default_typestore=_typestore())
             self.reader.open()
         except (AnyReaderError, OSError, ValueError, KeyError) as exc:
             raise DataError(bag, None, f"not a readable ROS bag: {_one_line(exc)}") from None
@@ -320,12 +333,17 @@ def _preset_of(types: dict[str, str]) -> str | None:
 
 
 def _roles(
-    bag: Path, types: dict[str, str], table: dict[str, str], table_path: Path | None
+    bag: Path,
+    types: dict[str, str],
+    table: dict[str, str],
+    table_path: Path | None,
+    wanted: tuple[str, ...] = ROLES,
 ) -> dict[str, str]:
-    """Role -> topic: ``[topics]`` where given (checked), else the one topic of a fitting type."""
+    """Role -> topic of the ``wanted`` roles: ``[topics]`` where given (checked), else the one
+    topic of a fitting type."""
     out: dict[str, str] = {}
     table = _with_preset(types, table)
-    for role in ROLES:
+    for role in wanted:
         if role in table:
             topic = table[role]
             if topic not in types:
@@ -384,29 +402,40 @@ def _stamp(msg: Any) -> float:
 class _Column:
     """One role's decoded messages, in the bag's order, with their stamp checks.
 
-    The rows go into numpy arrays preallocated from the bag's own message count of the topic
-    (grown by half when a bag's index undercounts), so that reading keeps the output arrays
-    and a constant overhead, never a Python object per message."""
+    Each field of a row goes into its own numpy array, preallocated from the bag's own message
+    count of the topic (grown by half when a bag's index undercounts), and the role's series
+    are views of those arrays (:meth:`arrays`): reading keeps the output arrays and a constant
+    overhead, never a Python object per message nor a second copy of a field."""
 
-    def __init__(self, role: str, topic: str, count: int) -> None:
+    def __init__(self, bag: Path, role: str, topic: str, count: int) -> None:
         self.role, self.topic = role, topic
         self.n = 0
         self.capacity = max(int(count), 16)
-        self.t = np.empty(self.capacity, dtype=np.float64)
-        width = ROW_WIDTH[role]
-        self.rows = np.empty((self.capacity, width), dtype=np.float64)
+        try:
+            self.t = np.empty(self.capacity, dtype=np.float64)
+            self.fields = {
+                name: np.empty((self.capacity, *shape), dtype=dtype)
+                for name, shape, dtype in ROW_FIELDS[role]
+            }
+        except (MemoryError, ValueError):
+            raise DataError(
+                bag, None, f"topic {topic}: the bag's index counts {count} messages, beyond memory"
+            ) from None
         self.bins: np.ndarray | None = None  # sonar: (capacity, n_bins) uint8
+        self.bin_m = math.nan  # sonar: the first beam's bin size (m)
         self.frame = ""
         self.last_t = -math.inf
         self.last_log_s = -math.inf
         self.out_of_order = 0
         self.repeated = 0
         self.first_fault: dict[str, int] = {}  # "out_of_order", "repeated" -> message index
+        self.sorted = False  # the messages out of order have been sorted (by :meth:`arrays`)
 
     def _grow(self) -> None:
         self.capacity += max(self.capacity // 2, 16)
         self.t = np.resize(self.t, self.capacity)
-        self.rows = np.resize(self.rows, (self.capacity, self.rows.shape[1]))
+        for name, x in self.fields.items():
+            self.fields[name] = np.resize(x, (self.capacity, *x.shape[1:]))
         if self.bins is not None:
             self.bins = np.resize(self.bins, (self.capacity, self.bins.shape[1]))
 
@@ -419,6 +448,9 @@ class _Column:
         row: tuple[float, ...],
         bins: np.ndarray | None = None,
     ) -> None:
+        """One message: its stamp ``t`` and the bag's receive time ``log_s`` (s), its ``row``
+        (:data:`ROW_FIELDS`' values in order; the sonar's bin size (m) after them) and a
+        beam's ``bins``."""
         if self.n:
             jump = (t - self.last_t) - (log_s - self.last_log_s)
             if abs(jump) > CLOCK_JUMP_S:
@@ -438,32 +470,41 @@ class _Column:
         if bins is not None:
             if self.bins is None:
                 self.bins = np.empty((self.capacity, bins.size), dtype=np.uint8)
+                self.bin_m = row[1]
             elif bins.size != self.bins.shape[1] or not math.isclose(
-                row[1], self.rows[0, 1], rel_tol=1e-4
+                row[1], self.bin_m, rel_tol=1e-4
             ):
                 raise DataError(
                     bag,
                     None,
                     f"topic {self.topic} message {index}: a beam of {bins.size} bins of"
-                    f" {row[1]:g} m after {self.bins.shape[1]} bins of {self.rows[0, 1]:g} m (the"
+                    f" {row[1]:g} m after {self.bins.shape[1]} bins of {self.bin_m:g} m (the"
                     " head's range changed: one run a range)",
                 )
         if self.n == self.capacity:
             self._grow()
-        self.t[self.n] = t
-        self.rows[self.n] = row
+        n = self.n
+        self.t[n] = t
+        k = 0
+        for name, shape, _ in ROW_FIELDS[self.role]:
+            if shape:
+                self.fields[name][n] = row[k : k + shape[0]]
+                k += shape[0]
+            else:
+                self.fields[name][n] = row[k]
+                k += 1
         if bins is not None and self.bins is not None:
-            self.bins[self.n] = bins
+            self.bins[n] = bins
         self.n += 1
         self.last_t, self.last_log_s = t, log_s
 
-    def arrays(self, bag: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """``(t, rows, bins)`` trimmed to the messages read and sorted by stamp (a warning
-        counts the messages out of order; only then are the arrays copied)."""
-        t, rows = self.t[: self.n], self.rows[: self.n]
-        bins = self.bins[: self.n] if self.bins is not None else None
-        if bins is not None and self.capacity > self.n:  # an index that overcounted
-            bins = bins.copy()
+    def arrays(self, bag: Path) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray | None]:
+        """``(t, fields, bins)``: views of the messages read, sorted by stamp (a warning counts
+        the messages out of order; only they are moved, in place)."""
+        n = self.n
+        t = self.t[:n]
+        fields = {name: x[:n] for name, x in self.fields.items()}
+        bins = self.bins[:n] if self.bins is not None else None
         if self.repeated:
             warnings.warn(
                 f"{bag}: topic {self.topic} ({self.role}): {self.repeated} message(s) with the"
@@ -472,7 +513,8 @@ class _Column:
                 DataWarning,
                 stacklevel=3,
             )
-        if self.out_of_order:
+        if self.out_of_order and not self.sorted:
+            self.sorted = True
             warnings.warn(
                 f"{bag}: topic {self.topic} ({self.role}): {self.out_of_order} message(s) stamped"
                 f" earlier than the one before (the first: message"
@@ -481,14 +523,23 @@ class _Column:
                 stacklevel=3,
             )
             order = np.argsort(t, kind="stable")
-            t, rows = t[order], rows[order]
-            bins = bins[order] if bins is not None else None
-        return t, rows, bins
+            moved = np.flatnonzero(order != np.arange(n))
+            source = order[moved]
+            for x in (t, *fields.values(), *([bins] if bins is not None else [])):
+                x[moved] = x[source]
+        return t, fields, bins
 
 
-#: Floats per row of each role: sonar (angle rad, bin size m), dvl (vx, vy, valid, sigma m/s or
-#: NaN), imu (yaw, yaw rate), gps (lat, lon, fix).
-ROW_WIDTH = {"sonar": 2, "dvl": 4, "imu": 2, "gps": 3}
+#: The fields of each role's rows (name, shape of one row's value, dtype): sonar (angle rad;
+#: the bin size, m, is checked against the first beam's, not kept), dvl (vx, vy m/s, bottom
+#: lock, the message's own sigma m/s or NaN), imu (yaw rad, yaw rate rad/s), gps (lat, lon
+#: deg, fix).
+ROW_FIELDS: dict[str, tuple[tuple[str, tuple[int, ...], Any], ...]] = {
+    "sonar": (("angle", (), np.float64),),
+    "dvl": (("v", (2,), np.float64), ("valid", (), np.bool_), ("sigma", (), np.float64)),
+    "imu": (("yaw", (), np.float64), ("rate", (), np.float64)),
+    "gps": (("lat", (), np.float64), ("lon", (), np.float64), ("fix", (), np.bool_)),
+}
 
 
 def _field(msg: Any, *names: str) -> Any:
@@ -577,71 +628,68 @@ TF_TOPICS = ("/tf_static", "/tf")
 
 
 def _read_columns(
-    bag: Path, roles: dict[str, str]
+    bag: Path, r: _Reader, roles: dict[str, str]
 ) -> tuple[dict[str, _Column], dict[tuple[str, str], Any]]:
     """One pass over the bag's messages of the roles' topics (and its transforms: every
     ``/tf_static`` message; ``/tf`` only without ``/tf_static``, until each role's frame is
     linked); the columns and the transforms ``(parent, child) -> Transform``."""
     by_topic = {topic: role for role, topic in roles.items()}
-    with _Reader(bag) as r:
-        reader = r.reader
-        info = reader.topics
-        columns = {
-            role: _Column(role, topic, info[topic].msgcount) for role, topic in roles.items()
-        }
-        tf_topic = next((t for t in TF_TOPICS if t in info), None)
-        conns = [c for c in reader.connections if c.topic in by_topic or c.topic == tf_topic]
-        counts = dict.fromkeys([*by_topic, tf_topic], 0)
-        edges: dict[tuple[str, str], Any] = {}
-        tf_done = tf_topic is None
-        topic = ""
-        try:
-            for conn, log_ns, raw in reader.messages(connections=conns):
-                topic = conn.topic
-                index = counts[topic]
-                counts[topic] += 1
-                if topic == tf_topic:
-                    if not tf_done:
-                        msg = _decode(bag, reader, raw, conn.msgtype, topic, index)
-                        for tf in msg.transforms:
-                            key = (tf.header.frame_id.lstrip("/"), tf.child_frame_id.lstrip("/"))
-                            edges.setdefault(key, tf.transform)
-                        tf_done = topic == "/tf" and index % 50 == 49 and _linked(columns, edges)
-                    continue
-                role = by_topic[topic]
-                msg = _decode(bag, reader, raw, conn.msgtype, topic, index)
-                try:
-                    if role == "sonar":
-                        angle, size_m, bins = _sonar_row(conn.msgtype, msg)
-                        row: tuple[float, ...] = (angle, size_m)
-                    elif role == "dvl":
-                        row, bins = _dvl_row(conn.msgtype, msg), None
-                    elif role == "imu":
-                        row, bins = _imu_row(msg), None
-                    else:
-                        row, bins = _gps_row(msg), None
-                except (AttributeError, ValueError, TypeError, IndexError) as exc:
-                    raise DataError(
-                        bag,
-                        None,
-                        f"topic {topic} ({conn.msgtype}) message {index}: {_one_line(exc)}",
-                    ) from None
-                t = _stamp(msg)
-                if not math.isfinite(t) or t <= 0.0:
-                    raise DataError(
-                        bag, None, f"topic {topic} message {index}: stamp {t!r} is not a time"
-                    )
-                column = columns[role]
-                if not column.n:
-                    column.frame = str(msg.header.frame_id).lstrip("/")
-                column.add(bag, index, t, log_ns * 1e-9, row, bins)
-        except DataError:
-            raise
-        except Exception as exc:  # a bag cut short, a bad chunk: where the reading stopped
-            where = f" after message {counts.get(topic, 0) - 1} of {topic}" if topic else ""
-            raise DataError(
-                bag, None, f"the bag cannot be read on{where}: {_one_line(exc)}"
-            ) from None
+    reader = r.reader
+    info = reader.topics
+    columns = {
+        role: _Column(bag, role, topic, info[topic].msgcount) for role, topic in roles.items()
+    }
+    tf_topic = next((t for t in TF_TOPICS if t in info), None)
+    conns = [c for c in reader.connections if c.topic in by_topic or c.topic == tf_topic]
+    counts = dict.fromkeys([*by_topic, tf_topic], 0)
+    edges: dict[tuple[str, str], Any] = {}
+    tf_done = tf_topic is None
+    topic = ""
+    try:
+        for conn, log_ns, raw in reader.messages(connections=conns):
+            topic = conn.topic
+            index = counts[topic]
+            counts[topic] += 1
+            if topic == tf_topic:
+                if not tf_done:
+                    msg = _decode(bag, reader, raw, conn.msgtype, topic, index)
+                    for tf in msg.transforms:
+                        key = (tf.header.frame_id.lstrip("/"), tf.child_frame_id.lstrip("/"))
+                        edges.setdefault(key, tf.transform)
+                    tf_done = topic == "/tf" and index % 50 == 49 and _linked(columns, edges)
+                continue
+            role = by_topic[topic]
+            msg = _decode(bag, reader, raw, conn.msgtype, topic, index)
+            try:
+                if role == "sonar":
+                    angle, size_m, bins = _sonar_row(conn.msgtype, msg)
+                    row: tuple[float, ...] = (angle, size_m)
+                elif role == "dvl":
+                    row, bins = _dvl_row(conn.msgtype, msg), None
+                elif role == "imu":
+                    row, bins = _imu_row(msg), None
+                else:
+                    row, bins = _gps_row(msg), None
+            except (AttributeError, ValueError, TypeError, IndexError) as exc:
+                raise DataError(
+                    bag,
+                    None,
+                    f"topic {topic} ({conn.msgtype}) message {index}: {_one_line(exc)}",
+                ) from None
+            t = _stamp(msg)
+            if not math.isfinite(t) or t <= 0.0:
+                raise DataError(
+                    bag, None, f"topic {topic} message {index}: stamp {t!r} is not a time"
+                )
+            column = columns[role]
+            if not column.n:
+                column.frame = str(msg.header.frame_id).lstrip("/")
+            column.add(bag, index, t, log_ns * 1e-9, row, bins)
+    except DataError:
+        raise
+    except Exception as exc:  # a bag cut short, a bad chunk: where the reading stopped
+        where = f" after message {counts.get(topic, 0) - 1} of {topic}" if topic else ""
+        raise DataError(bag, None, f"the bag cannot be read on{where}: {_one_line(exc)}") from None
     return columns, edges
 
 
@@ -662,31 +710,136 @@ def _linked(columns: dict[str, _Column], edges: dict[tuple[str, str], Any]) -> b
     return all(c.frame in children for c in columns.values() if c.n and c.frame)
 
 
-def _read_required(
-    bag: Path,
-    roles: dict[str, str],
-    types: dict[str, str],
-    required: tuple[str, ...],
+@dataclass(frozen=True)
+class BagRoles:
+    """What :func:`read_roles` read of a bag: a series per role read (None for a role not
+    asked, without a topic or without a message), as the bag has them (not yet gated).
+
+    Attributes
+    ----------
+    bag : Path
+    topics : dict of str to str
+        Role -> the topic read for it.
+    beams : BeamSeries or None
+        The sonar: stamps (Unix s), transducer angles as the messages give them (rad),
+        ``(N, n_bins)`` uint8 intensities.
+    bin_size_m : float
+        The beams' bin size (m; NaN without beams).
+    dvl : DvlSeries or None
+        Velocities in the DVL's frame (m/s) with bottom lock; ``heading_rad`` NaN.
+    attitude : AttitudeSeries or None
+        Yaw (rad, ENU) and yaw rate (rad/s) of the IMU's frame.
+    gps : GpsSeries or None
+        East-North (m) from the first fix: a ruler only.
+    counts : dict of str to int
+        ``<role>_out_of_order`` and ``<role>_repeated``: the messages stamped earlier than the
+        one before (sorted into the series) and with its stamp (kept; the gates drop them).
+    frames : dict of str to str
+        Role -> ``header.frame_id`` of its first message (without a leading ``/``).
+    transforms : dict
+        ``(parent, child)`` frame -> ``geometry_msgs/Transform`` of the bag's ``/tf_static``
+        (else the first ``/tf`` messages, until each role's frame is linked).
+    base_frame : str or None
+        ``[topics] base_frame`` (or its preset's), when given.
+    dvl_sigma_mps : tuple of (float, int)
+        The median and the count of the DVL messages' own finite 1-sigma (a covariance, or
+        Water Linked's figure of merit; m/s); ``(nan, 0)`` without.
+    """
+
+    bag: Path
+    topics: dict[str, str]
+    beams: BeamSeries | None
+    bin_size_m: float
+    dvl: DvlSeries | None
+    attitude: AttitudeSeries | None
+    gps: GpsSeries | None
+    counts: dict[str, int]
+    frames: dict[str, str]
+    transforms: dict[tuple[str, str], Any]
+    base_frame: str | None
+    dvl_sigma_mps: tuple[float, int]
+
+
+def read_roles(
+    bag: str | Path,
+    roles: tuple[str, ...] = ROLES,
+    required: tuple[str, ...] = REQUIRED_ROLES,
+    topics_file: str | Path | None = None,
     purpose: str = "",
-) -> tuple[dict[str, _Column], dict[tuple[str, str], Any]]:
-    """:func:`_read_columns` of ``roles``, after checking each ``required`` role has a topic
-    (else a :class:`DataError` listing the bag's ``types``, topic -> type; ``purpose`` follows
-    the missing roles' names) and then at least one message."""
-    missing = [role for role in required if role not in roles]
-    if missing:
-        listing = ", ".join(f"{t} ({ty})" for t, ty in sorted(types.items())) or "none"
-        raise DataError(
-            bag,
-            None,
-            f"no topic for the {', '.join(missing)}{purpose} (types: "
-            + "; ".join(f"{m}: {', '.join(ROLE_TYPES[m])}" for m in missing)
-            + f"); the bag's topics: {listing}",
-        )
-    columns, edges = _read_columns(bag, roles)
+) -> BagRoles:
+    """Read these ``roles`` of a bag (a subset of :data:`ROLES`) in one streamed pass.
+
+    The topic of each role is found as the module docstring says (``[topics]`` of
+    ``topics_file``, a preset's name, or the bag's ``sonarslam.toml``; else the one topic of a
+    type that fits); the topics of the roles not asked are not read. Each message's row goes
+    into arrays preallocated from the bag's count of its topic, and the series are views of
+    them: the memory beyond the series does not grow with the bag's length.
+
+    Parameters
+    ----------
+    bag : str or Path
+        A ROS 1 ``.bag``, a ``.mcap`` file or a ROS 2 bag directory.
+    roles : tuple of str
+        The roles to read.
+    required : tuple of str
+        The roles that must have a topic and a message (a :class:`DataError` otherwise, whose
+        text ``purpose`` completes: " of the Ping360's navigation").
+    topics_file : str or Path, optional
+        A TOML file with ``[topics]``, or the name of a :data:`TOPIC_PRESETS` preset.
+
+    Raises
+    ------
+    DataError
+        Naming the bag (or the ``[topics]`` file), the topic and the message's index: a
+        required role without a topic or a message, a topic of a type that cannot play its
+        role, a message that cannot be decoded, a clock jump, a bag cut short, a beam of
+        another bin count, a GPS without any fix.
+    """
+    p = Path(bag)
+    if not is_bag(p):
+        raise DataError(p, None, "not a ROS bag (.bag, .mcap, or a directory with metadata.yaml)")
+    unknown = sorted(set(roles) - set(ROLES))
+    if unknown or not set(required) <= set(roles):
+        raise ValueError(f"roles must be among {ROLES} and hold required, got {roles}, {required}")
+    table, table_path = _topics_table(p, topics_file)
+    with _Reader(p) as r:
+        types = {t: i.msgtype or "" for t, i in r.reader.topics.items()}
+        table = _with_preset(types, table)
+        found = _roles(p, types, table, table_path, roles)
+        missing = [role for role in required if role not in found]
+        if missing:
+            listing = ", ".join(f"{t} ({ty})" for t, ty in sorted(types.items())) or "none"
+            raise DataError(
+                p,
+                None,
+                f"no topic for the {', '.join(missing)}{purpose} (types: "
+                + "; ".join(f"{m}: {', '.join(ROLE_TYPES[m])}" for m in missing)
+                + f"); the bag's topics: {listing}",
+            )
+        columns, edges = _read_columns(p, r, found)
     for role in required:
         if not columns[role].n:
-            raise DataError(bag, None, f"topic {roles[role]} ({role}) has no message")
-    return columns, edges
+            raise DataError(p, None, f"topic {found[role]} ({role}) has no message")
+    has = {role: c for role, c in columns.items() if c.n}
+    sigma = _dvl_sigma(has["dvl"]) if "dvl" in has else (math.nan, 0)
+    beams = _beams(p, has["sonar"]) if "sonar" in has else None
+    return BagRoles(
+        bag=p,
+        topics=found,
+        beams=beams[0] if beams is not None else None,
+        bin_size_m=beams[2] if beams is not None else math.nan,
+        dvl=_dvl(p, has["dvl"]) if "dvl" in has else None,
+        attitude=_imu(p, has["imu"]) if "imu" in has else None,
+        gps=_gps(p, has["gps"]) if "gps" in has else None,
+        counts={
+            **{f"{role}_out_of_order": c.out_of_order for role, c in columns.items()},
+            **{f"{role}_repeated": c.repeated for role, c in columns.items()},
+        },
+        frames={role: c.frame for role, c in has.items() if c.frame},
+        transforms=edges,
+        base_frame=table.get("base_frame"),
+        dvl_sigma_mps=sigma,
+    )
 
 
 def open_bag(
@@ -708,15 +861,9 @@ def open_bag(
     :class:`DataError`).
     """
     p = Path(bag)
-    if not is_bag(p):
-        raise DataError(p, None, "not a ROS bag (.bag, .mcap, or a directory with metadata.yaml)")
-    table, table_path = _topics_table(p, topics_file)
-    with _Reader(p) as r:
-        types = {t: i.msgtype or "" for t, i in r.reader.topics.items()}
-    table = _with_preset(types, table)
-    roles = _roles(p, types, table, table_path)
-    columns, edges = _read_required(p, roles, types, REQUIRED_ROLES)
-    mountings, tf_line = tf_mountings(p, columns, edges, table.get("base_frame"))
+    read = read_roles(p, ROLES, REQUIRED_ROLES, topics_file)
+    assert read.beams is not None and read.dvl is not None and read.attitude is not None
+    mountings, tf_line = tf_mountings(p, read.frames, read.transforms, read.base_frame)
     toml = _beside(p, "sonarslam.toml")
     config = _with_mountings(DatasetConfig(), mountings, toml)
     if toml is not None:
@@ -732,30 +879,26 @@ def open_bag(
     if config_override is not None:
         config = load_dataset_config(config_override, base=config)
         calibration = f"{calibration}; over it {config_override}"
-    dvl_note = _dvl_sigma_note(p, columns["dvl"], config)
+    dvl_note = _dvl_sigma_note(p, read.topics["dvl"], read.dvl_sigma_mps, config)
     if dvl_note:
         calibration = f"{calibration}; {dvl_note}"
-    beams = _beams(p, columns["sonar"])
-    sonar_head = replace(config.sonar, n_bins=beams[1], bin_size_m=beams[2])
+    n_bins, bin_m = int(read.beams.intensities.shape[1]), read.bin_size_m
+    sonar_head = replace(config.sonar, n_bins=n_bins, bin_size_m=bin_m)
     if (
         toml is not None
         and _file_sets_head(toml)
-        and (config.sonar.n_bins != beams[1] or not math.isclose(config.sonar.bin_size_m, beams[2]))
+        and (config.sonar.n_bins != n_bins or not math.isclose(config.sonar.bin_size_m, bin_m))
     ):
         raise DataError(
             toml,
             None,
             f"[sonar] n_bins {config.sonar.n_bins}, bin_size_m {config.sonar.bin_size_m:g}: the"
-            f" bag's beams have {beams[1]} bins of {beams[2]:g} m (leave them out; the bag's win)",
+            f" bag's beams have {n_bins} bins of {bin_m:g} m (leave them out; the bag's win)",
         )
     config = replace(config, sonar=sonar_head)
-    series = beams[0]
+    series = read.beams
     if config.sonar_time_offset_s:
         series = series.shifted(config.sonar_time_offset_s)
-    dvl, att = _dvl(p, columns["dvl"]), _imu(p, columns["imu"])
-    gps = _gps(p, columns["gps"]) if "gps" in columns and columns["gps"].n else None
-    counts = {f"{role}_out_of_order": c.out_of_order for role, c in columns.items()}
-    counts.update({f"{role}_repeated": c.repeated for role, c in columns.items()})
     truth = _beside(p, "truth.json")
     name = p.stem if p.is_file() else p.name
     d = gated_dataset(
@@ -763,13 +906,13 @@ def open_bag(
         p,
         config,
         series,
-        dvl,
-        att,
-        gps,
+        read.dvl,
+        read.attitude,
+        read.gps,
         calibration,
         truth=read_truth(truth) if truth is not None else None,
     )
-    d.report.counts.update(counts)
+    d.report.counts.update(read.counts)
     return d
 
 
@@ -782,37 +925,42 @@ def _file_sets_head(toml: Path) -> bool:
 
 
 def _beams(bag: Path, col: _Column) -> tuple[BeamSeries, int, float]:
-    t, rows, bins = col.arrays(bag)
+    t, fields, bins = col.arrays(bag)
     assert bins is not None
-    n_bins, bin_m = int(bins.shape[1]), float(rows[0, 1])
+    n_bins, bin_m = int(bins.shape[1]), float(col.bin_m)
     if n_bins == 0 or not bin_m > 0.0:
         raise DataError(
             bag, None, f"topic {col.topic} message 0: a beam of {n_bins} bins over {bin_m:g} m"
         )
-    col.bins = None  # the beams now live in the series only
-    return BeamSeries(t, rows[:, 0].copy(), bins, False), n_bins, bin_m
+    return BeamSeries(t, fields["angle"], bins, False), n_bins, bin_m
 
 
 def _dvl(bag: Path, col: _Column) -> DvlSeries:
-    t, rows, _ = col.arrays(bag)
-    return DvlSeries(t, rows[:, :2].copy(), rows[:, 2] > 0.5, np.full(t.size, np.nan), bag)
+    t, fields, _ = col.arrays(bag)
+    return DvlSeries(t, fields["v"], fields["valid"], np.full(t.size, np.nan), bag)
 
 
-def _dvl_sigma_note(bag: Path, col: _Column, config: DatasetConfig) -> str:
-    """The DVL messages' own 1-sigma (a covariance, or Water Linked's figure of merit) beside
-    the ``[noise] dvl_sigma_mps`` the estimators take; a warning when the median exceeds it."""
-    sigma = col.rows[: col.n, 3]
+def _dvl_sigma(col: _Column) -> tuple[float, int]:
+    """The median and the count of the DVL messages' own finite 1-sigma (m/s)."""
+    sigma = col.fields["sigma"][: col.n]
     sigma = sigma[np.isfinite(sigma)]
-    if not sigma.size:
+    return (float(np.median(sigma)), int(sigma.size)) if sigma.size else (math.nan, 0)
+
+
+def _dvl_sigma_note(bag: Path, topic: str, sigma: tuple[float, int], config: DatasetConfig) -> str:
+    """The DVL messages' own 1-sigma (median, count: a covariance, or Water Linked's figure of
+    merit) beside the ``[noise] dvl_sigma_mps`` the estimators take; a warning when the
+    median exceeds it."""
+    median, count = sigma
+    if not count:
         return ""
-    median = float(np.median(sigma))
     note = (
-        f"DVL: the messages' own sigma (median {median:.3g} m/s over {sigma.size}) is not an"
+        f"DVL: the messages' own sigma (median {median:.3g} m/s over {count}) is not an"
         f" input; the estimators take [noise] dvl_sigma_mps = {config.noise.dvl_sigma_mps:g}"
     )
     if median > config.noise.dvl_sigma_mps:
         warnings.warn(
-            f"{bag}: topic {col.topic}: {note} (set it in sonarslam.toml)",
+            f"{bag}: topic {topic}: {note} (set it in sonarslam.toml)",
             DataWarning,
             stacklevel=3,
         )
@@ -820,19 +968,19 @@ def _dvl_sigma_note(bag: Path, col: _Column, config: DatasetConfig) -> str:
 
 
 def _imu(bag: Path, col: _Column) -> AttitudeSeries:
-    t, rows, _ = col.arrays(bag)
-    return AttitudeSeries(t, rows[:, 0].copy(), rows[:, 1].copy(), bag)
+    t, fields, _ = col.arrays(bag)
+    return AttitudeSeries(t, fields["yaw"], fields["rate"], bag)
 
 
 def _gps(bag: Path, col: _Column) -> GpsSeries:
-    t, rows, _ = col.arrays(bag)
-    fix = rows[:, 2] > 0.5
+    t, fields, _ = col.arrays(bag)
+    fix = fields["fix"]
     if not fix.any():
         raise DataError(bag, None, f"topic {col.topic} (gps): no message with a fix")
     first = int(np.flatnonzero(fix)[0])
-    lat0, lon0 = float(rows[first, 0]), float(rows[first, 1])
-    lat = np.where(fix, rows[:, 0], lat0)
-    lon = np.where(fix, rows[:, 1], lon0)
+    lat0, lon0 = float(fields["lat"][first]), float(fields["lon"][first])
+    lat = np.where(fix, fields["lat"], lat0)
+    lon = np.where(fix, fields["lon"], lon0)
     en = geodetic_to_local_en(lat, lon, lat0, lon0)
     return GpsSeries(t, en, (lat0, lon0), fix, bag)
 
@@ -903,18 +1051,14 @@ def _base_frame(edges: dict[tuple[str, str], Any], frames: list[str], given: str
 
 def tf_mountings(
     bag: Path,
-    columns: dict[str, _Column],
+    role_frames: dict[str, str],
     edges: dict[tuple[str, str], Any],
     base_frame: str | None,
 ) -> tuple[dict[str, Mounting], str]:
     """The mountings (``bTs``: x, y, yaw of the sensor frame's x axis in the base's plane) of
-    the roles whose ``header.frame_id`` hangs below the base frame in the bag's transforms;
-    and a line saying which (empty when none)."""
-    frames = {
-        role: columns[role].frame
-        for role in MOUNTED_ROLES
-        if role in columns and columns[role].n and columns[role].frame
-    }
+    the roles whose ``header.frame_id`` (``role_frames``) hangs below the base frame in the
+    bag's transforms; and a line saying which (empty when none)."""
+    frames = {role: f for role, f in role_frames.items() if role in MOUNTED_ROLES and f}
     if not edges or not frames:
         return {}, ""
     base = _base_frame(edges, sorted(set(frames.values())), base_frame)

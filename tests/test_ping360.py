@@ -351,3 +351,34 @@ def test_auto_device_data_beams_and_bad_settings(small: Path) -> None:
     (small.parent / "sonarslam.toml").write_text("[ping360]\nspeed_of_sound_mps = 900\n")
     with pytest.raises(DataError, match=r"\[ping360\]: .*speed_of_sound_mps"):
         _open(small, nav=small.parent / "nav.csv")
+
+
+def test_the_navigation_bag_is_read_through_rosbags_public_role_reader() -> None:
+    """ping360.py reads its navigation bag with ``read_roles`` (rosbag.py's public, documented
+    role reader) and reaches into none of rosbag.py's private names."""
+    import ast
+
+    import sonarslam.datasets.ping360 as ping360
+    import sonarslam.datasets.rosbag as rosbag
+
+    tree = ast.parse(Path(ping360.__file__).read_text(encoding="utf-8"))
+    private = sorted(
+        {
+            alias.name
+            for node in ast.walk(tree)
+            if isinstance(node, ast.ImportFrom) and (node.module or "").endswith("rosbag")
+            for alias in node.names
+            if alias.name.startswith("_")
+        }
+        | {
+            node.attr
+            for node in ast.walk(tree)
+            if isinstance(node, ast.Attribute)
+            and isinstance(node.value, ast.Name)
+            and node.value.id in ("rb", "rosbag")
+            and node.attr.startswith("_")
+        }
+    )
+    assert private == []
+    assert "read_roles" in rosbag.__all__ and rosbag.read_roles.__doc__
+    assert ping360.read_roles is rosbag.read_roles
