@@ -10,6 +10,7 @@ import shutil
 import warnings
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -130,9 +131,15 @@ def test_simulate_writes_a_bag(tmp_path: Path) -> None:
     assert len(d.beams) > 100 and d.truth is not None
 
 
-def _write_ros1(d: Dataset, path: Path, change: Callable[[str, int, float], float]) -> Path:
+def _write_ros1(
+    d: Dataset,
+    path: Path,
+    change: Callable[[str, int, float], float],
+    edit: Callable[[str, int, Any], None] | None = None,
+) -> Path:
     """``d`` as a ROS 1 bag whose header stamps are ``change(role, index, t)`` (the receive
-    times stay ``t``): out-of-order stamps and clock jumps."""
+    times stay ``t``): out-of-order stamps and clock jumps; ``edit(role, index, msg)`` changes a
+    message in place before it is written."""
     from rosbags.rosbag1 import Writer
 
     store = _typestore()
@@ -147,6 +154,8 @@ def _write_ros1(d: Dataset, path: Path, change: Callable[[str, int, float], floa
         conns = {r: w.add_connection(f"/{r}", ty, typestore=store) for r, ty in types.items()}
         for t, role, msg in _messages(store, d):
             msg.header.stamp = _stamp_of(store, change(role, counts[role], t))
+            if edit is not None:
+                edit(role, counts[role], msg)
             counts[role] += 1
             w.write(conns[role], int(round(t * 1e9)), store.serialize_ros1(msg, types[role]))
     return path
@@ -194,6 +203,62 @@ def test_a_clock_jump_is_an_error_naming_the_topic_and_message(
     ):
         open_bag(bag)
     assert CLOCK_JUMP_S == 1.0
+
+
+def _same(role: str, i: int, t: float) -> float:
+    return t
+
+
+def test_an_imu_without_orientation_is_an_error_naming_the_message(
+    short: Dataset, tmp_path: Path
+) -> None:
+    """A raw IMU topic (REP-145: orientation_covariance[0] = -1, a zero quaternion) read as a
+    heading would be a heading of 0 for the whole run: refused at its first message."""
+
+    def raw(role: str, i: int, msg: Any) -> None:
+        if role == "imu":
+            msg.orientation_covariance[0] = -1.0
+            msg.orientation.x = msg.orientation.y = msg.orientation.z = msg.orientation.w = 0.0
+
+    bag = _write_ros1(short, tmp_path / "raw.bag", _same, raw)
+    with pytest.raises(
+        DataError, match=r"raw.bag: topic /imu \(sensor_msgs/msg/Imu\) message 0: .*REP-145"
+    ):
+        open_bag(bag)
+
+    def zero(role: str, i: int, msg: Any) -> None:
+        if role == "imu" and i == 7:
+            msg.orientation.x = msg.orientation.y = msg.orientation.z = msg.orientation.w = 0.0
+
+    bag = _write_ros1(short, tmp_path / "zero.bag", _same, zero)
+    with pytest.raises(DataError, match=r"message 7: orientation \(0, 0, 0, 0\) is not a unit"):
+        open_bag(bag)
+
+
+def test_an_ned_heading_beside_an_enu_gyro_is_an_error(layout: Dataset, tmp_path: Path) -> None:
+    """An orientation whose heading is NED's (clockwise from North) beside the ENU gyro turns
+    against it: refused, where it would have been a mirrored trajectory without a word. The
+    harbour's own bag (both ENU) passes the same check."""
+    turned = float(np.sum(np.abs(np.diff(np.unwrap(layout.attitude.yaw_rad)))))
+    assert turned > math.radians(180.0)  # the check has turns to judge
+
+    def ned(role: str, i: int, msg: Any) -> None:
+        if role == "imu":
+            q = msg.orientation
+            yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+            heading = 0.5 * math.pi - yaw
+            q.x, q.y, q.z, q.w = 0.0, 0.0, math.sin(0.5 * heading), math.cos(0.5 * heading)
+
+    bag = _write_ros1(layout, tmp_path / "ned.bag", _same, ned)
+    with pytest.raises(
+        DataError,
+        match=r"ned.bag: topic /imu \(imu\): the orientation's heading"
+        r" turns against angular_velocity.z \(correlation -[01]\.",
+    ):
+        open_bag(bag)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        open_bag(_write_ros1(layout, tmp_path / "enu.bag", _same))  # no error
 
 
 def test_missing_role_wrong_type_and_truncated_bags_are_one_line(
