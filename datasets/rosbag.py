@@ -889,6 +889,8 @@ def open_bag(
     if config_override is not None:
         config = load_dataset_config(config_override, base=config)
         calibration = f"{calibration}; over it {config_override}"
+    if calibration != NEUTRAL_CALIBRATION:  # a neutral run is said whole above
+        _warn_identity_mountings(p, mountings, [toml, config_override])
     dvl_note = _dvl_sigma_note(p, read.topics["dvl"], read.dvl_sigma_mps, config)
     if dvl_note:
         calibration = f"{calibration}; {dvl_note}"
@@ -1149,19 +1151,49 @@ def tf_mountings(
     return out, line
 
 
+def _mounting_tables(toml: str | Path | None) -> set[str]:
+    """The sensors (``sonar``, ``dvl``, ``ahrs``) whose ``[mounting.<sensor>]`` table a
+    ``sonarslam.toml``-format file has; none for a file that cannot be read
+    (:func:`sonarslam.datasets.config.load_dataset_config` names its problem)."""
+    if toml is None:
+        return set()
+    try:
+        data = tomllib.loads(Path(toml).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return set()
+    mounting = data.get("mounting", {})
+    return set(mounting) if isinstance(mounting, dict) else set()
+
+
+def _warn_identity_mountings(
+    bag: Path, mountings: dict[str, Mounting], files: list[str | Path | None]
+) -> None:
+    """A DataWarning naming each sensor left at the identity mounting when the others have a
+    source (the transforms or a file's table): one sensor forgotten among given ones is not
+    a choice the user made."""
+    given = set().union(*(_mounting_tables(f) for f in files))
+    missing = [
+        field.removesuffix("_mounting")
+        for role, field in MOUNTED_ROLES.items()
+        if role not in mountings and field.removesuffix("_mounting") not in given
+    ]
+    if missing and len(missing) < len(MOUNTED_ROLES):
+        tables = ", ".join(f"[mounting.{m}]" for m in missing)
+        warnings.warn(
+            f"{bag}: the {', '.join(missing)} mounting(s) are the identity: the bag's transforms"
+            f" and sonarslam.toml give the others but not these (write {tables} with x_m, y_m,"
+            " yaw_deg in sonarslam.toml, zeros if that is the truth)",
+            DataWarning,
+            stacklevel=3,
+        )
+
+
 def _with_mountings(
     config: DatasetConfig, mountings: dict[str, Mounting], toml: Path | None
 ) -> DatasetConfig:
     """``config`` with the transforms' mountings, except those a ``sonarslam.toml`` sets with a
     ``[mounting.<sensor>]`` table (the file wins, table by table)."""
-    tables: set[str] = set()
-    if toml is not None:
-        try:
-            data = tomllib.loads(toml.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
-            data = {}  # load_dataset_config names the problem
-        mounting = data.get("mounting", {})
-        tables = set(mounting) if isinstance(mounting, dict) else set()
+    tables = _mounting_tables(toml)
     changes: dict[str, Any] = {
         MOUNTED_ROLES[role]: m
         for role, m in mountings.items()

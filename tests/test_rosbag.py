@@ -261,6 +261,28 @@ def test_an_ned_heading_beside_an_enu_gyro_is_an_error(layout: Dataset, tmp_path
         open_bag(_write_ros1(layout, tmp_path / "enu.bag", _same))  # no error
 
 
+def test_a_mounting_left_out_among_given_ones_is_said(
+    short: Dataset, harbour: Path, tmp_path: Path
+) -> None:
+    """A sonarslam.toml that gives the sonar's mounting but not the DVL's nor the AHRS's leaves
+    those at the identity: said by name (the harbour's DVL is truly turned), not run silently;
+    the full file says nothing of the kind."""
+    bag = write_bag(short, tmp_path / "run.bag", "ros1")
+    full = (harbour / "sonarslam.toml").read_text(encoding="utf-8")
+    (tmp_path / "sonarslam.toml").write_text(_without_mountings(full, keep="sonar"))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", DataWarning)
+        open_bag(bag)
+    said = [str(w.message) for w in caught if "are the identity" in str(w.message)]
+    assert len(said) == 1 and "the dvl, ahrs mounting(s)" in said[0]
+    assert "[mounting.dvl], [mounting.ahrs]" in said[0]
+    (tmp_path / "sonarslam.toml").write_text(full)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", DataWarning)
+        open_bag(bag)
+    assert not [w for w in caught if "are the identity" in str(w.message)]
+
+
 def test_missing_role_wrong_type_and_truncated_bags_are_one_line(
     short: Dataset, bags: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
