@@ -13,8 +13,11 @@ GPS); :func:`open_bag` reads the four and makes them a
 ======  ==================================================  ====================================
 role    message types                                       what is taken
 ======  ==================================================  ====================================
-sonar   ``sensor_msgs/LaserScan`` (one beam a message)      ``angle_min`` (rad), ``intensities``;
-                                                            bin size ``range_max / n``
+sonar   ``sensor_msgs/LaserScan`` (one beam a message)      ``angle_min`` (rad, counter-clockwise
+                                                            about the frame's z: REP-103, so
+                                                            ``angle_sense = +1`` by default),
+                                                            ``intensities``; bin size
+                                                            ``range_max / n``
         ``ping360_sonar/SonarEcho``                         ``angle`` (rad), ``intensities``,
                                                             bin size ``range / number_of_samples``
         ``bluerobotics_sonar_msgs/SonarPing360``            ``angle`` (gradians), ``profile_data``,
@@ -65,6 +68,7 @@ from sonarslam.datasets.ros1bag import Ros1Bag
 from sonarslam.sonar.beam import Mounting
 
 __all__ = [
+    "bag_config",
     "ROLES",
     "ROLE_TYPES",
     "CLOCK_JUMP_S",
@@ -546,6 +550,12 @@ def _field(msg: Any, *names: str) -> Any:
     raise AttributeError(f"none of the fields {', '.join(names)}")
 
 
+#: Sonar types whose beam angle turns counter-clockwise about their frame's z axis (REP-103):
+#: a bag of these reads with ``[sonar] angle_sense = +1`` unless its ``sonarslam.toml`` says
+#: otherwise. The Ping360's types give the head's own angle (clockwise seen from above).
+REP103_SONAR_TYPES = ("sensor_msgs/msg/LaserScan", "marine_acoustic_msgs/msg/ProjectedSonarImage")
+
+
 def _sonar_row(msgtype: str, msg: Any) -> tuple[float, float, np.ndarray]:
     """(transducer angle rad, bin size m, intensities uint8) of one beam message."""
     if msgtype == "sensor_msgs/msg/LaserScan":
@@ -754,6 +764,8 @@ class BagRoles:
     dvl_sigma_mps : tuple of (float, int)
         The median and the count of the DVL messages' own finite 1-sigma (a covariance, or
         Water Linked's figure of merit; m/s); ``(nan, 0)`` without.
+    msgtypes : dict of str to str
+        Role -> the message type of its topic (``sensor_msgs/msg/LaserScan``).
     """
 
     bag: Path
@@ -768,6 +780,7 @@ class BagRoles:
     transforms: dict[tuple[str, str], Any]
     base_frame: str | None
     dvl_sigma_mps: tuple[float, int]
+    msgtypes: dict[str, str]
 
 
 def read_roles(
@@ -849,6 +862,7 @@ def read_roles(
         transforms=edges,
         base_frame=table.get("base_frame"),
         dvl_sigma_mps=sigma,
+        msgtypes={role: types[topic] for role, topic in found.items()},
     )
 
 
@@ -875,7 +889,10 @@ def open_bag(
     assert read.beams is not None and read.dvl is not None and read.attitude is not None
     mountings, tf_line = tf_mountings(p, read.frames, read.transforms, read.base_frame)
     toml = _beside(p, "sonarslam.toml")
-    config = _with_mountings(DatasetConfig(), mountings, toml)
+    base = DatasetConfig()
+    if read.msgtypes.get("sonar") in REP103_SONAR_TYPES:
+        base = replace(base, sonar=replace(base.sonar, angle_sense=1))
+    config = _with_mountings(base, mountings, toml)
     if toml is not None:
         config, calibration = load_dataset_config(toml, base=config), str(toml)
         if tf_line:
@@ -1258,6 +1275,7 @@ def _messages(store: Any, d: Dataset) -> Iterator[tuple[float, str, Any]]:
     cov36 = np.zeros(36)
     cov9 = np.zeros(9)
     beams = d.beams.shifted(-d.config.sonar_time_offset_s)
+    sense = d.config.sonar.angle_sense
 
     def head(t: float, frame: str) -> Any:
         return header(stamp=_stamp_of(store, t), frame_id=frame)
@@ -1316,7 +1334,8 @@ def _messages(store: Any, d: Dataset) -> Iterator[tuple[float, str, Any]]:
                 position_covariance_type=0,
             )
         else:
-            angle = float(beams.transducer_angle_rad[i])
+            # REP-103: the bearing in the sonar frame, counter-clockwise (bag_config)
+            angle = float(np.mod(sense * beams.transducer_angle_rad[i], 2.0 * math.pi))
             msg = T["sensor_msgs/msg/LaserScan"](
                 header=head(t, "sonar"),
                 angle_min=angle,
@@ -1374,8 +1393,16 @@ def _caves_messages(store: Any, d: Dataset) -> Iterator[tuple[float, str, Any]]:
             yield t, "tf", T["tf2_msgs/msg/TFMessage"](transforms=tfs)
 
 
+def bag_config(config: DatasetConfig) -> DatasetConfig:
+    """The configuration of a bag :func:`write_bag` writes of a dataset of ``config``: its
+    ``LaserScan`` angles are bearings in the sonar frame, counter-clockwise (REP-103), so
+    ``[sonar] angle_sense = +1``; the rest is ``config``'s."""
+    return replace(config, sonar=replace(config.sonar, angle_sense=1))
+
+
 def write_bag(d: Dataset, path: str | Path, kind: str, preset: str | None = None) -> Path:
-    """Write a dataset's beams (``LaserScan``), DVL (``TwistWithCovarianceStamped``), AHRS
+    """Write a dataset's beams (``LaserScan``, each angle the bearing in the sonar frame,
+    counter-clockwise: REP-103; :func:`bag_config`), DVL (``TwistWithCovarianceStamped``), AHRS
     (``Imu``) and GPS (``NavSatFix``) as a bag: ``kind`` ``"ros1"`` (``path`` a ``.bag`` file),
     ``"mcap"`` or ``"sqlite3"`` (``path`` a ROS 2 bag directory). Each message's receive time
     is its stamp. ``preset="caves"``: in the caves data set's shape instead

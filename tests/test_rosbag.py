@@ -15,12 +15,14 @@ from typing import Any
 import numpy as np
 import pytest
 
+from sonarslam.datasets.config import dump_dataset_config
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.rosbag import (
     CLOCK_JUMP_S,
     _messages,
     _stamp_of,
     _typestore,
+    bag_config,
     bag_topics,
     is_bag,
     open_bag,
@@ -55,8 +57,8 @@ def _bag(layout: Dataset, harbour: Path, folder: Path, kind: str) -> Path:
     path = folder / "run.bag" if kind == "ros1" else folder / "bag"
     write_bag(layout, path, kind)
     beside = folder if kind == "ros1" else path
-    for name in ("sonarslam.toml", "truth.json"):
-        shutil.copy(harbour / name, beside / name)
+    shutil.copy(harbour / "truth.json", beside / "truth.json")
+    (beside / "sonarslam.toml").write_text(dump_dataset_config(bag_config(layout.config)))
     return path
 
 
@@ -75,12 +77,20 @@ def test_a_bag_reads_as_the_directory(kind: str, bags: dict[str, Path], layout: 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DataWarning)
         d = open_dataset(bag)
-    assert d.config == layout.config
+    # REP-103 angles: the head turns the other way round, each beam's bearing is the same
+    assert d.config == bag_config(layout.config) and d.config.sonar.angle_sense == 1
     np.testing.assert_array_equal(d.beams.intensities, layout.beams.intensities)
     np.testing.assert_array_equal(d.beams.t_s, layout.beams.t_s)  # ns stamps of these times
-    np.testing.assert_allclose(
-        d.beams.transducer_angle_rad, layout.beams.transducer_angle_rad, rtol=0, atol=ANGLE_TOL_RAD
+    bearing_miss = np.angle(
+        np.exp(
+            1j
+            * (
+                d.config.sonar.bearing_rad(d.beams.transducer_angle_rad)
+                - layout.config.sonar.bearing_rad(layout.beams.transducer_angle_rad)
+            )
+        )
     )
+    assert np.max(np.abs(bearing_miss)) < ANGLE_TOL_RAD
     np.testing.assert_array_equal(d.dvl.v_mps, layout.dvl.v_mps)
     np.testing.assert_array_equal(d.dvl.valid, layout.dvl.valid)
     np.testing.assert_array_equal(d.attitude.t, layout.attitude.t)
@@ -564,8 +574,11 @@ def test_water_linked_and_marine_acoustic_dvls_and_a_projected_sonar_image(
         np.testing.assert_array_equal(d.dvl.valid, valid)
         np.testing.assert_array_equal(d.dvl.v_mps[valid], short.dvl.v_mps[valid])
         np.testing.assert_array_equal(d.beams.intensities, short.beams.intensities)
+        # both types give REP-103 angles: the bearings are the directory's
+        assert d.config.sonar.angle_sense == 1
+        got = d.config.sonar.bearing_rad(d.beams.transducer_angle_rad)
         miss = np.angle(
-            np.exp(1j * (d.beams.transducer_angle_rad - short.beams.transducer_angle_rad))
+            np.exp(1j * (got - short.config.sonar.bearing_rad(short.beams.transducer_angle_rad)))
         )
         assert np.max(np.abs(miss)) < 1e-6
         if dvl_type == "dvl_msgs/msg/DVL":  # fom 0.1 m/s above the neutral 0.05: said
