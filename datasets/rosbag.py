@@ -13,8 +13,11 @@ GPS); :func:`open_bag` reads the four and makes them a
 ======  ==================================================  ====================================
 role    message types                                       what is taken
 ======  ==================================================  ====================================
-sonar   ``sensor_msgs/LaserScan`` (one beam a message)      ``angle_min`` (rad), ``intensities``;
-                                                            bin size ``range_max / n``
+sonar   ``sensor_msgs/LaserScan`` (one beam a message)      ``angle_min`` (rad, counter-clockwise
+                                                            about the frame's z: REP-103, so
+                                                            ``angle_sense = +1`` by default),
+                                                            ``intensities``; bin size
+                                                            ``range_max / n``
         ``ping360_sonar/SonarEcho``                         ``angle`` (rad), ``intensities``,
                                                             bin size ``range / number_of_samples``
         ``bluerobotics_sonar_msgs/SonarPing360``            ``angle`` (gradians), ``profile_data``,
@@ -65,6 +68,7 @@ from sonarslam.datasets.ros1bag import Ros1Bag
 from sonarslam.sonar.beam import Mounting
 
 __all__ = [
+    "bag_config",
     "ROLES",
     "ROLE_TYPES",
     "CLOCK_JUMP_S",
@@ -551,6 +555,12 @@ def _field(msg: Any, *names: str) -> Any:
     raise AttributeError(f"none of the fields {', '.join(names)}")
 
 
+#: Sonar types whose beam angle turns counter-clockwise about their frame's z axis (REP-103):
+#: a bag of these reads with ``[sonar] angle_sense = +1`` unless its ``sonarslam.toml`` says
+#: otherwise. The Ping360's types give the head's own angle (clockwise seen from above).
+REP103_SONAR_TYPES = ("sensor_msgs/msg/LaserScan", "marine_acoustic_msgs/msg/ProjectedSonarImage")
+
+
 def _sonar_row(msgtype: str, msg: Any) -> tuple[float, float, np.ndarray]:
     """(transducer angle rad, bin size m, intensities uint8) of one beam message."""
     if msgtype == "sensor_msgs/msg/LaserScan":
@@ -612,9 +622,26 @@ def _dvl_row(msgtype: str, msg: Any) -> tuple[float, float, float, float]:
     return (vx if ok else 0.0), (vy if ok else 0.0), float(ok), sigma if ok else math.nan
 
 
+#: How far an IMU's orientation may be from a unit quaternion before it is not an orientation.
+QUATERNION_NORM_TOL = 0.05
+
+
 def _imu_row(msg: Any) -> tuple[float, float]:
+    """(yaw of ``orientation`` rad ENU, ``angular_velocity.z`` rad/s). Raises ValueError for a
+    message that gives no orientation (REP-145: ``orientation_covariance[0] = -1``, as raw IMU
+    topics publish) or one that is not a unit quaternion."""
+    if float(msg.orientation_covariance[0]) == -1.0:
+        raise ValueError(
+            "orientation_covariance[0] = -1: the IMU gives no orientation (REP-145; a raw IMU"
+            " topic such as /mavros/imu/data_raw): sonarslam needs the heading, name a topic"
+            " with the fused orientation ([topics] imu)"
+        )
     q = msg.orientation
-    yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+    x, y, z, w = float(q.x), float(q.y), float(q.z), float(q.w)
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if not abs(norm - 1.0) <= QUATERNION_NORM_TOL:
+        raise ValueError(f"orientation ({x:g}, {y:g}, {z:g}, {w:g}) is not a unit quaternion")
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
     return yaw, float(msg.angular_velocity.z)
 
 
@@ -744,6 +771,8 @@ class BagRoles:
     dvl_sigma_mps : tuple of (float, int)
         The median and the count of the DVL messages' own finite 1-sigma (a covariance, or
         Water Linked's figure of merit; m/s); ``(nan, 0)`` without.
+    msgtypes : dict of str to str
+        Role -> the message type of its topic (``sensor_msgs/msg/LaserScan``).
     """
 
     bag: Path
@@ -758,6 +787,7 @@ class BagRoles:
     transforms: dict[tuple[str, str], Any]
     base_frame: str | None
     dvl_sigma_mps: tuple[float, int]
+    msgtypes: dict[str, str]
 
 
 def read_roles(
@@ -839,6 +869,7 @@ def read_roles(
         transforms=edges,
         base_frame=table.get("base_frame"),
         dvl_sigma_mps=sigma,
+        msgtypes={role: types[topic] for role, topic in found.items()},
     )
 
 
@@ -865,7 +896,10 @@ def open_bag(
     assert read.beams is not None and read.dvl is not None and read.attitude is not None
     mountings, tf_line = tf_mountings(p, read.frames, read.transforms, read.base_frame)
     toml = _beside(p, "sonarslam.toml")
-    config = _with_mountings(DatasetConfig(), mountings, toml)
+    base = DatasetConfig()
+    if read.msgtypes.get("sonar") in REP103_SONAR_TYPES:
+        base = replace(base, sonar=replace(base.sonar, angle_sense=1))
+    config = _with_mountings(base, mountings, toml)
     if toml is not None:
         config, calibration = load_dataset_config(toml, base=config), str(toml)
         if tf_line:
@@ -879,6 +913,8 @@ def open_bag(
     if config_override is not None:
         config = load_dataset_config(config_override, base=config)
         calibration = f"{calibration}; over it {config_override}"
+    if calibration != NEUTRAL_CALIBRATION:  # a neutral run is said whole above
+        _warn_identity_mountings(p, mountings, [toml, config_override])
     dvl_note = _dvl_sigma_note(p, read.topics["dvl"], read.dvl_sigma_mps, config)
     if dvl_note:
         calibration = f"{calibration}; {dvl_note}"
@@ -967,9 +1003,53 @@ def _dvl_sigma_note(bag: Path, topic: str, sigma: tuple[float, int], config: Dat
     return note
 
 
+#: The gyro's yaw rate and the orientation's heading change must agree in sign: a correlation
+#: below this over the run is an orientation in another convention than the gyro's (NED).
+MIN_GYRO_HEADING_CORRELATION = -0.5
+#: The windows (s) over which the heading's and the gyro's changes are compared.
+HEADING_SENSE_WINDOW_S = 5.0
+#: Turning (rad) the gyro must show before the check says anything.
+MIN_TURN_FOR_SENSE_RAD = math.radians(90.0)
+
+
 def _imu(bag: Path, col: _Column) -> AttitudeSeries:
     t, fields, _ = col.arrays(bag)
-    return AttitudeSeries(t, fields["yaw"], fields["rate"], bag)
+    yaw, rate = fields["yaw"], fields["rate"]
+    _check_heading_sense(bag, col.topic, t, yaw, rate)
+    return AttitudeSeries(t, yaw, rate, bag)
+
+
+def _check_heading_sense(
+    bag: Path, topic: str, t_s: np.ndarray, yaw_rad: np.ndarray, rate_rad_per_s: np.ndarray
+) -> None:
+    """A DataError when the orientation's heading turns against the gyro's ``z`` rate over the
+    run: the correlation of their changes over :data:`HEADING_SENSE_WINDOW_S` windows (the
+    heading's own noise averaged out) below :data:`MIN_GYRO_HEADING_CORRELATION` is an
+    orientation in NED (heading clockwise) beside an ENU gyro, or the other way. Silent when
+    the gyro reads nothing or the run hardly turns."""
+    if t_s.size < 3 or not t_s[-1] - t_s[0] > 2.0 * HEADING_SENSE_WINDOW_S:
+        return
+    gyro = np.concatenate(
+        [[0.0], np.cumsum(0.5 * (rate_rad_per_s[1:] + rate_rad_per_s[:-1]) * np.diff(t_s))]
+    )
+    edges = np.arange(t_s[0], t_s[-1], HEADING_SENSE_WINDOW_S)
+    d_heading = np.diff(np.interp(edges, t_s, np.unwrap(yaw_rad)))
+    d_gyro = np.diff(np.interp(edges, t_s, gyro))
+    ok = np.isfinite(d_heading) & np.isfinite(d_gyro)
+    d_heading, d_gyro = d_heading[ok], d_gyro[ok]
+    power = float(np.sqrt(np.sum(d_heading**2) * np.sum(d_gyro**2)))
+    if not power > 0.0 or float(np.sum(np.abs(d_gyro))) < MIN_TURN_FOR_SENSE_RAD:
+        return
+    correlation = float(np.sum(d_heading * d_gyro)) / power
+    if correlation < MIN_GYRO_HEADING_CORRELATION:
+        raise DataError(
+            bag,
+            None,
+            f"topic {topic} (imu): the orientation's heading turns against angular_velocity.z"
+            f" (correlation {correlation:+.2f} over the run): the orientation is not ENU"
+            " (REP-103: heading counter-clockwise from East; NED's turns clockwise) or the gyro"
+            " is not; convert them to one convention",
+        )
 
 
 def _gps(bag: Path, col: _Column) -> GpsSeries:
@@ -1095,19 +1175,49 @@ def tf_mountings(
     return out, line
 
 
+def _mounting_tables(toml: str | Path | None) -> set[str]:
+    """The sensors (``sonar``, ``dvl``, ``ahrs``) whose ``[mounting.<sensor>]`` table a
+    ``sonarslam.toml``-format file has; none for a file that cannot be read
+    (:func:`sonarslam.datasets.config.load_dataset_config` names its problem)."""
+    if toml is None:
+        return set()
+    try:
+        data = tomllib.loads(Path(toml).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return set()
+    mounting = data.get("mounting", {})
+    return set(mounting) if isinstance(mounting, dict) else set()
+
+
+def _warn_identity_mountings(
+    bag: Path, mountings: dict[str, Mounting], files: list[str | Path | None]
+) -> None:
+    """A DataWarning naming each sensor left at the identity mounting when the others have a
+    source (the transforms or a file's table): one sensor forgotten among given ones is not
+    a choice the user made."""
+    given = set().union(*(_mounting_tables(f) for f in files))
+    missing = [
+        field.removesuffix("_mounting")
+        for role, field in MOUNTED_ROLES.items()
+        if role not in mountings and field.removesuffix("_mounting") not in given
+    ]
+    if missing and len(missing) < len(MOUNTED_ROLES):
+        tables = ", ".join(f"[mounting.{m}]" for m in missing)
+        warnings.warn(
+            f"{bag}: the {', '.join(missing)} mounting(s) are the identity: the bag's transforms"
+            f" and sonarslam.toml give the others but not these (write {tables} with x_m, y_m,"
+            " yaw_deg in sonarslam.toml, zeros if that is the truth)",
+            DataWarning,
+            stacklevel=3,
+        )
+
+
 def _with_mountings(
     config: DatasetConfig, mountings: dict[str, Mounting], toml: Path | None
 ) -> DatasetConfig:
     """``config`` with the transforms' mountings, except those a ``sonarslam.toml`` sets with a
     ``[mounting.<sensor>]`` table (the file wins, table by table)."""
-    tables: set[str] = set()
-    if toml is not None:
-        try:
-            data = tomllib.loads(toml.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
-            data = {}  # load_dataset_config names the problem
-        mounting = data.get("mounting", {})
-        tables = set(mounting) if isinstance(mounting, dict) else set()
+    tables = _mounting_tables(toml)
     changes: dict[str, Any] = {
         MOUNTED_ROLES[role]: m
         for role, m in mountings.items()
@@ -1172,6 +1282,7 @@ def _messages(store: Any, d: Dataset) -> Iterator[tuple[float, str, Any]]:
     cov36 = np.zeros(36)
     cov9 = np.zeros(9)
     beams = d.beams.shifted(-d.config.sonar_time_offset_s)
+    sense = d.config.sonar.angle_sense
 
     def head(t: float, frame: str) -> Any:
         return header(stamp=_stamp_of(store, t), frame_id=frame)
@@ -1230,7 +1341,8 @@ def _messages(store: Any, d: Dataset) -> Iterator[tuple[float, str, Any]]:
                 position_covariance_type=0,
             )
         else:
-            angle = float(beams.transducer_angle_rad[i])
+            # REP-103: the bearing in the sonar frame, counter-clockwise (bag_config)
+            angle = float(np.mod(sense * beams.transducer_angle_rad[i], 2.0 * math.pi))
             msg = T["sensor_msgs/msg/LaserScan"](
                 header=head(t, "sonar"),
                 angle_min=angle,
@@ -1288,8 +1400,16 @@ def _caves_messages(store: Any, d: Dataset) -> Iterator[tuple[float, str, Any]]:
             yield t, "tf", T["tf2_msgs/msg/TFMessage"](transforms=tfs)
 
 
+def bag_config(config: DatasetConfig) -> DatasetConfig:
+    """The configuration of a bag :func:`write_bag` writes of a dataset of ``config``: its
+    ``LaserScan`` angles are bearings in the sonar frame, counter-clockwise (REP-103), so
+    ``[sonar] angle_sense = +1``; the rest is ``config``'s."""
+    return replace(config, sonar=replace(config.sonar, angle_sense=1))
+
+
 def write_bag(d: Dataset, path: str | Path, kind: str, preset: str | None = None) -> Path:
-    """Write a dataset's beams (``LaserScan``), DVL (``TwistWithCovarianceStamped``), AHRS
+    """Write a dataset's beams (``LaserScan``, each angle the bearing in the sonar frame,
+    counter-clockwise: REP-103; :func:`bag_config`), DVL (``TwistWithCovarianceStamped``), AHRS
     (``Imu``) and GPS (``NavSatFix``) as a bag: ``kind`` ``"ros1"`` (``path`` a ``.bag`` file),
     ``"mcap"`` or ``"sqlite3"`` (``path`` a ROS 2 bag directory). Each message's receive time
     is its stamp. ``preset="caves"``: in the caves data set's shape instead

@@ -540,10 +540,10 @@ def _files(root: Path) -> dict[str, bytes]:
 def bag_seeds(work: Path, dataset_seed: Seed) -> dict[str, Seed]:
     """A few seconds of the simulated harbour as a ROS 1 bag, a ROS 2 MCAP bag and a ROS 2
     sqlite3 bag (each with the run's sonarslam.toml), for the ``open_bag`` targets."""
-    from sonarslam.datasets.rosbag import write_bag
+    from sonarslam.datasets.rosbag import bag_config, write_bag
 
     d = _seed_dataset(work, dataset_seed.files)
-    toml = dataset_seed.files["sonarslam.toml"]
+    toml = dump_dataset_config(bag_config(d.config)).encode()  # REP-103 angles
     out = {}
     for kind in ("ros1", "mcap", "sqlite3"):
         folder = work / f"bag_{kind}"

@@ -10,16 +10,19 @@ import shutil
 import warnings
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
+from sonarslam.datasets.config import dump_dataset_config
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.rosbag import (
     CLOCK_JUMP_S,
     _messages,
     _stamp_of,
     _typestore,
+    bag_config,
     bag_topics,
     is_bag,
     open_bag,
@@ -54,8 +57,8 @@ def _bag(layout: Dataset, harbour: Path, folder: Path, kind: str) -> Path:
     path = folder / "run.bag" if kind == "ros1" else folder / "bag"
     write_bag(layout, path, kind)
     beside = folder if kind == "ros1" else path
-    for name in ("sonarslam.toml", "truth.json"):
-        shutil.copy(harbour / name, beside / name)
+    shutil.copy(harbour / "truth.json", beside / "truth.json")
+    (beside / "sonarslam.toml").write_text(dump_dataset_config(bag_config(layout.config)))
     return path
 
 
@@ -74,12 +77,20 @@ def test_a_bag_reads_as_the_directory(kind: str, bags: dict[str, Path], layout: 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DataWarning)
         d = open_dataset(bag)
-    assert d.config == layout.config
+    # REP-103 angles: the head turns the other way round, each beam's bearing is the same
+    assert d.config == bag_config(layout.config) and d.config.sonar.angle_sense == 1
     np.testing.assert_array_equal(d.beams.intensities, layout.beams.intensities)
     np.testing.assert_array_equal(d.beams.t_s, layout.beams.t_s)  # ns stamps of these times
-    np.testing.assert_allclose(
-        d.beams.transducer_angle_rad, layout.beams.transducer_angle_rad, rtol=0, atol=ANGLE_TOL_RAD
+    bearing_miss = np.angle(
+        np.exp(
+            1j
+            * (
+                d.config.sonar.bearing_rad(d.beams.transducer_angle_rad)
+                - layout.config.sonar.bearing_rad(layout.beams.transducer_angle_rad)
+            )
+        )
     )
+    assert np.max(np.abs(bearing_miss)) < ANGLE_TOL_RAD
     np.testing.assert_array_equal(d.dvl.v_mps, layout.dvl.v_mps)
     np.testing.assert_array_equal(d.dvl.valid, layout.dvl.valid)
     np.testing.assert_array_equal(d.attitude.t, layout.attitude.t)
@@ -130,9 +141,15 @@ def test_simulate_writes_a_bag(tmp_path: Path) -> None:
     assert len(d.beams) > 100 and d.truth is not None
 
 
-def _write_ros1(d: Dataset, path: Path, change: Callable[[str, int, float], float]) -> Path:
+def _write_ros1(
+    d: Dataset,
+    path: Path,
+    change: Callable[[str, int, float], float],
+    edit: Callable[[str, int, Any], None] | None = None,
+) -> Path:
     """``d`` as a ROS 1 bag whose header stamps are ``change(role, index, t)`` (the receive
-    times stay ``t``): out-of-order stamps and clock jumps."""
+    times stay ``t``): out-of-order stamps and clock jumps; ``edit(role, index, msg)`` changes a
+    message in place before it is written."""
     from rosbags.rosbag1 import Writer
 
     store = _typestore()
@@ -147,6 +164,8 @@ def _write_ros1(d: Dataset, path: Path, change: Callable[[str, int, float], floa
         conns = {r: w.add_connection(f"/{r}", ty, typestore=store) for r, ty in types.items()}
         for t, role, msg in _messages(store, d):
             msg.header.stamp = _stamp_of(store, change(role, counts[role], t))
+            if edit is not None:
+                edit(role, counts[role], msg)
             counts[role] += 1
             w.write(conns[role], int(round(t * 1e9)), store.serialize_ros1(msg, types[role]))
     return path
@@ -194,6 +213,84 @@ def test_a_clock_jump_is_an_error_naming_the_topic_and_message(
     ):
         open_bag(bag)
     assert CLOCK_JUMP_S == 1.0
+
+
+def _same(role: str, i: int, t: float) -> float:
+    return t
+
+
+def test_an_imu_without_orientation_is_an_error_naming_the_message(
+    short: Dataset, tmp_path: Path
+) -> None:
+    """A raw IMU topic (REP-145: orientation_covariance[0] = -1, a zero quaternion) read as a
+    heading would be a heading of 0 for the whole run: refused at its first message."""
+
+    def raw(role: str, i: int, msg: Any) -> None:
+        if role == "imu":
+            msg.orientation_covariance[0] = -1.0
+            msg.orientation.x = msg.orientation.y = msg.orientation.z = msg.orientation.w = 0.0
+
+    bag = _write_ros1(short, tmp_path / "raw.bag", _same, raw)
+    with pytest.raises(
+        DataError, match=r"raw.bag: topic /imu \(sensor_msgs/msg/Imu\) message 0: .*REP-145"
+    ):
+        open_bag(bag)
+
+    def zero(role: str, i: int, msg: Any) -> None:
+        if role == "imu" and i == 7:
+            msg.orientation.x = msg.orientation.y = msg.orientation.z = msg.orientation.w = 0.0
+
+    bag = _write_ros1(short, tmp_path / "zero.bag", _same, zero)
+    with pytest.raises(DataError, match=r"message 7: orientation \(0, 0, 0, 0\) is not a unit"):
+        open_bag(bag)
+
+
+def test_an_ned_heading_beside_an_enu_gyro_is_an_error(layout: Dataset, tmp_path: Path) -> None:
+    """An orientation whose heading is NED's (clockwise from North) beside the ENU gyro turns
+    against it: refused, where it would have been a mirrored trajectory without a word. The
+    harbour's own bag (both ENU) passes the same check."""
+    turned = float(np.sum(np.abs(np.diff(np.unwrap(layout.attitude.yaw_rad)))))
+    assert turned > math.radians(180.0)  # the check has turns to judge
+
+    def ned(role: str, i: int, msg: Any) -> None:
+        if role == "imu":
+            q = msg.orientation
+            yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+            heading = 0.5 * math.pi - yaw
+            q.x, q.y, q.z, q.w = 0.0, 0.0, math.sin(0.5 * heading), math.cos(0.5 * heading)
+
+    bag = _write_ros1(layout, tmp_path / "ned.bag", _same, ned)
+    with pytest.raises(
+        DataError,
+        match=r"ned.bag: topic /imu \(imu\): the orientation's heading"
+        r" turns against angular_velocity.z \(correlation -[01]\.",
+    ):
+        open_bag(bag)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        open_bag(_write_ros1(layout, tmp_path / "enu.bag", _same))  # no error
+
+
+def test_a_mounting_left_out_among_given_ones_is_said(
+    short: Dataset, harbour: Path, tmp_path: Path
+) -> None:
+    """A sonarslam.toml that gives the sonar's mounting but not the DVL's nor the AHRS's leaves
+    those at the identity: said by name (the harbour's DVL is truly turned), not run silently;
+    the full file says nothing of the kind."""
+    bag = write_bag(short, tmp_path / "run.bag", "ros1")
+    full = (harbour / "sonarslam.toml").read_text(encoding="utf-8")
+    (tmp_path / "sonarslam.toml").write_text(_without_mountings(full, keep="sonar"))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", DataWarning)
+        open_bag(bag)
+    said = [str(w.message) for w in caught if "are the identity" in str(w.message)]
+    assert len(said) == 1 and "the dvl, ahrs mounting(s)" in said[0]
+    assert "[mounting.dvl], [mounting.ahrs]" in said[0]
+    (tmp_path / "sonarslam.toml").write_text(full)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", DataWarning)
+        open_bag(bag)
+    assert not [w for w in caught if "are the identity" in str(w.message)]
 
 
 def test_missing_role_wrong_type_and_truncated_bags_are_one_line(
@@ -477,8 +574,11 @@ def test_water_linked_and_marine_acoustic_dvls_and_a_projected_sonar_image(
         np.testing.assert_array_equal(d.dvl.valid, valid)
         np.testing.assert_array_equal(d.dvl.v_mps[valid], short.dvl.v_mps[valid])
         np.testing.assert_array_equal(d.beams.intensities, short.beams.intensities)
+        # both types give REP-103 angles: the bearings are the directory's
+        assert d.config.sonar.angle_sense == 1
+        got = d.config.sonar.bearing_rad(d.beams.transducer_angle_rad)
         miss = np.angle(
-            np.exp(1j * (d.beams.transducer_angle_rad - short.beams.transducer_angle_rad))
+            np.exp(1j * (got - short.config.sonar.bearing_rad(short.beams.transducer_angle_rad)))
         )
         assert np.max(np.abs(miss)) < 1e-6
         if dvl_type == "dvl_msgs/msg/DVL":  # fom 0.1 m/s above the neutral 0.05: said

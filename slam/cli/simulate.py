@@ -8,8 +8,9 @@ import tempfile
 import warnings
 from pathlib import Path
 
+from sonarslam.datasets.config import dump_dataset_config
 from sonarslam.datasets.errors import DataWarning
-from sonarslam.datasets.rosbag import write_bag
+from sonarslam.datasets.rosbag import bag_config, write_bag
 from sonarslam.datasets.simulator import simulate
 from sonarslam.datasets.simulator.ping360 import simulate_ping360
 from sonarslam.datasets.source import open_dataset
@@ -61,7 +62,7 @@ def command(args: argparse.Namespace) -> int:
                 out.rmdir()  # an empty directory (check_output_dir): rosbags creates its own
             bag = write_bag(dataset, out, args.bag, args.preset)
         shutil.copy(Path(layout) / "truth.json", out / "truth.json")
-        toml = (Path(layout) / "sonarslam.toml").read_text(encoding="utf-8")
+        toml = dump_dataset_config(bag_config(dataset.config))  # REP-103 angles
         if args.preset is not None:  # the mountings are the bag's transforms
             toml = _without_mountings(toml)
         (out / "sonarslam.toml").write_text(toml, encoding="utf-8")
