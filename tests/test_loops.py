@@ -80,3 +80,20 @@ def test_run_records_the_loops_of_the_run_and_of_dead_reckoning(
     with pytest.raises(SystemExit, match="2"):
         main(["run", str(nogps), "--out", str(tmp_path / "bad"), "--loop", "200,20"])
     assert "0 <= T0 < T1" in capsys.readouterr().err
+
+
+def test_report_without_gps_has_provenance_and_no_empty_figures(
+    nogps: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A report of runs without GPS lists their provenance, and no "## Figures" heading with
+    nothing under it (their figures are in their own section)."""
+    run = tmp_path / "dr"
+    assert main(["run", str(nogps), "--backend", "dr", "--out", str(run), "--quiet"]) == 0
+    assert main(["report", str(run), "--out", str(tmp_path / "R")]) == 0
+    text = (tmp_path / "R" / "report.md").read_text()
+    provenance = text.split("## Provenance")[1]
+    row = next(x for x in provenance.splitlines() if "(`dr`)" in x)
+    commit = json.loads((run / "metrics.json").read_text())["provenance"]["settings_sha256"]
+    assert row.startswith("| dr (`dr`) |") and commit[:16] in row
+    assert "## Figures" not in text
+    assert "![loops_nogps](loops_nogps.png)" in text
