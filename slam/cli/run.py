@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from sonarslam.slam.run.presets import parse_settings
-from sonarslam.slam.run.run import loop_line, run, summary_line
+from sonarslam.slam.run.run import loop_line, run, smoothed_lines, summary_line
 
 
 def command(args: argparse.Namespace) -> int:
@@ -30,6 +30,8 @@ def command(args: argparse.Namespace) -> int:
     if "extractor_preset" in m:
         print(f"extractor preset: {m['extractor_preset']} (slam/run/presets.py)")
     print(summary_line(m))
+    for line in smoothed_lines(m):
+        print(line)
     if "loops" in m:
         print(loop_line(m))
     if "health_line" in m:

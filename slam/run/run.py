@@ -61,6 +61,7 @@ __all__ = [
     "run_backend",
     "run",
     "summary_line",
+    "smoothed_lines",
     "results_table",
 ]
 
@@ -498,6 +499,32 @@ def summary_line(metrics: dict[str, Any]) -> str:
         f"over {m['ate_n']} fixes; {m['data_s']:.0f} s of data in {m['wall_s']:.2f} s "
         f"({m['realtime_factor']:.0f}x real time)"
     )
+
+
+def smoothed_lines(metrics: dict[str, Any]) -> list[str]:
+    """A line each for a factor graph's smoothed and batch trajectories (``--batch``) in
+    :func:`summary_line`'s terms: against the truth (simulated runs), against GPS over the sonar
+    span and the whole run; none for a run without them."""
+    lines = []
+    for name in ("smoothed", "batch"):
+        f = _row_figures(metrics, name)
+        parts = []
+        if np.isfinite(f["truth"]):
+            parts.append(
+                f"against the truth ATE mean {f['truth']:.2f} m, max {f['truth_max']:.2f}"
+                f" (rigidly aligned {f['truth_aligned']:.2f})"
+            )
+        gps = []
+        if np.isfinite(f["sonar"]):
+            gps.append(f"ATE over the sonar span mean {f['sonar']:.2f} m, max {f['sonar_max']:.2f}")
+        if np.isfinite(f["whole"]):
+            gps.append(f"whole run ATE mean {f['whole']:.2f} m, max {f['whole_max']:.2f}")
+        if gps:
+            against = "against the simulated GPS: " if parts else ""
+            parts.append(against + "; ".join(gps))
+        if parts:
+            lines.append(f"{metrics['backend']} {name}: " + "; ".join(parts))
+    return lines
 
 
 def _row_figures(m: dict[str, Any], name: str | None) -> dict[str, float]:
