@@ -38,6 +38,8 @@ def command(args: argparse.Namespace) -> int:
         print(m["health_line"])
     out = result.out_dir.resolve() if result.out_dir else Path(args.out)
     print(f"outputs: {out} ({', '.join(sorted(p.name for p in result.files))})")
+    for note in result.notes:
+        print(f"note: {note}")
     if args.strict and m.get("health_ok") is False:
         print(
             f"sonarslam run: error: --strict: {m['health_issues']} health issue(s), first:"

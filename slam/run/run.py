@@ -95,6 +95,9 @@ class RunResult:
         Where the files were written (None: nothing written).
     files : list of Path
         The files this run wrote there.
+    notes : list of str
+        Lines for the terminal about what the files hold (``graph.g2o``: what the format cannot
+        hold, expected of it).
     figures : RunMetrics or None
         The typed figures ``metrics`` is written from (None for a result made elsewhere).
     """
@@ -108,6 +111,7 @@ class RunResult:
     out_dir: Path | None = None
     files: list[Path] = field(default_factory=list)
     figures: RunMetrics | None = None
+    notes: list[str] = field(default_factory=list)
 
 
 def run_backend(
@@ -419,6 +423,7 @@ def run(
         result.metrics,
         result.closed_loop,
         result.trajectories,
+        result.notes,
     )
     result.out_dir = Path(out_dir)
     return result
