@@ -31,7 +31,14 @@ def command(args: argparse.Namespace) -> int:
         args.source, config_override=args.config, topics_file=args.topics, nav=args.nav
     )
     t0, t1 = d.nav_span_s
-    print(f"{d.name}: {d.root}")
+    kind = (
+        "ROS bag"
+        if is_bag(d.root)
+        else "Ping Viewer log"
+        if is_ping360_log(d.root)
+        else "logs in the marina layout"
+    )
+    print(f"{d.name}: {kind} at {d.root.resolve()}; calibration: {d.calibration}")
     if is_ping360_log(d.root):
         c = d.report.counts
         dropped = {
