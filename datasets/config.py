@@ -412,9 +412,14 @@ def _tables(p: Path, text: str, data: dict[str, Any]) -> dict[str, dict[str, Any
         outer, _, last = name.rpartition(".")
         line = toml_line(text, outer, last) or toml_line(text, name)
         if name not in _SCHEMA and name != "mounting":
-            tops = sorted({k.split(".")[0] for k in _SCHEMA})
+            # the tables allowed where the unknown one is: [mounting]'s own, or the top level's
+            allowed = sorted(
+                {k[len(outer) + 1 :] for k in _SCHEMA if k.startswith(f"{outer}.")}
+                if outer
+                else {k.split(".")[0] for k in _SCHEMA}
+            )
             where = f"[{outer}]" if outer else "top level"
-            raise DataError(p, line, f"unknown key {last!r} in {where}; allowed: {tops}")
+            raise DataError(p, line, f"unknown key {last!r} in {where}; allowed: {allowed}")
         if not isinstance(table, dict):
             raise DataError(
                 p, line, f"[{name}] must be a table, got {table!r} ({type(table).__name__})"

@@ -36,7 +36,8 @@ from sonarslam.datasets.keyframes import read_keyframes
 from sonarslam.datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti, read_setup
 from sonarslam.datasets.ping360 import is_ping360_log, open_ping360
 from sonarslam.datasets.records import BeamSeries
-from sonarslam.datasets.rosbag import is_bag, open_bag
+from sonarslam.datasets.rosbag import TOPIC_PRESETS, is_bag, open_bag
+from sonarslam.datasets.toml import read_toml
 
 __all__ = [
     "Dataset",
@@ -47,6 +48,7 @@ __all__ = [
     "is_marina",
     "NEUTRAL_CALIBRATION",
     "check_overlap",
+    "check_toml_inputs",
 ]
 
 ENV_VAR = "SONARSLAM_DATA"
@@ -145,10 +147,12 @@ def open_dataset(
     """
     root = resolve_source(source)
     if is_ping360_log(root):
+        check_toml_inputs(root, topics_file)
         return open_ping360(root, config_override, topics_file, nav)
     if nav is not None:
         raise DataError(Path(nav), None, "--nav is for a Ping Viewer .bin log")
     if is_bag(root):
+        check_toml_inputs(root, topics_file)
         return open_bag(root, config_override, topics_file)
     if topics_file is not None:
         raise DataError(
@@ -180,6 +184,18 @@ def open_dataset(
         report=report,
         calibration=calibration,
     )
+
+
+def check_toml_inputs(root: Path, topics_file: str | Path | None) -> None:
+    """Read the ``--topics`` file (unless a preset's name) and a bag's own ``sonarslam.toml`` as
+    TOML before the readers take their ``[topics]``: a missing file or a syntax error is then a
+    :class:`DataError` as ``--config``'s (``file not found``, the syntax error's line)."""
+    if topics_file is not None and str(topics_file) not in TOPIC_PRESETS:
+        read_toml(Path(topics_file))
+    if is_bag(root):
+        beside = (root if root.is_dir() else root.parent) / "sonarslam.toml"
+        if beside.is_file():
+            read_toml(beside)
 
 
 def is_marina(root: Path) -> bool:

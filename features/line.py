@@ -32,6 +32,8 @@ class LineFeature:
         Ends of the segment seen by the voters, rows of points in frame R (m).
     n_voters : int
         Bins that voted for the line (removed from the store after the vote).
+    z : ndarray, shape (2,)
+        Property: ``(rho_m, theta_rad)``, the measurement a back end takes with ``cov``.
     """
 
     t: float

@@ -264,6 +264,32 @@ def test_a_skipped_step_is_refused_by_name() -> None:
         assoc.applied(_belief(wTb, lines_w))
 
 
+def test_a_belief_in_degrees_is_refused_by_name() -> None:
+    """A yaw or a line's theta beyond 2 pi is degrees given for radians: refused, naming the
+    field; a covariance that is not one likewise. (A yaw of 90 "degrees" was taken as 90 rad
+    and changed how many landmarks the association made.)"""
+    lines_w = np.array([[5.0, 0.5], [3.0, -2.0]])
+    cov = np.eye(7)
+    assert WorldBelief(np.array([1.0, 2.0, 2.0 * np.pi]), lines_w, cov).k == 2
+    with pytest.raises(ValueError, match=r"WorldBelief.wTb's yaw must be in radians .* 90\.0"):
+        WorldBelief(np.array([1.0, 2.0, 90.0]), lines_w, cov)
+    with pytest.raises(ValueError, match=r"lines_w's theta must be in radians .* 45\.0 at row 1"):
+        WorldBelief(np.array([1.0, 2.0, 0.5]), np.array([[5.0, 0.5], [3.0, 45.0]]), cov)
+    skew = np.eye(7)
+    skew[0, 1] = 0.5
+    with pytest.raises(ValueError, match="WorldBelief.cov must be a covariance"):
+        WorldBelief(np.array([1.0, 2.0, 0.5]), lines_w, skew)
+    with pytest.raises(ValueError, match="WorldBelief.cov must be a covariance"):
+        WorldBelief(np.array([1.0, 2.0, 0.5]), lines_w, -np.eye(7))
+
+
+def test_line_feature_documents_its_measurement() -> None:
+    from sonarslam.features.line import LineFeature
+
+    doc = inspect.getdoc(LineFeature) or ""
+    assert "z : ndarray, shape (2,)" in doc and "``(rho_m, theta_rad)``" in doc
+
+
 def test_the_landmark_layer_refuses_a_missing_after_previous() -> None:
     """The trial's duplicate: a back end that passed ``after_previous=None`` after a vote got
     a fifth landmark for four walls; the layer now names the parameter instead."""

@@ -80,3 +80,72 @@ def test_run_records_the_loops_of_the_run_and_of_dead_reckoning(
     with pytest.raises(SystemExit, match="2"):
         main(["run", str(nogps), "--out", str(tmp_path / "bad"), "--loop", "200,20"])
     assert "0 <= T0 < T1" in capsys.readouterr().err
+
+
+def test_report_without_gps_has_provenance_and_no_empty_figures(
+    nogps: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A report of runs without GPS lists their provenance, and no "## Figures" heading with
+    nothing under it (their figures are in their own section)."""
+    run = tmp_path / "dr"
+    assert main(["run", str(nogps), "--backend", "dr", "--out", str(run), "--quiet"]) == 0
+    assert main(["report", str(run), "--out", str(tmp_path / "R")]) == 0
+    text = (tmp_path / "R" / "report.md").read_text()
+    provenance = text.split("## Provenance")[1]
+    row = next(x for x in provenance.splitlines() if "(`dr`)" in x)
+    commit = json.loads((run / "metrics.json").read_text())["provenance"]["settings_sha256"]
+    assert row.startswith("| dr (`dr`) |") and commit[:16] in row
+    assert "## Figures" not in text
+    assert "![loops_nogps](loops_nogps.png)" in text
+
+
+def test_every_run_of_a_dataset_is_judged_at_the_same_loops(
+    nogps: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The loops are found along dead reckoning, not along the run judged: a dr and an EKF run
+    of one dataset share loops and references (each the truth's relative pose to the
+    registration's tolerance), and dead reckoning's error at them is one figure."""
+    metrics = {}
+    for backend in ("dr", "ekf"):
+        out = tmp_path / backend
+        assert main(["run", str(nogps), "--backend", backend, "--out", str(out), "--quiet"]) == 0
+        metrics[backend] = json.loads((out / "metrics.json").read_text())
+    out = capsys.readouterr().out
+    assert "references: scan registrations along dead reckoning, the same for every run" in out
+    dr, ekf = metrics["dr"]["loops"], metrics["ekf"]["loops"]
+    assert len(dr) >= 2 and [(x["t0_s"], x["t1_s"], x["t0Tt1"]) for x in dr] == [
+        (x["t0_s"], x["t1_s"], x["t0Tt1"]) for x in ekf
+    ]
+    assert [x["error_m"]["run"] for x in dr] == [x["error_m"]["dr"] for x in ekf]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        truth = truth_trajectory(open_dataset(nogps))
+    for loop in ekf:
+        p = truth.poses(np.array([loop["t0_s"], loop["t1_s"]]))
+        assert np.hypot(*(between(*p)[:2] - loop["t0Tt1"][:2])) < REGISTRATION_TOL_M
+        if loop["reference_free_directions"] == 0:  # else the guess there: no own accuracy
+            assert 0.0 < loop["reference_sigma_m"] < REGISTRATION_TOL_M, loop
+    sigmas = [x["reference_sigma_m"] for x in ekf if x["reference_free_directions"] == 0]
+    assert len(sigmas) + metrics["ekf"]["loops_with_free_direction"] == len(ekf)
+    # none states an accuracy when every registration left a direction free (this run's two)
+    expected = float(np.mean(sigmas)) if sigmas else None
+    assert metrics["ekf"]["loop_reference_sigma_m"] == pytest.approx(expected)
+
+
+def test_a_loop_error_beyond_the_search_radius_is_warned(nogps: Path) -> None:
+    """An estimate 50 m off from the middle of the run on (as a wrong mounting's 28-31 m)
+    is named with the loop and the radius."""
+    from sonarslam.slam.io.trajectory import Trajectory
+    from sonarslam.slam.run.run import RunResult, loop_figures
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        d = open_dataset(nogps)
+    dr = dead_reckoning_trajectory(d)
+    poses = dr.poses_wTb.copy()
+    poses[dr.t_s > 0.5 * (dr.t_s[0] + dr.t_s[-1]), 0] += 50.0
+    result = RunResult("ekf", Trajectory(dr.t_s, poses), {})
+    with pytest.warns(UserWarning, match=r"ekf's loop-closure error 5\d\.\d m .* exceeds the 20 m"):
+        figures = loop_figures(d, result, [])
+    assert max(e.position_m for e in figures.errors[""]) > 20.0
+    assert max(e.position_m for e in figures.errors["dr"]) < 20.0

@@ -9,6 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from sonarslam.datasets.config import DatasetConfig, dump_dataset_config
+from sonarslam.datasets.errors import DataError
 from sonarslam.datasets.ping360 import is_ping360_log, ping360_table
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.settings import SettingError
@@ -158,9 +159,20 @@ def command(args: argparse.Namespace) -> int:
     poses = pose_source_by_name(dataset, args.poses)
     result = calibrate_sonar_yaw(dataset, poses, window_s=args.window)
     current = math.degrees(dataset.config.sonar_mounting.yaw_rad)
+    if not result.decisive:
+        raise DataError(
+            dataset.root,
+            None,
+            f"the map-sharpness objective is too flat to give a sonar yaw (least entropy at "
+            f"{math.degrees(result.best_yaw_rad):.2f} deg, {result.verdict()}): the echoes do "
+            "not show the same walls from several places; calibrate on a longer run that passes "
+            f"walls more than once, or try another --window (now {args.window:g} s); nothing "
+            "written",
+        )
     print(
         f"sonar mounting yaw with {args.poses} poses: {math.degrees(result.best_yaw_rad):.2f} deg "
-        f"(configured: {current:.2f} deg); put it under [mounting.sonar] yaw_deg in sonarslam.toml"
+        f"(configured: {current:.2f} deg; {result.verdict()}); put it under [mounting.sonar] "
+        "yaw_deg in sonarslam.toml"
     )
     mount = replace(
         dataset.config.sonar_mounting,

@@ -7,7 +7,7 @@ import math
 
 from sonarslam.datasets.ping360 import is_ping360_log
 from sonarslam.datasets.rosbag import bag_topics, is_bag
-from sonarslam.datasets.source import open_dataset
+from sonarslam.datasets.source import check_toml_inputs, open_dataset, resolve_source
 from sonarslam.slam.model.motion import gyro_bias_against_heading
 from sonarslam.slam.run.presets import parse_settings
 from sonarslam.slam.run.settings import Setting, check_run_settings, dataset_settings, run_settings
@@ -18,6 +18,7 @@ def command(args: argparse.Namespace) -> int:
     settings = parse_settings(args.set)
     check_run_settings(settings)
     if is_bag(args.source):
+        check_toml_inputs(resolve_source(args.source), args.topics)
         topics = bag_topics(args.source, args.topics)
         print(f"{args.source}: {len(topics)} topics (role: what sonarslam reads it as)")
         width = max((len(t.topic) for t in topics), default=5)
@@ -30,7 +31,14 @@ def command(args: argparse.Namespace) -> int:
         args.source, config_override=args.config, topics_file=args.topics, nav=args.nav
     )
     t0, t1 = d.nav_span_s
-    print(f"{d.name}: {d.root}")
+    kind = (
+        "ROS bag"
+        if is_bag(d.root)
+        else "Ping Viewer log"
+        if is_ping360_log(d.root)
+        else "logs in the marina layout"
+    )
+    print(f"{d.name}: {kind} at {d.root.resolve()}; calibration: {d.calibration}")
     if is_ping360_log(d.root):
         c = d.report.counts
         dropped = {

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from sonarslam.slam.run.presets import parse_settings
-from sonarslam.slam.run.run import loop_line, run, summary_line
+from sonarslam.slam.run.run import loop_line, run, smoothed_lines, summary_line
 
 
 def command(args: argparse.Namespace) -> int:
@@ -30,12 +30,16 @@ def command(args: argparse.Namespace) -> int:
     if "extractor_preset" in m:
         print(f"extractor preset: {m['extractor_preset']} (slam/run/presets.py)")
     print(summary_line(m))
+    for line in smoothed_lines(m):
+        print(line)
     if "loops" in m:
         print(loop_line(m))
     if "health_line" in m:
         print(m["health_line"])
     out = result.out_dir.resolve() if result.out_dir else Path(args.out)
     print(f"outputs: {out} ({', '.join(sorted(p.name for p in result.files))})")
+    for note in result.notes:
+        print(f"note: {note}")
     if args.strict and m.get("health_ok") is False:
         print(
             f"sonarslam run: error: --strict: {m['health_issues']} health issue(s), first:"

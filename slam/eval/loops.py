@@ -13,8 +13,13 @@ relative pose ``t0Tt1`` it truly had between them:
   the estimate, :class:`sonarslam.features.scans.scan.ScanBuilder`) ending at each time is
   registered onto the other (:func:`sonarslam.features.scans.icp.register_from`, from the
   estimate's relative pose with a guess covariance of ``radius_m`` and 10 deg); an accepted
-  registration is the map's measure of the true ``t0Tt1``, independent of the drift between the
+  registration is the map's measure of the true ``t0Tt1`` in the directions it constrains (in
+  one it leaves free, along a single wall, it keeps the guess: dead reckoning's), independent of the drift between the
   two times (the motion correction within one turn is the odometry's, locally right).
+
+The loops of a run are found along dead reckoning (:func:`sonarslam.slam.run.run.loop_figures`),
+not along the estimate being judged: every run of one dataset is then measured at the same loops
+against the same references, and an estimate does not help build its own ruler.
 
 The error of an estimate at a loop is the distance between its own relative position
 ``between(wTb(t0), wTb(t1))[:2]`` and the loop's (zero for a stated loop), and for a found loop
@@ -59,12 +64,21 @@ class Loop:
     t0Tt1 : ndarray, shape (3,)
         The relative body pose ``(x_m, y_m, yaw_rad)`` of the map's registration (found), or
         ``(0, 0, nan)`` (stated: the same place, the heading not stated).
+    sigma_m : float
+        The reference's own accuracy as its registration states it: ``sqrt`` of the trace of
+        its position covariance (m); NaN for a stated loop (the user's word) and for a
+        registration that left a direction free.
+    free_directions : int
+        Directions of ``(x, y, yaw)`` the registration left free (0-2): there the reference
+        is the guess, dead reckoning's relative pose.
     """
 
     t0_s: float
     t1_s: float
     how: str
     t0Tt1: FloatArray
+    sigma_m: float = math.nan
+    free_directions: int = 0
 
 
 @dataclass(frozen=True)
@@ -160,7 +174,13 @@ def _confirm(
     reg = register_from(reference_lines(a.points_b, config), b.points_b, guess, cov, config)
     if not reg.accepted:
         return None
-    return Loop(a.t_ref_s, b.t_ref_s, "found", np.asarray(reg.z, dtype=np.float64))
+    # a direction the scans leave free (along a single wall) keeps the guess, dead reckoning's
+    # relative pose: such a reference states no accuracy of its own
+    free = 3 - int(reg.constrained.shape[1])
+    cov = np.asarray(reg.cov, dtype=np.float64)
+    sigma_m = math.sqrt(max(float(np.trace(cov[:2, :2])), 0.0)) if free == 0 else math.nan
+    z = np.asarray(reg.z, dtype=np.float64)
+    return Loop(a.t_ref_s, b.t_ref_s, "found", z, sigma_m, free)
 
 
 def loop_errors(estimate: PoseSource, loops: list[Loop]) -> list[LoopError]:

@@ -49,10 +49,12 @@ class WorldBelief:
     Attributes
     ----------
     wTb : ndarray, shape (3,)
-        Body pose ``(x_m, y_m, yaw_rad)``.
+        Body pose ``(x_m, y_m, yaw_rad)``; a yaw beyond ``2 pi`` in magnitude is refused
+        (degrees given for radians).
     lines_w : ndarray, shape (k, 2)
         World line ``(rho_m, theta_rad)`` of every landmark the association made, row ``j``
-        landmark ``j`` (merged ones too: their rows are not read); need not be normalised.
+        landmark ``j`` (merged ones too: their rows are not read); need not be normalised, but
+        a theta beyond ``2 pi`` in magnitude is refused.
     cov : ndarray, shape (3 + 2k, 3 + 2k), optional
         Joint covariance of ``[x_m, y_m, yaw_rad, rho_0, theta_0, ..., rho_k-1, theta_k-1]``
         (m, rad), with the pose in world coordinates (a GTSAM ``Pose2`` marginal is in the
@@ -72,8 +74,19 @@ class WorldBelief:
         object.__setattr__(self, "lines_w", lines)
         if wTb.shape != (3,) or not np.all(np.isfinite(wTb)):
             raise ValueError(f"WorldBelief.wTb must be 3 finite numbers, got {self.wTb!r}")
+        if abs(wTb[2]) > 2.0 * np.pi:
+            raise ValueError(
+                f"WorldBelief.wTb's yaw must be in radians within [-2 pi, 2 pi], got"
+                f" {float(wTb[2])} (degrees? or wrap an unwrapped yaw)"
+            )
         if not np.all(np.isfinite(lines)):
             raise ValueError("WorldBelief.lines_w holds a line that is not finite")
+        if lines.size and np.max(np.abs(lines[:, 1])) > 2.0 * np.pi:
+            j = int(np.argmax(np.abs(lines[:, 1])))
+            raise ValueError(
+                f"WorldBelief.lines_w's theta must be in radians within [-2 pi, 2 pi], got"
+                f" {float(lines[j, 1])} at row {j} (degrees?)"
+            )
         if self.cov is not None:
             cov = np.asarray(self.cov, dtype=np.float64)
             n = 3 + 2 * lines.shape[0]
@@ -84,6 +97,12 @@ class WorldBelief:
                 )
             if not np.all(np.isfinite(cov)):
                 raise ValueError("WorldBelief.cov is not finite")
+            scale = max(float(np.max(np.abs(cov))), 1e-300)
+            if np.max(np.abs(cov - cov.T)) > 1e-6 * scale or np.any(np.diag(cov) < 0.0):
+                raise ValueError(
+                    "WorldBelief.cov must be a covariance: symmetric (to 1e-6 of its largest"
+                    " entry) with a non-negative diagonal"
+                )
             object.__setattr__(self, "cov", cov)
 
     @property

@@ -24,7 +24,7 @@ from sonarslam.slam.backends.registry import backend_spec
 from sonarslam.slam.eval.sharpness import map_entropy
 from sonarslam.slam.model.motion import body_yaw
 from sonarslam.slam.run.closed_loop import ClosedLoopResult, run_closed_loop
-from sonarslam.slam.run.presets import run_config
+from sonarslam.slam.run.presets import map_min_intensity, run_config
 
 __all__ = [
     "YawSearch",
@@ -39,13 +39,61 @@ __all__ = [
 ]
 
 
+#: A sonar yaw is taken only when the objective's minimum lies this many noise units (robust
+#: spread of the coarse grid's entropies) below their median: a flat objective has no minimum
+#: to trust (:attr:`YawSearch.decisive`).
+MIN_YAW_DEPTH = 6.0
+#: ... and this many noise units below the lowest entropy outside its own basin
+#: (:data:`YAW_BASIN_DEG` either side): two basins of about equal depth are an ambiguity.
+MIN_YAW_MARGIN = 3.0
+#: Half width (deg) of the best yaw's basin, left out when the second-best basin is looked for.
+YAW_BASIN_DEG = 30.0
+
+
 @dataclass(frozen=True)
 class YawSearch:
-    """Result: the best yaw (rad), the grid searched (rad) and its entropies (nats)."""
+    """Result of :func:`calibrate_sonar_yaw`.
+
+    Attributes
+    ----------
+    best_yaw_rad : float
+        The yaw of least entropy (rad).
+    yaw_grid_rad : ndarray, shape (N,)
+        The yaws searched, sorted (rad).
+    entropy : ndarray, shape (N,)
+        The summed windowed entropy at each (nats).
+    noise : float
+        The objective's noise unit (nats): 1.4826 x the median absolute deviation of the coarse
+        grid's entropies from their median.
+    depth : float
+        Median minus least coarse entropy, in noise units.
+    second_yaw_rad : float
+        The least-entropy yaw more than :data:`YAW_BASIN_DEG` from the best (rad).
+    margin : float
+        Its entropy minus the best's, in noise units.
+    """
 
     best_yaw_rad: float
     yaw_grid_rad: FloatArray
     entropy: FloatArray
+    noise: float
+    depth: float
+    second_yaw_rad: float
+    margin: float
+
+    @property
+    def decisive(self) -> bool:
+        """True when the minimum stands out: depth >= :data:`MIN_YAW_DEPTH` and margin >=
+        :data:`MIN_YAW_MARGIN` (a flat or two-basin objective gives no yaw to trust)."""
+        return self.depth >= MIN_YAW_DEPTH and self.margin >= MIN_YAW_MARGIN
+
+    def verdict(self) -> str:
+        """The contrast in words: ``depth ... and margin ... noise units (needs ...)``."""
+        return (
+            f"minimum {self.depth:.1f} noise units below the median (needs {MIN_YAW_DEPTH:g}),"
+            f" {self.margin:.1f} below the second basin at"
+            f" {np.degrees(self.second_yaw_rad):.0f} deg (needs {MIN_YAW_MARGIN:g})"
+        )
 
 
 #: A sonar calibration needs this many full turns of the head inside the navigation span: the
@@ -73,10 +121,12 @@ def require_turns(dataset: Dataset, n_beams: int, what: str) -> None:
 def _windowed_entropy(
     dataset: Dataset, pose_source: PoseSource, window_s: float, cell_m: float
 ) -> Callable[[float], float]:
-    """``sonar yaw (rad) -> summed entropy (nats)`` of the dataset's beams projected with
-    ``pose_source`` in windows of ``window_s`` (the mounting's x, y kept)."""
+    """``sonar yaw (rad) -> summed entropy (nats)`` of the dataset's echoes (the bins a map
+    draws, :func:`sonarslam.slam.run.presets.map_min_intensity`: raw beams' background noise
+    fills every cell whatever the yaw) projected with ``pose_source`` in windows of
+    ``window_s`` (the mounting's x, y kept)."""
     beams = dataset.nav_beams()
-    bi, r, bearing = beam_points(beams, dataset.config.sonar)
+    bi, r, bearing = beam_points(beams, dataset.config.sonar, map_min_intensity(beams))
     t = np.array([b.t for b in beams])[bi]
     mount = dataset.config.sonar_mounting
     wTs0 = compose(pose_source.poses(t), replace(mount, yaw_rad=0.0).as_pose())
@@ -124,6 +174,12 @@ def calibrate_sonar_yaw(
         Histogram cell (m).
     coarse_step_deg, fine_step_deg : float
         Grid over 360 deg, then refined +-2 coarse steps around the best.
+
+    Returns
+    -------
+    YawSearch
+        The best yaw and the objective's contrast: take the yaw only when
+        :attr:`YawSearch.decisive` (a flat objective's minimum is noise).
     """
     require_turns(dataset, len(dataset.nav_beams()), "the sonar yaw")
     cost = _windowed_entropy(dataset, pose_source, window_s, cell_m)
@@ -136,7 +192,19 @@ def calibrate_sonar_yaw(
     grid = np.concatenate([coarse, fine])
     ent = np.concatenate([costs, fine_costs])
     order = np.argsort(grid)
-    return YawSearch(float(wrap_angle(fine[int(np.argmin(fine_costs))])), grid[order], ent[order])
+    median = float(np.median(costs))
+    noise = max(1.4826 * float(np.median(np.abs(costs - median))), 1e-12)
+    away = np.abs(wrap_angle(coarse - best)) > np.deg2rad(YAW_BASIN_DEG)
+    second = int(np.argmin(np.where(away, costs, np.inf)))
+    return YawSearch(
+        float(wrap_angle(fine[int(np.argmin(fine_costs))])),
+        grid[order],
+        ent[order],
+        noise,
+        (median - float(costs.min())) / noise,
+        float(coarse[second]),
+        (float(costs[second]) - float(costs.min())) / noise,
+    )
 
 
 @dataclass(frozen=True)

@@ -304,6 +304,8 @@ class LoopFigures:
         "loops_stated",
         "loops_found",
         "loop_radius_m",
+        "loop_reference_sigma_m",
+        "loops_with_free_direction",
         "loop_error_mean_m",
         "loop_error_max_m",
         "loop_error_<name>_mean_m",
@@ -323,6 +325,13 @@ class LoopFigures:
             if self.searched
             else None,
             "loop_radius_m": self.radius_m,
+            # the found loops' references' own accuracy: a floor under every loop error
+            "loop_reference_sigma_m": _finite(
+                float(np.mean(sigmas))
+                if (sigmas := [x.sigma_m for x in self.loops if np.isfinite(x.sigma_m)])
+                else math.nan
+            ),
+            "loops_with_free_direction": sum(x.free_directions > 0 for x in self.loops),
         }
         for name, errors in self.errors.items():
             tag = f"_{name}" if name else ""
@@ -335,6 +344,8 @@ class LoopFigures:
                 "t1_s": loop.t1_s,
                 "how": loop.how,
                 "t0Tt1": [_finite(v) for v in loop.t0Tt1],
+                "reference_sigma_m": _finite(loop.sigma_m),
+                "reference_free_directions": loop.free_directions,
                 "error_m": {
                     name or "run": errors[k].position_m for name, errors in self.errors.items()
                 },

@@ -73,9 +73,11 @@ def write_run(
     metrics: dict[str, Any],
     closed_loop: ClosedLoopResult | None,
     trajectories: dict[str, Trajectory],
+    notes: list[str] | None = None,
 ) -> list[Path]:
     """Write a run's files into ``out`` (created); returns the files written, in order (what
-    was in ``out`` before, another run's files, is not among them)."""
+    was in ``out`` before, another run's files, is not among them). ``notes``: gets a line for
+    the terminal about what a file holds (``graph.g2o``'s: what g2o cannot hold)."""
     make_output_dir(out)
     used = dump_dataset_config(dataset.config)
     if backend == "dr":
@@ -104,7 +106,7 @@ def write_run(
             covs = partial(write_trajectory_covariances, trajectory=dense)
             files.append(write_atomic(out / cov_file(stem), covs))
     if closed_loop is not None:
-        files += _write_closed_loop(out, dataset, backend, closed_loop)
+        files += _write_closed_loop(out, dataset, backend, closed_loop, notes)
     files.append(write_json(out / "metrics.json", metrics))
     files.append(
         write_atomic(
@@ -232,9 +234,10 @@ def _report_figure_without_reference(
 
 
 def _write_closed_loop(
-    out: Path, dataset: Dataset, backend: str, result: ClosedLoopResult
+    out: Path, dataset: Dataset, backend: str, result: ClosedLoopResult, notes: list[str] | None
 ) -> list[Path]:
-    """map.json, lines.jsonl, the back end's files and map.png of a closed loop; the files."""
+    """map.json, lines.jsonl, the back end's files and map.png of a closed loop; the files.
+    What ``graph.g2o`` leaves out goes to ``notes``: expected of the format, not a warning."""
     landmarks = result.backend.map_records()
     files = [write_json(out / "map.json", {"landmarks": landmarks}, indent=1)]
     lines = [
@@ -245,7 +248,10 @@ def _write_closed_loop(
     for saved in write_files_into(out, result.backend.save):
         files.append(saved)
         if saved.name == "graph.json":
-            files.append(graph_json_to_g2o(saved).path)
+            export = graph_json_to_g2o(saved, warn=False)
+            files.append(export.path)
+            if notes is not None:
+                notes.append(export.message())
     t0, t1 = result.trajectory.span_s
     beams = [b for b in dataset.nav_beams() if t0 <= b.t <= t1]
     points, _ = project_beams(

@@ -59,7 +59,12 @@ from sonarslam.slam.run.report_figures import (
     segment_table,
     trajectory_figure,
 )
-from sonarslam.slam.run.report_free import gps_free_section, is_gps_free, load_gps_free
+from sonarslam.slam.run.report_free import (
+    GpsFreeRun,
+    gps_free_section,
+    is_gps_free,
+    load_gps_free,
+)
 
 __all__ = ["ReportResult", "report"]
 
@@ -268,16 +273,19 @@ def _consistency(runs: list[RunData], period_s: float = 1.0) -> list[str]:
     ]
 
 
-def _provenance(runs: list[RunData], labels: dict[str, str]) -> list[str]:
-    """Where each run's figures come from (``metrics.json``'s ``provenance``)."""
+def _provenance(runs: list[RunData], labels: dict[str, str], free: list[GpsFreeRun]) -> list[str]:
+    """Where each run's figures come from (``metrics.json``'s ``provenance``), the runs with GPS
+    then those without."""
     rows = []
-    for run in runs:
-        p = run.metrics.get("provenance") or {}
+    named = [(f"{labels[str(r.run_dir)]} (`{r.name}`)", r.metrics) for r in runs]
+    named += [(f"{r.metrics.get('backend')} (`{r.name}`)", r.metrics) for r in free]
+    for name, metrics in named:
+        p = metrics.get("provenance") or {}
         commit = p.get("git_commit")
         dirty = p.get("git_dirty")
         rows.append(
             {
-                "run": f"{labels[str(run.run_dir)]} (`{run.name}`)",
+                "run": name,
                 "sonarslam": p.get("version") or "not recorded",
                 "git commit": "not recorded"
                 if commit is None
@@ -417,8 +425,9 @@ def report(
     figures += free_figs
     rows += free_rows
     md += _consistency(runs)
-    md += _provenance(runs, labels)
-    md += ["## Figures", ""]
+    md += _provenance(runs, labels, free)
+    # the runs without GPS put their figures in their own section
+    md += ["## Figures", ""] if runs else []
     for name, figs in dataset_figs:
         md += [f"### {name}", ""] + [f"![{p.stem}]({p.name})\n" for p in figs]
     for run in runs:

@@ -61,6 +61,7 @@ __all__ = [
     "run_backend",
     "run",
     "summary_line",
+    "smoothed_lines",
     "results_table",
 ]
 
@@ -94,6 +95,9 @@ class RunResult:
         Where the files were written (None: nothing written).
     files : list of Path
         The files this run wrote there.
+    notes : list of str
+        Lines for the terminal about what the files hold (``graph.g2o``: what the format cannot
+        hold, expected of it).
     figures : RunMetrics or None
         The typed figures ``metrics`` is written from (None for a result made elsewhere).
     """
@@ -107,6 +111,7 @@ class RunResult:
     out_dir: Path | None = None
     files: list[Path] = field(default_factory=list)
     figures: RunMetrics | None = None
+    notes: list[str] = field(default_factory=list)
 
 
 def run_backend(
@@ -418,6 +423,7 @@ def run(
         result.metrics,
         result.closed_loop,
         result.trajectories,
+        result.notes,
     )
     result.out_dir = Path(out_dir)
     return result
@@ -431,21 +437,38 @@ def loop_figures(
     dataset: Dataset, result: RunResult, loops_rel_s: list[tuple[float, float]]
 ) -> LoopFigures:
     """The loop-closure errors of a run (:mod:`sonarslam.slam.eval.loops`): the loops stated,
-    and without GPS those found along the run's own estimate within :data:`LOOP_RADIUS_SHARE`
-    of the sonar's range; at each, the error of the run's estimate, of its other estimates
-    and of dead reckoning."""
+    and without GPS those found along dead reckoning within :data:`LOOP_RADIUS_SHARE` of the
+    sonar's range, confirmed by scan registration (the same loops and references for every run
+    of the dataset, whatever its back end); at each, the error of the run's estimate, of its
+    other estimates and of dead reckoning. An error beyond the search radius is warned of: the
+    estimate disagrees with the map by more than a return was searched within (a wrong
+    mounting, a diverged run)."""
     head = dataset.config.sonar
     radius_m = LOOP_RADIUS_SHARE * head.n_bins * head.bin_size_m
     loops = stated_loops(loops_rel_s, dataset.nav_span_s[0])
-    estimate = result.trajectory
+    dr = dead_reckoning_trajectory(dataset)
     searched = dataset.gps is None
     if searched:
-        loops += find_loops(dataset, estimate, radius_m)
-    estimates: dict[str, Trajectory] = {"": estimate, **result.trajectories}
+        loops += find_loops(dataset, dr, radius_m)
+    estimates: dict[str, Trajectory] = {"": result.trajectory, **result.trajectories}
     if result.backend != "dr":
-        estimates["dr"] = dead_reckoning_trajectory(dataset)
+        estimates["dr"] = dr
     errors = {name: loop_errors(tr, loops) for name, tr in estimates.items()}
-    return LoopFigures(radius_m, loops, errors, searched)
+    figures = LoopFigures(radius_m, loops, errors, searched)
+    for name, errs in errors.items():
+        worst = max(errs, key=lambda e: e.position_m, default=None)
+        if worst is not None and worst.position_m > radius_m:
+            t0 = dataset.nav_span_s[0]
+            warnings.warn(
+                f"{dataset.root}: {result.backend}{' ' + name if name else ''}'s loop-closure"
+                f" error {worst.position_m:.1f} m at the loop {worst.loop.t0_s - t0:.0f} s -"
+                f" {worst.loop.t1_s - t0:.0f} s exceeds the {radius_m:.0f} m the loops were"
+                " searched within: the estimate disagrees with the sonar's map there (a wrong"
+                " mounting or calibration, a diverged run; `sonarslam calibrate`)",
+                UserWarning,
+                stacklevel=2,
+            )
+    return figures
 
 
 def loop_line(metrics: dict[str, Any]) -> str:
@@ -464,7 +487,21 @@ def loop_line(metrics: dict[str, Any]) -> str:
         f" mean {m[key]:.2f} m, max {m[key.replace('_mean_', '_max_')]:.2f}"
         for key in sorted(k for k in m if k.startswith("loop_error") and k.endswith("_mean_m"))
     ]
-    return f"{head}; loop-closure error: {'; '.join(parts)}"
+    sigma = m.get("loop_reference_sigma_m")
+    free = m.get("loops_with_free_direction") or 0
+    floor = ""
+    if found:
+        own = (
+            f"their own 1-sigma {sigma:.2f} m on average, a floor under these figures"
+            if sigma is not None
+            else "none states an accuracy of its own"
+        )
+        floor = (
+            f" (references: scan registrations along dead reckoning, the same for every run of"
+            f" the dataset; {own}; {free} of {found} leave a direction free, dead reckoning's"
+            " there)"
+        )
+    return f"{head}; loop-closure error{floor}: {'; '.join(parts)}"
 
 
 def summary_line(metrics: dict[str, Any]) -> str:
@@ -498,6 +535,32 @@ def summary_line(metrics: dict[str, Any]) -> str:
         f"over {m['ate_n']} fixes; {m['data_s']:.0f} s of data in {m['wall_s']:.2f} s "
         f"({m['realtime_factor']:.0f}x real time)"
     )
+
+
+def smoothed_lines(metrics: dict[str, Any]) -> list[str]:
+    """A line each for a factor graph's smoothed and batch trajectories (``--batch``) in
+    :func:`summary_line`'s terms: against the truth (simulated runs), against GPS over the sonar
+    span and the whole run; none for a run without them."""
+    lines = []
+    for name in ("smoothed", "batch"):
+        f = _row_figures(metrics, name)
+        parts = []
+        if np.isfinite(f["truth"]):
+            parts.append(
+                f"against the truth ATE mean {f['truth']:.2f} m, max {f['truth_max']:.2f}"
+                f" (rigidly aligned {f['truth_aligned']:.2f})"
+            )
+        gps = []
+        if np.isfinite(f["sonar"]):
+            gps.append(f"ATE over the sonar span mean {f['sonar']:.2f} m, max {f['sonar_max']:.2f}")
+        if np.isfinite(f["whole"]):
+            gps.append(f"whole run ATE mean {f['whole']:.2f} m, max {f['whole_max']:.2f}")
+        if gps:
+            against = "against the simulated GPS: " if parts else ""
+            parts.append(against + "; ".join(gps))
+        if parts:
+            lines.append(f"{metrics['backend']} {name}: " + "; ".join(parts))
+    return lines
 
 
 def _row_figures(m: dict[str, Any], name: str | None) -> dict[str, float]:

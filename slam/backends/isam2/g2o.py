@@ -110,9 +110,11 @@ def write_g2o(
     factors: list[dict[str, Any]],
     values: dict[str, dict[str, Any]],
     whole: str = "graph.json",
+    warn: bool = True,
 ) -> G2oExport:
     """Write the poses and odometry of a graph (``graph.json``'s ``factors`` and ``values``) as
-    g2o; warns (``UserWarning``) naming the factors it left out (module docstring)."""
+    g2o; warns (``UserWarning``, unless ``warn`` is False: a caller that reports
+    :meth:`G2oExport.message` itself) naming the factors it left out (module docstring)."""
     out = Path(path)
     lines = []
     poses = sorted(
@@ -135,16 +137,20 @@ def write_g2o(
     result = G2oExport(
         out, len(poses), edges, dict(left_out), approximated, whole, scan_edges, unkerneled
     )
-    if left_out or approximated or unkerneled:
+    if warn and (left_out or approximated or unkerneled):
         warnings.warn(result.message(), UserWarning, stacklevel=2)
     return result
 
 
-def graph_json_to_g2o(json_path: str | Path, g2o_path: str | Path | None = None) -> G2oExport:
+def graph_json_to_g2o(
+    json_path: str | Path, g2o_path: str | Path | None = None, warn: bool = True
+) -> G2oExport:
     """``graph.json`` (:func:`sonarslam.slam.backends.isam2.graph_io.save_graph`) to ``graph.g2o`` beside
-    it (or ``g2o_path``)."""
+    it (or ``g2o_path``); ``warn`` as :func:`write_g2o`'s."""
     src = Path(json_path)
     doc = json.loads(src.read_text())
     if doc.get("format") != GRAPH_FORMAT:
         raise ValueError(f"{src}: not a {GRAPH_FORMAT} file")
-    return write_g2o(g2o_path or src.with_suffix(".g2o"), doc["factors"], doc["values"], src.name)
+    return write_g2o(
+        g2o_path or src.with_suffix(".g2o"), doc["factors"], doc["values"], src.name, warn
+    )

@@ -1,0 +1,93 @@
+"""Errors a new user meets first: each names the file and line (or the option) and what is
+allowed there; and ``make lint`` checks the project's folders, not a user's scratch files."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from sonarslam.slam.cli.main import main
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 30 s simulated pool as an MCAP bag (its sonarslam.toml inside)."""
+    out = tmp_path_factory.mktemp("bag") / "rov"
+    assert main(["simulate", "pool", "--duration", "30", "--out", str(out), "--bag", "mcap"]) == 0
+    return out
+
+
+def _error(capsys: pytest.CaptureFixture[str]) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    return err[0]
+
+
+def test_a_mounting_typo_lists_the_mountings(
+    simulated: Callable[..., Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    src = tmp_path / "typo"
+    shutil.copytree(simulated("harbour", 0, 60.0), src)
+    toml = src / "sonarslam.toml"
+    text = toml.read_text()
+    toml.write_text(text.replace("[mounting.sonar]", "[mounting.sonr]"))
+    line = 1 + text.split("\n").index("[mounting.sonar]")
+    assert main(["info", str(src)]) == 1
+    assert _error(capsys).endswith(
+        f"{toml}:{line}: unknown key 'sonr' in [mounting]; allowed: ['ahrs', 'dvl', 'sonar']"
+    )
+
+
+def test_a_bags_malformed_toml_and_a_missing_topics_file_name_file_and_line(
+    bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bad = tmp_path / "bad"
+    shutil.copytree(bag, bad)
+    toml = bad / "sonarslam.toml"
+    lines = toml.read_text().splitlines()
+    toml.write_text("\n".join([*lines, "[noise]", "dvl_sigma_mps = 0.1", ""]))
+    for command in ("info", "run"):
+        args = [command, str(bad)] + (["--out", str(tmp_path / "o")] if command == "run" else [])
+        assert main(args) == 1
+        err = _error(capsys)
+        assert f"{toml}:{len(lines) + 1}: TOML syntax error: Cannot declare ('noise',) twice" in err
+    missing = tmp_path / "nope.toml"
+    for command in ("info", "run"):
+        args = [command, str(bag), "--topics", str(missing)]
+        args += ["--out", str(tmp_path / "o")] if command == "run" else []
+        assert main(args) == 1
+        assert _error(capsys).endswith(f"error: {missing}: file not found")
+
+
+def test_info_first_line_says_what_the_source_is(
+    bag: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["info", str(bag)]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("rov: "))
+    assert line == f"rov: ROS bag at {bag.resolve()}; calibration: {bag / 'sonarslam.toml'}"
+
+
+def test_lint_checks_the_projects_folders_and_every_tracked_python_file() -> None:
+    """``make lint`` names its folders (a scratch file at the clone's top is not linted), and
+    every Python file git tracks lies in one of them (or in notebooks/, which ruff excludes)."""
+    recipe = re.search(r"^lint:.*\n((?:\t.*\n)+)", (ROOT / "Makefile").read_text(), re.M)
+    assert recipe is not None
+    check = next(x for x in recipe[1].splitlines() if "ruff check" in x)
+    assert not re.search(r"ruff check \.(\s|$)", check), check
+    dirs = re.search(r"^LINT_DIRS = (.*)$", (ROOT / "Makefile").read_text(), re.M)
+    assert dirs is not None
+    linted = {*dirs[1].split(), *check.split("ruff check ")[1].split()} - {"$(LINT_DIRS)"}
+    if not (ROOT / ".git").exists():
+        pytest.skip("not a git clone: no tracked files to compare")
+    tracked = subprocess.run(
+        ["git", "ls-files", "*.py"], cwd=ROOT, capture_output=True, text=True, check=True
+    ).stdout.split()
+    outside = [p for p in tracked if p.split("/")[0] not in linted | {"notebooks"}]
+    assert not outside, outside
