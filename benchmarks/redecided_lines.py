@@ -3,8 +3,8 @@ graph without them make the graph better, as the loop decided them and as the sm
 re-decides them? A benchmark only: the ruler (GPS on the marina, the simulator's truth on
 simulated data) never feeds an estimator.
 
-python benchmarks/redecided_lines.py --run DIR [--reference REF.json] [--stretch-m 40]
-    [--passes 2] [--graphs dr+heading,dr+heading+revisits,...] [--out F.json]
+python benchmarks/redecided_lines.py --run DIR [--reference REF.json] [--stretch-m 80]
+    [--passes 1] [--graphs dr+heading,dr+heading+revisits,...] [--out F.json]
 
 DIR is an iSAM2 run directory (its ``graph.json``). For each base combination of factor
 families (``--graphs``; the families of :mod:`marina_factor_levels`, whose loading, families,
@@ -110,8 +110,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--run", type=Path, required=True, help="an iSAM2 run directory")
     ap.add_argument("--reference", type=Path, default=None, help="a reference graph's JSON")
     ap.add_argument("--graphs", default=",".join(DEFAULT_GRAPHS), help="base combinations")
-    ap.add_argument("--stretch-m", type=float, default=40.0, help="longest stretch (m)")
-    ap.add_argument("--passes", type=int, default=2, help="re-decision passes")
+    ap.add_argument("--stretch-m", type=float, default=80.0, help="longest stretch (m)")
+    ap.add_argument("--passes", type=int, default=1, help="re-decision passes")
     ap.add_argument("--out", type=Path, default=None, help="JSON of the scores")
     args = ap.parse_args(argv)
     try:

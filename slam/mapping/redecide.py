@@ -81,7 +81,7 @@ class RedecideConfig:
         Gauss-Newton iterations of each stretch's line fit.
     """
 
-    max_stretch_m: float = bounded(40.0, 0.0, 1e5, low_open=True)
+    max_stretch_m: float = bounded(80.0, 0.0, 1e5, low_open=True)
     association: AssociationConfig = field(default_factory=AssociationConfig)
     min_observations: int = bounded(2, 1, 1000)
     fit_iterations: int = bounded(5, 1, 100)

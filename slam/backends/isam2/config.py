@@ -153,7 +153,7 @@ class GraphConfig(BackendConfig):
     scan_compatibility_probability: float = bounded(0.999, 0.0, 1.0, low_open=True, high_open=True)
     batch_optimizer: str = one_of("lm", "lm", "gnc")
     redecide_stretch_m: float | None = bounded(None, 0.0, 1e5, low_open=True)
-    redecide_passes: int = bounded(2, 1, 10)
+    redecide_passes: int = bounded(1, 1, 10)
 
     @property
     def calibrated(self) -> bool:

@@ -716,13 +716,15 @@ class LineIsam2:
 
     def redecide_lines(self) -> RedecidedGraph:
         """The graph with its line observations re-decided at iSAM2's smoothed estimate, in
-        stretches of at most ``redecide_stretch_m`` (40 m when it is None), re-optimised
+        stretches of at most ``redecide_stretch_m`` (when it is None,
+        :class:`sonarslam.slam.mapping.redecide.RedecideConfig`'s default), re-optimised
         (:func:`sonarslam.slam.backends.isam2.redecided.redecided_graph`,
         ``redecide_passes`` passes). The graph and its estimates are left as they are."""
         self.finish()
         cfg = self.config
-        stretch = 40.0 if cfg.redecide_stretch_m is None else cfg.redecide_stretch_m
-        config = RedecideConfig(max_stretch_m=stretch, association=cfg.association)
+        config = RedecideConfig(association=cfg.association)
+        if cfg.redecide_stretch_m is not None:
+            config = replace(config, max_stretch_m=cfg.redecide_stretch_m)
         values = self.isam.calculateEstimate()
         self._redecided = redecided_graph(self.records, values, config, cfg.redecide_passes)
         return self._redecided

@@ -155,30 +155,39 @@ def _pass(
                 out.append(replace(r, keys=(r.keys[0], int(S(j)), *r.keys[2:])))
             continue
         out.append(r)
+    lines = {int(S(j)): np.asarray(v) for j, v in enumerate(decision.stretches.lines_w)}
+    return _optimise(out, values, params, lines), out, decision
+
+
+def _optimise(
+    records: list[FactorRecord],
+    values: gtsam.Values,
+    params: gtsam.LevenbergMarquardtParams,
+    more: dict[int, np.ndarray] | None = None,
+) -> gtsam.Values:
+    """Levenberg-Marquardt on ``records`` from ``values`` (their variables only) and ``more``
+    (vector variables ``values`` lacks)."""
     graph = gtsam.NonlinearFactorGraph()
     keys: set[int] = set()
-    for r in out:
+    for r in records:
         graph.add(r.to_gtsam())
         keys.update(r.keys)
     start = gtsam.Values()
-    for key in keys:
-        if gtsam.Symbol(key).chr() == ord("s"):
-            continue
+    for key, vector in (more or {}).items():
+        start.insert(key, np.asarray(vector, dtype=np.float64))
+    for key in keys - set(more or {}):
         if gtsam.Symbol(key).chr() == ord("x"):
             start.insert(key, values.atPose2(key))
         else:
             start.insert(key, values.atVector(key))
-    for j, line in enumerate(decision.stretches.lines_w):
-        start.insert(S(j), np.asarray(line, dtype=np.float64))
-    optimum = gtsam.LevenbergMarquardtOptimizer(graph, start, params).optimize()
-    return optimum, out, decision
+    return gtsam.LevenbergMarquardtOptimizer(graph, start, params).optimize()
 
 
 def redecided_graph(
     records: list[FactorRecord],
     values: gtsam.Values,
     config: RedecideConfig,
-    passes: int = 2,
+    passes: int = 1,
     params: gtsam.LevenbergMarquardtParams | None = None,
 ) -> RedecidedGraph:
     """The graph's line observations re-decided at ``values`` and the graph re-optimised
@@ -212,13 +221,18 @@ def redecided_graph(
     for _ in range(passes):
         optimum, out, decision = _pass(records, current, config, params)
         decisions.append(decision)
-        merged = gtsam.Values(values)  # the loop's landmarks stay where they were
-        for key in optimum.keys():
-            if not merged.exists(key):
-                continue
-            if gtsam.Symbol(key).chr() == ord("x"):
-                merged.update(key, optimum.atPose2(key))
-            else:
-                merged.update(key, optimum.atVector(key))
-        current = merged
+        current = _merged(values, optimum)  # the loop's landmarks stay where they were
     return RedecidedGraph(optimum, out, decisions)
+
+
+def _merged(values: gtsam.Values, optimum: gtsam.Values) -> gtsam.Values:
+    """``values`` with those of its variables ``optimum`` holds replaced by its."""
+    merged = gtsam.Values(values)
+    for key in optimum.keys():
+        if not merged.exists(key):
+            continue
+        if gtsam.Symbol(key).chr() == ord("x"):
+            merged.update(key, optimum.atPose2(key))
+        else:
+            merged.update(key, optimum.atVector(key))
+    return merged
