@@ -243,3 +243,18 @@ def test_line_observations_group_a_vote_and_join_landmarks_tied_by_an_equality()
     wTs0 = compose(np.array([values.atPose2(X(0)).x(), 0.0, 0.0]), np.array([0.5, 0.0, 0.0]))
     assert np.allclose(obs.wTs[0], wTs0)
     assert along_line(np.array([12.0, np.pi / 2]), obs.wTs[:1, :2])[0] == pytest.approx(-0.5)
+
+
+def test_an_observation_the_loop_left_unassociated_joins_the_wall_it_fits():
+    rng = np.random.default_rng(13)
+    wall = np.array([10.0, np.pi / 2])
+    poses = np.array([[3.0 * k, 0.0, 0.0] for k in range(8)])
+    z = np.array([_observe(p, wall, rng) for p in poses])
+    obs = LineObservations(poses, z, np.tile(R_OBS, (8, 1, 1)), np.arange(8))
+    landmark = np.zeros(8, dtype=int)
+    landmark[3] = -1
+    out = redecide(obs, landmark, RedecideConfig())
+    assert out.dropped == 0 and out.moved == 1
+    assert np.all(out.stretch == 0)
+    alone = redecide(obs, -np.ones(8, dtype=int), RedecideConfig())  # no landmark to join
+    assert alone.dropped == 8 and alone.moved == 0

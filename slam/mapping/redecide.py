@@ -385,6 +385,7 @@ def redecide(
     # an observation moved when it now shares its stretch with observations of another landmark
     moved = 0
     for part in final.members:
-        owner = np.bincount(landmark[part][landmark[part] >= 0]).argmax() if part.size else -1
+        labelled = landmark[part][landmark[part] >= 0]
+        owner = int(np.bincount(labelled).argmax()) if labelled.size else -1
         moved += int(np.sum(landmark[part] != owner))
     return Redecision(stretch, final, moved)
