@@ -359,6 +359,31 @@ def test_room_batch_lm_agrees_with_isam2(room: SyntheticRun):
         assert np.hypot(*(a[:2] - b[:2])) < 0.05 and abs(wrap_angle(a[2] - b[2])) < 3e-3
 
 
+def test_room_lines_re_decided_keep_the_walls_and_the_trajectory(room: SyntheticRun):
+    """The lines re-decided at the smoothed estimate (straight walls of 24-40 m: one stretch
+    each, no observation moved) give the smoothed estimate's accuracy; the estimate is among
+    the trajectories only when ``redecide_stretch_m`` is set, and the graph is left as it was."""
+    be = room.backend
+    n_records = len(be.records)
+    out = be.redecide_lines()
+    m = out.metrics()
+    assert m["redecided_stretches"] == 4 and m["redecided_moved"] == 0
+    assert m["redecided_dropped"] <= 2
+    tr = be.redecided_trajectory()
+    index = np.round(np.interp(tr.t_s, room.t_s, np.arange(room.t_s.size))).astype(int)
+    err_xy = np.hypot(*(tr.poses_wTb[:, :2] - room.truth[index, :2]).T)
+    assert err_xy.max() < 0.25
+    assert len(be.records) == n_records and m.items() <= be.metrics().items()
+    assert "redecided" not in be.trajectories()
+    config = be.config
+    try:
+        be.config = replace(config, redecide_stretch_m=30.0)
+        assert len(be.trajectories()["redecided"].t_s) == be.n_nodes
+        assert be.metrics()["redecided_stretches"] >= 4
+    finally:
+        be.config = config
+
+
 def test_the_ahrs_bias_is_unobservable_so_its_prior_alone_fixes_it(room: SyntheticRun):
     """Rotating poses and walls about the start position while the bias takes the rotation
     back leaves every factor unchanged but the bias prior: line landmarks, DVL, gyro and the

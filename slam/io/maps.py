@@ -62,6 +62,7 @@ TRAJECTORY_STYLES: dict[str, TrajectoryStyle] = {
     "isam2": TrajectoryStyle("#009E73", "-", "iSAM2 (online)"),
     "isam2_smoothed": TrajectoryStyle("#CC79A7", (0, (6, 1.5, 1, 1.5, 1, 1.5)), "iSAM2 smoothed"),
     "isam2_batch": TrajectoryStyle("#56B4E9", ":", "iSAM2 batch"),
+    "isam2_redecided": TrajectoryStyle("#E69F00", (0, (8, 2)), "iSAM2 lines re-decided"),
 }
 
 

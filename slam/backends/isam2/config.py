@@ -113,6 +113,13 @@ class GraphConfig(BackendConfig):
         it, or graduated non-convexity choosing the revisits jointly among every one the
         registration accepted, the compatibility gate's rejects included
         (:meth:`sonarslam.slam.backends.isam2.graph.LineIsam2.optimize_batch`).
+    redecide_stretch_m : float or None
+        After the run, the line observations re-decided at the smoothed estimate in stretches
+        of at most this (m) along each line and the graph re-optimised: the estimate
+        ``redecided`` (:meth:`sonarslam.slam.backends.isam2.graph.LineIsam2.redecide_lines`).
+        None: not made.
+    redecide_passes : int
+        Re-decisions, each at the previous one's optimum.
     """
 
     ahrs_bias_prior_deg: float = bounded(0.0, -180.0, 180.0)
@@ -145,6 +152,8 @@ class GraphConfig(BackendConfig):
     revisits_per_scan: int = bounded(2, 0, math.inf)
     scan_compatibility_probability: float = bounded(0.999, 0.0, 1.0, low_open=True, high_open=True)
     batch_optimizer: str = one_of("lm", "lm", "gnc")
+    redecide_stretch_m: float | None = bounded(None, 0.0, 1e5, low_open=True)
+    redecide_passes: int = bounded(1, 1, 10)
 
     @property
     def calibrated(self) -> bool:

@@ -72,10 +72,12 @@ from sonarslam.slam.backends.isam2.graph_io import (
 )
 from sonarslam.slam.backends.isam2.odometry import NodeOdometry, local_covariance
 from sonarslam.slam.backends.isam2.pose_source import NodeTable, SmoothedPoseSource
+from sonarslam.slam.backends.isam2.redecided import RedecidedGraph, redecided_graph
 from sonarslam.slam.backends.isam2.scans import ScanConstraints
 from sonarslam.slam.io.states import HEADING_ERROR_FILE, write_heading_error
 from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.mapping.landmarks import Landmark, LandmarkMap
+from sonarslam.slam.mapping.redecide import RedecideConfig
 from sonarslam.slam.mapping.vote import (
     AfterVote,
     Belief,
@@ -154,6 +156,7 @@ class LineIsam2:
         self._stale = False
         self._gate_candidates = float(chi2.ppf(config.candidate_gate_probability, 2))
         self._batch: gtsam.Values | None = None
+        self._redecided: RedecidedGraph | None = None
         # the newest optimised node (the anchor of the current pose) and its marginal
         self._anchor_pose = np.zeros(3)
         self._anchor_xyyaw = (0.0, 0.0, 0.0)
@@ -711,13 +714,37 @@ class LineIsam2:
             self._after,
         )
 
+    def redecide_lines(self) -> RedecidedGraph:
+        """The graph with its line observations re-decided at iSAM2's smoothed estimate, in
+        stretches of at most ``redecide_stretch_m`` (when it is None,
+        :class:`sonarslam.slam.mapping.redecide.RedecideConfig`'s default), re-optimised
+        (:func:`sonarslam.slam.backends.isam2.redecided.redecided_graph`,
+        ``redecide_passes`` passes). The graph and its estimates are left as they are."""
+        self.finish()
+        cfg = self.config
+        config = RedecideConfig(association=cfg.association)
+        if cfg.redecide_stretch_m is not None:
+            config = replace(config, max_stretch_m=cfg.redecide_stretch_m)
+        values = self.isam.calculateEstimate()
+        self._redecided = redecided_graph(self.records, values, config, cfg.redecide_passes)
+        return self._redecided
+
+    def redecided_trajectory(self) -> Trajectory:
+        """The nodes' poses after :meth:`redecide_lines` (run now if it has not been)."""
+        found = self._redecided if self._redecided is not None else self.redecide_lines()
+        poses = np.array([pose_of(found.values.atPose2(X(k))) for k in range(self._n_nodes)])
+        return Trajectory(self.nodes.t_s[: self._n_nodes].copy(), poses)
+
     def trajectories(self, batch: bool = False) -> dict[str, Trajectory]:
-        """The smoothed trajectory (``"smoothed"``) and with ``batch`` the one after a final
-        batch Levenberg-Marquardt (``"batch"``)."""
+        """The smoothed trajectory (``"smoothed"``), with ``batch`` the one after a final
+        batch Levenberg-Marquardt (``"batch"``), and with ``redecide_stretch_m`` set the one
+        with the lines re-decided (``"redecided"``, :meth:`redecide_lines`)."""
         out = {"smoothed": self.smoothed_trajectory()}
         if batch:
             self.optimize_batch()
             out["batch"] = self.smoothed_trajectory()
+        if self.config.redecide_stretch_m is not None:
+            out["redecided"] = self.redecided_trajectory()
         return out
 
     def metrics(self) -> dict[str, float | int]:
@@ -726,6 +753,8 @@ class LineIsam2:
         if self.scans is not None:
             out.update(self.scans.metrics())
         out.update(self._gnc_stats)
+        if self._redecided is not None:
+            out.update(self._redecided.metrics())
         update_ms = 1e3 * np.array([wall for _, wall, _ in self.update_log])
         if update_ms.size:
             out["isam2_updates"] = int(update_ms.size)
