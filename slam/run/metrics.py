@@ -211,6 +211,7 @@ class ClosedLoopFigures:
         "scan_revisit_tried",
         "scan_revisit_accepted",
         "scan_revisit_nis_median",
+        "scan_revisit_incompatible",
         "truth_precision",
         "truth_recall",
         "truth_associations",
