@@ -19,7 +19,9 @@ DIR is an iSAM2 run directory (``sonarslam run marina --backend isam2 --out DIR`
    the product's nodes nearest the reference's node times, with dead reckoning's relative motion
    between each reference time and its node time composed in
    (``z = between(DR(t_a), DR(t_i)) * T * between(DR(t_j), DR(t_b))``), the reference's
-   covariance and kernel;
+   covariance and kernel; with ``--reference-pairs``, the family ``refpairs``: the product's own
+   registrations at the reference's pairs (``benchmarks/marina_reference_pairs.py --out``),
+   moved the same way, with their covariance and the product's revisit kernel;
 3. re-optimises each requested combination of families (``--graphs``, ``+``-joined family names,
    comma-separated; ``product`` is every factor of the run) with Levenberg-Marquardt from the
    run's saved values (the variables no factor of the combination touches are left out);
@@ -55,7 +57,7 @@ from evo.core.geometry import GeometryException, umeyama_alignment
 
 from sonarslam.datasets.errors import DataError
 from sonarslam.datasets.source import Dataset, open_dataset
-from sonarslam.features.geometry import between, compose
+from sonarslam.features.geometry import between, compose, compose_jacobians
 from sonarslam.slam.backends.isam2.graph_io import (
     FactorKind,
     FactorRecord,
@@ -65,9 +67,10 @@ from sonarslam.slam.backends.isam2.graph_io import (
 )
 from sonarslam.slam.eval.truth import truth_trajectory
 from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.model.lines import local_to_world
 from sonarslam.slam.run.sources import dead_reckoning_trajectory
 
-FAMILIES = ("dr", "heading", "lines", "scans", "revisits", "reference")
+FAMILIES = ("dr", "heading", "lines", "scans", "revisits", "reference", "refpairs")
 
 #: The combinations scored by default (those whose families the graph holds).
 DEFAULT_GRAPHS = (
@@ -84,6 +87,8 @@ DEFAULT_GRAPHS = (
     "dr+heading+reference+scans+lines",
     "dr+heading+reference+revisits",
     "dr+heading+reference+revisits+lines",
+    "dr+heading+refpairs",
+    "dr+heading+refpairs+lines",
 )
 
 
@@ -99,6 +104,8 @@ def family_of(record: FactorRecord) -> str:
     if record.constraint is not None:
         if record.constraint.startswith("reference"):
             return "reference"
+        if record.constraint.startswith("refpairs"):
+            return "refpairs"
         if "revisit" in record.constraint:
             return "revisits"
         if "consecutive" in record.constraint:
@@ -137,6 +144,50 @@ def reference_records(
                 pair["cov"],
                 robust=robust,
                 constraint="reference-revisit",
+            )
+        )
+    return out
+
+
+def reference_pair_records(
+    pairs: dict[str, Any],
+    reference: dict[str, Any],
+    node_t: dict[str, float],
+    dr: Trajectory,
+    robust: Robust | None,
+) -> list[FactorRecord]:
+    """The product's own registrations at the reference's pairs (``pairs``: the JSON of
+    ``benchmarks/marina_reference_pairs.py --out``, its rows' ``z_nodes`` and ``cov_nodes``
+    between the reference's node times), those its registration accepted, moved onto the
+    product's nearest nodes as :func:`reference_records` moves the reference's, with the
+    product's kernel (``robust``): the family ``refpairs``."""
+    names = sorted(node_t, key=lambda n: node_t[n])
+    t = np.array([node_t[n] for n in names])
+    t_ref = np.asarray(reference["t_nodes"], dtype=np.float64)
+    out = []
+    for row in pairs["rows"]:
+        if not row["accepted"]:
+            continue
+        ti, tj = float(t_ref[row["i"]]), float(t_ref[row["j"]])
+        a, b = int(np.argmin(np.abs(t - ti))), int(np.argmin(np.abs(t - tj)))
+        if a == b:
+            continue
+        Pa, Pi, Pj, Pb = dr.poses(np.array([t[a], ti, tj, t[b]]))
+        iTj = np.asarray(row["z_nodes"], dtype=np.float64)
+        aTj = compose(between(Pa, Pi), iTj)
+        z = compose(aTj, between(Pj, Pb))
+        _, J1 = compose_jacobians(between(Pa, Pi), iTj)
+        J2, _ = compose_jacobians(aTj, between(Pj, Pb))
+        J = local_to_world(-float(z[2])) @ J2 @ J1  # plain iTj -> the tangent at z
+        cov = J @ np.asarray(row["cov_nodes"], dtype=np.float64) @ J.T
+        out.append(
+            FactorRecord.of(
+                FactorKind.BETWEEN_POSE,
+                [key_of(names[a]), key_of(names[b])],
+                z,
+                0.5 * (cov + cov.T),
+                robust=robust,
+                constraint="refpairs-revisit",
             )
         )
     return out
@@ -311,7 +362,7 @@ def factor_levels(
         if unknown:
             raise ValueError(f"--graphs: {name!r}: unknown families {unknown} (of {FAMILIES})")
         if name == "product":
-            parts = [p for p in parts if p != "reference"]
+            parts = [p for p in parts if p not in ("reference", "refpairs")]
         elif any(not by_family[p] for p in parts):
             continue
         chosen = [r for p in parts for r in by_family[p]]
@@ -328,13 +379,19 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--run", type=Path, required=True, help="an iSAM2 run directory")
     ap.add_argument("--reference", type=Path, default=None, help="a reference graph's JSON")
+    ap.add_argument(
+        "--reference-pairs",
+        type=Path,
+        default=None,
+        help="the JSON of benchmarks/marina_reference_pairs.py --out (the family refpairs)",
+    )
     ap.add_argument("--graphs", default=",".join(DEFAULT_GRAPHS), help="combinations to score")
     ap.add_argument("--cut-m", default="", help="stretch lengths M1,M2 (m) to cut lines into")
     ap.add_argument("--variants", action="store_true", help="the line variants too (step 4)")
     ap.add_argument("--out", type=Path, default=None, help="JSON of the scores")
     args = ap.parse_args(argv)
     try:
-        _, records, values, node_t, ds = load_run(args.run)
+        doc, records, values, node_t, ds = load_run(args.run)
         reference = None if args.reference is None else json.loads(args.reference.read_text())
     except (OSError, KeyError, ValueError, DataError) as exc:
         print(f"marina_factor_levels: {exc}", file=sys.stderr)
@@ -344,6 +401,20 @@ def main(argv: list[str] | None = None) -> int:
             records = records + reference_records(reference, node_t, dead_reckoning_trajectory(ds))
         except (KeyError, ValueError, TypeError) as exc:
             print(f"marina_factor_levels: {args.reference}: {exc!r}", file=sys.stderr)
+            return 1
+    if args.reference_pairs is not None:
+        try:
+            if reference is None:
+                raise ValueError("--reference-pairs needs --reference (its node times)")
+            pairs = json.loads(args.reference_pairs.read_text())
+            cfg = doc["meta"]["config"]
+            kernel = cfg.get("scan_robust")
+            robust = None if kernel is None else Robust(kernel, float(cfg["scan_robust_k"]))
+            records = records + reference_pair_records(
+                pairs, reference, node_t, dead_reckoning_trajectory(ds), robust
+            )
+        except (OSError, KeyError, ValueError, TypeError) as exc:
+            print(f"marina_factor_levels: {args.reference_pairs}: {exc!r}", file=sys.stderr)
             return 1
     ruler_name, *ruler = ruler_of(ds)
     try:

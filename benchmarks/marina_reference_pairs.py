@@ -17,7 +17,9 @@ pairs:
    (:meth:`sonarslam.features.scans.ScanMatcher.register`), from dead reckoning's relative pose
    and its covariance (``S_k - S_j`` of its chain, as the registration benchmark's rule).
 3. Re-expressed between the reference's node times with dead reckoning's relative motion between
-   each node time and its scan's reference time (seconds: small and locally right).
+   each node time and its scan's reference time (seconds: small and locally right), with its
+   covariance carried along (``z_nodes``, ``cov_nodes`` in plain ``(x_m, y_m, yaw_rad)``: the
+   family ``refpairs`` of ``benchmarks/marina_factor_levels.py --reference-pairs``).
 4. Scored: against the ruler (GPS positions with the AHRS heading dead reckoning uses: the
    position error of the relative pose, p50, p90 and the share beyond 2 m), and against the
    reference's relative pose, for the product's accepted registrations and for the reference's
@@ -47,7 +49,7 @@ from scipy.stats import chi2
 
 from sonarslam.datasets.errors import DataError
 from sonarslam.datasets.source import open_dataset
-from sonarslam.features.geometry import between, compose, wrap_angle
+from sonarslam.features.geometry import between, compose, compose_jacobians, wrap_angle
 from sonarslam.slam.run.presets import SCAN_PRESETS, apply_overrides, parse_settings, preset_for
 from sonarslam.slam.run.sources import dead_reckoning_trajectory, gps_ahrs_trajectory
 
@@ -116,7 +118,11 @@ def main(argv: list[str] | None = None) -> int:
         reasons[reg.reason or "accepted"] += 1
         # node i -> scan a's reference, scan b's reference -> node j (dead reckoning's motion)
         Pi, Pj = dr.poses(np.array([ti, tj]))
-        z = compose(compose(between(Pi, Pa), reg.z), between(Pb, Pj))
+        iTa = compose(between(Pi, Pa), reg.z)
+        z = compose(iTa, between(Pb, Pj))
+        _, J1_z = compose_jacobians(between(Pi, Pa), reg.z)
+        J2_a, _ = compose_jacobians(iTa, between(Pb, Pj))
+        J = J2_a @ J1_z  # d z / d reg.z
         g = between(*ruler.poses(np.array([ti, tj])))
         T_ref = np.asarray(pair["T"], dtype=np.float64)
         nu = np.array(
@@ -134,6 +140,7 @@ def main(argv: list[str] | None = None) -> int:
                 "compatible": bool(reg.accepted and nis <= compat),
                 "nis_dr": nis,
                 "z_nodes": z.tolist(),
+                "cov_nodes": (J @ reg.cov @ J.T).tolist(),
                 "err_gps_m": float(np.hypot(*(z[:2] - g[:2]))),
                 "err_gps_yaw_deg": float(np.degrees(abs(wrap_angle(z[2] - g[2])))),
                 "err_reference_m": float(np.hypot(*(z[:2] - T_ref[:2]))),

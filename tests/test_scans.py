@@ -13,6 +13,7 @@ import gtsam
 import numpy as np
 import pytest
 from gtsam.symbol_shorthand import X
+from scipy.stats import chi2
 
 from sonarslam.datasets.simulator import make_scenario, simulate_records
 from sonarslam.datasets.simulator.writer import write_dataset
@@ -22,7 +23,11 @@ from sonarslam.features.scans import ScanConfig, ScanMatcher, reference_lines, r
 from sonarslam.features.scans.icp import _median, register_from
 from sonarslam.slam.backends.isam2.g2o import graph_json_to_g2o
 from sonarslam.slam.backends.isam2.graph_io import FactorKind, FactorRecord, Robust
-from sonarslam.slam.backends.isam2.scans import radial_gate_distance, relative_pose_covariance
+from sonarslam.slam.backends.isam2.scans import (
+    choose_revisits,
+    radial_gate_distance,
+    relative_pose_covariance,
+)
 from sonarslam.slam.eval.consistency import mean_nees_band
 from sonarslam.slam.eval.truth import truth_trajectory
 from sonarslam.slam.model.lines import local_to_world
@@ -153,6 +158,26 @@ def test_radial_gate_distance():
     # 14 m along x, r = 10: 4 m beyond the radius, sigma along x 2 m: 2 sigmas, squared 4
     assert radial_gate_distance(np.array([14.0, 0.0]), S, 10.0) == pytest.approx(4.0)
     assert radial_gate_distance(np.array([0.0, 14.0]), S, 10.0) == pytest.approx(16.0)
+
+
+def test_choose_revisits_nearest_and_spread_over_time():
+    """Eight candidates ``(distance_m, scan)``: the nearest rule takes the nearest, a submap
+    apart; the spread rule the nearest of each time group (the oldest pass too), then fills
+    with the nearest; both at most ``n``, never two within ``spacing`` scans."""
+    cands = [(9.0, 2), (8.0, 3), (7.5, 10), (3.0, 40), (2.0, 41), (1.0, 42), (4.0, 60), (5.0, 61)]
+    assert choose_revisits(cands, 2, 3, "nearest") == [(1.0, 42), (4.0, 60)]
+    assert choose_revisits(cands, 4, 3, "nearest") == [(1.0, 42), (4.0, 60), (7.5, 10), (8.0, 3)]
+    # time groups of two: (2, 3) -> 3, (10, 40) -> 40, (41, 42) -> none 3 from 40, (61, 60) ->
+    # 60; then the nearest of the rest: 10
+    assert choose_revisits(cands, 4, 3, "spread") == [(8.0, 3), (3.0, 40), (4.0, 60), (7.5, 10)]
+    # two groups: (2, 3, 10, 40) -> 40; (41, 42, 60, 61) -> 42 is within 3 of 40, then 60
+    assert choose_revisits(cands, 2, 3, "spread") == [(3.0, 40), (4.0, 60)]
+    assert choose_revisits(cands, 0, 3, "spread") == []
+    assert choose_revisits([], 2, 3, "nearest") == []
+    for rule in ("nearest", "spread"):
+        for n in range(1, 9):
+            js = [j for _, j in choose_revisits(cands, n, 3, rule)]
+            assert len(js) <= n and all(abs(a - b) >= 3 for a in js for b in js if a != b)
 
 
 def test_scan_between_record_round_trips_with_its_kernel_and_exports_to_g2o(tmp_path):
@@ -339,6 +364,12 @@ def test_short_simulated_closed_loop_with_scans_beats_dead_reckoning(tmp_path_fa
     )
     assert kinds["scan-consecutive"] == m["scan_consecutive_accepted"]
     assert kinds["scan-revisit"] == m["scan_revisit_accepted"]
+    # the default gate keeps every registration the matcher accepts, and counts those the
+    # graph's compatibility gate would have rejected
+    revisits = [p for p in backend.scans.log.pairs if p["kind"] == "revisit"]
+    assert all(p["accepted"] == (p["nis"] is not None) for p in revisits)
+    c2 = chi2.ppf(backend.config.scan_compatibility_probability, 3)
+    assert m["scan_revisit_incompatible"] == sum(p["accepted"] and p["nis"] > c2 for p in revisits)
     with pytest.warns(UserWarning):
         export = graph_json_to_g2o(paths[0])
     assert export.scan_edges == kinds["scan-consecutive"] + kinds["scan-revisit"]

@@ -217,6 +217,7 @@ class ClosedLoopFigures:
         "redecided_moved",
         "redecided_stretches",
         "redecided_passes",
+        "scan_revisit_incompatible",
         "truth_precision",
         "truth_recall",
         "truth_associations",

@@ -103,11 +103,23 @@ class GraphConfig(BackendConfig):
         At most this many candidates (nearest by that distance under the loose gate, with
         cached marginals and no cross-covariance) get the joint marginal and the exact gate.
     revisits_per_scan : int
-        At most this many revisit registrations per new scan (the most likely first, from
-        older scans at least a submap apart).
+        At most this many revisit registrations per new scan (from older scans at least a
+        submap apart).
+    revisit_choice : {"nearest", "spread"}
+        Which candidates and revisits are taken
+        (:func:`sonarslam.slam.backends.isam2.scans.choose_revisits`): the nearest in metres, or
+        the nearest in each of as many groups of the candidates in time order (spread over the
+        passes).
+    revisit_gate : {"graph", "registration"}
+        ``"graph"``: a revisit registration is kept when its relative pose is compatible with
+        the graph's prediction (``scan_compatibility_probability``); ``"registration"``: every
+        registration the matcher accepts (its inliers, residual and ambiguity tests) goes in,
+        under the scan kernel (``scan_robust``): a gate against the graph's estimate rejects
+        the revisits that would correct its drift once it has drifted beyond its marginals.
     scan_compatibility_probability : float
-        A revisit registration is kept when its relative pose is compatible with the graph's
-        prediction (chi2(3) of the difference with the sum of both covariances) within this.
+        A revisit registration is compatible with the graph's prediction when chi2(3) of the
+        difference with the sum of both covariances is within this (the ``"graph"`` gate, and
+        the batch's GNC threshold).
     batch_optimizer : {"lm", "gnc"}
         The final batch pass (``--batch``): Levenberg-Marquardt on the graph as the loop built
         it, or graduated non-convexity choosing the revisits jointly among every one the
@@ -150,6 +162,8 @@ class GraphConfig(BackendConfig):
     revisit_min_gap_s: float = bounded(60.0, 0.0, math.inf)
     revisit_candidates: int = bounded(4, 0, math.inf)
     revisits_per_scan: int = bounded(2, 0, math.inf)
+    revisit_choice: str = one_of("nearest", "nearest", "spread")
+    revisit_gate: str = one_of("graph", "graph", "registration")
     scan_compatibility_probability: float = bounded(0.999, 0.0, 1.0, low_open=True, high_open=True)
     batch_optimizer: str = one_of("lm", "lm", "gnc")
     redecide_stretch_m: float | None = bounded(None, 0.0, 1e5, low_open=True)

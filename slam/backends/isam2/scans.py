@@ -14,9 +14,11 @@ scan. Here (MSISpIC's pose graph, Mallios et al. 2014, in iSAM2):
    ``u = d / |d|``. A loose pass uses each node's cached marginal and no cross-covariance
    (conservative: the cross-covariance of two poses of one trajectory is positive); the nearest
    ``revisit_candidates`` then get the joint marginal ``(X(j), X(k))`` and the exact gate.
-   The most likely ``revisits_per_scan`` are registered (submaps of ``submap_scans`` scans),
-   from the graph's relative pose, and kept when compatible with it (chi2(3) of the difference
-   with both covariances; the directions the registration leaves free carry no information).
+   ``revisits_per_scan`` of them (``revisit_choice``: the nearest, or spread over the passes,
+   :func:`choose_revisits`) are registered (submaps of ``submap_scans`` scans), from the
+   graph's relative pose, and kept (``revisit_gate = "graph"``) when compatible with it (chi2(3)
+   of the difference with both covariances; the directions the registration leaves free carry
+   no information), or (``"registration"``) whenever the registration's own tests accept them.
 4. Every scan factor has a robust kernel (``scan_robust``, Cauchy by default) and is a record
    of :mod:`sonarslam.slam.backends.isam2.graph_io` (``BetweenFactorPose2`` with ``"robust"`` and
    ``"constraint"``: ``"scan-consecutive"`` or ``"scan-revisit"``), so ``graph.json`` holds
@@ -54,6 +56,7 @@ __all__ = [
     "ScanConstraints",
     "relative_pose_covariance",
     "radial_gate_distance",
+    "choose_revisits",
 ]
 
 
@@ -118,6 +121,43 @@ def radial_gate_distance(d_xy: FloatArray, S_xy: FloatArray, radius_m: float) ->
         return 0.0
     u = np.asarray(d_xy) / dist
     return (dist - radius_m) ** 2 / max(float(u @ S_xy @ u), 1e-12)
+
+
+def choose_revisits(
+    candidates: list[tuple[float, int]], n: int, spacing: int, rule: str
+) -> list[tuple[float, int]]:
+    """At most ``n`` of ``(distance_m, scan j)`` revisit candidates, each at least ``spacing``
+    scans from the others chosen (a revisit of one place from several passes, not one pass's
+    neighbouring scans).
+
+    ``rule``: ``"nearest"``, the nearest in metres first (the most overlap); ``"spread"``, the
+    candidates in time order split into ``n`` groups of equal count and the nearest of each
+    group (the oldest passes as well as the newest: a revisit's information about the drift
+    grows with the time between its two scans, and one pass's revisits share their errors),
+    then the nearest of the rest while fewer than ``n`` are chosen.
+    """
+    if n <= 0 or not candidates:
+        return []
+    chosen: list[tuple[float, int]] = []
+
+    def take(pool: list[tuple[float, int]]) -> None:
+        for g, j in sorted(pool):
+            if len(chosen) >= n:
+                return
+            if all(abs(j - c) >= spacing for _, c in chosen):
+                chosen.append((g, j))
+                return
+
+    if rule == "spread":
+        by_time = sorted(candidates, key=lambda c: c[1])
+        for group in np.array_split(np.arange(len(by_time)), min(n, len(by_time))):
+            take([by_time[i] for i in group])
+    for g, j in sorted(candidates):
+        if len(chosen) >= n:
+            break
+        if (g, j) not in chosen and all(abs(j - c) >= spacing for _, c in chosen):
+            chosen.append((g, j))
+    return chosen
 
 
 @dataclass
@@ -267,9 +307,8 @@ class ScanConstraints:
         return M @ J @ M.T
 
     def _loose(self, k: int, pose_k: FloatArray, spread: int) -> list[tuple[float, int]]:
-        """Older scans under the loose gate, nearest (in metres: the most overlap) first, at
-        most ``revisit_candidates``, each at least ``spread`` scans from the others chosen (a
-        revisit of one place from several passes, not one pass's neighbouring scans)."""
+        """Older scans under the loose gate, at most ``revisit_candidates``
+        (:func:`choose_revisits`, ``revisit_choice``)."""
         cfg = self.config
         out = []
         for j in range(k):
@@ -279,13 +318,7 @@ class ScanConstraints:
             S = self._cov[j][:2, :2] + self._cov[k][:2, :2]
             if radial_gate_distance(d, S, cfg.revisit_radius_m) <= self._gate:
                 out.append((float(np.hypot(d[0], d[1])), j))
-        chosen: list[tuple[float, int]] = []
-        for g, j in sorted(out):
-            if len(chosen) >= cfg.revisit_candidates:
-                break
-            if all(abs(j - c) >= spread for _, c in chosen):
-                chosen.append((g, j))
-        return chosen
+        return choose_revisits(out, cfg.revisit_candidates, spread, cfg.revisit_choice)
 
     def _revisits(self, k: int, matcher: ScanMatcher) -> None:
         cfg = self.config
@@ -299,20 +332,24 @@ class ScanConstraints:
             # the gate in scan j's frame: d and S of the relative position
             if radial_gate_distance(-jTk[:2], S[:2, :2], cfg.revisit_radius_m) <= self._gate:
                 gated.append((float(np.hypot(jTk[0], jTk[1])), j, jTk, S))
-        chosen: list[int] = []
+        picked = {
+            j
+            for _, j in choose_revisits(
+                [(g[0], g[1]) for g in gated], cfg.revisits_per_scan, half, cfg.revisit_choice
+            )
+        }
         added = False
         for _, j, jTk, S in sorted(gated, key=lambda c: c[0]):
-            if len(chosen) >= cfg.revisits_per_scan:
-                break
-            if any(abs(j - c) < half for c in chosen):
+            if j not in picked:
                 continue
-            chosen.append(j)
             reg = matcher.register(j, k, jTk, S)
             nis = None
             if reg.accepted:
                 nu = np.array([*(reg.z[:2] - jTk[:2]), wrap_angle(reg.z[2] - jTk[2])])
                 nis = float(nu @ np.linalg.solve(S + reg.cov, nu))
-            ok = reg.accepted and nis is not None and nis <= self._compat
+            ok = reg.accepted and (
+                cfg.revisit_gate == "registration" or (nis or 0.0) <= self._compat
+            )
             self._log(reg, "revisit", j, k, nis)
             self.log.pairs[-1]["accepted"] = ok
             if not ok and reg.accepted:
@@ -330,4 +367,9 @@ class ScanConstraints:
         nis = [p["nis"] for p in self.log.pairs if p["nis"] is not None and p["accepted"]]
         if nis:
             out["scan_revisit_nis_median"] = float(np.median(nis))
+        # registrations the graph's gate rejects (``revisit_gate = "graph"``) or would reject
+        out["scan_revisit_incompatible"] = sum(
+            p["kind"] == "revisit" and p["nis"] is not None and p["nis"] > self._compat
+            for p in self.log.pairs
+        )
         return out
