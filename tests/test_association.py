@@ -82,26 +82,33 @@ def test_config_is_checked():
         AssociationConfig(gate_probability=1.0)
 
 
-def test_ekf_closed_loop_associates_the_true_walls(tmp_path):
+@pytest.fixture(scope="module")
+def harbour_ekf(opened):
+    """300 s of simulated harbour (seed 4) and the EKF closed loop on it with the default
+    settings: (dataset, result), run once for the module's two tests of it."""
+    from sonarslam.features.config import ExtractorConfig
+    from sonarslam.slam.backends.ekf import EkfConfig, LineEkf
+    from sonarslam.slam.run.closed_loop import run_closed_loop
+
+    ds = opened("harbour", 4, 300.0)
+    mount = ds.config.sonar_mounting
+    res = run_closed_loop(
+        ds, lambda t, p, P: LineEkf(t, p, P, mount, EkfConfig()), ExtractorConfig(), progress=False
+    )
+    return ds, res
+
+
+def test_ekf_closed_loop_associates_the_true_walls(harbour_ekf):
     """EKF closed loop on 300 s of simulated harbour: the pairings against the true walls meet
     the issue's targets (precision 99 %, recall 95 %), and the tentative lines that seeded
     landmarks are reported as seeds, on their landmark's wall."""
-    from sonarslam.datasets.simulator import simulate
-    from sonarslam.datasets.source import open_dataset
-    from sonarslam.features.config import ExtractorConfig
-    from sonarslam.slam.backends.ekf import EkfConfig, LineEkf
     from sonarslam.slam.eval.truth import (
         association_against_truth,
         landmark_overshoot_m,
         truth_walls,
     )
-    from sonarslam.slam.run.closed_loop import run_closed_loop
 
-    ds = open_dataset(simulate("harbour", seed=4, out_dir=tmp_path / "h", duration_s=300.0))
-    mount = ds.config.sonar_mounting
-    res = run_closed_loop(
-        ds, lambda t, p, P: LineEkf(t, p, P, mount, EkfConfig()), ExtractorConfig(), progress=False
-    )
+    ds, res = harbour_ekf
     walls = truth_walls(ds)
     s = association_against_truth(ds, res.features, res.feature_landmarks, res.feature_seeds)
     # with the default rule (a landmark needs 2 sightings) each landmark has one seed
@@ -199,22 +206,26 @@ def test_the_extent_gate_keeps_a_landmark_within_its_longest_extent():
     ]
 
 
-def test_a_landmark_longer_than_its_limit_is_not_made_by_the_loop(tmp_path):
+def test_a_landmark_longer_than_its_limit_is_not_made_by_the_loop(harbour_ekf):
     """EKF closed loop on 300 s of simulated harbour (seed 4): with ``max_extent_m = 20`` no
     landmark's extent is longer than 20 m beyond what a single observation spans, and more
     landmarks stand for the same walls than without the limit."""
     from dataclasses import replace
 
-    from sonarslam.datasets.simulator import simulate
-    from sonarslam.datasets.source import open_dataset
     from sonarslam.features.config import ExtractorConfig
     from sonarslam.slam.backends.ekf import EkfConfig, LineEkf
     from sonarslam.slam.run.closed_loop import run_closed_loop
 
-    ds = open_dataset(simulate("harbour", seed=4, out_dir=tmp_path / "h", duration_s=300.0))
+    ds, default = harbour_ekf
     mount = ds.config.sonar_mounting
-    lengths = {}
-    for limit in (None, 20.0):
+    assert EkfConfig().max_extent_m is None  # the module's default run is the one without limit
+    lengths = {
+        None: [
+            float(np.linalg.norm(np.subtract(*r["endpoints"])))
+            for r in default.backend.map_records()
+        ]
+    }
+    for limit in (20.0,):
         cfg = replace(EkfConfig(), max_extent_m=limit)
         res = run_closed_loop(
             ds, lambda t, p, P, c=cfg: LineEkf(t, p, P, mount, c), ExtractorConfig(), progress=False

@@ -9,15 +9,14 @@ import json
 import math
 from collections.abc import Callable
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
 from gtsam.symbol_shorthand import K
 
 from sonarslam.datasets.config import NoiseConfig
+from sonarslam.datasets.dataset import Dataset
 from sonarslam.datasets.simulator.scenario import make_scenario
-from sonarslam.datasets.source import open_dataset
 from sonarslam.slam.backends.ekf import N_VEHICLE, EkfConfig, LineEkf
 from sonarslam.slam.backends.registry import backend_spec
 from sonarslam.slam.model.motion import MotionStep
@@ -26,15 +25,16 @@ from sonarslam.slam.run.presets import run_config
 from sonarslam.sonar.beam import Mounting
 
 
-@pytest.fixture(scope="module")
-def drift(simulated: Callable[..., Path]) -> str:
-    """900 s of the drift world, seed 2 (tests/test_sonar_calibration.py's run: simulated once)."""
-    return str(simulated("drift", 2, 900.0))
+@pytest.fixture
+def drift(opened: Callable[..., Dataset]) -> Dataset:
+    """900 s of the drift world, seed 2 (tests/test_sonar_calibration.py's run: simulated and
+    read once per session)."""
+    return opened("drift", 2, 900.0)
 
 
 @pytest.mark.parametrize("name", ["ekf", "isam2"])
-def test_the_dvl_scale_error_is_found(drift: str, name: str) -> None:
-    ds = open_dataset(drift)
+def test_the_dvl_scale_error_is_found(drift: Dataset, name: str) -> None:
+    ds = drift
     assert ds.config.noise.dvl_scale_sigma == pytest.approx(0.02)  # the world's specification
     truth = json.loads((ds.root / "truth.json").read_text())
     k_true = truth["errors"]["dvl_scale_factor"]

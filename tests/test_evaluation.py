@@ -370,18 +370,17 @@ def test_aligned_ate_against_gps_removes_a_rigid_move_only():
     assert 0.5 < aligned.ate_mean_m < ate_against_gps(bent, gps).ate_mean_m
 
 
-def test_the_true_trajectory_projects_the_sharpest_map(simulated):
+def test_the_true_trajectory_projects_the_sharpest_map(opened):
     """GPS-free sharpness: a simulated harbour's beams projected with the truth give a lower
     entropy than with its second half turned by 2 deg about the midpoint, or with a drift that
     grows to 3 m; a rigid move of the whole trajectory leaves it (it holds no shape error); the
     whole-run figure is in a dead-reckoning run's metrics.json."""
-    from sonarslam.datasets.source import open_dataset
     from sonarslam.slam.eval.sharpness import trajectory_sharpness
     from sonarslam.slam.eval.truth import truth_trajectory
     from sonarslam.slam.run.presets import map_min_intensity
     from sonarslam.slam.run.run import run_backend
 
-    ds = open_dataset(simulated("harbour", 2, 300.0))
+    ds = opened("harbour", 2, 300.0)
     truth = truth_trajectory(ds)
     span = ds.sonar_span_s
     assert span is not None

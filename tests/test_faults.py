@@ -7,13 +7,13 @@ from __future__ import annotations
 import json
 import shutil
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from sonarslam.datasets.errors import DataError, DataWarning
-from sonarslam.datasets.simulator import simulate
 from sonarslam.datasets.source import open_dataset
 from sonarslam.slam.cli.main import main
 from sonarslam.slam.io.files import atomic_path, write_json
@@ -24,10 +24,10 @@ GAP = (30.0, 60.0)  # s after the first row
 
 
 @pytest.fixture(scope="module")
-def harbour(tmp_path_factory):
-    return simulate(
-        "harbour", seed=4, out_dir=tmp_path_factory.mktemp("sim") / "h", duration_s=100.0
-    )
+def harbour(simulated: Callable[..., Path]) -> Path:
+    """100 s of harbour, seed 4 (simulated once per session: tests/test_faults.py and
+    tests/test_never_silent.py read it); read only, a test that changes it copies it."""
+    return simulated("harbour", 4, 100.0, name="h")
 
 
 def _copy(src: Path, dst: Path) -> Path:

@@ -3,13 +3,14 @@ variance by ``walk**2 dt`` and agree on what the AHRS headings tell them."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 from gtsam.symbol_shorthand import B
 
 from sonarslam.datasets.config import NoiseConfig
-from sonarslam.datasets.simulator import simulate
-from sonarslam.datasets.source import open_dataset
+from sonarslam.datasets.dataset import Dataset
 from sonarslam.slam.backends.registry import backend_spec
 from sonarslam.slam.eval.truth import truth_trajectory
 from sonarslam.slam.model.motion import MotionStep
@@ -71,18 +72,18 @@ def test_the_back_ends_agree_on_the_current_heading_under_a_walk():
 
 
 @pytest.fixture(scope="module")
-def drift_300s(tmp_path_factory: pytest.TempPathFactory) -> str:
+def drift_300s(opened: Callable[..., Dataset]) -> Dataset:
     """300 s of the drift world: its AHRS heading walks (0.15 deg/sqrt(s)), the estimators are
-    told the walk's rate."""
-    return str(simulate("drift", seed=2, out_dir=tmp_path_factory.mktemp("d"), duration_s=300))
+    told the walk's rate (simulated and read once per session)."""
+    return opened("drift", 2, 300.0)
 
 
 @pytest.mark.parametrize("name", ["ekf", "isam2"])
-def test_no_back_end_learns_the_unobservable_rotation(drift_300s: str, name: str) -> None:
+def test_no_back_end_learns_the_unobservable_rotation(drift_300s: Dataset, name: str) -> None:
     """A rotation of the whole map and trajectory with the opposite change of the AHRS bias
     changes no measurement: the heading's variance never falls below the bias prior's, and its
     error against the truth stays consistent with it (FEJ-EKF: Huang et al. 2008)."""
-    ds = open_dataset(drift_300s)
+    ds = drift_300s
     run = run_backend(ds, name, {})
     tr = run.trajectory
     assert tr.covs is not None

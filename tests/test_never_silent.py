@@ -12,6 +12,7 @@ import shutil
 import subprocess
 import sys
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,6 @@ import pytest
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.keyframes import read_keyframe_times, read_pcd
 from sonarslam.datasets.logfile import NUMBER, iter_tables, read_table
-from sonarslam.datasets.simulator import simulate
 from sonarslam.datasets.source import open_dataset
 from sonarslam.slam.cli.main import main
 from sonarslam.slam.io.files import atomic_path, make_output_dir, remove_stale_temporaries
@@ -31,10 +31,10 @@ BAD_INPUT = Path(__file__).resolve().parents[1] / "docs" / "bad-input.md"
 
 
 @pytest.fixture(scope="module")
-def harbour(tmp_path_factory):
-    return simulate(
-        "harbour", seed=4, out_dir=tmp_path_factory.mktemp("sim") / "h", duration_s=100.0
-    )
+def harbour(simulated: Callable[..., Path]) -> Path:
+    """100 s of harbour, seed 4 (simulated once per session: tests/test_faults.py and
+    tests/test_never_silent.py read it); read only, a test that changes it copies it."""
+    return simulated("harbour", 4, 100.0, name="h")
 
 
 def _log(folder: Path, suffix: str) -> Path:

@@ -193,10 +193,12 @@ def _arrays_of(d: Dataset) -> dict[str, object]:
     }
 
 
-def test_a_dataset_from_arrays_is_the_directorys_and_is_gated(harbour: Path) -> None:
+def test_a_dataset_from_arrays_is_the_directorys_and_is_gated(
+    opened: Callable[..., Dataset],
+) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DataWarning)
-        d = open_dataset(harbour)
+        d = opened("harbour", 2, 300.0)  # the module's harbour, as open_dataset read it
         a = dataset_from_arrays(d.config, name="h", **_arrays_of(d))  # type: ignore[arg-type]
     assert a.calibration.startswith("given with the arrays")
     np.testing.assert_array_equal(a.beams.intensities, d.beams.intensities)
@@ -230,10 +232,12 @@ def test_a_dataset_from_arrays_is_the_directorys_and_is_gated(harbour: Path) -> 
         ({"gps_lat_lon_deg": None}, "gps_t_s and gps_lat_lon_deg go together"),
     ],
 )
-def test_bad_arrays_are_named(harbour: Path, change: dict[str, object], message: str) -> None:
+def test_bad_arrays_are_named(
+    opened: Callable[..., Dataset], change: dict[str, object], message: str
+) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DataWarning)
-        d = open_dataset(harbour)
+        d = opened("harbour", 2, 300.0)  # the module's harbour, as open_dataset read it
     kw = _arrays_of(d)
     key, how = next(iter(change.items()))
     value = None if how is None else np.array(kw[key])

@@ -5,12 +5,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.datasets.source import Dataset
 from sonarslam.features.extractor import LineExtractor
 from sonarslam.slam.cli.main import main
 from sonarslam.slam.eval.consistency import mean_nees_band
@@ -25,10 +24,10 @@ from sonarslam.slam.run.sonar_calibration import (
 
 
 @pytest.fixture(scope="module")
-def drift(simulated: Callable[..., Path]) -> Dataset:
+def drift(opened: Callable[..., Dataset]) -> Dataset:
     """900 s of the drift world: its echoes rise on the wall's face and peak 0.25 m behind
-    (the same run as tests/test_dvl_scale.py's, simulated once per session)."""
-    return open_dataset(simulated("drift", 2, 900.0))
+    (the same run as tests/test_dvl_scale.py's, simulated and read once per session)."""
+    return opened("drift", 2, 900.0)
 
 
 @pytest.fixture(scope="module")
