@@ -31,12 +31,12 @@ define install
 	$(BIN)/python -m pip install $(PIP_QUIET) -c $(LOCK) $(1)
 endef
 
-.PHONY: venv run test lint bench lock clean help readme-figures FORCE
+.PHONY: venv run test lint style bench lock clean help readme-figures FORCE
 
 help:
 	@echo "make run    set up .venv (runtime only) and run the main job: dead reckoning, EKF and iSAM2"
 	@echo "            on the marina if SONARSLAM_DATA has it, else on a simulated harbour (it says so)"
-	@echo "make test   set up .venv with the development tools, lint (ruff, mypy), run the tests"
+	@echo "make test   set up .venv with the development tools, ruff, run the tests (mypy among them)"
 	@echo "make venv   .venv with the development tools, without running anything"
 	@echo "make bench  speed benchmarks (benchmarks/)"
 	@echo "make readme-figures  re-measure the README's and docs/' generated figures (the marina)"
@@ -69,14 +69,18 @@ run: $(STAMP_RUN)
 
 # the project's own folders only: a user's scratch .py in the clone is not the project's
 LINT_DIRS = sonarslam sonar features slam datasets tests benchmarks
-lint: $(STAMP_DEV)
+lint: style
+	$(BIN)/mypy
+
+style: $(STAMP_DEV)
 	$(BIN)/ruff check $(LINT_DIRS) docs
 	$(BIN)/ruff format --check $(LINT_DIRS)
-	$(BIN)/mypy
 
 # 2 workers on 2 cores, one BLAS thread each (more only contend); worksteal: a worker that runs
 # out of tests takes them from the other, so the long tests do not decide the end
-test: lint
+# the type check runs inside the suite (tests/test_typing.py), beside the other tests on the
+# second core, rather than alone before them
+test: style
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 \
 		$(BIN)/python -m pytest -q -n 2 --dist worksteal -rs --durations=15
 

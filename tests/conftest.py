@@ -77,9 +77,29 @@ def marina(shared_dir: Callable[[str, Callable[[Path], None]], Path]) -> Dataset
     return loaded
 
 
+#: The modules of the longest tests (10-35 s each), run first: a long test that starts last
+#: decides when the suite ends while the other worker waits (longest first balances the two).
+#: Whole modules move, so that their module fixtures are still made once.
+LONG_MODULES = (
+    "test_docs_examples.py",
+    "test_typing.py",
+    "test_sweep.py",
+    "test_own_data.py",
+    "test_notebooks.py",
+    "test_namespace.py",
+)
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Mark every test that needs the real marina (its fixture or ``needs_marina``) with
-    ``marina``, so that ``pytest -m marina`` runs them and ``-m "not marina"`` leaves them."""
+    """The modules of :data:`LONG_MODULES` first (the others in their order). Mark every test
+    that needs the real marina (its fixture or ``needs_marina``) with ``marina``, so that
+    ``pytest -m marina`` runs them and ``-m "not marina"`` leaves them."""
+
+    def rank(item: pytest.Item) -> int:
+        name = item.path.name
+        return LONG_MODULES.index(name) if name in LONG_MODULES else len(LONG_MODULES)
+
+    items.sort(key=rank)  # stable: each module's own order kept
     for item in items:
         uses_fixture = "marina" in getattr(item, "fixturenames", ())
         skipif = any(
