@@ -75,9 +75,10 @@ def test_info_first_line_says_what_the_source_is(
 
 
 def test_lint_checks_the_projects_folders_and_every_tracked_python_file() -> None:
-    """``make lint`` names its folders (a scratch file at the clone's top is not linted), and
-    every Python file git tracks lies in one of them (or in notebooks/, which ruff excludes)."""
-    recipe = re.search(r"^lint:.*\n((?:\t.*\n)+)", (ROOT / "Makefile").read_text(), re.M)
+    """``make style`` (ruff, for ``make lint`` and ``make test``) names its folders (a scratch
+    file at the clone's top is not linted), and every Python file git tracks lies in one of
+    them (or in notebooks/, which ruff excludes)."""
+    recipe = re.search(r"^style:.*\n((?:\t.*\n)+)", (ROOT / "Makefile").read_text(), re.M)
     assert recipe is not None
     check = next(x for x in recipe[1].splitlines() if "ruff check" in x)
     assert not re.search(r"ruff check \.(\s|$)", check), check
