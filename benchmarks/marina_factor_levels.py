@@ -65,6 +65,7 @@ from sonarslam.slam.backends.isam2.graph_io import (
     key_of,
     pose_of,
 )
+from sonarslam.slam.backends.isam2.redecided import optimise_records
 from sonarslam.slam.eval.truth import truth_trajectory
 from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.model.lines import local_to_world
@@ -194,21 +195,11 @@ def reference_pair_records(
 
 
 def optimise(records: Sequence[FactorRecord], values: gtsam.Values) -> gtsam.Values:
-    """Levenberg-Marquardt on the records from ``values`` (those of their keys only)."""
-    graph = gtsam.NonlinearFactorGraph()
-    keys: set[int] = set()
-    for r in records:
-        graph.add(r.to_gtsam())
-        keys.update(r.keys)
-    start = gtsam.Values()
-    for k in keys:
-        if gtsam.Symbol(k).chr() == ord("x"):
-            start.insert(k, values.atPose2(k))
-        else:
-            start.insert(k, values.atVector(k))
+    """Levenberg-Marquardt on the records from ``values`` (those of their keys only), at most
+    100 iterations (the product's :func:`optimise_records`)."""
     params = gtsam.LevenbergMarquardtParams()
     params.setMaxIterations(100)
-    return gtsam.LevenbergMarquardtOptimizer(graph, start, params).optimize()
+    return optimise_records(list(records), values, params)
 
 
 def node_trajectory(values: gtsam.Values, node_t: dict[str, float]) -> Trajectory:

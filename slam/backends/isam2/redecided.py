@@ -39,7 +39,7 @@ from sonarslam.slam.mapping.redecide import (
     redecide,
 )
 
-__all__ = ["RedecidedGraph", "redecided_graph", "line_observations"]
+__all__ = ["RedecidedGraph", "redecided_graph", "line_observations", "optimise_records"]
 
 _LINE_KINDS = (FactorKind.LINE_OBSERVATION, FactorKind.LINE_OBSERVATION_CALIBRATED)
 
@@ -156,10 +156,10 @@ def _pass(
             continue
         out.append(r)
     lines = {int(S(j)): np.asarray(v) for j, v in enumerate(decision.stretches.lines_w)}
-    return _optimise(out, values, params, lines), out, decision
+    return optimise_records(out, values, params, lines), out, decision
 
 
-def _optimise(
+def optimise_records(
     records: list[FactorRecord],
     values: gtsam.Values,
     params: gtsam.LevenbergMarquardtParams,
