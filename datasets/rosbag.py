@@ -899,7 +899,8 @@ def open_bag(
     base = DatasetConfig()
     if read.msgtypes.get("sonar") in REP103_SONAR_TYPES:
         base = replace(base, sonar=replace(base.sonar, angle_sense=1))
-    config = _with_mountings(base, mountings, toml)
+    in_toml = _mounting_tables(toml)
+    config = _with_mountings(base, mountings, in_toml)
     if toml is not None:
         config, calibration = load_dataset_config(toml, base=config), str(toml)
         if tf_line:
@@ -914,7 +915,7 @@ def open_bag(
         config = load_dataset_config(config_override, base=config)
         calibration = f"{calibration}; over it {config_override}"
     if calibration != NEUTRAL_CALIBRATION:  # a neutral run is said whole above
-        _warn_identity_mountings(p, mountings, [toml, config_override])
+        _warn_identity_mountings(p, mountings, in_toml | _mounting_tables(config_override))
     dvl_note = _dvl_sigma_note(p, read.topics["dvl"], read.dvl_sigma_mps, config)
     if dvl_note:
         calibration = f"{calibration}; {dvl_note}"
@@ -1189,13 +1190,10 @@ def _mounting_tables(toml: str | Path | None) -> set[str]:
     return set(mounting) if isinstance(mounting, dict) else set()
 
 
-def _warn_identity_mountings(
-    bag: Path, mountings: dict[str, Mounting], files: list[str | Path | None]
-) -> None:
+def _warn_identity_mountings(bag: Path, mountings: dict[str, Mounting], given: set[str]) -> None:
     """A DataWarning naming each sensor left at the identity mounting when the others have a
-    source (the transforms or a file's table): one sensor forgotten among given ones is not
+    source (the transforms, or a table of the files: ``given``): one sensor forgotten among given ones is not
     a choice the user made."""
-    given = set().union(*(_mounting_tables(f) for f in files))
     missing = [
         field.removesuffix("_mounting")
         for role, field in MOUNTED_ROLES.items()
@@ -1213,11 +1211,11 @@ def _warn_identity_mountings(
 
 
 def _with_mountings(
-    config: DatasetConfig, mountings: dict[str, Mounting], toml: Path | None
+    config: DatasetConfig, mountings: dict[str, Mounting], tables: set[str]
 ) -> DatasetConfig:
-    """``config`` with the transforms' mountings, except those a ``sonarslam.toml`` sets with a
-    ``[mounting.<sensor>]`` table (the file wins, table by table)."""
-    tables = _mounting_tables(toml)
+    """``config`` with the transforms' mountings, except those whose ``[mounting.<sensor>]``
+    table the ``sonarslam.toml`` has (``tables``, :func:`_mounting_tables`: the file wins,
+    table by table)."""
     changes: dict[str, Any] = {
         MOUNTED_ROLES[role]: m
         for role, m in mountings.items()
