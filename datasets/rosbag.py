@@ -1192,8 +1192,8 @@ def _mounting_tables(toml: str | Path | None) -> set[str]:
 
 def _warn_identity_mountings(bag: Path, mountings: dict[str, Mounting], given: set[str]) -> None:
     """A DataWarning naming each sensor left at the identity mounting when the others have a
-    source (the transforms, or a table of the files: ``given``): one sensor forgotten among given ones is not
-    a choice the user made."""
+    source (the transforms, or a table of the files: ``given``): one sensor forgotten among
+    given ones is not a choice the user made."""
     missing = [
         field.removesuffix("_mounting")
         for role, field in MOUNTED_ROLES.items()
