@@ -14,8 +14,9 @@ relative pose ``t0Tt1`` it truly had between them:
   registered onto the other (:func:`sonarslam.features.scans.icp.register_from`, from the
   estimate's relative pose with a guess covariance of ``radius_m`` and 10 deg); an accepted
   registration is the map's measure of the true ``t0Tt1`` in the directions it constrains (in
-  one it leaves free, along a single wall, it keeps the guess: dead reckoning's), independent of the drift between the
-  two times (the motion correction within one turn is the odometry's, locally right).
+  one it leaves free, along a single wall, it keeps the guess: dead reckoning's), independent
+  of the drift between the two times (the motion correction within one turn is the odometry's,
+  locally right).
 
 The loops of a run are found along dead reckoning (:func:`sonarslam.slam.run.run.loop_figures`),
 not along the estimate being judged: every run of one dataset is then measured at the same loops
