@@ -119,6 +119,16 @@ def test_report_table_holds_each_runs_numbers(runs, tmp_path):
     t, e = truth_errors(ekf.trajectory, truth_trajectory(load_run(ekf.out_dir).dataset))
     first = (t - t[0]) < 300.0
     assert _row(md, "ekf", column=0)[1] == f"{e[first].mean():.2f} / {e[first].max():.2f}"
+    # the EKF's constants beside the simulator's truth, the error in the run's own sigmas
+    from sonarslam.slam.eval.truth import true_calibration
+
+    ekf_run = load_run(ekf.out_dir)
+    truth = true_calibration(ekf_run.dataset, ekf.trajectory.span_s[1])
+    m = ekf.metrics
+    assert truth["state_ahrs_bias_deg"] == pytest.approx(-2.0)  # the harbour's constant bias
+    (line,) = [ln for ln in md.splitlines() if ln.startswith("- AHRS heading error (end): ")]
+    z = (m["state_ahrs_bias_deg"] - truth["state_ahrs_bias_deg"]) / m["state_ahrs_bias_sd_deg"]
+    assert line.endswith(f"; truth {truth['state_ahrs_bias_deg']:.6g}, error {z:+.1f}σ"), line
     # each error band says which covariance model it is: different ones for dr and a closed loop
     from sonarslam.slam.run.report_figures import band_model
 

@@ -33,6 +33,7 @@ __all__ = [
     "truth_trajectory",
     "truth_walls",
     "true_sonar",
+    "true_calibration",
     "wall_lines_world",
     "wall_lines",
     "SAME_LINE_RHO_M",
@@ -90,6 +91,39 @@ def true_sonar(dataset: Dataset) -> tuple[FloatArray, float]:
     m = truth.get("mountings", {}).get("sonar")
     bTs = told if m is None else np.array([m["x_m"], m["y_m"], m["yaw_rad"]], dtype=np.float64)
     return bTs, float(truth.get("errors", {}).get("sonar_range_scale", 1.0))
+
+
+def true_calibration(dataset: Dataset, t_end_s: float) -> dict[str, float]:
+    """The simulator's true values of the calibration estimates a run writes to
+    ``metrics.json``, under the same keys; empty for a dataset without truth.
+
+    ``state_sonar_{x,y}_m``, ``state_sonar_yaw_deg`` and ``state_sonar_range_scale``: the true
+    mounting and range scale (:func:`true_sonar`). ``state_ahrs_bias_deg``: the true heading
+    error ``b`` at ``t_end_s`` (s; :func:`truth_heading_error`). ``state_dvl_scale``: the
+    estimators' ``k_e`` (the vehicle moves ``1 + k_e`` times the DVL's velocity) that undoes the
+    DVL's own error, which measures ``(1 + k) v`` (``dvl_scale_factor``): ``1 + k_e = 1 / (1 +
+    k)``. ``dvl_scale_in_sonar_map``: the ``k_e`` that agrees with a map the sonar draws at
+    ``s`` times the true distances (``sonar_range_scale``), ``1 + k_e = s / (1 + k)``: an
+    estimator without a range-scale state lies between the two.
+    """
+    truth = dataset.truth
+    if truth is None:
+        return {}
+    bTs, scale = true_sonar(dataset)
+    k = float(truth.get("errors", {}).get("dvl_scale_factor", 0.0))
+    out = {
+        "state_sonar_x_m": float(bTs[0]),
+        "state_sonar_y_m": float(bTs[1]),
+        "state_sonar_yaw_deg": float(np.rad2deg(bTs[2])),
+        "state_sonar_range_scale": scale,
+        "state_dvl_scale": 1.0 / (1.0 + k) - 1.0,
+        "dvl_scale_in_sonar_map": scale / (1.0 + k) - 1.0,
+    }
+    heading = truth_heading_error(dataset)
+    if heading is not None:
+        t, b_deg = heading
+        out["state_ahrs_bias_deg"] = float(np.interp(t_end_s, t, b_deg))
+    return out
 
 
 def _offset(dataset: Dataset) -> FloatArray:

@@ -14,10 +14,11 @@ from pathlib import Path
 import numpy as np
 from evo.core.geometry import umeyama_alignment
 
+from sonarslam.features.geometry import wrap_angle
 from sonarslam.features.projection import project_beams
 from sonarslam.slam.eval.ate import ate_errors, truth_errors
 from sonarslam.slam.eval.consistency import chi2_band, nees_series, pose_errors
-from sonarslam.slam.eval.truth import truth_heading_error, truth_walls
+from sonarslam.slam.eval.truth import true_calibration, truth_heading_error, truth_walls
 from sonarslam.slam.io.maps import MapLayers, landmark_layers, plot_map
 from sonarslam.slam.io.plots import (
     plot_error_bounds,
@@ -163,13 +164,36 @@ _CALIBRATION = (
 
 def calibration_lines(run: RunData) -> list[str]:
     """One Markdown list item per calibration estimate of the run's ``metrics.json``, with its
-    sd."""
+    sd, and on simulated data the truth and the error in sigmas
+    (:func:`sonarslam.slam.eval.truth.true_calibration`)."""
     m = run.metrics
-    return [
-        f"- {label}: {m[key]:.6g} ± {m[sd]:.2g} {unit} (1σ)".replace("  ", " ")
-        for label, key, sd, unit in _CALIBRATION
-        if key in m and sd in m
-    ]
+    truth = {}
+    if run.dataset is not None:
+        truth = true_calibration(run.dataset, run.trajectory.span_s[1])
+    lines = []
+    for label, key, sd, unit in _CALIBRATION:
+        if key not in m or sd not in m:
+            continue
+        text = f"- {label}: {m[key]:.6g} ± {m[sd]:.2g} {unit} (1σ)".replace("  ", " ")
+        if key in truth:
+            error = m[key] - truth[key]
+            if unit == "deg":
+                error = float(np.rad2deg(wrap_angle(np.deg2rad(error))))
+            z = error / m[sd] if m[sd] > 0 else float("inf")
+            text += f"; truth {truth[key]:.6g}, error {z:+.1f}σ"
+            in_map = truth["dvl_scale_in_sonar_map"]
+            if (
+                key == "state_dvl_scale"
+                and "state_sonar_range_scale" not in m
+                and in_map != truth[key]
+            ):
+                z_map = (m[key] - in_map) / m[sd] if m[sd] > 0 else float("inf")
+                text += (
+                    f"; the sonar's range scale {truth['state_sonar_range_scale']:.6g}, not"
+                    f" estimated, puts it at {in_map:.6g} in the sonar's map ({z_map:+.1f}σ)"
+                )
+        lines.append(text)
+    return lines
 
 
 def nees_figure(run: RunData, label: str, out: Path) -> Path:
