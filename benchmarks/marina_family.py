@@ -2,7 +2,7 @@
 of what a user cannot know exactly, per estimate the mean, min and max of the ATE.
 
 python benchmarks/marina_family.py [--source marina] [--backends dr,ekf,isam2] \\
-    [--workers 2] [--only NAME,...] [--out out/marina_family]
+    [--workers 2] [--only NAME,...] [--set SCOPE.FIELD=V ...] [--out out/marina_family]
 
 One run of one dataset cannot rank two settings that differ by less than what a calibration
 error of a quarter degree moves it (issue 29: sonar yaw +-0.25 deg moved iSAM2 smoothed between
@@ -31,6 +31,8 @@ estimate: the sonar span's ATE mean and max, unaligned and SE(2)-aligned, and th
 
 Writes ``OUT/family.json`` (every run's figures and the per-estimate statistics) and
 ``OUT/family.md`` (the table); each run's own outputs stay in ``OUT/runs/<backend>/<name>/``.
+``--set`` gives every closed-loop run of the family one more setting (dead reckoning takes none):
+two settings are compared by their families, not by two runs.
 """
 
 from __future__ import annotations
@@ -178,13 +180,19 @@ def _config_file(p: Perturbation, path: Path) -> Path | None:
     return path
 
 
-def run_one(source: str, backend: str, p: Perturbation, out: Path) -> dict[str, Any]:
-    """``sonarslam run`` of one member; its metrics.json, the wall time, or the error."""
+def run_one(
+    source: str, backend: str, p: Perturbation, out: Path, shared: tuple[str, ...] = ()
+) -> dict[str, Any]:
+    """``sonarslam run`` of one member (with the ``--set`` settings ``shared`` of every
+    closed-loop run); its metrics.json, the wall time, or the error."""
     run_dir = out / "runs" / backend / p.name
     run_dir.mkdir(parents=True, exist_ok=True)
     args = [source, "--out", str(run_dir), "--quiet", *BACKENDS[backend][0]]
     for key, value in p.settings.items():
         args += ["--set", f"{key}={value}"]
+    if backend != "dr":
+        for setting in shared:
+            args += ["--set", setting]
     cfg = _config_file(p, run_dir.parent / f"{p.name}.toml")
     if cfg is not None:
         args += ["--config", str(cfg)]
@@ -250,6 +258,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--backends", default="dr,ekf,isam2", help=f"comma list of {sorted(BACKENDS)}")
     ap.add_argument("--workers", type=int, default=2, help="runs at a time (at most 2)")
     ap.add_argument("--only", default=None, help="comma list of member names (default: all)")
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SCOPE.FIELD=V",
+        help="a setting of every closed-loop run (repeatable)",
+    )
     ap.add_argument("--out", type=Path, default=Path("out/marina_family"))
     args = ap.parse_args(argv)
     backends = [b.strip() for b in args.backends.split(",") if b.strip()]
@@ -284,7 +299,11 @@ def main(argv: list[str] | None = None) -> int:
         notes.append(f"dead reckoning: {', '.join(skipped)} left out (it takes no such setting)")
     wall0 = time.perf_counter()
     with ThreadPoolExecutor(max_workers=args.workers) as pool:
-        results = list(pool.map(lambda job: run_one(args.source, job[0], job[1], args.out), jobs))
+        results = list(
+            pool.map(
+                lambda job: run_one(args.source, job[0], job[1], args.out, tuple(args.set)), jobs
+            )
+        )
     wall = time.perf_counter() - wall0
     runs: dict[str, dict[str, Any]] = {}
     per_estimate: dict[str, dict[str, dict[str, float]]] = {}
@@ -307,6 +326,7 @@ def main(argv: list[str] | None = None) -> int:
     result = {
         "source": args.source,
         "members": [p.name for p in family],
+        "settings": args.set,
         "notes": notes,
         "summary": summary,
         "runs": runs,
