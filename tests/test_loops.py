@@ -149,3 +149,37 @@ def test_a_loop_error_beyond_the_search_radius_is_warned(nogps: Path) -> None:
         figures = loop_figures(d, result, [])
     assert max(e.position_m for e in figures.errors[""]) > 20.0
     assert max(e.position_m for e in figures.errors["dr"]) < 20.0
+
+
+def test_the_sonar_says_which_way_dead_reckoning_should_go(
+    nogps: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Without GPS a DVL mounted the wrong way round leaves every estimate consistent with
+    itself; the sonar's registrations of nearby scans show dead reckoning's motion turned
+    (issue 31's review: a reversed DVL passed the health check in silence)."""
+    from sonarslam.slam.eval.loops import odometry_check
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        d = open_dataset(nogps)
+        wrong = tmp_path / "dvl.toml"
+        told = float(np.degrees(d.config.dvl_mounting.yaw_rad))
+        wrong.write_text(f"[mounting.dvl]\nyaw_deg = {told + 180.0}\n")
+        d_wrong = open_dataset(nogps, config_override=wrong)
+    right = odometry_check(d, dead_reckoning_trajectory(d), step_m=3.0)
+    # the simulated harbour's DVL and sonar have no scale error: the registrations are the
+    # truth's relative poses to a tenth of a metre over 3 m
+    assert right.accepted >= 5
+    assert abs(right.heading_deg) < 3.0 and abs(right.scale - 1.0) < 0.05
+    turned = odometry_check(d_wrong, dead_reckoning_trajectory(d_wrong), step_m=3.0)
+    assert turned.accepted >= 3 and abs(turned.heading_deg) > 150.0
+    out = tmp_path / "dr"
+    args = ["run", str(nogps), "--backend", "dr", "--out", str(out), "--quiet"]
+    assert main([*args, "--config", str(wrong)]) == 0
+    err = capsys.readouterr().err
+    assert "the sonar sees the vehicle move" in err and "[mounting.dvl] yaw_deg" in err
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["odometry_check_heading_deg"] == pytest.approx(turned.heading_deg)
+    args[args.index("--out") + 1] = str(tmp_path / "dr_right")
+    assert main(args) == 0
+    assert "the sonar sees the vehicle move" not in capsys.readouterr().err

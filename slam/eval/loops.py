@@ -41,10 +41,19 @@ from sonarslam.datasets.source import Dataset
 from sonarslam.features.geometry import FloatArray, between, wrap_angle
 from sonarslam.features.pose_source import PoseSource
 from sonarslam.features.scans.config import ScanConfig
-from sonarslam.features.scans.icp import reference_lines, register_from
+from sonarslam.features.scans.icp import reference_lines, register, register_from
 from sonarslam.features.scans.scan import Scan, ScanBuilder
 
-__all__ = ["Loop", "LoopError", "SAMPLE_S", "stated_loops", "find_loops", "loop_errors"]
+__all__ = [
+    "Loop",
+    "LoopError",
+    "SAMPLE_S",
+    "stated_loops",
+    "find_loops",
+    "loop_errors",
+    "OdometryCheck",
+    "odometry_check",
+]
 
 #: The estimate is searched for returns at this step (s).
 SAMPLE_S = 2.0
@@ -198,3 +207,99 @@ def loop_errors(estimate: PoseSource, loops: list[Loop]) -> list[LoopError]:
         )
         out.append(LoopError(loop, position, heading))
     return out
+
+
+@dataclass(frozen=True)
+class OdometryCheck:
+    """How the sonar sees the vehicle move between two nearby scans, against dead reckoning.
+
+    Attributes
+    ----------
+    pairs : int
+        Pairs of scans registered.
+    accepted : int
+        Registrations accepted with every direction constrained.
+    heading_deg : float
+        The circular mean over the accepted pairs of the angle from dead reckoning's
+        translation between the two scans to the registration's (deg, counter-clockwise in the
+        first scan's body frame); NaN without an accepted pair.
+    scale : float
+        The median of the registration's translation length over dead reckoning's (the sonar's
+        range scale over the DVL's, 1 when both are right); NaN without an accepted pair.
+    """
+
+    pairs: int
+    accepted: int
+    heading_deg: float
+    scale: float
+
+
+def odometry_check(
+    dataset: Dataset,
+    dead_reckoning: PoseSource,
+    step_m: float,
+    n_pairs: int = 12,
+    config: ScanConfig | None = None,
+) -> OdometryCheck:
+    """Register pairs of scans ``step_m`` apart along dead reckoning's path and compare the
+    sonar's relative pose with dead reckoning's (GPS-free).
+
+    ``n_pairs`` first scans spread evenly over the sonar span; each is paired with the scan that
+    ends where dead reckoning has moved ``step_m`` further, at least one turn of the head later
+    (the two share no beam) and at most five. The second scan is registered onto the first from
+    dead reckoning's relative pose and from the same with its translation turned by 90, 180
+    and 270 deg (:func:`sonarslam.features.scans.icp.register`, one start each), and the
+    accepted result with the most weight kept: the sonar, not the guess, then says which way
+    the vehicle went. A DVL mounted the wrong way round, or a sonar mirrored, turns
+    :attr:`OdometryCheck.heading_deg` far from 0; the sonar's range scale against the DVL's
+    moves :attr:`OdometryCheck.scale` from 1. The scans are motion-corrected with dead
+    reckoning within their own turn only.
+    """
+    config = config or ScanConfig()
+    span = dataset.sonar_span_s
+    t_beams = dataset.beams.t_s
+    empty = OdometryCheck(0, 0, math.nan, math.nan)
+    if span is None or t_beams.size < 2:
+        return empty
+    head = dataset.config.sonar
+    n_turn = config.beams_per_scan or int(round(2.0 * np.pi / head.step_rad))
+    turn_s = float(np.median(np.diff(t_beams))) * n_turn
+    t = np.arange(span[0], span[1], min(1.0, turn_s / 4.0))
+    if t.size < 2:
+        return empty
+    p = np.asarray(dead_reckoning.poses(t))
+    path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p[:, :2], axis=0).T))])
+    pairs = accepted = 0
+    angles, ratios = [], []
+    for t0 in np.linspace(span[0] + turn_s, span[1] - 2.0 * turn_s, n_pairs):
+        i0 = int(np.searchsorted(t, t0))
+        far = np.flatnonzero((path >= path[i0] + step_m) & (t >= t0 + turn_s))
+        if i0 >= t.size or far.size == 0 or t[far[0]] > t0 + 5.0 * turn_s:
+            continue  # the vehicle hardly moves here
+        a = _scan_ending(dataset, float(t0), dead_reckoning, config)
+        b = _scan_ending(dataset, float(t[far[0]]), dead_reckoning, config)
+        if a is None or b is None or len(a.points_b) < 10 or len(b.points_b) < 10:
+            continue
+        guess = between(a.wTb_ref, b.wTb_ref)
+        if math.hypot(guess[0], guess[1]) < 0.5 * step_m:
+            continue
+        pairs += 1
+        ref = reference_lines(a.points_b, config)
+        best = None
+        for turn in (0.0, 0.5 * math.pi, math.pi, 1.5 * math.pi):
+            c, s = math.cos(turn), math.sin(turn)
+            start = np.array([c * guess[0] - s * guess[1], s * guess[0] + c * guess[1], guess[2]])
+            reg = register(ref, b.points_b, start, config)
+            if reg.accepted and reg.constrained.shape[1] == 3:
+                if best is None or reg.weight > best.weight:
+                    best = reg
+        if best is None:
+            continue
+        accepted += 1
+        z = np.asarray(best.z, dtype=np.float64)
+        angles.append(math.atan2(z[1], z[0]) - math.atan2(guess[1], guess[0]))
+        ratios.append(math.hypot(z[0], z[1]) / math.hypot(guess[0], guess[1]))
+    if not angles:
+        return OdometryCheck(pairs, 0, math.nan, math.nan)
+    mean = math.atan2(float(np.mean(np.sin(angles))), float(np.mean(np.cos(angles))))
+    return OdometryCheck(pairs, accepted, math.degrees(mean), float(np.median(ratios)))

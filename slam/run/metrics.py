@@ -19,7 +19,7 @@ import numpy as np
 
 from sonarslam.datasets.source import Dataset
 from sonarslam.slam.eval.ate import AteResult, ate_against_gps, ate_against_truth
-from sonarslam.slam.eval.loops import Loop, LoopError
+from sonarslam.slam.eval.loops import Loop, LoopError, OdometryCheck
 from sonarslam.slam.eval.sharpness import trajectory_sharpness
 from sonarslam.slam.eval.truth import AssociationScores, association_against_truth, truth_trajectory
 from sonarslam.slam.io.trajectory import Trajectory
@@ -305,6 +305,8 @@ class LoopFigures:
         One error per loop for each estimate.
     searched : bool
         Whether loops were searched for (runs without GPS) besides the stated ones.
+    odometry : OdometryCheck or None
+        Dead reckoning's motion against the sonar's between nearby scans (runs without GPS).
     """
 
     KEYS: ClassVar[tuple[str, ...]] = (
@@ -318,12 +320,17 @@ class LoopFigures:
         "loop_error_<name>_mean_m",
         "loop_error_<name>_max_m",
         "loops",
+        "odometry_check_pairs",
+        "odometry_check_accepted",
+        "odometry_check_heading_deg",
+        "odometry_check_scale",
     )
 
     radius_m: float
     loops: list[Loop]
     errors: dict[str, list[LoopError]]
     searched: bool
+    odometry: OdometryCheck | None = None
 
     def to_json(self) -> dict[str, JsonValue]:
         out: dict[str, JsonValue] = {
@@ -363,6 +370,11 @@ class LoopFigures:
             }
             for k, loop in enumerate(self.loops)
         ]
+        if self.odometry is not None:
+            out["odometry_check_pairs"] = self.odometry.pairs
+            out["odometry_check_accepted"] = self.odometry.accepted
+            out["odometry_check_heading_deg"] = _finite(self.odometry.heading_deg)
+            out["odometry_check_scale"] = _finite(self.odometry.scale)
         return out
 
 

@@ -26,7 +26,13 @@ from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.settings import SettingError
 from sonarslam.slam.backends.registry import BACKENDS, backend_spec
-from sonarslam.slam.eval.loops import find_loops, loop_errors, stated_loops
+from sonarslam.slam.eval.loops import (
+    OdometryCheck,
+    find_loops,
+    loop_errors,
+    odometry_check,
+    stated_loops,
+)
 from sonarslam.slam.io.files import check_output_dir
 from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.run.closed_loop import ClosedLoopResult, run_closed_loop
@@ -431,6 +437,30 @@ def run(
 
 #: A found loop is a return within this share of the sonar's range (the scans overlap).
 LOOP_RADIUS_SHARE = 0.4
+#: Without GPS, scans this share of the sonar's range apart along dead reckoning (within 1-5 m)
+#: check its direction of motion against the sonar's (:func:`sonarslam.slam.eval.loops.odometry_check`).
+ODOMETRY_STEP_SHARE = 0.1
+#: The sonar and dead reckoning disagree when the mean angle between their motions exceeds this
+#: (deg) over at least :data:`ODOMETRY_MIN_PAIRS` registrations.
+ODOMETRY_MAX_ANGLE_DEG = 45.0
+ODOMETRY_MIN_PAIRS = 3
+
+
+def _warn_odometry(dataset: Dataset, check: OdometryCheck) -> None:
+    """Warn when the sonar sees the vehicle move another way than dead reckoning does: without
+    GPS nothing else would show a DVL mounted the wrong way round (the estimate follows it and
+    stays consistent with itself)."""
+    if check.accepted < ODOMETRY_MIN_PAIRS or abs(check.heading_deg) <= ODOMETRY_MAX_ANGLE_DEG:
+        return
+    warnings.warn(
+        f"{dataset.root}: the sonar sees the vehicle move {check.heading_deg:+.0f} deg away from"
+        f" where dead reckoning moves it ({check.accepted} registrations of scans a few metres"
+        " apart): the DVL's mounting yaw ([mounting.dvl] yaw_deg) or its axes' signs, or the"
+        " sonar's angle sense ([sonar] angle_sense), is likely wrong; every estimate of this"
+        " run follows dead reckoning's motion",
+        UserWarning,
+        stacklevel=3,
+    )
 
 
 def loop_figures(
@@ -448,13 +478,17 @@ def loop_figures(
     loops = stated_loops(loops_rel_s, dataset.nav_span_s[0])
     dr = dead_reckoning_trajectory(dataset)
     searched = dataset.gps is None
+    odometry = None
     if searched:
         loops += find_loops(dataset, dr, radius_m)
+        range_m = head.n_bins * head.bin_size_m
+        odometry = odometry_check(dataset, dr, min(max(ODOMETRY_STEP_SHARE * range_m, 1.0), 5.0))
+        _warn_odometry(dataset, odometry)
     estimates: dict[str, Trajectory] = {"": result.trajectory, **result.trajectories}
     if result.backend != "dr":
         estimates["dr"] = dr
     errors = {name: loop_errors(tr, loops) for name, tr in estimates.items()}
-    figures = LoopFigures(radius_m, loops, errors, searched)
+    figures = LoopFigures(radius_m, loops, errors, searched, odometry)
     for name, errs in errors.items():
         worst = max(errs, key=lambda e: e.position_m, default=None)
         if worst is not None and worst.position_m > radius_m:
@@ -481,7 +515,7 @@ def loop_line(metrics: dict[str, Any]) -> str:
         else ""
     )
     if not m["loops"]:
-        return head + ": no loop-closure error"
+        return head + ": no loop-closure error" + _odometry_part(m)
     parts = [
         f"{'dead reckoning' if key == 'loop_error_dr_mean_m' else 'run' if key == 'loop_error_mean_m' else key[11:-7]}"
         f" mean {m[key]:.2f} m, max {m[key.replace('_mean_', '_max_')]:.2f}"
@@ -499,9 +533,25 @@ def loop_line(metrics: dict[str, Any]) -> str:
         floor = (
             f" (references: scan registrations along dead reckoning, the same for every run of"
             f" the dataset; {own}; {free} of {found} leave a direction free, dead reckoning's"
-            " there)"
+            " there; made with the sonar as calibrated, so that a range-scale or mounting error"
+            " biases them as it biases the lines: no independent ruler)"
         )
-    return f"{head}; loop-closure error{floor}: {'; '.join(parts)}"
+    return f"{head}; loop-closure error{floor}: {'; '.join(parts)}{_odometry_part(m)}"
+
+
+def _odometry_part(metrics: dict[str, Any]) -> str:
+    """The odometry check of a run without GPS (``metrics.json`` ``odometry_check_*``), or ""."""
+    accepted = metrics.get("odometry_check_accepted")
+    if accepted is None:
+        return ""
+    if not accepted:
+        return f"; dead reckoning against the sonar: no registration of {metrics['odometry_check_pairs']} accepted"
+    return (
+        f"; dead reckoning against the sonar ({accepted} of"
+        f" {metrics['odometry_check_pairs']} registrations of scans a few metres apart): its"
+        f" motion {metrics['odometry_check_heading_deg']:+.1f} deg off the sonar's, lengths"
+        f" x{metrics['odometry_check_scale']:.3f}"
+    )
 
 
 def summary_line(metrics: dict[str, Any]) -> str:
