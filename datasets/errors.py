@@ -50,6 +50,7 @@ class MissingExtraError(ImportError):
         self.extra = extra
         module = (missing.name or "?").split(".")[0]
         super().__init__(
-            f"{feature} needs {module}, which is not installed: pip install 'sonarslam[{extra}]'",
+            f"{feature} needs {module}, which is not installed: pip install 'sonarslam[{extra}]'"
+            f" (in a clone of the repository: make venv, or pip install -e '.[{extra}]')",
             name=missing.name,
         )

@@ -118,7 +118,8 @@ def test_a_sweep_without_dask_names_the_extra(tmp_path, capsys, monkeypatch):
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [
         "sonarslam sweep: error: a sweep on Dask needs dask, which is not installed:"
-        " pip install 'sonarslam[sweep]'"
+        " pip install 'sonarslam[sweep]' (in a clone of the repository: make venv, or pip"
+        " install -e '.[sweep]')"
     ]
     assert not (tmp_path / "o" / "sim").exists()
 
@@ -138,7 +139,8 @@ def test_a_drawn_world_without_shapely_names_the_extra(tmp_path):
     assert done.returncode == 1, done.stderr
     assert done.stderr.strip().splitlines() == [
         "sonarslam simulate: error: a drawn world needs shapely, which is not installed:"
-        " pip install 'sonarslam[sim]'"
+        " pip install 'sonarslam[sim]' (in a clone of the repository: make venv, or pip install"
+        " -e '.[sim]')"
     ]
 
 
