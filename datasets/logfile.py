@@ -290,7 +290,12 @@ def data_lines(path: str | Path, comment: str = "%") -> tuple[list[tuple[int, st
     """The data lines of a log, ``(physical line number, text stripped of spaces/tabs)``,
     without blank lines and lines starting with ``comment``; and the number of the file's last
     line when it has no line end (None otherwise)."""
-    lines, terminated = text_lines(path)
+    return _numbered_lines(read_text(path, "latin-1"), comment)
+
+
+def _numbered_lines(text: str, comment: str = "%") -> tuple[list[tuple[int, str]], int | None]:
+    """:func:`data_lines` of a file's text."""
+    lines, terminated = split_lines(text)
     numbered = []
     for number, raw in enumerate(lines, start=1):
         line = raw.strip(" \t")
@@ -336,7 +341,14 @@ def read_table(
         See the module docstring.
     """
     p = Path(path)
-    numbered, open_end = data_lines(p)
+    data = read_bytes(p)
+    fast = _fast_table(p, data, n_columns, min_columns)
+    if fast is not None:
+        if time_column is not None:
+            check_unix_times(fast, time_column)
+            check_time_order(fast, time_column)
+        return fast
+    numbered, open_end = _numbered_lines(data.decode("latin-1"))
     return parse_table(
         p,
         numbered,
@@ -497,6 +509,61 @@ def _finite_row(fields: list[str]) -> bool:
     if not all(_NUMBER_RE.fullmatch(f) for f in fields):
         return False
     return bool(np.all(np.isfinite(np.array(fields, dtype=np.float64))))
+
+
+#: The bytes a data line of the common case holds: ASCII digits, signs, points, exponents,
+#: spaces and tabs (and the line ends).
+_NUMERIC_BYTES = b"0123456789eE+-. \t\n"
+
+
+def _fast_table(path: Path, data: bytes, n_columns: int | None, min_columns: int) -> Table | None:
+    """:func:`read_table`'s rows of a whole file in the common case, on its bytes in a few
+    vectorised passes: a head of comment and blank lines, then only lines of ASCII numbers of
+    the grammar (or blank ones), every data line with the same count of fields, all finite,
+    line ends ``\\n`` or ``\\r\\n`` only and the last line ended. Else None: the line-by-line
+    reader (:func:`parse_table`) then reads the file and names what is wrong. The values are
+    those of :func:`parse_table` (the same conversion of the same fields), the times are left
+    to the caller to check."""
+    if b"\r" in data:
+        if data.count(b"\r") != data.count(b"\r\n"):
+            return None  # a line break \r alone: the line-by-line reader's
+        data = data.replace(b"\r\n", b"\n")
+    if not data.endswith(b"\n"):
+        return None  # no file, or a last line that may be cut: judged line by line
+    start, number = 0, 1  # the head: comment and blank lines
+    while start < len(data):
+        end = data.index(b"\n", start)
+        line = data[start:end].strip(b" \t")
+        if line and not line.startswith(b"%"):
+            break
+        start, number = end + 1, number + 1
+    body = data[start:]
+    if not body or body.translate(None, _NUMERIC_BYTES):
+        return None  # no data line, or a byte of another kind (a comment below the head...)
+    code = np.frombuffer(body, dtype=np.uint8)
+    is_char = (code != 32) & (code != 9) & (code != 10)
+    first_chars = np.flatnonzero(is_char[1:] & ~is_char[:-1]) + 1  # where each field starts
+    if is_char[0]:
+        first_chars = np.concatenate([[0], first_chars])
+    ends = np.flatnonzero(code == 10)
+    per_line = np.diff(np.searchsorted(first_chars, ends), prepend=0)
+    rows = np.flatnonzero(per_line)  # blank lines hold no field
+    n = int(per_line[rows[0]]) if n_columns is None else n_columns
+    if n < max(min_columns, 1) or np.any(per_line[rows] != n):
+        return None
+    # the conversion of :func:`_fast_block`: exactly the grammar NUMBER on this alphabet
+    try:
+        values = np.array(body.split(), dtype=np.float64).reshape(rows.size, n)
+    except ValueError:
+        return None
+    if not np.all(np.isfinite(values)):
+        return None
+    return Table(
+        path=path,
+        data=values,
+        line_numbers=(rows + number).astype(np.int64),
+        skipped=0,
+    )
 
 
 def _fast_block(
