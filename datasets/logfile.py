@@ -511,6 +511,72 @@ def _finite_row(fields: list[str]) -> bool:
     return bool(np.all(np.isfinite(np.array(fields, dtype=np.float64))))
 
 
+#: ``10.0 ** k`` for ``k`` = 0-15, each exact in a float64.
+_POW10 = np.array([float(f"1e{k}") for k in range(16)])
+#: Most significant digits a field converted arithmetically may hold: below 2**53, so exact.
+_EXACT_DIGITS = 15
+
+
+def _numbers(text: bytes) -> FloatArray:
+    """The float64 of each field of ``text`` (ASCII of :data:`_NUMERIC_BYTES`, fields
+    separated by spaces, tabs and ``\\n``), as ``np.array(text.split(), dtype=np.float64)``
+    gives them, in one flat array; a ValueError for a field that is no number.
+
+    A field ``[+-]digits[.digits]`` (or ``[+-].digits``) of at most 15 digits, the bulk of a
+    log (all of a raw sonar log's intensities), is converted arithmetically: its digits as a
+    whole number ``m`` (exact below 2**53) divided by ``10**k`` (exact for ``k`` <= 15), a
+    single IEEE division, so the correctly rounded value of the decimal, which is what the
+    string conversion gives (Clinger 1990, "How to read floating point numbers accurately",
+    the exact case). The other fields (exponents, more digits) go through the string
+    conversion.
+    """
+    code = np.frombuffer(text, dtype=np.uint8)
+    if code.size == 0:
+        return np.zeros(0)
+    is_char = (code != 32) & (code != 9) & (code != 10)
+    edge = np.diff(is_char.view(np.int8), prepend=np.int8(0), append=np.int8(0))
+    starts = np.flatnonzero(edge == 1)
+    ends = np.flatnonzero(edge == -1)  # one past each field's last byte
+    is_digit = (code >= 48) & (code <= 57)
+    digits_to = np.cumsum(is_digit, dtype=np.int32)  # digits up to each byte (inclusive)
+    digits_at = np.flatnonzero(is_digit)
+    first = digits_to[starts] - is_digit[starts]  # index in digits_at of a field's first digit
+    n_digits = digits_to[ends - 1] - first
+    marks = np.flatnonzero(is_char & ~is_digit)  # signs, points, exponents
+    field_of = np.searchsorted(starts, marks, side="right") - 1
+    mark = code[marks]
+    n_fields = starts.size
+    points = np.bincount(field_of[mark == 46], minlength=n_fields)
+    signs = np.bincount(field_of[(mark == 43) | (mark == 45)], minlength=n_fields)
+    others = np.bincount(field_of[(mark == 101) | (mark == 69)], minlength=n_fields)
+    lead = code[starts]
+    signed = (lead == 43) | (lead == 45)
+    plain = (
+        (points <= 1)
+        & (others == 0)
+        & (signs == signed)
+        & (n_digits >= 1)
+        & (n_digits <= _EXACT_DIGITS)
+    )
+    # digits after the point: the field's digits less those before the point
+    after = np.zeros(n_fields, dtype=np.int64)
+    at_point = mark == 46
+    with_point = field_of[at_point]
+    after[with_point] = (first + n_digits)[with_point] - digits_to[marks[at_point]]
+    whole = np.zeros(n_fields, dtype=np.int64)
+    for d in np.unique(n_digits[plain]):
+        sel = np.flatnonzero(plain & (n_digits == d))
+        places = digits_at[first[sel, None] + np.arange(d)]  # (G, d)
+        weights = 10 ** np.arange(d - 1, -1, -1, dtype=np.int64)
+        whole[sel] = (code[places].astype(np.int64) - 48) @ weights
+    values = whole.astype(np.float64) / _POW10[np.where(plain, after, 0)]
+    values = np.where(lead == 45, -values, values)
+    rest = np.flatnonzero(~plain)
+    if rest.size:
+        values[rest] = np.array([text[starts[i] : ends[i]] for i in rest], dtype=np.float64)
+    return values
+
+
 #: The bytes a data line of the common case holds: ASCII digits, signs, points, exponents,
 #: spaces and tabs (and the line ends).
 _NUMERIC_BYTES = b"0123456789eE+-. \t\n"
@@ -553,7 +619,7 @@ def _fast_table(path: Path, data: bytes, n_columns: int | None, min_columns: int
         return None
     # the conversion of :func:`_fast_block`: exactly the grammar NUMBER on this alphabet
     try:
-        values = np.array(body.split(), dtype=np.float64).reshape(rows.size, n)
+        values = _numbers(body).reshape(rows.size, n)
     except ValueError:
         return None
     if not np.all(np.isfinite(values)):
@@ -597,7 +663,7 @@ def _fast_block(
     # numpy's conversion of ASCII tokens of these characters accepts exactly the grammar
     # NUMBER (tested exhaustively to 6 characters in tests/test_fuzz_readers.py)
     try:
-        data = np.array(flat.split(), dtype=np.float64).reshape(len(body), n)
+        data = _numbers(flat).reshape(len(body), n)
     except ValueError:
         return None
     if not np.all(np.isfinite(data)):

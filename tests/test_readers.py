@@ -22,7 +22,14 @@ from sonarslam.datasets.geodesy import (
 )
 from sonarslam.datasets.islog import read_is_log, write_is_log
 from sonarslam.datasets.keyframes import read_pcd_xy
-from sonarslam.datasets.logfile import Table, _fast_table, data_lines, parse_table, read_table
+from sonarslam.datasets.logfile import (
+    Table,
+    _fast_table,
+    _numbers,
+    data_lines,
+    parse_table,
+    read_table,
+)
 from sonarslam.datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti
 from sonarslam.datasets.source import open_dataset
 from sonarslam.sonar.beam import SonarBeam
@@ -309,6 +316,18 @@ def _line_reader(path: Path, trust_last_line: bool = False, **kw: object) -> Tab
     return parse_table(path, numbered, None if trust_last_line else open_end, **kw)  # type: ignore[arg-type]
 
 
+def _python_rows(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """The data rows of a clean log by Python's own float() of each field, and their lines: the
+    reference neither reader shares a conversion with."""
+    rows, numbers = [], []
+    for number, raw in enumerate(re.split(rb"\r\n|\r|\n", path.read_bytes()), start=1):
+        line = raw.strip(b" \t")
+        if line and not line.startswith(b"%"):
+            rows.append([float(f) for f in line.split()])
+            numbers.append(number)
+    return np.array(rows, dtype=np.float64), np.array(numbers)
+
+
 def _same_table(a: Table, b: Table) -> None:
     assert a.data.dtype == b.data.dtype == np.float64
     assert a.data.shape == b.data.shape
@@ -330,6 +349,9 @@ def test_fast_path_reads_the_marina_logs_as_the_line_reader():
         taken.append(path.name.rsplit("_", 1)[-1])
         _same_table(fast, _line_reader(path))
         _same_table(read_table(path), _line_reader(path))
+        rows, numbers = _python_rows(path)
+        assert fast.data.tobytes() == rows.tobytes()
+        assert np.array_equal(fast.line_numbers, numbers)
     assert set(taken) == {"DVL.log", "MTi.log", "PID.log", "timestamps.log"}
 
 
@@ -389,6 +411,9 @@ def test_fast_path_is_the_line_reader_on_crafted_logs(tmp_path, name):
         _same_table(got, want)
         if fast is not None:
             _same_table(fast, want)
+            rows, numbers = _python_rows(path)
+            assert fast.data.tobytes() == rows.tobytes()
+            assert np.array_equal(fast.line_numbers, numbers)
 
 
 def test_fast_path_keeps_the_column_count_and_time_errors(tmp_path):
@@ -438,3 +463,36 @@ def test_gps_outliers_are_those_of_the_fix_by_fix_gate():
         assert np.array_equal(_gps_outliers(t, en, gates), want)
         found += int(want.sum())
     assert found > 100  # the cases hold outliers, not only clean tracks
+
+
+def test_numbers_are_pythons_floats_bit_for_bit():
+    """The fields converted arithmetically (up to 15 digits, no exponent) and those left to the
+    string conversion are all Python's float() of the field, to the bit (and the sign of a
+    zero); a field that is no number is a ValueError."""
+    rng = np.random.default_rng(7)
+    edge = ["-0", "-0.0", "+0", ".5", "-.25", "1.", "007", "+.0", "-000000000000000.1"]
+    edge += ["999999999999999", "0.000000000000001", "123456789012345", "1234567890123456"]
+    edge += ["9007199254740993", "0.1000000000000000055511151231257827", "1e5", "-2.5E-3"]
+    edge += ["4.9e-324", "1e-400", "255", "0"]
+    for _ in range(300):
+        fields = []
+        for _ in range(int(rng.integers(1, 80))):
+            kind = rng.integers(4)
+            if kind == 0:
+                fields.append(str(rng.integers(0, 256)))
+            elif kind == 1:
+                fields.append(f"{rng.uniform(-1e6, 1e6):.{rng.integers(0, 16)}f}")
+            elif kind == 2:
+                digits = "".join(rng.choice(list("0123456789"), int(rng.integers(1, 18))))
+                cut = int(rng.integers(0, len(digits) + 1))
+                sign = str(rng.choice(["", "-", "+"]))
+                fields.append(f"{sign}{digits[:cut]}.{digits[cut:]}")
+            else:
+                fields.append(str(rng.choice(edge)))
+        seps = rng.choice([" ", "\t", "\n", " \t", "\t\t"], len(fields))
+        text = "".join(f + str(sep) for f, sep in zip(fields, seps, strict=True)).encode()
+        want = np.array([float(f) for f in fields])
+        assert _numbers(text).tobytes() == want.tobytes(), fields
+    for bad in [b"1 2 .", b"1 +-2", b"1e", b"1 2.3.4", b"- 1", b"1-2", b"+", b"1 -"]:
+        with pytest.raises(ValueError):
+            _numbers(bad)
