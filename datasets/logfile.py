@@ -100,8 +100,6 @@ _CSV_ROW_RE = re.compile(rf"{NUMBER}(?:[ \t]*,[ \t]*{NUMBER})*")
 _LINE_BREAK = re.compile(r"\r\n|\r|\n")
 _FIELD_SEP = re.compile(r"[ \t]+")
 _NOT_TEXT = re.compile(r"[^\t\x20-\x7e]")
-_TAB_TO_SPACE = bytes.maketrans(b"\t", b" ")
-_NOT_NUMERIC_TEXT = re.compile(r"[^0-9eE+\-. \t\n]")
 _NUMBER_PREFIX = re.compile(r"[+-]?[0-9]*\.?[0-9]*(?:[eE][+-]?)?")
 _SHAPE = re.compile(r"[+-]?([0-9]*)(?:\.([0-9]+))?(?:[eE][+-]?([0-9]+))?")
 _KINDS = (
@@ -433,7 +431,9 @@ def parse_table(
         _warn_skipped(path, expected, bad_lines, cut_line)
     table = Table(
         path=path,
-        data=np.vstack(parts) if parts else np.zeros((0, expected or 0)),
+        data=(parts[0] if len(parts) == 1 else np.vstack(parts))
+        if parts
+        else np.zeros((0, expected or 0)),
         line_numbers=np.asarray(line_numbers, dtype=np.int64),
         skipped=len(bad_lines) + (cut_line is not None),
         skipped_lines=tuple(bad_lines),
@@ -564,7 +564,7 @@ def _numbers(text: bytes) -> FloatArray:
     with_point = field_of[at_point]
     after[with_point] = (first + n_digits)[with_point] - digits_to[marks[at_point]]
     whole = np.zeros(n_fields, dtype=np.int64)
-    for d in np.unique(n_digits[plain]):
+    for d in np.flatnonzero(np.bincount(n_digits[plain], minlength=1)):
         sel = np.flatnonzero(plain & (n_digits == d))
         places = digits_at[first[sel, None] + np.arange(d)]  # (G, d)
         weights = 10 ** np.arange(d - 1, -1, -1, dtype=np.int64)
@@ -580,6 +580,17 @@ def _numbers(text: bytes) -> FloatArray:
 #: The bytes a data line of the common case holds: ASCII digits, signs, points, exponents,
 #: spaces and tabs (and the line ends).
 _NUMERIC_BYTES = b"0123456789eE+-. \t\n"
+
+
+def _fields_per_line(code: np.ndarray) -> np.ndarray:
+    """(L,) int: the fields (runs of bytes other than space, tab and ``\\n``) of each line of
+    the bytes ``code`` (N,) uint8, whose every line ends with ``\\n``."""
+    is_char = (code != 32) & (code != 9) & (code != 10)
+    first_chars = np.flatnonzero(is_char[1:] & ~is_char[:-1]) + 1  # where each field starts
+    if is_char[0]:
+        first_chars = np.concatenate([[0], first_chars])
+    ends = np.flatnonzero(code == 10)
+    return np.diff(np.searchsorted(first_chars, ends), prepend=0)
 
 
 def _fast_table(path: Path, data: bytes, n_columns: int | None, min_columns: int) -> Table | None:
@@ -606,13 +617,7 @@ def _fast_table(path: Path, data: bytes, n_columns: int | None, min_columns: int
     body = data[start:]
     if not body or body.translate(None, _NUMERIC_BYTES):
         return None  # no data line, or a byte of another kind (a comment below the head...)
-    code = np.frombuffer(body, dtype=np.uint8)
-    is_char = (code != 32) & (code != 9) & (code != 10)
-    first_chars = np.flatnonzero(is_char[1:] & ~is_char[:-1]) + 1  # where each field starts
-    if is_char[0]:
-        first_chars = np.concatenate([[0], first_chars])
-    ends = np.flatnonzero(code == 10)
-    per_line = np.diff(np.searchsorted(first_chars, ends), prepend=0)
+    per_line = _fields_per_line(np.frombuffer(body, dtype=np.uint8))
     rows = np.flatnonzero(per_line)  # blank lines hold no field
     n = int(per_line[rows[0]]) if n_columns is None else n_columns
     if n < max(min_columns, 1) or np.any(per_line[rows] != n):
@@ -648,15 +653,10 @@ def _fast_block(
     body = lines[:-1] if lines and lines[-1][0] == open_end else lines
     if not body:
         return None
-    block = "\n".join(line for _, line in body)
-    if _NOT_NUMERIC_TEXT.search(block) is not None:
-        return None
-    flat = block.encode("ascii").translate(_TAB_TO_SPACE)
-    code = np.frombuffer(flat, dtype=np.uint8)
-    is_char = (code != 32) & (code != 10)
-    starts = np.cumsum(is_char & ~np.concatenate([[False], is_char[:-1]]))
-    ends = np.flatnonzero(code == 10)
-    per_line = np.diff(np.concatenate([[0], starts[ends], [starts[-1]]]))
+    flat = ("\n".join(line for _, line in body) + "\n").encode("ascii", errors="replace")
+    if flat.translate(None, _NUMERIC_BYTES):
+        return None  # a byte of another kind (a non-ASCII one is "?" here)
+    per_line = _fields_per_line(np.frombuffer(flat, dtype=np.uint8))
     n = int(per_line[0]) if n_columns is None else n_columns
     if n < max(min_columns, 1) or np.any(per_line != n):
         return None
