@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import re
 import shutil
 import warnings
@@ -23,6 +24,7 @@ from sonarslam.datasets.geodesy import (
 from sonarslam.datasets.islog import read_is_log, write_is_log
 from sonarslam.datasets.keyframes import read_pcd_xy
 from sonarslam.datasets.logfile import (
+    NUMBER,
     Table,
     _fast_table,
     _numbers,
@@ -453,7 +455,7 @@ def test_gps_outliers_are_those_of_the_fix_by_fix_gate():
     gates = GateConfig()
     rng = np.random.default_rng(28)
     found = 0
-    for _ in range(200):
+    for _ in range(80):
         n = int(rng.integers(0, 80))
         t = np.sort(rng.uniform(0.0, rng.uniform(1.0, 200.0), n))
         en = rng.normal(0.0, rng.uniform(0.1, 30.0), (n, 2))
@@ -462,7 +464,7 @@ def test_gps_outliers_are_those_of_the_fix_by_fix_gate():
         want = _gps_outliers_one_by_one(t, en, gates)
         assert np.array_equal(_gps_outliers(t, en, gates), want)
         found += int(want.sum())
-    assert found > 100  # the cases hold outliers, not only clean tracks
+    assert found > 40  # the cases hold outliers, not only clean tracks
 
 
 def test_numbers_are_pythons_floats_bit_for_bit():
@@ -496,3 +498,19 @@ def test_numbers_are_pythons_floats_bit_for_bit():
     for bad in [b"1 2 .", b"1 +-2", b"1e", b"1 2.3.4", b"- 1", b"1-2", b"+", b"1 -"]:
         with pytest.raises(ValueError):
             _numbers(bad)
+
+
+def test_numbers_accept_the_grammar_and_give_pythons_floats_on_every_short_field():
+    """Every field of ``0 1 9 . + - e`` to 5 characters: one of the grammar NUMBER is converted
+    to Python's float() of it, to the bit; one that is not is a ValueError (to 4 characters)."""
+    grammar = re.compile(NUMBER)
+    good, bad = [], []
+    for n in range(1, 6):
+        for chars in itertools.product("019.+-e", repeat=n):
+            field = "".join(chars)
+            (good if grammar.fullmatch(field) else bad).append(field)
+    values = _numbers(" ".join(good).encode())
+    assert values.tobytes() == np.array([float(f) for f in good]).tobytes()
+    for field in (f for f in bad if len(f) <= 4):
+        with pytest.raises(ValueError):
+            _numbers(f"1 {field} 2".encode())
