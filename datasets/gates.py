@@ -376,15 +376,18 @@ def _outliers(t_s: FloatArray, en_m: FloatArray, gates: GateConfig) -> np.ndarra
     out = np.zeros(n, dtype=bool)
     lo = np.searchsorted(t_s, t_s - GPS_NEIGHBOUR_WINDOW_S, side="left")
     hi = np.searchsorted(t_s, t_s + GPS_NEIGHBOUR_WINDOW_S, side="right")
-    for k in range(n):
-        idx = np.concatenate([np.arange(lo[k], k), np.arange(k + 1, hi[k])])
-        if idx.size < 2:
-            continue
-        centre = np.median(en_m[idx], axis=0)
-        allowance = gates.gps_max_jump_m + gates.dvl_max_speed_mps * float(
-            np.median(np.abs(t_s[idx] - t_s[k]))
-        )
-        out[k] = float(np.hypot(*(en_m[k] - centre))) > allowance
+    size = hi - lo - 1  # the neighbours of each fix: its window without itself
+    # the fixes with the same count of neighbours at once (a few counts: the fixes come at a
+    # steady rate); each median is the one of that fix's neighbours alone
+    for m in np.unique(size[size >= 2]):
+        ks = np.flatnonzero(size == m)
+        j = np.arange(m)
+        idx = lo[ks, None] + j + (j >= (ks - lo[ks])[:, None])  # (G, m): the window but k
+        centre = np.median(en_m[idx], axis=1)  # (G, 2)
+        gap_s = np.median(np.abs(t_s[idx] - t_s[ks, None]), axis=1)
+        allowance = gates.gps_max_jump_m + gates.dvl_max_speed_mps * gap_s
+        miss = en_m[ks] - centre
+        out[ks] = np.hypot(miss[:, 0], miss[:, 1]) > allowance
     return out
 
 

@@ -100,8 +100,6 @@ _CSV_ROW_RE = re.compile(rf"{NUMBER}(?:[ \t]*,[ \t]*{NUMBER})*")
 _LINE_BREAK = re.compile(r"\r\n|\r|\n")
 _FIELD_SEP = re.compile(r"[ \t]+")
 _NOT_TEXT = re.compile(r"[^\t\x20-\x7e]")
-_TAB_TO_SPACE = bytes.maketrans(b"\t", b" ")
-_NOT_NUMERIC_TEXT = re.compile(r"[^0-9eE+\-. \t\n]")
 _NUMBER_PREFIX = re.compile(r"[+-]?[0-9]*\.?[0-9]*(?:[eE][+-]?)?")
 _SHAPE = re.compile(r"[+-]?([0-9]*)(?:\.([0-9]+))?(?:[eE][+-]?([0-9]+))?")
 _KINDS = (
@@ -290,7 +288,12 @@ def data_lines(path: str | Path, comment: str = "%") -> tuple[list[tuple[int, st
     """The data lines of a log, ``(physical line number, text stripped of spaces/tabs)``,
     without blank lines and lines starting with ``comment``; and the number of the file's last
     line when it has no line end (None otherwise)."""
-    lines, terminated = text_lines(path)
+    return _numbered_lines(read_text(path, "latin-1"), comment)
+
+
+def _numbered_lines(text: str, comment: str = "%") -> tuple[list[tuple[int, str]], int | None]:
+    """:func:`data_lines` of a file's text."""
+    lines, terminated = split_lines(text)
     numbered = []
     for number, raw in enumerate(lines, start=1):
         line = raw.strip(" \t")
@@ -336,7 +339,14 @@ def read_table(
         See the module docstring.
     """
     p = Path(path)
-    numbered, open_end = data_lines(p)
+    data = read_bytes(p)
+    fast = _fast_table(p, data, n_columns, min_columns)
+    if fast is not None:
+        if time_column is not None:
+            check_unix_times(fast, time_column)
+            check_time_order(fast, time_column)
+        return fast
+    numbered, open_end = _numbered_lines(data.decode("latin-1"))
     return parse_table(
         p,
         numbered,
@@ -421,7 +431,9 @@ def parse_table(
         _warn_skipped(path, expected, bad_lines, cut_line)
     table = Table(
         path=path,
-        data=np.vstack(parts) if parts else np.zeros((0, expected or 0)),
+        data=(parts[0] if len(parts) == 1 else np.vstack(parts))
+        if parts
+        else np.zeros((0, expected or 0)),
         line_numbers=np.asarray(line_numbers, dtype=np.int64),
         skipped=len(bad_lines) + (cut_line is not None),
         skipped_lines=tuple(bad_lines),
@@ -499,6 +511,132 @@ def _finite_row(fields: list[str]) -> bool:
     return bool(np.all(np.isfinite(np.array(fields, dtype=np.float64))))
 
 
+#: ``10.0 ** k`` for ``k`` = 0-15, each exact in a float64.
+_POW10 = np.array([float(f"1e{k}") for k in range(16)])
+#: Most significant digits a field converted arithmetically may hold: below 2**53, so exact.
+_EXACT_DIGITS = 15
+
+
+def _numbers(text: bytes) -> FloatArray:
+    """The float64 of each field of ``text`` (ASCII of :data:`_NUMERIC_BYTES`, fields
+    separated by spaces, tabs and ``\\n``), as ``np.array(text.split(), dtype=np.float64)``
+    gives them, in one flat array; a ValueError for a field that is no number.
+
+    A field ``[+-]digits[.digits]`` (or ``[+-].digits``) of at most 15 digits, the bulk of a
+    log (all of a raw sonar log's intensities), is converted arithmetically: its digits as a
+    whole number ``m`` (exact below 2**53) divided by ``10**k`` (exact for ``k`` <= 15), a
+    single IEEE division, so the correctly rounded value of the decimal, which is what the
+    string conversion gives (Clinger 1990, "How to read floating point numbers accurately",
+    the exact case). The other fields (exponents, more digits) go through the string
+    conversion.
+    """
+    code = np.frombuffer(text, dtype=np.uint8)
+    if code.size == 0:
+        return np.zeros(0)
+    is_char = (code != 32) & (code != 9) & (code != 10)
+    edge = np.diff(is_char.view(np.int8), prepend=np.int8(0), append=np.int8(0))
+    starts = np.flatnonzero(edge == 1)
+    ends = np.flatnonzero(edge == -1)  # one past each field's last byte
+    is_digit = (code >= 48) & (code <= 57)
+    digits_to = np.cumsum(is_digit, dtype=np.int32)  # digits up to each byte (inclusive)
+    digits_at = np.flatnonzero(is_digit)
+    first = digits_to[starts] - is_digit[starts]  # index in digits_at of a field's first digit
+    n_digits = digits_to[ends - 1] - first
+    marks = np.flatnonzero(is_char & ~is_digit)  # signs, points, exponents
+    field_of = np.searchsorted(starts, marks, side="right") - 1
+    mark = code[marks]
+    n_fields = starts.size
+    points = np.bincount(field_of[mark == 46], minlength=n_fields)
+    signs = np.bincount(field_of[(mark == 43) | (mark == 45)], minlength=n_fields)
+    others = np.bincount(field_of[(mark == 101) | (mark == 69)], minlength=n_fields)
+    lead = code[starts]
+    signed = (lead == 43) | (lead == 45)
+    plain = (
+        (points <= 1)
+        & (others == 0)
+        & (signs == signed)
+        & (n_digits >= 1)
+        & (n_digits <= _EXACT_DIGITS)
+    )
+    # digits after the point: the field's digits less those before the point
+    after = np.zeros(n_fields, dtype=np.int64)
+    at_point = mark == 46
+    with_point = field_of[at_point]
+    after[with_point] = (first + n_digits)[with_point] - digits_to[marks[at_point]]
+    whole = np.zeros(n_fields, dtype=np.int64)
+    for d in np.flatnonzero(np.bincount(n_digits[plain], minlength=1)):
+        sel = np.flatnonzero(plain & (n_digits == d))
+        places = digits_at[first[sel, None] + np.arange(d)]  # (G, d)
+        weights = 10 ** np.arange(d - 1, -1, -1, dtype=np.int64)
+        whole[sel] = (code[places].astype(np.int64) - 48) @ weights
+    values = whole.astype(np.float64) / _POW10[np.where(plain, after, 0)]
+    values = np.where(lead == 45, -values, values)
+    rest = np.flatnonzero(~plain)
+    if rest.size:
+        values[rest] = np.array([text[starts[i] : ends[i]] for i in rest], dtype=np.float64)
+    return values
+
+
+#: The bytes a data line of the common case holds: ASCII digits, signs, points, exponents,
+#: spaces and tabs (and the line ends).
+_NUMERIC_BYTES = b"0123456789eE+-. \t\n"
+
+
+def _fields_per_line(code: np.ndarray) -> np.ndarray:
+    """(L,) int: the fields (runs of bytes other than space, tab and ``\\n``) of each line of
+    the bytes ``code`` (N,) uint8, whose every line ends with ``\\n``."""
+    is_char = (code != 32) & (code != 9) & (code != 10)
+    first_chars = np.flatnonzero(is_char[1:] & ~is_char[:-1]) + 1  # where each field starts
+    if is_char[0]:
+        first_chars = np.concatenate([[0], first_chars])
+    ends = np.flatnonzero(code == 10)
+    return np.diff(np.searchsorted(first_chars, ends), prepend=0)
+
+
+def _fast_table(path: Path, data: bytes, n_columns: int | None, min_columns: int) -> Table | None:
+    """:func:`read_table`'s rows of a whole file in the common case, on its bytes in a few
+    vectorised passes: a head of comment and blank lines, then only lines of ASCII numbers of
+    the grammar (or blank ones), every data line with the same count of fields, all finite,
+    line ends ``\\n`` or ``\\r\\n`` only and the last line ended. Else None: the line-by-line
+    reader (:func:`parse_table`) then reads the file and names what is wrong. The values are
+    those of :func:`parse_table` (the same conversion of the same fields), the times are left
+    to the caller to check."""
+    if b"\r" in data:
+        if data.count(b"\r") != data.count(b"\r\n"):
+            return None  # a line break \r alone: the line-by-line reader's
+        data = data.replace(b"\r\n", b"\n")
+    if not data.endswith(b"\n"):
+        return None  # no file, or a last line that may be cut: judged line by line
+    start, number = 0, 1  # the head: comment and blank lines
+    while start < len(data):
+        end = data.index(b"\n", start)
+        line = data[start:end].strip(b" \t")
+        if line and not line.startswith(b"%"):
+            break
+        start, number = end + 1, number + 1
+    body = data[start:]
+    if not body or body.translate(None, _NUMERIC_BYTES):
+        return None  # no data line, or a byte of another kind (a comment below the head...)
+    per_line = _fields_per_line(np.frombuffer(body, dtype=np.uint8))
+    rows = np.flatnonzero(per_line)  # blank lines hold no field
+    n = int(per_line[rows[0]]) if n_columns is None else n_columns
+    if n < max(min_columns, 1) or np.any(per_line[rows] != n):
+        return None
+    # the conversion of :func:`_fast_block`: exactly the grammar NUMBER on this alphabet
+    try:
+        values = _numbers(body).reshape(rows.size, n)
+    except ValueError:
+        return None
+    if not np.all(np.isfinite(values)):
+        return None
+    return Table(
+        path=path,
+        data=values,
+        line_numbers=(rows + number).astype(np.int64),
+        skipped=0,
+    )
+
+
 def _fast_block(
     lines: list[tuple[int, str]],
     n_columns: int | None,
@@ -515,22 +653,17 @@ def _fast_block(
     body = lines[:-1] if lines and lines[-1][0] == open_end else lines
     if not body:
         return None
-    block = "\n".join(line for _, line in body)
-    if _NOT_NUMERIC_TEXT.search(block) is not None:
-        return None
-    flat = block.encode("ascii").translate(_TAB_TO_SPACE)
-    code = np.frombuffer(flat, dtype=np.uint8)
-    is_char = (code != 32) & (code != 10)
-    starts = np.cumsum(is_char & ~np.concatenate([[False], is_char[:-1]]))
-    ends = np.flatnonzero(code == 10)
-    per_line = np.diff(np.concatenate([[0], starts[ends], [starts[-1]]]))
+    flat = ("\n".join(line for _, line in body) + "\n").encode("ascii", errors="replace")
+    if flat.translate(None, _NUMERIC_BYTES):
+        return None  # a byte of another kind (a non-ASCII one is "?" here)
+    per_line = _fields_per_line(np.frombuffer(flat, dtype=np.uint8))
     n = int(per_line[0]) if n_columns is None else n_columns
     if n < max(min_columns, 1) or np.any(per_line != n):
         return None
     # numpy's conversion of ASCII tokens of these characters accepts exactly the grammar
     # NUMBER (tested exhaustively to 6 characters in tests/test_fuzz_readers.py)
     try:
-        data = np.array(flat.split(), dtype=np.float64).reshape(len(body), n)
+        data = _numbers(flat).reshape(len(body), n)
     except ValueError:
         return None
     if not np.all(np.isfinite(data)):

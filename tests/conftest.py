@@ -181,8 +181,8 @@ def opened(
     simulated: Callable[..., Path], shared_dir: Callable[[str, Callable[[Path], None]], Path]
 ) -> Callable[..., Dataset]:
     """``opened(kind, seed, duration_s)``: ``open_dataset`` of ``simulated(kind, seed,
-    duration_s)``, read once per session (the first worker to ask pickles it; reading the text
-    logs again costs ~0.7 s for 300 s of harbour, ~2 s for 900 s of drift) and returned as a
+    duration_s)``, read once per session (the first worker to ask pickles it; loading the pickle
+    is cheaper than reading the text logs again: benchmarks/log_reading.py) and returned as a
     fresh copy at each call, so a test may change it. For tests that need the run as input;
     a test of ``open_dataset`` itself calls it."""
 

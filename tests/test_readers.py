@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+import itertools
 import re
 import shutil
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from sonarslam.datasets.config import load_dataset_config
+from sonarslam.datasets.config import GateConfig, load_dataset_config
 from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.gates import GPS_NEIGHBOUR_WINDOW_S
+from sonarslam.datasets.gates import _outliers as _gps_outliers
 from sonarslam.datasets.geodesy import (
     ddmm_to_degrees,
     degrees_to_ddmm,
@@ -19,6 +23,15 @@ from sonarslam.datasets.geodesy import (
 )
 from sonarslam.datasets.islog import read_is_log, write_is_log
 from sonarslam.datasets.keyframes import read_pcd_xy
+from sonarslam.datasets.logfile import (
+    NUMBER,
+    Table,
+    _fast_table,
+    _numbers,
+    data_lines,
+    parse_table,
+    read_table,
+)
 from sonarslam.datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti
 from sonarslam.datasets.source import open_dataset
 from sonarslam.sonar.beam import SonarBeam
@@ -293,3 +306,211 @@ def test_partial_toml_does_not_inherit_the_marina_calibration(tmp_path):
     ds = open_dataset(src)
     assert ds.config.sonar_time_offset_s == 0.0
     assert ds.config.sonar_mounting.yaw_rad == 0.0 and ds.config.ahrs_mounting.yaw_rad == 0.0
+
+
+# --- the whole-file fast path of read_table against the line-by-line reader ----------------------
+
+
+def _line_reader(path: Path, trust_last_line: bool = False, **kw: object) -> Table:
+    """read_table as it was before the whole-file fast path: the line-by-line reader (with the
+    fast block of parse_table) on the numbered data lines."""
+    numbered, open_end = data_lines(path)
+    return parse_table(path, numbered, None if trust_last_line else open_end, **kw)  # type: ignore[arg-type]
+
+
+def _python_rows(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """The data rows of a clean log by Python's own float() of each field, and their lines: the
+    reference neither reader shares a conversion with."""
+    rows, numbers = [], []
+    for number, raw in enumerate(re.split(rb"\r\n|\r|\n", path.read_bytes()), start=1):
+        line = raw.strip(b" \t")
+        if line and not line.startswith(b"%"):
+            rows.append([float(f) for f in line.split()])
+            numbers.append(number)
+    return np.array(rows, dtype=np.float64), np.array(numbers)
+
+
+def _same_table(a: Table, b: Table) -> None:
+    assert a.data.dtype == b.data.dtype == np.float64
+    assert a.data.shape == b.data.shape
+    assert a.data.tobytes() == b.data.tobytes()  # bit for bit (also the sign of a zero)
+    assert a.line_numbers.dtype == b.line_numbers.dtype
+    assert np.array_equal(a.line_numbers, b.line_numbers)
+    assert (a.skipped, a.skipped_lines, a.cut_line) == (b.skipped, b.skipped_lines, b.cut_line)
+
+
+@needs_marina
+def test_fast_path_reads_the_marina_logs_as_the_line_reader():
+    logs = marina_root() / "logs"  # type: ignore[operator]
+    taken = []
+    for path in sorted(logs.glob("*.log")):
+        fast = _fast_table(path, path.read_bytes(), None, 1)
+        if fast is None:  # the DGPS and SETUP logs end without a line end: read line by line
+            assert not path.read_bytes().endswith(b"\n"), path.name
+            continue
+        taken.append(path.name.rsplit("_", 1)[-1])
+        _same_table(fast, _line_reader(path))
+        _same_table(read_table(path), _line_reader(path))
+        rows, numbers = _python_rows(path)
+        assert fast.data.tobytes() == rows.tobytes()
+        assert np.array_equal(fast.line_numbers, numbers)
+    assert set(taken) == {"DVL.log", "MTi.log", "PID.log", "timestamps.log"}
+
+
+FAST_CASES = {
+    # name: (bytes, whether the fast path takes them)
+    "crlf with a head": (b"% a\r\n%\xe9\xff latin-1 head\r\n\r\n1 2.5\r\n3 -4e-3\r\n", True),
+    "lf, tabs and runs": (b"  %x\n\t1\t\t2  \n 3 4\t\n", True),
+    "blank lines between": (b"1 2\n\n  \t\n3 4\n\n", True),
+    "numbers of every shape": (
+        b"1. .5 -0 +1e3 1E-3 0.1000000000000000055511151231257827 123456789012345678901 "
+        b"2.2250738585072014e-308 4.9e-324 1e-400 -.0e+0\n"
+        b"9 9 9 9 9 9 9 9 9 9 9\n",
+        True,
+    ),
+    "no head": (b"1093455224.578 63224578\n1093455224.646 63224646\n", True),
+    "a comment below the head": (b"1 2\n% note\n3 4\n", False),
+    "a bare cr": (b"1 2\r3 4\n", False),
+    "a cut last line": (b"1 2\n3 4", False),
+    "a short row": (b"1 2\n3\n5 6\n", False),
+    "a field of other bytes": (b"1 2\n3 x\n", False),
+    "a vertical tab": (b"1 2\n3\x0b4\n", False),
+    "a dangling point": (b"1 2\n. 4\n", False),
+    "a dangling exponent": (b"1 2\n1e 4\n", False),
+    "two signs": (b"1 2\n+-1 4\n", False),
+    "an overflow": (b"1 2\n1e999 4\n", False),
+    "only a head": (b"% a\n\n", False),
+    "empty": (b"", False),
+}
+
+
+@pytest.mark.parametrize("name", sorted(FAST_CASES))
+def test_fast_path_is_the_line_reader_on_crafted_logs(tmp_path, name):
+    """Where the whole-file path takes a file, its table is the line reader's bit for bit; where
+    it does not, read_table is the line reader (the same table, or the same error and warning)."""
+    data, taken = FAST_CASES[name]
+    path = tmp_path / "x.log"
+    path.write_bytes(data)
+    fast = _fast_table(path, data, None, 1)
+    assert (fast is not None) == taken
+    with warnings.catch_warnings(record=True) as seen_line:
+        warnings.simplefilter("always")
+        try:
+            want: Table | str = _line_reader(path, time_column=None)
+        except DataError as exc:
+            want = str(exc)
+    with warnings.catch_warnings(record=True) as seen_read:
+        warnings.simplefilter("always")
+        try:
+            got: Table | str = read_table(path, time_column=None)
+        except DataError as exc:
+            got = str(exc)
+    assert [str(w.message) for w in seen_read] == [str(w.message) for w in seen_line]
+    if isinstance(want, str):
+        assert got == want
+    else:
+        assert isinstance(got, Table)
+        _same_table(got, want)
+        if fast is not None:
+            _same_table(fast, want)
+            rows, numbers = _python_rows(path)
+            assert fast.data.tobytes() == rows.tobytes()
+            assert np.array_equal(fast.line_numbers, numbers)
+
+
+def test_fast_path_keeps_the_column_count_and_time_errors(tmp_path):
+    path = tmp_path / "t.log"
+    path.write_bytes(b"% t v\r\n10 1\r\n12 2\r\n11 3\r\n")
+    with pytest.raises(DataError, match=r"t\.log:4: time goes backwards"):
+        read_table(path)
+    path.write_bytes(b"10 1\n-1 2\n")
+    with pytest.raises(DataError, match=r"t\.log:2: time -1 s is not a Unix time"):
+        read_table(path)
+    path.write_bytes(b"10 1 7\n12 2 8\n")
+    with pytest.raises(DataError, match="no data rows"):  # both rows have 3 fields
+        read_table(path, n_columns=2)
+    assert _fast_table(path, path.read_bytes(), 2, 1) is None
+    assert _fast_table(path, path.read_bytes(), None, 4) is None
+    assert read_table(path, min_columns=3).data.shape == (2, 3)
+
+
+def _gps_outliers_one_by_one(t_s: np.ndarray, en_m: np.ndarray, gates: GateConfig) -> np.ndarray:
+    """The GPS gate's outliers as first written, one fix at a time."""
+    out = np.zeros(t_s.size, dtype=bool)
+    lo = np.searchsorted(t_s, t_s - GPS_NEIGHBOUR_WINDOW_S, side="left")
+    hi = np.searchsorted(t_s, t_s + GPS_NEIGHBOUR_WINDOW_S, side="right")
+    for k in range(t_s.size):
+        idx = np.concatenate([np.arange(lo[k], k), np.arange(k + 1, hi[k])])
+        if idx.size < 2:
+            continue
+        centre = np.median(en_m[idx], axis=0)
+        allowance = gates.gps_max_jump_m + gates.dvl_max_speed_mps * float(
+            np.median(np.abs(t_s[idx] - t_s[k]))
+        )
+        out[k] = float(np.hypot(*(en_m[k] - centre))) > allowance
+    return out
+
+
+def test_gps_outliers_are_those_of_the_fix_by_fix_gate():
+    gates = GateConfig()
+    rng = np.random.default_rng(28)
+    found = 0
+    for _ in range(80):
+        n = int(rng.integers(0, 80))
+        t = np.sort(rng.uniform(0.0, rng.uniform(1.0, 200.0), n))
+        en = rng.normal(0.0, rng.uniform(0.1, 30.0), (n, 2))
+        if n:
+            en[rng.integers(0, n, 3)] += rng.uniform(-200.0, 200.0, (3, 2))
+        want = _gps_outliers_one_by_one(t, en, gates)
+        assert np.array_equal(_gps_outliers(t, en, gates), want)
+        found += int(want.sum())
+    assert found > 40  # the cases hold outliers, not only clean tracks
+
+
+def test_numbers_are_pythons_floats_bit_for_bit():
+    """The fields converted arithmetically (up to 15 digits, no exponent) and those left to the
+    string conversion are all Python's float() of the field, to the bit (and the sign of a
+    zero); a field that is no number is a ValueError."""
+    rng = np.random.default_rng(7)
+    edge = ["-0", "-0.0", "+0", ".5", "-.25", "1.", "007", "+.0", "-000000000000000.1"]
+    edge += ["999999999999999", "0.000000000000001", "123456789012345", "1234567890123456"]
+    edge += ["9007199254740993", "0.1000000000000000055511151231257827", "1e5", "-2.5E-3"]
+    edge += ["4.9e-324", "1e-400", "255", "0"]
+    for _ in range(300):
+        fields = []
+        for _ in range(int(rng.integers(1, 80))):
+            kind = rng.integers(4)
+            if kind == 0:
+                fields.append(str(rng.integers(0, 256)))
+            elif kind == 1:
+                fields.append(f"{rng.uniform(-1e6, 1e6):.{rng.integers(0, 16)}f}")
+            elif kind == 2:
+                digits = "".join(rng.choice(list("0123456789"), int(rng.integers(1, 18))))
+                cut = int(rng.integers(0, len(digits) + 1))
+                sign = str(rng.choice(["", "-", "+"]))
+                fields.append(f"{sign}{digits[:cut]}.{digits[cut:]}")
+            else:
+                fields.append(str(rng.choice(edge)))
+        seps = rng.choice([" ", "\t", "\n", " \t", "\t\t"], len(fields))
+        text = "".join(f + str(sep) for f, sep in zip(fields, seps, strict=True)).encode()
+        want = np.array([float(f) for f in fields])
+        assert _numbers(text).tobytes() == want.tobytes(), fields
+    for bad in [b"1 2 .", b"1 +-2", b"1e", b"1 2.3.4", b"- 1", b"1-2", b"+", b"1 -"]:
+        with pytest.raises(ValueError):
+            _numbers(bad)
+
+
+def test_numbers_accept_the_grammar_and_give_pythons_floats_on_every_short_field():
+    """Every field of ``0 1 9 . + - e`` to 5 characters: one of the grammar NUMBER is converted
+    to Python's float() of it, to the bit; one that is not is a ValueError (to 4 characters)."""
+    grammar = re.compile(NUMBER)
+    good, bad = [], []
+    for n in range(1, 6):
+        for chars in itertools.product("019.+-e", repeat=n):
+            field = "".join(chars)
+            (good if grammar.fullmatch(field) else bad).append(field)
+    values = _numbers(" ".join(good).encode())
+    assert values.tobytes() == np.array([float(f) for f in good]).tobytes()
+    for field in (f for f in bad if len(f) <= 4):
+        with pytest.raises(ValueError):
+            _numbers(f"1 {field} 2".encode())
