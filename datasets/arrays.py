@@ -63,6 +63,30 @@ def _times(root: Path, name: str, value: npt.ArrayLike) -> Any:
     return t
 
 
+def _check_radians(root: Path, name: str, values: Any, unwrapped: bool = False) -> None:
+    """A :class:`DataError` naming ``name`` and the first row of angles given in degrees for
+    radians: beyond 2 pi in magnitude; for a series that may be unwrapped (``unwrapped``: any
+    branch, turns counted on), its first row beyond 2 pi (``np.unwrap`` starts where its input
+    does) or a step of more than 3 pi from one row to the next (no wrap of radians is that
+    large; a wrap of degrees is 360)."""
+    a = np.asarray(values, dtype=np.float64)
+    lim = 2.0 * np.pi
+    if not unwrapped:
+        bad = np.flatnonzero(np.abs(a) > lim)
+        why = "is beyond 2 pi rad"
+    elif a.size and abs(a[0]) > lim:
+        bad, why = (
+            np.zeros(1, dtype=np.int64),
+            "is beyond 2 pi rad (an unwrapped yaw starts within it)",
+        )
+    else:
+        bad = np.flatnonzero(np.abs(np.diff(a)) > 1.5 * lim) + 1
+        why = "is more than 3 pi rad from the row before"
+    if bad.size:
+        i = int(bad[0])
+        raise DataError(root, None, f"{name}: row {i} ({a[i]:g}) {why}: degrees? (np.radians)")
+
+
 def dataset_from_arrays(
     config: DatasetConfig,
     *,
@@ -89,13 +113,18 @@ def dataset_from_arrays(
     config : DatasetConfig
         The sonar head, mountings and noise (required: ``DatasetConfig()`` is the neutral one).
     beam_t_s, beam_angle_rad : array, shape (B,)
-        Beam times (s, non-decreasing) and transducer angles as the head reports them (rad).
+        Beam times (s, non-decreasing) and transducer angles as the head reports them (rad,
+        within 2 pi of zero).
     beam_intensities : array of uint8, shape (B, config.sonar.n_bins)
     dvl_t_s : array, shape (D,)
     dvl_v_mps : array, shape (D, 2)
         Bottom velocity in the DVL frame (m/s).
     ahrs_t_s, ahrs_yaw_rad : array, shape (A,)
-        Yaw of the AHRS frame, counter-clockwise from East (rad; REP-103 ENU).
+        Yaw of the AHRS frame, counter-clockwise from East (rad; REP-103 ENU), wrapped in any
+        branch or unwrapped (then starting within 2 pi of zero, as ``np.unwrap`` of wrapped
+        angles does). A series in degrees is refused where it shows (its first row beyond 2 pi,
+        or a wrap of 360); one that starts within 6.3 deg of East and never wraps cannot be
+        told from radians.
     dvl_valid : array of bool, shape (D,), optional
         Bottom lock (default: every row).
     ahrs_yaw_rate_rad_per_s : array, shape (A,), optional
@@ -114,13 +143,14 @@ def dataset_from_arrays(
     Raises
     ------
     DataError
-        A wrong shape, a value that is not finite, times going backwards (naming the parameter
-        and the row), intensities not of ``config.sonar.n_bins`` bins, DVL and AHRS that do not
+        A wrong shape, a value that is not finite, times going backwards, angles in degrees
+        (naming the parameter and the row), intensities not of ``config.sonar.n_bins`` bins, DVL and AHRS that do not
         overlap. Faults that pass are gated with counted warnings.
     """
     where = Path(root) if root is not None else Path(f"<{name}>")
     bt = _times(where, "beam_t_s", beam_t_s)
     angle = _array(where, "beam_angle_rad", beam_angle_rad, (bt.size,))
+    _check_radians(where, "beam_angle_rad", angle)
     bins = np.asarray(beam_intensities)
     n_bins = config.sonar.n_bins
     if bins.shape != (bt.size, n_bins):
@@ -139,6 +169,7 @@ def dataset_from_arrays(
         raise DataError(where, None, f"dvl_valid must have shape ({dt.size},), got {valid.shape}")
     at = _times(where, "ahrs_t_s", ahrs_t_s)
     yaw = _array(where, "ahrs_yaw_rad", ahrs_yaw_rad, (at.size,))
+    _check_radians(where, "ahrs_yaw_rad", yaw, unwrapped=True)
     if ahrs_yaw_rate_rad_per_s is None:
         rate = (
             np.gradient(np.unwrap(yaw), at)

@@ -483,7 +483,28 @@ def load_dataset_config(path: str | Path, base: DatasetConfig | None = None) -> 
         line = toml_line(text, *named[0]) if len(named) == 1 else None
         if not where:  # a type error, already named by the file's key
             where, line = [exc.key], _line_of_key(text, exc.key)
-        raise DataError(p, line, f"{', '.join(where)}: {exc.message}") from None
+        message = exc.message
+        if len(named) == 1 and _SCHEMA[named[0][0]][named[0][1]][1] == _DEGREES:
+            message = _in_degrees(_SCHEMA[named[0][0]][named[0][1]][0], data, named[0], message)
+        raise DataError(p, line, f"{', '.join(where)}: {message}") from None
+
+
+def _in_degrees(path: str, data: dict[str, Any], table_key: tuple[str, str], message: str) -> str:
+    """The range check's ``message`` of a key in degrees restated in degrees (the field's range
+    is in radians), with the value as the file wrote it."""
+    cls: Any = DatasetConfig
+    *outer, name = path.split(".")
+    for part in outer:
+        cls = field_types(cls)[part]
+    r = next((f.metadata.get("range") for f in fields(cls) if f.name == name), None)
+    if r is None or " must be in " not in f" {message}":
+        return message
+    table, key = table_key
+    value: Any = data
+    for part in (*table.split("."), key):
+        value = value.get(part) if isinstance(value, dict) else None
+    lb, rb = "(" if r.low_open else "[", ")" if r.high_open else "]"
+    return f"must be in {lb}{_deg(r.low):g}, {_deg(r.high):g}{rb} deg, got {value!r}"
 
 
 def _line_of_key(text: str, key: str) -> int | None:

@@ -20,13 +20,24 @@ from sonarslam.datasets.gates import SensorReport
 from sonarslam.datasets.logfile import read_text
 from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries, Record
 
-__all__ = ["Dataset", "NEUTRAL_CALIBRATION", "check_overlap", "read_truth"]
+__all__ = ["Dataset", "NEUTRAL_CALIBRATION", "check_overlap", "neutral_warning", "read_truth"]
 
+_NEUTRAL = "neutral: no sonarslam.toml, so identity mountings, no clock offset and default noise"
 #: :attr:`Dataset.calibration` of a run that is not the marina and has no ``sonarslam.toml``.
 NEUTRAL_CALIBRATION = (
-    "neutral: no sonarslam.toml, so identity mountings, no clock offset and default noise"
-    " (write one: sonarslam calibrate SOURCE --write SOURCE/sonarslam.toml, docs/data.md)"
+    f"{_NEUTRAL} (write one: sonarslam calibrate SOURCE --write FOLDER/sonarslam.toml, FOLDER"
+    " the source if a directory, else the one holding its file; docs/data.md)"
 )
+
+
+def neutral_warning(source: Path) -> str:
+    """The warning of a run of ``source`` on neutral settings (:data:`NEUTRAL_CALIBRATION`),
+    naming the ``sonarslam.toml`` to write: inside a directory, beside a file."""
+    toml = (source if source.is_dir() else source.parent) / "sonarslam.toml"
+    return (
+        f"{source}: {_NEUTRAL} (write one: sonarslam calibrate {source} --write {toml},"
+        " docs/data.md)"
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,6 +72,10 @@ class Dataset:
         The start ``(x_m, y_m, yaw_rad)`` in the local East-North frame a user gave
         (``--start``; yaw NaN: none given, else checked against the AHRS's); None: the first
         GPS fix, or the origin without GPS (:func:`sonarslam.slam.run.sources.start_pose`).
+    inputs : tuple of Path
+        Files (or bag directories) read besides ``root`` and the ``sonarslam.toml`` and
+        ``truth.json`` in or beside it: a ``--topics`` file, a Ping360 log's navigation
+        (``metrics.json`` provenance digests them).
     """
 
     name: str
@@ -74,6 +89,7 @@ class Dataset:
     report: SensorReport = field(default_factory=SensorReport)
     calibration: str = ""
     start_enu: tuple[float, float, float] | None = None
+    inputs: tuple[Path, ...] = ()
 
     @property
     def nav_span_s(self) -> tuple[float, float]:

@@ -93,12 +93,17 @@ import tomli_w
 
 from sonarslam.datasets.arrays import gated_dataset
 from sonarslam.datasets.config import DatasetConfig, load_dataset_config
-from sonarslam.datasets.dataset import NEUTRAL_CALIBRATION, Dataset, read_truth
+from sonarslam.datasets.dataset import (
+    NEUTRAL_CALIBRATION,
+    Dataset,
+    neutral_warning,
+    read_truth,
+)
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.geodesy import geodetic_to_local_en
 from sonarslam.datasets.logfile import open_regular, read_text
 from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries
-from sonarslam.datasets.rosbag import is_bag, read_roles
+from sonarslam.datasets.rosbag import TOPIC_PRESETS, is_bag, read_roles
 from sonarslam.settings import SettingError, bounded, check_fields, one_of
 
 __all__ = [
@@ -897,12 +902,14 @@ def open_ping360(
     settings = Ping360Settings()
     sonar_keys: dict[str, Any] = {}
     where = p
+    head_file: Path | None = None  # the file that set the head's n_bins or bin_size_m last
     for source in (toml, Path(config_override) if config_override is not None else None):
         if source is not None:
             table, sonar = _table(source)
             settings = _settings(table, source, settings)
             sonar_keys.update(sonar)
             where = source if table else where
+            head_file = source if {"n_bins", "bin_size_m"} & set(sonar) else head_file
     nav_path = Path(nav) if nav is not None else Path(settings.nav) if settings.nav else None
     if nav_path is None:
         raise DataError(
@@ -916,7 +923,7 @@ def open_ping360(
     else:
         config, calibration = DatasetConfig(), NEUTRAL_CALIBRATION
         if config_override is None:
-            warnings.warn(f"{p}: {NEUTRAL_CALIBRATION}", DataWarning, stacklevel=3)
+            warnings.warn(neutral_warning(p), DataWarning, stacklevel=3)
     if config_override is not None:
         config = load_dataset_config(config_override, base=config)
         calibration = f"{calibration}; over it {config_override}"
@@ -926,7 +933,7 @@ def open_ping360(
         "bin_size_m" in sonar_keys and not math.isclose(config.sonar.bin_size_m, log.bin_size_m)
     ):
         raise DataError(
-            toml or Path(str(config_override)),
+            head_file or p,
             None,
             f"[sonar] n_bins {config.sonar.n_bins}, bin_size_m {config.sonar.bin_size_m:g}: the"
             f" log's beams have {n_bins} samples of {log.bin_size_m:g} m at"
@@ -959,7 +966,14 @@ def open_ping360(
     )
     d.report.counts.update(log.counts)
     d.report.counts.update(nav_counts)
-    return d
+    return replace(d, inputs=(nav_path, *_topics_path(topics_file)))
+
+
+def _topics_path(topics_file: str | Path | None) -> tuple[Path, ...]:
+    """A ``--topics`` file as an input read (a preset's name is none)."""
+    if topics_file is None or str(topics_file) in TOPIC_PRESETS:
+        return ()
+    return (Path(topics_file),)
 
 
 def _check_clocks(

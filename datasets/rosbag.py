@@ -60,7 +60,12 @@ import numpy as np
 
 from sonarslam.datasets.arrays import gated_dataset
 from sonarslam.datasets.config import DatasetConfig, load_dataset_config
-from sonarslam.datasets.dataset import NEUTRAL_CALIBRATION, Dataset, read_truth
+from sonarslam.datasets.dataset import (
+    NEUTRAL_CALIBRATION,
+    Dataset,
+    neutral_warning,
+    read_truth,
+)
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.geodesy import geodetic_to_local_en, local_en_to_geodetic
 from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries
@@ -910,7 +915,7 @@ def open_bag(
     else:
         calibration = NEUTRAL_CALIBRATION
         if config_override is None:
-            warnings.warn(f"{p}: {NEUTRAL_CALIBRATION}", DataWarning, stacklevel=2)
+            warnings.warn(neutral_warning(p), DataWarning, stacklevel=2)
     if config_override is not None:
         config = load_dataset_config(config_override, base=config)
         calibration = f"{calibration}; over it {config_override}"
@@ -921,13 +926,14 @@ def open_bag(
         calibration = f"{calibration}; {dvl_note}"
     n_bins, bin_m = int(read.beams.intensities.shape[1]), read.bin_size_m
     sonar_head = replace(config.sonar, n_bins=n_bins, bin_size_m=bin_m)
-    if (
-        toml is not None
-        and _file_sets_head(toml)
-        and (config.sonar.n_bins != n_bins or not math.isclose(config.sonar.bin_size_m, bin_m))
+    # the file that set the head last: --config's over the bag's own
+    files = (Path(config_override) if config_override is not None else None, toml)
+    head_file = next((f for f in files if f is not None and _file_sets_head(f)), None)
+    if head_file is not None and (
+        config.sonar.n_bins != n_bins or not math.isclose(config.sonar.bin_size_m, bin_m)
     ):
         raise DataError(
-            toml,
+            head_file,
             None,
             f"[sonar] n_bins {config.sonar.n_bins}, bin_size_m {config.sonar.bin_size_m:g}: the"
             f" bag's beams have {n_bins} bins of {bin_m:g} m (leave them out; the bag's win)",
@@ -950,6 +956,8 @@ def open_bag(
         truth=read_truth(truth) if truth is not None else None,
     )
     d.report.counts.update(read.counts)
+    if topics_file is not None and str(topics_file) not in TOPIC_PRESETS:
+        d = replace(d, inputs=(Path(topics_file),))
     return d
 
 

@@ -28,7 +28,13 @@ from dataclasses import replace
 from pathlib import Path
 
 from sonarslam.datasets.config import MARINA_CONFIG, DatasetConfig, load_dataset_config
-from sonarslam.datasets.dataset import NEUTRAL_CALIBRATION, Dataset, check_overlap, read_truth
+from sonarslam.datasets.dataset import (
+    NEUTRAL_CALIBRATION,
+    Dataset,
+    check_overlap,
+    neutral_warning,
+    read_truth,
+)
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.gates import SensorReport, gate_attitude, gate_beams, gate_dvl, gate_gps
 from sonarslam.datasets.islog import read_is_log
@@ -220,7 +226,7 @@ def _config(root: Path, config_override: str | Path | None) -> tuple[DatasetConf
     else:
         config, calibration = DatasetConfig(), NEUTRAL_CALIBRATION
         if config_override is None:
-            warnings.warn(f"{root}: {NEUTRAL_CALIBRATION}", DataWarning, stacklevel=3)
+            warnings.warn(neutral_warning(root), DataWarning, stacklevel=3)
     setup = _find_one(root, "*_SETUP.log", required=False)
     if setup is not None and toml is None:
         range_m, bin_m, step_rad = read_setup(setup)

@@ -13,12 +13,33 @@ import numpy.typing as npt
 
 from sonarslam.features.geometry import FloatArray
 
-__all__ = ["PoseSource", "BatchCovariances", "pose_covariances"]
+__all__ = [
+    "MAX_YAW_JUMP_RAD",
+    "MAX_YAW_RATE_RADPS",
+    "BatchCovariances",
+    "PoseSource",
+    "PoseSpanWarning",
+    "checked_poses",
+    "outside_span",
+    "pose_covariances",
+]
+
+#: No vehicle turns faster than this (one turn a second): a pose source whose yaw turns
+#: faster between two beams, by more than :data:`MAX_YAW_JUMP_RAD`, is taken as giving degrees.
+MAX_YAW_RATE_RADPS = 2.0 * np.pi
+#: ... and the smallest yaw step between two beams taken as a jump (rad, ~29 deg).
+MAX_YAW_JUMP_RAD = 0.5
 
 
 @runtime_checkable
 class PoseSource(Protocol):
-    """Vehicle pose ``wTb`` (world East-North, yaw CCW from east) at given times."""
+    """Vehicle pose ``wTb`` (world East-North, yaw CCW from east) at given times.
+
+    Yaw is in radians (any branch: wrapped or unwrapped). A source that knows where it has
+    poses gives ``span_s``, ``(t_first_s, t_last_s)``
+    (:class:`sonarslam.slam.io.trajectory.Trajectory` does): the front end warns, once, of beams
+    outside it (:class:`PoseSpanWarning`), whose poses a trajectory holds from an end.
+    """
 
     def poses(self, t_s: npt.ArrayLike) -> FloatArray:
         """Poses of the vehicle body at times ``t_s``.
@@ -49,6 +70,60 @@ class BatchCovariances(Protocol):
     def covariances(self, t_s: npt.ArrayLike) -> FloatArray | None:
         """Covariances at times ``t_s`` (N,), shape (N, 3, 3), or None if the source has none."""
         ...
+
+
+class PoseSpanWarning(UserWarning):
+    """Beams outside the span of their pose source: placed with a pose held from an end."""
+
+
+def outside_span(source: PoseSource, t_s: npt.ArrayLike) -> str | None:
+    """What is wrong with beams at ``t_s`` (N,) (Unix s) that lie outside ``source``'s
+    ``span_s`` (a source without one has no span to miss), naming their times and the span;
+    None when all lie inside."""
+    span = getattr(source, "span_s", None)
+    t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+    if span is None or t.size == 0:
+        return None
+    t0, t1 = float(span[0]), float(span[1])
+    out = t[(t < t0) | (t > t1)]
+    if out.size == 0:
+        return None
+    return (
+        f"{out.size} beam time(s) {out.min():.3f}-{out.max():.3f} s (Unix) lie outside the pose"
+        f" source's span {t0:.3f}-{t1:.3f} s: their poses are held from an end, a stale frame"
+        " for their echoes; give a source that covers the beams, or only the beams inside its"
+        " span (BeamSeries.between(t0, t1))"
+    )
+
+
+def checked_poses(source: PoseSource, t_s: npt.ArrayLike) -> FloatArray:
+    """``source.poses(t_s)``, shape (N, 3), for beams at increasing times ``t_s`` (N,) (Unix s),
+    their yaw checked for degrees.
+
+    Raises
+    ------
+    ValueError
+        The yaw turns by more than :data:`MAX_YAW_JUMP_RAD` between two consecutive times at
+        more than :data:`MAX_YAW_RATE_RADPS` (degrees given for radians), naming the two times
+        and yaws. A source in degrees that hardly turns passes: the check sees only turns.
+    """
+    t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+    wTb = np.asarray(source.poses(t), dtype=np.float64).reshape(-1, 3)
+    if t.size > 1:
+        dt = np.diff(t)
+        step = np.abs(np.angle(np.exp(1j * np.diff(wTb[:, 2]))))
+        bad = np.flatnonzero(
+            (step > MAX_YAW_JUMP_RAD) & (step > MAX_YAW_RATE_RADPS * np.maximum(dt, 0.0))
+        )
+        if bad.size:
+            i = int(bad[0])
+            raise ValueError(
+                f"the pose source's yaw jumps from {wTb[i, 2]:.4g} to {wTb[i + 1, 2]:.4g} between"
+                f" beams at {t[i]:.3f} and {t[i + 1]:.3f} s (Unix), {step[i]:.3g} rad in"
+                f" {dt[i]:.3g} s, faster than any vehicle turns ({MAX_YAW_RATE_RADPS:.3g} rad/s):"
+                " poses(t_s) must give yaw in radians (degrees?)"
+            )
+    return wTb
 
 
 def pose_covariances(source: PoseSource, t_s: npt.ArrayLike) -> FloatArray | None:

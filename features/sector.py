@@ -15,13 +15,19 @@ pose source; :func:`reference_to_newest` is the re-referencing itself.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
 from sonarslam.features.geometry import FloatArray, between, compose, wrap_angle
-from sonarslam.features.pose_source import PoseSource
+from sonarslam.features.pose_source import (
+    PoseSource,
+    PoseSpanWarning,
+    checked_poses,
+    outside_span,
+)
 from sonarslam.sonar.beam import Mounting, SonarHead
 from sonarslam.sonar.segmentation import SegmentedBeam
 from sonarslam.sonar.store import SectorStore, StoredSector
@@ -199,6 +205,7 @@ class Sector:
         self.pose_source = pose_source
         self.requery_poses = bool(requery_poses)
         self._wTs = np.zeros((self.store.capacity, 3))  # poses cached at arrival, by slot
+        self._span_warned = False
 
     @property
     def capacity(self) -> int:
@@ -212,9 +219,16 @@ class Sector:
         return len(self.store)
 
     def sonar_poses(self, t_s: npt.ArrayLike) -> FloatArray:
-        """Sonar poses ``wTs`` at times ``t_s`` from the pose source, shape (N, 3)."""
-        wTb = np.asarray(self.pose_source.poses(np.atleast_1d(t_s)), dtype=np.float64)
-        return compose(wTb.reshape(-1, 3), self.bTs)
+        """Sonar poses ``wTs`` at increasing times ``t_s`` from the pose source, shape (N, 3)
+        (:func:`sonarslam.features.pose_source.checked_poses`: a ValueError for a yaw in
+        degrees; a :class:`~sonarslam.features.pose_source.PoseSpanWarning`, the first time,
+        for times outside the source's ``span_s``)."""
+        if not self._span_warned:
+            missed = outside_span(self.pose_source, t_s)
+            if missed is not None:
+                self._span_warned = True
+                warnings.warn(f"{missed} (said once per extractor)", PoseSpanWarning, stacklevel=5)
+        return compose(checked_poses(self.pose_source, t_s), self.bTs)
 
     def add(self, t_s: float, bearing_rad: float, segmented: SegmentedBeam) -> None:
         """Store one segmented beam (:meth:`sonarslam.sonar.store.SectorStore.add`)."""

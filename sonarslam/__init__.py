@@ -124,4 +124,5 @@ def __getattr__(name: str) -> Any:
 
 
 def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+    """The public names (:data:`__all__`) and ``__version__``, not the module's own imports."""
+    return sorted({*__all__, "__version__"})

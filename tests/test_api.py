@@ -85,7 +85,7 @@ def test_the_public_names_are_one_table() -> None:
     assert sonarslam.__all__ == sorted(sonarslam.__all__)
     assert set(sonarslam.__all__) == set(homes)
     assert _type_checking_homes() == homes  # what mypy sees is what is loaded
-    assert set(sonarslam.__all__) <= set(dir(sonarslam))
+    assert set(dir(sonarslam)) == {*sonarslam.__all__, "__version__"}  # not its own imports
     with pytest.raises(AttributeError, match="no attribute 'Trajectory'"):
         _ = sonarslam.Trajectory
 

@@ -380,6 +380,14 @@ def test_info_lists_what_run_would_take_with_config_and_set(short_harbour, tmp_p
     assert rows["ekf.min_rho_m"].split()[1:4] == ["2.5", "m", "--set"]
     assert rows["scans.kernel_k"].split()[1:3] == ["2.0", "--set"]
     assert rows["isam2.min_rho_m"].split()[-1] == "default"  # another scope untouched
+    # a back end's noise keys are those it reads; [noise] ahrs_sigma_deg is dead reckoning's
+    assert rows["ekf.noise.ahrs_white_sigma_deg"].split()[1:3] == ["1.0", "deg"]
+    assert "isam2.noise.ahrs_bias_sigma_deg" in rows and "[noise] ahrs_sigma_deg" in rows
+    assert not {"ekf.noise.ahrs_sigma_deg", "isam2.noise.dvl_sigma_mps"} & set(rows)
+    assert main(["info", str(short_harbour), "--set", "ekf.noise.ahrs_sigma_deg=3"]) == 2
+    err = capsys.readouterr().err
+    assert "ekf.noise.ahrs_sigma_deg: the back end does not read it" in err
+    assert "give it in a --config file" in err
     assert main(["info", str(short_harbour), "--set", "ekf.no_such_field=1"]) == 2
     captured = capsys.readouterr()
     assert "no_such_field" in captured.err and captured.out == ""

@@ -8,6 +8,7 @@ beam axis meets the wall), ``"uniform"`` (at a random bearing within the beam wi
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,7 +20,8 @@ from sonarslam.features.config import ExtractorConfig
 from sonarslam.features.extractor import LineExtractor
 from sonarslam.features.geometry import compose, line_world_to_frame, wrap_angle
 from sonarslam.features.line import LineFeature
-from sonarslam.features.pose_source import PoseSource
+from sonarslam.features.pose_source import PoseSource, PoseSpanWarning
+from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.run.presets import EXTRACTOR_PRESETS
 from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead
 
@@ -572,3 +574,55 @@ def test_pose_uncertainty_widens_the_seed_ellipse_by_the_fit_pose_term() -> None
         # the same pose variances up to the voters: the fit refits on its gated support (~30 %)
         np.testing.assert_allclose(np.diag(b.cov - a.cov), np.diag(fb.cov - fa.cov), rtol=0.5)
         assert np.linalg.eigvalsh(b.cov - a.cov).min() > -1e-15
+
+
+def test_beams_outside_the_pose_sources_span_are_said_once_naming_the_times() -> None:
+    """A trajectory that stops halfway through the sector holds its last pose for the rest
+    (its design): the extractor says so once, naming the beams' times and the span; a
+    trajectory over all the beams is taken silently. The pool's sonar stands still, so the
+    held pose is the true one and the walls are found either way."""
+    beams = _pool_beams(800, -70.0, seed=2010)
+    t = np.array([b.t for b in beams])
+    zero = np.zeros((t.size, 3))
+    config = POOL_CONFIG.replace(vote_every_n_beams=40)  # six votes, each past the span
+    ex = LineExtractor(config, POOL_HEAD, Mounting(), Trajectory(t[:300], zero[:300]))
+    with pytest.warns(PoseSpanWarning) as said:
+        lines = run(ex, beams)
+    assert ex.n_votes == 6 and len(said) == 1
+    message = str(said[0].message)
+    assert f"300 beam time(s) {t[300]:.3f}-{t[599]:.3f} s (Unix)" in message  # the first vote's
+    assert f"span {t[0]:.3f}-{t[299]:.3f} s" in message
+    assert set(_wall_index(lines, wall_lines_world(POOL_WALLS))) == {0, 1, 2, 3}
+    whole = LineExtractor(config, POOL_HEAD, Mounting(), Trajectory(t, zero))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PoseSpanWarning)
+        assert len(run(whole, beams)) == len(lines)
+
+
+@dataclass
+class DegreePoses:
+    """A vehicle turning at ``yaw_rate_rad_per_s`` whose yaw is given in degrees."""
+
+    yaw_rate_rad_per_s: float
+
+    def poses(self, t_s: npt.ArrayLike) -> np.ndarray:
+        p = ConstantVelocityPoses(yaw_rate_rad_per_s=self.yaw_rate_rad_per_s).poses(t_s)
+        p[:, 2] = np.degrees(p[:, 2])
+        return p
+
+    def covariance(self, t_s: float) -> np.ndarray | None:
+        return None
+
+
+def test_a_turning_pose_source_in_degrees_is_refused() -> None:
+    """Yaw in degrees on a vehicle turning at 0.3 rad/s (17 deg/s, an ordinary turn) reads as
+    17 rad/s between beams 0.05 s apart: refused, naming the beams' times; the same turn in
+    radians is taken."""
+    beams = _pool_beams(600, -70.0, seed=2010)
+    ex = LineExtractor(POOL_CONFIG, POOL_HEAD, Mounting(), DegreePoses(0.3))
+    with pytest.raises(ValueError, match=r"yaw jumps from .* between beams at 1000\.\d{3} and"):
+        run(ex, beams)
+    with pytest.raises(ValueError, match=r"radians \(degrees\?\)"):
+        run(LineExtractor(POOL_CONFIG, POOL_HEAD, Mounting(), DegreePoses(0.3)), beams)
+    turning = ConstantVelocityPoses(yaw_rate_rad_per_s=0.3)
+    run(LineExtractor(POOL_CONFIG, POOL_HEAD, Mounting(), turning), beams)

@@ -80,6 +80,11 @@ def test_run_records_the_loops_of_the_run_and_of_dead_reckoning(
     with pytest.raises(SystemExit, match="2"):
         main(["run", str(nogps), "--out", str(tmp_path / "bad"), "--loop", "200,20"])
     assert "0 <= T0 < T1" in capsys.readouterr().err
+    for unix in ("1700000430,1700000496", "1700000430.5,1700000496.5"):  # int and float
+        with pytest.raises(SystemExit, match="2"):
+            main(["run", str(nogps), "--out", str(tmp_path / "bad"), "--loop", unix])
+        err = capsys.readouterr().err
+        assert "T0,T1 are seconds from the start of the navigation, not Unix times" in err
 
 
 def test_report_without_gps_has_provenance_and_no_empty_figures(
@@ -97,6 +102,11 @@ def test_report_without_gps_has_provenance_and_no_empty_figures(
     assert row.startswith("| dr (`dr`) |") and commit[:16] in row
     assert "## Figures" not in text
     assert "![loops_nogps](loops_nogps.png)" in text
+    assert "gps.tum" not in text  # no evo APE against a GPS there is none of
+    # the GPS baseline needs a GPS: the error says which back end to take instead
+    assert main(["run", str(nogps), "--backend", "gps", "--out", str(tmp_path / "g")]) == 2
+    err = capsys.readouterr().err
+    assert "--backend: gps needs a GPS" in err and "take --backend dr" in err
 
 
 def test_every_run_of_a_dataset_is_judged_at_the_same_loops(

@@ -270,3 +270,41 @@ def test_map_png_writes_each_landmark_id_by_its_segment():
         ("3", (5.0, 0.0)),
         ("17", (0.0, 10.0)),
     }
+
+
+def test_provenance_of_a_single_file_source_digests_what_the_run_reads(tmp_path: Path) -> None:
+    """A Ping Viewer log (or a bag file): the file, the sonarslam.toml and truth.json beside it
+    and its navigation elsewhere (a bag directory), each by its bytes; not the folder's other
+    files."""
+    import hashlib
+
+    from sonarslam.slam.run.provenance import dataset_digests
+
+    folder, nav = tmp_path / "logs", tmp_path / "nav"
+    (nav / "bag").mkdir(parents=True)
+    folder.mkdir()
+    for path, text in [
+        (folder / "log.bin", b"pings"),
+        (folder / "sonarslam.toml", b"[sonar]\n"),
+        (folder / "truth.json", b"{}"),
+        (folder / "notes.txt", b"not read"),
+        (nav / "bag" / "metadata.yaml", b"m"),
+        (nav / "bag" / "bag_0.db3", b"d"),
+    ]:
+        path.write_bytes(text)
+    total, listed, count = dataset_digests(folder / "log.bin", [nav / "bag"])
+
+    def sha(p: Path) -> str:
+        return hashlib.sha256(p.read_bytes()).hexdigest()
+
+    outside = (nav / "bag").resolve().as_posix()
+    assert listed == {
+        "log.bin": sha(folder / "log.bin"),
+        "sonarslam.toml": sha(folder / "sonarslam.toml"),
+        "truth.json": sha(folder / "truth.json"),
+        f"{outside}/bag_0.db3": sha(nav / "bag" / "bag_0.db3"),
+        f"{outside}/metadata.yaml": sha(nav / "bag" / "metadata.yaml"),
+    }
+    assert count == 5 and total != hashlib.sha256().hexdigest()
+    (folder / "log.bin").write_bytes(b"other pings")
+    assert dataset_digests(folder / "log.bin", [nav / "bag"])[0] != total

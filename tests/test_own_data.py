@@ -230,6 +230,12 @@ def test_a_dataset_from_arrays_is_the_directorys_and_is_gated(
         ({"ahrs_yaw_rad": "nan"}, r"ahrs_yaw_rad: row 7 is not finite"),
         ({"beam_intensities": "bins"}, r"beam_intensities must have shape \(\d+, 500\)"),
         ({"gps_lat_lon_deg": None}, "gps_t_s and gps_lat_lon_deg go together"),
+        (
+            {"ahrs_yaw_rad": "degrees"},
+            r"<arrays>: ahrs_yaw_rad: row 0 \(-?\d+\.?\d*\) is beyond 2 pi rad .*degrees\?",
+        ),
+        ({"beam_angle_rad": "degrees"}, r"beam_angle_rad: row \d+ \(.*\) is beyond 2 pi rad"),
+        ({"ahrs_yaw_rad": "wrap360"}, r"ahrs_yaw_rad: row 8 \(.*\) is more than 3 pi rad"),
     ],
 )
 def test_bad_arrays_are_named(
@@ -250,6 +256,31 @@ def test_bad_arrays_are_named(
     elif how == "bins":
         assert value is not None
         value = value[:, :100]
+    elif how == "degrees":
+        value = np.degrees(value)
+    elif how == "wrap360":  # degrees wrapping at 360 from a start near East
+        assert value is not None
+        value[:8], value[8:] = 1.0, 359.0
     kw[key] = value
     with pytest.raises(DataError, match=message):
         dataset_from_arrays(d.config, **kw)  # type: ignore[arg-type]
+
+
+def test_an_unwrapped_yaw_in_radians_is_taken_as_the_wrapped_one(
+    opened: Callable[..., Dataset],
+) -> None:
+    """The check for degrees leaves alone an unwrapped series (np.unwrap, turns counted on):
+    its dead reckoning is the wrapped series' own."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        d = opened("harbour", 2, 300.0)
+        kw = _arrays_of(d)
+        yaw = np.asarray(kw["ahrs_yaw_rad"])
+        turned = np.unwrap(yaw) + 2.0 * np.pi * np.linspace(0.0, 3.0, yaw.size).round()
+        assert np.abs(turned).max() > 4.0 * np.pi  # beyond two turns, never by a 3 pi step
+        a = dataset_from_arrays(d.config, **kw)  # type: ignore[arg-type]
+        b = dataset_from_arrays(d.config, **{**kw, "ahrs_yaw_rad": turned})  # type: ignore[arg-type]
+    dr_a, dr_b = dead_reckoning_trajectory(a), dead_reckoning_trajectory(b)
+    np.testing.assert_allclose(dr_b.poses_wTb[:, :2], dr_a.poses_wTb[:, :2], rtol=0, atol=1e-6)
+    yaw_diff = np.angle(np.exp(1j * (dr_b.poses_wTb[:, 2] - dr_a.poses_wTb[:, 2])))
+    assert np.abs(yaw_diff).max() < 1e-9

@@ -3,6 +3,7 @@ and ROS 2 MCAP and sqlite3 bags reads back as the directory reads, and a bad bag
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import re
@@ -129,6 +130,32 @@ def test_info_lists_the_roles_and_run_takes_a_bag(
     assert main(["run", str(bags["sqlite3"]), "--out", str(tmp_path / "r"), "--quiet"]) == 0
     m = json.loads((tmp_path / "r" / "metrics.json").read_text())
     assert m["calibration"].endswith("sonarslam.toml") and m["evaluation"] == "gps and truth"
+    # a bag file's provenance: its bytes and the two files beside it that the run reads
+    assert (
+        main(["run", str(bags["ros1"]), "--backend", "dr", "--out", str(tmp_path / "f"), "--quiet"])
+        == 0
+    )
+    p = json.loads((tmp_path / "f" / "metrics.json").read_text())["provenance"]
+    folder = bags["ros1"].parent
+    read = ("run.bag", "sonarslam.toml", "truth.json")
+    assert p["dataset_files"] == {
+        n: hashlib.sha256((folder / n).read_bytes()).hexdigest() for n in read
+    }
+    assert p["dataset_file_count"] == 3 and p["dataset_sha256"] != hashlib.sha256().hexdigest()
+
+
+def test_a_head_that_disagrees_with_the_bag_names_the_file_that_set_it(
+    bags: dict[str, Path], tmp_path: Path
+) -> None:
+    """``[sonar] bin_size_m`` in a --config over a bag whose own sonarslam.toml leaves it to the
+    bag: the error names the --config file, not the bag's."""
+    over = tmp_path / "m_bin.toml"
+    over.write_text("[sonar]\nbin_size_m = 10.0\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        with pytest.raises(DataError, match=r"bin_size_m 10: the bag's beams have") as e:
+            open_bag(bags["ros1"], config_override=over)
+    assert str(e.value).startswith(f"{over}:")
 
 
 def test_simulate_writes_a_bag(tmp_path: Path) -> None:
@@ -422,8 +449,11 @@ def test_ping360_messages_give_beams_in_radians_and_metres(
             if role in conns:
                 out = sonar(msg) if role == "sonar" else msg
                 w.write(conns[role], int(round(t * 1e9)), serialize(out, types[role]))
-    with pytest.warns(DataWarning, match="neutral"):
+    with pytest.warns(DataWarning, match="neutral") as said:
         d = open_bag(path)
+    # the sonarslam.toml to write: inside a bag directory, beside a bag file
+    toml = (path if path.is_dir() else tmp_path) / "sonarslam.toml"
+    assert any(f"--write {toml}, docs/data.md" in str(w.message) for w in said)
     np.testing.assert_allclose(
         d.beams.transducer_angle_rad, np.array(grads) * np.pi / 200.0, atol=1e-6
     )

@@ -154,3 +154,33 @@ def test_the_back_ends_noise_is_the_dataset_s() -> None:
     assert motion.gap_sigma_mps == noise.dvl_gap_sigma_mps
     names = {f.name for f in dataclasses.fields(EkfConfig)}
     assert not names & {f.name for f in dataclasses.fields(NoiseConfig)}
+
+
+def test_the_noise_keys_a_back_end_lists_are_those_it_reads() -> None:
+    """``BACKEND_NOISE_KEYS`` (what ``info`` lists and ``--set`` takes as ``<backend>.noise.*``)
+    is the set of ``[noise]`` keys the back ends' code reads from their configuration."""
+    import re
+
+    from sonarslam.slam.backends.base import BACKEND_NOISE_KEYS
+
+    fields = {f.name for f in dataclasses.fields(NoiseConfig)}
+    read: set[str] = set()
+    for path in (ROOT / "slam" / "backends").rglob("*.py"):
+        read |= set(re.findall(r"config\.noise\.(\w+)", path.read_text())) & fields
+    assert read == set(BACKEND_NOISE_KEYS)
+    with pytest.raises(SettingError, match=r"^ekf\.noise\.dvl_sigma_mps: the back end does not"):
+        backend_config("ekf", {"noise.dvl_sigma_mps": 0.1})
+
+
+def test_a_key_in_degrees_out_of_range_is_said_in_degrees(tmp_path: Path) -> None:
+    """The fields are in radians; a ``_deg`` key's range is said in degrees, with the value as
+    written."""
+    for text, said in [
+        ("[sonar]\nstep_deg = 0.0314\n", "[sonar] step_deg: must be in [0.1, 180) deg, got 0.0314"),
+        ("[mounting.dvl]\nyaw_deg = 400\n", "[mounting.dvl] yaw_deg: must be in [-360, 360] deg"),
+    ]:
+        path = tmp_path / "s.toml"
+        path.write_text(text)
+        with pytest.raises(DataError) as e:
+            load_dataset_config(path)
+        assert str(e.value).startswith(f"{path}:2: {said}")

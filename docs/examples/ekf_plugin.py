@@ -8,6 +8,7 @@ from sonarslam.features.geometry import between, compose, compose_jacobians, lin
 
 ds = sonarslam.open_dataset(sonarslam.simulate("harbour", 0, "sim-harbour", duration_s=120.0))
 odometry = sonarslam.dead_reckoning_trajectory(ds)  # your odometry: here the DVL and the AHRS
+beams = ds.nav_beams().between(*odometry.span_s)  # the beams it has poses for
 bTs = ds.config.sonar_mounting.as_pose()  # the sonar in the body frame (x_m, y_m, yaw_rad)
 extractor = sonarslam.LineExtractor(
     sonarslam.extractor_preset(ds), ds.config.sonar, ds.config.sonar_mounting, odometry
@@ -39,7 +40,7 @@ def belief() -> sonarslam.WorldBelief:
 
 t_k = float(odometry.t_s[0])
 ekf = new_filter(odometry.poses(t_k)[0], np.diag([1.0, 1.0, 0.05**2]))
-for beam in ds.nav_beams():
+for beam in beams:
     lines = extractor.add(beam)  # a vote's lines, in the sonar frame at the newest beam
     if not lines:
         continue

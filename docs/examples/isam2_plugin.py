@@ -7,6 +7,7 @@ import sonarslam
 
 ds = sonarslam.open_dataset(sonarslam.simulate("harbour", 0, "sim-harbour", duration_s=120.0))
 odometry = sonarslam.dead_reckoning_trajectory(ds)  # your odometry: here the DVL and the AHRS
+beams = ds.nav_beams().between(*odometry.span_s)  # the beams it has poses for
 bTs = ds.config.sonar_mounting.as_pose()  # the sonar in the body frame (x_m, y_m, yaw_rad)
 extractor = sonarslam.LineExtractor(
     sonarslam.extractor_preset(ds), ds.config.sonar, ds.config.sonar_mounting, odometry
@@ -27,7 +28,7 @@ isam, graph, values = gtsam.ISAM2(), gtsam.NonlinearFactorGraph(), gtsam.Values(
 k, t_k = 0, float(odometry.t_s[0])
 graph.add(gtsam.PriorFactorPose2(X(0), pose(t_k), gtsam.noiseModel.Diagonal.Sigmas([1, 1, 0.05])))
 values.insert(X(0), pose(t_k))
-for lines in filter(None, map(extractor.add, ds.nav_beams())):  # each vote's lines (frame R)
+for lines in filter(None, map(extractor.add, beams)):  # each vote's lines (frame R)
     step = pose(t_k).between(pose(lines[0].t))  # a pose node per vote, and the odometry to it
     sigma_m = 0.05 + 0.05 * (step.x() ** 2 + step.y() ** 2) ** 0.5  # 5 cm + 5 % of the step
     noise = gtsam.noiseModel.Diagonal.Sigmas([sigma_m, sigma_m, 0.01])

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sonarslam.features.geometry import FloatArray, between, compose, inverse, transform_points
-from sonarslam.features.pose_source import PoseSource
+from sonarslam.features.pose_source import PoseSource, checked_poses
 from sonarslam.features.scans.config import ScanConfig
 from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead
 from sonarslam.sonar.segmentation import leading_edge_bins
@@ -103,7 +103,7 @@ class ScanBuilder:
 
     def _complete(self) -> Scan:
         t = np.asarray(self._t)
-        poses = self.pose_source.poses(t)  # (n_beams, 3); the last is the reference
+        poses = checked_poses(self.pose_source, t)  # (n_beams, 3); the last is the reference
         wTs = compose(poses, self.bTs)
         refTs = compose(inverse(poses[-1]), wTs)
         counts = np.array([r.size for r in self._ranges])

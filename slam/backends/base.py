@@ -33,6 +33,7 @@ from sonarslam.slam.model.lines import VoteObservations, usable_observations
 from sonarslam.slam.model.motion import MotionStep, OdometryChain
 
 __all__ = [
+    "BACKEND_NOISE_KEYS",
     "BackendConfig",
     "Backend",
     "ScanBackend",
@@ -41,6 +42,18 @@ __all__ = [
     "vote_observations",
     "ids_of_features",
 ]
+
+
+#: The ``[noise]`` keys a back end reads from its configuration's ``noise``
+#: (``<backend>.noise.<key>``); the other keys reach every estimator through the dataset's
+#: ``[noise]`` (the motion model, the start pose), never through a back end's settings.
+BACKEND_NOISE_KEYS = (
+    "ahrs_white_sigma_deg",
+    "ahrs_bias_sigma_deg",
+    "ahrs_bias_walk_deg_per_sqrt_s",
+    "gyro_sigma_rad_per_s",
+    "dvl_scale_sigma",
+)
 
 
 @dataclass(frozen=True)
@@ -53,8 +66,9 @@ class BackendConfig(LandmarkConfig):
     noise : NoiseConfig
         The sensor noise the heading and motion models take: the dataset's ``[noise]``
         (:class:`sonarslam.datasets.config.NoiseConfig`: the AHRS's white noise and bias, the
-        bias's walk, the gyro's and the DVL's scale error), set by the runner; its ``--set``
-        names are ``<backend>.noise.<key>``. The AHRS bias is modelled so that an estimator
+        bias's walk, the gyro's and the DVL's scale error: :data:`BACKEND_NOISE_KEYS`, the
+        keys a back end reads), set by the runner; their ``--set`` names are
+        ``<backend>.noise.<key>``. The AHRS bias is modelled so that an estimator
         never believes its heading better than the compass can tell it (a white-noise model
         at 1 Hz would, and would be inconsistent); nothing else observes it: line landmarks,
         DVL and gyro are blind to a rotation of the whole map and trajectory about the start

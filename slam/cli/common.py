@@ -146,12 +146,22 @@ def parse_start(text: str) -> tuple[float, float, float]:
     return values[0], values[1], yaw
 
 
+#: A ``--loop`` time this large (s, ~3 years) is a Unix time, not one from the start.
+UNIX_TIME_S = 1e8
+
+
 def parse_loop(text: str) -> tuple[float, float]:
     """``T0,T1`` (s from the start of the navigation, ``0 <= T0 < T1``); an argparse ``type``."""
     parts = text.split(",")
     if len(parts) != 2:
         raise argparse.ArgumentTypeError(f"must be T0,T1 (s from the start), got {text!r}")
-    t0, t1 = (float(number(float)(v.strip())) for v in parts)
+    said = "T0,T1 are seconds from the start of the navigation, not Unix times"
+    try:
+        t0, t1 = (float(number(float)(v.strip())) for v in parts)
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f"{said}: {exc}") from None
+    if max(abs(t0), abs(t1)) >= UNIX_TIME_S:
+        raise argparse.ArgumentTypeError(f"{said} (sonarslam info gives the span), got {text!r}")
     if not 0.0 <= t0 < t1:
         raise argparse.ArgumentTypeError(f"must have 0 <= T0 < T1, got {text!r}")
     return t0, t1

@@ -43,7 +43,7 @@ from sonarslam.datasets.toml import read_toml, toml_line
 from sonarslam.features.config import ExtractorConfig
 from sonarslam.features.scans import ScanConfig
 from sonarslam.settings import SettingError, parse_text, replace_checked
-from sonarslam.slam.backends.base import BackendConfig
+from sonarslam.slam.backends.base import BACKEND_NOISE_KEYS, BackendConfig
 from sonarslam.slam.backends.registry import backend_spec
 from sonarslam.slam.model.motion import gyro_bias_against_heading
 from sonarslam.sonar.beam import SonarBeam
@@ -242,7 +242,19 @@ def backend_config(
     name: str, overrides: dict[str, Any] | None = None, noise: NoiseConfig | None = None
 ) -> BackendConfig:
     """Back end ``name``'s default configuration with a dataset's ``noise`` calibration
-    (:func:`noise_settings`) and ``overrides`` (dotted names) over it."""
+    (:func:`noise_settings`) and ``overrides`` (dotted names) over it.
+
+    Raises SettingError for a ``noise.<key>`` no back end reads (not in
+    :data:`sonarslam.slam.backends.base.BACKEND_NOISE_KEYS`): it goes in ``[noise]``."""
+    for key in overrides or {}:
+        head, _, field = key.partition(".")
+        if head == "noise" and field and field not in BACKEND_NOISE_KEYS:
+            raise SettingError(
+                f"{name}.{key}",
+                f"the back end does not read it (it reads noise.{{{', '.join(BACKEND_NOISE_KEYS)}}});"
+                f" the motion model and the start pose take {field} from the dataset's [noise]:"
+                " give it in a --config file",
+            )
     defaults = backend_spec(name).config_type(**noise_settings(noise)[1])
     return apply_overrides(defaults, overrides or {}, prefix=f"{name}.")
 

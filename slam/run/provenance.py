@@ -9,10 +9,13 @@ A figure can be traced back to the code, the settings and the data that made it:
 * ``settings_sha256``: SHA-256 of the settings that decide the run: the back end, ``--batch``, the dataset
   configuration used (``config_used.toml``'s text) and the closed loop's resolved extractor,
   back-end and scan-matcher settings (:class:`sonarslam.slam.run.presets.RunConfig`), as canonical JSON;
-* ``dataset_sha256`` and ``dataset_files``: the SHA-256 of every file under the dataset's
-  directory (``dataset_files``: relative path -> digest; a folder of more than
-  :data:`GROUP_OVER` files, the marina's keyframes, is one entry ``folder/*`` over its files'
-  names and digests, with ``dataset_file_count``), and one digest over them all.
+* ``dataset_sha256`` and ``dataset_files``: the SHA-256 of every file the run read
+  (:func:`dataset_files`: every file under the dataset's directory; for a single-file source,
+  a bag or a Ping Viewer log, the file with its ``sonarslam.toml`` and ``truth.json``; and a
+  ``--topics`` file or a Ping360 log's navigation, :attr:`Dataset.inputs`)
+  (``dataset_files``: relative path -> digest; a folder of more than :data:`GROUP_OVER` files,
+  the marina's keyframes, is one entry ``folder/*`` over its files' names and digests, with
+  ``dataset_file_count``), and one digest over them all.
 """
 
 from __future__ import annotations
@@ -21,11 +24,19 @@ import dataclasses
 import hashlib
 import json
 import subprocess
+from collections.abc import Sequence
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
-__all__ = ["GROUP_OVER", "dataset_digests", "git_state", "provenance", "settings_digest"]
+__all__ = [
+    "GROUP_OVER",
+    "dataset_digests",
+    "dataset_files",
+    "git_state",
+    "provenance",
+    "settings_digest",
+]
 
 #: A folder with more files than this gets one digest over them in ``dataset_files``.
 GROUP_OVER = 20
@@ -102,11 +113,35 @@ def settings_digest(
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def dataset_digests(root: Path) -> tuple[str, dict[str, str], int]:
+def dataset_files(root: Path, also: Sequence[Path] = ()) -> tuple[Path, list[Path]]:
+    """``(base folder, files)`` a run on ``root`` reads: every regular file under a directory;
+    a single file (a ROS 1 bag, an MCAP, a Ping Viewer ``.bin``) with the ``sonarslam.toml``
+    and ``truth.json`` beside it; then the files of ``also`` (a ``--topics`` file, a Ping360
+    log's navigation: files or directories), each once, in sorted order."""
+    base = root if root.is_dir() else root.parent
+    found: set[Path] = set()
+    for p in (root, *also):
+        if p.is_dir():
+            found.update(q for q in p.rglob("*") if q.is_file())
+        elif p.is_file():
+            found.add(p)
+            if p == root:
+                found.update(
+                    q for q in (base / "sonarslam.toml", base / "truth.json") if q.is_file()
+                )
+    return base, sorted(found)
+
+
+def dataset_digests(root: Path, also: Sequence[Path] = ()) -> tuple[str, dict[str, str], int]:
     """``(digest over all, {relative path or folder/*: digest}, number of files)`` of the
-    regular files under ``root`` (module docstring)."""
-    files = sorted(p for p in root.rglob("*") if p.is_file())
-    digests = {p.relative_to(root).as_posix(): _sha256_file(p) for p in files}
+    files a run on ``root`` reads (:func:`dataset_files`; module docstring). A file outside the
+    base folder is named by its absolute path."""
+    base, files = dataset_files(root, also)
+
+    def name(p: Path) -> str:
+        return p.relative_to(base).as_posix() if p.is_relative_to(base) else p.resolve().as_posix()
+
+    digests = {name(p): _sha256_file(p) for p in files}
     by_folder: dict[str, list[str]] = {}
     for rel in digests:
         by_folder.setdefault(rel.rpartition("/")[0], []).append(rel)
@@ -131,10 +166,12 @@ def provenance(
     dataset_config_toml: str,
     run_config: Any | None,
     batch: bool = False,
+    also: Sequence[Path] = (),
 ) -> dict[str, Any]:
-    """The ``provenance`` object of ``metrics.json`` (module docstring)."""
+    """The ``provenance`` object of ``metrics.json`` (module docstring); ``also``: files or
+    directories the run read besides ``dataset_root`` (:func:`dataset_files`)."""
     commit, dirty = git_state()
-    total, listed, count = dataset_digests(dataset_root)
+    total, listed, count = dataset_digests(dataset_root, also)
     return {
         "version": _package_version(),
         "git_commit": commit,

@@ -399,11 +399,14 @@ def report(
         "",
         f"Runs: {', '.join(f'`{r}`' for r in [*(x.run_dir for x in runs), *(x.run_dir for x in free)])}.",
         "",
-        f"evo's APE is on `<backend>.tum` against `gps.tum` (translation, "
-        f"{'Umeyama-aligned' if align else 'no alignment'}; its sd has ddof 0); evo's RPE is the "
-        f"translation error of the relative motion over {rpe_delta_m:g} m of path.",
-        "",
     ]
+    if runs:  # the runs with GPS (those without have their own section)
+        md += [
+            f"evo's APE is on `<backend>.tum` against `gps.tum` (translation, "
+            f"{'Umeyama-aligned' if align else 'no alignment'}; its sd has ddof 0); evo's RPE is"
+            f" the translation error of the relative motion over {rpe_delta_m:g} m of path.",
+            "",
+        ]
     dataset_figs: list[tuple[str, list[Path]]] = []
     for name, group in by_dataset.items():
         group_rows = [

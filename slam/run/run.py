@@ -182,6 +182,12 @@ def run_backend(
             )
         if batch:
             raise SettingError("--batch", f"back end {backend!r} does not smooth")
+        if backend == "gps" and dataset.gps is None:
+            raise SettingError(
+                "--backend",
+                f"gps needs a GPS, and {dataset.root} has none (*_DGPS.log or a NavSatFix"
+                " topic): take --backend dr",
+            )
         trajectory = POSE_SOURCES[backend](dataset)
     else:
         result, config, trajectories, loop = _closed_loop(
@@ -418,7 +424,12 @@ def run(
     if loops_rel_s or dataset.gps is None:
         result.figures.loops = loop_figures(dataset, result, loops_rel_s or [])
     result.figures.provenance = provenance(
-        backend, dataset.root, dump_dataset_config(dataset.config), result.config, batch
+        backend,
+        dataset.root,
+        dump_dataset_config(dataset.config),
+        result.config,
+        batch,
+        also=dataset.inputs,
     )
     result.metrics = result.figures.to_json()
     result.files = write_run(

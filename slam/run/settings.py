@@ -24,6 +24,7 @@ from typing import Any
 from sonarslam.datasets.config import config_tables
 from sonarslam.datasets.source import Dataset
 from sonarslam.settings import SettingError
+from sonarslam.slam.backends.base import BACKEND_NOISE_KEYS
 from sonarslam.slam.backends.registry import BACKENDS
 from sonarslam.slam.run.presets import (
     SCAN_PRESETS,
@@ -206,13 +207,19 @@ def run_settings(dataset: Dataset, settings: dict[str, Any] | None = None) -> li
     preset = preset_for(dataset.beams)
     noise = dataset.config.noise
     from_noise = {f"extractor.{k}" for k in noise_settings(noise)[0]}
-    from_noise |= {f"{b}.noise.{f.name}" for b in BACKENDS for f in dataclasses.fields(noise)}
+    from_noise |= {f"{b}.noise.{k}" for b in BACKENDS for k in BACKEND_NOISE_KEYS}
+    # the [noise] keys a back end does not read (BACKEND_NOISE_KEYS) are left out: they act
+    # through the dataset's [noise], listed with the dataset's settings
+    unread = {f"{b}.noise.{f.name}" for b in BACKENDS for f in dataclasses.fields(noise)}
+    unread -= from_noise
 
     def listed(prefix: str, default: Any, changed: Any, source: str) -> list[Setting]:
         out = []
         for (name, before), (_, value) in zip(
             _flatten(prefix, default), _flatten(prefix, changed), strict=True
         ):
+            if name in unread:
+                continue
             if value != before or name.partition(".")[2] in given[prefix]:
                 where = "--set"
             elif name in from_noise:
