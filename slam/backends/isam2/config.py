@@ -110,6 +110,15 @@ class GraphConfig(BackendConfig):
         (:func:`sonarslam.slam.backends.isam2.scans.choose_revisits`): the nearest in metres, or
         the nearest in each of as many groups of the candidates in time order (spread over the
         passes).
+    revisit_spacing_scans : int or None
+        The revisits of one scan are at least this many scans apart in the older scans (the
+        candidates too): None, ``submap_scans`` (their submaps share no scan: one revisit per
+        earlier pass); 1, neighbouring scans of one pass too.
+    revisit_lag_scans : int
+        A scan's revisits are proposed when this many scans after it have arrived: with
+        ``submap_scans // 2`` its submap is complete, centred on it and frozen as the older
+        scans' are (0: at once, its submap the newest scans, shifted back). The last
+        ``revisit_lag_scans`` scans of a run get no revisits.
     revisit_gate : {"graph", "registration"}
         ``"graph"``: a revisit registration is kept when its relative pose is compatible with
         the graph's prediction (``scan_compatibility_probability``); ``"registration"``: every
@@ -163,6 +172,8 @@ class GraphConfig(BackendConfig):
     revisit_candidates: int = bounded(4, 0, math.inf)
     revisits_per_scan: int = bounded(2, 0, math.inf)
     revisit_choice: str = one_of("nearest", "nearest", "spread")
+    revisit_spacing_scans: int | None = bounded(None, 1, 1000)
+    revisit_lag_scans: int = bounded(0, 0, 100)
     revisit_gate: str = one_of("graph", "graph", "registration")
     scan_compatibility_probability: float = bounded(0.999, 0.0, 1.0, low_open=True, high_open=True)
     batch_optimizer: str = one_of("lm", "lm", "gnc")
