@@ -119,12 +119,14 @@ class GraphConfig(BackendConfig):
         ``submap_scans // 2`` its submap is complete, centred on it and frozen as the older
         scans' are (0: at once, its submap the newest scans, shifted back). The last
         ``revisit_lag_scans`` scans of a run get no revisits.
-    revisit_gate : {"graph", "registration"}
-        ``"graph"``: a revisit registration is kept when its relative pose is compatible with
-        the graph's prediction (``scan_compatibility_probability``); ``"registration"``: every
-        registration the matcher accepts (its inliers, residual and ambiguity tests) goes in,
-        under the scan kernel (``scan_robust``): a gate against the graph's estimate rejects
-        the revisits that would correct its drift once it has drifted beyond its marginals.
+    revisit_gate : {"registration", "graph"}
+        ``"registration"`` (the default): every registration the matcher accepts (its inliers,
+        residual and ambiguity tests) goes in, under the scan kernel (``scan_robust``), which
+        re-weights it against every other factor at each relinearisation; ``"graph"``: a
+        revisit registration is kept only when its relative pose is compatible with the graph's
+        prediction (``scan_compatibility_probability``), which rejects the revisits that would
+        correct the drift once the estimate has drifted beyond its marginals
+        (docs/design-decisions.md, "Revisits: every registration the matcher accepts").
     scan_compatibility_probability : float
         A revisit registration is compatible with the graph's prediction when chi2(3) of the
         difference with the sum of both covariances is within this (the ``"graph"`` gate, and
@@ -174,7 +176,7 @@ class GraphConfig(BackendConfig):
     revisit_choice: str = one_of("nearest", "nearest", "spread")
     revisit_spacing_scans: int | None = bounded(None, 1, 1000)
     revisit_lag_scans: int = bounded(0, 0, 100)
-    revisit_gate: str = one_of("graph", "graph", "registration")
+    revisit_gate: str = one_of("registration", "graph", "registration")
     scan_compatibility_probability: float = bounded(0.999, 0.0, 1.0, low_open=True, high_open=True)
     batch_optimizer: str = one_of("lm", "lm", "gnc")
     redecide_stretch_m: float | None = bounded(None, 0.0, 1e5, low_open=True)

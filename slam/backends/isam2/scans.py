@@ -15,12 +15,13 @@ scan. Here (MSISpIC's pose graph, Mallios et al. 2014, in iSAM2):
    (conservative: the cross-covariance of two poses of one trajectory is positive); the nearest
    ``revisit_candidates`` then get the joint marginal ``(X(j), X(k))`` and the exact gate.
    ``revisits_per_scan`` of them (``revisit_choice``: the nearest, or spread over the passes,
-   :func:`choose_revisits`) are registered (submaps of ``submap_scans`` scans; with
-   ``revisit_lag_scans`` once that many newer scans have arrived, so that the new scan's
-   submap is complete and centred), from the
-   graph's relative pose, and kept (``revisit_gate = "graph"``) when compatible with it (chi2(3)
-   of the difference with both covariances; the directions the registration leaves free carry
-   no information), or (``"registration"``) whenever the registration's own tests accept them.
+   :func:`choose_revisits`; at least ``revisit_spacing_scans`` apart) are registered (submaps
+   of ``submap_scans`` scans; with ``revisit_lag_scans``, once that many newer scans have
+   arrived, so that the new scan's submap is complete and centred) from the graph's relative
+   pose, and kept (``revisit_gate = "registration"``, the default) whenever the registration's
+   own tests accept them, or (``"graph"``) only when compatible with the graph's prediction
+   (chi2(3) of the difference with both covariances; the directions the registration leaves
+   free carry no information).
 4. Every scan factor has a robust kernel (``scan_robust``, Cauchy by default) and is a record
    of :mod:`sonarslam.slam.backends.isam2.graph_io` (``BetweenFactorPose2`` with ``"robust"`` and
    ``"constraint"``: ``"scan-consecutive"`` or ``"scan-revisit"``), so ``graph.json`` holds
