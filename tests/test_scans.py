@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import replace
 
 import gtsam
@@ -17,7 +18,7 @@ from scipy.stats import chi2
 
 from sonarslam.datasets.simulator import make_scenario, simulate_records
 from sonarslam.datasets.simulator.writer import write_dataset
-from sonarslam.datasets.source import open_dataset
+from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.features.geometry import between, compose, inverse, transform_points, wrap_angle
 from sonarslam.features.scans import ScanConfig, ScanMatcher, reference_lines, register
 from sonarslam.features.scans.icp import _median, register_from
@@ -446,3 +447,46 @@ def test_gnc_batch_chooses_the_revisits_and_rejects_a_planted_false_one(tmp_path
     smoothed = backend.smoothed_trajectory()
     err = np.hypot(*(smoothed.poses_wTb[:, :2] - truth.poses(smoothed.t_s)[:, :2]).T)
     assert err.mean() < 0.85 * dr, (err.mean(), dr)
+
+
+def test_lagged_neighbouring_revisits_register_centred_submaps_and_match_the_truth(
+    opened: Callable[[str, int, float], Dataset],
+) -> None:
+    """900 s of the drift world (seed 2), scans only, with ``isam2.revisit_lag_scans = 1`` and
+    ``isam2.revisit_spacing_scans = 1``: each scan's revisits are registered once the scan after
+    it has arrived (its submap complete, centred and frozen), never before; a scan may take two
+    neighbouring scans of one earlier pass (15 revisits here, 8 with the default spacing);
+    their relative poses are within 0.3 m and 0.5 deg of the truth's between the two scans'
+    reference times (p90; measured 0.18 m, 0.42 deg at most), and the loop beats dead
+    reckoning by 10 % (4.57 m)."""
+    dataset = opened("drift", 2, 900.0)
+    dr = run_backend(dataset, "dr").metrics["ate_truth_mean_m"]
+    settings = {
+        "isam2.constraints": "scans",
+        "isam2.revisit_lag_scans": "1",
+        "isam2.revisit_spacing_scans": "1",
+    }
+    run = run_backend(dataset, "isam2", settings)
+    assert run.metrics["ate_truth_mean_m"] < 0.9 * dr, (run.metrics["ate_truth_mean_m"], dr)
+    backend = run.closed_loop.backend
+    assert backend.scans is not None
+    newest, lags = -1, []  # the newest scan when each revisit was logged
+    older: dict[int, list[int]] = {}
+    for p in backend.scans.log.pairs:
+        if p["kind"] == "consecutive":
+            newest = max(newest, p["k"])
+        else:
+            lags.append(newest - p["k"])
+            older.setdefault(p["k"], []).append(p["j"])
+    assert len(lags) >= 12 and set(lags) == {1}, Counter(lags)
+    assert any(len(js) == 2 and abs(js[0] - js[1]) == 1 for js in older.values()), older
+    truth = truth_trajectory(dataset)
+    err_m, err_deg = [], []
+    for p in backend.scans.log.pairs:
+        if p["kind"] == "revisit" and p["accepted"]:
+            d = np.asarray(p["z"]) - between(*truth.poses(np.array([p["t_j"], p["t_k"]])))
+            err_m.append(float(np.hypot(d[0], d[1])))
+            err_deg.append(float(np.degrees(abs(wrap_angle(d[2])))))
+    assert len(err_m) >= 12
+    assert np.percentile(err_m, 90) < 0.3, err_m
+    assert np.percentile(err_deg, 90) < 0.5, err_deg

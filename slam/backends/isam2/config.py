@@ -110,12 +110,23 @@ class GraphConfig(BackendConfig):
         (:func:`sonarslam.slam.backends.isam2.scans.choose_revisits`): the nearest in metres, or
         the nearest in each of as many groups of the candidates in time order (spread over the
         passes).
-    revisit_gate : {"graph", "registration"}
-        ``"graph"``: a revisit registration is kept when its relative pose is compatible with
-        the graph's prediction (``scan_compatibility_probability``); ``"registration"``: every
-        registration the matcher accepts (its inliers, residual and ambiguity tests) goes in,
-        under the scan kernel (``scan_robust``): a gate against the graph's estimate rejects
-        the revisits that would correct its drift once it has drifted beyond its marginals.
+    revisit_spacing_scans : int or None
+        The revisits of one scan are at least this many scans apart in the older scans (the
+        candidates too): None, ``submap_scans`` (their submaps share no scan: one revisit per
+        earlier pass); 1, neighbouring scans of one pass too.
+    revisit_lag_scans : int
+        A scan's revisits are proposed when this many scans after it have arrived: with
+        ``submap_scans // 2`` its submap is complete, centred on it and frozen as the older
+        scans' are (0: at once, its submap the newest scans, shifted back). The last
+        ``revisit_lag_scans`` scans of a run get no revisits.
+    revisit_gate : {"registration", "graph"}
+        ``"registration"`` (the default): every registration the matcher accepts (its inliers,
+        residual and ambiguity tests) goes in, under the scan kernel (``scan_robust``), which
+        re-weights it against every other factor at each relinearisation; ``"graph"``: a
+        revisit registration is kept only when its relative pose is compatible with the graph's
+        prediction (``scan_compatibility_probability``), which rejects the revisits that would
+        correct the drift once the estimate has drifted beyond its marginals
+        (docs/design-decisions.md, "Revisits: every registration the matcher accepts").
     scan_compatibility_probability : float
         A revisit registration is compatible with the graph's prediction when chi2(3) of the
         difference with the sum of both covariances is within this (the ``"graph"`` gate, and
@@ -163,7 +174,9 @@ class GraphConfig(BackendConfig):
     revisit_candidates: int = bounded(4, 0, math.inf)
     revisits_per_scan: int = bounded(2, 0, math.inf)
     revisit_choice: str = one_of("nearest", "nearest", "spread")
-    revisit_gate: str = one_of("graph", "graph", "registration")
+    revisit_spacing_scans: int | None = bounded(None, 1, 1000)
+    revisit_lag_scans: int = bounded(0, 0, 100)
+    revisit_gate: str = one_of("registration", "graph", "registration")
     scan_compatibility_probability: float = bounded(0.999, 0.0, 1.0, low_open=True, high_open=True)
     batch_optimizer: str = one_of("lm", "lm", "gnc")
     redecide_stretch_m: float | None = bounded(None, 0.0, 1e5, low_open=True)

@@ -15,10 +15,13 @@ scan. Here (MSISpIC's pose graph, Mallios et al. 2014, in iSAM2):
    (conservative: the cross-covariance of two poses of one trajectory is positive); the nearest
    ``revisit_candidates`` then get the joint marginal ``(X(j), X(k))`` and the exact gate.
    ``revisits_per_scan`` of them (``revisit_choice``: the nearest, or spread over the passes,
-   :func:`choose_revisits`) are registered (submaps of ``submap_scans`` scans), from the
-   graph's relative pose, and kept (``revisit_gate = "graph"``) when compatible with it (chi2(3)
-   of the difference with both covariances; the directions the registration leaves free carry
-   no information), or (``"registration"``) whenever the registration's own tests accept them.
+   :func:`choose_revisits`; at least ``revisit_spacing_scans`` apart) are registered (submaps
+   of ``submap_scans`` scans; with ``revisit_lag_scans``, once that many newer scans have
+   arrived, so that the new scan's submap is complete and centred) from the graph's relative
+   pose, and kept (``revisit_gate = "registration"``, the default) whenever the registration's
+   own tests accept them, or (``"graph"``) only when compatible with the graph's prediction
+   (chi2(3) of the difference with both covariances; the directions the registration leaves
+   free carry no information).
 4. Every scan factor has a robust kernel (``scan_robust``, Cauchy by default) and is a record
    of :mod:`sonarslam.slam.backends.isam2.graph_io` (``BetweenFactorPose2`` with ``"robust"`` and
    ``"constraint"``: ``"scan-consecutive"`` or ``"scan-revisit"``), so ``graph.json`` holds
@@ -264,8 +267,11 @@ class ScanConstraints:
                     self._add_between(k - 1, k, reg, "consecutive")
         self.graph.scan_update()
         self._cov[k] = self._marginal(k)
-        if cfg.revisits_per_scan > 0:
-            self._revisits(k, matcher)
+        c = k - cfg.revisit_lag_scans  # the scan whose revisits are proposed now
+        if cfg.revisits_per_scan > 0 and c >= 0 and c in self.log.nodes:
+            if c != k:
+                self._cov[c] = self._marginal(c)
+            self._revisits(c, matcher)
 
     def _log(self, reg: Registration, kind: str, j: int, k: int, nis: float | None = None) -> None:
         self.log.pairs.append(
@@ -324,8 +330,8 @@ class ScanConstraints:
         cfg = self.config
         pose_k = self._pose(k)
         gated: list[tuple[float, int, FloatArray, FloatArray]] = []
-        half = matcher.config.submap_scans
-        for _, j in self._loose(k, pose_k, half):
+        spacing = cfg.revisit_spacing_scans or matcher.config.submap_scans
+        for _, j in self._loose(k, pose_k, spacing):
             pose_j = self._pose(j)
             S = relative_pose_covariance(pose_j, pose_k, self._joint(j, k))
             jTk = between(pose_j, pose_k)
@@ -335,7 +341,7 @@ class ScanConstraints:
         picked = {
             j
             for _, j in choose_revisits(
-                [(g[0], g[1]) for g in gated], cfg.revisits_per_scan, half, cfg.revisit_choice
+                [(g[0], g[1]) for g in gated], cfg.revisits_per_scan, spacing, cfg.revisit_choice
             )
         }
         added = False
