@@ -327,12 +327,6 @@ def room() -> SyntheticRun:
     return run_room(1)
 
 
-@pytest.fixture(scope="module")
-def room_fixed_mount() -> SyntheticRun:
-    """The room with the sonar's mounting and range scale held (plain ``LineObservation``)."""
-    return run_room(1, config=GraphConfig(estimate_sonar_mount=False, range_scale_sigma=0.0))
-
-
 def test_room_recovers_the_walls_and_the_trajectory(room: SyntheticRun):
     be = room.backend
     assert len(be.map) == 4  # one landmark per wall, no duplicates
@@ -652,8 +646,7 @@ def test_every_factor_kind_round_trips_through_its_json_form(room: SyntheticRun)
         assert e1 == pytest.approx(e0, rel=1e-12, abs=1e-12)
         kinds.add(record.kind)
     assert FactorKind.HEADING_BIAS in kinds
-    # the default graph estimates the sonar's mounting: its line factors are the calibrated kind
-    assert FactorKind.LINE_OBSERVATION_CALIBRATED in kinds
+    assert kinds & {FactorKind.LINE_OBSERVATION, FactorKind.LINE_OBSERVATION_CALIBRATED}
 
 
 @pytest.mark.parametrize(
@@ -668,9 +661,9 @@ def test_every_factor_kind_round_trips_through_its_json_form(room: SyntheticRun)
     ],
 )
 def test_load_graph_names_the_file_and_the_factor_it_cannot_read(
-    room_fixed_mount: SyntheticRun, tmp_path, change: dict, message: str
+    room: SyntheticRun, tmp_path, change: dict, message: str
 ):
-    (path,) = room_fixed_mount.backend.save(tmp_path)
+    (path,) = room.backend.save(tmp_path)
     doc = json.loads(path.read_text())
     i = next(i for i, f in enumerate(doc["factors"]) if f["type"] == "LineObservation")
     doc["factors"][i] |= change

@@ -14,9 +14,10 @@ __all__ = ["GraphConfig"]
 @dataclass(frozen=True)
 class GraphConfig(BackendConfig):
     """Settings of the factor graph: those of :class:`sonarslam.slam.backends.base.BackendConfig`
-    and the following. ``estimate_misalignment`` is on here (the EKF's is off): with the sonar's
-    mounting a variable, the DVL's misalignment takes the crab a DVL's lateral bias puts on the
-    odometry, which the mounting's yaw would otherwise absorb (docs/calibration.md).
+    and the following. With the sonar's mounting a variable, estimate the DVL's misalignment too
+    (``estimate_misalignment``): it takes the crab a DVL's lateral bias puts on the odometry,
+    which the mounting's yaw would otherwise absorb (docs/calibration.md, "Calibration as state:
+    the three together").
 
     Attributes
     ----------
@@ -44,7 +45,8 @@ class GraphConfig(BackendConfig):
     estimate_sonar_mount : bool
         Estimate the sonar mounting ``bTs`` ``(x, y, yaw)``, one variable ``C(0)`` shared by every
         line and scan observation (:mod:`sonarslam.slam.model.calibration`), with the dataset's
-        mounting as the prior mean (docs/design-decisions.md, "Sonar calibration as state").
+        mounting as the prior mean. Off by default (docs/design-decisions.md, "Sonar
+        calibration as state").
     sonar_mount_sigma_m : float
         Its prior 1-sigma in x and in y (m): a lever arm a user measures with a tape, or not at
         all.
@@ -54,8 +56,8 @@ class GraphConfig(BackendConfig):
     range_scale_sigma : float
         Prior 1-sigma of the sonar's range scale ``s`` around 1 (an echo from range ``r`` is
         logged at ``s * r``: a sound-speed error), ``R(0)``, shared as the mounting; 0: not
-        estimated (``s = 1``; docs/design-decisions.md gives the sizes these priors are chosen
-        for).
+        estimated (``s = 1``, the default; docs/design-decisions.md gives the sizes these
+        priors are chosen for).
     scan_calibration : bool
         The scan constraints take the mounting and range scale too
         (``ScanRegistrationCalibrated``); False (the default): they stay ``BetweenFactorPose2``
@@ -153,11 +155,10 @@ class GraphConfig(BackendConfig):
     update_period_s: float = bounded(5.0, 0.0, 3600.0)
     estimate_gyro_scale: bool = False
     gyro_scale_sigma: float = bounded(0.2, 1e-4, 10.0)
-    estimate_misalignment: bool = True  # the graph estimates it beside the sonar's mounting
-    estimate_sonar_mount: bool = True
+    estimate_sonar_mount: bool = False
     sonar_mount_sigma_m: float = bounded(0.2, 1e-4, 10.0)
     sonar_mount_sigma_deg: float = bounded(0.5, 1e-3, 90.0)
-    range_scale_sigma: float = bounded(0.04, 0.0, 0.5)
+    range_scale_sigma: float = bounded(0.0, 0.0, 0.5)
     scan_calibration: bool = False
     robust: str | None = one_of("huber", None, "huber", "cauchy")
     robust_k: float = bounded(1.345, 1e-3, 100.0)
