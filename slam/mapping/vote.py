@@ -16,6 +16,7 @@ records settle the last one.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from sonarslam.features.geometry import FloatArray
@@ -26,6 +27,7 @@ __all__ = [
     "Anchored",
     "LandmarkBelief",
     "AfterVote",
+    "ViewPair",
     "Belief",
     "NewLandmark",
     "Decision",
@@ -84,6 +86,28 @@ class AfterVote:
 
 
 @dataclass(frozen=True, eq=False)
+class ViewPair:
+    """The sonar's pose at the current vote and at an earlier one, as the back end estimates them
+    now, with their joint covariance: what a tentative line's gate needs to compare two views
+    (:meth:`sonarslam.slam.mapping.landmarks.LandmarkMap.tentative_distance`).
+
+    Attributes
+    ----------
+    wTs_now : ndarray, shape (3,)
+        The sonar's pose at the current vote ``(x_m, y_m, yaw_rad)``.
+    wTs_then : ndarray, shape (3,)
+        The sonar's pose at the earlier vote, as the back end estimates it now (a filter: as it
+        estimated it then; a smoother: smoothed).
+    cov : ndarray, shape (6, 6)
+        Joint covariance of ``[wTs_now, wTs_then]`` in ``(x, y, yaw)``, cross-covariance included.
+    """
+
+    wTs_now: FloatArray
+    wTs_then: FloatArray
+    cov: FloatArray
+
+
+@dataclass(frozen=True, eq=False)
 class Belief:
     """One vote as the back end sees it before using it.
 
@@ -118,6 +142,14 @@ class Belief:
         only the newest (the EKF).
     after_previous : AfterVote or None
         The estimate right after the back end applied the previous vote with observations.
+    view : object or None
+        The back end's token of this vote's pose (kept with a tentative line first seen in it);
+        None: the back end keeps no joint covariance of its poses.
+    view_pair : callable or None
+        ``view_pair(token)`` -> :class:`ViewPair` of this vote's sonar pose and an earlier
+        vote's (the token it gave then), or None when the back end no longer knows it. None:
+        a tentative line's two views are compared as independent (each world line holding
+        its own pose's covariance).
     """
 
     features: list[LineFeature]
@@ -134,6 +166,8 @@ class Belief:
     landmarks: LandmarkBelief
     seeds_used: bool
     after_previous: AfterVote | None
+    view: object | None = None
+    view_pair: Callable[[object], ViewPair | None] | None = None
 
 
 @dataclass(frozen=True, eq=False)
