@@ -478,8 +478,15 @@ class LineEkf:
             seeds_used=False,
             after_previous=self._after,
             view=view,
-            view_pair=self._view_pair,
+            view_pairs=self._view_pairs(view) if view is not None else None,
         )
+
+    def _view_pairs(self, view: int) -> dict[object, ViewPair]:
+        """:meth:`_view_pair` of every vote a tentative line waits on, and of this one's
+        ``view`` (a tentative line first seen earlier in this vote)."""
+        views = {c.view for c in self.map.tentative if c.view is not None} | {view}
+        pairs = {v: self._view_pair(v) for v in views}
+        return {v: p for v, p in pairs.items() if p is not None}
 
     def _view_pair(self, view: object) -> ViewPair | None:
         """The sonar's pose now and at vote ``view`` (as estimated then), with their joint

@@ -111,7 +111,7 @@ class LandmarkConfig:
         into the older (:meth:`LandmarkMap.merge_duplicates`). None: never merged.
     tentative_joint_gate : bool
         The tentative gate uses the joint covariance of the two views' sonar poses (their
-        cross-covariance, from the back end's :attr:`Belief.view_pair`); False: each world line
+        cross-covariance, from the back end's :attr:`Belief.view_pairs`); False: each world line
         holds its own pose's covariance, as if the two poses' errors were independent (the
         common error of two views seconds apart then counts twice).
     reobservation_min_move_m : float or None
@@ -132,7 +132,7 @@ class LandmarkConfig:
     side_gate: bool = True
     line_cov_scale: float = bounded(1.0, 1e-2, 1e2)
     merge_gate_probability: float | None = bounded(None, 0.0, 1.0, low_open=True, high_open=True)
-    tentative_joint_gate: bool = True
+    tentative_joint_gate: bool = False
     reobservation_min_move_m: float | None = bounded(5.0, 0.0, 1e4, high_open=True)
 
     def __post_init__(self) -> None:
@@ -418,17 +418,12 @@ class LandmarkMap:
         kept = [c for c in self.tentative if f.t - c.t <= cfg.tentative_max_age_s]
         self.stats["tentative_dropped"] += len(self.tentative) - len(kept)
         self.tentative = kept
-        pairs: dict[int, ViewPair | None] = {}  # one back-end query per earlier vote
         for cand in self.tentative:
             if cfg.side_gate and sonar_side(wTb, cand.line_w, self.bTs)[0] != cand.side:
                 continue
             pair = None
-            if cfg.tentative_joint_gate and belief.view_pair is not None:
-                if cand.view is not None:
-                    key = id(cand.view)
-                    if key not in pairs:
-                        pairs[key] = belief.view_pair(cand.view)
-                    pair = pairs[key]
+            if cfg.tentative_joint_gate and belief.view_pairs is not None:
+                pair = belief.view_pairs.get(cand.view)
             if pair is not None:
                 R1 = cand.observations[0][1].cov * cfg.line_cov_scale
                 d2 = self.tentative_distance(cand.observations[0][1].z, R1, f.z, R, pair)

@@ -16,7 +16,6 @@ records settle the last one.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from sonarslam.features.geometry import FloatArray
@@ -145,11 +144,11 @@ class Belief:
     view : object or None
         The back end's token of this vote's pose (kept with a tentative line first seen in it);
         None: the back end keeps no joint covariance of its poses.
-    view_pair : callable or None
-        ``view_pair(token)`` -> :class:`ViewPair` of this vote's sonar pose and an earlier
-        vote's (the token it gave then), or None when the back end no longer knows it. None:
-        a tentative line's two views are compared as independent (each world line holding
-        its own pose's covariance).
+    view_pairs : dict of object to ViewPair, optional
+        For the token of each earlier vote a tentative line was first seen in (the landmark
+        layer's ``tentative``), this vote's sonar pose and that vote's with their joint
+        covariance. A tentative line whose token is missing (or None here) has its two views
+        compared as independent (each world line holding its own pose's covariance).
     """
 
     features: list[LineFeature]
@@ -167,7 +166,7 @@ class Belief:
     seeds_used: bool
     after_previous: AfterVote | None
     view: object | None = None
-    view_pair: Callable[[object], ViewPair | None] | None = None
+    view_pairs: dict[object, ViewPair] | None = None
 
 
 @dataclass(frozen=True, eq=False)

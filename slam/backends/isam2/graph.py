@@ -427,8 +427,16 @@ class LineIsam2:
             seeds_used=True,
             after_previous=self._after,
             view=anchor if self.config.tentative_joint_gate else None,
-            view_pair=self._view_pair,
+            view_pairs=self._view_pairs() if obs.features else None,
         )
+
+    def _view_pairs(self) -> dict[object, ViewPair]:
+        """:meth:`_view_pair` of every earlier vote a tentative line waits on."""
+        if not self.config.tentative_joint_gate:
+            return {}
+        views = {c.view for c in self.map.tentative if c.view is not None}
+        pairs = {v: self._view_pair(v) for v in views}
+        return {v: p for v, p in pairs.items() if p is not None}
 
     def _view_pair(self, view: object) -> ViewPair | None:
         """The sonar's pose now and at an earlier vote anchored at ``view`` (its node smoothed
