@@ -621,6 +621,91 @@ def table(rows: list[dict[str, Any]], backends: list[str]) -> str:
     return "\n".join(lines)
 
 
+#: The kinds of wrong pairing :func:`pairing_kind` tells apart, in its order.
+PAIRING_KINDS = (
+    "at a tentative line's promotion",
+    "spurious",
+    "one line (0-0.14 m, < 0.5 deg)",
+    "adjacent walls at an angle (>= 0.5 deg)",
+    "parallel, a step (> 0.14 m)",
+)
+
+
+def pairing_kind(p: dict[str, Any]) -> str:
+    """What a wrong pairing of ``--pairings`` is: the promoting observation of a tentative line
+    (its landmark had taken none), a spurious line on either side, or by the two walls'
+    separation (sonar frame): on one line, at an angle, or parallel and apart."""
+    if p.get("landmark_unit") is None or p.get("obs_unit") is None:
+        return PAIRING_KINDS[1]
+    if p.get("landmark_taken") == 0:
+        return PAIRING_KINDS[0]
+    sep = p.get("separation") or {}
+    if abs(float(sep.get("theta_deg", 0.0))) >= 0.5:
+        return PAIRING_KINDS[3]
+    if abs(float(sep.get("rho_m", 0.0))) <= 0.14:
+        return PAIRING_KINDS[2]
+    return PAIRING_KINDS[4]
+
+
+def summary(rows: list[dict[str, Any]], dr: dict[str, list[float]] | None = None) -> str:
+    """Per back end and seed range (the seeds' thousands): worlds, pose ANEES (median of the
+    runs' means), runs above the threshold (health-flagged), pooled association precision and
+    recall, mean ATE unaligned / aligned (iSAM2's smoothed after a semicolon), and with ``dr``
+    (seed -> dead reckoning's ``[ATE, aligned ATE]``) how many runs beat it and the worst loss;
+    then the wrong pairings by kind (:func:`pairing_kind`)."""
+    out = [
+        "| back end, seeds | worlds | ANEES (median) | runs > 10 (flagged) | precision / recall"
+        " | ATE unaligned / aligned (m) | beats DR unaligned / aligned | worst vs DR |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    kinds: dict[str, Counter[str]] = {}
+    groups: dict[tuple[str, int], list[dict[str, Any]]] = {}
+    for r in rows:
+        groups.setdefault((r["backend"], int(r["seed"]) // 10000), []).append(r)
+    for (b, _range), rs in sorted(groups.items()):
+        n = len(rs)
+        nees = [float(r["nees_mean"]) for r in rs]
+        above = [r for r in rs if not 0.0 <= float(r["nees_mean"]) <= 10.0]
+        flagged = sum(1 for r in above if not r["health_ok"])
+        a = sum(r["associated"] for r in rs)
+        right = sum(r["precision"] * r["associated"] for r in rs)
+        t = sum(r["true_pairs"] for r in rs)
+        ate = float(np.mean([r["ate_m"] for r in rs]))
+        ate_al = float(np.mean([r["ate_aligned_m"] for r in rs]))
+        ates = f"{ate:.2f} / {ate_al:.2f}"
+        if all(r.get("smoothed_ate_m") is not None for r in rs):
+            sm = float(np.mean([r["smoothed_ate_m"] for r in rs]))
+            sm_al = float(np.mean([r["smoothed_ate_aligned_m"] for r in rs]))
+            ates += f"; {sm:.2f} / {sm_al:.2f}"
+        seeds = f"{min(r['seed'] for r in rs)}-{max(r['seed'] for r in rs)}"
+        line = (
+            f"| {b}, {seeds} | {n} | {np.mean(nees):.2f} ({np.median(nees):.2f}) |"
+            f" {len(above)} ({flagged}) | {100 * right / a:.2f} % / {100 * right / t:.2f} % |"
+            f" {ates} |"
+        )
+        if dr is not None and all(str(r["seed"]) in dr for r in rs):
+            d = [dr[str(r["seed"])] for r in rs]
+            beat = sum(1 for r, x in zip(rs, d, strict=True) if r["ate_m"] < x[0])
+            beat_al = sum(1 for r, x in zip(rs, d, strict=True) if r["ate_aligned_m"] < x[1])
+            worst = max(r["ate_m"] / x[0] - 1.0 for r, x in zip(rs, d, strict=True))
+            worst_al = max(r["ate_aligned_m"] / x[1] - 1.0 for r, x in zip(rs, d, strict=True))
+            line += (
+                f" {beat}/{n} / {beat_al}/{n} | {100 * worst:+.0f} % / {100 * worst_al:+.0f} % |"
+            )
+        else:
+            line += " - | - |"
+        out.append(line)
+        for r in rs:
+            for p in r.get("wrong_pairings") or []:
+                kinds.setdefault(b, Counter())[pairing_kind(p)] += 1
+    if kinds:
+        out += ["", "| wrong pairings | " + " | ".join(kinds) + " |"]
+        out.append("|---|" + "---|" * len(kinds))
+        for k in PAIRING_KINDS:
+            out.append(f"| {k} | " + " | ".join(str(c[k]) for c in kinds.values()) + " |")
+    return "\n".join(out)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="0-9")
@@ -637,10 +722,20 @@ def main() -> int:
     ap.add_argument("--pairings", action="store_true", help="list every wrong pairing of every run")
     ap.add_argument("--out", default=None, help="results JSON (rewritten after every run)")
     ap.add_argument("--table", default=None, help="only print the table of this results JSON")
+    ap.add_argument(
+        "--summary", default=None, help="only print the figures per back end and seed range"
+    )
+    ap.add_argument(
+        "--dr", default=None, help="with --summary: JSON of seed -> DR's [ATE, aligned ATE]"
+    )
     args = ap.parse_args()
     if args.table:
         done = json.loads(Path(args.table).read_text())
         print(table(done, list(dict.fromkeys(r["backend"] for r in done))))
+        return 0
+    if args.summary:
+        dr = json.loads(Path(args.dr).read_text()) if args.dr else None
+        print(summary(json.loads(Path(args.summary).read_text()), dr))
         return 0
     settings: dict[str, Any] = {}
     for s in args.set:

@@ -31,6 +31,14 @@ O(n^2), exactly symmetric), each line observation in the sonar frame R
 (:func:`sonarslam.slam.model.lines.line_prediction`) by filterpy's, its result symmetrised. Which observation
 updates which landmark, and when a new line becomes one, is the landmark layer's
 (:class:`sonarslam.slam.mapping.landmarks.LandmarkMap`); this class holds the filter state only.
+
+A tentative line's gate compares two views of it with the joint covariance of the two poses
+(:meth:`sonarslam.slam.mapping.landmarks.LandmarkMap.tentative_distance`). The filter keeps the
+cross-covariance of its state with the pose of each vote a tentative line was first seen in, a
+stochastic clone's (Roumeliotis & Burdick 2002) without the clone in the state: ``C = P[:, POSE]``
+at the vote, then ``C <- F C`` at each prediction (``Phi`` at the flush) and ``C <- (I - K H) C``
+at each update with that update's gain, a new landmark's rows ``G_pose C[POSE]``; a clone is
+dropped with the last tentative line that needs it.
 """
 
 from __future__ import annotations
@@ -47,6 +55,8 @@ from filterpy.kalman import ExtendedKalmanFilter
 from sonarslam.features.geometry import (
     FLIP_RHO,
     FloatArray,
+    compose,
+    compose_jacobians,
     line_difference,
     normalize_line,
     wrap_angle,
@@ -64,7 +74,7 @@ from sonarslam.slam.backends.base import (
 from sonarslam.slam.io.states import HEADING_ERROR_FILE, write_heading_error
 from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.mapping.landmarks import LandmarkMap
-from sonarslam.slam.mapping.vote import AfterVote, Belief, Decision, LandmarkBelief
+from sonarslam.slam.mapping.vote import AfterVote, Belief, Decision, LandmarkBelief, ViewPair
 from sonarslam.slam.model.lines import line_prediction, world_observation
 from sonarslam.slam.model.motion import MotionStep, step_displacement
 from sonarslam.slam.model.noise import robust_kernel
@@ -236,6 +246,10 @@ class LineEkf:
         self._after: AfterVote | None = None  # the estimate after the last vote's update
         #: every AHRS heading update's innovation ``(t_s, nu_rad, S_rad2)`` before the update
         self.heading_innovations: list[tuple[float, float, float]] = []
+        # the poses of the votes that tentative lines were first seen in: vote number ->
+        # (the pose then (3,), its covariance then (3, 3), Cov(state now, pose then) (n, 3))
+        self._clones: dict[int, tuple[FloatArray, FloatArray, FloatArray]] = {}
+        self._votes = 0
 
     # -- state access ----------------------------------------------------------------------
 
@@ -331,6 +345,8 @@ class LineEkf:
         if P.shape[0] > V:
             P[:V, V:] = self._Phi @ P[:V, V:]
             P[V:, :V] = P[:V, V:].T
+        for _, _, C in self._clones.values():
+            C[:V] = self._Phi @ C[:V]
         self._Phi = np.eye(V)
         self._pending = False
 
@@ -346,6 +362,9 @@ class LineEkf:
     ) -> None:
         self._flush()
         self.kf.update(z, lambda _x: H, lambda _x: hx, R=R, residual=residual)
+        K = np.asarray(self.kf.K)
+        for _, _, C in self._clones.values():
+            C -= K @ (H @ C)
         # filterpy's Joseph form (I - K H) P (I - K H)^T + K R K^T is symmetric only to
         # round-off, and nothing else symmetrises P: over hundreds of updates of a filter
         # whose variances span 1e-8 to 1e2 the asymmetry grows until P is indefinite, a gate's
@@ -365,6 +384,8 @@ class LineEkf:
         for j in i[x[i] < 0.0]:
             self.kf.P[j, :] *= -1.0
             self.kf.P[:, j] *= -1.0
+            for _, _, C in self._clones.values():
+                C[j] *= -1.0
         x[i], x[i + 1] = normalize_line(x[i], x[i + 1])
 
     def update_heading(self, t_s: float, yaw_body_rad: float) -> bool:
@@ -380,6 +401,10 @@ class LineEkf:
         self.heading_innovations.append((t_s, nu, S))
         h = np.zeros(x.size)
         h[:N_VEHICLE] = self._h_heading
+        if self._clones:
+            k = P @ h / (float(h @ P @ h) + r)  # the gain scalar_joseph_update applies
+            for _, _, C in self._clones.values():
+                C -= np.outer(k, h @ C)
         self.kf.x, self.kf.P = scalar_joseph_update(x, P, h, nu, r)
         self._normalise()
         self._own_stats["ahrs_updates"] += 1
@@ -419,6 +444,8 @@ class LineEkf:
         obs = vote_observations(features, self.config)
         decision = self.map.vote(self._belief(obs))
         self._apply(decision)
+        live = {c.view for c in self.map.tentative}
+        self._clones = {v: c for v, c in self._clones.items() if v in live}
         self.vote_wall_s.append(time.perf_counter() - wall0)
         return ids_of_features(features, obs.features, decision.ids)
 
@@ -426,8 +453,14 @@ class LineEkf:
         """Every active landmark predicted from the whole state (the Jacobians at this vote's
         start, :meth:`predict_line`)."""
         ids = list(self._index) if obs.features else []
+        view = None
         if obs.features:
             self._pose_lin = self.x[POSE].copy()
+            if self.config.tentative_joint_gate:
+                self._votes += 1
+                view = self._votes
+                P = self.P
+                self._clones[view] = (self.pose, P[POSE, POSE].copy(), P[:, POSE].copy())
         preds = [self.predict_line(j) for j in ids]
         return Belief(
             features=obs.features,
@@ -444,7 +477,31 @@ class LineEkf:
             landmarks=LandmarkBelief({j: self.landmark_line(j) for j in ids}),
             seeds_used=False,
             after_previous=self._after,
+            view=view,
+            view_pairs=self._view_pairs(view) if view is not None else None,
         )
+
+    def _view_pairs(self, view: int) -> dict[object, ViewPair]:
+        """:meth:`_view_pair` of every vote a tentative line waits on, and of this one's
+        ``view`` (a tentative line first seen earlier in this vote)."""
+        views = {c.view for c in self.map.tentative if c.view is not None} | {view}
+        pairs = {v: self._view_pair(v) for v in views}
+        return {v: p for v, p in pairs.items() if p is not None}
+
+    def _view_pair(self, view: object) -> ViewPair | None:
+        """The sonar's pose now and at vote ``view`` (as estimated then), with their joint
+        covariance from the clone's cross-covariance (module docstring); None when no clone."""
+        clone = self._clones.get(view) if isinstance(view, int) else None
+        if clone is None:
+            return None
+        wTb_then, P_then, C = clone
+        P = self.P  # flushed: the clones' vehicle rows are current too
+        cov_b = np.block([[P[POSE, POSE], C[POSE]], [C[POSE].T, P_then]])
+        wTb_now = self.pose
+        J = np.zeros((6, 6))
+        J[:3, :3] = compose_jacobians(wTb_now, self.bTs)[0]
+        J[3:, 3:] = compose_jacobians(wTb_then, self.bTs)[0]
+        return ViewPair(compose(wTb_now, self.bTs), compose(wTb_then, self.bTs), J @ cov_b @ J.T)
 
     def _apply(self, decision: Decision) -> None:
         """The landmark layer's decision: the merges, the updates, the new landmarks; then the
@@ -494,6 +551,8 @@ class LineEkf:
         R = np.asarray(f.cov) * self.config.line_cov_scale
         P_new[n:, n:] = obs.G_pose @ P[POSE, POSE] @ obs.G_pose.T + obs.G_z @ R @ obs.G_z.T
         self.kf = _filter(np.concatenate([x, obs.line_w]), P_new)
+        for v, (pose, P_then, C) in self._clones.items():
+            self._clones[v] = (pose, P_then, np.vstack([C, obs.G_pose @ C[POSE]]))
         self._index[landmark_id] = n
         self._first_line_w[landmark_id] = obs.line_w.copy()
 
@@ -514,6 +573,8 @@ class LineEkf:
         self._update(np.zeros(2), H, nu, R, lambda a, b: a - b)
         keep_rows = np.r_[0:idr, idr + 2 : self.x.size]
         self.kf = _filter(self.x[keep_rows].copy(), self.P[np.ix_(keep_rows, keep_rows)].copy())
+        for v, (pose, P_then, C) in self._clones.items():
+            self._clones[v] = (pose, P_then, C[keep_rows])
         del self._index[drop], self._first_line_w[drop]
         self._index = {j: i - 2 if i > idr else i for j, i in self._index.items()}
 

@@ -11,7 +11,8 @@ ends manage them by the same rules:
   observed segment does not reach the landmark's extent (``extent_margin_m``) or when the sonar
   is on the other side of the landmark's line than when it was first seen (``side_gate``);
 * an observation that pairs with no landmark is a *tentative* line; when ``tentative_observations``
-  compatible observations (chi2 gate in the world, same side) arrive within
+  compatible observations (chi2 gate on the two views' world lines with the joint covariance of
+  the two sonar poses, :meth:`LandmarkMap.tentative_distance`; same side) arrive within
   ``tentative_max_age_s`` it is promoted to a landmark;
 * each landmark's extent along its line grows with the segments of its observations.
 
@@ -34,6 +35,7 @@ from sonarslam.features.geometry import (
     along_line,
     compose,
     line_difference,
+    line_frame_to_world,
     normalize_line_cov,
     segment_on_line,
     transform_points,
@@ -54,6 +56,7 @@ from sonarslam.slam.mapping.vote import (
     Decision,
     LandmarkBelief,
     NewLandmark,
+    ViewPair,
 )
 from sonarslam.slam.model.lines import sonar_side, world_observation
 
@@ -79,7 +82,8 @@ class LandmarkConfig:
         Method and gate of the association.
     tentative_observations : int
         A new line becomes a landmark when seen this many times, each compatible with the
-        first (chi2 gate of ``association.gate_probability`` in the world frame) ...
+        first (chi2 gate of ``association.gate_probability`` on the two world lines,
+        :meth:`LandmarkMap.tentative_distance`) ...
     tentative_max_age_s : float
         ... within this time (s); older tentative lines are dropped.
     min_rho_m : float
@@ -105,6 +109,11 @@ class LandmarkConfig:
         ``extent_margin_m`` are one wall when their lines are jointly compatible at this
         probability (chi2(2) on their difference with the joint covariance): the newer is merged
         into the older (:meth:`LandmarkMap.merge_duplicates`). None: never merged.
+    tentative_joint_gate : bool
+        The tentative gate uses the joint covariance of the two views' sonar poses (their
+        cross-covariance, from the back end's :attr:`Belief.view_pairs`); False: each world line
+        holds its own pose's covariance, as if the two poses' errors were independent (the
+        common error of two views seconds apart then counts twice).
     reobservation_min_move_m : float or None
         An associated observation of a landmark is used only when the sonar has moved at least
         this far (m) since the landmark's last used observation: observations of one wall from
@@ -123,6 +132,7 @@ class LandmarkConfig:
     side_gate: bool = True
     line_cov_scale: float = bounded(1.0, 1e-2, 1e2)
     merge_gate_probability: float | None = bounded(None, 0.0, 1.0, low_open=True, high_open=True)
+    tentative_joint_gate: bool = False
     reobservation_min_move_m: float | None = bounded(5.0, 0.0, 1e4, high_open=True)
 
     def __post_init__(self) -> None:
@@ -179,8 +189,11 @@ class Landmark:
 class Tentative:
     """A line seen but not yet a landmark.
 
-    ``observations`` pairs each line with the back end's anchor of it (the factor graph's node
-    and mounting; None for the EKF); ``ends_w`` stacks their world end points, shape (2n, 2).
+    ``line_w`` and ``cov_w`` are the first view's world line and its covariance (with its own
+    pose's); ``observations`` pairs each line with the back end's anchor of it (the factor
+    graph's node and mounting; None for the EKF); ``ends_w`` stacks their world end points,
+    shape (2n, 2); ``view`` is the back end's token of the first view's pose
+    (:attr:`Belief.view`), None when it keeps none.
     """
 
     t: float
@@ -189,6 +202,7 @@ class Tentative:
     ends_w: FloatArray
     observations: list[Anchored]
     side: float = 1.0
+    view: object | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -400,14 +414,23 @@ class LandmarkMap:
         cfg = self.config
         wTb = belief.wTb
         obs = world_observation(f, wTb, belief.P_pose, self.bTs, cfg.line_cov_scale)
+        R = np.asarray(f.cov) * cfg.line_cov_scale
         kept = [c for c in self.tentative if f.t - c.t <= cfg.tentative_max_age_s]
         self.stats["tentative_dropped"] += len(self.tentative) - len(kept)
         self.tentative = kept
         for cand in self.tentative:
             if cfg.side_gate and sonar_side(wTb, cand.line_w, self.bTs)[0] != cand.side:
                 continue
-            nu, _ = line_difference(obs.line_w, cand.line_w)
-            if nu @ np.linalg.solve(obs.cov_w + cand.cov_w, nu) <= self._gate:
+            pair = None
+            if cfg.tentative_joint_gate and belief.view_pairs is not None:
+                pair = belief.view_pairs.get(cand.view)
+            if pair is not None:
+                R1 = cand.observations[0][1].cov * cfg.line_cov_scale
+                d2 = self.tentative_distance(cand.observations[0][1].z, R1, f.z, R, pair)
+            else:
+                nu, _ = line_difference(obs.line_w, cand.line_w)
+                d2 = float(nu @ np.linalg.solve(obs.cov_w + cand.cov_w, nu))
+            if d2 <= self._gate:
                 cand.observations.append((belief.anchor, f))
                 cand.ends_w = np.vstack([cand.ends_w, obs.ends_w])
                 if len(cand.observations) >= cfg.tentative_observations:
@@ -415,11 +438,61 @@ class LandmarkMap:
                     return self._promote(belief, obs.line_w, cand, new)
                 return None
         side = float(sonar_side(wTb, obs.line_w, self.bTs)[0])
-        cand = Tentative(f.t, obs.line_w, obs.cov_w, obs.ends_w, [(belief.anchor, f)], side)
+        cand = Tentative(
+            f.t, obs.line_w, obs.cov_w, obs.ends_w, [(belief.anchor, f)], side, belief.view
+        )
         if cfg.tentative_observations <= 1:
             return self._promote(belief, obs.line_w, cand, new)
         self.tentative.append(cand)
         return None
+
+    @staticmethod
+    def tentative_distance(
+        z1: FloatArray, R1: FloatArray, z2: FloatArray, R2: FloatArray, pair: ViewPair
+    ) -> float:
+        """Squared Mahalanobis distance of two views of a line, ``z1`` (covariance ``R1``, sonar
+        frame) from the sonar at ``pair.wTs_then`` and ``z2`` (``R2``) from ``pair.wTs_now``,
+        with the joint covariance of the two sonar poses: chi2(2) when both are of one line.
+
+        Each view's world line is ``L_k = g(z_k, S_k)``
+        (:func:`sonarslam.features.geometry.line_frame_to_world`, Jacobians ``G_zk`` and
+        ``G_sk``), and their difference ``d = L_2 - L_1`` (``L_2`` in ``L_1``'s representation,
+        :func:`sonarslam.features.geometry.line_difference`: ``F = FLIP_RHO`` on ``L_2``'s
+        terms when flipped, else ``I``) is, to first order in the errors,
+        ``d = F (G_z2 e_z2 + G_s2 e_s2) - G_z1 e_z1 - G_s1 e_s1``. The two extractions' errors
+        are independent of each other and of the poses, so
+
+        ``C_d = F G_z2 R2 G_z2^T F^T + G_z1 R1 G_z1^T + B Sigma B^T``,
+        ``B = [F G_s2, -G_s1]``, ``Sigma = [[P_22, P_21], [P_12, P_11]]`` (``pair.cov``);
+
+        the pose part is ``F G_s2 P_22 G_s2^T F^T + G_s1 P_11 G_s1^T - F G_s2 P_21 G_s1^T -
+        G_s1 P_12 G_s2^T F^T``: the covariance of the difference of two estimates with a
+        common error is the sum of their covariances *less* their cross-covariances (the
+        difference of two correlated track estimates, Bar-Shalom 1981, "On the track-to-track
+        correlation problem", IEEE TAC 26(2)).
+        Two views seconds apart share most of their pose error (the heading error moves a
+        world line's ``rho`` by that error times its distance from the world's origin, in both
+        views alike): without ``P_12`` that error counts twice instead of cancelling, and the
+        gate lets two parallel walls metres apart pass. ``P_12`` is the back end's: a filter's
+        by a stochastic clone of the earlier pose (Roumeliotis & Burdick 2002; Mourikis,
+        Roumeliotis & Burdick 2007, the SC-KF): ``Cov(s_t, x_then) = Phi P[s, x_then]`` with
+        ``Phi`` the product of every prediction's ``F`` and every update's ``I - K H`` since,
+        as the clone's error never changes; a smoother's from the joint marginal of the two
+        pose nodes (the current estimates of both).
+
+        Returns
+        -------
+        float
+            ``d^T C_d^-1 d``.
+        """
+        L1, Gz1, Gs1 = line_frame_to_world(z1, pair.wTs_then)
+        L2, Gz2, Gs2 = line_frame_to_world(z2, pair.wTs_now)
+        d, flipped = line_difference(L2, L1)
+        if flipped:
+            Gz2, Gs2 = FLIP_RHO @ Gz2, FLIP_RHO @ Gs2
+        B = np.hstack([Gs2, -Gs1])
+        C = Gz2 @ R2 @ Gz2.T + Gz1 @ R1 @ Gz1.T + B @ pair.cov @ B.T
+        return float(d @ np.linalg.solve(C, d))
 
     def _promote(
         self, belief: Belief, line_w: FloatArray, cand: Tentative, new: list[NewLandmark]

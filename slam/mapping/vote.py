@@ -26,6 +26,7 @@ __all__ = [
     "Anchored",
     "LandmarkBelief",
     "AfterVote",
+    "ViewPair",
     "Belief",
     "NewLandmark",
     "Decision",
@@ -84,6 +85,28 @@ class AfterVote:
 
 
 @dataclass(frozen=True, eq=False)
+class ViewPair:
+    """The sonar's pose at the current vote and at an earlier one, as the back end estimates them
+    now, with their joint covariance: what a tentative line's gate needs to compare two views
+    (:meth:`sonarslam.slam.mapping.landmarks.LandmarkMap.tentative_distance`).
+
+    Attributes
+    ----------
+    wTs_now : ndarray, shape (3,)
+        The sonar's pose at the current vote ``(x_m, y_m, yaw_rad)``.
+    wTs_then : ndarray, shape (3,)
+        The sonar's pose at the earlier vote, as the back end estimates it now (a filter: as it
+        estimated it then; a smoother: smoothed).
+    cov : ndarray, shape (6, 6)
+        Joint covariance of ``[wTs_now, wTs_then]`` in ``(x, y, yaw)``, cross-covariance included.
+    """
+
+    wTs_now: FloatArray
+    wTs_then: FloatArray
+    cov: FloatArray
+
+
+@dataclass(frozen=True, eq=False)
 class Belief:
     """One vote as the back end sees it before using it.
 
@@ -118,6 +141,14 @@ class Belief:
         only the newest (the EKF).
     after_previous : AfterVote or None
         The estimate right after the back end applied the previous vote with observations.
+    view : object or None
+        The back end's token of this vote's pose (kept with a tentative line first seen in it);
+        None: the back end keeps no joint covariance of its poses.
+    view_pairs : dict of object to ViewPair, optional
+        For the token of each earlier vote a tentative line was first seen in (the landmark
+        layer's ``tentative``), this vote's sonar pose and that vote's with their joint
+        covariance. A tentative line whose token is missing (or None here) has its two views
+        compared as independent (each world line holding its own pose's covariance).
     """
 
     features: list[LineFeature]
@@ -134,6 +165,8 @@ class Belief:
     landmarks: LandmarkBelief
     seeds_used: bool
     after_previous: AfterVote | None
+    view: object | None = None
+    view_pairs: dict[object, ViewPair] | None = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -48,7 +48,13 @@ import numpy as np
 from gtsam.symbol_shorthand import B, C, D, G, K, L, R, X
 from scipy.stats import chi2
 
-from sonarslam.features.geometry import FloatArray, compose, inverse, line_difference
+from sonarslam.features.geometry import (
+    FloatArray,
+    compose,
+    compose_jacobians,
+    inverse,
+    line_difference,
+)
 from sonarslam.features.line import LineFeature
 from sonarslam.features.pose_source import PoseSource
 from sonarslam.features.scans import Scan, ScanMatcher
@@ -85,6 +91,7 @@ from sonarslam.slam.mapping.vote import (
     LandmarkBelief,
     NewLandmark,
     NodeAnchor,
+    ViewPair,
 )
 from sonarslam.slam.model.lines import line_prediction, local_to_world, sonar_side
 from sonarslam.slam.model.motion import MotionStep
@@ -419,7 +426,50 @@ class LineIsam2:
             landmarks=LandmarkBelief({lm.id: self._lm_est[lm.id] for lm in active}),
             seeds_used=True,
             after_previous=self._after,
+            view=anchor if self.config.tentative_joint_gate else None,
+            view_pairs=self._view_pairs() if obs.features else None,
         )
+
+    def _view_pairs(self) -> dict[object, ViewPair]:
+        """:meth:`_view_pair` of every earlier vote a tentative line waits on."""
+        if not self.config.tentative_joint_gate:
+            return {}
+        views = {c.view for c in self.map.tentative if c.view is not None}
+        pairs = {v: self._view_pair(v) for v in views}
+        return {v: p for v, p in pairs.items() if p is not None}
+
+    def _view_pair(self, view: object) -> ViewPair | None:
+        """The sonar's pose now and at an earlier vote anchored at ``view`` (its node smoothed
+        now), with their joint covariance: iSAM2's joint marginal of the anchor (the newest
+        optimised node) and the view's node, both mapped from the local tangent to the world
+        (:func:`sonarslam.slam.model.lines.local_to_world`), the anchor composed with the
+        odometry since it (:func:`sonarslam.slam.backends.isam2.candidates.joint_covariance`),
+        and each pose composed with its sonar mounting. None when the view's node is not
+        optimised yet."""
+        if not isinstance(view, NodeAnchor):
+            return None
+        k_a = self._n_nodes - 1 - len(self._pending_nodes)
+        k1 = view.node
+        if k1 > k_a:
+            return None
+        t0 = time.perf_counter()
+        if k1 == k_a:
+            M = np.asarray(self.isam.marginalCovariance(X(k_a)))
+            J_local = np.block([[M, M], [M, M]])
+        else:
+            joint = self.isam.jointMarginalCovariance([X(k_a), X(k1)])
+            keys = [X(k_a), X(k1)]
+            J_local = np.block([[np.asarray(joint.at(a, b)) for b in keys] for a in keys])
+        self.timing_s["marginals"] += time.perf_counter() - t0
+        pose_then = np.asarray(pose_of(self.isam.calculateEstimatePose2(X(k1))), dtype=np.float64)
+        A = np.eye(6)
+        A[3:, 3:] = local_to_world(float(pose_then[2]))
+        cov_b = joint_covariance(A @ J_local @ A.T, self._anchor_pose, self.odometry.since_anchor)
+        wTb_now = self.pose
+        J = np.zeros((6, 6))
+        J[:3, :3] = compose_jacobians(wTb_now, self.bTs)[0]
+        J[3:, 3:] = compose_jacobians(pose_then, view.bTs)[0]
+        return ViewPair(compose(wTb_now, self.bTs), compose(pose_then, view.bTs), J @ cov_b @ J.T)
 
     def _apply(self, decision: Decision, anchor: NodeAnchor) -> None:
         """The landmark layer's decision: a ``LineEquality`` factor per merge, a factor per
