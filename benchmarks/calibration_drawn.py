@@ -18,14 +18,18 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from sonarslam.datasets.source import open_dataset
-from sonarslam.slam.eval.truth import truth_heading_error
+from sonarslam.slam.eval.truth import (
+    CALIBRATION_SD_KEYS,
+    calibration_sigmas,
+    true_calibration,
+    truth_heading_error,
+)
 from sonarslam.slam.io.states import HEADING_ERROR_FILE, read_heading_error
 
 #: The ATE keys compared (against the truth).
@@ -37,30 +41,31 @@ ATE_KEYS = (
 )
 
 
+#: This table's names of the sonar's calibration estimates -> their ``metrics.json`` keys.
+NAMES = {
+    "x_m": "state_sonar_x_m",
+    "y_m": "state_sonar_y_m",
+    "yaw_deg": "state_sonar_yaw_deg",
+    "range_scale": "state_sonar_range_scale",
+}
+
+
 def calibration_errors(run_dir: Path) -> dict[str, Any]:
     """One run's estimates, their sd and their error in sigmas against the truth."""
     m = json.loads((run_dir / "metrics.json").read_text())
     dataset = open_dataset(m["source"])
     truth = dataset.truth
     assert truth is not None, f"{m['source']}: no truth.json"
-    mount = truth["mountings"]["sonar"]
-    true_values = {
-        "x_m": float(mount["x_m"]),
-        "y_m": float(mount["y_m"]),
-        "yaw_deg": math.degrees(float(mount["yaw_rad"])),
-        "range_scale": float(truth.get("errors", {}).get("sonar_range_scale", 1.0)),
-    }
+    true_values = true_calibration(dataset, dataset.nav_span_s[1])
     out: dict[str, Any] = {"run": str(run_dir), "seed": truth["seed"]}
-    for name, true in true_values.items():
-        base, _, unit = name.rpartition("_") if name != "range_scale" else (name, "", "")
-        key = f"state_sonar_{name}" if not unit else f"state_sonar_{base}_{unit}"
-        sd_key = f"state_sonar_{name}_sd" if not unit else f"state_sonar_{base}_sd_{unit}"
-        if key not in m:
-            continue
-        err = float(m[key]) - true
-        if name == "yaw_deg":
-            err = (err + 180.0) % 360.0 - 180.0
-        out[name] = {"estimate": m[key], "sd": m[sd_key], "truth": true, "z": err / m[sd_key]}
+    for name, key in NAMES.items():
+        if key in m:
+            out[name] = {
+                "estimate": m[key],
+                "sd": m[CALIBRATION_SD_KEYS[key]],
+                "truth": true_values[key],
+                "z": calibration_sigmas(m, true_values, key),
+            }
     track = run_dir / HEADING_ERROR_FILE
     true_b = truth_heading_error(dataset)
     if track.exists() and true_b is not None:
@@ -83,7 +88,7 @@ def main() -> None:
     for row, base in zip(rows, args.against, strict=False):
         mb = json.loads((base / "metrics.json").read_text())
         row["ate_without"] = {k: mb.get(k) for k in ATE_KEYS}
-    names = ("x_m", "y_m", "yaw_deg", "range_scale")
+    names = tuple(NAMES)
     print(
         "| seed | " + " | ".join(f"{n} est ± sd (truth) z" for n in names) + " | b in 2σ |"
         " ATE online / smoothed / aligned smoothed (without → with) |"

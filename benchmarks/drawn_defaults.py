@@ -37,19 +37,19 @@ import numpy as np
 
 from sonarslam.datasets.errors import DataWarning
 from sonarslam.slam.eval.consistency import nees_series
-from sonarslam.slam.eval.truth import true_calibration
+from sonarslam.slam.eval.truth import calibration_sigmas, true_calibration
 from sonarslam.slam.run.report_data import load_run
 from sonarslam.slam.run.sweep import calibrate_cached, parse_seeds, simulate_cached
 
 #: The estimates scored: label -> the metrics.json infix of its ATE keys.
 ESTIMATES = {"online": "", "smoothed": "_smoothed"}
-#: The calibration estimates scored against the truth: metrics.json key -> its sd's key.
-CALIBRATION = {
-    "state_sonar_x_m": "state_sonar_x_sd_m",
-    "state_sonar_y_m": "state_sonar_y_sd_m",
-    "state_sonar_yaw_deg": "state_sonar_yaw_sd_deg",
-    "state_sonar_range_scale": "state_sonar_range_scale_sd",
-}
+#: The calibration estimates scored against the truth (``metrics.json`` keys).
+CALIBRATION = (
+    "state_sonar_x_m",
+    "state_sonar_y_m",
+    "state_sonar_yaw_deg",
+    "state_sonar_range_scale",
+)
 
 
 def run_one(world: str, calibration: str, args: list[str], out: Path) -> dict[str, Any]:
@@ -93,12 +93,9 @@ def score(runs: dict[int, dict[str, Any]], dr: dict[int, dict[str, Any]], dirs: 
         assert run.truth is not None and run.dataset is not None
         nees.append(nees_series(run.trajectory, run.truth).mean)
         truth = true_calibration(run.dataset, run.trajectory.span_s[1])
-        for key, sd in CALIBRATION.items():
+        for key in CALIBRATION:
             if key in runs[s]:
-                err = runs[s][key] - truth[key]
-                if key.endswith("_deg"):
-                    err = (err + 180.0) % 360.0 - 180.0
-                within[key].append(abs(err) <= 2.0 * runs[s][sd])
+                within[key].append(abs(calibration_sigmas(runs[s], truth, key)) <= 2.0)
     out["anees"] = float(np.mean(nees))
     out["nees_median"] = float(np.median(nees))
     out["nees_above_10"] = int(np.sum(np.array(nees) > 10.0))

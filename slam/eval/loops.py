@@ -261,8 +261,9 @@ def odometry_check(
     empty = OdometryCheck(0, 0, math.nan, math.nan)
     if span is None or t_beams.size < 2:
         return empty
-    head = dataset.config.sonar
-    n_turn = config.beams_per_scan or int(round(2.0 * np.pi / head.step_rad))
+    n_turn = ScanBuilder(
+        config, dataset.config.sonar, dataset.config.sonar_mounting, dead_reckoning
+    ).n_beams
     turn_s = float(np.median(np.diff(t_beams))) * n_turn
     t = np.arange(span[0], span[1], min(1.0, turn_s / 4.0))
     if t.size < 2:
@@ -272,9 +273,9 @@ def odometry_check(
     pairs = accepted = 0
     angles, ratios = [], []
     for t0 in np.linspace(span[0] + turn_s, span[1] - 2.0 * turn_s, n_pairs):
-        i0 = int(np.searchsorted(t, t0))
+        i0 = min(int(np.searchsorted(t, t0)), t.size - 1)
         far = np.flatnonzero((path >= path[i0] + step_m) & (t >= t0 + turn_s))
-        if i0 >= t.size or far.size == 0 or t[far[0]] > t0 + 5.0 * turn_s:
+        if far.size == 0 or t[far[0]] > t0 + 5.0 * turn_s:
             continue  # the vehicle hardly moves here
         a = _scan_ending(dataset, float(t0), dead_reckoning, config)
         b = _scan_ending(dataset, float(t[far[0]]), dead_reckoning, config)

@@ -34,6 +34,8 @@ __all__ = [
     "truth_walls",
     "true_sonar",
     "true_calibration",
+    "CALIBRATION_SD_KEYS",
+    "calibration_sigmas",
     "wall_lines_world",
     "wall_lines",
     "SAME_LINE_RHO_M",
@@ -124,6 +126,31 @@ def true_calibration(dataset: Dataset, t_end_s: float) -> dict[str, float]:
         t, b_deg = heading
         out["state_ahrs_bias_deg"] = float(np.interp(t_end_s, t, b_deg))
     return out
+
+
+#: The calibration estimates of ``metrics.json`` that :func:`true_calibration` gives the truth
+#: of: the estimate's key -> its sd's key.
+CALIBRATION_SD_KEYS = {
+    "state_sonar_x_m": "state_sonar_x_sd_m",
+    "state_sonar_y_m": "state_sonar_y_sd_m",
+    "state_sonar_yaw_deg": "state_sonar_yaw_sd_deg",
+    "state_sonar_range_scale": "state_sonar_range_scale_sd",
+    "state_ahrs_bias_deg": "state_ahrs_bias_sd_deg",
+    "state_dvl_scale": "state_dvl_scale_sd",
+}
+
+
+def calibration_sigmas(
+    metrics: dict[str, Any], truth: dict[str, float], key: str, truth_key: str | None = None
+) -> float:
+    """The error of the estimate ``metrics[key]`` against ``truth[truth_key or key]``
+    (:func:`true_calibration`) in sigmas of its own sd (``CALIBRATION_SD_KEYS``); angles
+    (``_deg``) wrapped; ``inf`` for a zero sd."""
+    error = float(metrics[key]) - truth[truth_key or key]
+    if key.endswith("_deg"):
+        error = float(np.rad2deg(wrap_angle(np.deg2rad(error))))
+    sd = float(metrics[CALIBRATION_SD_KEYS[key]])
+    return error / sd if sd > 0 else float("inf")
 
 
 def _offset(dataset: Dataset) -> FloatArray:

@@ -14,11 +14,15 @@ from pathlib import Path
 import numpy as np
 from evo.core.geometry import umeyama_alignment
 
-from sonarslam.features.geometry import wrap_angle
 from sonarslam.features.projection import project_beams
 from sonarslam.slam.eval.ate import ate_errors, truth_errors
 from sonarslam.slam.eval.consistency import chi2_band, nees_series, pose_errors
-from sonarslam.slam.eval.truth import true_calibration, truth_heading_error, truth_walls
+from sonarslam.slam.eval.truth import (
+    calibration_sigmas,
+    true_calibration,
+    truth_heading_error,
+    truth_walls,
+)
 from sonarslam.slam.io.maps import MapLayers, landmark_layers, plot_map
 from sonarslam.slam.io.plots import (
     plot_error_bounds,
@@ -176,22 +180,15 @@ def calibration_lines(run: RunData) -> list[str]:
             continue
         text = f"- {label}: {m[key]:.6g} ± {m[sd]:.2g} {unit} (1σ)".replace("  ", " ")
         if key in truth:
-            error = m[key] - truth[key]
-            if unit == "deg":
-                error = float(np.rad2deg(wrap_angle(np.deg2rad(error))))
-            z = error / m[sd] if m[sd] > 0 else float("inf")
-            text += f"; truth {truth[key]:.6g}, error {z:+.1f}σ"
-            in_map = truth["dvl_scale_in_sonar_map"]
-            if (
-                key == "state_dvl_scale"
-                and "state_sonar_range_scale" not in m
-                and in_map != truth[key]
-            ):
-                z_map = (m[key] - in_map) / m[sd] if m[sd] > 0 else float("inf")
-                text += (
-                    f"; the sonar's range scale {truth['state_sonar_range_scale']:.6g}, not"
-                    f" estimated, puts it at {in_map:.6g} in the sonar's map ({z_map:+.1f}σ)"
-                )
+            text += f"; truth {truth[key]:.6g}, error {calibration_sigmas(m, truth, key):+.1f}σ"
+        in_map = truth.get("dvl_scale_in_sonar_map")
+        untold = key == "state_dvl_scale" and "state_sonar_range_scale" not in m
+        if untold and in_map is not None and in_map != truth[key]:
+            z_map = calibration_sigmas(m, truth, key, "dvl_scale_in_sonar_map")
+            text += (
+                f"; the sonar's range scale {truth['state_sonar_range_scale']:.6g}, not"
+                f" estimated, puts it at {in_map:.6g} in the sonar's map ({z_map:+.1f}σ)"
+            )
         lines.append(text)
     return lines
 

@@ -555,11 +555,12 @@ def _odometry_part(metrics: dict[str, Any]) -> str:
     accepted = metrics.get("odometry_check_accepted")
     if accepted is None:
         return ""
+    pairs = metrics["odometry_check_pairs"]
     if not accepted:
-        return f"; dead reckoning against the sonar: no registration of {metrics['odometry_check_pairs']} accepted"
+        return f"; dead reckoning against the sonar: no registration of {pairs} accepted"
     return (
-        f"; dead reckoning against the sonar ({accepted} of"
-        f" {metrics['odometry_check_pairs']} registrations of scans a few metres apart): its"
+        f"; dead reckoning against the sonar ({accepted} of {pairs} registrations of scans a"
+        " few metres apart): its"
         f" motion {metrics['odometry_check_heading_deg']:+.1f} deg off the sonar's, lengths"
         f" x{metrics['odometry_check_scale']:.3f}"
     )
