@@ -288,6 +288,7 @@ class LineExtractor:
                     votes=w.votes,
                     endpoints_r=self._endpoints(used, est.rho_m, est.theta_rad),
                     n_voters=int(support.size),
+                    bTs=self.sector.bTs.copy(),
                 )
             )
             gone = np.union1d(w.removed, support)
