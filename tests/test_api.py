@@ -388,3 +388,34 @@ def test_run_backend_takes_a_typed_config(simulated: Callable[..., Path]) -> Non
         run_backend(ds, "ekf", {"ekf.min_rho_m": 2.0}, config=typed)
     with pytest.raises(SettingError, match="config.backend.*EkfConfig, got GraphConfig"):
         run_backend(ds, "ekf", config=replace(default, backend=GraphConfig()))
+
+
+def test_a_typed_config_made_for_another_dataset_is_refused(
+    simulated: Callable[..., Path], tmp_path: Path
+) -> None:
+    """A RunConfig made for dataset A and run on B, whose [noise] differs, took A's noise
+    silently (it showed only as 'settings' B was never given); it is refused, naming both
+    datasets and what differs, before any work. The same data in another folder, or the
+    config untied (dataset=None), still runs."""
+    import shutil
+
+    from sonarslam.slam.run.run import _typed_settings
+
+    a_root = simulated("harbour", 0, 60.0)
+    b_root = shutil.copytree(a_root, tmp_path / "b")
+    toml = b_root / "sonarslam.toml"
+    toml.write_text(toml.read_text().replace("dvl_sigma_mps = 0.02", "dvl_sigma_mps = 0.1"))
+    a, b = open_dataset(a_root), open_dataset(b_root)
+    config = RunConfig.for_dataset(a, "ekf")
+    untied = replace(config, dataset=None)
+    assert untied == config  # which dataset made it is not a setting
+    silent = _typed_settings(b, "ekf", untied, None)  # what run_backend ran with before
+    assert silent == {"ekf.noise.dvl_sigma_mps": 0.02}
+    message = (
+        rf"config.dataset: the RunConfig was made for {a_root} .* run on {b_root}, whose"
+        r" \[noise\] \(dvl_sigma_mps\) differ"
+    )
+    with pytest.raises(SettingError, match=message):
+        run_backend(b, "ekf", config=config)
+    same = shutil.copytree(a_root, tmp_path / "same")  # the same calibration elsewhere
+    assert _typed_settings(open_dataset(same), "ekf", config, None) == {}
