@@ -128,10 +128,7 @@ FAULTS: list[tuple[str, Edit]] = [
     ("one GPS fix 500 m off (lat + 0.27')", _set_once("DGPS", 100.0, {1: "4212.5"})),
     ("[noise] dvl_sigma_mps = 1e300", _config("[noise]\ndvl_sigma_mps = 1e300\n")),
     ("[sonar] time_offset_s = 1e9", _config("[sonar]\ntime_offset_s = 1e9\n")),
-    (
-        "[sonar] time_offset_s = 3600 (valid, no beam left)",
-        _config("[sonar]\ntime_offset_s = 3600.0\n"),
-    ),
+    ("[sonar] time_offset_s = 150 (150 ms meant)", _config("[sonar]\ntime_offset_s = 150\n")),
     ("GPS ending early (first 100 s only)", _drop("DGPS", 100.0, 1e9)),
     ("every GPS fix twice", _every("DGPS", lambda t, f: [f, f])),
     ("every DVL row without bottom lock", _every("DVL", lambda t, f: [[*f[:14], "0", *f[15:]]])),

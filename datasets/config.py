@@ -233,8 +233,11 @@ class GateConfig:
 #: previous sample (causal). A gyro bias the estimators do not model (the marina's MTi,
 #: docs/calibration.md) runs the closed-loop heading off the compass between heading updates.
 YAW_RATE_SOURCES = ("gyro", "heading")
-#: Largest clock offset of the sonar (s): a day.
-MAX_TIME_OFFSET_S = 86400.0
+#: Largest clock offset of the sonar (s). A calibrated offset is a fraction of a second (the
+#: marina's 0.75 s, docs/calibration.md); 10 s is most of a Miniking's 360 deg turn (~14 s),
+#: over which every wall of a sector moves: a larger one is a unit slip (``150`` for 150 ms)
+#: or clocks in other time zones, whose logs' times must be put right, not offset here.
+MAX_TIME_OFFSET_S = 10.0
 
 
 @dataclass(frozen=True)

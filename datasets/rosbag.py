@@ -1178,7 +1178,10 @@ def tf_mountings(
                 stacklevel=3,
             )
         source = f"transforms of {bag.name}: {base} -> {frame}"
-        out[role] = Mounting(x_m=float(p[0]), y_m=float(p[1]), yaw_rad=yaw, source=source)
+        try:
+            out[role] = Mounting(x_m=float(p[0]), y_m=float(p[1]), yaw_rad=yaw, source=source)
+        except ValueError as exc:
+            raise DataError(bag, None, f"transform {base} -> {frame} ({role}): {exc}") from None
         said.append(f"{role} ({frame})")
     line = f"mountings of {', '.join(said)} from the bag's transforms (base {base})" if said else ""
     return out, line

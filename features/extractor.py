@@ -35,12 +35,18 @@ from sonarslam.features.uncertainty import (
     seed_ellipse,
     support_mask,
 )
-from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead
+from sonarslam.settings import SettingError
+from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead, bin_range_m
 from sonarslam.sonar.segmentation import SegmentedBeam, segment_intensities
 
 __all__ = ["LineExtractor", "segment_with"]
 
 _DEG = float(np.pi / 180.0)
+
+#: Raw beams: an ``intensity_threshold`` that more than this fraction of the in-range bins pass
+#: (over the beams before the first vote) is refused: it does not tell echoes from background
+#: (a 0/255 mask's threshold, 1, as the marina presets' on intensities passes nearly every bin).
+MAX_THRESHOLD_PASS_FRACTION = 0.5
 
 
 def segment_with(
@@ -94,6 +100,13 @@ class LineExtractor:
     :meth:`add` segments a beam and stores it; once the store holds a full sector it votes
     every ``vote_every_n_beams`` beams and returns the lines found. :meth:`flush` votes on what
     is stored now (the end of a stream).
+
+    Raw beams (``beam.thresholded`` False) are checked once, at the first vote: if more than
+    :data:`MAX_THRESHOLD_PASS_FRACTION` of their in-range bins pass ``intensity_threshold``,
+    the threshold is a mask's (a preset for thresholded keyframes, ``marina*``, on intensities)
+    or below the background, and the vote is refused with a
+    :class:`~sonarslam.settings.SettingError` naming it. Masks are not checked: their threshold
+    is the third party's (:mod:`sonarslam.sonar.segmentation`).
 
     Each :class:`~sonarslam.features.line.LineFeature` has ``t`` the newest beam's time, ``wTr`` its sonar
     pose (frame R), ``(rho_m, theta_rad)`` and ``cov`` in R, ``votes`` of the winning cell,
@@ -161,6 +174,14 @@ class LineExtractor:
         self.line_systematic_cov = np.diag([cfg.line_sigma_rho_m, cfg.line_sigma_theta_rad]) ** 2
         self._since_vote = 0
         self.n_votes = 0
+        ranges_m = bin_range_m(np.arange(head.n_bins), head.bin_size_m)
+        #: bins a threshold is applied to, per beam, and the raw beams' counts before the check
+        self._bins_in_range = int(
+            np.count_nonzero((ranges_m >= cfg.min_range_m) & (ranges_m <= self.max_range_m))
+        )
+        self._raw_bins_seen = 0
+        self._raw_bins_passed = 0
+        self._threshold_checked = False
 
     # -- streaming -------------------------------------------------------------------------
 
@@ -178,6 +199,9 @@ class LineExtractor:
         """
         cfg = self.config
         seg = segment_with(cfg, self.head.bin_size_m, beam.intensities, beam.thresholded)
+        if not beam.thresholded and not self._threshold_checked:
+            self._raw_bins_seen += self._bins_in_range
+            self._raw_bins_passed += int(seg.threshold_bins.size)
         bearing = float(self.head.angle_sense * beam.transducer_angle_rad)
         self.sector.add(float(beam.t), bearing, seg)
         self._since_vote += 1
@@ -221,6 +245,7 @@ class LineExtractor:
     def vote(self) -> list[LineFeature]:
         """Vote on the stored sector now: lines in the newest beam's sonar frame R."""
         cfg = self.config
+        self._check_threshold()
         self._since_vote = 0
         self.n_votes += 1
         snap = self.sector.snapshot()  # paper 2.3: every stored bin in R
@@ -263,6 +288,7 @@ class LineExtractor:
                     votes=w.votes,
                     endpoints_r=self._endpoints(used, est.rho_m, est.theta_rad),
                     n_voters=int(support.size),
+                    bTs=self.sector.bTs.copy(),
                 )
             )
             gone = np.union1d(w.removed, support)
@@ -271,6 +297,26 @@ class LineExtractor:
             taken[gone] = True
             self.sector.remove_final_bins(fin.bin_id[gone])  # paper 2.5
         return lines
+
+    def _check_threshold(self) -> None:
+        """Refuse, once, an ``intensity_threshold`` that most in-range bins of the raw beams
+        stored so far pass (the class's Notes)."""
+        if self._threshold_checked:
+            return
+        self._threshold_checked = True
+        if self._raw_bins_seen == 0:
+            return
+        fraction = self._raw_bins_passed / self._raw_bins_seen
+        if fraction > MAX_THRESHOLD_PASS_FRACTION:
+            raise SettingError(
+                "extractor.intensity_threshold",
+                f"{self.config.intensity_threshold:g} passes {100.0 * fraction:.0f} % of the"
+                " in-range bins of these raw (unthresholded) intensity beams: it cannot tell"
+                " echoes from background. A threshold for 0/255 masks (the marina presets',"
+                " meant for thresholded keyframes) was given for intensities: use the"
+                " 'default' preset (extractor_preset('default'), or the dataset's,"
+                " extractor_preset(dataset)) or a threshold above the background",
+            )
 
     def _refit_on_support(
         self,

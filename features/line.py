@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from sonarslam.features.geometry import FloatArray, line_frame_to_world, transform_points
 
-__all__ = ["LineFeature"]
+__all__ = ["LineFeature", "check_mounting"]
+
+#: Two mountings ``bTs`` closer than this in every component (m, rad) are the same.
+MOUNTING_TOLERANCE = 1e-6
 
 
 @dataclass(frozen=True, eq=False)
@@ -32,6 +37,11 @@ class LineFeature:
         Ends of the segment seen by the voters, rows of points in frame R (m).
     n_voters : int
         Bins that voted for the line (removed from the store after the vote).
+    bTs : ndarray, shape (3,) or None
+        The sonar mounting ``(x_m, y_m, yaw_rad)`` in the body frame that the extractor placed
+        ``wTr`` with (``wTr = wTb * bTs``), set by :class:`~sonarslam.features.extractor.LineExtractor`;
+        a back end's line model must use the same (:func:`check_mounting`). None: not known (a
+        line read from ``lines.jsonl`` or made by hand), not checked.
     z : ndarray, shape (2,)
         Property: ``(rho_m, theta_rad)``, the measurement a back end takes with ``cov``.
     """
@@ -44,6 +54,7 @@ class LineFeature:
     votes: int
     endpoints_r: FloatArray = field(repr=False)
     n_voters: int = 0
+    bTs: FloatArray | None = field(default=None, repr=False)
 
     @property
     def z(self) -> FloatArray:
@@ -72,3 +83,40 @@ class LineFeature:
             "n_voters": int(self.n_voters),
             "endpoints": self.endpoints_world().tolist(),
         }
+
+
+def check_mounting(lines: Iterable[LineFeature], bTs: npt.ArrayLike, where: str) -> None:
+    """Refuse a sonar mounting ``bTs`` that is not the one the lines were extracted with.
+
+    A line is ``(rho, theta)`` in the sonar frame the extractor placed with its mounting; a
+    line model with another mounting puts every landmark and pose off by the difference,
+    without a word.
+
+    Parameters
+    ----------
+    lines : iterable of LineFeature
+        Lines whose ``bTs`` is None are not checked.
+    bTs : array_like, shape (3,)
+        The mounting ``(x_m, y_m, yaw_rad)`` given to the line model.
+    where : str
+        Names the parameter in the message (``"LandmarkAssociation(bTs=...)"``).
+
+    Raises
+    ------
+    ValueError
+        Naming ``where``, the mounting given and the lines' (the extractor's).
+    """
+    given = np.asarray(bTs, dtype=np.float64).reshape(3)
+    for line in lines:
+        if line.bTs is None:
+            continue
+        d = np.asarray(line.bTs, dtype=np.float64) - given
+        d[2] = (d[2] + np.pi) % (2.0 * np.pi) - np.pi
+        if np.max(np.abs(d)) > MOUNTING_TOLERANCE:
+            fmt = np.array2string(given, precision=4, separator=", ")
+            ext = np.array2string(np.asarray(line.bTs), precision=4, separator=", ")
+            raise ValueError(
+                f"{where}: sonar mounting bTs {fmt} (x_m, y_m, yaw_rad) is not the one the"
+                f" lines were extracted with, {ext} (the LineExtractor's sonar_mounting,"
+                " LineFeature.bTs): give the same mounting (Mounting.as_pose()) to both"
+            )

@@ -32,8 +32,10 @@ def bin_range_m(bin_index: npt.ArrayLike, bin_size_m: float) -> FloatArray:
 #: Largest echo range offset of a head (m), either sign: an echo is kept metres, not tens of
 #: metres, behind its surface.
 MAX_RANGE_OFFSET_M = 10.0
-#: Largest lever arm of a sensor mounting (m).
-MAX_LEVER_M = 100.0
+#: Largest lever arm of a sensor mounting, per axis (m): a sensor sits on the vehicle, within
+#: metres of its body origin; a larger number is a unit slip (``x_m = 30`` for 30 cm), which
+#: would otherwise pass as a sonar placed tens of metres away.
+MAX_LEVER_M = 10.0
 #: Most bins per beam of a head (MSIS heads log up to ~1,500): more is a corrupt setting that
 #: would allocate a scan of ``n_bins x beams`` for nothing.
 MAX_BINS = 10_000

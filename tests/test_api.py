@@ -200,14 +200,17 @@ def test_gtsam_belief_reads_isam2_and_marginals_by_key_in_world_coordinates() ->
 # -- the association for one's own SLAM --------------------------------------------------------
 
 
-def _vote(t: float, wTb: np.ndarray, rng: np.random.Generator) -> list[LineFeature]:
-    """The four walls seen (noisy) from body pose ``wTb``."""
+def _vote(
+    t: float, wTb: np.ndarray, rng: np.random.Generator, bTs: np.ndarray | None = None
+) -> list[LineFeature]:
+    """The four walls seen (noisy) from body pose ``wTb`` by the sonar at :data:`BTS`; the
+    lines carry ``bTs`` as their mounting (None: none, as a line made by hand)."""
     wTs = compose(wTb, BTS)
     out = []
     for line_w, ends_w in WALLS:
         z = line_world_to_frame(line_w, wTs)[0] + rng.normal(0.0, [0.05, 0.005])
         ends_r = transform_points(inverse(wTs), ends_w)
-        out.append(LineFeature(t, wTs, float(z[0]), float(z[1]), R_LINE, 40, ends_r, 40))
+        out.append(LineFeature(t, wTs, float(z[0]), float(z[1]), R_LINE, 40, ends_r, 40, bTs))
     return out
 
 
@@ -262,6 +265,50 @@ def test_a_skipped_step_is_refused_by_name() -> None:
         WorldBelief(wTb, np.array(lines_w), np.eye(3))
     with pytest.raises(RuntimeError, match="no decision"):
         assoc.applied(_belief(wTb, lines_w))
+
+
+def _landmarks(assoc: LandmarkAssociation, bTs: np.ndarray | None) -> list[np.ndarray]:
+    """The world lines the association makes over 10 votes along x, lines carrying ``bTs``."""
+    rng = np.random.default_rng(6)
+    lines_w: list[np.ndarray] = []
+    for k in range(1, 11):
+        wTb = np.array([0.5 * k - 10.0, 0.0, 0.0])
+        decision = assoc.decide(_vote(float(k), wTb, rng, bTs), _belief(wTb, lines_w))
+        lines_w += [new.line_w for new in decision.new_landmarks]
+        assoc.applied(_belief(wTb, lines_w))
+    return lines_w
+
+
+def test_a_mounting_other_than_the_extractors_is_refused_by_name() -> None:
+    """The lines were extracted with the sonar at BTS; a plug-in given another mounting put
+    every landmark off its wall without a word (lines without their mounting still do). The
+    lines now carry it: the association, world_observation and line_factor refuse another,
+    naming the parameter and both mountings, and line_factor takes it from the line."""
+    wrong = BTS + np.array([0.0, 0.5, 0.0])  # a lever arm 0.5 m off to the side
+    silent = _landmarks(LandmarkAssociation(wrong, seeds_used=False), bTs=None)
+    off = np.array([min(np.abs(line_difference(lw, t)[0][0]) for t, _ in WALLS) for lw in silent])
+    assert len(silent) == 4 and np.count_nonzero(off > 0.4) == 2, off  # the walls along x
+    right = _landmarks(LandmarkAssociation(BTS, seeds_used=False), bTs=BTS)
+    assert len(right) == 4
+    assoc = LandmarkAssociation(wrong, seeds_used=False)
+    wTb = np.array([-10.0, 0.0, 0.0])
+    lines = _vote(1.0, wTb, np.random.default_rng(7), BTS)
+    msg = r"sonar mounting bTs \[0.3   , 0.5   , 3.1416\] .* extracted with, \[0.3   , 0.    , 3.1416\]"
+    with pytest.raises(ValueError, match=r"LandmarkAssociation\(bTs=...\): " + msg):
+        assoc.decide(lines, _belief(wTb, []))
+    with pytest.raises(ValueError, match=r"world_observation\(bTs=...\): " + msg):
+        sonarslam.world_observation(lines[0], wTb, np.eye(3) * 1e-4, wrong)
+    with pytest.raises(ValueError, match=r"line_factor\(bTs=...\): " + msg):
+        line_factor(X(0), L(0), lines[0], bTs=wrong)
+    # the line's own mounting, covariance and z: the same factor as given one by one
+    values = gtsam.Values()
+    values.insert(X(0), gtsam.Pose2(*wTb))
+    values.insert(L(0), WALLS[0][0])
+    own = line_factor(X(0), L(0), lines[0]).unwhitenedError(values)
+    given = line_factor(X(0), L(0), lines[0].z, R_LINE, BTS).unwhitenedError(values)
+    np.testing.assert_array_equal(own, given)
+    with pytest.raises(TypeError, match="cov and bTs are required"):
+        line_factor(X(0), L(0), lines[0].z)
 
 
 def test_a_belief_in_degrees_is_refused_by_name() -> None:
@@ -341,3 +388,34 @@ def test_run_backend_takes_a_typed_config(simulated: Callable[..., Path]) -> Non
         run_backend(ds, "ekf", {"ekf.min_rho_m": 2.0}, config=typed)
     with pytest.raises(SettingError, match="config.backend.*EkfConfig, got GraphConfig"):
         run_backend(ds, "ekf", config=replace(default, backend=GraphConfig()))
+
+
+def test_a_typed_config_made_for_another_dataset_is_refused(
+    simulated: Callable[..., Path], tmp_path: Path
+) -> None:
+    """A RunConfig made for dataset A and run on B, whose [noise] differs, took A's noise
+    silently (it showed only as 'settings' B was never given); it is refused, naming both
+    datasets and what differs, before any work. The same data in another folder, or the
+    config untied (dataset=None), still runs."""
+    import shutil
+
+    from sonarslam.slam.run.run import _typed_settings
+
+    a_root = simulated("harbour", 0, 60.0)
+    b_root = shutil.copytree(a_root, tmp_path / "b")
+    toml = b_root / "sonarslam.toml"
+    toml.write_text(toml.read_text().replace("dvl_sigma_mps = 0.02", "dvl_sigma_mps = 0.1"))
+    a, b = open_dataset(a_root), open_dataset(b_root)
+    config = RunConfig.for_dataset(a, "ekf")
+    untied = replace(config, dataset=None)
+    assert untied == config  # which dataset made it is not a setting
+    silent = _typed_settings(b, "ekf", untied, None)  # what run_backend ran with before
+    assert silent == {"ekf.noise.dvl_sigma_mps": 0.02}
+    message = (
+        rf"config.dataset: the RunConfig was made for {a_root} .* run on {b_root}, whose"
+        r" \[noise\] \(dvl_sigma_mps\) differ"
+    )
+    with pytest.raises(SettingError, match=message):
+        run_backend(b, "ekf", config=config)
+    same = shutil.copytree(a_root, tmp_path / "same")  # the same calibration elsewhere
+    assert _typed_settings(open_dataset(same), "ekf", config, None) == {}

@@ -21,6 +21,7 @@ from sonarslam.features.extractor import LineExtractor
 from sonarslam.features.geometry import compose, line_world_to_frame, wrap_angle
 from sonarslam.features.line import LineFeature
 from sonarslam.features.pose_source import PoseSource, PoseSpanWarning
+from sonarslam.settings import SettingError
 from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.run.presets import EXTRACTOR_PRESETS
 from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead
@@ -446,6 +447,65 @@ def test_marina_preset_on_a_thresholded_mask() -> None:
     assert len(lines) >= 3
     drho, dtheta = match_lines(lines, wall_lines_world(walls))
     assert drho.max() < 0.3 and np.rad2deg(dtheta.max()) < 1.5
+
+
+def _noisy_raw_beams(n_beams: int, seed: int) -> tuple[list[SonarBeam], PoseSource, np.ndarray]:
+    """Raw intensity beams of the marina head in a rectangle: a background of 0-39 in every bin
+    and each wall's echo a peak of 230 decaying over 6 bins behind its first return."""
+    head = SonarHead()
+    rng = np.random.default_rng(seed)
+    poses = ConstantVelocityPoses(start=(0.0, 0.0, 0.4))
+    walls = rectangle_walls((3.0, -2.0), (30.0, 60.0), 0.2)
+    raw = simulate_beams(
+        walls,
+        poses,
+        head,
+        Mounting(),
+        n_beams=n_beams,
+        dt_s=0.07,
+        first_bearing_rad=0.0,
+        rng=rng,
+        return_model="first_return",
+        range_sigma_m=0.05,
+    )
+    beams = []
+    for b in raw:
+        m = rng.integers(0, 40, head.n_bins).astype(np.uint8)
+        i = np.flatnonzero(b.intensities)
+        if i.size:
+            tail = np.arange(230, 100, -25).astype(np.uint8)[: head.n_bins - i[0]]
+            m[i[0] : i[0] + tail.size] = tail
+        beams.append(SonarBeam(b.t, b.transducer_angle_rad, m, False))
+    return beams, poses, walls
+
+
+def test_a_mask_preset_on_raw_intensity_beams_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The keyframes' preset (threshold 1 for 0/255 masks) on raw intensities passes every
+    background bin: lines tens of degrees off any wall, silently, without the check; with it,
+    a SettingError naming intensity_threshold. The raw beams' preset, and first returns with a
+    threshold above the background, are not refused and find the walls."""
+    import sonarslam.features.extractor as extractor_module
+
+    beams, poses, walls = _noisy_raw_beams(200, seed=8)
+    head, truth_w = SonarHead(), wall_lines_world(walls)
+    with monkeypatch.context() as m:  # the check off: the silent wrong answer it prevents
+        m.setattr(extractor_module, "MAX_THRESHOLD_PASS_FRACTION", 1.0)
+        lines = run(LineExtractor(MARINA_FIT, head, Mounting(), poses), beams)
+        _, dtheta = match_lines(lines, truth_w)
+        assert np.count_nonzero(np.rad2deg(dtheta) > 20.0) >= 2
+    with pytest.raises(
+        SettingError,
+        match=r"extractor.intensity_threshold: 1 passes 9[0-9] % of the in-range bins of these raw",
+    ):
+        run(LineExtractor(MARINA_FIT, head, Mounting(), poses), beams)
+    for cfg in (EXTRACTOR_PRESETS["default"], MARINA_FIT.replace(intensity_threshold=80.0)):
+        for model in ("axis", "first_return"):
+            lines = run(
+                LineExtractor(cfg.replace(return_model=model), head, Mounting(), poses), beams
+            )
+            drho, dtheta = match_lines(lines, truth_w)
+            assert len(lines) >= 2
+            assert drho.max() < 0.3 and np.rad2deg(dtheta.max()) < 2.0, (model, drho, dtheta)
 
 
 # -- the sector store ------------------------------------------------------------------------------

@@ -132,17 +132,20 @@ def test_a_dvl_never_valid_is_a_one_line_error_and_leaves_nothing(harbour, tmp_p
         run_backend(_open(folder)[0], "dr")
 
 
-def test_a_clock_offset_that_leaves_no_beam_stops_a_closed_loop(harbour, tmp_path, capsys):
+def test_a_clock_offset_beyond_a_turn_of_the_head_is_refused(harbour, tmp_path, capsys):
+    """An hour's offset (a clock in another zone) left no beam; a 150 s one (150 ms meant) ran,
+    on a longer run, with a health warning at best: both are refused when the file is read,
+    naming it, its line and the key."""
     config = tmp_path / "late.toml"
-    config.write_text("[sonar]\ntime_offset_s = 3600.0\n")
     out = tmp_path / "out"
     args = ["run", str(harbour), "--backend", "ekf", "--out", str(out), "--quiet"]
-    assert main([*args, "--config", str(config)]) == 1
-    err = [ln for ln in capsys.readouterr().err.splitlines() if not ln.startswith("warning:")]
-    assert len(err) == 1 and "no sonar beam inside the navigation span" in err[0]
-    config.write_text("[sonar]\ntime_offset_s = 1e9\n")
-    assert main([*args, "--config", str(config)]) == 1
-    assert "[sonar] time_offset_s: must be in [-86400, 86400]" in capsys.readouterr().err
+    for value in ("3600.0", "150", "1e9"):
+        config.write_text(f"[sonar]\ntime_offset_s = {value}\n")
+        assert main([*args, "--config", str(config)]) == 1
+        err = [ln for ln in capsys.readouterr().err.splitlines() if not ln.startswith("warning:")]
+        assert (
+            len(err) == 1 and "late.toml:2: [sonar] time_offset_s: must be in [-10, 10]" in err[0]
+        )
     assert not out.exists()
 
 

@@ -95,7 +95,16 @@ def test_a_write_error_names_the_file(tmp_path):
         ),
         (
             "[mounting.sonar]\nx_m = 1.0\ny_m = 179.9\n",
-            r"t\.toml:3: \[mounting\.sonar\] y_m: must be in \[-100, 100\]",
+            r"t\.toml:3: \[mounting\.sonar\] y_m: must be in \[-10, 10\]",
+        ),
+        # unit slips: centimetres for metres, milliseconds for seconds
+        (
+            "[mounting.sonar]\nx_m = 30\nyaw_deg = 180.0\n",
+            r"t\.toml:2: \[mounting\.sonar\] x_m: must be in \[-10, 10\], got 30",
+        ),
+        (
+            "[sonar]\ntime_offset_s = 150\n",
+            r"t\.toml:2: \[sonar\] time_offset_s: must be in \[-10, 10\], got 150",
         ),
     ],
 )

@@ -168,6 +168,33 @@ def test_simulate_writes_a_bag(tmp_path: Path) -> None:
     assert len(d.beams) > 100 and d.truth is not None
 
 
+def test_simulate_leaves_the_gps_out_of_any_bag_when_asked(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Only --preset caves wrote a bag without GPS: the default shape always had a NavSatFix
+    topic, so a run on it was never one without GPS. --no-gps leaves it out of every output
+    (the layout's DGPS log, any bag), the truth kept; its help says so."""
+    args = ["simulate", "pool", "--duration", "20", "--out"]
+    assert main([*args, str(tmp_path / "gps"), "--bag", "ros1"]) == 0
+    assert main([*args, str(tmp_path / "bag"), "--bag", "ros1", "--no-gps"]) == 0
+    assert main([*args, str(tmp_path / "layout"), "--no-gps"]) == 0
+    assert not list((tmp_path / "layout").glob("*_DGPS.log"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        with_gps = open_dataset(next((tmp_path / "gps").glob("*.bag")))
+        without = open_dataset(next((tmp_path / "bag").glob("*.bag")))
+        layout = open_dataset(tmp_path / "layout")
+    assert with_gps.gps is not None and with_gps.gps.t.size > 10
+    assert without.gps is None and layout.gps is None
+    assert without.truth is not None and layout.truth is not None
+    assert len(without.beams) == len(with_gps.beams) > 100
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        main(["simulate", "--help"])
+    sim_help = " ".join(capsys.readouterr().out.split())
+    assert "--no-gps leave the GPS out" in sim_help and "(--bag, any --preset)" in sim_help
+
+
 def _write_ros1(
     d: Dataset,
     path: Path,

@@ -44,7 +44,7 @@ from sonarslam.datasets.ping360 import (
 )
 from sonarslam.datasets.rosbag import write_bag
 from sonarslam.datasets.simulator.scenario import make_scenario, simulate_records
-from sonarslam.datasets.simulator.writer import write_dataset
+from sonarslam.datasets.simulator.writer import drop_gps, write_dataset
 from sonarslam.datasets.source import open_dataset
 from sonarslam.sonar.beam import SonarHead
 
@@ -124,14 +124,21 @@ def write_ping360_run(d: Dataset, out_dir: str | Path, layout: Path | None = Non
 
 
 def simulate_ping360(
-    kind: str, seed: int, out_dir: str | Path, duration_s: float | None = None
+    kind: str,
+    seed: int,
+    out_dir: str | Path,
+    duration_s: float | None = None,
+    gps: bool = True,
 ) -> Path:
     """Simulate ``kind`` with a Ping360-shaped head (:func:`ping360_head` of its own) and write
-    it as a ``.bin`` with its navigation bag (module docstring). Returns the ``.bin``."""
+    it as a ``.bin`` with its navigation bag (module docstring), with a GPS topic unless
+    ``gps`` is False. Returns the ``.bin``."""
     scenario = make_scenario(kind, seed, duration_s)
     scenario = replace(scenario, head=ping360_head(scenario.head))
     with tempfile.TemporaryDirectory() as tmp:
         layout = write_dataset(simulate_records(scenario), Path(tmp) / "run")
+        if not gps:
+            drop_gps(layout)
         with warnings.catch_warnings():  # the sensors' gaps are the simulator's own
             warnings.simplefilter("ignore", DataWarning)
             dataset = open_dataset(layout)

@@ -55,6 +55,7 @@ __all__ = [
     "TRUTH_SCHEMA",
     "first_fix_enu_m",
     "write_dataset",
+    "drop_gps",
     "simulate",
 ]
 
@@ -322,6 +323,13 @@ def write_dataset(sim: Simulation, out_dir: str | Path) -> Path:
         json.dumps(_truth(sim), allow_nan=False) + "\n", encoding="utf-8"
     )
     return out
+
+
+def drop_gps(layout: str | Path) -> None:
+    """Remove a simulated run's GPS (its ``*_DGPS.log``): a run without GPS, ``truth.json``
+    kept (``sonarslam simulate --no-gps``)."""
+    for log in Path(layout).glob("*_DGPS.log"):
+        log.unlink()
 
 
 def simulate(kind: str, seed: int, out_dir: str | Path, duration_s: float | None = None) -> Path:

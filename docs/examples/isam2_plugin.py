@@ -38,11 +38,11 @@ for lines in filter(None, map(extractor.add, beams)):  # each vote's lines (fram
     k, t_k, graph, values = k + 1, lines[0].t, gtsam.NonlinearFactorGraph(), gtsam.Values()
     decision = association.decide(lines, belief(k, isam), pose_key=X(k))  # no merges by default
     for j, line in decision.updates:  # an observation of landmark j
-        graph.add(sonarslam.line_factor(X(k), L(j), line.z, line.cov, bTs))
+        graph.add(sonarslam.line_factor(X(k), L(j), line))  # its z, cov and mounting
     for new in decision.new_landmarks:  # with every observation that made it, at its pose
         values.insert(L(new.id), new.line_w)
         for anchor, line in new.observations:
-            graph.add(sonarslam.line_factor(anchor.node, L(new.id), line.z, line.cov, bTs))
+            graph.add(sonarslam.line_factor(anchor.node, L(new.id), line))
     isam.update(graph, values)
     association.applied(belief(k))  # the estimate after the update, before the next vote
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()

@@ -74,6 +74,13 @@ def _simulate(sub: Subparsers) -> argparse.ArgumentParser:
         " [mounting.*] tables (the transforms give them)",
     )
     p.add_argument(
+        "--no-gps",
+        action="store_true",
+        help="leave the GPS out, whatever the output: the layout without its *_DGPS.log, a bag"
+        " (--bag, any --preset) without a NavSatFix topic, a Ping360 run's nav.bag likewise; runs"
+        " on it are measured against truth.json and their loops (docs/data.md, 'Without GPS')",
+    )
+    p.add_argument(
         "--ping360",
         action="store_true",
         help="write the run as a Ping360 logs it instead: a Ping Viewer OUT/<start>.bin (a"

@@ -13,6 +13,7 @@ from sonarslam.datasets.errors import DataWarning
 from sonarslam.datasets.rosbag import bag_config, write_bag
 from sonarslam.datasets.simulator import simulate
 from sonarslam.datasets.simulator.ping360 import simulate_ping360
+from sonarslam.datasets.simulator.writer import drop_gps
 from sonarslam.datasets.source import open_dataset
 from sonarslam.settings import SettingError
 from sonarslam.slam.io.files import check_output_dir
@@ -24,7 +25,11 @@ def command(args: argparse.Namespace) -> int:
         if args.bag is not None:
             raise SettingError("--ping360", "a Ping360 run's navigation is a ROS 1 bag: no --bag")
         log = simulate_ping360(
-            args.kind, seed=args.seed, out_dir=args.out, duration_s=args.duration
+            args.kind,
+            seed=args.seed,
+            out_dir=args.out,
+            duration_s=args.duration,
+            gps=not args.no_gps,
         )
         print(
             f"simulated {args.kind} (seed {args.seed}) written as a Ping360 logs it: {log}, with"
@@ -41,14 +46,19 @@ def command(args: argparse.Namespace) -> int:
         )
     if args.preset is not None and args.bag is None:
         raise SettingError("--preset", "a preset is the shape of a bag: give --bag too")
+    without = " without GPS" if args.no_gps else ""
     if args.bag is None:
         out = simulate(args.kind, seed=args.seed, out_dir=args.out, duration_s=args.duration)
-        print(f"simulated {args.kind} (seed {args.seed}) written to {out}")
+        if args.no_gps:
+            drop_gps(out)
+        print(f"simulated {args.kind} (seed {args.seed}) written to {out}{without}")
         return 0
     with tempfile.TemporaryDirectory() as tmp:
         layout = simulate(
             args.kind, seed=args.seed, out_dir=Path(tmp) / "run", duration_s=args.duration
         )
+        if args.no_gps:
+            drop_gps(layout)
         with warnings.catch_warnings():  # the sensors' gaps are the simulator's own: said below
             warnings.simplefilter("ignore", DataWarning)
             dataset = open_dataset(layout)
@@ -66,7 +76,7 @@ def command(args: argparse.Namespace) -> int:
         if args.preset is not None:  # the mountings are the bag's transforms
             toml = _without_mountings(toml)
         (out / "sonarslam.toml").write_text(toml, encoding="utf-8")
-    print(f"simulated {args.kind} (seed {args.seed}) written as a {args.bag} bag: {bag}")
+    print(f"simulated {args.kind} (seed {args.seed}) written as a {args.bag} bag{without}: {bag}")
     return 0
 
 

@@ -30,7 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from sonarslam.features.geometry import FloatArray
-from sonarslam.features.line import LineFeature
+from sonarslam.features.line import LineFeature, check_mounting
 from sonarslam.slam.mapping.landmarks import LandmarkConfig, LandmarkMap
 from sonarslam.slam.mapping.vote import AfterVote, Belief, Decision, LandmarkBelief, NodeAnchor
 from sonarslam.slam.model.lines import (
@@ -158,7 +158,9 @@ class LandmarkAssociation:
     Parameters
     ----------
     bTs : array_like, shape (3,)
-        Sonar mounting ``(x_m, y_m, yaw_rad)`` in the body frame (``Mounting.as_pose()``).
+        Sonar mounting ``(x_m, y_m, yaw_rad)`` in the body frame (``Mounting.as_pose()``): the
+        extractor's; :meth:`decide` refuses lines extracted with another
+        (:attr:`sonarslam.features.line.LineFeature.bTs`).
     config : LandmarkConfig, optional
         The landmark layer's rules (association method and gate, tentative lines, extents,
         merges); the back ends' defaults when not given.
@@ -194,7 +196,8 @@ class LandmarkAssociation:
         lines : sequence of LineFeature
             The lines of one vote (what :meth:`sonarslam.features.extractor.LineExtractor.add`
             returned), in the sonar frame of the vote; those nearer than ``min_rho_m`` are not
-            used (``Decision.ids`` is over the used ones).
+            used (``Decision.ids`` is over the used ones). Lines extracted with another
+            mounting than ``bTs`` are refused (ValueError naming it).
         belief : WorldBelief
             Your estimate at the vote (its time: the lines' ``t``), with its covariance, over
             every landmark made so far.
@@ -224,6 +227,7 @@ class LandmarkAssociation:
             )
         if belief.cov is None:
             raise ValueError("belief.cov is None: decide needs the joint covariance")
+        check_mounting(lines, self.bTs, "LandmarkAssociation(bTs=...)")
         cfg = self.config
         obs = usable_observations(list(lines), cfg.min_rho_m, cfg.line_cov_scale)
         active = [lm.id for lm in self.map.active()]

@@ -32,7 +32,7 @@ from sonarslam.features.geometry import (
     transform_points,
     wrap_angle,
 )
-from sonarslam.features.line import LineFeature
+from sonarslam.features.line import LineFeature, check_mounting
 
 __all__ = [
     "local_to_world",
@@ -224,7 +224,8 @@ def world_observation(
     P_pose : ndarray, shape (3, 3)
         That pose's covariance in ``(x_m, y_m, yaw_rad)``.
     bTs : ndarray, shape (3,)
-        Sonar mounting in the body frame.
+        Sonar mounting in the body frame: the one ``feature`` was extracted with (its ``bTs``;
+        another is refused, ValueError naming it).
     cov_scale : float
         Multiplies the observation's covariance (the back ends' ``line_cov_scale``).
 
@@ -235,6 +236,7 @@ def world_observation(
         Jacobians ``G_z`` (2, 2) and ``G_pose`` (2, 3) (the cross-covariance of the new line
         with the state is ``G_pose P[pose, :]``).
     """
+    check_mounting([feature], bTs, "world_observation(bTs=...)")
     wTs = compose(wTb, bTs)
     line_w, G_z, G_sensor = line_frame_to_world(feature.z, wTs)
     J_pose, _ = compose_jacobians(wTb, bTs)

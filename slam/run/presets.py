@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -276,6 +276,10 @@ class RunConfig:
     scans : ScanConfig
         The scan matcher's preset of the same name (:data:`SCAN_PRESETS`) with the ``scans.*``
         settings over it (used when the back end's ``constraints`` hold ``scans``).
+    dataset : str or None
+        The root of the dataset :meth:`for_dataset` made it for: run on another whose preset
+        or ``[noise]`` differ from this configuration's, it is refused
+        (:func:`sonarslam.slam.run.run.run_backend`, naming both). None: tied to no dataset.
     """
 
     preset: str
@@ -283,14 +287,18 @@ class RunConfig:
     backend: BackendConfig
     settings: dict[str, Any]
     scans: ScanConfig = ScanConfig()
+    #: not a setting: left out of comparisons and of the settings' digest (provenance)
+    dataset: str | None = field(default=None, compare=False)
 
     @classmethod
     def for_dataset(cls, dataset: Dataset, backend: str) -> RunConfig:
         """What ``sonarslam run`` uses on this dataset with no settings: the extractor preset of
         its beams and back end ``backend``'s defaults, both with the dataset's ``[noise]``.
         Change it with :func:`dataclasses.replace` and give it to
-        :func:`sonarslam.slam.run.run.run_backend` (``config=``)."""
-        return run_config(dataset.beams, backend, None, dataset.config.noise)
+        :func:`sonarslam.slam.run.run.run_backend` (``config=``), on this dataset (``dataset``:
+        another with another preset or ``[noise]`` is refused)."""
+        config = run_config(dataset.beams, backend, None, dataset.config.noise)
+        return replace(config, dataset=str(dataset.root))
 
 
 def run_config(

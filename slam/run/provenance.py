@@ -88,7 +88,11 @@ def _canonical(obj: Any) -> Any:
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         return {
             "__type__": type(obj).__name__,
-            **{f.name: _canonical(getattr(obj, f.name)) for f in dataclasses.fields(obj)},
+            **{
+                f.name: _canonical(getattr(obj, f.name))
+                for f in dataclasses.fields(obj)
+                if f.compare  # a field that is no setting (RunConfig.dataset) is left out
+            },
         }
     if isinstance(obj, dict):
         return {str(k): _canonical(v) for k, v in obj.items()}

@@ -273,11 +273,34 @@ def _typed_settings(
             f"back end {backend!r} takes a {want.__name__}, got {type(config.backend).__name__}",
         )
     default = RunConfig.for_dataset(dataset, backend)
+    _check_made_for(config, default)
     return {
         **_differences(default.extractor, config.extractor, "extractor."),
         **_differences(default.backend, config.backend, f"{backend}."),
         **_differences(default.scans, config.scans, "scans."),
     }
+
+
+def _check_made_for(config: RunConfig, default: RunConfig) -> None:
+    """Refuse a configuration made for another dataset (``config.dataset``) whose extractor
+    preset or ``[noise]`` calibration differ from this one's (``default``, its
+    :meth:`RunConfig.for_dataset`): the run would take the other's silently."""
+    if config.dataset is None or config.dataset == default.dataset:
+        return
+    differ = []
+    if config.preset != default.preset:
+        differ.append(f"extractor preset ({config.preset!r}, here {default.preset!r})")
+    if config.backend.noise != default.backend.noise:
+        changed = _differences(default.backend.noise, config.backend.noise, "")
+        differ.append(f"[noise] ({', '.join(sorted(changed))})")
+    if differ:
+        raise SettingError(
+            "config.dataset",
+            f"the RunConfig was made for {config.dataset} (RunConfig.for_dataset) and is run on"
+            f" {default.dataset}, whose {' and '.join(differ)} differ: it would run with the"
+            " other's. Make it with RunConfig.for_dataset(this dataset, backend), or give"
+            " replace(config, dataset=None) to run it as it is",
+        )
 
 
 def _differences(default: Any, given: Any, prefix: str) -> dict[str, Any]:

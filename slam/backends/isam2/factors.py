@@ -38,6 +38,7 @@ import numpy as np
 import numpy.typing as npt
 
 from sonarslam.features.geometry import FloatArray, wrap_angle
+from sonarslam.features.line import LineFeature, check_mounting
 from sonarslam.slam.model.calibration import line_residual_calibrated, scan_residual
 from sonarslam.slam.model.lines import line_residual
 from sonarslam.slam.model.noise import robust_kernel
@@ -83,9 +84,9 @@ def noise_model(
 def line_factor(
     pose_key: int,
     line_key: int,
-    z: npt.ArrayLike,
-    cov: npt.ArrayLike,
-    bTs: npt.ArrayLike,
+    z: LineFeature | npt.ArrayLike,
+    cov: npt.ArrayLike | None = None,
+    bTs: npt.ArrayLike | None = None,
     robust: str | None = None,
     robust_k: float = 1.345,
 ) -> gtsam.CustomFactor:
@@ -95,15 +96,28 @@ def line_factor(
     ----------
     pose_key, line_key : int
         Keys of the body pose and of the world line.
-    z : array_like, shape (2,)
-        Measured line ``(rho_m, theta_rad)`` in the sonar frame R, normalised.
-    cov : array_like, shape (2, 2)
-        Its covariance (the extractor's).
-    bTs : array_like, shape (3,)
-        Sonar mounting, a constant of the factor.
+    z : LineFeature or array_like, shape (2,)
+        The observation: a line of the extractor (its ``z``, ``cov`` and mounting ``bTs``), or
+        the measured line ``(rho_m, theta_rad)`` in the sonar frame R, normalised.
+    cov : array_like, shape (2, 2), optional
+        Its covariance (the extractor's): required with an array ``z``; a line's own by default.
+    bTs : array_like, shape (3,), optional
+        Sonar mounting, a constant of the factor: required with an array ``z``; a line's own
+        (:attr:`~sonarslam.features.line.LineFeature.bTs`) by default, and another than the
+        line's is refused (ValueError naming it).
     robust, robust_k
         See :func:`noise_model`.
     """
+    if isinstance(z, LineFeature):
+        if bTs is None:
+            if z.bTs is None:
+                raise ValueError("line_factor: bTs is required for a line without its mounting")
+            bTs = z.bTs
+        check_mounting([z], bTs, "line_factor(bTs=...)")
+        cov = z.cov if cov is None else cov
+        z = z.z
+    if cov is None or bTs is None:
+        raise TypeError("line_factor: cov and bTs are required with a measured line z")
     z_m = np.asarray(z, dtype=np.float64).copy()
     bTs_m = np.asarray(bTs, dtype=np.float64).copy()
 
