@@ -1,5 +1,5 @@
-"""``sonarslam calibrate``: GPS-free calibrations (sonar yaw, AHRS yaw, AHRS deviation, the
-sonar's range offset, a line's systematic error)."""
+"""``sonarslam calibrate``: GPS-free calibrations (sonar yaw, the sonar clock offset, AHRS yaw,
+AHRS deviation, the sonar's range offset, a line's systematic error)."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ from sonarslam.slam.run.calibration import (
     calibrate_ahrs_deviation,
     calibrate_ahrs_yaw,
     calibrate_sonar_yaw,
+    calibrate_time_offset,
     ekf_closed_loop,
 )
 from sonarslam.slam.run.closed_loop import ClosedLoopResult
@@ -73,6 +74,31 @@ def _ahrs_deviation(args: argparse.Namespace) -> int:
     return 0
 
 
+def _time_offset(args: argparse.Namespace) -> int:
+    """--time-offset: the sonar clock offset of least map entropy, or a refusal when the
+    objective is flat."""
+    dataset = _open(args)
+    window = 60.0 if args.window is None else args.window
+    result = calibrate_time_offset(dataset, pose_source_by_name(dataset, args.poses), window)
+    if not result.decisive:
+        raise DataError(
+            dataset.root,
+            None,
+            f"the map-sharpness objective is too flat to give a sonar clock offset (least entropy"
+            f" at {result.best_offset_s:+.3f} s, {result.verdict()}): the echoes do not show the"
+            " same walls while the vehicle turns; calibrate on a longer run, or try another"
+            f" --window (now {window:g} s); nothing written",
+        )
+    print(
+        f"sonar clock offset with {args.poses} poses: {result.best_offset_s:+.3f} s (configured:"
+        f" {result.configured_offset_s:+.3f} s; searched {result.offset_grid_s[0]:+.2f} to"
+        f" {result.offset_grid_s[-1]:+.2f} s; {result.verdict()}); put it under [sonar]"
+        " time_offset_s in sonarslam.toml"
+    )
+    _write(args, replace(dataset.config, sonar_time_offset_s=round(result.best_offset_s, 3)))
+    return 0
+
+
 def _sonar(args: argparse.Namespace) -> int:
     """--range-offset and/or --line-noise; with both, the lines see the offset just found."""
     dataset = _open(args)
@@ -115,6 +141,7 @@ def command(args: argparse.Namespace) -> int:
     modes = [
         name
         for name, on in (
+            ("--time-offset", args.time_offset),
             ("--ahrs", args.ahrs),
             ("--ahrs-deviation", args.ahrs_deviation),
             ("--range-offset/--line-noise", args.range_offset or args.line_noise),
@@ -128,6 +155,8 @@ def command(args: argparse.Namespace) -> int:
         )
     if args.ahrs_deviation:
         return _ahrs_deviation(args)
+    if args.time_offset:
+        return _time_offset(args)
     if args.range_offset or args.line_noise:
         return _sonar(args)
     dataset = _open(args)
@@ -157,7 +186,8 @@ def command(args: argparse.Namespace) -> int:
         _write(args, replace(dataset.config, ahrs_mounting=mount))
         return 0
     poses = pose_source_by_name(dataset, args.poses)
-    result = calibrate_sonar_yaw(dataset, poses, window_s=args.window)
+    window = 120.0 if args.window is None else args.window
+    result = calibrate_sonar_yaw(dataset, poses, window_s=window)
     current = math.degrees(dataset.config.sonar_mounting.yaw_rad)
     if not result.decisive:
         raise DataError(
@@ -166,7 +196,7 @@ def command(args: argparse.Namespace) -> int:
             f"the map-sharpness objective is too flat to give a sonar yaw (least entropy at "
             f"{math.degrees(result.best_yaw_rad):.2f} deg, {result.verdict()}): the echoes do "
             "not show the same walls from several places; calibrate on a longer run that passes "
-            f"walls more than once, or try another --window (now {args.window:g} s); nothing "
+            f"walls more than once, or try another --window (now {window:g} s); nothing "
             "written",
         )
     print(

@@ -191,8 +191,8 @@ def _demo(sub: Subparsers) -> argparse.ArgumentParser:
 def _calibrate(sub: Subparsers) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "calibrate",
-        help="GPS-free calibrations: sonar yaw by map sharpness; --ahrs, --ahrs-deviation,"
-        " --range-offset, --line-noise",
+        help="GPS-free calibrations: sonar yaw by map sharpness; --time-offset, --ahrs,"
+        " --ahrs-deviation, --range-offset, --line-noise",
         epilog=EPILOG,
     )
     add_source(p)
@@ -200,8 +200,14 @@ def _calibrate(sub: Subparsers) -> argparse.ArgumentParser:
     p.add_argument(
         "--window",
         type=number(float, 0.0, 86400.0, low_open=True),
-        default=120.0,
-        help="entropy window (s, default 120)",
+        default=None,
+        help="entropy window (s, default 120; 60 for --time-offset)",
+    )
+    p.add_argument(
+        "--time-offset",
+        action="store_true",
+        help="the sonar clock offset by map sharpness instead: +-3 s around the configured"
+        " one (GPS-free with the default --poses dr; [sonar] time_offset_s)",
     )
     p.add_argument(
         "--ahrs",

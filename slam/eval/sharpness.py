@@ -19,19 +19,39 @@ from sonarslam.features.geometry import FloatArray
 from sonarslam.features.pose_source import PoseSource
 from sonarslam.features.projection import project_beams
 
-__all__ = ["map_entropy", "trajectory_sharpness"]
+__all__ = ["map_entropy", "map_entropy_variance", "trajectory_sharpness"]
+
+
+def _cell_counts(points_w: FloatArray, cell_m: float) -> np.ndarray:
+    """Points per occupied cell of the 2D histogram of ``points_w`` ``(N, 2)``, N > 0."""
+    ij = np.floor(points_w / cell_m).astype(np.int64)
+    ij -= ij.min(axis=0)
+    keys = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
+    return np.bincount(np.unique(keys, return_inverse=True)[1])
 
 
 def map_entropy(points_w: FloatArray, cell_m: float) -> float:
     """Shannon entropy (nats) of the 2D histogram of points ``(N, 2)`` with square cells."""
     if points_w.shape[0] == 0:
         return 0.0
-    ij = np.floor(points_w / cell_m).astype(np.int64)
-    ij -= ij.min(axis=0)
-    keys = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
-    counts = np.bincount(np.unique(keys, return_inverse=True)[1])
+    counts = _cell_counts(points_w, cell_m)
     p = counts / counts.sum()
     return float(-(p * np.log(p)).sum())
+
+
+def map_entropy_variance(points_w: FloatArray, cell_m: float) -> float:
+    """Sampling variance (nats^2) of :func:`map_entropy` of ``N`` points ``(N, 2)``: the
+    first-order (delta-method) variance of the plug-in entropy of ``N`` draws from the cells'
+    frequencies ``p``, ``(sum p ln^2 p - H^2) / N`` (Basharin 1959); 0 without points. The
+    spread the entropy would have over re-drawn echoes of the same map: the unit in which a
+    difference of entropies is judged (:mod:`sonarslam.slam.run.calibration`)."""
+    if points_w.shape[0] == 0:
+        return 0.0
+    counts = _cell_counts(points_w, cell_m)
+    p = counts / counts.sum()
+    log_p = np.log(p)
+    h = -(p * log_p).sum()
+    return float(max((p * log_p**2).sum() - h**2, 0.0) / points_w.shape[0])
 
 
 def trajectory_sharpness(

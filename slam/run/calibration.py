@@ -9,11 +9,13 @@ default is dead reckoning, so the ground truth is not used to calibrate.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
 
+from sonarslam.datasets.config import MAX_TIME_OFFSET_S
 from sonarslam.datasets.errors import DataError
 from sonarslam.datasets.source import Dataset
 from sonarslam.features.geometry import FloatArray, compose, wrap_angle
@@ -21,7 +23,7 @@ from sonarslam.features.line import LineFeature
 from sonarslam.features.pose_source import PoseSource
 from sonarslam.features.projection import beam_points
 from sonarslam.slam.backends.registry import backend_spec
-from sonarslam.slam.eval.sharpness import map_entropy
+from sonarslam.slam.eval.sharpness import map_entropy, map_entropy_variance
 from sonarslam.slam.model.motion import body_yaw
 from sonarslam.slam.run.closed_loop import ClosedLoopResult, run_closed_loop
 from sonarslam.slam.run.presets import map_min_intensity, run_config
@@ -31,6 +33,8 @@ __all__ = [
     "map_entropy",
     "scan_entropy",
     "calibrate_sonar_yaw",
+    "ClockSearch",
+    "calibrate_time_offset",
     "CompassFit",
     "calibrate_ahrs_yaw",
     "heading_deviation_from_lines",
@@ -118,25 +122,46 @@ def require_turns(dataset: Dataset, n_beams: int, what: str) -> None:
         )
 
 
-def _windowed_entropy(
-    dataset: Dataset, pose_source: PoseSource, window_s: float, cell_m: float
-) -> Callable[[float], float]:
-    """``sonar yaw (rad) -> summed entropy (nats)`` of the dataset's echoes (the bins a map
-    draws, :func:`sonarslam.slam.run.presets.map_min_intensity`: raw beams' background noise
-    fills every cell whatever the yaw) projected with ``pose_source`` in windows of
-    ``window_s`` (the mounting's x, y kept)."""
+def _windowed_points(
+    dataset: Dataset, pose_source: PoseSource, window_s: float, shift_margin_s: float = 0.0
+) -> Callable[[float, float], list[FloatArray]]:
+    """``(sonar yaw (rad), clock shift (s)) -> world points (M, 2) per window``: the dataset's
+    echoes (the bins a map draws, :func:`sonarslam.slam.run.presets.map_min_intensity`: raw
+    beams' background noise fills every cell whatever the yaw) projected with ``pose_source``
+    at their beams' times plus the shift (the mounting's x, y kept), split into windows of
+    ``window_s`` by the beams' own times (a shift moves no echo to another window). The beams
+    within ``shift_margin_s`` of the navigation span's ends are left out, so that a shift up to
+    that margin finds poses for every beam."""
     beams = dataset.nav_beams()
+    if shift_margin_s > 0.0:
+        t0, t1 = dataset.nav_span_s
+        beams = beams.between(t0 + shift_margin_s, t1 - shift_margin_s)
     bi, r, bearing = beam_points(beams, dataset.config.sonar, map_min_intensity(beams))
-    t = np.array([b.t for b in beams])[bi]
-    mount = dataset.config.sonar_mounting
-    wTs0 = compose(pose_source.poses(t), replace(mount, yaw_rad=0.0).as_pose())
+    t_beam = np.array([b.t for b in beams])
+    t = t_beam[bi]
+    mount0 = replace(dataset.config.sonar_mounting, yaw_rad=0.0).as_pose()
+    wTs0 = compose(pose_source.poses(t_beam), mount0)[bi]
     window = np.floor((t - t[0]) / window_s).astype(np.int64)
     splits = np.flatnonzero(np.diff(window)) + 1
 
+    def points(yaw: float, shift_s: float = 0.0) -> list[FloatArray]:
+        wTs = wTs0 if shift_s == 0.0 else compose(pose_source.poses(t_beam + shift_s), mount0)[bi]
+        ang = wTs[:, 2] + yaw + bearing
+        pts = np.column_stack([wTs[:, 0] + r * np.cos(ang), wTs[:, 1] + r * np.sin(ang)])
+        return np.split(pts, splits)
+
+    return points
+
+
+def _windowed_entropy(
+    dataset: Dataset, pose_source: PoseSource, window_s: float, cell_m: float
+) -> Callable[[float], float]:
+    """``sonar yaw (rad) -> summed entropy (nats)`` of :func:`_windowed_points` over
+    ``window_s`` windows."""
+    points = _windowed_points(dataset, pose_source, window_s)
+
     def cost(yaw: float) -> float:
-        ang = wTs0[:, 2] + yaw + bearing
-        pts = np.column_stack([wTs0[:, 0] + r * np.cos(ang), wTs0[:, 1] + r * np.sin(ang)])
-        return sum(map_entropy(chunk, cell_m) for chunk in np.split(pts, splits))
+        return sum(map_entropy(chunk, cell_m) for chunk in points(yaw, 0.0))
 
     return cost
 
@@ -204,6 +229,159 @@ def calibrate_sonar_yaw(
         (median - float(costs.min())) / noise,
         float(coarse[second]),
         (float(costs[second]) - float(costs.min())) / noise,
+    )
+
+
+#: A sonar clock offset is taken only when the objective's coarse minimum lies this many noise
+#: units (the summed entropy's sampling spread at the minimum,
+#: :func:`sonarslam.slam.eval.sharpness.map_entropy_variance`) below the coarse grid's median:
+#: a flat objective has no minimum to trust (:attr:`ClockSearch.decisive`; the measured
+#: contrasts are in docs/calibration.md).
+MIN_CLOCK_DEPTH = 2.5
+#: ... and the least entropy more than :data:`CLOCK_BASIN_S` from it this many noise units above.
+MIN_CLOCK_MARGIN = 2.0
+#: Half width (s) of the best offset's basin, left out when the margin is looked for.
+CLOCK_BASIN_S = 1.0
+
+
+@dataclass(frozen=True)
+class ClockSearch:
+    """Result of :func:`calibrate_time_offset` (offsets in s: ``[sonar] time_offset_s``, added
+    to the sonar's log times to put them on the navigation clock).
+
+    Attributes
+    ----------
+    best_offset_s : float
+        The offset of least entropy: the vertex of a parabola fitted to the fine grid's
+        entropies (the fine grid's own least when the fit is not convex or its vertex lies
+        outside the fine grid).
+    configured_offset_s : float
+        The dataset's offset the search is centred on.
+    offset_grid_s : ndarray, shape (N,)
+        The offsets searched, sorted.
+    entropy : ndarray, shape (N,)
+        The summed windowed entropy at each (nats).
+    noise : float
+        The objective's noise unit (nats): the sampling standard deviation of the summed
+        entropy at the coarse minimum (the windows' variances summed).
+    depth : float
+        Median minus least coarse entropy, in noise units.
+    second_offset_s : float
+        The least-entropy coarse offset more than :data:`CLOCK_BASIN_S` from the best.
+    margin : float
+        Its entropy minus the least coarse entropy, in noise units.
+    """
+
+    best_offset_s: float
+    configured_offset_s: float
+    offset_grid_s: FloatArray
+    entropy: FloatArray
+    noise: float
+    depth: float
+    second_offset_s: float
+    margin: float
+
+    @property
+    def decisive(self) -> bool:
+        """True when the minimum stands out: depth >= :data:`MIN_CLOCK_DEPTH` and margin >=
+        :data:`MIN_CLOCK_MARGIN`."""
+        return self.depth >= MIN_CLOCK_DEPTH and self.margin >= MIN_CLOCK_MARGIN
+
+    def verdict(self) -> str:
+        """The contrast in words: ``depth ... and margin ... noise units (needs ...)``."""
+        return (
+            f"minimum {self.depth:.1f} noise units below the median (needs {MIN_CLOCK_DEPTH:g}),"
+            f" {self.margin:.1f} below the best offset more than {CLOCK_BASIN_S:g} s away, at"
+            f" {self.second_offset_s:+.2f} s (needs {MIN_CLOCK_MARGIN:g})"
+        )
+
+
+def calibrate_time_offset(
+    dataset: Dataset,
+    pose_source: PoseSource,
+    window_s: float = 60.0,
+    cell_m: float = 0.5,
+    half_range_s: float = 3.0,
+    coarse_step_s: float = 0.25,
+    fine_step_s: float | None = None,
+) -> ClockSearch:
+    """Search the sonar clock offset that minimises the summed windowed map entropy.
+
+    A wrong offset places each beam with the pose of another time: the walls smear by the
+    vehicle's turn and change of velocity over the offset (a steady translation moves every
+    echo alike and is not seen). The echoes are projected with ``pose_source`` at their beams'
+    times shifted by each offset less the configured one (:func:`_windowed_points`, the same
+    objective as :func:`calibrate_sonar_yaw` with the configured mounting yaw).
+
+    Parameters
+    ----------
+    dataset : Dataset
+        Beams on the navigation clock with the configured ``[sonar] time_offset_s``.
+    pose_source : PoseSource
+        Vehicle poses (dead reckoning for a GPS-free calibration).
+    window_s : float
+        Length of each time window (s).
+    cell_m : float
+        Histogram cell (m).
+    half_range_s : float
+        The coarse grid spans the configured offset +- this (s), clipped to
+        +- :data:`sonarslam.datasets.config.MAX_TIME_OFFSET_S`.
+    coarse_step_s : float
+        Step of the coarse grid (s).
+    fine_step_s : float, optional
+        Step of the fine grid over +- 2 coarse steps around the coarse best (s); default half
+        the median interval between beams.
+
+    Returns
+    -------
+    ClockSearch
+        The best offset and the objective's contrast: take it only when
+        :attr:`ClockSearch.decisive`.
+    """
+    require_turns(dataset, len(dataset.nav_beams()), "the sonar clock offset")
+    configured = dataset.config.sonar_time_offset_s
+    low = max(-half_range_s, -MAX_TIME_OFFSET_S - configured)
+    high = min(half_range_s, MAX_TIME_OFFSET_S - configured)
+    points = _windowed_points(
+        dataset, pose_source, window_s, shift_margin_s=max(-low, high) + 2 * coarse_step_s
+    )
+    yaw = dataset.config.sonar_mounting.yaw_rad
+
+    def cost(shift_s: float) -> float:
+        return sum(map_entropy(chunk, cell_m) for chunk in points(yaw, shift_s))
+
+    coarse = np.arange(low, high + 1e-9, coarse_step_s)
+    costs = np.array([cost(x) for x in coarse])
+    k = int(np.argmin(costs))
+    if fine_step_s is None:
+        fine_step_s = 0.5 * float(np.median(np.diff(dataset.nav_beams().t_s)))
+    span = 2 * coarse_step_s
+    fine = coarse[k] + np.arange(-span, span + 1e-9, fine_step_s)
+    fine = fine[(fine >= low) & (fine <= high)]
+    fine_costs = np.array([cost(x) for x in fine])
+    best = float(fine[int(np.argmin(fine_costs))])
+    curvature, slope, _ = np.polyfit(fine - coarse[k], fine_costs, 2)
+    if curvature > 0.0:
+        vertex = float(coarse[k] - slope / (2.0 * curvature))
+        if fine[0] <= vertex <= fine[-1]:
+            best = vertex
+    chunks = points(yaw, float(coarse[k]))
+    noise = max(math.sqrt(sum(map_entropy_variance(c, cell_m) for c in chunks)), 1e-12)
+    median = float(np.median(costs))
+    away = np.abs(coarse - coarse[k]) > CLOCK_BASIN_S
+    second = int(np.argmin(np.where(away, costs, np.inf))) if away.any() else k
+    grid = np.concatenate([coarse, fine])
+    ent = np.concatenate([costs, fine_costs])
+    order = np.argsort(grid, kind="stable")
+    return ClockSearch(
+        configured + best,
+        configured,
+        configured + grid[order],
+        ent[order],
+        noise,
+        (median - float(costs[k])) / noise,
+        configured + float(coarse[second]),
+        (float(costs[second]) - float(costs[k])) / noise,
     )
 
 
