@@ -82,6 +82,19 @@ def read_is_log(path: str | Path, n_bins: int | None = None) -> BeamSeries:
     return BeamSeries(np.concatenate(times), np.concatenate(angles), np.concatenate(bins_u8))
 
 
+#: ``"0 "`` ... ``"255 "`` as fixed-width bytes (padded with NUL): a uint8 beam's bins are
+#: written through this table, as ``str`` of each value joined by spaces (the same text, without
+#: a Python string per bin).
+_BIN_TEXT = np.array([f"{v} ".encode("ascii") for v in range(256)], dtype="S4")
+
+
+def _bins_text(intensities: npt.NDArray[np.generic]) -> str:
+    """The bins of one beam as the log writes them: each value, space-separated."""
+    if intensities.dtype == np.uint8:
+        return _BIN_TEXT[intensities].tobytes().replace(b"\0", b"")[:-1].decode("ascii")
+    return " ".join(map(str, intensities.astype(int).tolist()))
+
+
 def write_is_log(path: str | Path, beams: Iterable[SonarBeam]) -> int:
     """Write beams as a raw ``_IS.log``; returns the number of rows written.
 
@@ -96,7 +109,7 @@ def write_is_log(path: str | Path, beams: Iterable[SonarBeam]) -> int:
         elif beam.intensities.size != n_bins:
             raise ValueError(f"beam at t={beam.t} has {beam.intensities.size} bins, not {n_bins}")
         sensor_ms = int(round((beam.t % 86400.0) * 1000.0))
-        bins = " ".join(map(str, beam.intensities.astype(int).tolist()))
+        bins = _bins_text(beam.intensities)
         lines.append(f"{beam.t:.3f}\t{sensor_ms}\t{beam.transducer_angle_rad:.6f}\t{bins}")
     header = [h.format(n_bins=n_bins or 0) for h in _HEADER]
     p.write_text("\n".join(header + lines) + "\n", encoding="ascii")

@@ -346,6 +346,23 @@ def _walls_near(walls_m: FloatArray, origins_m: FloatArray, reach_m: float) -> n
     return near if near.size else np.arange(walls_m.shape[0])
 
 
+#: Below this exponent ``np.exp`` gives exactly 0.0 (it underflows below -745.14): the profiles
+#: take 0.0 there without evaluating it, the same values at a fraction of the cost (most bins
+#: of a ray lie far from its wall).
+_EXP_ZERO_BELOW = -750.0
+
+
+def _exp_or_zero(exponent: FloatArray, needed: npt.NDArray[np.bool_] | None = None) -> FloatArray:
+    """``np.exp(exponent)`` where ``needed`` (default: everywhere), evaluated only where it is
+    not exactly 0.0 (the same values there); 0.0 where not needed."""
+    live = ~(exponent < _EXP_ZERO_BELOW)  # NaN kept: np.exp gives it as before
+    if needed is not None:
+        live &= needed
+    out = np.zeros(exponent.shape)
+    np.exp(exponent, out=out, where=live)
+    return out
+
+
 def _offset_profile(
     delta_m: FloatArray,
     offset_m: float,
@@ -359,10 +376,12 @@ def _offset_profile(
     peak = 1.0 + echo.tail_fraction
     rise_sigma_m = offset_m / np.sqrt(2.0 * np.log(2.0))
     after = delta_m - offset_m
+    before = after < 0.0  # the rising edge; the fall elsewhere (each computed only where used)
     behind = np.maximum(after, 0.0)
-    fall = np.exp(-0.5 * (behind / sigma_m) ** 2) + echo.tail_fraction * np.exp(-behind / tail_m)
-    rise = peak * np.exp(-0.5 * (np.minimum(after, 0.0) / rise_sigma_m) ** 2)
-    return np.asarray(np.where(after < 0.0, rise, fall))
+    fall = _exp_or_zero(-0.5 * (behind / sigma_m) ** 2, ~before)
+    fall += echo.tail_fraction * _exp_or_zero(-behind / tail_m, ~before)
+    rise = peak * _exp_or_zero(-0.5 * (np.minimum(after, 0.0) / rise_sigma_m) ** 2, before)
+    return np.asarray(np.where(before, rise, fall))
 
 
 def _render_chunk(
@@ -415,10 +434,13 @@ def _render_chunk(
     if range_offset_m > 0.0:
         profile = _offset_profile(delta, range_offset_m, sigma_m, echo, tail_m)
     else:
-        profile = np.exp(-0.5 * (delta / sigma_m) ** 2)
+        profile = _exp_or_zero(-0.5 * (delta / sigma_m) ** 2)
         if echo.tail_fraction > 0.0:
             behind = np.maximum(delta, 0.0)
-            profile += np.where(delta > 0.0, echo.tail_fraction * np.exp(-behind / tail_m), 0.0)
+            tail = delta > 0.0
+            profile += np.where(
+                tail, echo.tail_fraction * _exp_or_zero(-behind / tail_m, tail), 0.0
+            )
     signal = np.einsum("brn,br->bn", profile, amp)
 
     if echo.dead_zone_m > 0.0:

@@ -137,24 +137,51 @@ def walls_from_segments(segments_w: npt.ArrayLike, sides: npt.ArrayLike) -> list
     ]
 
 
+@dataclass(frozen=True)
+class _WallFrame:
+    """What :func:`_candidates` needs of a wall, computed once per wall rather than once per
+    line and wall (the same values): its line, unit normal ``n`` and tangent ``u``, and its ends
+    along ``u``, sorted."""
+
+    rho_m: np.float64
+    theta_rad: np.float64
+    n: FloatArray
+    u: FloatArray
+    ends_u: tuple[float, float]
+    side: int
+
+
+def _wall_frames(walls: list[WallReference]) -> list[_WallFrame]:
+    out = []
+    for w in walls:
+        line = np.asarray(w.line_w, dtype=np.float64)
+        n = np.array([np.cos(w.line_w[1]), np.sin(w.line_w[1])])
+        u = np.array([-n[1], n[0]])
+        s0, s1 = np.sort(w.endpoints_w @ u)
+        out.append(_WallFrame(line[0], line[1], n, u, (s0, s1), w.side))
+    return out
+
+
 def _candidates(
-    ft: LineFeature, walls: list[WallReference], gates: AssociationGates
+    ft: LineFeature, frames: list[_WallFrame], gates: AssociationGates
 ) -> tuple[list[int], FloatArray]:
     """Walls passing the side, angle and overlap rules, and every wall's mean end distance."""
     ends = ft.endpoints_world()
     theta_line = float(ft.line_world()[1])
-    dist = np.full(len(walls), np.inf)
+    x, y = np.asarray(ft.wTr[:2], dtype=np.float64)
+    dist = np.full(len(frames), np.inf)
     passing = []
-    for k, w in enumerate(walls):
-        n = np.array([np.cos(w.line_w[1]), np.sin(w.line_w[1])])
-        u = np.array([-n[1], n[0]])
-        dist[k] = float(np.mean(np.abs(ends @ n - w.line_w[0])))
-        if int(water_side(w.line_w, ft.wTr[:2])) != w.side:
+    for k, w in enumerate(frames):
+        dist[k] = float(np.mean(np.abs(ends @ w.n - w.rho_m)))
+        # walls.water_side of the sonar's position, as line_side computes it: +1 where
+        # rho - p . n < 0 (n = (cos theta, sin theta)), else -1
+        side = 1 if w.rho_m - x * w.n[0] - y * w.n[1] < 0.0 else -1
+        if side != w.side:
             continue
-        if 0.5 * abs(float(wrap_angle(2.0 * (theta_line - w.line_w[1])))) > gates.max_angle_rad:
+        if 0.5 * abs(float(wrap_angle(2.0 * (theta_line - w.theta_rad)))) > gates.max_angle_rad:
             continue
-        a, b = np.sort(ends @ u)
-        s0, s1 = np.sort(w.endpoints_w @ u)
+        a, b = np.sort(ends @ w.u)
+        s0, s1 = w.ends_u
         lo, hi = max(a, s0 - gates.extent_margin_m), min(b, s1 + gates.extent_margin_m)
         inside = (hi - lo) / (b - a) if b - a > 1e-9 else float(s0 <= a <= s1)
         if inside >= gates.min_overlap:
@@ -182,9 +209,10 @@ def associate(
         One per feature, in order.
     """
     g = gates or AssociationGates()
+    frames = _wall_frames(walls)
     out = []
     for ft in features:
-        passing, dist = _candidates(ft, walls, g)
+        passing, dist = _candidates(ft, frames, g)
         if not passing:
             out.append(WallMatch(None, "no wall", float("nan")))
             continue
