@@ -52,6 +52,8 @@ __all__ = [
     "find_loops",
     "loop_errors",
     "OdometryCheck",
+    "OdometryPair",
+    "odometry_pairs",
     "odometry_check",
 ]
 
@@ -234,44 +236,104 @@ class OdometryCheck:
     scale: float
 
 
-def odometry_check(
+@dataclass(frozen=True)
+class OdometryPair:
+    """One pair of scans of :func:`odometry_pairs`: dead reckoning's relative pose and the
+    sonar's.
+
+    Attributes
+    ----------
+    t0_s, t1_s : float
+        The two scans' reference times (s, the navigation clock).
+    dead_reckoning : FloatArray
+        (3,) dead reckoning's relative pose ``b0Tb1`` ``(x_m, y_m, yaw_rad)`` (first scan's
+        body frame).
+    sonar : FloatArray or None
+        (3,) the registration's relative pose in the same frame (the scans put in the body
+        frame through the configured mounting), None when no start gave an accepted
+        registration that constrains every direction.
+    cov : FloatArray or None
+        (3, 3) the registration's covariance (m², rad²), None with ``sonar``.
+    """
+
+    t0_s: float
+    t1_s: float
+    dead_reckoning: FloatArray
+    sonar: FloatArray | None
+    cov: FloatArray | None
+
+    @property
+    def angle_rad(self) -> float:
+        """The angle from dead reckoning's translation to the sonar's (rad, counter-clockwise in
+        the first scan's body frame, in ``[-pi, pi)``); NaN without a registration."""
+        if self.sonar is None:
+            return math.nan
+        return float(
+            wrap_angle(
+                math.atan2(self.sonar[1], self.sonar[0])
+                - math.atan2(self.dead_reckoning[1], self.dead_reckoning[0])
+            )
+        )
+
+    @property
+    def angle_sd_rad(self) -> float:
+        """1-sigma of :attr:`angle_rad` from the registration's covariance across its
+        translation (rad); NaN without a registration."""
+        if self.sonar is None or self.cov is None:
+            return math.nan
+        length = math.hypot(self.sonar[0], self.sonar[1])
+        across = np.array([-self.sonar[1], self.sonar[0]]) / length
+        return math.sqrt(max(float(across @ self.cov[:2, :2] @ across), 0.0)) / length
+
+    @property
+    def scale(self) -> float:
+        """The sonar's translation length over dead reckoning's; NaN without a registration."""
+        if self.sonar is None:
+            return math.nan
+        return math.hypot(self.sonar[0], self.sonar[1]) / math.hypot(
+            self.dead_reckoning[0], self.dead_reckoning[1]
+        )
+
+
+def odometry_pairs(
     dataset: Dataset,
     dead_reckoning: PoseSource,
     step_m: float,
     n_pairs: int = 12,
     config: ScanConfig | None = None,
-) -> OdometryCheck:
-    """Register pairs of scans ``step_m`` apart along dead reckoning's path and compare the
-    sonar's relative pose with dead reckoning's (GPS-free).
+) -> list[OdometryPair]:
+    """Register pairs of scans ``step_m`` apart along dead reckoning's path (GPS-free): every
+    pair registered, with its registration where one was accepted.
 
     ``n_pairs`` first scans spread evenly over the sonar span; each is paired with the scan that
     ends where dead reckoning has moved ``step_m`` further, at least one turn of the head later
-    (the two share no beam) and at most five. The second scan is registered onto the first from
-    dead reckoning's relative pose and from the same with its translation turned by 90, 180
-    and 270 deg (:func:`sonarslam.features.scans.icp.register`, one start each), and the
-    accepted result with the most weight kept: the sonar, not the guess, then says which way
-    the vehicle went. A DVL mounted the wrong way round, or a sonar mirrored, turns
-    :attr:`OdometryCheck.heading_deg` far from 0; the sonar's range scale against the DVL's
-    moves :attr:`OdometryCheck.scale` from 1. The scans are motion-corrected with dead
-    reckoning within their own turn only.
+    (the two share no beam) and at most five; a pair whose dead-reckoning translation is under
+    ``step_m / 2`` is skipped. The second scan is registered onto the first from dead
+    reckoning's relative pose and from the same with its translation turned by 90, 180 and 270
+    deg (:func:`sonarslam.features.scans.icp.register`, one start each), and the accepted
+    result that constrains every direction with the most weight kept: the sonar, not the guess,
+    then says which way the vehicle went. The scans are motion-corrected with dead reckoning
+    within their own turn only, and put in the body frame through the configured sonar
+    mounting: a mounting yaw off by ``e`` turns the sonar's translation by ``-e``, a DVL whose
+    velocity is turned by ``-delta`` (a misalignment, or a lateral bias ``delta * speed``) turns
+    dead reckoning's by ``-delta``, so :attr:`OdometryPair.angle_rad` measures ``delta - e``;
+    a constant heading error cancels in both relative poses.
     """
     config = config or ScanConfig()
     span = dataset.sonar_span_s
     t_beams = dataset.beams.t_s
-    empty = OdometryCheck(0, 0, math.nan, math.nan)
     if span is None or t_beams.size < 2:
-        return empty
+        return []
     n_turn = ScanBuilder(
         config, dataset.config.sonar, dataset.config.sonar_mounting, dead_reckoning
     ).n_beams
     turn_s = float(np.median(np.diff(t_beams))) * n_turn
     t = np.arange(span[0], span[1], min(1.0, turn_s / 4.0))
     if t.size < 2:
-        return empty
+        return []
     p = np.asarray(dead_reckoning.poses(t))
     path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p[:, :2], axis=0).T))])
-    pairs = accepted = 0
-    angles, ratios = [], []
+    out: list[OdometryPair] = []
     for t0 in np.linspace(span[0] + turn_s, span[1] - 2.0 * turn_s, n_pairs):
         i0 = min(int(np.searchsorted(t, t0)), t.size - 1)
         far = np.flatnonzero((path >= path[i0] + step_m) & (t >= t0 + turn_s))
@@ -284,7 +346,6 @@ def odometry_check(
         guess = between(a.wTb_ref, b.wTb_ref)
         if math.hypot(guess[0], guess[1]) < 0.5 * step_m:
             continue
-        pairs += 1
         ref = reference_lines(a.points_b, config)
         best = None
         for turn in (0.0, 0.5 * math.pi, math.pi, 1.5 * math.pi):
@@ -294,13 +355,32 @@ def odometry_check(
             if reg.accepted and reg.constrained.shape[1] == 3:
                 if best is None or reg.weight > best.weight:
                     best = reg
-        if best is None:
-            continue
-        accepted += 1
-        z = np.asarray(best.z, dtype=np.float64)
-        angles.append(math.atan2(z[1], z[0]) - math.atan2(guess[1], guess[0]))
-        ratios.append(math.hypot(z[0], z[1]) / math.hypot(guess[0], guess[1]))
-    if not angles:
-        return OdometryCheck(pairs, 0, math.nan, math.nan)
+        sonar = None if best is None else np.asarray(best.z, dtype=np.float64)
+        cov = None if best is None else np.asarray(best.cov, dtype=np.float64)
+        out.append(OdometryPair(a.t_ref_s, b.t_ref_s, np.asarray(guess), sonar, cov))
+    return out
+
+
+def odometry_check(
+    dataset: Dataset,
+    dead_reckoning: PoseSource,
+    step_m: float,
+    n_pairs: int = 12,
+    config: ScanConfig | None = None,
+) -> OdometryCheck:
+    """Register pairs of scans ``step_m`` apart along dead reckoning's path and compare the
+    sonar's relative pose with dead reckoning's (GPS-free): :func:`odometry_pairs` summed up.
+
+    A DVL mounted the wrong way round, or a sonar mirrored, turns
+    :attr:`OdometryCheck.heading_deg` far from 0; the sonar's range scale against the DVL's
+    moves :attr:`OdometryCheck.scale` from 1.
+    """
+    pairs = odometry_pairs(dataset, dead_reckoning, step_m, n_pairs, config)
+    done = [p for p in pairs if p.sonar is not None]
+    if not done:
+        return OdometryCheck(len(pairs), 0, math.nan, math.nan)
+    angles = [p.angle_rad for p in done]
     mean = math.atan2(float(np.mean(np.sin(angles))), float(np.mean(np.cos(angles))))
-    return OdometryCheck(pairs, accepted, math.degrees(mean), float(np.median(ratios)))
+    return OdometryCheck(
+        len(pairs), len(done), math.degrees(mean), float(np.median([p.scale for p in done]))
+    )

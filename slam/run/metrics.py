@@ -205,6 +205,7 @@ class ClosedLoopFigures:
         "state_sonar_y{,_sd}_m",
         "state_sonar_yaw{,_sd}_deg",
         "state_sonar_range_scale{,_sd}",
+        "state_sonar_yaw_misalignment_corr",
         "scans",
         "scan_consecutive_tried",
         "scan_consecutive_accepted",

@@ -53,6 +53,15 @@ class GraphConfig(BackendConfig):
     sonar_mount_sigma_deg : float
         Its prior 1-sigma in yaw (deg): a yaw calibrated from the sonar's own map (``sonarslam
         calibrate``) is known to a fraction of a degree.
+    sonar_yaw_prior : {"body", "dead_reckoning"}
+        What the mounting's yaw prior is on, when the mounting and the DVL misalignment are
+        both estimated: ``"body"`` (the default), the yaw itself (a yaw measured against the
+        hull); ``"dead_reckoning"``, the yaw minus the misalignment
+        (:func:`sonarslam.slam.backends.isam2.factors.mount_prior_dvl_residual`): a yaw
+        calibrated from the sonar's map drawn with dead-reckoning poses (``sonarslam calibrate
+        --poses dr``) is known relative to the DVL's track, and the data see only that
+        difference, so the misalignment's own prior alone then decides where the two turn
+        together (docs/calibration.md, "The sonar/DVL direction").
     range_scale_sigma : float
         Prior 1-sigma of the sonar's range scale ``s`` around 1 (an echo from range ``r`` is
         logged at ``s * r``: a sound-speed error), ``R(0)``, shared as the mounting; 0: not
@@ -158,6 +167,7 @@ class GraphConfig(BackendConfig):
     estimate_sonar_mount: bool = False
     sonar_mount_sigma_m: float = bounded(0.2, 1e-4, 10.0)
     sonar_mount_sigma_deg: float = bounded(0.5, 1e-3, 90.0)
+    sonar_yaw_prior: str = one_of("body", "body", "dead_reckoning")
     range_scale_sigma: float = bounded(0.0, 0.0, 0.5)
     scan_calibration: bool = False
     robust: str | None = one_of("huber", None, "huber", "cauchy")

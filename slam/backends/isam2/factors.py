@@ -54,6 +54,8 @@ __all__ = [
     "heading_factor",
     "odometry_residual",
     "odometry_factor",
+    "mount_prior_dvl_residual",
+    "mount_prior_dvl_factor",
 ]
 
 _S = np.array([[0.0, -1.0], [1.0, 0.0]])  # d R(a) / da = R(a) S
@@ -299,6 +301,54 @@ def heading_factor(
     return gtsam.CustomFactor(
         gtsam.noiseModel.Isotropic.Sigma(1, float(sigma_rad)), [pose_key, bias_key], error
     )
+
+
+# -- the sonar mounting's prior with its yaw relative to the DVL's track ---------------------------
+
+
+def mount_prior_dvl_residual(
+    z: FloatArray, mount: FloatArray, delta_rad: float
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Error of a prior on the sonar mounting ``C(0)`` whose yaw was calibrated relative to the
+    DVL's track: ``(x - z_x, y - z_y, wrap(yaw - delta - z_yaw))`` with ``delta`` the DVL
+    misalignment ``D(0)``.
+
+    Rotating the mounting's yaw and the misalignment together turns the track and the map
+    together and leaves the AHRS headings alone, so the data see only ``yaw - delta``; a yaw
+    calibrated with dead-reckoning poses (``sonarslam calibrate --poses dr``, which holds
+    ``delta = 0``) measured that difference, and its prior belongs on it.
+
+    Returns
+    -------
+    e : ndarray, shape (3,)
+    H_mount : ndarray, shape (3, 3)
+        ``d e / d C(0)`` (the identity).
+    H_delta : ndarray, shape (3, 1)
+        ``d e / d D(0)``.
+    """
+    m = np.asarray(mount, dtype=np.float64)
+    e = np.array([m[0] - z[0], m[1] - z[1], float(wrap_angle(m[2] - float(delta_rad) - z[2]))])
+    return e, np.eye(3), np.array([[0.0], [0.0], [-1.0]])
+
+
+def mount_prior_dvl_factor(
+    mount_key: int, delta_key: int, z: npt.ArrayLike, cov: npt.ArrayLike
+) -> gtsam.CustomFactor:
+    """The prior of :func:`mount_prior_dvl_residual` on ``C(0)`` and ``D(0)``: ``z`` (3,) the
+    calibrated mounting ``(x_m, y_m, yaw_rad)``, ``cov`` (3, 3) its covariance."""
+    zz = np.asarray(z, dtype=np.float64).reshape(3)
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> FloatArray:
+        keys = this.keys()
+        e, h_m, h_d = mount_prior_dvl_residual(
+            zz, values.atVector(keys[0]), float(values.atVector(keys[1])[0])
+        )
+        if H is not None:
+            H[0] = h_m
+            H[1] = h_d
+        return e
+
+    return gtsam.CustomFactor(noise_model(cov), [mount_key, delta_key], error)
 
 
 # -- DVL + gyro odometry with a misalignment and a gyro scale ------------------------------------

@@ -839,7 +839,22 @@ class LineIsam2:
         if self.config.range_scale_sigma > 0.0:
             out["state_sonar_range_scale"] = float(values.atVector(R(0))[0])
             out["state_sonar_range_scale_sd"] = float(np.sqrt(marginal(R(0))[0, 0]))
+        if self.config.estimate_sonar_mount and self.config.estimate_misalignment:
+            out["state_sonar_yaw_misalignment_corr"] = self._yaw_misalignment_correlation(values)
         return out
+
+    def _yaw_misalignment_correlation(self, values: gtsam.Values) -> float:
+        """The correlation of the sonar mounting's yaw with the DVL misalignment in their joint
+        marginal (the whole graph's, at ``values``): a rotation of both by one angle turns the
+        track and the map together and leaves the AHRS headings alone, so the data see their
+        difference and only the priors their sum (docs/calibration.md, "The sonar/DVL
+        direction")."""
+        keys = gtsam.KeyVector([C(0), D(0)])
+        joint = gtsam.Marginals(self.graph, values).jointMarginalCovariance(keys)
+        var_yaw = float(np.asarray(joint.at(C(0), C(0)))[2, 2])
+        var_d = float(np.asarray(joint.at(D(0), D(0)))[0, 0])
+        cross = float(np.asarray(joint.at(C(0), D(0)))[2, 0])
+        return cross / float(np.sqrt(var_yaw * var_d))
 
     def heading_error_track(self) -> tuple[FloatArray, FloatArray, FloatArray] | None:
         """The AHRS heading error ``b`` at every node with its marginal sd, when it walks

@@ -31,6 +31,7 @@ from sonarslam.slam.backends.isam2.factors import (
     heading_factor,
     line_equality_factor,
     line_factor,
+    mount_prior_dvl_factor,
     noise_model,
     odometry_factor,
 )
@@ -82,6 +83,7 @@ class FactorKind(Enum):
     LINE_OBSERVATION = "LineObservation"
     LINE_OBSERVATION_CALIBRATED = "LineObservationCalibrated"
     SCAN_CALIBRATED = "ScanRegistrationCalibrated"
+    MOUNT_PRIOR_DVL = "SonarMountPriorDvl"
 
 
 @dataclass(frozen=True)
@@ -264,6 +266,7 @@ _N_KEYS = {
     FactorKind.DVL_GYRO_ODOMETRY: (2, 5),
     FactorKind.LINE_OBSERVATION_CALIBRATED: (2, 4),
     FactorKind.SCAN_CALIBRATED: (2, 4),
+    FactorKind.MOUNT_PRIOR_DVL: (2, 2),
 }
 
 
@@ -278,6 +281,7 @@ _Z_SIZE = {
     FactorKind.LINE_OBSERVATION: 2,
     FactorKind.LINE_OBSERVATION_CALIBRATED: 2,
     FactorKind.SCAN_CALIBRATED: 3,
+    FactorKind.MOUNT_PRIOR_DVL: 3,
 }
 
 
@@ -386,6 +390,7 @@ _BUILDERS: dict[FactorKind, Callable[[FactorRecord], gtsam.NonlinearFactor]] = {
     FactorKind.LINE_OBSERVATION: _line_observation,
     FactorKind.LINE_OBSERVATION_CALIBRATED: _line_calibrated,
     FactorKind.SCAN_CALIBRATED: _scan_calibrated,
+    FactorKind.MOUNT_PRIOR_DVL: lambda r: mount_prior_dvl_factor(r.keys[0], r.keys[1], r.z, r.cov),
 }
 
 
@@ -424,7 +429,11 @@ def start_records(
                 np.deg2rad(config.sonar_mount_sigma_deg) ** 2,
             ]
         )
-        records.append(FactorRecord.of(prior, [C(0)], bTs, cov_c))
+        if config.sonar_yaw_prior == "dead_reckoning" and config.estimate_misalignment:
+            # the yaw known relative to the DVL's track: its prior on yaw - delta
+            records.append(FactorRecord.of(FactorKind.MOUNT_PRIOR_DVL, [C(0), D(0)], bTs, cov_c))
+        else:
+            records.append(FactorRecord.of(prior, [C(0)], bTs, cov_c))
         values.insert(C(0), np.asarray(bTs, dtype=np.float64))
     if config.range_scale_sigma > 0.0:
         records.append(FactorRecord.of(prior, [R(0)], [1.0], [[config.range_scale_sigma**2]]))
