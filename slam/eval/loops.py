@@ -45,6 +45,7 @@ from sonarslam.features.scans.icp import reference_lines, register, register_fro
 from sonarslam.features.scans.scan import Scan, ScanBuilder
 
 __all__ = [
+    "LOOP_CAUSES",
     "Loop",
     "LoopError",
     "SAMPLE_S",
@@ -54,6 +55,15 @@ __all__ = [
     "OdometryCheck",
     "odometry_check",
 ]
+
+#: Where a loop-closure error, or a map that does not re-find its walls, can come from (the
+#: warnings of ``run`` and of the health monitor's landmark check name them).
+LOOP_CAUSES = (
+    "a wrong mounting or calibration (`sonarslam calibrate`), the sonar's angle sense ([sonar]"
+    " angle_sense), a clock offset ([sonar] time_offset_s), the IMU's frame convention (an"
+    " orientation and gyro both in NED instead of REP-103's ENU turn the vehicle the wrong"
+    " way, and no check refuses them), a diverged run"
+)
 
 #: The estimate is searched for returns at this step (s).
 SAMPLE_S = 2.0
@@ -226,12 +236,22 @@ class OdometryCheck:
     scale : float
         The median of the registration's translation length over dead reckoning's (the sonar's
         range scale over the DVL's, 1 when both are right); NaN without an accepted pair.
+    heading_se_deg : float
+        The standard error of :attr:`heading_deg`: the angles' circular standard deviation
+        over the square root of the accepted pairs (deg); NaN below two.
+    scale_se : float
+        The standard error of :attr:`scale`: ``sqrt(pi / 2)`` (the median's against the mean's
+        for Gaussian samples) times the ratios' robust standard deviation (``1.4826`` times
+        their median absolute deviation: one pair's wrong registration does not inflate it)
+        over the square root of the accepted pairs; NaN below two.
     """
 
     pairs: int
     accepted: int
     heading_deg: float
     scale: float
+    heading_se_deg: float = math.nan
+    scale_se: float = math.nan
 
 
 def odometry_check(
@@ -250,10 +270,14 @@ def odometry_check(
     dead reckoning's relative pose and from the same with its translation turned by 90, 180
     and 270 deg (:func:`sonarslam.features.scans.icp.register`, one start each), and the
     accepted result with the most weight kept: the sonar, not the guess, then says which way
-    the vehicle went. A DVL mounted the wrong way round, or a sonar mirrored, turns
-    :attr:`OdometryCheck.heading_deg` far from 0; the sonar's range scale against the DVL's
-    moves :attr:`OdometryCheck.scale` from 1. The scans are motion-corrected with dead
-    reckoning within their own turn only.
+    the vehicle went. A DVL mounted the wrong way round, or a sonar mounted at another yaw than
+    ``[mounting.sonar] yaw_deg`` says (its yaw turns every registration, hence the motion the
+    sonar measures), turns :attr:`OdometryCheck.heading_deg` from 0 by that angle; the sonar's
+    range scale against the DVL's moves :attr:`OdometryCheck.scale` from 1. A mirrored sonar
+    (``[sonar] angle_sense`` flipped) mirrors each scan about the head's zero direction: when
+    that zero lies along the direction of travel the mirrored motion is the same, and the
+    check does not see it. The scans are motion-corrected with dead reckoning within their own
+    turn only.
     """
     config = config or ScanConfig()
     span = dataset.sonar_span_s
@@ -303,4 +327,12 @@ def odometry_check(
     if not angles:
         return OdometryCheck(pairs, 0, math.nan, math.nan)
     mean = math.atan2(float(np.mean(np.sin(angles))), float(np.mean(np.cos(angles))))
-    return OdometryCheck(pairs, accepted, math.degrees(mean), float(np.median(ratios)))
+    heading_se = scale_se = math.nan
+    if accepted >= 2:
+        spread = wrap_angle(np.asarray(angles) - mean)
+        heading_se = math.degrees(float(np.std(spread, ddof=1)) / math.sqrt(accepted))
+        mad = float(np.median(np.abs(np.asarray(ratios) - np.median(ratios))))
+        scale_se = math.sqrt(math.pi / 2.0) * 1.4826 * mad / math.sqrt(accepted)
+    return OdometryCheck(
+        pairs, accepted, math.degrees(mean), float(np.median(ratios)), heading_se, scale_se
+    )
