@@ -489,7 +489,7 @@ ODOMETRY_MIN_PAIRS = 3
 ODOMETRY_SOFT_ANGLE_DEG = 4.0
 ODOMETRY_SOFT_SCALE = 0.03
 ODOMETRY_SOFT_SE = 3.0
-ODOMETRY_SOFT_MIN_PAIRS = 5
+ODOMETRY_SOFT_MIN_PAIRS = 4
 #: Where a wrong direction of motion can come from, named in the odometry check's warnings.
 _ODOMETRY_CAUSES = (
     "the sonar's mounting yaw ([mounting.sonar] yaw_deg: it turns every registration, hence the"
