@@ -602,7 +602,8 @@ def _warn_loops(
     for name, errs in errors.items():
         worst = max(errs, key=lambda e: e.position_m, default=None)
         if worst is not None and worst.position_m > radius_m:
-            label = "dead reckoning" if name == "dr" else f"{backend} {name}" if name else backend
+            own = name or backend  # the run's own estimate has no name
+            label = "dead reckoning" if own == "dr" else f"{backend} {name}" if name else backend
             over.append(
                 f"{label}'s {worst.position_m:.1f} m at the loop {worst.loop.t0_s - t0:.0f} s -"
                 f" {worst.loop.t1_s - t0:.0f} s"
