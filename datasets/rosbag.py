@@ -211,20 +211,36 @@ def _beside(bag: Path, name: str) -> Path | None:
     return found if found.is_file() else None
 
 
-def _typestore() -> Any:
-    """ROS 2 Humble's types plus the Ping360 drivers' (:data:`CUSTOM_MSG_DEFINITIONS`)."""
+#: ``tf2_msgs/TFMessage``, which rosbags' ROS 1 (Noetic) store leaves out.
+_TF_MESSAGE = "geometry_msgs/TransformStamped[] transforms\n"
+
+
+def _typestore(ros1: bool = False) -> Any:
+    """ROS 2 Humble's types plus the Ping360 drivers' (:data:`CUSTOM_MSG_DEFINITIONS`); with
+    ``ros1`` ROS 1 Noetic's instead (its ``Header`` has ``seq``; its definitions and MD5 sums
+    are those a ROS 1 tool expects: ``LaserScan`` ``90c7ef2d...``), plus the same custom
+    types and ``tf2_msgs/TFMessage``."""
     from rosbags.typesys import (  # lazy: only bags load rosbags
         Stores,
         get_types_from_msg,
         get_typestore,
     )
 
-    store = get_typestore(Stores.ROS2_HUMBLE)
+    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
     types: dict[str, Any] = {}
     for name, text in CUSTOM_MSG_DEFINITIONS.items():
         types.update(get_types_from_msg(text, name))
+    if "tf2_msgs/msg/TFMessage" not in store.types:
+        types.update(get_types_from_msg(_TF_MESSAGE, "tf2_msgs/msg/TFMessage"))
     store.register(types)
     return store
+
+
+def _header(store: Any, t_s: float, frame: str) -> Any:
+    """A ``std_msgs/Header`` at ``t_s`` (Unix s) in ``frame`` (``seq`` 0 in ROS 1's)."""
+    header = store.types["std_msgs/msg/Header"]
+    seq = {"seq": 0} if "seq" in header.__dataclass_fields__ else {}
+    return header(**seq, stamp=_stamp_of(store, t_s), frame_id=frame)
 
 
 @dataclass(frozen=True)
@@ -1269,7 +1285,7 @@ def transform_msg(
     at (``x_m``, ``y_m``, ``z_m``) and turned by ``yaw_rad`` about z."""
     T = store.types
     return T["geometry_msgs/msg/TransformStamped"](
-        header=T["std_msgs/msg/Header"](stamp=_stamp_of(store, t), frame_id=parent),
+        header=_header(store, t, parent),
         child_frame_id=child,
         transform=T["geometry_msgs/msg/Transform"](
             translation=T["geometry_msgs/msg/Vector3"](x=x_m, y=y_m, z=z_m),
@@ -1283,7 +1299,6 @@ def transform_msg(
 def _messages(store: Any, d: Dataset) -> Iterator[tuple[float, str, Any]]:
     """(time, role, message) of a dataset in time order: the inverse of :func:`open_bag`."""
     T = store.types
-    header = T["std_msgs/msg/Header"]
     vec = T["geometry_msgs/msg/Vector3"]
     n = d.config.sonar.n_bins
     range_m = n * d.config.sonar.bin_size_m
@@ -1294,7 +1309,7 @@ def _messages(store: Any, d: Dataset) -> Iterator[tuple[float, str, Any]]:
     sense = d.config.sonar.angle_sense
 
     def head(t: float, frame: str) -> Any:
-        return header(stamp=_stamp_of(store, t), frame_id=frame)
+        return _header(store, t, frame)
 
     items: list[tuple[float, int, str, int]] = []
     items += [(float(t), 0, "imu", i) for i, t in enumerate(d.attitude.t)]
@@ -1433,7 +1448,7 @@ def write_bag(d: Dataset, path: str | Path, kind: str, preset: str | None = None
     if preset not in (None, "caves"):
         raise ValueError(f"bag preset must be None or 'caves', got {preset!r}")
     p = Path(path)
-    store = _typestore()
+    store = _typestore(ros1=kind == "ros1")
     types = {
         "sonar": "sensor_msgs/msg/LaserScan",
         "dvl": "geometry_msgs/msg/TwistWithCovarianceStamped",

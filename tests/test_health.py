@@ -209,6 +209,10 @@ def test_landmarks_created_instead_of_reobserved_are_flagged() -> None:
     report = assess(replace(inputs, landmark_created_s=created, reobserved_s=again))
     assert {i.check for i in report.issues} == {"landmarks"}
     assert report.issues[0].t0_s >= T0 + 960.0
+    # its causes include the IMU's frame convention, which no reader check refuses when the
+    # orientation and the gyro are both NED (issue 32's review)
+    cause = report.issues[0].cause
+    assert "IMU's frame convention" in cause and "[sonar] angle_sense" in cause
 
 
 def _truth_of(tr: Trajectory, rng: np.random.Generator, rho: float = 0.99) -> Trajectory:

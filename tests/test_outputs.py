@@ -315,3 +315,42 @@ def test_provenance_of_a_single_file_source_digests_what_the_run_reads(tmp_path:
     assert count == 5 and total != hashlib.sha256().hexdigest()
     (folder / "log.bin").write_bytes(b"other pings")
     assert dataset_digests(folder / "log.bin", [nav / "bag"])[0] != total
+
+
+def test_the_association_counts_add_up_and_the_nees_is_recorded(runs):
+    """metrics.json's association counters reconcile (docs/outputs.md: every line the landmark
+    layer used is paired or unpaired, every unpaired one seeded a landmark, was dropped with
+    its tentative line or still waits; issue 32's review could not find 2 of 61), and a
+    simulated closed loop records its pose, position and heading NEES against the truth with
+    their chi2 bands (the report computed it; metrics.json had none)."""
+    from sonarslam.slam.eval.consistency import chi2_band, nees_series
+    from sonarslam.slam.io.trajectory import load_run_trajectory
+
+    m = runs["isam2"].metrics
+    assert m["assoc_observations"] > 0 and m["assoc_unpaired"] > 0
+    assert m["assoc_observations"] == m["assoc_associated"] + m["assoc_unpaired"]
+    assert m["assoc_unpaired"] == (
+        m["assoc_seed_observations"]
+        + m["assoc_tentative_dropped_observations"]
+        + m["assoc_tentative_pending_observations"]
+    )
+    assert 0 <= m["assoc_reobservations_skipped"] <= m["assoc_associated"]
+    assert m["assoc_seed_observations"] >= m["assoc_new_landmarks"]
+    assert m["line_features"] >= m["assoc_observations"] + m["assoc_rejected_near"]
+    # the NEES of the run's own trajectory, as the report's nees_series gives it
+    out = runs["isam2"].out_dir
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        truth = truth_trajectory(open_dataset(m["source"]))
+    estimate = load_run_trajectory(out, "isam2")
+    for block, dof in (("pose", 3), ("position", 2), ("heading", 1)):
+        series = nees_series(estimate, truth, block)
+        # (the TUM file holds the poses to its printed digits)
+        assert m[f"nees_{block}_mean"] == pytest.approx(series.mean, rel=1e-3)
+        assert m[f"nees_{block}_in_band_fraction"] == pytest.approx(
+            series.in_band_fraction(), abs=0.01
+        )
+        assert m[f"nees_{block}_band"] == pytest.approx(list(chi2_band(dof)))
+    assert 0.0 < m["nees_pose_mean"] < 50.0
+    # dead reckoning's own covariances (not written to a file) give its NEES too
+    assert runs["dr"].metrics["nees_pose_mean"] > 0.0

@@ -128,7 +128,16 @@ def test_report_table_holds_each_runs_numbers(runs, tmp_path):
     assert truth["state_ahrs_bias_deg"] == pytest.approx(-2.0)  # the harbour's constant bias
     (line,) = [ln for ln in md.splitlines() if ln.startswith("- AHRS heading error (end): ")]
     z = (m["state_ahrs_bias_deg"] - truth["state_ahrs_bias_deg"]) / m["state_ahrs_bias_sd_deg"]
-    assert line.endswith(f"; truth {truth['state_ahrs_bias_deg']:.6g}, error {z:+.1f}σ"), line
+    # the value to the sd's resolution (two significant figures of the sd), never 4.99604e-14
+    from sonarslam.slam.run.report_figures import _decimals, _fixed
+
+    d = _decimals(m["state_ahrs_bias_sd_deg"])
+    assert line == (
+        f"- AHRS heading error (end): {_fixed(m['state_ahrs_bias_deg'], d)} ±"
+        f" {_fixed(m['state_ahrs_bias_sd_deg'], d)} deg (1σ); truth"
+        f" {_fixed(truth['state_ahrs_bias_deg'], d + 1)}, error {z:+.1f}σ"
+    ), line
+    assert "e-" not in line
     # each error band says which covariance model it is: different ones for dr and a closed loop
     from sonarslam.slam.run.report_figures import band_model
 

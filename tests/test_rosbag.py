@@ -113,6 +113,22 @@ def test_a_bag_reads_as_the_directory(kind: str, bags: dict[str, Path], layout: 
     np.testing.assert_allclose(a.poses_wTb, b.poses_wTb, rtol=0, atol=1e-9)
 
 
+def test_a_ros1_bag_carries_ros1_message_definitions(bags: dict[str, Path]) -> None:
+    """A ROS 1 bag's connections hold ROS 1's definitions (a ``Header`` with ``seq``) and their
+    MD5 sums, as ``rosbag`` and ``rostopic`` check them (issue 32's review: the ROS 2 ones were
+    written, ``LaserScan`` 27099baa... instead of ROS 1's 90c7ef2d...)."""
+    from rosbags.rosbag1 import Reader
+
+    with Reader(bags["ros1"]) as reader:
+        conns = {c.msgtype: c for c in reader.connections}
+    scan = conns["sensor_msgs/msg/LaserScan"]
+    assert scan.digest == "90c7ef2dc6895d81024acba2ac42f369"
+    assert "uint32 seq" in scan.msgdef.data
+    # the rest of the ROS 1 standard (Noetic's MD5 sums)
+    assert conns["sensor_msgs/msg/Imu"].digest == "6a62c6daae103f4ff57a132d6f95cec2"
+    assert conns["sensor_msgs/msg/NavSatFix"].digest == "2d3a8cd499b9b4a0249fb98fd05cfa48"
+
+
 def test_info_lists_the_roles_and_run_takes_a_bag(
     bags: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -96,4 +96,6 @@ def test_calibrate_cli_yaw_or_refusal(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "too flat to give a sonar yaw" in err[0], err
     assert "nothing written" in err[0]
+    # a mirrored sonar flattens the objective too: the refusal names it (issue 32's review)
+    assert "[sonar] angle_sense" in err[0]
     assert not refused.exists()

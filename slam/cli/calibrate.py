@@ -195,9 +195,10 @@ def command(args: argparse.Namespace) -> int:
             None,
             f"the map-sharpness objective is too flat to give a sonar yaw (least entropy at "
             f"{math.degrees(result.best_yaw_rad):.2f} deg, {result.verdict()}): the echoes do "
-            "not show the same walls from several places; calibrate on a longer run that passes "
-            f"walls more than once, or try another --window (now {window:g} s); nothing "
-            "written",
+            "not show the same walls from several places, or the sonar is mirrored (a wrong "
+            "[sonar] angle_sense: no yaw then brings its views of a wall together); calibrate on "
+            "a longer run that passes walls more than once, try the other angle_sense, or try "
+            f"another --window (now {window:g} s); nothing written",
         )
     print(
         f"sonar mounting yaw with {args.poses} poses: {math.degrees(result.best_yaw_rad):.2f} deg "

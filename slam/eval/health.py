@@ -68,6 +68,7 @@ from sonarslam.datasets.errors import DataWarning
 from sonarslam.features.geometry import FloatArray, wrap_angle
 from sonarslam.settings import bounded, check_fields
 from sonarslam.slam.eval.consistency import nees_series, window_median_gate
+from sonarslam.slam.eval.loops import LOOP_CAUSES
 from sonarslam.slam.io.trajectory import Trajectory
 
 __all__ = [
@@ -568,7 +569,8 @@ def _check_landmarks(inputs: HealthInputs, cfg: HealthConfig) -> tuple[list[Heal
                 "landmarks",
                 f"{int(new[g].sum())} landmarks created against {int(again[g].sum())}"
                 f" re-observations (share {new[g].sum() / max(new[g].sum() + again[g].sum(), 1):.2f},"
-                f" limit {cfg.landmark_new_share_max:g})",
+                f" limit {cfg.landmark_new_share_max:g}): the map does not re-find its walls"
+                f" ({LOOP_CAUSES})",
                 a,
                 b,
             )

@@ -45,6 +45,7 @@ from sonarslam.features.scans.icp import reference_lines, register, register_fro
 from sonarslam.features.scans.scan import Scan, ScanBuilder
 
 __all__ = [
+    "LOOP_CAUSES",
     "Loop",
     "LoopError",
     "SAMPLE_S",
@@ -56,6 +57,15 @@ __all__ = [
     "odometry_pairs",
     "odometry_check",
 ]
+
+#: Where a loop-closure error, or a map that does not re-find its walls, can come from (the
+#: warnings of ``run`` and of the health monitor's landmark check name them).
+LOOP_CAUSES = (
+    "a wrong mounting or calibration (`sonarslam calibrate`), the sonar's angle sense ([sonar]"
+    " angle_sense), a clock offset ([sonar] time_offset_s), the IMU's frame convention (an"
+    " orientation and gyro both in NED instead of REP-103's ENU turn the vehicle the wrong"
+    " way, and no check refuses them), a diverged run"
+)
 
 #: The estimate is searched for returns at this step (s).
 SAMPLE_S = 2.0
@@ -228,12 +238,22 @@ class OdometryCheck:
     scale : float
         The median of the registration's translation length over dead reckoning's (the sonar's
         range scale over the DVL's, 1 when both are right); NaN without an accepted pair.
+    heading_se_deg : float
+        The standard error of :attr:`heading_deg`: the angles' circular standard deviation
+        over the square root of the accepted pairs (deg); NaN below two.
+    scale_se : float
+        The standard error of :attr:`scale`: ``sqrt(pi / 2)`` (the median's against the mean's
+        for Gaussian samples) times the ratios' robust standard deviation (``1.4826`` times
+        their median absolute deviation: one pair's wrong registration does not inflate it)
+        over the square root of the accepted pairs; NaN below two.
     """
 
     pairs: int
     accepted: int
     heading_deg: float
     scale: float
+    heading_se_deg: float = math.nan
+    scale_se: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -317,7 +337,9 @@ def odometry_pairs(
     mounting: a mounting yaw off by ``e`` turns the sonar's translation by ``-e``, a DVL whose
     velocity is turned by ``-delta`` (a misalignment, or a lateral bias ``delta * speed``) turns
     dead reckoning's by ``-delta``, so :attr:`OdometryPair.angle_rad` measures ``delta - e``;
-    a constant heading error cancels in both relative poses.
+    a constant heading error cancels in both relative poses. A mirrored sonar (``[sonar]
+    angle_sense`` flipped) mirrors each scan about the head's zero direction: when that zero
+    lies along the direction of travel the mirrored motion is the same, and no pair sees it.
     """
     config = config or ScanConfig()
     span = dataset.sonar_span_s
@@ -371,9 +393,11 @@ def odometry_check(
     """Register pairs of scans ``step_m`` apart along dead reckoning's path and compare the
     sonar's relative pose with dead reckoning's (GPS-free): :func:`odometry_pairs` summed up.
 
-    A DVL mounted the wrong way round, or a sonar mirrored, turns
-    :attr:`OdometryCheck.heading_deg` far from 0; the sonar's range scale against the DVL's
-    moves :attr:`OdometryCheck.scale` from 1.
+    A DVL mounted the wrong way round, or a sonar mounted at another yaw than ``[mounting.sonar]
+    yaw_deg`` says, turns :attr:`OdometryCheck.heading_deg` from 0 by that angle (a mirrored
+    sonar need not: :func:`odometry_pairs`); the sonar's range scale against the DVL's moves
+    :attr:`OdometryCheck.scale` from 1. The standard errors are the pairs' spread over the
+    square root of their number (the scale's from their median absolute deviation).
     """
     pairs = odometry_pairs(dataset, dead_reckoning, step_m, n_pairs, config)
     done = [p for p in pairs if p.sonar is not None]
@@ -381,6 +405,14 @@ def odometry_check(
         return OdometryCheck(len(pairs), 0, math.nan, math.nan)
     angles = [p.angle_rad for p in done]
     mean = math.atan2(float(np.mean(np.sin(angles))), float(np.mean(np.cos(angles))))
+    accepted = len(done)
+    ratios = [p.scale for p in done]
+    heading_se = scale_se = math.nan
+    if accepted >= 2:
+        spread = wrap_angle(np.asarray(angles) - mean)
+        heading_se = math.degrees(float(np.std(spread, ddof=1)) / math.sqrt(accepted))
+        mad = float(np.median(np.abs(np.asarray(ratios) - np.median(ratios))))
+        scale_se = math.sqrt(math.pi / 2.0) * 1.4826 * mad / math.sqrt(accepted)
     return OdometryCheck(
-        len(pairs), len(done), math.degrees(mean), float(np.median([p.scale for p in done]))
+        len(pairs), accepted, math.degrees(mean), float(np.median(ratios)), heading_se, scale_se
     )

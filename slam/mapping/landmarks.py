@@ -241,6 +241,10 @@ class LandmarkMap:
             "rejected_near": 0,
             "merged": 0,
             "reobservations_skipped": 0,
+            "unpaired": 0,
+            "seed_observations": 0,
+            "tentative_dropped_observations": 0,
+            "tentative_pending_observations": 0,
         }
         #: (t, observation index in its vote, landmark id or None) of every used observation
         self.association_log: list[tuple[float, int, int | None]] = []
@@ -344,7 +348,12 @@ class LandmarkMap:
         new: list[NewLandmark] = []
         for i, j in enumerate(pairing):
             if j is None:
+                self.stats["unpaired"] += 1
                 ids[i] = self._new_line(belief, use[i], new)
+        # observations = associated + unpaired; unpaired = seed + dropped + pending observations
+        self.stats["tentative_pending_observations"] = sum(
+            len(c.observations) for c in self.tentative
+        )
         # a skipped re-observation was still seen: it grows the extent
         self._growth = [(lm.id, f.endpoints_r) for lm, f in paired]
         self._touched = sorted({i for i in ids if i is not None})
@@ -417,6 +426,9 @@ class LandmarkMap:
         R = np.asarray(f.cov) * cfg.line_cov_scale
         kept = [c for c in self.tentative if f.t - c.t <= cfg.tentative_max_age_s]
         self.stats["tentative_dropped"] += len(self.tentative) - len(kept)
+        self.stats["tentative_dropped_observations"] += sum(
+            len(c.observations) for c in self.tentative if c not in kept
+        )
         self.tentative = kept
         for cand in self.tentative:
             if cfg.side_gate and sonar_side(wTb, cand.line_w, self.bTs)[0] != cand.side:
@@ -512,6 +524,7 @@ class LandmarkMap:
         new.append(NewLandmark(lm.id, line_w, cand.observations))
         self.seed_log.extend((f, lm.id) for _, f in cand.observations[:-1])
         self.stats["new_landmarks"] += 1
+        self.stats["seed_observations"] += len(cand.observations)
         return lm.id
 
     # -- duplicates ------------------------------------------------------------------------

@@ -19,6 +19,7 @@ import numpy as np
 
 from sonarslam.datasets.source import Dataset
 from sonarslam.slam.eval.ate import AteResult, ate_against_gps, ate_against_truth
+from sonarslam.slam.eval.consistency import COMPONENTS, NeesSeries, chi2_band, nees_series
 from sonarslam.slam.eval.loops import Loop, LoopError, OdometryCheck
 from sonarslam.slam.eval.sharpness import trajectory_sharpness
 from sonarslam.slam.eval.truth import AssociationScores, association_against_truth, truth_trajectory
@@ -58,6 +59,10 @@ class TrajectoryFigures:
         Simulated data: against the truth.
     map_entropy_nats : float or None
         The map's entropy projected with the trajectory (:mod:`sonarslam.slam.eval.sharpness`).
+    nees : dict of str to NeesSeries
+        Simulated data, the run's own trajectory with covariances: its NEES against the truth
+        by block (``pose``, ``position``, ``heading``;
+        :func:`sonarslam.slam.eval.consistency.nees_series`).
     """
 
     KEYS: ClassVar[tuple[str, ...]] = (
@@ -83,6 +88,9 @@ class TrajectoryFigures:
         "ate_sonar_aligned_<name>_*",
         "ate_truth_<name>_*",
         "ate_truth_aligned_<name>_*",
+        "nees_{pose,position,heading}_mean",
+        "nees_{pose,position,heading}_in_band_fraction",
+        "nees_{pose,position,heading}_band",
     )
 
     name: str
@@ -94,6 +102,18 @@ class TrajectoryFigures:
     ate_truth: AteResult | None = None
     ate_truth_aligned: AteResult | None = None
     map_entropy_nats: float | None = None
+    nees: Mapping[str, NeesSeries] = field(default_factory=dict)
+
+    def nees_json(self) -> dict[str, JsonValue]:
+        """Each NEES block's mean over the run's samples, the share of samples inside the
+        two-sided 95 % band of chi2(dof) and that band (a consistent estimate's mean is dof)."""
+        out: dict[str, JsonValue] = {}
+        for block, series in self.nees.items():
+            lo, hi = chi2_band(series.dof)
+            out[f"nees_{block}_mean"] = _finite(series.mean)
+            out[f"nees_{block}_in_band_fraction"] = series.in_band_fraction()
+            out[f"nees_{block}_band"] = [lo, hi]
+        return out
 
     def whole_json(self) -> dict[str, JsonValue]:
         """The whole run's ATE: every figure for the run's own trajectory, mean and max for
@@ -325,6 +345,8 @@ class LoopFigures:
         "odometry_check_accepted",
         "odometry_check_heading_deg",
         "odometry_check_scale",
+        "odometry_check_heading_se_deg",
+        "odometry_check_scale_se",
     )
 
     radius_m: float
@@ -376,6 +398,8 @@ class LoopFigures:
             out["odometry_check_accepted"] = self.odometry.accepted
             out["odometry_check_heading_deg"] = _finite(self.odometry.heading_deg)
             out["odometry_check_scale"] = _finite(self.odometry.scale)
+            out["odometry_check_heading_se_deg"] = _finite(self.odometry.heading_se_deg)
+            out["odometry_check_scale_se"] = _finite(self.odometry.scale_se)
         return out
 
 
@@ -439,6 +463,7 @@ class RunMetrics:
             "start_pose": self.start_pose,
             **self.trajectory.whole_json(),
             **self.trajectory.span_json(),
+            **self.trajectory.nees_json(),
             **self.data.to_json(),
         }
         if self.closed_loop is not None:
@@ -492,12 +517,15 @@ def trajectory_figures(dataset: Dataset, trajectory: Trajectory, name: str) -> T
             ate_against_gps(trajectory, gps, span, align=True),
         )
     truth_figures: tuple[AteResult | None, AteResult | None] = (None, None)
+    nees: dict[str, NeesSeries] = {}
     if dataset.truth is not None:
         truth = truth_trajectory(dataset)
         truth_figures = (
             ate_against_truth(trajectory, truth),
             ate_against_truth(trajectory, truth, align=True),
         )
+        if not name and trajectory.covs is not None:
+            nees = {block: nees_series(trajectory, truth, block) for block in COMPONENTS}
     return TrajectoryFigures(
         name=name,
         ate=ate_against_gps(trajectory, gps) if gps is not None else None,
@@ -508,6 +536,7 @@ def trajectory_figures(dataset: Dataset, trajectory: Trajectory, name: str) -> T
         ate_truth=truth_figures[0],
         ate_truth_aligned=truth_figures[1],
         map_entropy_nats=_sharpness(dataset, trajectory),
+        nees=nees,
     )
 
 

@@ -7,6 +7,7 @@ real run, the GPS fixes.
 
 from __future__ import annotations
 
+import math
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -166,6 +167,19 @@ _CALIBRATION = (
 )
 
 
+def _decimals(sd: float) -> int:
+    """Decimals that show ``sd`` to two significant figures (0 from 10 up, 3 for 0.012)."""
+    if not (math.isfinite(sd) and sd > 0.0):
+        return 6
+    return max(0, 1 - math.floor(math.log10(sd)))
+
+
+def _fixed(v: float, decimals: int) -> str:
+    """``v`` to ``decimals``, without the sign of a value that rounds to zero."""
+    text = f"{v:.{decimals}f}"
+    return text[1:] if text.startswith("-") and float(text) == 0.0 else text
+
+
 def calibration_lines(run: RunData) -> list[str]:
     """One Markdown list item per calibration estimate of the run's ``metrics.json``, with its
     sd, and on simulated data the truth and the error in sigmas
@@ -178,9 +192,14 @@ def calibration_lines(run: RunData) -> list[str]:
     for label, key, sd, unit in _CALIBRATION:
         if key not in m or sd not in m:
             continue
-        text = f"- {label}: {m[key]:.6g} ± {m[sd]:.2g} {unit} (1σ)".replace("  ", " ")
+        d = _decimals(float(m[sd]))
+        text = f"- {label}: {_fixed(m[key], d)} ± {_fixed(m[sd], d)} {unit} (1σ)"
+        text = text.replace("  ", " ")
         if key in truth:
-            text += f"; truth {truth[key]:.6g}, error {calibration_sigmas(m, truth, key):+.1f}σ"
+            text += (
+                f"; truth {_fixed(truth[key], d + 1)}, error"
+                f" {calibration_sigmas(m, truth, key):+.1f}σ"
+            )
         in_map = truth.get("dvl_scale_in_sonar_map")
         untold = key == "state_dvl_scale" and "state_sonar_range_scale" not in m
         if untold and in_map is not None and in_map != truth[key]:

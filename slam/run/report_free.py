@@ -3,7 +3,9 @@
 A run without GPS has no ATE; ``sonarslam run`` measured instead the loop-closure error of its
 estimate and of dead reckoning at the loops stated (``--loop``) and found
 (:mod:`sonarslam.slam.eval.loops`), and the map's entropy; on simulated data also the ATE
-against the truth. This section tables them per dataset and draws, per dataset, the runs'
+against the truth (as it is and rigidly aligned) and the pose NEES. This section tables them
+per dataset, lists each run's health verdict (:mod:`sonarslam.slam.eval.health`, GPS-free) and
+its odometry check (dead reckoning's motion against the sonar's), and draws, per dataset, the runs'
 trajectories with their loops (each loop a segment between the estimate's positions at its two
 times; the loops are the first run's) beside each run's own ``report.png`` and ``map.png``.
 """
@@ -18,7 +20,16 @@ from typing import Any
 
 from matplotlib.figure import Figure
 
-from sonarslam.slam.io.trajectory import GPS_FILE, Trajectory, read_tum, trajectory_stem
+from sonarslam.slam.eval.consistency import nees_series
+from sonarslam.slam.io.trajectory import (
+    GPS_FILE,
+    TRUTH_FILE,
+    Trajectory,
+    load_run_trajectory,
+    read_tum,
+    trajectory_stem,
+)
+from sonarslam.slam.run.run import odometry_line
 
 __all__ = ["is_gps_free", "GpsFreeRun", "load_gps_free", "gps_free_section"]
 
@@ -35,6 +46,9 @@ COLUMNS = [
     ("loop_error_dr_max_m", "max"),
     ("map_entropy_nats", "map entropy (nats)"),
     ("ate_truth_mean_m", "vs truth: ATE mean (m)"),
+    ("ate_truth_aligned_mean_m", "aligned mean"),
+    ("nees_pose_mean", "pose NEES mean (3 dof)"),
+    ("nees_pose_in_band_fraction", "NEES in 95 % band"),
 ]
 
 
@@ -74,15 +88,42 @@ def load_gps_free(run_dir: str | Path) -> GpsFreeRun:
     tum = run / f"{stem}.tum"
     if not tum.is_file():
         raise FileNotFoundError(f"{run}: no {tum.name} (not a run directory of sonarslam run)")
-    return GpsFreeRun(run, metrics, read_tum(tum))
+    trajectory = load_run_trajectory(run, stem)
+    if (
+        "nees_pose_mean" not in metrics
+        and (run / TRUTH_FILE).is_file()
+        and trajectory.covs is not None
+    ):
+        # a run written before metrics.json held the NEES: from its truth.tum and covariances
+        pose = nees_series(trajectory, read_tum(run / TRUTH_FILE), "pose")
+        metrics = {
+            **metrics,
+            "nees_pose_mean": pose.mean,
+            "nees_pose_in_band_fraction": pose.in_band_fraction(),
+        }
+    return GpsFreeRun(run, metrics, trajectory)
 
 
-def _fmt(v: Any) -> str:
+def _fmt(v: Any, key: str = "") -> str:
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
         return ""
+    if key.endswith("_fraction"):
+        return f"{100 * v:.0f} %"
     if isinstance(v, float):
         return f"{v:.2f}"
     return str(v)
+
+
+def _run_lines(run: GpsFreeRun) -> list[str]:
+    """The run's health verdict and odometry check, as its terminal printed them."""
+    m = run.metrics
+    lines = []
+    if isinstance(m.get("health_line"), str):
+        lines.append(f"- `{run.name}`: {m['health_line']}")
+    odometry = odometry_line(m)
+    if odometry:
+        lines.append(f"- `{run.name}`: {odometry}")
+    return lines
 
 
 def _figure(dataset: str, runs: list[GpsFreeRun], path: Path) -> Path:
@@ -122,7 +163,9 @@ def gps_free_section(
         " the same loops against the same references; slam/eval/loops.py) of each run's"
         " estimate and of dead reckoning at those loops, the references' own 1σ (their"
         " registrations' covariance: a floor under the errors), the map's entropy (lower is"
-        " sharper), and against the truth on simulated data.",
+        " sharper), and against the truth on simulated data (the ATE as it is and rigidly aligned,"
+        " the pose NEES: chi2(3) samples when consistent, mean 3, the share inside their two-sided"
+        " 95 % band).",
         "",
     ]
     figures: list[Path] = []
@@ -142,8 +185,17 @@ def gps_free_section(
                 "method": r.metrics.get("backend"),
             }
             rows.append(row)
-            md.append("| " + " | ".join(_fmt(row.get(k)) for k, _ in COLUMNS) + " |")
+            md.append("| " + " | ".join(_fmt(row.get(k), k) for k, _ in COLUMNS) + " |")
         md.append("")
+        checks = [line for r in group for line in _run_lines(r)]
+        if checks:
+            md += [
+                "Health (GPS-free: each run against its own model) and the odometry check (dead"
+                " reckoning's motion against the sonar's registrations of nearby scans):",
+                "",
+                *checks,
+                "",
+            ]
         fig = _figure(dataset, group, out / f"loops_{dataset}.png")
         figures.append(fig)
         md += [f"![{fig.stem}]({fig.name})", ""]

@@ -12,6 +12,7 @@ sensor; the ATE is taken at every GPS fix inside the trajectory's span, with no 
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from dataclasses import dataclass, field, fields, is_dataclass, replace
@@ -27,6 +28,8 @@ from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.settings import SettingError
 from sonarslam.slam.backends.registry import BACKENDS, backend_spec
 from sonarslam.slam.eval.loops import (
+    LOOP_CAUSES,
+    LoopError,
     OdometryCheck,
     find_loops,
     loop_errors,
@@ -69,6 +72,7 @@ __all__ = [
     "summary_line",
     "smoothed_lines",
     "results_table",
+    "odometry_line",
 ]
 
 #: Back ends that are pose sources, not estimators with settings.
@@ -478,23 +482,84 @@ ODOMETRY_STEP_SHARE = 0.1
 #: (deg) over at least :data:`ODOMETRY_MIN_PAIRS` registrations.
 ODOMETRY_MAX_ANGLE_DEG = 45.0
 ODOMETRY_MIN_PAIRS = 3
+#: The softer level: a mean angle beyond this (deg), or a length ratio further from 1 than
+#: :func:`odometry_scale_tolerance`, each also beyond :data:`ODOMETRY_SOFT_SE` of its own
+#: standard errors, over at least :data:`ODOMETRY_SOFT_MIN_PAIRS` registrations (docs/outputs.md
+#: gives the spread measured on correct simulated runs).
+ODOMETRY_SOFT_ANGLE_DEG = 4.0
+ODOMETRY_SOFT_SCALE = 0.03
+ODOMETRY_SOFT_SE = 3.0
+ODOMETRY_SOFT_MIN_PAIRS = 4
+#: Where a wrong direction of motion can come from, named in the odometry check's warnings.
+_ODOMETRY_CAUSES = (
+    "the sonar's mounting yaw ([mounting.sonar] yaw_deg: it turns every registration, hence the"
+    " motion the sonar measures; `sonarslam calibrate` estimates it), the DVL's mounting yaw"
+    " ([mounting.dvl] yaw_deg) or its axes' signs, or the sonar's angle sense ([sonar]"
+    " angle_sense: a mirror turns the motion only where the head's zero is not along the"
+    " travel)"
+)
+
+
+def odometry_scale_tolerance(dataset: Dataset) -> float:
+    """How far from 1 the odometry check's length ratio may lie before the softer warning:
+    :data:`ODOMETRY_SOFT_SCALE` and three of the DVL scale error's sd the dataset states
+    (``[noise] dvl_scale_sigma``: a scale error told, which the run estimates), added in
+    quadrature."""
+    told = float(dataset.config.noise.dvl_scale_sigma)
+    return math.hypot(ODOMETRY_SOFT_SCALE, 3.0 * told)
 
 
 def _warn_odometry(dataset: Dataset, check: OdometryCheck) -> None:
     """Warn when the sonar sees the vehicle move another way than dead reckoning does: without
-    GPS nothing else would show a DVL mounted the wrong way round (the estimate follows it and
-    stays consistent with itself)."""
-    if check.accepted < ODOMETRY_MIN_PAIRS or abs(check.heading_deg) <= ODOMETRY_MAX_ANGLE_DEG:
+    GPS nothing else would show a DVL or sonar mounted the wrong way round (the estimate
+    follows it and stays consistent with itself). Two levels: beyond
+    :data:`ODOMETRY_MAX_ANGLE_DEG` (a mounting the wrong way round), and the softer one
+    (:data:`ODOMETRY_SOFT_ANGLE_DEG`, :func:`odometry_scale_tolerance`, each beyond
+    :data:`ODOMETRY_SOFT_SE` standard errors: a mounting some degrees off, a range or DVL
+    scale some per cent off)."""
+    if check.accepted < ODOMETRY_MIN_PAIRS or not math.isfinite(check.heading_deg):
         return
-    warnings.warn(
-        f"{dataset.root}: the sonar sees the vehicle move {check.heading_deg:+.0f} deg away from"
-        f" where dead reckoning moves it ({check.accepted} registrations of scans a few metres"
-        " apart): the DVL's mounting yaw ([mounting.dvl] yaw_deg) or its axes' signs, or the"
-        " sonar's angle sense ([sonar] angle_sense), is likely wrong; every estimate of this"
-        " run follows dead reckoning's motion",
-        UserWarning,
-        stacklevel=3,
+    seen = (
+        f"({check.accepted} registrations of scans a few metres apart, standard error"
+        f" {check.heading_se_deg:.1f} deg)"
     )
+    if abs(check.heading_deg) > ODOMETRY_MAX_ANGLE_DEG:
+        warnings.warn(
+            f"{dataset.root}: the sonar sees the vehicle move {check.heading_deg:+.0f} deg away"
+            f" from where dead reckoning moves it {seen}: one of {_ODOMETRY_CAUSES} is likely wrong;"
+            " every estimate of this run follows dead reckoning's motion",
+            UserWarning,
+            stacklevel=3,
+        )
+        return
+    if check.accepted < ODOMETRY_SOFT_MIN_PAIRS:
+        return
+    found = []
+    angle, se = check.heading_deg, check.heading_se_deg
+    if abs(angle) > ODOMETRY_SOFT_ANGLE_DEG and abs(angle) > ODOMETRY_SOFT_SE * se:
+        found.append(
+            f"the sonar sees the vehicle move {angle:+.1f} ± {se:.1f} deg away from where dead"
+            f" reckoning moves it: check {_ODOMETRY_CAUSES}"
+        )
+    scale, scale_se = check.scale, check.scale_se
+    if (
+        math.isfinite(scale)
+        and abs(scale - 1.0) > odometry_scale_tolerance(dataset)
+        and abs(scale - 1.0) > ODOMETRY_SOFT_SE * scale_se
+    ):
+        found.append(
+            f"the sonar's lengths are x{scale:.3f} ± {scale_se:.3f} dead reckoning's: check the"
+            " sonar's range ([sonar] bin_size_m; isam2.range_scale_sigma estimates its scale)"
+            " and the DVL's scale ([noise] dvl_scale_sigma lets the run estimate it; allowed"
+            f" here: {odometry_scale_tolerance(dataset):.3f})"
+        )
+    if found:
+        warnings.warn(
+            f"{dataset.root}: dead reckoning against the sonar ({check.accepted} registrations"
+            f" of scans a few metres apart): {'; '.join(found)}",
+            UserWarning,
+            stacklevel=3,
+        )
 
 
 def loop_figures(
@@ -523,20 +588,34 @@ def loop_figures(
         estimates["dr"] = dr
     errors = {name: loop_errors(tr, loops) for name, tr in estimates.items()}
     figures = LoopFigures(radius_m, loops, errors, searched, odometry)
+    _warn_loops(dataset, result.backend, errors, radius_m)
+    return figures
+
+
+def _warn_loops(
+    dataset: Dataset, backend: str, errors: dict[str, list[LoopError]], radius_m: float
+) -> None:
+    """One warning for the loops at which estimates disagree with the sonar's map by more than
+    ``radius_m``, naming every such estimate (the run's, its other ones, dead reckoning)."""
+    t0 = dataset.nav_span_s[0]
+    over = []
     for name, errs in errors.items():
         worst = max(errs, key=lambda e: e.position_m, default=None)
         if worst is not None and worst.position_m > radius_m:
-            t0 = dataset.nav_span_s[0]
-            warnings.warn(
-                f"{dataset.root}: {result.backend}{' ' + name if name else ''}'s loop-closure"
-                f" error {worst.position_m:.1f} m at the loop {worst.loop.t0_s - t0:.0f} s -"
-                f" {worst.loop.t1_s - t0:.0f} s exceeds the {radius_m:.0f} m the loops were"
-                " searched within: the estimate disagrees with the sonar's map there (a wrong"
-                " mounting or calibration, a diverged run; `sonarslam calibrate`)",
-                UserWarning,
-                stacklevel=2,
+            own = name or backend  # the run's own estimate has no name
+            label = "dead reckoning" if own == "dr" else f"{backend} {name}" if name else backend
+            over.append(
+                f"{label}'s {worst.position_m:.1f} m at the loop {worst.loop.t0_s - t0:.0f} s -"
+                f" {worst.loop.t1_s - t0:.0f} s"
             )
-    return figures
+    if over:
+        warnings.warn(
+            f"{dataset.root}: loop-closure error beyond the {radius_m:.0f} m the loops were"
+            f" searched within: {'; '.join(over)}: the estimate disagrees with the sonar's map"
+            f" there ({LOOP_CAUSES})",
+            UserWarning,
+            stacklevel=3,
+        )
 
 
 def loop_line(metrics: dict[str, Any]) -> str:
@@ -574,19 +653,31 @@ def loop_line(metrics: dict[str, Any]) -> str:
 
 
 def _odometry_part(metrics: dict[str, Any]) -> str:
+    line = odometry_line(metrics)
+    return f"; {line}" if line else ""
+
+
+def odometry_line(metrics: dict[str, Any]) -> str:
     """The odometry check of a run without GPS (``metrics.json`` ``odometry_check_*``), or ""."""
     accepted = metrics.get("odometry_check_accepted")
     if accepted is None:
         return ""
     pairs = metrics["odometry_check_pairs"]
     if not accepted:
-        return f"; dead reckoning against the sonar: no registration of {pairs} accepted"
+        return f"dead reckoning against the sonar: no registration of {pairs} accepted"
     return (
-        f"; dead reckoning against the sonar ({accepted} of {pairs} registrations of scans a"
+        f"dead reckoning against the sonar ({accepted} of {pairs} registrations of scans a"
         " few metres apart): its"
-        f" motion {metrics['odometry_check_heading_deg']:+.1f} deg off the sonar's, lengths"
-        f" x{metrics['odometry_check_scale']:.3f}"
+        f" motion {metrics['odometry_check_heading_deg']:+.1f}{_se(metrics, 'heading_se_deg', 1)}"
+        f" deg off the sonar's, lengths x{metrics['odometry_check_scale']:.3f}"
+        f"{_se(metrics, 'scale_se', 3)}"
     )
+
+
+def _se(metrics: dict[str, Any], key: str, digits: int) -> str:
+    """`` ± <standard error>`` of an odometry-check figure, or "" (older runs, one pair)."""
+    v = metrics.get(f"odometry_check_{key}")
+    return "" if v is None else f" ± {v:.{digits}f}"
 
 
 def summary_line(metrics: dict[str, Any]) -> str:
