@@ -199,8 +199,9 @@ class GateConfig:
         as one without bottom lock (the motion model holds the last good velocity).
     dvl_spike_sigmas : float
         A valid DVL velocity farther than this many times the DVL's scatter from both its
-        valid neighbours' (the run's own: the MAD of successive differences, at least
-        ``[noise] dvl_sigma_mps``) is an isolated spike: taken as without bottom lock
+        valid neighbours' (the run's own about the row: the median of 61 successive
+        differences, at least ``[noise] dvl_sigma_mps``) is an isolated spike: taken as
+        without bottom lock
         (:func:`sonarslam.datasets.gates.gate_dvl`); 0 turns the check off.
     ahrs_max_jump_deg : float
         An AHRS heading that differs from the last good one turned by the gyro's integral by
