@@ -225,7 +225,7 @@ def gated_dataset(
     (the dataset holds views of them)."""
     report = SensorReport()
     gates = config.gates
-    dvl = gate_dvl(dvl, gates, report)
+    dvl = gate_dvl(dvl, gates, report, config.noise.dvl_sigma_mps)
     attitude = gate_attitude(attitude, gates, report)
     check_overlap(root, dvl, attitude)
     gated_gps = gate_gps(gps, gates, report) if gps is not None else None

@@ -56,6 +56,7 @@ radians in the objects)::
 
     [gates]                 # plausibility of the sensors' samples (datasets/gates.py)
     dvl_max_speed_mps = 3.0 # a faster DVL velocity is a spike: the row counts as no lock
+    dvl_spike_sigmas = 12.0 # a velocity this many DVL scatters off both neighbours: a spike
     ahrs_max_jump_deg = 10.0      # a heading change the gyro does not explain by more ...
     ahrs_jump_drift_deg_per_s = 1.0     # ... (plus this per second since the last good sample)
     ahrs_max_rate_deg_per_s = 600.0     # a faster gyro rate is a spike: the sample is dropped
@@ -196,6 +197,12 @@ class GateConfig:
     dvl_max_speed_mps : float
         A DVL bottom velocity faster than this (m/s, horizontal) is a spike: the row is taken
         as one without bottom lock (the motion model holds the last good velocity).
+    dvl_spike_sigmas : float
+        A valid DVL velocity farther than this many times the DVL's scatter from both its
+        valid neighbours' (the run's own about the row: the median of 61 successive
+        differences, at least ``[noise] dvl_sigma_mps``) is an isolated spike: taken as
+        without bottom lock
+        (:func:`sonarslam.datasets.gates.gate_dvl`); 0 turns the check off.
     ahrs_max_jump_deg : float
         An AHRS heading that differs from the last good one turned by the gyro's integral by
         more than this (deg), plus ``ahrs_jump_drift_deg_per_s`` per second since that sample, is a
@@ -217,6 +224,7 @@ class GateConfig:
     """
 
     dvl_max_speed_mps: float = bounded(3.0, 0.0, 100.0, low_open=True)
+    dvl_spike_sigmas: float = bounded(12.0, 0.0, 1e4)
     ahrs_max_jump_deg: float = bounded(10.0, 0.0, 180.0, low_open=True)
     ahrs_jump_drift_deg_per_s: float = bounded(1.0, 0.0, 360.0)
     ahrs_max_rate_deg_per_s: float = bounded(600.0, 0.0, 1e4, low_open=True)

@@ -12,6 +12,8 @@ fault                                  what happens
 =====================================  =======================================================
 repeated stamp (DVL, AHRS, GPS)        the later rows of a stamp are dropped
 DVL speed > ``dvl_max_speed_mps``      the row is flagged as without bottom lock
+DVL velocity ``dvl_spike_sigmas``      the row is flagged as without bottom lock
+scatters off both neighbours
 AHRS rate > ``ahrs_max_rate_deg_per_s``      the sample is dropped
 AHRS heading jump the gyro does        the sample is dropped (judged against the last good
 not explain                            sample turned by the gyro's integral since)
@@ -47,6 +49,7 @@ __all__ = [
     "gate_attitude",
     "gate_gps",
     "gate_beams",
+    "dvl_spikes",
 ]
 
 #: Neighbours of a GPS fix: those within this time (s).
@@ -226,8 +229,65 @@ def _compact(keep: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
     return tuple(x[:w] for x in arrays)
 
 
-def gate_dvl(dvl: DvlSeries, gates: GateConfig, report: SensorReport) -> DvlSeries:
-    """Drop repeated stamps; flag rows faster than ``dvl_max_speed_mps`` as without lock.
+#: The DVL's scatter at a row is the one of this many successive differences about it.
+DVL_SCATTER_WINDOW = 61
+#: The median norm of the difference of two samples of 2-D white noise of 1-sigma ``s`` per
+#: axis is ``2 sqrt(ln 2) s`` (a Rayleigh of scale ``sqrt(2) s``).
+RAYLEIGH_MEDIAN_PER_SIGMA = 2.0 * math.sqrt(math.log(2.0))
+
+
+def dvl_spikes(
+    t_s: FloatArray, v_mps: FloatArray, valid: np.ndarray, gates: GateConfig, floor_mps: float
+) -> tuple[np.ndarray, FloatArray, FloatArray]:
+    """Isolated velocity spikes among the valid DVL rows: ``(spike (N,) bool, sigma (N,) m/s,
+    off (N,) m/s)``.
+
+    ``sigma`` is the DVL's scatter per axis at each valid row, the run's own and local: the
+    median norm of the :data:`DVL_SCATTER_WINDOW` successive differences of the valid
+    velocities about it over :data:`RAYLEIGH_MEDIAN_PER_SIGMA` (robust to the spike itself; a
+    DVL that degrades raises it where it does), at least ``floor_mps`` (``[noise]
+    dvl_sigma_mps``). A valid row whose velocity is farther than ``dvl_spike_sigmas * sigma``
+    (horizontal norm) from both its valid neighbours', each within a gap's time
+    (``gap_periods`` median periods, at least ``min_gap_s``), is a spike; ``off`` is the
+    smaller of the two distances (0 where not judged). A step of the velocity (a real
+    acceleration) leaves one neighbour near: not a spike. White noise of ``sigma`` per axis is
+    that far from one neighbour with chance ``exp(-k^2 / 4)`` (``k`` the sigmas).
+    """
+    n = t_s.size
+    spike = np.zeros(n, dtype=bool)
+    off = np.zeros(n)
+    sigma = np.full(n, np.nan)
+    idx = np.flatnonzero(valid)
+    if idx.size < 3 or gates.dvl_spike_sigmas <= 0.0:
+        return spike, sigma, off
+    d = np.diff(v_mps[idx], axis=0)  # (M - 1, 2)
+    jump = np.hypot(d[:, 0], d[:, 1])
+    del d
+    half = DVL_SCATTER_WINDOW // 2
+    padded = np.pad(jump, half, mode="edge")
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1)
+    local = np.empty(jump.size)
+    for a in range(0, jump.size, BLOCK):
+        local[a : a + BLOCK] = np.median(windows[a : a + BLOCK], axis=1)
+    del padded, windows
+    # row idx[j] (1 <= j <= M - 2) lies between differences j - 1 and j
+    row_sigma = np.maximum(np.maximum(local[:-1], local[1:]) / RAYLEIGH_MEDIAN_PER_SIGMA, floor_mps)
+    dt = np.diff(t_s[idx])
+    near = dt <= max(gates.gap_periods * float(np.median(dt)), gates.min_gap_s)
+    judged = near[:-1] & near[1:]
+    least = np.where(judged, np.minimum(jump[:-1], jump[1:]), 0.0)
+    off[idx[1:-1]] = least
+    sigma[idx[1:-1]] = row_sigma
+    spike[idx[1:-1]] = least > gates.dvl_spike_sigmas * row_sigma
+    return spike, sigma, off
+
+
+def gate_dvl(
+    dvl: DvlSeries, gates: GateConfig, report: SensorReport, noise_sigma_mps: float = 0.0
+) -> DvlSeries:
+    """Drop repeated stamps; flag rows faster than ``dvl_max_speed_mps``, and isolated
+    velocity spikes (:func:`dvl_spikes`, whose scatter is at least ``noise_sigma_mps``, the
+    ``[noise] dvl_sigma_mps``), as without lock.
 
     In place: the series' arrays are compacted and its ``valid`` cleared where flagged, and the
     series returned holds views of them (give it arrays it may change)."""
@@ -258,6 +318,23 @@ def gate_dvl(dvl: DvlSeries, gates: GateConfig, report: SensorReport) -> DvlSeri
             f" without bottom lock (first at t={first:.3f} s)",
         )
         valid &= ~fast
+    del fast
+    spike, sigma, off = dvl_spikes(t, v, valid, gates, noise_sigma_mps)
+    n_spike = int(spike.sum())
+    report.counts["dvl_velocity_spikes"] = n_spike
+    if n_spike:
+        i = int(np.flatnonzero(spike)[0])
+        _warn(
+            dvl.path,
+            "DVL",
+            f"{n_spike} row(s) whose velocity is more than {gates.dvl_spike_sigmas:g} times the"
+            f" DVL's scatter off both neighbours taken as without bottom lock"
+            f" (first at t={float(t[i]):.3f} s, {float(off[i]):.3g} m/s off, the scatter there"
+            f" {float(sigma[i]):.3g} m/s; [gates]"
+            " dvl_spike_sigmas)",
+        )
+        valid &= ~spike
+    del spike, sigma, off
     out = DvlSeries(t, v, valid, heading, dvl.path)
     report.gaps["dvl"] = _warn_gaps(
         dvl.path,

@@ -43,7 +43,10 @@ counted :class:`DataWarning`): no topic for the sonar, DVL or IMU; a topic of ``
 missing or of a type that cannot play its role; a type with no definition; a message that
 cannot be decoded or a bag cut short; a stamp that jumps against the bag's own clock by more
 than :data:`CLOCK_JUMP_S` (an error); a stamp earlier than the one before within that (counted
-``fault_<role>_out_of_order``, the messages sorted); a beam of another bin count than the first.
+``fault_<role>_out_of_order``, the messages sorted); a beam of another bin count than the first;
+a beam angle read as radians beyond 2 pi or not finite (the ROS 1 ``ping360_sonar`` node's
+``SonarEcho.angle`` in gradians 0-399, a ``LaserScan`` in degrees) or a ``SonarPing360`` angle
+outside 0-399 gradians, at its first such message.
 """
 
 from __future__ import annotations
@@ -582,19 +585,55 @@ def _field(msg: Any, *names: str) -> Any:
 REP103_SONAR_TYPES = ("sensor_msgs/msg/LaserScan", "marine_acoustic_msgs/msg/ProjectedSonarImage")
 
 
+#: Beam angle fields read as radians, by sonar type: a value beyond 2 pi in magnitude (or not
+#: finite) is refused, naming the unit slip (:func:`_checked_radians`).
+_RADIAN_ANGLE_FIELDS = {
+    "sensor_msgs/msg/LaserScan": "angle_min",
+    "ping360_sonar/msg/SonarEcho": "angle",
+}
+
+
+def _checked_radians(msgtype: str, angle: float) -> float:
+    """``angle`` (rad) of a beam message, or a ValueError naming its field and the likely unit
+    when it is not finite or beyond 2 pi in magnitude: the ROS 1 ``ping360_sonar`` node
+    publishes ``SonarEcho.angle`` in gradians (0-399, its ``node.py``: ``msg.angle = angle``)
+    although its ``.msg`` says rad; a ``LaserScan`` written in degrees shows the same way."""
+    if math.isfinite(angle) and abs(angle) <= 2.0 * math.pi:
+        return angle
+    name = _RADIAN_ANGLE_FIELDS.get(msgtype, "angle")
+    if not math.isfinite(angle):
+        raise ValueError(f"{name} {angle!r} is not a beam angle (rad)")
+    hint = (
+        "gradians (0-399: the ROS 1 ping360_sonar node publishes the head's angle so, though"
+        " its SonarEcho.msg says rad) or degrees?"
+        if msgtype == "ping360_sonar/msg/SonarEcho"
+        else "degrees (or gradians)?"
+    )
+    raise ValueError(
+        f"{name} {angle:g} is beyond 2 pi rad: {hint} The field must be radians; convert the"
+        " bag's angles (gradians * pi / 200, np.radians of degrees)"
+    )
+
+
 def _sonar_row(msgtype: str, msg: Any) -> tuple[float, float, np.ndarray]:
-    """(transducer angle rad, bin size m, intensities uint8) of one beam message."""
+    """(transducer angle rad, bin size m, intensities uint8) of one beam message; a ValueError
+    for an angle beyond 2 pi rad or not finite (:func:`_checked_radians`)."""
     if msgtype == "sensor_msgs/msg/LaserScan":
         values = np.asarray(msg.intensities, dtype=np.float64)
         bins = np.clip(np.rint(values), 0, 255).astype(np.uint8)
-        return float(msg.angle_min), float(msg.range_max) / max(bins.size, 1), bins
+        angle = _checked_radians(msgtype, float(msg.angle_min))
+        return angle, float(msg.range_max) / max(bins.size, 1), bins
     if msgtype == "ping360_sonar/msg/SonarEcho":
         bins = np.asarray(msg.intensities, dtype=np.uint8)
-        return float(msg.angle), float(msg.range) / max(bins.size, 1), bins
+        angle = _checked_radians(msgtype, float(msg.angle))
+        return angle, float(msg.range) / max(bins.size, 1), bins
     if msgtype == "marine_acoustic_msgs/msg/ProjectedSonarImage":
         return _projected_row(msg)
     bins = np.asarray(msg.profile_data, dtype=np.uint8)
-    return float(msg.angle) * GRADIANS_TO_RAD, float(msg.range) / max(bins.size, 1), bins
+    grad = float(msg.angle)
+    if not 0.0 <= grad < 400.0:
+        raise ValueError(f"angle {grad:g} is not a Ping360 head angle (gradians, 0-399)")
+    return grad * GRADIANS_TO_RAD, float(msg.range) / max(bins.size, 1), bins
 
 
 def _projected_row(msg: Any) -> tuple[float, float, np.ndarray]:

@@ -170,7 +170,7 @@ def open_dataset(
     dvl_path = _find_one(root, "*_DVL.log", required=True)
     mti_path = _find_one(root, "*_MTi.log", required=True)
     assert dvl_path is not None and mti_path is not None
-    dvl = gate_dvl(read_dvl(dvl_path), gates, report)
+    dvl = gate_dvl(read_dvl(dvl_path), gates, report, config.noise.dvl_sigma_mps)
     attitude = gate_attitude(read_mti(mti_path), gates, report)
     check_overlap(root, dvl, attitude)
     gps_path = _find_one(root, "*_DGPS.log", required=False)

@@ -182,6 +182,8 @@ class LineExtractor:
         self._raw_bins_seen = 0
         self._raw_bins_passed = 0
         self._threshold_checked = False
+        self._n_added = 0
+        self._last_t_s = -np.inf
 
     # -- streaming -------------------------------------------------------------------------
 
@@ -191,12 +193,22 @@ class LineExtractor:
         Parameters
         ----------
         beam : SonarBeam
+            Its ``t`` (Unix s) not earlier than the previous beam's (a repeated stamp is
+            taken), its ``transducer_angle_rad`` finite and within 2 pi of zero.
 
         Returns
         -------
         list of LineFeature
             Lines of the vote made after this beam (empty if no vote was due).
+
+        Raises
+        ------
+        SettingError
+            Naming ``beam.t`` (a beam earlier than the one before: beams out of order, or
+            reversed) or ``beam.transducer_angle_rad`` (NaN, or beyond 2 pi: degrees or
+            gradians), with the beam's index among those added and its time.
         """
+        self._check_beam(beam)
         cfg = self.config
         seg = segment_with(cfg, self.head.bin_size_m, beam.intensities, beam.thresholded)
         if not beam.thresholded and not self._threshold_checked:
@@ -208,6 +220,30 @@ class LineExtractor:
         if self.sector.is_full and self._since_vote >= cfg.vote_every_n_beams:
             return self.vote()
         return []
+
+    def _check_beam(self, beam: SonarBeam) -> None:
+        """Refuse a beam earlier than the one before or with an angle that is not radians
+        (:meth:`add`'s Raises); count it."""
+        k, t = self._n_added, float(beam.t)
+        if not t >= self._last_t_s:  # NaN too
+            raise SettingError(
+                "beam.t",
+                f"beam {k} at {t:.3f} s (Unix) is earlier than beam {k - 1} at"
+                f" {self._last_t_s:.3f} s: beams must be added in time order (shuffled or"
+                " reversed beams give poses of the wrong time); sort them by time",
+            )
+        angle = float(beam.transducer_angle_rad)
+        if not abs(angle) <= 2.0 * np.pi:
+            why = (
+                "is not a number"
+                if np.isnan(angle)
+                else "is beyond 2 pi rad: degrees or gradians? (np.radians, gradians * pi / 200)"
+            )
+            raise SettingError(
+                "beam.transducer_angle_rad", f"beam {k} at {t:.3f} s (Unix): {angle:g} {why}"
+            )
+        self._n_added = k + 1
+        self._last_t_s = t
 
     def flush(self) -> list[LineFeature]:
         """Vote on the stored beams if any arrived since the last vote (end of a stream)."""

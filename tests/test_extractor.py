@@ -148,7 +148,7 @@ def simulate_beams(
                 inten[i] = 255
         if rng.random() < clutter_prob:
             inten[rng.integers(0, head.n_bins)] = 150
-        angle = bearing / head.angle_sense  # as logged
+        angle = float(wrap_angle(bearing)) / head.angle_sense  # as logged: within 2 pi
         beams.append(SonarBeam(t=t, transducer_angle_rad=angle, intensities=inten))
     return beams
 
@@ -686,3 +686,38 @@ def test_a_turning_pose_source_in_degrees_is_refused() -> None:
         run(LineExtractor(POOL_CONFIG, POOL_HEAD, Mounting(), DegreePoses(0.3)), beams)
     turning = ConstantVelocityPoses(yaw_rate_rad_per_s=0.3)
     run(LineExtractor(POOL_CONFIG, POOL_HEAD, Mounting(), turning), beams)
+
+
+def test_beams_out_of_order_or_not_in_radians_are_refused_by_name() -> None:
+    """Shuffled beams on a turning vehicle were refused as a pose source in degrees; reversed
+    beams, beams in degrees (read as radians: no line) and a NaN angle passed silently. Each is
+    refused naming ``beam.t`` or ``beam.transducer_angle_rad`` and the beam; the same beams in
+    order and in radians are taken (the pool's walls, as in test_pool_all_four_walls)."""
+    from dataclasses import replace
+
+    beams = _pool_beams(700, -70.0, seed=2011)
+    turning = ConstantVelocityPoses(yaw_rate_rad_per_s=0.3, t0_s=beams[0].t)
+
+    def extractor() -> LineExtractor:
+        return LineExtractor(POOL_CONFIG, POOL_HEAD, Mounting(), turning)
+
+    assert len(run(extractor(), beams)) >= 4
+    order = np.random.default_rng(7).permutation(len(beams))
+    shuffled = [beams[i] for i in order]
+    first = next(k for k in range(1, len(order)) if order[k] < order[k - 1])
+    with pytest.raises(SettingError, match=rf"^beam\.t: beam {first} at .* is earlier than beam"):
+        run(extractor(), shuffled)
+    with pytest.raises(SettingError, match=r"^beam\.t: beam 1 at .* time order"):
+        run(extractor(), beams[::-1])
+    in_degrees = [
+        replace(b, transducer_angle_rad=np.degrees(b.transducer_angle_rad)) for b in beams
+    ]
+    k = next(i for i, b in enumerate(in_degrees) if abs(b.transducer_angle_rad) > 2 * np.pi)
+    with pytest.raises(
+        SettingError, match=rf"^beam\.transducer_angle_rad: beam {k} at .* degrees or gradians"
+    ):
+        run(extractor(), in_degrees)
+    with_nan = list(beams)
+    with_nan[100] = replace(beams[100], transducer_angle_rad=float("nan"))
+    with pytest.raises(SettingError, match=r"transducer_angle_rad: beam 100 .* is not a number"):
+        run(extractor(), with_nan)

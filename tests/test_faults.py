@@ -266,3 +266,38 @@ def test_command_line_misuse_is_one_line_with_its_exit_code(
     err = capsys.readouterr().err.strip().splitlines()
     assert got == code and len(err) == 1 and says in err[0], (got, err)
     assert set(tmp_path.iterdir()) == before  # nothing created, nothing left
+
+
+def test_an_isolated_dvl_spike_under_the_speed_gate_is_dropped_and_said(harbour, tmp_path):
+    """A DVL row of 2.5 m/s (the log's cm/s) on a vehicle at ~0.5 m/s passes the 3 m/s speed gate: with the
+    spike gate off ([gates] dvl_spike_sigmas = 0) it is taken silently and dead reckoning
+    drifts; on (the default) it is taken as without bottom lock, counted and said with its
+    time, and dead reckoning is the clean run's (ATE against the simulator's truth)."""
+    base_ds = _open(harbour)[0]
+    assert base_ds.report.counts["dvl_velocity_spikes"] == 0  # the simulator's noise passes
+    base = run_backend(base_ds, "dr").metrics
+    folder = _copy(harbour, tmp_path / "h")
+    hit: list[float] = []
+
+    def spike(t: float, f: list[str]) -> list[list[str]]:
+        if t > 40.0 and not hit:
+            hit.append(float(f[0]))
+            return [[("250.0" if i == 12 else v) for i, v in enumerate(f)]]  # cm/s
+        return [f]
+
+    edit_log_rows(_log(folder, "DVL"), spike)
+    off = tmp_path / "off.toml"
+    off.write_text("[gates]\ndvl_spike_sigmas = 0.0\n")
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        silent = open_dataset(folder, config_override=off)
+    assert silent.report.counts["dvl_velocity_spikes"] == 0
+    m_off = run_backend(silent, "dr").metrics
+    ds, said = _open(folder)
+    assert ds.report.counts["dvl_velocity_spikes"] == 1
+    m_on = run_backend(ds, "dr").metrics
+    assert m_on["fault_dvl_velocity_spikes"] == 1
+    line = next(s for s in said if "off both neighbours" in s)
+    assert "_DVL.log: 1 row(s)" in line and f"first at t={hit[0]:.3f} s" in line
+    assert m_off["ate_mean_m"] > base["ate_mean_m"] + 0.3  # the silent wrong answer
+    assert m_on["ate_mean_m"] == pytest.approx(base["ate_mean_m"], abs=0.05)

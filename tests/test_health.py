@@ -446,3 +446,23 @@ def test_line_covariances_told_ten_times_too_large_are_underconfident(gyro_harbo
     assert "under-confident, not an error" in m["health_line"]
     said = [str(w.message) for w in caught if issubclass(w.category, DataWarning)]
     assert not any("smaller than predicted" in w for w in said), said
+
+
+def test_a_run_of_thousands_of_beams_without_lines_is_flagged_with_its_causes() -> None:
+    """Beam angles in gradians read as radians gave 0 lines from 5,871 beams and "no
+    inconsistency found" (every check judges lines or innovations, and there were none): the
+    ``lines`` check flags it, naming the likely causes; the simulated harbour's yield (61 lines
+    from 5,862 beams) and a run too short to judge pass."""
+    rng = np.random.default_rng(3)
+    silent = assess(_inputs(rng, n_beams=5871, n_lines=0))
+    assert not silent.ok and silent.checks_flagged() == ["lines"]
+    line = silent.line()
+    assert "\n" not in line
+    assert "0 lines from 5871 beams" in line and "dead reckoning" in line
+    for cause in ("not in radians", "intensity_threshold", "max_range_m"):
+        assert cause in line
+    assert assess(_inputs(rng, n_beams=5871, n_lines=5)).checks_flagged() == ["lines"]
+    good = assess(_inputs(rng, n_beams=5862, n_lines=61))
+    assert good.ok and good.metrics()["health_lines_windows"] == 1
+    short = assess(_inputs(rng, n_beams=1500, n_lines=0))
+    assert short.ok and "health_lines_windows" not in short.metrics()

@@ -285,6 +285,28 @@ def test_a_clock_jump_is_an_error_naming_the_topic_and_message(
     assert CLOCK_JUMP_S == 1.0
 
 
+def test_laser_scan_angles_in_degrees_are_an_error_naming_the_message(
+    short: Dataset, tmp_path: Path
+) -> None:
+    """A LaserScan whose angle_min is in degrees read as radians gave a run without a line
+    that said nothing; refused at its first message beyond 2 pi, naming bag, topic, index."""
+    degrees: list[float] = []
+
+    def in_degrees(role: str, i: int, msg: Any) -> None:
+        if role == "sonar":
+            msg.angle_min = msg.angle_max = math.degrees(msg.angle_min)
+            degrees.append(msg.angle_min)
+
+    bag = _write_ros1(short, tmp_path / "deg.bag", _same, in_degrees)
+    first = next(i for i, a in enumerate(degrees) if abs(a) > 2.0 * np.pi)
+    with pytest.raises(
+        DataError,
+        match=rf"deg\.bag: topic /sonar \(sensor_msgs/msg/LaserScan\) message {first}:"
+        r" angle_min [0-9.]+ is beyond 2 pi rad: degrees",
+    ):
+        open_bag(bag)
+
+
 def _same(role: str, i: int, t: float) -> float:
     return t
 
@@ -423,12 +445,15 @@ def test_missing_role_wrong_type_and_truncated_bags_are_one_line(
     assert "half.mcap" in err and "Traceback" not in err
 
 
-@pytest.mark.parametrize("kind", ["ros1", "sqlite3"])
+@pytest.mark.parametrize("kind", ["ros1", "sqlite3", "ros1_gradians"])
 def test_ping360_messages_give_beams_in_radians_and_metres(
     kind: str, short: Dataset, tmp_path: Path
 ) -> None:
     """SonarPing360 (gradians, profile_data, range) in a ROS 2 sqlite3 bag, whose types come
-    from CUSTOM_MSG_DEFINITIONS; SonarEcho (radians) in a ROS 1 bag, which carries its own."""
+    from CUSTOM_MSG_DEFINITIONS; SonarEcho (radians) in a ROS 1 bag, which carries its own.
+    ``ros1_gradians``: SonarEcho.angle in gradians as the ROS 1 ping360_sonar node publishes
+    it (read as radians it was a run of dead reckoning that said nothing): refused at the first
+    message beyond 2 pi, naming the bag, topic, message and the unit."""
     from rosbags.rosbag1 import Writer as Writer1
     from rosbags.rosbag2 import StoragePlugin
     from rosbags.rosbag2 import Writer as Writer2
@@ -440,6 +465,7 @@ def test_ping360_messages_give_beams_in_radians_and_metres(
         if kind == "sqlite3"
         else "ping360_sonar/msg/SonarEcho"
     )
+    ros1 = kind.startswith("ros1")
     types = {
         "sonar": ping,
         "dvl": "geometry_msgs/msg/TwistWithCovarianceStamped",
@@ -468,7 +494,7 @@ def test_ping360_messages_give_beams_in_radians_and_metres(
             )
         return T[ping](
             header=h,
-            angle=grad * np.pi / 200.0,
+            angle=float(grad) if kind == "ros1_gradians" else grad * np.pi / 200.0,
             gain=1,
             number_of_samples=n,
             transmit_frequency=750,
@@ -478,20 +504,25 @@ def test_ping360_messages_give_beams_in_radians_and_metres(
         )
 
     def serialize(msg: object, ty: str) -> bytes:
-        return store.serialize_ros1(msg, ty) if kind == "ros1" else store.serialize_cdr(msg, ty)
+        return store.serialize_ros1(msg, ty) if ros1 else store.serialize_cdr(msg, ty)
 
-    path = tmp_path / ("p.bag" if kind == "ros1" else "p")
-    w = (
-        Writer1(path)
-        if kind == "ros1"
-        else Writer2(path, version=9, storage_plugin=StoragePlugin.SQLITE3)
-    )
+    path = tmp_path / ("p.bag" if ros1 else "p")
+    w = Writer1(path) if ros1 else Writer2(path, version=9, storage_plugin=StoragePlugin.SQLITE3)
     with w:
         conns = {r: w.add_connection(f"/{r}", ty, typestore=store) for r, ty in types.items()}
         for t, role, msg in _messages(store, short):
             if role in conns:
                 out = sonar(msg) if role == "sonar" else msg
                 w.write(conns[role], int(round(t * 1e9)), serialize(out, types[role]))
+    if kind == "ros1_gradians":
+        first = next(i for i, g in enumerate(grads) if g > 2.0 * np.pi)
+        with pytest.raises(
+            DataError,
+            match=rf"p\.bag: topic /sonar \(ping360_sonar/msg/SonarEcho\) message {first}:"
+            rf" angle {grads[first]} is beyond 2 pi rad: gradians \(0-399",
+        ):
+            open_bag(path)
+        return
     with pytest.warns(DataWarning, match="neutral") as said:
         d = open_bag(path)
     # the sonarslam.toml to write: inside a bag directory, beside a bag file

@@ -39,6 +39,13 @@ innovations of a consistent filter are white with the covariance it predicts):
     Landmark count growth: a window in which at least ``landmark_min_new`` landmarks were
     created and they are more than ``landmark_new_share_max`` of the window's associations
     (a map that re-observes its walls associates far more lines than it creates landmarks).
+``lines``
+    The line extractor's yield: a run of at least ``lines_min_beams`` beams that gave fewer
+    than ``min_lines_per_kbeam`` lines per 1000 beams is dead reckoning that no check above
+    can see (no line, no innovation to judge). Its likely causes: beam angles in another unit
+    than radians, an ``intensity_threshold`` above the echoes, a ``max_range_m`` or head range
+    short of the walls. The marina and simulated runs give 7-13 lines per 1000 beams
+    (docs/bad-input.md).
 
 The chance thresholds are Bonferroni-corrected over a check's windows, so that a consistent
 run raises a check with probability at most ``false_alarm``. :func:`assess` gives a
@@ -110,6 +117,10 @@ class HealthConfig:
         Fewest landmarks created in a window for the growth check.
     landmark_new_share_max : float
         Largest share of new landmarks among a window's associations and creations.
+    min_lines_per_kbeam : float
+        Fewest lines per 1000 beams of a run the ``lines`` check judges.
+    lines_min_beams : int
+        Fewest beams for the ``lines`` check to judge a run.
     """
 
     window_s: float = bounded(120.0, 1.0, 1e5)
@@ -121,6 +132,8 @@ class HealthConfig:
     bias_sigmas: float = bounded(10.0, 1.0, 1e3)
     landmark_min_new: int = bounded(5, 1, 10_000)
     landmark_new_share_max: float = bounded(0.5, 0.0, 1.0)
+    min_lines_per_kbeam: float = bounded(1.0, 0.0, 1e3)
+    lines_min_beams: int = bounded(2000, 1, 10**9)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -171,6 +184,9 @@ class HealthInputs:
     states : list of StateValue
     truth : Trajectory or None
         The simulator's true poses (simulated runs only): the ``nees`` check.
+    n_beams, n_lines : int
+        The beams the extractor was given and the lines it gave (the ``lines`` check; not
+        judged with ``n_beams`` 0).
     """
 
     trajectory: Trajectory
@@ -184,6 +200,8 @@ class HealthInputs:
     reobserved_s: FloatArray = field(default_factory=lambda: np.zeros(0))
     states: Sequence[StateValue] = ()
     truth: Trajectory | None = None
+    n_beams: int = 0
+    n_lines: int = 0
 
 
 @dataclass(frozen=True)
@@ -578,6 +596,23 @@ def _check_landmarks(inputs: HealthInputs, cfg: HealthConfig) -> tuple[list[Heal
     return issues, int(judged.sum())
 
 
+def _check_lines(inputs: HealthInputs, cfg: HealthConfig) -> tuple[list[HealthIssue], int]:
+    """A run of many beams that gave (almost) no line, with its likely causes."""
+    n_beams, n_lines = inputs.n_beams, inputs.n_lines
+    if n_beams < cfg.lines_min_beams:
+        return [], 0
+    if 1000.0 * n_lines / n_beams >= cfg.min_lines_per_kbeam:
+        return [], 1
+    lo, hi = inputs.trajectory.span_s
+    cause = (
+        f"{n_lines} lines from {n_beams} beams (fewer than {cfg.min_lines_per_kbeam:g} per 1000):"
+        " the run is dead reckoning. Likely causes: beam angles not in radians (gradians or"
+        " degrees), extractor.intensity_threshold above the echoes, extractor.max_range_m or"
+        " the head's range short of the walls"
+    )
+    return [HealthIssue("lines", cause, lo, hi)], 1
+
+
 def assess(inputs: HealthInputs, config: HealthConfig | None = None) -> HealthReport:
     """Run every check on a run's logs (module docstring); the issues in time order."""
     cfg = config or HealthConfig()
@@ -603,6 +638,10 @@ def assess(inputs: HealthInputs, config: HealthConfig | None = None) -> HealthRe
     found, judged["state"] = _check_states(inputs, cfg)
     issues += found
     found, judged["landmarks"] = _check_landmarks(inputs, cfg)
+    issues += found
+    found, n = _check_lines(inputs, cfg)
+    if n:
+        judged["lines"] = n
     issues += found
     issues.sort(key=lambda i: (i.t0_s, i.check))
     findings.sort(key=lambda i: (i.t0_s, i.check))

@@ -124,6 +124,9 @@ def health_inputs(dataset: Dataset, result: ClosedLoopResult) -> HealthInputs:
         reobserved_s=np.array(reobserved),
         states=states,
         truth=truth_trajectory(dataset) if dataset.truth is not None else None,
+        # the beams the extractor saw: none when the back end takes no lines (scans only)
+        n_beams=int(result.counts.get("beams", 0)) if "lines" in cfg.constraint_kinds else 0,
+        n_lines=len(result.features),
     )
 
 
