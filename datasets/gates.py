@@ -143,12 +143,17 @@ def _median_step(t: FloatArray, mask: np.ndarray | None) -> float:
     return float((np.float64(_kth_positive(blocks, n // 2 - 1)) + np.float64(upper)) / 2.0)
 
 
+def gap_threshold_s(t_s: FloatArray, gates: GateConfig, mask: np.ndarray | None = None) -> float:
+    """The longest step (s) between two samples that is not a gap: ``gap_periods`` median
+    periods of ``t_s`` (of ``t_s[mask]``), at least ``min_gap_s``."""
+    return max(gates.gap_periods * _median_step(t_s, mask), gates.min_gap_s)
+
+
 def find_gaps(t_s: FloatArray, gates: GateConfig, mask: np.ndarray | None = None) -> Gaps:
     """The gaps of a sensor's sample times (s, non-decreasing; only those of ``mask`` when
-    given), worked through in blocks (:data:`BLOCK`)."""
+    given; longer than :func:`gap_threshold_s`), worked through in blocks (:data:`BLOCK`)."""
     t = np.asarray(t_s, dtype=np.float64)
-    period = _median_step(t, mask)
-    threshold = max(gates.gap_periods * period, gates.min_gap_s)
+    threshold = gap_threshold_s(t, gates, mask)
     spans: list[FloatArray] = []
     last: float | None = None
     for a in range(0, t.size, BLOCK):
@@ -248,7 +253,7 @@ def dvl_spikes(
     DVL that degrades raises it where it does), at least ``floor_mps`` (``[noise]
     dvl_sigma_mps``). A valid row whose velocity is farther than ``dvl_spike_sigmas * sigma``
     (horizontal norm) from both its valid neighbours', each within a gap's time
-    (``gap_periods`` median periods, at least ``min_gap_s``), is a spike; ``off`` is the
+    (:func:`gap_threshold_s` of the valid rows), is a spike; ``off`` is the
     smaller of the two distances (0 where not judged). A step of the velocity (a real
     acceleration) leaves one neighbour near: not a spike. White noise of ``sigma`` per axis is
     that far from one neighbour with chance ``exp(-k^2 / 4)`` (``k`` the sigmas).
@@ -272,8 +277,7 @@ def dvl_spikes(
     del padded, windows
     # row idx[j] (1 <= j <= M - 2) lies between differences j - 1 and j
     row_sigma = np.maximum(np.maximum(local[:-1], local[1:]) / RAYLEIGH_MEDIAN_PER_SIGMA, floor_mps)
-    dt = np.diff(t_s[idx])
-    near = dt <= max(gates.gap_periods * float(np.median(dt)), gates.min_gap_s)
+    near = np.diff(t_s[idx]) <= gap_threshold_s(t_s, gates, valid)
     judged = near[:-1] & near[1:]
     least = np.where(judged, np.minimum(jump[:-1], jump[1:]), 0.0)
     off[idx[1:-1]] = least
