@@ -418,42 +418,12 @@ def test_config_toml_round_trip(tmp_path: Path) -> None:
         ExtractorConfig(covariance_method="ellipse")
 
 
-def test_marina_preset_on_a_thresholded_mask() -> None:
-    """The preset runs on 0/255 masks: the nearest bin of each run votes."""
-    head = SonarHead()  # the marina head: 500 bins of 0.1 m, 1.8 deg, 3 deg beam
-    rng = np.random.default_rng(8)
-    poses = ConstantVelocityPoses(start=(0.0, 0.0, 0.4))
-    walls = rectangle_walls((3.0, -2.0), (30.0, 60.0), 0.2)
-    raw = simulate_beams(
-        walls,
-        poses,
-        head,
-        Mounting(),
-        n_beams=200,
-        dt_s=0.07,
-        first_bearing_rad=0.0,
-        rng=rng,
-        return_model="first_return",
-        range_sigma_m=0.05,
-    )
-    beams = []
-    for b in raw:  # thicken each echo into a 2-3 m run behind the first return, as a mask
-        m = b.intensities.copy()
-        i = np.flatnonzero(m)
-        if i.size:
-            m[i[0] : i[0] + int(rng.integers(20, 30))] = 255
-        beams.append(SonarBeam(b.t, b.transducer_angle_rad, (m > 0) * np.uint8(255), True))
-    lines = run(LineExtractor(MARINA_FIT, head, Mounting(), poses), beams)
-    assert len(lines) >= 3
-    drho, dtheta = match_lines(lines, wall_lines_world(walls))
-    assert drho.max() < 0.3 and np.rad2deg(dtheta.max()) < 1.5
-
-
-def _noisy_raw_beams(n_beams: int, seed: int) -> tuple[list[SonarBeam], PoseSource, np.ndarray]:
-    """Raw intensity beams of the marina head in a rectangle: a background of 0-39 in every bin
-    and each wall's echo a peak of 230 decaying over 6 bins behind its first return."""
+def _first_returns_in_a_rectangle(
+    n_beams: int, rng: np.random.Generator
+) -> tuple[list[SonarBeam], PoseSource, np.ndarray]:
+    """First-return beams of the marina head (500 bins of 0.1 m, 1.8 deg, 3 deg beam) from a
+    vehicle at constant velocity in a 30 m x 60 m rectangle: the beams, the poses, the walls."""
     head = SonarHead()
-    rng = np.random.default_rng(seed)
     poses = ConstantVelocityPoses(start=(0.0, 0.0, 0.4))
     walls = rectangle_walls((3.0, -2.0), (30.0, 60.0), 0.2)
     raw = simulate_beams(
@@ -468,6 +438,32 @@ def _noisy_raw_beams(n_beams: int, seed: int) -> tuple[list[SonarBeam], PoseSour
         return_model="first_return",
         range_sigma_m=0.05,
     )
+    return raw, poses, walls
+
+
+def test_marina_preset_on_a_thresholded_mask() -> None:
+    """The preset runs on 0/255 masks: the nearest bin of each run votes."""
+    rng = np.random.default_rng(8)
+    raw, poses, walls = _first_returns_in_a_rectangle(200, rng)
+    beams = []
+    for b in raw:  # thicken each echo into a 2-3 m run behind the first return, as a mask
+        m = b.intensities.copy()
+        i = np.flatnonzero(m)
+        if i.size:
+            m[i[0] : i[0] + int(rng.integers(20, 30))] = 255
+        beams.append(SonarBeam(b.t, b.transducer_angle_rad, (m > 0) * np.uint8(255), True))
+    lines = run(LineExtractor(MARINA_FIT, SonarHead(), Mounting(), poses), beams)
+    assert len(lines) >= 3
+    drho, dtheta = match_lines(lines, wall_lines_world(walls))
+    assert drho.max() < 0.3 and np.rad2deg(dtheta.max()) < 1.5
+
+
+def _noisy_raw_beams(n_beams: int, seed: int) -> tuple[list[SonarBeam], PoseSource, np.ndarray]:
+    """Raw intensity beams of the marina head in a rectangle: a background of 0-39 in every bin
+    and each wall's echo a peak of 230 decaying over 6 bins behind its first return."""
+    head = SonarHead()
+    rng = np.random.default_rng(seed)
+    raw, poses, walls = _first_returns_in_a_rectangle(n_beams, rng)
     beams = []
     for b in raw:
         m = rng.integers(0, 40, head.n_bins).astype(np.uint8)

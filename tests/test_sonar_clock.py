@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sonarslam.datasets.records import BeamSeries
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.slam.cli import calibrate as calibrate_cli
 from sonarslam.slam.cli.main import main
@@ -24,6 +23,7 @@ from sonarslam.slam.run.calibration import (
     calibrate_time_offset,
 )
 from sonarslam.slam.run.sources import pose_source_by_name
+from tests.echoes import shuffled_echoes
 
 #: Tolerance (s) on the offset found. Measured on 300 s of the harbour, seeds 1-3, the sonar's
 #: clock shifted by 0, 1 and 2 s: errors -0.034 to +0.101 s (the largest on seed 2 unshifted),
@@ -35,16 +35,6 @@ OFFSET_TOL_S = 0.15
 def harbour(simulated: Callable[..., Path]) -> Dataset:
     """300 s of the harbour world (raw intensities with background noise, sonar clock offset 0)."""
     return open_dataset(simulated("harbour", 2, 300.0))
-
-
-def _shuffled(ds: Dataset, seed: int) -> Dataset:
-    """The run with its beams' intensity rows permuted among the beams: echoes with no geometry
-    left, so no clock offset sharpens them."""
-    b = ds.beams
-    assert isinstance(b, BeamSeries)
-    rows = np.random.default_rng(seed).permutation(b.intensities.shape[0])
-    beams = BeamSeries(b.t_s, b.transducer_angle_rad, b.intensities[rows], b.thresholded)
-    return replace(ds, beams=beams)
 
 
 @pytest.mark.parametrize("late_s", [0.0, 1.0])
@@ -64,7 +54,7 @@ def test_clock_offset_of_the_harbour_is_the_truth(harbour: Dataset, late_s: floa
 
 def test_clock_offset_without_geometry_is_not_decisive(harbour: Dataset) -> None:
     """Echoes shuffled among the beams: the objective is flat and says so."""
-    ds = _shuffled(harbour, seed=7)
+    ds = shuffled_echoes(harbour, seed=7)
     search = calibrate_time_offset(ds, pose_source_by_name(ds, "dr"))
     assert not search.decisive, search.verdict()
     assert search.depth < MIN_CLOCK_DEPTH or search.margin < MIN_CLOCK_MARGIN
@@ -92,7 +82,7 @@ def test_calibrate_cli_time_offset_or_refusal(
     assert written == pytest.approx(found, abs=1e-3)
     assert open_dataset(harbour.root, config_override=out).config.sonar_time_offset_s == written
 
-    flat = _shuffled(harbour, seed=7)
+    flat = shuffled_echoes(harbour, seed=7)
     monkeypatch.setattr(calibrate_cli, "open_dataset", lambda *a, **k: flat)
     refused = tmp_path / "refused.toml"
     assert main(["calibrate", str(harbour.root), "--time-offset", "--write", str(refused)]) == 1

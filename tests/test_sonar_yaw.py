@@ -6,13 +6,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 import pytest
 
-from sonarslam.datasets.records import BeamSeries
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.features.geometry import wrap_angle
 from sonarslam.slam.cli import calibrate as calibrate_cli
@@ -25,6 +22,7 @@ from sonarslam.slam.run.calibration import (
     calibrate_sonar_yaw,
 )
 from sonarslam.slam.run.sources import pose_source_by_name
+from tests.echoes import shuffled_echoes
 
 #: Tolerance (deg) on the yaw found: the fine grid's step is 0.25 deg, the dead-reckoning
 #: heading of a 120 s window errs by about a degree (AHRS bias 2 deg, sigma 0.5 deg).
@@ -42,16 +40,6 @@ def harbour_search(harbour: Dataset) -> YawSearch:
     return calibrate_sonar_yaw(harbour, pose_source_by_name(harbour, "dr"))
 
 
-def _shuffled(ds: Dataset, seed: int) -> Dataset:
-    """The run with its beams' intensity rows permuted among the beams: echoes with no geometry
-    left, so no yaw sharpens them."""
-    b = ds.beams
-    assert isinstance(b, BeamSeries)
-    rows = np.random.default_rng(seed).permutation(b.intensities.shape[0])
-    beams = BeamSeries(b.t_s, b.transducer_angle_rad, b.intensities[rows], b.thresholded)
-    return replace(ds, beams=beams)
-
-
 def test_sonar_yaw_of_the_harbour_is_the_truth(harbour: Dataset, harbour_search: YawSearch) -> None:
     """Raw beams: the echoes (bins at the extractor's threshold) are scored, not the background
     noise that made the objective flat (30.68 vs 30.75 nats over 360 deg, least at 22 deg)."""
@@ -67,7 +55,7 @@ def test_sonar_yaw_of_the_harbour_is_the_truth(harbour: Dataset, harbour_search:
 
 def test_sonar_yaw_without_geometry_is_not_decisive(harbour: Dataset) -> None:
     """Echoes shuffled among the beams: the objective is flat and says so."""
-    ds = _shuffled(harbour, seed=7)
+    ds = shuffled_echoes(harbour, seed=7)
     search = calibrate_sonar_yaw(ds, pose_source_by_name(ds, "dr"))
     assert not search.decisive, search.verdict()
     assert search.depth < MIN_YAW_DEPTH or search.margin < MIN_YAW_MARGIN
@@ -89,7 +77,7 @@ def test_calibrate_cli_yaw_or_refusal(
     assert abs((found - truth + 180.0) % 360.0 - 180.0) < YAW_TOL_DEG, line
     assert out.is_file()
 
-    flat = _shuffled(harbour, seed=7)
+    flat = shuffled_echoes(harbour, seed=7)
     monkeypatch.setattr(calibrate_cli, "open_dataset", lambda *a, **k: flat)
     refused = tmp_path / "refused.toml"
     assert main(["calibrate", str(harbour.root), "--write", str(refused)]) == 1
