@@ -40,8 +40,9 @@ class LineFeature:
     bTs : ndarray, shape (3,) or None
         The sonar mounting ``(x_m, y_m, yaw_rad)`` in the body frame that the extractor placed
         ``wTr`` with (``wTr = wTb * bTs``), set by :class:`~sonarslam.features.extractor.LineExtractor`;
-        a back end's line model must use the same (:func:`check_mounting`). None: not known (a
-        line read from ``lines.jsonl`` or made by hand), not checked.
+        a back end's line model must use the same (:func:`check_mounting`); ``lines.jsonl`` keeps
+        it. None: not known (a line made by hand, or read from a file written without it), not
+        checked.
     z : ndarray, shape (2,)
         Property: ``(rho_m, theta_rad)``, the measurement a back end takes with ``cov``.
     """
@@ -82,6 +83,7 @@ class LineFeature:
             "votes": int(self.votes),
             "n_voters": int(self.n_voters),
             "endpoints": self.endpoints_world().tolist(),
+            **({} if self.bTs is None else {"bTs": np.asarray(self.bTs, dtype=float).tolist()}),
         }
 
 

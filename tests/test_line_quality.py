@@ -5,6 +5,7 @@ lines drawn from known walls and covariances); the marina references when the da
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -20,7 +21,7 @@ from sonarslam.features.geometry import (
     transform_points,
     wrap_angle,
 )
-from sonarslam.features.line import LineFeature
+from sonarslam.features.line import LineFeature, check_mounting
 from sonarslam.slam.eval.consistency import chi2_gate
 from sonarslam.slam.eval.leading_edges import (
     EdgeConfig,
@@ -383,6 +384,28 @@ def test_lines_jsonl_round_trip_and_bad_rows(tmp_path):
         read_lines_jsonl(path)
     with pytest.raises(DataError, match="file not found"):
         read_lines_jsonl(tmp_path / "missing.jsonl")
+
+
+def test_lines_jsonl_keeps_the_mounting_the_lines_were_extracted_with(tmp_path):
+    # a back end reading the file back must be able to check its mounting against the lines'
+    # (check_mounting); a file that dropped bTs would let a different mounting through unseen
+    bTs = np.array([0.3, -0.1, np.pi])
+    lines, _, _ = drawn_lines(4, 3, (0.0,) * 4, np.diag([0.1, 0.01]))
+    lines = [replace(f, bTs=bTs) for f in lines]
+    path = tmp_path / "lines.jsonl"
+    path.write_text("".join(json.dumps({**f.to_json(), "landmark": 7}) + "\n" for f in lines))
+    back, extras = read_lines_jsonl(path)
+    assert all(b.bTs is not None and np.allclose(b.bTs, bTs, atol=1e-12) for b in back)
+    assert extras == [{"landmark": 7}] * 3  # the feature's own fields are not extras
+    check_mounting(back, bTs, "test")
+    with pytest.raises(ValueError, match="sonar mounting"):
+        check_mounting(back, np.zeros(3), "test")
+    rows = path.read_text().splitlines()
+    bad = json.loads(rows[1])
+    bad["bTs"] = [0.3, "x"]
+    path.write_text(rows[0] + "\n" + json.dumps(bad) + "\n")
+    with pytest.raises(DataError, match=r"lines.jsonl:2: not a line feature: .*bTs"):
+        read_lines_jsonl(path)
 
 
 # -- the marina -------------------------------------------------------------------------------

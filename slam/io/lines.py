@@ -20,6 +20,8 @@ from sonarslam.features.line import LineFeature
 __all__ = ["line_from_json", "read_lines_jsonl"]
 
 _REQUIRED = ("t", "x", "y", "yaw", "rho", "theta", "cov", "endpoints")
+#: Every field of :meth:`LineFeature.to_json`; the rest of a row are a run's extras.
+_FEATURE = (*_REQUIRED, "votes", "n_voters", "bTs")
 
 
 def line_from_json(d: dict[str, Any]) -> LineFeature:
@@ -34,6 +36,16 @@ def line_from_json(d: dict[str, Any]) -> LineFeature:
         raise ValueError(f"cov and endpoints must be 2x2, got {cov.shape} and {ends_w.shape}")
     if not (np.all(np.isfinite(wTr)) and np.all(np.isfinite(cov)) and np.all(np.isfinite(ends_w))):
         raise ValueError("non-finite pose, covariance or endpoints")
+    bTs = None
+    if d.get("bTs") is not None:
+        try:
+            bTs = np.asarray(d["bTs"], dtype=np.float64)
+        except (TypeError, ValueError):
+            bTs = np.full(0, np.nan)
+        if bTs.shape != (3,) or not np.all(np.isfinite(bTs)):
+            raise ValueError(
+                f"bTs must be three finite numbers (x_m, y_m, yaw_rad), got {d['bTs']}"
+            )
     return LineFeature(
         t=float(d["t"]),
         wTr=wTr,
@@ -43,6 +55,7 @@ def line_from_json(d: dict[str, Any]) -> LineFeature:
         votes=int(d.get("votes", 0)),
         endpoints_r=transform_points(inverse(wTr), ends_w),
         n_voters=int(d.get("n_voters", 0)),
+        bTs=bTs,
     )
 
 
@@ -58,7 +71,8 @@ def read_lines_jsonl(path: str | Path) -> tuple[list[LineFeature], list[dict[str
     lines : list of LineFeature
         In file order.
     extras : list of dict
-        The other fields of each row (a run's ``landmark``), in the same order.
+        The fields of each row that are not the line feature's (a run's ``landmark``), in the
+        same order.
 
     Raises
     ------
@@ -83,7 +97,7 @@ def read_lines_jsonl(path: str | Path) -> tuple[list[LineFeature], list[dict[str
             lines.append(line_from_json(d))
         except (KeyError, ValueError, TypeError) as exc:
             raise DataError(p, number, f"not a line feature: {exc}") from exc
-        extras.append({k: v for k, v in d.items() if k not in _REQUIRED})
+        extras.append({k: v for k, v in d.items() if k not in _FEATURE})
     if not lines:
         raise DataError(p, None, "no lines")
     return lines, extras
