@@ -256,7 +256,8 @@ def dvl_spikes(
     (:func:`gap_threshold_s` of the valid rows), is a spike; ``off`` is the
     smaller of the two distances (0 where not judged). A step of the velocity (a real
     acceleration) leaves one neighbour near: not a spike. White noise of ``sigma`` per axis is
-    that far from one neighbour with chance ``exp(-k^2 / 4)`` (``k`` the sigmas).
+    that far from one neighbour with chance ``exp(-k^2 / 4)`` (``k`` the sigmas). Two spikes in
+    a row are found as a pair (:func:`_spike_pairs`).
     """
     n = t_s.size
     spike = np.zeros(n, dtype=bool)
@@ -283,7 +284,43 @@ def dvl_spikes(
     off[idx[1:-1]] = least
     sigma[idx[1:-1]] = row_sigma
     spike[idx[1:-1]] = least > gates.dvl_spike_sigmas * row_sigma
+    pair, pair_off = _spike_pairs(v_mps[idx], near, row_sigma, gates.dvl_spike_sigmas)
+    off[idx[1:-1]] = np.where(pair, pair_off, off[idx[1:-1]])
+    spike[idx[1:-1]] |= pair
     return spike, sigma, off
+
+
+def _spike_pairs(
+    v_mps: FloatArray, near: np.ndarray, row_sigma: FloatArray, k: float
+) -> tuple[np.ndarray, FloatArray]:
+    """Two spikes in a row among ``M`` valid rows (each has the other as a close neighbour, so
+    the isolated test misses both): ``(pair (M - 2,) bool, off (M - 2,) m/s)`` for the inner rows
+    ``1 .. M - 2``.
+
+    Rows ``j, j + 1`` are a pair when both are more than ``k`` times the scatter (the larger of
+    the two rows' ``row_sigma``) off the rows either side of them (``j - 1`` and ``j + 2``),
+    which agree with each other within ``k`` times it, all four within a gap's time (``near``,
+    (M - 1,)). A step of the velocity leaves the rows either side apart: not a pair. ``off`` is
+    the least of the four distances (0 where not a pair)."""
+    m = v_mps.shape[0]
+    pair = np.zeros(m - 2, dtype=bool)
+    off = np.zeros(m - 2)
+    if m < 4:
+        return pair, off
+    before, a, b, after = v_mps[:-3], v_mps[1:-2], v_mps[2:-1], v_mps[3:]  # (M - 3, 2) each
+
+    def dist(p: FloatArray, q: FloatArray) -> FloatArray:
+        return np.hypot(p[:, 0] - q[:, 0], p[:, 1] - q[:, 1])
+
+    least = np.minimum.reduce([dist(a, before), dist(a, after), dist(b, before), dist(b, after)])
+    limit = k * np.maximum(row_sigma[:-1], row_sigma[1:])
+    hit = near[:-2] & near[1:-1] & near[2:] & (least > limit) & (dist(before, after) <= limit)
+    # pair j (rows j + 1, j + 2 of the M) marks inner rows j and j + 1
+    pair[:-1] |= hit
+    pair[1:] |= hit
+    off[:-1] = np.where(hit, least, off[:-1])
+    off[1:] = np.where(hit, np.maximum(off[1:], least), off[1:])
+    return pair, off
 
 
 def gate_dvl(
@@ -332,7 +369,8 @@ def gate_dvl(
             dvl.path,
             "DVL",
             f"{n_spike} row(s) whose velocity is more than {gates.dvl_spike_sigmas:g} times the"
-            f" DVL's scatter off both neighbours taken as without bottom lock"
+            f" DVL's scatter off both neighbours (two in a row: off the rows either side) taken"
+            " as without bottom lock"
             f" (first at t={float(t[i]):.3f} s, {float(off[i]):.3g} m/s off, the scatter there"
             f" {float(sigma[i]):.3g} m/s; [gates]"
             " dvl_spike_sigmas)",

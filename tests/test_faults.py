@@ -13,7 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sonarslam.datasets.config import GateConfig
 from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.gates import dvl_spikes
 from sonarslam.datasets.source import open_dataset
 from sonarslam.slam.cli.main import main
 from sonarslam.slam.io.files import atomic_path, write_json
@@ -301,3 +303,39 @@ def test_an_isolated_dvl_spike_under_the_speed_gate_is_dropped_and_said(harbour,
     assert "_DVL.log: 1 row(s)" in line and f"first at t={hit[0]:.3f} s" in line
     assert m_off["ate_mean_m"] > base["ate_mean_m"] + 0.3  # the silent wrong answer
     assert m_on["ate_mean_m"] == pytest.approx(base["ate_mean_m"], abs=0.05)
+
+
+def test_two_dvl_spikes_in_a_row_are_found_and_a_real_change_of_velocity_is_not(harbour, tmp_path):
+    """Two successive DVL rows of 2.5 m/s on a vehicle at ~0.5 m/s: each has the other as a
+    close neighbour, so the isolated-spike test alone passes both and dead reckoning drifts in
+    silence. As a pair (off the rows either side, which agree) both are taken as without lock
+    and said, and dead reckoning is the clean run's; a step of the velocity, seen on seeded
+    white noise, is not a pair."""
+    base = run_backend(_open(harbour)[0], "dr").metrics
+    folder = _copy(harbour, tmp_path / "h")
+    hit: list[float] = []
+
+    def spikes(t: float, f: list[str]) -> list[list[str]]:
+        if t > 40.0 and len(hit) < 2:
+            hit.append(float(f[0]))
+            return [[("250.0" if i == 12 else v) for i, v in enumerate(f)]]  # cm/s
+        return [f]
+
+    edit_log_rows(_log(folder, "DVL"), spikes)
+    ds, said = _open(folder)
+    assert ds.report.counts["dvl_velocity_spikes"] == 2
+    line = next(s for s in said if "off both neighbours" in s)
+    assert "_DVL.log: 2 row(s)" in line and f"first at t={hit[0]:.3f} s" in line
+    m = run_backend(ds, "dr").metrics
+    assert m["ate_mean_m"] == pytest.approx(base["ate_mean_m"], abs=0.05)
+
+    # the gate alone: white noise of 0.01 m/s at 5 Hz, a pair, then a step that stays
+    rng = np.random.default_rng(7)
+    n = 600
+    t = np.arange(n) / 5.0
+    v = np.column_stack([np.full(n, 0.5), np.zeros(n)]) + rng.normal(0.0, 0.01, (n, 2))
+    v[200:202, 0] += 1.0
+    v[400:, 0] += 0.6
+    found, _, off = dvl_spikes(t, v, np.ones(n, dtype=bool), GateConfig(), 0.01)
+    assert np.flatnonzero(found).tolist() == [200, 201]
+    assert off[200] > 0.9 and off[201] > 0.9
