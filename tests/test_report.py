@@ -217,6 +217,26 @@ def test_report_without_the_dataset_reuses_the_runs_map(runs, tmp_path, capsys):
     assert not (out / "nees_h5-ekf.png").exists()  # no truth without the dataset
 
 
+def test_two_sources_of_one_file_name_are_two_datasets(runs, tmp_path):
+    """Two runs of bags named alike in two folders (``day1/run.bag``, ``day2/run.bag``) are
+    two datasets: one section, one GPS and one trajectory figure each, named by the folder
+    that tells them apart; grouped by the file name alone they shared one section in silence."""
+    dirs = []
+    for day in ("day1", "day2"):
+        d = tmp_path / day
+        shutil.copytree(runs["ekf"].out_dir, d)
+        metrics = json.loads((d / "metrics.json").read_text())
+        metrics["source"] = str(tmp_path / "bags" / day / "run.bag")
+        (d / "metrics.json").write_text(json.dumps(metrics))
+        dirs.append(d)
+    res = report(dirs, tmp_path / "rep", open_sources=False)
+    md = res.path.read_text()
+    assert "## day1/run.bag" in md and "## day2/run.bag" in md, md
+    assert {r["dataset"] for r in res.rows} == {"day1/run.bag", "day2/run.bag"}
+    assert (tmp_path / "rep" / "trajectories_day1_run.bag.png").is_file()
+    assert (tmp_path / "rep" / "trajectories_day2_run.bag.png").is_file()
+
+
 def test_report_of_a_directory_that_is_no_run_is_one_line(tmp_path, capsys):
     assert main(["report", str(tmp_path), "--out", str(tmp_path / "o")]) == 1
     err = capsys.readouterr().err.strip().splitlines()

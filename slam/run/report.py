@@ -47,7 +47,13 @@ from sonarslam.slam.eval.consistency import (
     nees_series,
 )
 from sonarslam.slam.eval.published import PUBLISHED
-from sonarslam.slam.run.report_data import DISPLAY_NAMES, RunData, evaluate_run, load_run
+from sonarslam.slam.run.report_data import (
+    DISPLAY_NAMES,
+    RunData,
+    evaluate_run,
+    load_run,
+    source_labels,
+)
 from sonarslam.slam.run.report_figures import (
     SegmentTable,
     calibration_lines,
@@ -82,7 +88,7 @@ class ReportResult:
 
 
 def _label(run: RunData, runs: list[RunData]) -> str:
-    same = [r for r in runs if r.backend == run.backend and r.dataset_name == run.dataset_name]
+    same = [r for r in runs if r.backend == run.backend and r.source == run.source]
     return run.backend if len(same) == 1 else f"{run.backend} ({run.name})"
 
 
@@ -389,9 +395,11 @@ def report(
     free = [load_gps_free(d) for d in run_dirs if is_gps_free(d)]
     runs = [load_run(d, open_source=open_sources) for d in run_dirs if not is_gps_free(d)]
     labels = {str(r.run_dir): _label(r, runs) for r in runs}
+    # one section per source (two bags of one file name in two folders are two datasets)
+    names = source_labels(r.source for r in runs)
     by_dataset: dict[str, list[RunData]] = {}
     for run in runs:
-        by_dataset.setdefault(run.dataset_name, []).append(run)
+        by_dataset.setdefault(names[run.source], []).append(run)
     rows: list[dict[str, Any]] = []
     figures: list[Path] = []
     md = [
@@ -410,7 +418,9 @@ def report(
     dataset_figs: list[tuple[str, list[Path]]] = []
     for name, group in by_dataset.items():
         group_rows = [
-            row for r in group for row in [_run_row(r, rpe_delta_m, align), *_other_rows(r)]
+            {**row, "dataset": name}
+            for r in group
+            for row in [_run_row(r, rpe_delta_m, align), *_other_rows(r)]
         ]
         if name == PUBLISHED_DATASET and not any(r.truth is not None for r in group):
             group_rows += _published_rows()
@@ -451,7 +461,7 @@ def report(
             figs.append(out / f"consistency_{tag}.png")
             shutil.copyfile(run.run_dir / "consistency.png", figs[-1])
         figures += figs
-        md += [f"### {lab} on {run.dataset_name} (`{run.name}`)", ""]
+        md += [f"### {lab} on {names[run.source]} (`{run.name}`)", ""]
         md += [f"- {note}" for note in run.notes] + ([""] if run.notes else [])
         calibration = calibration_lines(run)
         md += calibration + ([""] if calibration else [])

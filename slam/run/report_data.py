@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -71,12 +72,32 @@ class RunData:
         return trajectory_stem(self.backend)
 
     @property
+    def source(self) -> str:
+        """The run's dataset as ``metrics.json`` names it (its path): runs of one source are
+        comparable, runs of two sources with one file name are not."""
+        return str(self.metrics.get("source", "unknown"))
+
+    @property
     def dataset_name(self) -> str:
-        return Path(str(self.metrics.get("source", "unknown"))).name
+        return Path(self.source).name
 
     @property
     def name(self) -> str:
         return self.run_dir.name
+
+
+def source_labels(sources: Iterable[str]) -> dict[str, str]:
+    """A name per source for the report's sections: its file name, or as many of its last path
+    parts as tell it from the other sources' (``day1/run.bag``, ``day2/run.bag``)."""
+    unique = sorted(set(sources))
+    parts = {s: Path(s).parts or (s,) for s in unique}
+    labels = {}
+    for s in unique:
+        k = 1
+        while k < len(parts[s]) and any(o != s and parts[o][-k:] == parts[s][-k:] for o in unique):
+            k += 1
+        labels[s] = "/".join(parts[s][-k:])
+    return labels
 
 
 def load_run(run_dir: str | Path, open_source: bool = True) -> RunData:

@@ -29,6 +29,7 @@ from sonarslam.slam.io.trajectory import (
     read_tum,
     trajectory_stem,
 )
+from sonarslam.slam.run.report_data import source_labels
 from sonarslam.slam.run.run import odometry_line
 
 __all__ = ["is_gps_free", "GpsFreeRun", "load_gps_free", "gps_free_section"]
@@ -75,8 +76,9 @@ class GpsFreeRun:
         return self.run_dir.name
 
     @property
-    def dataset_name(self) -> str:
-        return Path(str(self.metrics.get("source", "unknown"))).name
+    def source(self) -> str:
+        """The run's dataset as ``metrics.json`` names it (its path)."""
+        return str(self.metrics.get("source", "unknown"))
 
 
 def load_gps_free(run_dir: str | Path) -> GpsFreeRun:
@@ -170,9 +172,10 @@ def gps_free_section(
     ]
     figures: list[Path] = []
     rows: list[dict[str, Any]] = []
+    names = source_labels(r.source for r in runs)
     by_dataset: dict[str, list[GpsFreeRun]] = {}
     for r in runs:
-        by_dataset.setdefault(r.dataset_name, []).append(r)
+        by_dataset.setdefault(names[r.source], []).append(r)
     for dataset, group in by_dataset.items():
         md += [f"### {dataset}", ""]
         md.append("| " + " | ".join(h for _, h in COLUMNS) + " |")
