@@ -26,7 +26,7 @@ from sonarslam.slam.eval.health import (
     assess,
 )
 from sonarslam.slam.eval.truth import truth_trajectory
-from sonarslam.slam.model.motion import body_yaw
+from sonarslam.slam.model.motion import body_velocity, body_yaw
 from sonarslam.slam.run.closed_loop import ClosedLoopResult
 from sonarslam.slam.run.sources import dead_reckoning_trajectory
 
@@ -127,6 +127,7 @@ def health_inputs(dataset: Dataset, result: ClosedLoopResult) -> HealthInputs:
         # the beams the extractor saw: none when the back end takes no lines (scans only)
         n_beams=int(result.counts.get("beams", 0)) if "lines" in cfg.constraint_kinds else 0,
         n_lines=len(result.features),
+        travel_body_mps=body_velocity(dataset.dvl.v_mps[dataset.dvl.valid], c.dvl_mounting),
     )
 
 
