@@ -19,6 +19,7 @@ from sonarslam.slam.eval.health import (
     median_lower_bound,
     median_upper_bound,
 )
+from sonarslam.slam.eval.loops import OdometryCheck
 from sonarslam.slam.io.trajectory import Trajectory
 
 T0 = 1.7e9
@@ -107,6 +108,23 @@ def test_a_vehicle_that_travels_every_way_is_not_judged_by_the_travel_check() ->
     back_and_forth = np.concatenate([_travel(0.0, rng, 300), _travel(180.0, rng, 300)])
     report = assess(_inputs(rng, travel_body_mps=back_and_forth))
     assert report.ok and "travel" not in report.judged
+
+
+@pytest.mark.parametrize(
+    ("heading_deg", "accepted", "flagged"),
+    [(-174.0, 8, True), (60.0, 3, True), (30.0, 8, False), (-174.0, 2, False)],
+)
+def test_the_sonar_turned_from_dead_reckoning_trips_the_odometry_check(
+    heading_deg: float, accepted: int, flagged: bool
+) -> None:
+    """Beyond 45 deg over at least 3 registrations: a sensor mounted the wrong way round."""
+    check = OdometryCheck(12, accepted, heading_deg, 1.0, 5.0, 0.01)
+    report = assess(_inputs(np.random.default_rng(5), odometry=check))
+    assert report.judged["odometry"] == 1
+    assert ("odometry" in report.checks_flagged()) is flagged
+    assert report.ok is not flagged
+    if flagged:
+        assert f"{heading_deg:+.0f} deg away" in report.issues[0].cause
 
 
 def test_innovations_three_times_their_variance_trip_the_nis_check() -> None:

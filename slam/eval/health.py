@@ -46,6 +46,11 @@ innovations of a consistent filter are white with the covariance it predicts):
     off the bow. A vehicle travels bow first; a DVL mounting turned the wrong way round moves
     it stern- or side-first, and the map is as sharp with the sonar's yaw turned alike, so no
     other check sees it (docs/calibration.md).
+``odometry``
+    Runs without GPS: the sonar's motion between nearby scans against dead reckoning's
+    (:func:`sonarslam.slam.eval.loops.odometry_check`), flagged when they disagree by more than
+    :data:`sonarslam.slam.eval.loops.ODOMETRY_MAX_ANGLE_DEG` (a sensor mounted the wrong way
+    round: :attr:`sonarslam.slam.eval.loops.OdometryCheck.turned`).
 ``lines``
     The line extractor's yield: a run of at least ``lines_min_beams`` beams that gave fewer
     than ``min_lines_per_kbeam`` lines per 1000 beams is dead reckoning that no check above
@@ -82,7 +87,7 @@ from sonarslam.datasets.errors import DataWarning
 from sonarslam.features.geometry import FloatArray, wrap_angle
 from sonarslam.settings import bounded, check_fields
 from sonarslam.slam.eval.consistency import nees_series, window_median_gate
-from sonarslam.slam.eval.loops import LOOP_CAUSES
+from sonarslam.slam.eval.loops import LOOP_CAUSES, ODOMETRY_CAUSES, OdometryCheck
 from sonarslam.slam.io.trajectory import Trajectory
 
 __all__ = [
@@ -207,6 +212,8 @@ class HealthInputs:
     travel_body_mps : ndarray, shape (V, 2)
         Dead reckoning's velocities in the body frame (m/s; the DVL's rows with bottom lock
         through its mounting): the ``travel`` check (not judged without rows).
+    odometry : OdometryCheck or None
+        The run's odometry check (runs without GPS): the ``odometry`` check.
     """
 
     trajectory: Trajectory
@@ -223,6 +230,7 @@ class HealthInputs:
     n_beams: int = 0
     n_lines: int = 0
     travel_body_mps: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    odometry: OdometryCheck | None = None
 
 
 @dataclass(frozen=True)
@@ -681,6 +689,23 @@ def _check_travel(inputs: HealthInputs, cfg: HealthConfig) -> tuple[list[HealthI
     return [HealthIssue("travel", cause, lo, hi)], 1
 
 
+def _check_odometry(inputs: HealthInputs) -> tuple[list[HealthIssue], int]:
+    """The sonar's motion turned far from dead reckoning's (module docstring)."""
+    check = inputs.odometry
+    if check is None or not check.accepted:
+        return [], 0
+    if not check.turned:
+        return [], 1
+    lo, hi = inputs.trajectory.span_s
+    cause = (
+        f"the sonar sees the vehicle move {check.heading_deg:+.0f} deg away from where dead"
+        f" reckoning moves it ({check.accepted} registrations of scans a few metres apart,"
+        f" standard error {check.heading_se_deg:.1f} deg): one of {ODOMETRY_CAUSES} is likely"
+        " wrong; every estimate of this run follows dead reckoning's motion"
+    )
+    return [HealthIssue("odometry", cause, lo, hi)], 1
+
+
 def assess(inputs: HealthInputs, config: HealthConfig | None = None) -> HealthReport:
     """Run every check on a run's logs (module docstring); the issues in time order."""
     cfg = config or HealthConfig()
@@ -714,6 +739,10 @@ def assess(inputs: HealthInputs, config: HealthConfig | None = None) -> HealthRe
     found, n = _check_travel(inputs, cfg)
     if n:
         judged["travel"] = n
+    issues += found
+    found, n = _check_odometry(inputs)
+    if n:
+        judged["odometry"] = n
     issues += found
     issues.sort(key=lambda i: (i.t0_s, i.check))
     findings.sort(key=lambda i: (i.t0_s, i.check))
