@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import heapq
 import json
+import tomllib
 import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
@@ -28,6 +29,48 @@ NEUTRAL_CALIBRATION = (
     f"{_NEUTRAL} (write one: sonarslam calibrate SOURCE --write FOLDER/sonarslam.toml, FOLDER"
     " the source if a directory, else the one holding its file; docs/data.md)"
 )
+
+
+#: The sensors with a mounting in a ``sonarslam.toml`` (``[mounting.<sensor>]``).
+MOUNTED_SENSORS = ("sonar", "dvl", "ahrs")
+
+
+def mounting_tables(toml: str | Path | None) -> set[str]:
+    """The sensors (``sonar``, ``dvl``, ``ahrs``) whose ``[mounting.<sensor>]`` table a
+    ``sonarslam.toml``-format file has; none for a file that cannot be read
+    (:func:`sonarslam.datasets.config.load_dataset_config` names its problem)."""
+    if toml is None:
+        return set()
+    try:
+        data = tomllib.loads(Path(toml).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return set()
+    mounting = data.get("mounting", {})
+    return set(mounting) if isinstance(mounting, dict) else set()
+
+
+def warn_assumed_mountings(source: Path, config: DatasetConfig, tables: set[str]) -> None:
+    """A :class:`DataWarning` naming each sensor whose mounting nobody gave
+    (:attr:`sonarslam.sonar.beam.Mounting.assumed`: the identity, left out or written down as
+    an assumption), when the others have a source or a file's table (``tables``,
+    :func:`mounting_tables`) writes the assumption down: one sensor forgotten among given ones
+    is not a choice the user made, and a file that holds an assumption (``sonarslam calibrate
+    --write`` of a run without mountings) must not silence it. A file without any mounting
+    table leaves all three the identity without a word (the caller's neutral warning, or the
+    user's choice)."""
+    missing = [m for m in MOUNTED_SENSORS if getattr(config, f"{m}_mounting").assumed]
+    if not missing or (len(missing) == len(MOUNTED_SENSORS) and not tables & set(missing)):
+        return
+    names = ", ".join(f"[mounting.{m}]" for m in missing)
+    warnings.warn(
+        f"{source}: the {', '.join(missing)} mounting(s) are the identity, assumed: nothing gave"
+        f" them (write {names} with x_m, y_m, yaw_deg and a source in sonarslam.toml, zeros if"
+        " that is the truth; a table whose source says 'assumed' is not a measurement). A"
+        " DVL mounting turns dead reckoning's motion and the sonar yaw calibrated on it; an"
+        " AHRS mounting turns the whole run about its start",
+        DataWarning,
+        stacklevel=3,
+    )
 
 
 def neutral_warning(source: Path) -> str:

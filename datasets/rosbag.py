@@ -66,8 +66,10 @@ from sonarslam.datasets.config import DatasetConfig, load_dataset_config
 from sonarslam.datasets.dataset import (
     NEUTRAL_CALIBRATION,
     Dataset,
+    mounting_tables,
     neutral_warning,
     read_truth,
+    warn_assumed_mountings,
 )
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.geodesy import geodetic_to_local_en, local_en_to_geodetic
@@ -959,7 +961,7 @@ def open_bag(
     base = DatasetConfig()
     if read.msgtypes.get("sonar") in REP103_SONAR_TYPES:
         base = replace(base, sonar=replace(base.sonar, angle_sense=1))
-    in_toml = _mounting_tables(toml)
+    in_toml = mounting_tables(toml)
     config = _with_mountings(base, mountings, in_toml)
     if toml is not None:
         config, calibration = load_dataset_config(toml, base=config), str(toml)
@@ -975,7 +977,7 @@ def open_bag(
         config = load_dataset_config(config_override, base=config)
         calibration = f"{calibration}; over it {config_override}"
     if calibration != NEUTRAL_CALIBRATION:  # a neutral run is said whole above
-        _warn_identity_mountings(p, mountings, in_toml | _mounting_tables(config_override))
+        warn_assumed_mountings(p, config, in_toml | mounting_tables(config_override))
     dvl_note = _dvl_sigma_note(p, read.topics["dvl"], read.dvl_sigma_mps, config)
     if dvl_note:
         calibration = f"{calibration}; {dvl_note}"
@@ -1242,45 +1244,11 @@ def tf_mountings(
     return out, line
 
 
-def _mounting_tables(toml: str | Path | None) -> set[str]:
-    """The sensors (``sonar``, ``dvl``, ``ahrs``) whose ``[mounting.<sensor>]`` table a
-    ``sonarslam.toml``-format file has; none for a file that cannot be read
-    (:func:`sonarslam.datasets.config.load_dataset_config` names its problem)."""
-    if toml is None:
-        return set()
-    try:
-        data = tomllib.loads(Path(toml).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
-        return set()
-    mounting = data.get("mounting", {})
-    return set(mounting) if isinstance(mounting, dict) else set()
-
-
-def _warn_identity_mountings(bag: Path, mountings: dict[str, Mounting], given: set[str]) -> None:
-    """A DataWarning naming each sensor left at the identity mounting when the others have a
-    source (the transforms, or a table of the files: ``given``): one sensor forgotten among
-    given ones is not a choice the user made."""
-    missing = [
-        field.removesuffix("_mounting")
-        for role, field in MOUNTED_ROLES.items()
-        if role not in mountings and field.removesuffix("_mounting") not in given
-    ]
-    if missing and len(missing) < len(MOUNTED_ROLES):
-        tables = ", ".join(f"[mounting.{m}]" for m in missing)
-        warnings.warn(
-            f"{bag}: the {', '.join(missing)} mounting(s) are the identity: the bag's transforms"
-            f" and sonarslam.toml give the others but not these (write {tables} with x_m, y_m,"
-            " yaw_deg in sonarslam.toml, zeros if that is the truth)",
-            DataWarning,
-            stacklevel=3,
-        )
-
-
 def _with_mountings(
     config: DatasetConfig, mountings: dict[str, Mounting], tables: set[str]
 ) -> DatasetConfig:
     """``config`` with the transforms' mountings, except those whose ``[mounting.<sensor>]``
-    table the ``sonarslam.toml`` has (``tables``, :func:`_mounting_tables`: the file wins,
+    table the ``sonarslam.toml`` has (``tables``, :func:`sonarslam.datasets.dataset.mounting_tables`: the file wins,
     table by table)."""
     changes: dict[str, Any] = {
         MOUNTED_ROLES[role]: m

@@ -32,8 +32,10 @@ from sonarslam.datasets.dataset import (
     NEUTRAL_CALIBRATION,
     Dataset,
     check_overlap,
+    mounting_tables,
     neutral_warning,
     read_truth,
+    warn_assumed_mountings,
 )
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.gates import SensorReport, gate_attitude, gate_beams, gate_dvl, gate_gps
@@ -237,6 +239,10 @@ def _config(root: Path, config_override: str | Path | None) -> tuple[DatasetConf
     if config_override is not None:
         config = load_dataset_config(config_override, base=config)
         calibration = f"{calibration}; over it {config_override}"
+    if calibration != NEUTRAL_CALIBRATION:  # a neutral run is said whole above
+        warn_assumed_mountings(
+            root, config, mounting_tables(toml) | mounting_tables(config_override)
+        )
     return config, calibration
 
 

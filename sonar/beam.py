@@ -17,6 +17,7 @@ __all__ = [
     "bin_range_m",
     "MAX_BINS",
     "MIN_STEP_RAD",
+    "ASSUMED_MOUNTING_SOURCE",
 ]
 
 #: The project's float array type (``features.geometry`` re-exports it).
@@ -116,6 +117,14 @@ class SonarHead:
         return np.asarray(self.angle_sense * np.asarray(transducer_angle_rad, dtype=np.float64))
 
 
+#: The source of a mounting nobody gave (the identity by default). A ``sonarslam.toml`` that
+#: writes it keeps it an assumption: the readers warn of it as of a mounting left out
+#: (:attr:`Mounting.assumed`).
+ASSUMED_MOUNTING_SOURCE = "identity: assumed, never given"
+#: The same marker as written before it said so (``sonarslam calibrate --write`` wrote it).
+_OLD_ASSUMED_SOURCE = "identity"
+
+
 @dataclass(frozen=True)
 class Mounting:
     """Pose of a sensor frame in the vehicle body frame (x forward, y left), ``bTs``.
@@ -127,16 +136,24 @@ class Mounting:
     yaw_rad : float
         Rotation of the sensor frame about the body z axis, counter-clockwise (rad).
     source : str
-        Where the numbers come from (calibration method, drawing, ...).
+        Where the numbers come from (calibration method, drawing, ...);
+        :data:`ASSUMED_MOUNTING_SOURCE` for a mounting nobody gave.
     """
 
     x_m: float = bounded(0.0, -MAX_LEVER_M, MAX_LEVER_M)
     y_m: float = bounded(0.0, -MAX_LEVER_M, MAX_LEVER_M)
     yaw_rad: float = bounded(0.0, -2.0 * np.pi, 2.0 * np.pi)
-    source: str = "identity"
+    source: str = ASSUMED_MOUNTING_SOURCE
 
     def __post_init__(self) -> None:
         check_fields(self)
+
+    @property
+    def assumed(self) -> bool:
+        """True for a mounting nobody gave: its source is :data:`ASSUMED_MOUNTING_SOURCE` (or
+        the bare ``"identity"`` older files hold), whether it came from the defaults or from a
+        ``sonarslam.toml`` that wrote the assumption down."""
+        return self.source in (ASSUMED_MOUNTING_SOURCE, _OLD_ASSUMED_SOURCE)
 
     def as_pose(self) -> FloatArray:
         """``bTs`` as an array ``(x_m, y_m, yaw_rad)``."""

@@ -19,6 +19,7 @@ from sonarslam.slam.eval.health import (
     median_lower_bound,
     median_upper_bound,
 )
+from sonarslam.slam.eval.loops import OdometryCheck
 from sonarslam.slam.io.trajectory import Trajectory
 
 T0 = 1.7e9
@@ -73,6 +74,57 @@ def test_consistent_logs_raise_nothing(seed: int) -> None:
     assert m["health_underconfident"] == [] and m["health_first_finding"] is None
     assert m["health_nis_line_windows"] == 15 and m["health_departure_windows"] == 10
     assert "no inconsistency found" in report.line()
+
+
+def _travel(angle_deg: float, rng: np.random.Generator, n: int = 600) -> np.ndarray:
+    """Body-frame velocities (n, 2) of 0.5 m/s toward ``angle_deg`` off the bow, with 0.1 m/s
+    of noise."""
+    a = np.deg2rad(angle_deg)
+    return np.array([0.5 * np.cos(a), 0.5 * np.sin(a)]) + rng.normal(0.0, 0.1, (n, 2))
+
+
+@pytest.mark.parametrize(
+    ("angle_deg", "flagged"), [(0.0, False), (-26.0, False), (180.0, True), (90.0, True)]
+)
+def test_travel_off_the_bow_trips_the_travel_check(angle_deg: float, flagged: bool) -> None:
+    """A DVL given the wrong way round moves dead reckoning stern- or side-first; the run is
+    consistent with itself otherwise (the sonar's yaw calibrated on it took the same turn), so
+    only this check says so. The marina travels 26 deg off its bow on the whole (crabbing)."""
+    rng = np.random.default_rng(3)
+    report = assess(_inputs(rng, travel_body_mps=_travel(angle_deg, rng)))
+    assert report.judged["travel"] == 1
+    assert ("travel" in report.checks_flagged()) is flagged
+    if flagged:
+        cause = [i.cause for i in report.issues if i.check == "travel"][0]
+        assert f"{angle_deg:+.0f} deg off its bow" in cause and "[mounting.dvl]" in cause
+        assert not report.line().startswith("health: no inconsistency found")
+    else:
+        assert report.ok
+
+
+def test_a_vehicle_that_travels_every_way_is_not_judged_by_the_travel_check() -> None:
+    """Hovering or a pool's back-and-forth: the travel has no direction to judge."""
+    rng = np.random.default_rng(4)
+    back_and_forth = np.concatenate([_travel(0.0, rng, 300), _travel(180.0, rng, 300)])
+    report = assess(_inputs(rng, travel_body_mps=back_and_forth))
+    assert report.ok and "travel" not in report.judged
+
+
+@pytest.mark.parametrize(
+    ("heading_deg", "accepted", "flagged"),
+    [(-174.0, 8, True), (60.0, 3, True), (30.0, 8, False), (-174.0, 2, False)],
+)
+def test_the_sonar_turned_from_dead_reckoning_trips_the_odometry_check(
+    heading_deg: float, accepted: int, flagged: bool
+) -> None:
+    """Beyond 45 deg over at least 3 registrations: a sensor mounted the wrong way round."""
+    check = OdometryCheck(12, accepted, heading_deg, 1.0, 5.0, 0.01)
+    report = assess(_inputs(np.random.default_rng(5), odometry=check))
+    assert report.judged["odometry"] == 1
+    assert ("odometry" in report.checks_flagged()) is flagged
+    assert report.ok is not flagged
+    if flagged:
+        assert f"{heading_deg:+.0f} deg away" in report.issues[0].cause
 
 
 def test_innovations_three_times_their_variance_trip_the_nis_check() -> None:

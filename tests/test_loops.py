@@ -228,6 +228,33 @@ def test_the_sonar_says_which_way_dead_reckoning_should_go(
     assert "the sonar sees the vehicle move" not in capsys.readouterr().err
 
 
+def test_a_closed_loop_whose_sonar_is_turned_round_is_not_called_healthy(
+    nogps: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The sonar's yaw given 180 deg wrong, the DVL right: the odometry check sees the sonar's
+    motion turned round, and the health monitor's verdict says so (it used to print "no
+    inconsistency found" under the odometry check's warning); the warning is said once."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        d = open_dataset(nogps)
+    wrong = tmp_path / "sonar.toml"
+    told = float(np.degrees(d.config.sonar_mounting.yaw_rad))
+    wrong.write_text(f"[mounting.sonar]\nx_m = 0.3\nyaw_deg = {told - 180.0}\n")
+    out = tmp_path / "ekf"
+    args = ["run", str(nogps), "--backend", "ekf", "--out", str(out), "--quiet"]
+    assert main([*args, "--config", str(wrong)]) == 0
+    err = capsys.readouterr().err
+    assert err.count("the sonar sees the vehicle move") == 1, err
+    m = json.loads((out / "metrics.json").read_text())
+    assert abs(m["odometry_check_heading_deg"]) > 150.0
+    assert m["health_flagged"] == ["odometry"], m["health_line"]
+    assert "[mounting.dvl] yaw_deg" in m["health_line"]
+    args[args.index("--out") + 1] = str(tmp_path / "ekf_right")
+    assert main(args) == 0
+    right = json.loads((tmp_path / "ekf_right" / "metrics.json").read_text())
+    assert right["health_odometry_windows"] == 1 and "odometry" not in right["health_flagged"]
+
+
 def test_a_sonar_some_degrees_off_and_a_range_scale_are_measured_and_named(
     nogps: Path, tmp_path: Path
 ) -> None:

@@ -4,12 +4,15 @@ or the objective is reported flat and the command refuses; never a wrong yaw wit
 
 from __future__ import annotations
 
+import json
 import math
+import tomllib
 from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
+from sonarslam.datasets.errors import DataWarning
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.features.geometry import wrap_angle
 from sonarslam.slam.cli import calibrate as calibrate_cli
@@ -87,3 +90,84 @@ def test_calibrate_cli_yaw_or_refusal(
     # a mirrored sonar flattens the objective too: the refusal names it (issue 32's review)
     assert "[sonar] angle_sense" in err[0]
     assert not refused.exists()
+
+
+@pytest.fixture(scope="module")
+def harbour_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """300 s of the harbour (seed 1) as a ROS 1 bag without GPS (the odometry check's case),
+    with the simulator's sonarslam.toml (sonar yaw 180 deg, DVL yaw -90 deg) and truth.json."""
+    out = tmp_path_factory.mktemp("harbour_bag")
+    args = ["simulate", "harbour", "--seed", "1", "--duration", "300", "--out", str(out)]
+    assert main([*args, "--bag", "ros1", "--no-gps"]) == 0
+    return out / "sim_harbour_1.bag"
+
+
+def _bag_copy(bag: Path, folder: Path, toml: str | None) -> Path:
+    """The bag alone in ``folder`` (no truth.json: a user's run, judged GPS-free), with ``toml``
+    as its sonarslam.toml when given."""
+    folder.mkdir()
+    copy = folder / bag.name
+    copy.write_bytes(bag.read_bytes())
+    if toml is not None:
+        (folder / "sonarslam.toml").write_text(toml, encoding="utf-8")
+    return copy
+
+
+def _calibrated_yaw_deg(toml: Path) -> float:
+    data = tomllib.loads(toml.read_text(encoding="utf-8"))
+    return float(data["mounting"]["sonar"]["yaw_deg"])
+
+
+def test_calibrate_does_not_take_a_dvl_turned_round_for_the_sonar(
+    harbour_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The DVL's yaw given 180 deg wrong: dead reckoning runs stern first, and the sharpest map
+    has the sonar turned 180 deg too (its yaw relative to the motion is right). calibrate used to
+    write that yaw silently (0.5 deg for the true 180; the rerun then said "no inconsistency
+    found" at an ATE of 53 m): it refuses (exit 1, nothing written), naming the DVL and AHRS
+    mountings and dead reckoning's stern-first travel. Written all the same
+    (--accept-large-yaw), the rerun's health monitor flags the travel."""
+    toml = (harbour_bag.parent / "sonarslam.toml").read_text(encoding="utf-8")
+    assert 'yaw_deg = -90.0\nsource = "simulator truth"' in toml  # the DVL's table
+    wrong = toml.replace(
+        'yaw_deg = -90.0\nsource = "simulator truth"', 'yaw_deg = 90.0\nsource = "drawing"'
+    )
+    bag = _bag_copy(harbour_bag, tmp_path / "run", wrong)
+    out = tmp_path / "written.toml"
+    assert main(["calibrate", str(bag), "--quiet", "--write", str(out)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "nothing written" in err and not out.exists(), err
+    for named in ("[mounting.dvl] yaw_deg", "[mounting.ahrs] yaw_deg", "--accept-large-yaw"):
+        assert named in err, (named, err)
+    assert "+180 deg off its bow" in err, err
+
+    assert main(["calibrate", str(bag), "--quiet", "--accept-large-yaw", "--write", str(out)]) == 0
+    assert abs(wrap_angle(math.radians(_calibrated_yaw_deg(out)))) < math.radians(YAW_TOL_DEG)
+    (bag.parent / "sonarslam.toml").write_text(out.read_text(encoding="utf-8"), encoding="utf-8")
+    run_dir = tmp_path / "ekf"
+    assert main(["run", str(bag), "--backend", "ekf", "--quiet", "--out", str(run_dir)]) == 0
+    metrics = json.loads((run_dir / "metrics.json").read_text(encoding="utf-8"))
+    assert abs(metrics["odometry_check_heading_deg"]) < 10.0  # the sonar agrees with the DVL
+    assert "travel" in metrics["health_flagged"], metrics["health_line"]
+    assert not metrics["health_line"].startswith("health: no inconsistency found")
+
+
+def test_calibrate_keeps_the_mountings_it_assumed_assumed(
+    harbour_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A bag without sonarslam.toml: every mounting is the identity. The sharpest map's sonar
+    yaw is then relative to the DVL's assumed mounting (-90 deg for the true 180 and DVL -90):
+    calibrate says so, and its --write keeps the DVL's and AHRS's mountings marked as assumed,
+    so that the next opening still warns of them (it used to write them as given: silence, at
+    an ATE of 37 m)."""
+    bag = _bag_copy(harbour_bag, tmp_path / "run", None)
+    out = bag.parent / "sonarslam.toml"
+    assert main(["calibrate", str(bag), "--quiet", "--write", str(out)]) == 0
+    said = capsys.readouterr().err  # the command prints its warnings
+    assert "the DVL and AHRS mounting(s) are assumed" in said, said
+    assert "may be the DVL's mounting, not the sonar's" in said, said
+    assert "+90 deg off its bow" in said, said
+    with pytest.warns(DataWarning, match=r"the dvl, ahrs mounting\(s\) are the identity, assumed"):
+        ds = open_dataset(bag)
+    assert ds.config.dvl_mounting.assumed and ds.config.ahrs_mounting.assumed
+    assert not ds.config.sonar_mounting.assumed

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import argparse
 import math
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
 from sonarslam.datasets.config import DatasetConfig, dump_dataset_config
-from sonarslam.datasets.errors import DataError
+from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.ping360 import is_ping360_log, ping360_table
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.settings import SettingError
@@ -19,6 +20,7 @@ from sonarslam.slam.run.calibration import (
     calibrate_sonar_yaw,
     calibrate_time_offset,
     ekf_closed_loop,
+    yaw_change_doubt,
 )
 from sonarslam.slam.run.closed_loop import ClosedLoopResult
 from sonarslam.slam.run.sonar_calibration import calibrate_line_noise, calibrate_range_offset
@@ -200,11 +202,22 @@ def command(args: argparse.Namespace) -> int:
             "a longer run that passes walls more than once, try the other angle_sense, or try "
             f"another --window (now {window:g} s); nothing written",
         )
-    print(
+    found = (
         f"sonar mounting yaw with {args.poses} poses: {math.degrees(result.best_yaw_rad):.2f} deg "
-        f"(configured: {current:.2f} deg; {result.verdict()}); put it under [mounting.sonar] "
-        "yaw_deg in sonarslam.toml"
+        f"(configured: {current:.2f} deg; {result.verdict()})"
     )
+    doubt = yaw_change_doubt(dataset, result.best_yaw_rad)
+    if doubt is not None and not dataset.config.sonar_mounting.assumed:
+        if not args.accept_large_yaw:
+            raise DataError(
+                dataset.root,
+                None,
+                f"{found}: {doubt}; check those mountings and calibrate again, or give"
+                " --accept-large-yaw to take the sonar's; nothing written",
+            )
+    print(f"{found}; put it under [mounting.sonar] yaw_deg in sonarslam.toml")
+    if doubt is not None:
+        warnings.warn(f"{dataset.root}: {doubt}", DataWarning, stacklevel=2)
     mount = replace(
         dataset.config.sonar_mounting,
         yaw_rad=float(result.best_yaw_rad),

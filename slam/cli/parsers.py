@@ -204,6 +204,13 @@ def _calibrate(sub: Subparsers) -> argparse.ArgumentParser:
         help="entropy window (s, default 120; 60 for --time-offset)",
     )
     p.add_argument(
+        "--accept-large-yaw",
+        action="store_true",
+        help="write a sonar yaw found more than 45 deg from a configured (given) one: only"
+        " after checking the DVL's and AHRS's mountings, which map sharpness cannot tell from"
+        " the sonar's (docs/calibration.md)",
+    )
+    p.add_argument(
         "--time-offset",
         action="store_true",
         help="the sonar clock offset by map sharpness instead: +-3 s around the configured"

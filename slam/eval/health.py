@@ -39,6 +39,18 @@ innovations of a consistent filter are white with the covariance it predicts):
     Landmark count growth: a window in which at least ``landmark_min_new`` landmarks were
     created and they are more than ``landmark_new_share_max`` of the window's associations
     (a map that re-observes its walls associates far more lines than it creates landmarks).
+``travel``
+    The direction the vehicle travels in its own frame by dead reckoning (the DVL's velocities
+    through its mounting, :func:`travel_direction`): judged when at least
+    ``travel_min_share`` of the travel goes one way, flagged beyond ``travel_max_angle_deg``
+    off the bow. A vehicle travels bow first; a DVL mounting turned the wrong way round moves
+    it stern- or side-first, and the map is as sharp with the sonar's yaw turned alike, so no
+    other check sees it (docs/calibration.md).
+``odometry``
+    Runs without GPS: the sonar's motion between nearby scans against dead reckoning's
+    (:func:`sonarslam.slam.eval.loops.odometry_check`), flagged when they disagree by more than
+    :data:`sonarslam.slam.eval.loops.ODOMETRY_MAX_ANGLE_DEG` (a sensor mounted the wrong way
+    round: :attr:`sonarslam.slam.eval.loops.OdometryCheck.turned`).
 ``lines``
     The line extractor's yield: a run of at least ``lines_min_beams`` beams that gave fewer
     than ``min_lines_per_kbeam`` lines per 1000 beams is dead reckoning that no check above
@@ -75,7 +87,7 @@ from sonarslam.datasets.errors import DataWarning
 from sonarslam.features.geometry import FloatArray, wrap_angle
 from sonarslam.settings import bounded, check_fields
 from sonarslam.slam.eval.consistency import nees_series, window_median_gate
-from sonarslam.slam.eval.loops import LOOP_CAUSES
+from sonarslam.slam.eval.loops import LOOP_CAUSES, ODOMETRY_CAUSES, OdometryCheck
 from sonarslam.slam.io.trajectory import Trajectory
 
 __all__ = [
@@ -88,6 +100,7 @@ __all__ = [
     "assess",
     "median_lower_bound",
     "median_upper_bound",
+    "travel_direction",
 ]
 
 
@@ -121,6 +134,13 @@ class HealthConfig:
         Fewest lines per 1000 beams of a run the ``lines`` check judges.
     lines_min_beams : int
         Fewest beams for the ``lines`` check to judge a run.
+    travel_max_angle_deg : float
+        Largest angle off the bow of the vehicle's travel in its own frame (deg): halfway to
+        the nearest wrong way round of a mounting (a multiple of 90 deg).
+    travel_min_share : float
+        The ``travel`` check judges a run whose travel goes this much one way (the resultant
+        share of :func:`travel_direction`; a vehicle that hovers or goes every way says
+        nothing).
     """
 
     window_s: float = bounded(120.0, 1.0, 1e5)
@@ -134,6 +154,8 @@ class HealthConfig:
     landmark_new_share_max: float = bounded(0.5, 0.0, 1.0)
     min_lines_per_kbeam: float = bounded(1.0, 0.0, 1e3)
     lines_min_beams: int = bounded(2000, 1, 10**9)
+    travel_max_angle_deg: float = bounded(45.0, 1.0, 180.0)
+    travel_min_share: float = bounded(0.5, 0.0, 1.0)
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -187,6 +209,11 @@ class HealthInputs:
     n_beams, n_lines : int
         The beams the extractor was given and the lines it gave (the ``lines`` check; not
         judged with ``n_beams`` 0).
+    travel_body_mps : ndarray, shape (V, 2)
+        Dead reckoning's velocities in the body frame (m/s; the DVL's rows with bottom lock
+        through its mounting): the ``travel`` check (not judged without rows).
+    odometry : OdometryCheck or None
+        The run's odometry check (runs without GPS): the ``odometry`` check.
     """
 
     trajectory: Trajectory
@@ -202,6 +229,8 @@ class HealthInputs:
     truth: Trajectory | None = None
     n_beams: int = 0
     n_lines: int = 0
+    travel_body_mps: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    odometry: OdometryCheck | None = None
 
 
 @dataclass(frozen=True)
@@ -613,6 +642,70 @@ def _check_lines(inputs: HealthInputs, cfg: HealthConfig) -> tuple[list[HealthIs
     return [HealthIssue("lines", cause, lo, hi)], 1
 
 
+def travel_direction(v_body_mps: FloatArray) -> tuple[float, float]:
+    """Which way a vehicle travels in its own frame.
+
+    Parameters
+    ----------
+    v_body_mps : ndarray, shape (V, 2)
+        Velocities in the body frame (m/s; x forward, y left).
+
+    Returns
+    -------
+    angle_rad : float
+        The angle of the summed velocities from the bow (rad, counter-clockwise, range
+        ``[-pi, pi]``); NaN when they sum to zero.
+    share : float
+        The resultant share ``|sum v| / sum |v|`` (0-1): 1 when every row goes one way, near 0
+        for a vehicle that goes every way or hovers; NaN without motion.
+    """
+    v = np.asarray(v_body_mps, dtype=np.float64).reshape(-1, 2)
+    total = float(np.sum(np.hypot(v[:, 0], v[:, 1])))
+    if not total > 0.0:
+        return math.nan, math.nan
+    sx, sy = (float(a) for a in v.sum(axis=0))
+    share = math.hypot(sx, sy) / total
+    return (math.atan2(sy, sx) if share > 0.0 else math.nan), share
+
+
+def _check_travel(inputs: HealthInputs, cfg: HealthConfig) -> tuple[list[HealthIssue], int]:
+    """Dead reckoning that moves the vehicle far off its bow (module docstring)."""
+    if inputs.travel_body_mps.shape[0] < cfg.min_updates:
+        return [], 0
+    angle, share = travel_direction(inputs.travel_body_mps)
+    if not share >= cfg.travel_min_share:
+        return [], 0
+    if abs(math.degrees(angle)) <= cfg.travel_max_angle_deg:
+        return [], 1
+    lo, hi = inputs.trajectory.span_s
+    cause = (
+        f"dead reckoning moves the vehicle {math.degrees(angle):+.0f} deg off its bow ({share:.2f}"
+        f" of its travel one way in its own frame; limit {cfg.travel_max_angle_deg:g} deg): a"
+        " vehicle travels bow first, so the DVL's mounting ([mounting.dvl] yaw_deg, or its axes'"
+        " signs) is likely turned by about that; a sonar yaw calibrated by map sharpness on this"
+        " dead reckoning (`sonarslam calibrate`) took the same turn: calibrate it again after"
+        " the fix. A vehicle that truly travels stern- or side-first: not an error"
+    )
+    return [HealthIssue("travel", cause, lo, hi)], 1
+
+
+def _check_odometry(inputs: HealthInputs) -> tuple[list[HealthIssue], int]:
+    """The sonar's motion turned far from dead reckoning's (module docstring)."""
+    check = inputs.odometry
+    if check is None or not check.accepted:
+        return [], 0
+    if not check.turned:
+        return [], 1
+    lo, hi = inputs.trajectory.span_s
+    cause = (
+        f"the sonar sees the vehicle move {check.heading_deg:+.0f} deg away from where dead"
+        f" reckoning moves it ({check.accepted} registrations of scans a few metres apart,"
+        f" standard error {check.heading_se_deg:.1f} deg): one of {ODOMETRY_CAUSES} is likely"
+        " wrong; every estimate of this run follows dead reckoning's motion"
+    )
+    return [HealthIssue("odometry", cause, lo, hi)], 1
+
+
 def assess(inputs: HealthInputs, config: HealthConfig | None = None) -> HealthReport:
     """Run every check on a run's logs (module docstring); the issues in time order."""
     cfg = config or HealthConfig()
@@ -642,6 +735,14 @@ def assess(inputs: HealthInputs, config: HealthConfig | None = None) -> HealthRe
     found, n = _check_lines(inputs, cfg)
     if n:
         judged["lines"] = n
+    issues += found
+    found, n = _check_travel(inputs, cfg)
+    if n:
+        judged["travel"] = n
+    issues += found
+    found, n = _check_odometry(inputs)
+    if n:
+        judged["odometry"] = n
     issues += found
     issues.sort(key=lambda i: (i.t0_s, i.check))
     findings.sort(key=lambda i: (i.t0_s, i.check))

@@ -52,6 +52,9 @@ __all__ = [
     "stated_loops",
     "find_loops",
     "loop_errors",
+    "ODOMETRY_CAUSES",
+    "ODOMETRY_MAX_ANGLE_DEG",
+    "ODOMETRY_MIN_PAIRS",
     "OdometryCheck",
     "OdometryPair",
     "odometry_pairs",
@@ -65,6 +68,20 @@ LOOP_CAUSES = (
     " angle_sense), a clock offset ([sonar] time_offset_s), the IMU's frame convention (an"
     " orientation and gyro both in NED instead of REP-103's ENU turn the vehicle the wrong"
     " way, and no check refuses them), a diverged run"
+)
+
+#: The sonar and dead reckoning disagree when the mean angle between their motions exceeds this
+#: (deg) over at least :data:`ODOMETRY_MIN_PAIRS` registrations (:attr:`OdometryCheck.turned`):
+#: halfway to a mounting the wrong way round (a multiple of 90 deg).
+ODOMETRY_MAX_ANGLE_DEG = 45.0
+ODOMETRY_MIN_PAIRS = 3
+#: Where a wrong direction of motion can come from, named in the odometry check's warnings.
+ODOMETRY_CAUSES = (
+    "the sonar's mounting yaw ([mounting.sonar] yaw_deg: it turns every registration, hence the"
+    " motion the sonar measures; `sonarslam calibrate` estimates it), the DVL's mounting yaw"
+    " ([mounting.dvl] yaw_deg) or its axes' signs, or the sonar's angle sense ([sonar]"
+    " angle_sense: a mirror turns the motion only where the head's zero is not along the"
+    " travel)"
 )
 
 #: The estimate is searched for returns at this step (s).
@@ -254,6 +271,17 @@ class OdometryCheck:
     scale: float
     heading_se_deg: float = math.nan
     scale_se: float = math.nan
+
+    @property
+    def turned(self) -> bool:
+        """True when the sonar sees the vehicle move more than :data:`ODOMETRY_MAX_ANGLE_DEG`
+        away from dead reckoning over at least :data:`ODOMETRY_MIN_PAIRS` registrations: a
+        sensor mounted the wrong way round (:data:`ODOMETRY_CAUSES`)."""
+        return (
+            self.accepted >= ODOMETRY_MIN_PAIRS
+            and math.isfinite(self.heading_deg)
+            and abs(self.heading_deg) > ODOMETRY_MAX_ANGLE_DEG
+        )
 
 
 @dataclass(frozen=True)

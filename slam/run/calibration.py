@@ -23,8 +23,9 @@ from sonarslam.features.line import LineFeature
 from sonarslam.features.pose_source import PoseSource
 from sonarslam.features.projection import beam_points
 from sonarslam.slam.backends.registry import backend_spec
+from sonarslam.slam.eval.health import HealthConfig, travel_direction
 from sonarslam.slam.eval.sharpness import map_entropy, map_entropy_variance
-from sonarslam.slam.model.motion import body_yaw
+from sonarslam.slam.model.motion import body_velocity, body_yaw
 from sonarslam.slam.run.closed_loop import ClosedLoopResult, run_closed_loop
 from sonarslam.slam.run.presets import map_min_intensity, run_config
 
@@ -33,6 +34,8 @@ __all__ = [
     "map_entropy",
     "scan_entropy",
     "calibrate_sonar_yaw",
+    "MAX_YAW_CHANGE_DEG",
+    "yaw_change_doubt",
     "ClockSearch",
     "calibrate_time_offset",
     "CompassFit",
@@ -230,6 +233,71 @@ def calibrate_sonar_yaw(
         float(coarse[second]),
         (float(costs[second]) - float(costs.min())) / noise,
     )
+
+
+#: The largest change (deg) from a configured sonar yaw that ``sonarslam calibrate`` writes
+#: without ``--accept-large-yaw`` (:func:`yaw_change_doubt`): halfway to a mounting the wrong
+#: way round (a multiple of 90 deg), the same limit as the run's odometry check's. The search
+#: finds the sonar's yaw relative to dead reckoning's motion, so a DVL mounting given the wrong
+#: way round moves its minimum by as much.
+MAX_YAW_CHANGE_DEG = 45.0
+
+
+def yaw_change_doubt(dataset: Dataset, yaw_rad: float) -> str | None:
+    """Why a sonar yaw found by map sharpness may be another sensor's mounting, in words, or
+    None when it is within :data:`MAX_YAW_CHANGE_DEG` of the configured one.
+
+    Map sharpness over dead-reckoning poses measures the sonar's yaw relative to dead
+    reckoning's motion: a DVL mounting off by ``d`` turns that motion by ``d`` and moves the
+    sharpest map's sonar yaw by ``d`` too, and an AHRS mounting off turns the whole run about
+    its start, which no map sees. The words name those mountings, the ones nobody gave
+    (:attr:`sonarslam.sonar.beam.Mounting.assumed`), and which way dead reckoning moves the
+    vehicle in its own frame (:func:`sonarslam.slam.eval.health.travel_direction`: a vehicle
+    travels bow first).
+    """
+    cfg = dataset.config
+    current = cfg.sonar_mounting.yaw_rad
+    change = math.degrees(float(wrap_angle(yaw_rad - current)))
+    if abs(change) <= MAX_YAW_CHANGE_DEG:
+        return None
+    given = (
+        "the identity assumed for the sonar (nothing gave its mounting)"
+        if cfg.sonar_mounting.assumed
+        else f"the configured {math.degrees(current):.2f} deg ({cfg.sonar_mounting.source})"
+    )
+    out = (
+        f"the sonar yaw found, {math.degrees(yaw_rad):.2f} deg, is {change:+.0f} deg from {given}:"
+        " map sharpness over dead-reckoning poses measures the sonar's yaw relative to dead"
+        " reckoning's motion, so a DVL mounting off by an angle ([mounting.dvl] yaw_deg, or its"
+        " axes' signs) moves it by as much, and an AHRS mounting off ([mounting.ahrs] yaw_deg)"
+        " turns the whole run about its start, which no map sees; "
+        + (
+            "it is the sonar's yaw only if the DVL's mounting is right"
+            if cfg.sonar_mounting.assumed
+            else "a rotation this large is more likely one of those than the sonar's"
+        )
+    )
+    assumed = [m for m in ("dvl", "ahrs") if getattr(cfg, f"{m}_mounting").assumed]
+    if assumed:
+        out += (
+            f"; the {' and '.join(m.upper() for m in assumed)} mounting(s) are assumed (the"
+            f" identity, never given): {math.degrees(yaw_rad):.2f} deg may be the DVL's"
+            " mounting, not the sonar's"
+        )
+    angle, share = travel_direction(
+        body_velocity(dataset.dvl.v_mps[dataset.dvl.valid], cfg.dvl_mounting)
+    )
+    if math.isfinite(angle):
+        health = HealthConfig()
+        out += (
+            f"; dead reckoning moves the vehicle {math.degrees(angle):+.0f} deg off its bow"
+            f" ({share:.2f} of its travel one way in its own frame)"
+        )
+        if share >= health.travel_min_share and (
+            abs(math.degrees(angle)) > health.travel_max_angle_deg
+        ):
+            out += ": a vehicle travels bow first, so the DVL's mounting is likely turned by that"
+    return out
 
 
 #: A sonar clock offset is taken only when the objective's coarse minimum lies this many noise

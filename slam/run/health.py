@@ -25,8 +25,9 @@ from sonarslam.slam.eval.health import (
     StateValue,
     assess,
 )
+from sonarslam.slam.eval.loops import OdometryCheck
 from sonarslam.slam.eval.truth import truth_trajectory
-from sonarslam.slam.model.motion import body_yaw
+from sonarslam.slam.model.motion import body_velocity, body_yaw
 from sonarslam.slam.run.closed_loop import ClosedLoopResult
 from sonarslam.slam.run.sources import dead_reckoning_trajectory
 
@@ -66,8 +67,11 @@ def nis_streams(result: ClosedLoopResult) -> list[NisStream]:
     return streams
 
 
-def health_inputs(dataset: Dataset, result: ClosedLoopResult) -> HealthInputs:
-    """What the monitor reads of a closed loop's run (module docstring)."""
+def health_inputs(
+    dataset: Dataset, result: ClosedLoopResult, odometry: OdometryCheck | None = None
+) -> HealthInputs:
+    """What the monitor reads of a closed loop's run (module docstring), with the run's odometry
+    check (:func:`sonarslam.slam.eval.loops.odometry_check`) when it has one."""
     backend = result.backend
     cfg = backend.config
     lm = backend.map
@@ -127,11 +131,17 @@ def health_inputs(dataset: Dataset, result: ClosedLoopResult) -> HealthInputs:
         # the beams the extractor saw: none when the back end takes no lines (scans only)
         n_beams=int(result.counts.get("beams", 0)) if "lines" in cfg.constraint_kinds else 0,
         n_lines=len(result.features),
+        travel_body_mps=body_velocity(dataset.dvl.v_mps[dataset.dvl.valid], c.dvl_mounting),
+        odometry=odometry,
     )
 
 
 def monitor_run(
-    dataset: Dataset, result: ClosedLoopResult, config: HealthConfig | None = None
+    dataset: Dataset,
+    result: ClosedLoopResult,
+    config: HealthConfig | None = None,
+    odometry: OdometryCheck | None = None,
 ) -> HealthReport:
-    """:func:`sonarslam.slam.eval.health.assess` on a closed loop's run."""
-    return assess(health_inputs(dataset, result), config)
+    """:func:`sonarslam.slam.eval.health.assess` on a closed loop's run (and its odometry check,
+    when it has one)."""
+    return assess(health_inputs(dataset, result, odometry), config)

@@ -201,7 +201,8 @@ class DataFigures:
 class ClosedLoopFigures:
     """A closed loop's figures: its settings, map, counters and timings, the back end's own
     (``state_*``, ``isam2_*``, ``scan_*``), the line NIS, the cost per vote, on simulated data the
-    associations against the truth, and the health monitor's verdict."""
+    associations against the truth, and the health monitor's verdict (``odometry``: the odometry
+    check it judged, which the loop figures report; not a key of its own)."""
 
     KEYS: ClassVar[tuple[str, ...]] = (
         "settings",
@@ -275,6 +276,8 @@ class ClosedLoopFigures:
     truth: AssociationScores | None = None
     health: Mapping[str, JsonValue] = field(default_factory=dict)
     health_line: str = ""
+    #: the odometry check the health monitor judged (runs without GPS), for the loop figures
+    odometry: OdometryCheck | None = None
 
     def to_json(self) -> dict[str, JsonValue]:
         out: dict[str, JsonValue] = {
@@ -553,6 +556,7 @@ def closed_loop_figures(
     config: RunConfig,
     health: dict[str, JsonValue],
     health_line: str,
+    odometry: OdometryCheck | None = None,
 ) -> ClosedLoopFigures:
     backend = result.backend
     nis = backend.map.nis()
@@ -583,4 +587,5 @@ def closed_loop_figures(
         truth=truth,
         health=health,
         health_line=health_line,
+        odometry=odometry,
     )

@@ -29,6 +29,8 @@ from sonarslam.settings import SettingError
 from sonarslam.slam.backends.registry import BACKENDS, backend_spec
 from sonarslam.slam.eval.loops import (
     LOOP_CAUSES,
+    ODOMETRY_CAUSES,
+    ODOMETRY_MIN_PAIRS,
     LoopError,
     OdometryCheck,
     find_loops,
@@ -254,8 +256,10 @@ def _closed_loop(
     )
     result.backend.finish()
     trajectories = result.backend.trajectories(batch)
-    health = monitor_run(dataset, result)  # GPS-free: the run against its own model
-    loop = closed_loop_figures(dataset, result, config, health.metrics(), health.line())
+    # without GPS the sonar's motion against dead reckoning's is a check of the run too
+    odometry = dataset_odometry_check(dataset) if dataset.gps is None else None
+    health = monitor_run(dataset, result, odometry=odometry)  # GPS-free: against its own model
+    loop = closed_loop_figures(dataset, result, config, health.metrics(), health.line(), odometry)
     health.warn()
     return result, config, trajectories, loop
 
@@ -478,10 +482,6 @@ LOOP_RADIUS_SHARE = 0.4
 #: Without GPS, scans this share of the sonar's range apart along dead reckoning (within 1-5 m)
 #: check its direction of motion against the sonar's (:func:`sonarslam.slam.eval.loops.odometry_check`).
 ODOMETRY_STEP_SHARE = 0.1
-#: The sonar and dead reckoning disagree when the mean angle between their motions exceeds this
-#: (deg) over at least :data:`ODOMETRY_MIN_PAIRS` registrations.
-ODOMETRY_MAX_ANGLE_DEG = 45.0
-ODOMETRY_MIN_PAIRS = 3
 #: The softer level: a mean angle beyond this (deg), or a length ratio further from 1 than
 #: :func:`odometry_scale_tolerance`, each also beyond :data:`ODOMETRY_SOFT_SE` of its own
 #: standard errors, over at least :data:`ODOMETRY_SOFT_MIN_PAIRS` registrations (docs/outputs.md
@@ -490,14 +490,6 @@ ODOMETRY_SOFT_ANGLE_DEG = 4.0
 ODOMETRY_SOFT_SCALE = 0.03
 ODOMETRY_SOFT_SE = 3.0
 ODOMETRY_SOFT_MIN_PAIRS = 4
-#: Where a wrong direction of motion can come from, named in the odometry check's warnings.
-_ODOMETRY_CAUSES = (
-    "the sonar's mounting yaw ([mounting.sonar] yaw_deg: it turns every registration, hence the"
-    " motion the sonar measures; `sonarslam calibrate` estimates it), the DVL's mounting yaw"
-    " ([mounting.dvl] yaw_deg) or its axes' signs, or the sonar's angle sense ([sonar]"
-    " angle_sense: a mirror turns the motion only where the head's zero is not along the"
-    " travel)"
-)
 
 
 def odometry_scale_tolerance(dataset: Dataset) -> float:
@@ -509,24 +501,27 @@ def odometry_scale_tolerance(dataset: Dataset) -> float:
     return math.hypot(ODOMETRY_SOFT_SCALE, 3.0 * told)
 
 
-def _warn_odometry(dataset: Dataset, check: OdometryCheck) -> None:
+def _warn_odometry(dataset: Dataset, check: OdometryCheck, in_health: bool = False) -> None:
     """Warn when the sonar sees the vehicle move another way than dead reckoning does: without
     GPS nothing else would show a DVL or sonar mounted the wrong way round (the estimate
     follows it and stays consistent with itself). Two levels: beyond
-    :data:`ODOMETRY_MAX_ANGLE_DEG` (a mounting the wrong way round), and the softer one
-    (:data:`ODOMETRY_SOFT_ANGLE_DEG`, :func:`odometry_scale_tolerance`, each beyond
-    :data:`ODOMETRY_SOFT_SE` standard errors: a mounting some degrees off, a range or DVL
-    scale some per cent off)."""
+    :data:`sonarslam.slam.eval.loops.ODOMETRY_MAX_ANGLE_DEG` (a mounting the wrong way round),
+    and the softer one (:data:`ODOMETRY_SOFT_ANGLE_DEG`, :func:`odometry_scale_tolerance`, each
+    beyond :data:`ODOMETRY_SOFT_SE` standard errors: a mounting some degrees off, a range or DVL
+    scale some per cent off). ``in_health``: the health monitor judged this check (a closed
+    loop's run), and its ``odometry`` issue warns of the first level."""
     if check.accepted < ODOMETRY_MIN_PAIRS or not math.isfinite(check.heading_deg):
         return
     seen = (
         f"({check.accepted} registrations of scans a few metres apart, standard error"
         f" {check.heading_se_deg:.1f} deg)"
     )
-    if abs(check.heading_deg) > ODOMETRY_MAX_ANGLE_DEG:
+    if check.turned:
+        if in_health:
+            return
         warnings.warn(
             f"{dataset.root}: the sonar sees the vehicle move {check.heading_deg:+.0f} deg away"
-            f" from where dead reckoning moves it {seen}: one of {_ODOMETRY_CAUSES} is likely wrong;"
+            f" from where dead reckoning moves it {seen}: one of {ODOMETRY_CAUSES} is likely wrong;"
             " every estimate of this run follows dead reckoning's motion",
             UserWarning,
             stacklevel=3,
@@ -539,7 +534,7 @@ def _warn_odometry(dataset: Dataset, check: OdometryCheck) -> None:
     if abs(angle) > ODOMETRY_SOFT_ANGLE_DEG and abs(angle) > ODOMETRY_SOFT_SE * se:
         found.append(
             f"the sonar sees the vehicle move {angle:+.1f} ± {se:.1f} deg away from where dead"
-            f" reckoning moves it: check {_ODOMETRY_CAUSES}"
+            f" reckoning moves it: check {ODOMETRY_CAUSES}"
         )
     scale, scale_se = check.scale, check.scale_se
     if (
@@ -562,6 +557,16 @@ def _warn_odometry(dataset: Dataset, check: OdometryCheck) -> None:
         )
 
 
+def dataset_odometry_check(dataset: Dataset, dr: Trajectory | None = None) -> OdometryCheck:
+    """The odometry check of a run (:func:`sonarslam.slam.eval.loops.odometry_check`): scans
+    :data:`ODOMETRY_STEP_SHARE` of the sonar's range apart (within 1-5 m) along dead reckoning
+    (``dr``, made when not given)."""
+    head = dataset.config.sonar
+    range_m = head.n_bins * head.bin_size_m
+    dr = dr if dr is not None else dead_reckoning_trajectory(dataset)
+    return odometry_check(dataset, dr, min(max(ODOMETRY_STEP_SHARE * range_m, 1.0), 5.0))
+
+
 def loop_figures(
     dataset: Dataset, result: RunResult, loops_rel_s: list[tuple[float, float]]
 ) -> LoopFigures:
@@ -580,9 +585,12 @@ def loop_figures(
     odometry = None
     if searched:
         loops += find_loops(dataset, dr, radius_m)
-        range_m = head.n_bins * head.bin_size_m
-        odometry = odometry_check(dataset, dr, min(max(ODOMETRY_STEP_SHARE * range_m, 1.0), 5.0))
-        _warn_odometry(dataset, odometry)
+        # a closed loop's run checked it already, for its health monitor
+        closed = result.figures.closed_loop if result.figures is not None else None
+        odometry = closed.odometry if closed is not None else None
+        if odometry is None:
+            odometry = dataset_odometry_check(dataset, dr)
+        _warn_odometry(dataset, odometry, in_health=odometry is not None and closed is not None)
     estimates: dict[str, Trajectory] = {"": result.trajectory, **result.trajectories}
     if result.backend != "dr":
         estimates["dr"] = dr
