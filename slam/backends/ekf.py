@@ -31,13 +31,14 @@ State ``x = [x, y, psi, b, delta, k, g, rho_1, theta_1, ..., rho_L, theta_L]``:
 
 Prediction integrates the motion model (:mod:`sonarslam.slam.model.motion`) on the vehicle block only (the
 landmarks are static, so only the vehicle rows and columns of P change). Between two updates the
-steps are batched: each step propagates the vehicle block (7 x 7 without the calibration) (the driver reads the pose
-covariance at every record) and multiplies its Jacobian into their product ``Phi``; the
-vehicle-landmark block takes ``Phi`` once, when the full covariance is next needed
+steps are batched: each step propagates the vehicle block (7 x 7 without the calibration; the
+driver reads the pose covariance at every record) and multiplies its Jacobian into their product
+``Phi``; the vehicle-landmark block takes ``Phi`` once, when the full covariance is next needed
 (:meth:`LineEkf._flush`), not 7 x n work per record. Updates are in the Joseph form with H
 evaluated at the predicted state: the AHRS heading by :func:`scalar_joseph_update` (rank 1,
 O(n^2), exactly symmetric), each line observation in the sonar frame R
-(:func:`sonarslam.slam.model.lines.line_prediction`) by filterpy's, its result symmetrised. Which observation
+(:func:`sonarslam.slam.model.lines.line_prediction`, or its calibrated form) by filterpy's, its
+result symmetrised. Which observation
 updates which landmark, and when a new line becomes one, is the landmark layer's
 (:class:`sonarslam.slam.mapping.landmarks.LandmarkMap`); this class holds the filter state only.
 
