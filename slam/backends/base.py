@@ -82,6 +82,34 @@ class BackendConfig(LandmarkConfig):
         absorbs the error of a GPS-free DVL/AHRS calibration.
     misalignment_sigma_deg : float
         Its prior 1-sigma (deg).
+    estimate_sonar_mount : bool
+        Estimate the sonar mounting ``bTs`` ``(x, y, yaw)``, one estimate shared by every
+        line (and, in the factor graph, scan) observation
+        (:mod:`sonarslam.slam.model.calibration`), with the dataset's mounting as the prior
+        mean: the graph's variable ``C(0)``, three states of the EKF. Off by default
+        (docs/design-decisions.md, "Sonar calibration as state"; the EKF's: docs/calibration.md,
+        "The EKF's calibration states").
+    sonar_mount_sigma_m : float
+        Its prior 1-sigma in x and in y (m): a lever arm a user measures with a tape, or not at
+        all.
+    sonar_mount_sigma_deg : float
+        Its prior 1-sigma in yaw (deg): a yaw calibrated from the sonar's own map (``sonarslam
+        calibrate``) is known to a fraction of a degree.
+    sonar_yaw_prior : {"body", "dead_reckoning"}
+        What the mounting's yaw prior is on, when the mounting and the DVL misalignment are
+        both estimated: ``"body"`` (the default), the yaw itself (a yaw measured against the
+        hull); ``"dead_reckoning"``, the yaw minus the misalignment (the graph:
+        :func:`sonarslam.slam.backends.isam2.factors.mount_prior_dvl_residual`; the EKF: the
+        prior covariance of yaw and misalignment that says so): a yaw calibrated from the
+        sonar's map drawn with dead-reckoning poses (``sonarslam calibrate --poses dr``) is
+        known relative to the DVL's track, and the data see only that difference, so the
+        misalignment's own prior alone then decides where the two turn together
+        (docs/calibration.md, "The sonar/DVL direction").
+    range_scale_sigma : float
+        Prior 1-sigma of the sonar's range scale ``s`` around 1 (an echo from range ``r`` is
+        logged at ``s * r``: a sound-speed error), shared as the mounting (the graph's
+        ``R(0)``); 0: not estimated (``s = 1``, the default; docs/design-decisions.md gives the
+        sizes these priors are chosen for).
     robust : {None, "huber", "cauchy"}
         Robust kernel on the line observations, so that one bad line cannot drag the pose: the
         factor graph's on the whitened residual (``gtsam.noiseModel.Robust``), the EKF's on the
@@ -99,9 +127,19 @@ class BackendConfig(LandmarkConfig):
     ahrs_period_s: float = bounded(1.0, 1e-3, 3600.0)
     estimate_misalignment: bool = False
     misalignment_sigma_deg: float = bounded(5.0, 1e-3, 90.0)
+    estimate_sonar_mount: bool = False
+    sonar_mount_sigma_m: float = bounded(0.2, 1e-4, 10.0)
+    sonar_mount_sigma_deg: float = bounded(0.5, 1e-3, 90.0)
+    sonar_yaw_prior: str = one_of("body", "body", "dead_reckoning")
+    range_scale_sigma: float = bounded(0.0, 0.0, 0.5)
     robust: str | None = one_of(None, None, "huber", "cauchy")
     robust_k: float = bounded(1.345, 0.0, math.inf, low_open=True)
     constraints: str = "lines"
+
+    @property
+    def calibrated(self) -> bool:
+        """Whether the sonar's mounting or range scale is estimated."""
+        return self.estimate_sonar_mount or self.range_scale_sigma > 0.0
 
     @property
     def constraint_kinds(self) -> frozenset[str]:

@@ -16,19 +16,29 @@ State ``x = [x, y, psi, b, delta, k, g, rho_1, theta_1, ..., rho_L, theta_L]``:
   out, a gyro bias (docs/design-decisions.md) is taken for the AHRS bias's walk
   when the bias walks, and the heading spins away; with the AHRS heading's own change as the rate
   (``yaw_rate_source = "heading"``) no step involves it and it stays at its prior;
+* only when estimated (``estimate_sonar_mount``, ``range_scale_sigma > 0``, both off by
+  default, so that the state above is all there is), the sonar's calibration, constants after
+  ``g`` (:meth:`LineEkf.calibration_index`): its mounting ``bTs`` ``(x, y, yaw)`` with the
+  dataset's as prior mean and ``sonar_mount_sigma_m``, ``sonar_mount_sigma_deg`` as 1-sigma (with
+  ``sonar_yaw_prior = "dead_reckoning"`` and the misalignment estimated, the prior on ``yaw -
+  delta``), then its range scale ``s`` with prior 1 and ``range_scale_sigma``; every line is
+  then predicted by :func:`sonarslam.slam.model.calibration.line_prediction_calibrated` and a new
+  landmark put in the world by :func:`sonarslam.slam.model.calibration.world_line_calibrated`,
+  at the current estimate of both. They belong to the vehicle block below;
 * world lines ``(rho_w, theta_w)`` (:mod:`sonarslam.features.geometry` conventions), one per active
   landmark (:meth:`LineEkf.index`); kept normalised. A landmark merged into another (the landmark
   layer found them one wall) is tied to it by an exact update and leaves the state.
 
 Prediction integrates the motion model (:mod:`sonarslam.slam.model.motion`) on the vehicle block only (the
 landmarks are static, so only the vehicle rows and columns of P change). Between two updates the
-steps are batched: each step propagates the 7 x 7 vehicle block (the driver reads the pose
-covariance at every record) and multiplies its Jacobian into their product ``Phi``; the
-vehicle-landmark block takes ``Phi`` once, when the full covariance is next needed
+steps are batched: each step propagates the vehicle block (7 x 7 without the calibration; the
+driver reads the pose covariance at every record) and multiplies its Jacobian into their product
+``Phi``; the vehicle-landmark block takes ``Phi`` once, when the full covariance is next needed
 (:meth:`LineEkf._flush`), not 7 x n work per record. Updates are in the Joseph form with H
 evaluated at the predicted state: the AHRS heading by :func:`scalar_joseph_update` (rank 1,
 O(n^2), exactly symmetric), each line observation in the sonar frame R
-(:func:`sonarslam.slam.model.lines.line_prediction`) by filterpy's, its result symmetrised. Which observation
+(:func:`sonarslam.slam.model.lines.line_prediction`, or its calibrated form) by filterpy's, its
+result symmetrised. Which observation
 updates which landmark, and when a new line becomes one, is the landmark layer's
 (:class:`sonarslam.slam.mapping.landmarks.LandmarkMap`); this class holds the filter state only.
 
@@ -61,7 +71,7 @@ from sonarslam.features.geometry import (
     normalize_line,
     wrap_angle,
 )
-from sonarslam.features.line import LineFeature
+from sonarslam.features.line import LineFeature, check_mounting
 from sonarslam.features.pose_source import PoseSource
 from sonarslam.settings import bounded
 from sonarslam.slam.backends.base import (
@@ -75,6 +85,7 @@ from sonarslam.slam.io.states import HEADING_ERROR_FILE, write_heading_error
 from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.mapping.landmarks import LandmarkMap
 from sonarslam.slam.mapping.vote import AfterVote, Belief, Decision, LandmarkBelief, ViewPair
+from sonarslam.slam.model.calibration import line_prediction_calibrated, world_line_calibrated
 from sonarslam.slam.model.lines import line_prediction, world_observation
 from sonarslam.slam.model.motion import MotionStep, step_displacement
 from sonarslam.slam.model.noise import robust_kernel
@@ -90,6 +101,7 @@ __all__ = [
     "DVL_SCALE",
     "GYRO_BIAS",
     "N_VEHICLE",
+    "CalibrationIndex",
     "MERGE_VARIANCE",
     "scalar_joseph_update",
 ]
@@ -103,6 +115,34 @@ DVL_SCALE = 5  # k
 GYRO_BIAS = 6  # g
 N_VEHICLE = 7
 HEADING = [YAW, AHRS_BIAS]  # what the AHRS measures: psi + b
+
+
+@dataclass(frozen=True)
+class CalibrationIndex:
+    """Where the sonar's calibration states sit in the state (:meth:`LineEkf.calibration_index`).
+
+    Attributes
+    ----------
+    mount : slice or None
+        The mounting ``bTs`` ``(x_m, y_m, yaw_rad)``; None: not estimated.
+    scale : int or None
+        The range scale ``s``; None: not estimated.
+    size : int
+        The vehicle block's size with them (``N_VEHICLE`` when neither is estimated).
+    """
+
+    mount: slice | None
+    scale: int | None
+    size: int
+
+    @classmethod
+    def of(cls, estimate_mount: bool, estimate_scale: bool) -> CalibrationIndex:
+        i = N_VEHICLE
+        mount = slice(i, i + 3) if estimate_mount else None
+        i += 3 * estimate_mount
+        scale = i if estimate_scale else None
+        return cls(mount, scale, i + int(estimate_scale))
+
 
 #: The variance (m^2 and rad^2) of the exact update that ties two landmarks found to be one
 #: wall: the same line, numerically.
@@ -207,9 +247,11 @@ class LineEkf:
         self.config = config
         self.bTs = sonar_mounting.as_pose()
         self.t_s = t0_s
-        x = np.zeros(N_VEHICLE)
+        self._cal = CalibrationIndex.of(config.estimate_sonar_mount, config.range_scale_sigma > 0)
+        nv = self._cal.size
+        x = np.zeros(nv)
         x[POSE] = wTb0
-        P = np.zeros((N_VEHICLE, N_VEHICLE))
+        P = np.zeros((nv, nv))
         P[:2, :2] = P0[:2, :2]
         var_b = np.deg2rad(config.noise.ahrs_bias_sigma_deg) ** 2
         # psi0 came from the AHRS, which measures psi + b (white noise and bias as this filter
@@ -222,13 +264,14 @@ class LineEkf:
         )
         P[DVL_SCALE, DVL_SCALE] = config.noise.dvl_scale_sigma**2
         P[GYRO_BIAS, GYRO_BIAS] = np.deg2rad(config.gyro_bias_sigma_deg_per_s) ** 2
+        self._calibration_prior(x, P)
         self.kf = _filter(x, P)
         # the steps since the last flush: their Jacobians' product (vehicle block), pending
         # on the vehicle-landmark block of P (:meth:`_flush`)
-        self._Phi = np.eye(N_VEHICLE)
-        self._F = np.eye(N_VEHICLE)  # one step's Jacobian, rewritten in place
+        self._Phi = np.eye(nv)
+        self._F = np.eye(nv)  # one step's Jacobian, rewritten in place
         self._pending = False
-        self._h_heading = np.zeros(N_VEHICLE)  # z = psi + b
+        self._h_heading = np.zeros(nv)  # z = psi + b
         self._h_heading[HEADING] = 1.0
         self.map = LandmarkMap(config, self.bTs)
         self._index: dict[int, int] = {}  # landmark id -> index of its rho in the state
@@ -237,6 +280,7 @@ class LineEkf:
         self._var_walk = np.deg2rad(config.noise.ahrs_bias_walk_deg_per_sqrt_s) ** 2  # rad^2/s
         self.heading_error: list[tuple[float, float, float]] = []  # (t, b rad, var rad^2)
         self._pose_lin = np.zeros(3)  # the pose the vote's Jacobians are taken at (FEJ)
+        self._cal_lin = (self.bTs.copy(), 1.0)  # and the calibration (mounting, range scale)
         self._xy_first = (float(wTb0[0]), float(wTb0[1]))  # the position as first predicted
         self._last_ahrs_t = -np.inf
         self._own_stats = {"ahrs_updates": 0}
@@ -271,6 +315,41 @@ class LineEkf:
     def pose_cov(self) -> FloatArray:
         # the vehicle block is propagated at every step: no flush needed
         return np.asarray(self.kf.P[POSE, POSE]).copy()
+
+    def calibration_index(self) -> CalibrationIndex:
+        """Where the sonar's calibration states are (none when not estimated)."""
+        return self._cal
+
+    @property
+    def sonar_mount(self) -> FloatArray:
+        """The sonar mounting ``bTs`` ``(x_m, y_m, yaw_rad)`` the filter predicts with: its
+        estimate when estimated, else the dataset's."""
+        m = self._cal.mount
+        return self.bTs.copy() if m is None else np.array(self.kf.x[m])
+
+    @property
+    def range_scale(self) -> float:
+        """The sonar's range scale the filter predicts with (1 when not estimated)."""
+        i = self._cal.scale
+        return 1.0 if i is None else float(self.kf.x[i])
+
+    def _calibration_prior(self, x: FloatArray, P: FloatArray) -> None:
+        """The calibration states' prior means and covariance, in place (module docstring)."""
+        cfg, m, i = self.config, self._cal.mount, self._cal.scale
+        if m is not None:
+            x[m] = self.bTs
+            var_xy = cfg.sonar_mount_sigma_m**2
+            var_yaw = np.deg2rad(cfg.sonar_mount_sigma_deg) ** 2
+            P[m, m] = np.diag([var_xy, var_xy, var_yaw])
+            if cfg.sonar_yaw_prior == "dead_reckoning" and cfg.estimate_misalignment:
+                # the prior is on yaw - delta (its variance var_yaw) with delta's own: yaw =
+                # delta + e, so Var(yaw) = var_yaw + var_delta, Cov(yaw, delta) = var_delta
+                yaw = m.start + 2
+                P[yaw, yaw] += P[MISALIGNMENT, MISALIGNMENT]
+                P[yaw, MISALIGNMENT] = P[MISALIGNMENT, yaw] = P[MISALIGNMENT, MISALIGNMENT]
+        if i is not None:
+            x[i] = 1.0
+            P[i, i] = cfg.range_scale_sigma**2
 
     @property
     def stats(self) -> dict[str, int]:
@@ -322,7 +401,8 @@ class LineEkf:
         F[1, 5] = dy
         F[2, GYRO_BIAS] = -step.gyro_dt_s
         # the vehicle block now (P_vv <- F P_vv F^T + Q); the landmark columns at the flush
-        P_vv = self.kf.P[:N_VEHICLE, :N_VEHICLE]
+        nv = self._cal.size
+        P_vv = self.kf.P[:nv, :nv]
         P_vv[...] = F @ P_vv @ F.T
         P_vv[0, 0] += step.var_xy_m2
         P_vv[1, 1] += step.var_xy_m2
@@ -341,7 +421,7 @@ class LineEkf:
         if not self._pending:
             return
         P = self.kf.P
-        V = N_VEHICLE
+        V = self._cal.size
         if P.shape[0] > V:
             P[:V, V:] = self._Phi @ P[:V, V:]
             P[V:, :V] = P[:V, V:].T
@@ -400,7 +480,7 @@ class LineEkf:
         S = float(P[YAW, YAW] + 2.0 * P[YAW, AHRS_BIAS] + P[AHRS_BIAS, AHRS_BIAS] + r)
         self.heading_innovations.append((t_s, nu, S))
         h = np.zeros(x.size)
-        h[:N_VEHICLE] = self._h_heading
+        h[: self._cal.size] = self._h_heading
         if self._clones:
             k = P @ h / (float(h @ P @ h) + r)  # the gain scalar_joseph_update applies
             for _, _, C in self._clones.values():
@@ -421,6 +501,8 @@ class LineEkf:
         Roumeliotis (2008): without it the filter gains spurious information on the
         unobservable global heading and becomes overconfident.
         """
+        if self.config.calibrated:
+            return self._predict_line_calibrated(landmark_id)
         z_hat, H_pose, H_line = line_prediction(
             self.x[POSE], self.landmark_line(landmark_id), self.bTs
         )
@@ -432,6 +514,31 @@ class LineEkf:
                 H_pose, H_line = FLIP_RHO @ H_pose, FLIP_RHO @ H_line
         H = np.zeros((2, self.x.size))
         H[:, POSE] = H_pose
+        i = self.index(landmark_id)
+        H[:, i : i + 2] = H_line
+        return z_hat, H
+
+    def _predict_line_calibrated(self, landmark_id: int) -> tuple[FloatArray, FloatArray]:
+        """:meth:`predict_line` with the sonar's calibration states
+        (:func:`sonarslam.slam.model.calibration.line_prediction_calibrated`); with first-estimate
+        Jacobians, the calibration's are taken at its estimate at this vote's start."""
+        line = self.landmark_line(landmark_id)
+        z_hat, H_pose, H_line, H_mount, H_scale = line_prediction_calibrated(
+            self.x[POSE], line, self.sonar_mount, self.range_scale
+        )
+        if self.config.first_estimates_jacobians:
+            z_lin, H_pose, H_line, H_mount, H_scale = line_prediction_calibrated(
+                self._pose_lin, self._first_line_w[landmark_id], *self._cal_lin
+            )
+            if line_difference(z_lin, z_hat)[1]:  # the same line seen from the other side of 0
+                H_pose, H_line = FLIP_RHO @ H_pose, FLIP_RHO @ H_line
+                H_mount, H_scale = FLIP_RHO @ H_mount, FLIP_RHO @ H_scale
+        H = np.zeros((2, self.x.size))
+        H[:, POSE] = H_pose
+        if self._cal.mount is not None:
+            H[:, self._cal.mount] = H_mount
+        if self._cal.scale is not None:
+            H[:, self._cal.scale] = H_scale[:, 0]
         i = self.index(landmark_id)
         H[:, i : i + 2] = H_line
         return z_hat, H
@@ -456,6 +563,7 @@ class LineEkf:
         view = None
         if obs.features:
             self._pose_lin = self.x[POSE].copy()
+            self._cal_lin = (self.sonar_mount, self.range_scale)
             if self.config.tentative_joint_gate:
                 self._votes += 1
                 view = self._votes
@@ -540,6 +648,9 @@ class LineEkf:
     def _add_landmark(self, landmark_id: int, f: LineFeature) -> None:
         """Augment the state with the world line of ``f`` (the newest observation of a promoted
         line; the earlier, tentative ones only seeded it) and the full cross-covariances."""
+        if self.config.calibrated:
+            self._add_landmark_calibrated(landmark_id, f)
+            return
         obs = world_observation(f, self.x[POSE], self.P[POSE, POSE], self.bTs)
         x, P = self.x, self.P
         n = x.size
@@ -555,6 +666,37 @@ class LineEkf:
             self._clones[v] = (pose, P_then, np.vstack([C, obs.G_pose @ C[POSE]]))
         self._index[landmark_id] = n
         self._first_line_w[landmark_id] = obs.line_w.copy()
+
+    def _add_landmark_calibrated(self, landmark_id: int, f: LineFeature) -> None:
+        """:meth:`_add_landmark` with the sonar's calibration states: the world line at the
+        current estimate of the pose and the calibration
+        (:func:`sonarslam.slam.model.calibration.world_line_calibrated`), its cross-covariances
+        through all of them."""
+        check_mounting([f], self.bTs, "LineEkf (the dataset's sonar mounting)")
+        x, P = self.x, self.P
+        n = x.size
+        line_w, G_z, G_pose, G_mount, G_scale = world_line_calibrated(
+            np.asarray(f.z, dtype=np.float64), x[POSE], self.sonar_mount, self.range_scale
+        )
+        nv = self._cal.size
+        G = np.zeros((2, nv))  # d line_w / d the vehicle block
+        G[:, POSE] = G_pose
+        if self._cal.mount is not None:
+            G[:, self._cal.mount] = G_mount
+        if self._cal.scale is not None:
+            G[:, self._cal.scale] = G_scale[:, 0]
+        P_new = np.zeros((n + 2, n + 2))
+        P_new[:n, :n] = P
+        cross = G @ P[:nv, :]  # (2, n)
+        P_new[n:, :n] = cross
+        P_new[:n, n:] = cross.T
+        R = np.asarray(f.cov) * self.config.line_cov_scale
+        P_new[n:, n:] = G @ P[:nv, :nv] @ G.T + G_z @ R @ G_z.T
+        self.kf = _filter(np.concatenate([x, line_w]), P_new)
+        for v, (pose, P_then, C) in self._clones.items():
+            self._clones[v] = (pose, P_then, np.vstack([C, G @ C[:nv]]))
+        self._index[landmark_id] = n
+        self._first_line_w[landmark_id] = line_w.copy()
 
     def landmark_covariance(self, landmark_ids: list[int]) -> FloatArray:
         """Joint covariance of these landmarks' lines, shape (2k, 2k)."""
@@ -618,6 +760,28 @@ class LineEkf:
             out["state_gyro_bias_sd_deg_per_s"] = float(
                 np.rad2deg(np.sqrt(P[GYRO_BIAS, GYRO_BIAS]))
             )
+        return out | self._calibration_metrics(x, P)
+
+    def _calibration_metrics(self, x: FloatArray, P: FloatArray) -> dict[str, float | int]:
+        """The sonar's calibration estimates with their sd, under the factor graph's keys
+        (``state_sonar_{x,y}{,_sd}_m``, ``state_sonar_yaw{,_sd}_deg``,
+        ``state_sonar_range_scale{,_sd}``, and with the misalignment the correlation
+        ``state_sonar_yaw_misalignment_corr``); none when not estimated."""
+        out: dict[str, float | int] = {}
+        m, i = self._cal.mount, self._cal.scale
+        if m is not None:
+            sd = np.sqrt(np.diag(P)[m])
+            for k, (name, f) in enumerate((("x_m", 1.0), ("y_m", 1.0), ("yaw_deg", 180 / np.pi))):
+                base, unit = name.rsplit("_", 1)
+                out[f"state_sonar_{base}_{unit}"] = f * float(x[m][k])
+                out[f"state_sonar_{base}_sd_{unit}"] = f * float(sd[k])
+            if self.config.estimate_misalignment:
+                yaw = m.start + 2
+                corr = P[yaw, MISALIGNMENT] / np.sqrt(P[yaw, yaw] * P[MISALIGNMENT, MISALIGNMENT])
+                out["state_sonar_yaw_misalignment_corr"] = float(corr)
+        if i is not None:
+            out["state_sonar_range_scale"] = float(x[i])
+            out["state_sonar_range_scale_sd"] = float(np.sqrt(P[i, i]))
         return out
 
     def save(self, out_dir: Path) -> list[Path]:

@@ -14,7 +14,8 @@ __all__ = ["GraphConfig"]
 @dataclass(frozen=True)
 class GraphConfig(BackendConfig):
     """Settings of the factor graph: those of :class:`sonarslam.slam.backends.base.BackendConfig`
-    and the following. With the sonar's mounting a variable, estimate the DVL's misalignment too
+    (the sonar's calibration as state among them: ``C(0)`` the mounting, ``R(0)`` the range
+    scale, shared by every line and scan observation) and the following. With the sonar's mounting a variable, estimate the DVL's misalignment too
     (``estimate_misalignment``): it takes the crab a DVL's lateral bias puts on the odometry,
     which the mounting's yaw would otherwise absorb (docs/calibration.md, "Calibration as state:
     the three together").
@@ -42,31 +43,6 @@ class GraphConfig(BackendConfig):
         ``s`` times the gyro's integral. The AHRS headings make it observable.
     gyro_scale_sigma : float
         Prior 1-sigma of ``s`` around 1.
-    estimate_sonar_mount : bool
-        Estimate the sonar mounting ``bTs`` ``(x, y, yaw)``, one variable ``C(0)`` shared by every
-        line and scan observation (:mod:`sonarslam.slam.model.calibration`), with the dataset's
-        mounting as the prior mean. Off by default (docs/design-decisions.md, "Sonar
-        calibration as state").
-    sonar_mount_sigma_m : float
-        Its prior 1-sigma in x and in y (m): a lever arm a user measures with a tape, or not at
-        all.
-    sonar_mount_sigma_deg : float
-        Its prior 1-sigma in yaw (deg): a yaw calibrated from the sonar's own map (``sonarslam
-        calibrate``) is known to a fraction of a degree.
-    sonar_yaw_prior : {"body", "dead_reckoning"}
-        What the mounting's yaw prior is on, when the mounting and the DVL misalignment are
-        both estimated: ``"body"`` (the default), the yaw itself (a yaw measured against the
-        hull); ``"dead_reckoning"``, the yaw minus the misalignment
-        (:func:`sonarslam.slam.backends.isam2.factors.mount_prior_dvl_residual`): a yaw
-        calibrated from the sonar's map drawn with dead-reckoning poses (``sonarslam calibrate
-        --poses dr``) is known relative to the DVL's track, and the data see only that
-        difference, so the misalignment's own prior alone then decides where the two turn
-        together (docs/calibration.md, "The sonar/DVL direction").
-    range_scale_sigma : float
-        Prior 1-sigma of the sonar's range scale ``s`` around 1 (an echo from range ``r`` is
-        logged at ``s * r``: a sound-speed error), ``R(0)``, shared as the mounting; 0: not
-        estimated (``s = 1``, the default; docs/design-decisions.md gives the sizes these
-        priors are chosen for).
     scan_calibration : bool
         The scan constraints take the mounting and range scale too
         (``ScanRegistrationCalibrated``); False (the default): they stay ``BetweenFactorPose2``
@@ -164,11 +140,6 @@ class GraphConfig(BackendConfig):
     update_period_s: float = bounded(5.0, 0.0, 3600.0)
     estimate_gyro_scale: bool = False
     gyro_scale_sigma: float = bounded(0.2, 1e-4, 10.0)
-    estimate_sonar_mount: bool = False
-    sonar_mount_sigma_m: float = bounded(0.2, 1e-4, 10.0)
-    sonar_mount_sigma_deg: float = bounded(0.5, 1e-3, 90.0)
-    sonar_yaw_prior: str = one_of("body", "body", "dead_reckoning")
-    range_scale_sigma: float = bounded(0.0, 0.0, 0.5)
     scan_calibration: bool = False
     robust: str | None = one_of("huber", None, "huber", "cauchy")
     robust_k: float = bounded(1.345, 1e-3, 100.0)
@@ -194,8 +165,3 @@ class GraphConfig(BackendConfig):
     batch_optimizer: str = one_of("lm", "lm", "gnc")
     redecide_stretch_m: float | None = bounded(None, 0.0, 1e5, low_open=True)
     redecide_passes: int = bounded(1, 1, 10)
-
-    @property
-    def calibrated(self) -> bool:
-        """Whether the sonar's mounting or range scale is a variable."""
-        return self.estimate_sonar_mount or self.range_scale_sigma > 0.0
