@@ -92,6 +92,22 @@ def test_calibrate_cli_time_offset_or_refusal(
     assert not refused.exists()
 
 
+def test_an_offset_beyond_the_search_is_said_to_lie_beyond_it(
+    harbour: Dataset, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The sonar's log 5 s late, beyond the +-3 s search: the least entropy sits at the
+    search's edge, which is no minimum (it was called too flat, with advice to take a longer
+    run); the refusal names the edge and how to search beyond it, and nothing is written."""
+    late = replace(harbour, beams=harbour.beams.shifted(5.0))
+    search = calibrate_time_offset(late, pose_source_by_name(late, "dr"))
+    assert search.at_edge and not search.decisive, search.verdict()
+    assert search.best_offset_s == pytest.approx(-3.0, abs=0.3)
+    monkeypatch.setattr(calibrate_cli, "open_dataset", lambda *a, **k: late)
+    assert main(["calibrate", str(harbour.root), "--time-offset"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "edge of the search" in err[0] and "may lie beyond" in err[0], err
+
+
 def test_calibrate_cli_time_offset_is_one_mode(harbour: Dataset) -> None:
     """--time-offset with another calibration is a setting error (exit 2)."""
     assert main(["calibrate", str(harbour.root), "--time-offset", "--ahrs"]) == 2

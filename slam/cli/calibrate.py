@@ -82,6 +82,17 @@ def _time_offset(args: argparse.Namespace) -> int:
     dataset = _open(args)
     window = 60.0 if args.window is None else args.window
     result = calibrate_time_offset(dataset, pose_source_by_name(dataset, args.poses), window)
+    if result.at_edge:
+        lo, hi = result.offset_grid_s[0], result.offset_grid_s[-1]
+        raise DataError(
+            dataset.root,
+            None,
+            f"the least map entropy lies at the edge of the search ({result.best_offset_s:+.3f} s;"
+            f" searched {lo:+.2f} to {hi:+.2f} s around the configured"
+            f" {result.configured_offset_s:+.3f} s): the sonar clock offset may lie beyond it;"
+            " set [sonar] time_offset_s to that edge in a --config file and search again (the"
+            " search is centred on the configured offset); nothing written",
+        )
     if not result.decisive:
         raise DataError(
             dataset.root,

@@ -338,6 +338,9 @@ class ClockSearch:
         The least-entropy coarse offset more than :data:`CLOCK_BASIN_S` from the best.
     margin : float
         Its entropy minus the least coarse entropy, in noise units.
+    at_edge : bool
+        The least coarse entropy is at an end of the searched range: the objective may go on
+        falling beyond it, so the offset may lie outside the range.
     """
 
     best_offset_s: float
@@ -348,12 +351,15 @@ class ClockSearch:
     depth: float
     second_offset_s: float
     margin: float
+    at_edge: bool = False
 
     @property
     def decisive(self) -> bool:
-        """True when the minimum stands out: depth >= :data:`MIN_CLOCK_DEPTH` and margin >=
-        :data:`MIN_CLOCK_MARGIN`."""
-        return self.depth >= MIN_CLOCK_DEPTH and self.margin >= MIN_CLOCK_MARGIN
+        """True when the minimum stands out and is one: depth >= :data:`MIN_CLOCK_DEPTH`,
+        margin >= :data:`MIN_CLOCK_MARGIN` and not :attr:`at_edge`."""
+        return (
+            self.depth >= MIN_CLOCK_DEPTH and self.margin >= MIN_CLOCK_MARGIN and not self.at_edge
+        )
 
     def verdict(self) -> str:
         """The contrast in words: ``depth ... and margin ... noise units (needs ...)``."""
@@ -450,6 +456,7 @@ def calibrate_time_offset(
         (median - float(costs[k])) / noise,
         configured + float(coarse[second]),
         (float(costs[second]) - float(costs[k])) / noise,
+        at_edge=k in (0, coarse.size - 1),
     )
 
 
