@@ -518,3 +518,30 @@ def test_a_run_of_thousands_of_beams_without_lines_is_flagged_with_its_causes() 
     assert good.ok and good.metrics()["health_lines_windows"] == 1
     short = assess(_inputs(rng, n_beams=1500, n_lines=0))
     assert short.ok and "health_lines_windows" not in short.metrics()
+
+
+def test_an_issue_ends_where_the_run_ends_and_the_line_counts_each_check() -> None:
+    """A 1,100 s run flagged in its last 120 s window and in another: the issue ends at the
+    run's end, not at the window's (it read '960-1080 s' past a run's end), and the line counts
+    two issues of one check as such (it read '2 inconsistencies (landmarks)')."""
+    rng = np.random.default_rng(5)
+    inputs = _inputs(rng)
+    tr = inputs.trajectory
+    keep = tr.t_s <= T0 + 1100.0
+    assert tr.covs is not None
+    short = Trajectory(tr.t_s[keep], tr.poses_wTb[keep], tr.covs[keep])
+    created = np.concatenate(
+        [
+            inputs.landmark_created_s,
+            T0 + np.linspace(250.0, 350.0, 30),
+            T0 + np.linspace(1000.0, 1090.0, 30),
+        ]
+    )
+    seen = inputs.reobserved_s
+    again = seen[(seen < T0 + 960.0) & ~((seen >= T0 + 240.0) & (seen < T0 + 360.0))]
+    report = assess(
+        replace(inputs, trajectory=short, landmark_created_s=created, reobserved_s=again)
+    )
+    assert [i.check for i in report.issues] == ["landmarks", "landmarks"], report.line()
+    assert report.issues[-1].t1_s == pytest.approx(short.t_s[-1])
+    assert "2 inconsistencies (landmarks x2)" in report.line()

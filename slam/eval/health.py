@@ -315,9 +315,10 @@ class HealthReport:
                 f" a {100 * self.config.false_alarm:g} % false-alarm rate)"
             )
         else:
+            counts = [(c, sum(i.check == c for i in self.issues)) for c in self.checks_flagged()]
             out = (
                 f"health: {len(self.issues)} inconsistencies"
-                f" ({', '.join(self.checks_flagged())});"
+                f" ({', '.join(c if k == 1 else f'{c} x{k}' for c, k in counts)});"
                 f" first: {self.issues[0].message(self.t_ref_s).removeprefix('health: ')}"
             )
         if self.findings:
@@ -355,15 +356,18 @@ def _windows(t0_s: float, t1_s: float, window_s: float) -> FloatArray:
     return np.asarray(t0_s + window_s * np.arange(n + 1), dtype=np.float64)
 
 
-def _spans(edges: FloatArray, flagged: np.ndarray) -> list[tuple[float, float, np.ndarray]]:
-    """Runs of flagged windows as ``(t0, t1, window indices)``."""
+def _spans(
+    edges: FloatArray, flagged: np.ndarray, end_s: float = math.inf
+) -> list[tuple[float, float, np.ndarray]]:
+    """Runs of flagged windows as ``(t0, t1, window indices)``; ``t1`` no later than ``end_s``,
+    the end of what the windows hold (the last window runs past it)."""
     out: list[tuple[float, float, np.ndarray]] = []
     idx = np.flatnonzero(flagged)
     if idx.size == 0:
         return out
     groups = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
     for g in groups:
-        out.append((float(edges[g[0]]), float(edges[g[-1] + 1]), g))
+        out.append((float(edges[g[0]]), min(float(edges[g[-1] + 1]), end_s), g))
     return out
 
 
@@ -451,7 +455,7 @@ def _check_nees(
     # the lower gate: a median below c needs half the samples below it (chance <= 2 F(c))
     low = float(chi2.ppf(cfg.false_alarm / (2.0 * present.size), series.dof))
     issues = []
-    for a, b, g in _spans(edges, medians > gate):
+    for a, b, g in _spans(edges, medians > gate, float(t[-1])):
         worst = g[int(np.argmax(medians[g]))]
         issues.append(
             HealthIssue(
@@ -465,7 +469,7 @@ def _check_nees(
         )
     findings = []
     cautious = np.isfinite(medians) & (medians < low)
-    for a, b, g in _spans(edges, cautious):
+    for a, b, g in _spans(edges, cautious, float(t[-1])):
         least = g[int(np.argmin(medians[g]))]
         findings.append(
             HealthIssue(
@@ -502,7 +506,7 @@ def _check_departure(
     worst = np.full(n_windows, -np.inf)
     np.maximum.at(worst, which, d2)
     issues = []
-    for a, b, g in _spans(edges, worst > gate):
+    for a, b, g in _spans(edges, worst > gate, float(t[-1])):
         k = int(np.argmax(np.where(np.isin(which, g), d2, -np.inf)))
         issues.append(
             HealthIssue(
@@ -541,7 +545,7 @@ def _check_heading_bias(inputs: HealthInputs, cfg: HealthConfig) -> tuple[list[H
         lim[w] = cfg.bias_sigmas * float(np.max(sigma[m]))
         flagged[w] = abs(med[w]) > lim[w]
     issues = []
-    for a, b, g in _spans(edges, flagged):
+    for a, b, g in _spans(edges, flagged, hi):
         worst = g[int(np.argmax(np.abs(med[g])))]
         issues.append(
             HealthIssue(
@@ -610,7 +614,7 @@ def _check_landmarks(inputs: HealthInputs, cfg: HealthConfig) -> tuple[list[Heal
     judged = new >= cfg.landmark_min_new
     flagged = judged & (share > cfg.landmark_new_share_max)
     issues = []
-    for a, b, g in _spans(edges, flagged):
+    for a, b, g in _spans(edges, flagged, hi):
         issues.append(
             HealthIssue(
                 "landmarks",
