@@ -107,10 +107,12 @@ def test_report_table_holds_each_runs_numbers(runs, tmp_path):
         gps = read_tum(r.out_dir / "gps.tum")
         est = read_tum(r.out_dir / f"{r.backend}.tum")
         assert cells[8] == f"{evo_ape(gps, est).rmse_m:.2f}"
-    # NEES only where the covariances were saved; it is the NEES against the simulator's truth
+    # the NEES against the simulator's truth, the run's own figure (metrics.json's; the DR row
+    # read 2.96 against its 2.978 when recomputed from the files), also without its covariance
+    # file, whose absence only the figure needs
     nees = nees_series(ekf.trajectory, truth_trajectory(load_run(ekf.out_dir).dataset))
-    assert _row(md, "h5-ekf")[9] == f"{nees.mean:.2f}"
-    assert _row(md, "h5-dr")[9] == ""
+    assert _row(md, "h5-ekf")[9] == f"{nees.mean:.2f}" == f"{ekf.metrics['nees_pose_mean']:.2f}"
+    assert _row(md, "h5-dr")[9] == f"{dr.metrics['nees_pose_mean']:.2f}"
     assert f"no {cov_file('dr')}" in md
     # no published figure under a simulated table
     assert "Mallios 2014, Table 2" not in md and "17.46" not in md
