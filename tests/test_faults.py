@@ -301,3 +301,35 @@ def test_an_isolated_dvl_spike_under_the_speed_gate_is_dropped_and_said(harbour,
     assert "_DVL.log: 1 row(s)" in line and f"first at t={hit[0]:.3f} s" in line
     assert m_off["ate_mean_m"] > base["ate_mean_m"] + 0.3  # the silent wrong answer
     assert m_on["ate_mean_m"] == pytest.approx(base["ate_mean_m"], abs=0.05)
+
+
+def _dvl_times(folder: Path, factor: float) -> None:
+    """The DVL log's velocity columns (water and bottom, cm/s) times ``factor``."""
+    cols = (7, 8, 9, 11, 12, 13)
+    edit_log_rows(
+        _log(folder, "DVL"),
+        lambda t, f: [[f"{float(v) * factor:.6g}" if i in cols else v for i, v in enumerate(f)]],
+    )
+
+
+def test_a_dvl_log_in_another_unit_is_said_with_the_likely_cause(harbour, tmp_path):
+    """A marina-layout DVL log written in m/s (read as its cm/s) moves the vehicle 100 times
+    too little; every run ended with a wrong answer and no warning (the marina so: ATE 29 m).
+    Now opening it warns, naming the log, the speed with its unit and the columns' unit; the
+    clean log does not. One in mm/s (10 times fast) is gated as too fast, said likewise."""
+    clean, said_clean = _open(harbour)
+    assert not [s for s in said_clean if "unit" in s]
+    q_clean = run_backend(clean, "dr").metrics
+    assert 0.3 < q_clean["dvl_speed_p50_mps"] < 0.6  # the simulated vehicle's 0.45 m/s
+    slow = _copy(harbour, tmp_path / "mps")
+    _dvl_times(slow, 0.01)
+    ds, said = _open(slow)
+    line = next(s for s in said if "implausibly slow" in s)
+    assert str(_log(slow, "DVL")) in line and "bottomVelX/Y" in line and "cm/s" in line
+    m = run_backend(ds, "dr").metrics
+    assert m["dvl_speed_p50_mps"] == pytest.approx(q_clean["dvl_speed_p50_mps"] / 100, rel=1e-3)
+    assert m["ate_truth_mean_m"] > 5.0 * q_clean["ate_truth_mean_m"]  # what the warning is for
+    fast = _copy(harbour, tmp_path / "mmps")
+    _dvl_times(fast, 10.0)
+    line = next(s for s in _open(fast)[1] if "faster than 3 m/s" in s)
+    assert "_DVL.log" in line and "unit is likely wrong" in line and "mm/s" in line

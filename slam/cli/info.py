@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
+from sonarslam.datasets.gates import DVL_MIN_SPEED_MPS
 from sonarslam.datasets.ping360 import is_ping360_log
 from sonarslam.datasets.rosbag import bag_topics, is_bag
 from sonarslam.datasets.source import check_toml_inputs, open_dataset, resolve_source
@@ -78,6 +79,15 @@ def command(args: argparse.Namespace) -> int:
             f" the line landmarks act there): {span[0] - t0:.1f} s to {span[1] - t0:.1f} s"
         )
     n, dq = d.config.noise, dvl_quality(d)
+    slow = (
+        f" (under {DVL_MIN_SPEED_MPS:g} m/s: implausibly slow, the velocities' unit?)"
+        if dq["dvl_speed_p90_mps"] < DVL_MIN_SPEED_MPS
+        else ""
+    )
+    print(
+        f"  DVL speed over its locked rows (m/s): median {dq['dvl_speed_p50_mps']:.3g},"
+        f" p90 {dq['dvl_speed_p90_mps']:.3g}{slow}"
+    )
     print(
         f"  DVL scatter over {n.dvl_scatter_window_s or 60.0:g} s (m/s): "
         + ", ".join(f"p{p} {dq[f'dvl_scatter_p{p}_mps']:.3f}" for p in (10, 50, 90, 99))

@@ -163,6 +163,7 @@ class DataFigures:
         "realtime_factor",
         "dvl_rows",
         "dvl_invalid_rows",
+        "dvl_speed_p{50,90}_mps",
         "dvl_scatter_p{10,50,90,99}_mps",
         "dvl_excess_s",
         "dvl_excess_from_s",

@@ -11,6 +11,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from sonarslam.datasets.gates import dvl_speed_quantiles
 from sonarslam.datasets.records import GpsSeries
 from sonarslam.datasets.source import Dataset
 from sonarslam.features.geometry import FloatArray
@@ -51,11 +52,14 @@ def dvl_quality(dataset: Dataset) -> dict[str, float]:
     over ``[noise] dvl_scatter_window_s``, 60 s when that is off); the time its scatter stayed
     above the nominal one, when :func:`sonarslam.slam.model.noise.dvl_sample_sigma` added the excess as noise
     (s; 0 when off), and the first such time after the start of the logs (s, -1 if none).
+    The median and 90th percentile of its horizontal speed over the locked rows (m/s,
+    :func:`sonarslam.datasets.gates.dvl_speed_quantiles`; NaN without one).
     """
     noise = motion_noise(dataset)
     dvl = dataset.dvl
     t, v = dvl.t[dvl.valid], dvl.v_mps[dvl.valid]
-    out = {f"dvl_scatter_p{p}_mps": float("nan") for p in (10, 50, 90, 99)}
+    out = {f"dvl_speed_p{p}_mps": q for p, q in dvl_speed_quantiles(dvl, (50, 90)).items()}
+    out.update({f"dvl_scatter_p{p}_mps": float("nan") for p in (10, 50, 90, 99)})
     out.update({"dvl_excess_s": 0.0, "dvl_excess_from_s": -1.0})
     if t.size < 2:
         return out
