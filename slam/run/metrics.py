@@ -348,6 +348,10 @@ class LoopFigures:
         "odometry_check_scale",
         "odometry_check_heading_se_deg",
         "odometry_check_scale_se",
+        "odometry_check_starts",
+        "odometry_check_skipped_still",
+        "odometry_check_skipped_sparse",
+        "odometry_check_step_m",
     )
 
     radius_m: float
@@ -401,6 +405,10 @@ class LoopFigures:
             out["odometry_check_scale"] = _finite(self.odometry.scale)
             out["odometry_check_heading_se_deg"] = _finite(self.odometry.heading_se_deg)
             out["odometry_check_scale_se"] = _finite(self.odometry.scale_se)
+            out["odometry_check_starts"] = self.odometry.starts
+            out["odometry_check_skipped_still"] = self.odometry.skipped_still
+            out["odometry_check_skipped_sparse"] = self.odometry.skipped_sparse
+            out["odometry_check_step_m"] = _finite(self.odometry.step_m)
         return out
 
 

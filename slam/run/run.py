@@ -517,6 +517,13 @@ def _warn_odometry(dataset: Dataset, check: OdometryCheck) -> None:
     (:data:`ODOMETRY_SOFT_ANGLE_DEG`, :func:`odometry_scale_tolerance`, each beyond
     :data:`ODOMETRY_SOFT_SE` standard errors: a mounting some degrees off, a range or DVL
     scale some per cent off)."""
+    if check.starts and check.skipped_still == check.starts:
+        warnings.warn(
+            f"{dataset.root}: the sonar cannot check dead reckoning: {check.why_none()}",
+            UserWarning,
+            stacklevel=3,
+        )
+        return
     if check.accepted < ODOMETRY_MIN_PAIRS or not math.isfinite(check.heading_deg):
         return
     seen = (
@@ -664,7 +671,21 @@ def odometry_line(metrics: dict[str, Any]) -> str:
         return ""
     pairs = metrics["odometry_check_pairs"]
     if not accepted:
-        return f"dead reckoning against the sonar: no registration of {pairs} accepted"
+        why = ""
+        if "odometry_check_starts" in metrics:  # older runs do not say why
+            why = OdometryCheck(
+                pairs,
+                0,
+                math.nan,
+                math.nan,
+                starts=metrics["odometry_check_starts"],
+                skipped_still=metrics["odometry_check_skipped_still"],
+                skipped_sparse=metrics["odometry_check_skipped_sparse"],
+                step_m=metrics["odometry_check_step_m"] or math.nan,
+            ).why_none()
+        return f"dead reckoning against the sonar: no registration of {pairs} accepted" + (
+            f": {why}" if why else ""
+        )
     return (
         f"dead reckoning against the sonar ({accepted} of {pairs} registrations of scans a"
         " few metres apart): its"
