@@ -291,12 +291,11 @@ def dvl_spikes(
 
 
 #: The DVL's horizontal speed in 90 % of its locked rows under this (m/s) is implausible for an
-#: AUV or ASC survey: the marina's Ictineu, among the slowest, runs at a median 0.28 m/s by its
-#: DVL, the simulated vehicles at 0.4-0.45 m/s; ten times slower than ~0.2 m/s (72 m an hour) is
-#: a unit slip, not a survey: a log in m/s read as the marina layout's cm/s is 100 times slow
-#: (the marina's p90 0.55 m/s becomes 0.0055; a vehicle up to ~2 m/s stays under the limit).
-#: Even at rest a DVL reads its own noise (a 1-sigma ``s`` per axis gives a p90 speed of
-#: ``2.15 s``), and a unit slip shrinks the noise with the motion.
+#: AUV or ASC survey: ten times below ~0.2 m/s, the slow end of such surveys (72 m an hour), is a
+#: unit slip rather than a vehicle (a log in m/s read as the marina layout's cm/s is 100 times
+#: slow). Even at rest a DVL reads its own noise (a 1-sigma ``s`` per axis gives a p90 speed of
+#: ``2.15 s``), while a unit slip shrinks the noise with the motion. docs/bad-input.md gives the
+#: marina's and the simulator's speeds against it.
 DVL_MIN_SPEED_MPS = 0.02
 
 

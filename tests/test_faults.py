@@ -333,3 +333,28 @@ def test_a_dvl_log_in_another_unit_is_said_with_the_likely_cause(harbour, tmp_pa
     _dvl_times(fast, 10.0)
     line = next(s for s in _open(fast)[1] if "faster than 3 m/s" in s)
     assert "_DVL.log" in line and "unit is likely wrong" in line and "mm/s" in line
+
+
+def test_a_dvl_sigma_far_above_the_dvls_scatter_is_said(harbour, tmp_path, capsys):
+    """``[noise] dvl_sigma_mps = 2.0`` on a DVL whose scatter is 0.02 m/s was taken silently
+    (a new user's review: the EKF's ATE 1.05 -> 2.04 m); now every run and ``info`` warn,
+    naming the setting, the ratio and the scatter. The simulator's own sigma does not."""
+    clean, _ = _open(harbour)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DataWarning)
+        run_backend(clean, "dr")  # the simulator's 0.02 m/s against its scatter: quiet
+    told = tmp_path / "sigma.toml"
+    told.write_text("[noise]\ndvl_sigma_mps = 2.0\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        wide = open_dataset(harbour, config_override=told)
+    with pytest.warns(DataWarning) as record:
+        run_backend(wide, "dr")
+    (line,) = [str(w.message) for w in record if "dvl_sigma_mps" in str(w.message)]
+    assert "[noise] dvl_sigma_mps = 2 m/s" in line and str(told) in line
+    scatter = run_backend(clean, "dr").metrics["dvl_scatter_p50_mps"]
+    assert 0.015 < scatter < 0.03  # the simulator's 0.02 m/s
+    assert f"{2.0 / scatter:.0f} times the DVL's own scatter (median {scatter:.3g} m/s" in line
+    assert main(["info", str(harbour), "--config", str(told)]) == 0
+    out, err = capsys.readouterr()
+    assert "[noise] dvl_sigma_mps = 2 m/s" in err and "dvl_sigma_mps too large?" in out

@@ -12,7 +12,13 @@ from sonarslam.datasets.source import check_toml_inputs, open_dataset, resolve_s
 from sonarslam.slam.model.motion import gyro_bias_against_heading
 from sonarslam.slam.run.presets import parse_settings
 from sonarslam.slam.run.settings import Setting, check_run_settings, dataset_settings, run_settings
-from sonarslam.slam.run.sources import DR_IGNORES, dvl_quality, start_pose
+from sonarslam.slam.run.sources import (
+    DR_IGNORES,
+    DVL_SIGMA_OVER_SCATTER_MAX,
+    dvl_quality,
+    start_pose,
+    warn_dvl_sigma,
+)
 
 
 def command(args: argparse.Namespace) -> int:
@@ -101,6 +107,11 @@ def command(args: argparse.Namespace) -> int:
         )
     else:
         print(f"  DVL sigma {n.dvl_sigma_mps} m/s (the scatter's excess is not added)")
+    if warn_dvl_sigma(d, dq):
+        print(
+            f"  DVL sigma over its scatter's median: x{n.dvl_sigma_mps / dq['dvl_scatter_p50_mps']:.0f}"
+            f" (over {DVL_SIGMA_OVER_SCATTER_MAX:g}: [noise] dvl_sigma_mps too large?)"
+        )
     _print_settings("dataset settings (sonarslam.toml keys)", dataset_settings(d, args.config))
     print(f"  dead reckoning (--backend dr) ignores: {', '.join(DR_IGNORES)}")
     _print_settings("run settings (sonarslam run --set NAME=VALUE)", run_settings(d, settings))

@@ -61,6 +61,7 @@ from sonarslam.slam.run.sources import (
     dead_reckoning_trajectory,
     dvl_quality,
     start_pose_origin,
+    warn_dvl_sigma,
 )
 
 __all__ = [
@@ -178,6 +179,8 @@ def run_backend(
     trajectories: dict[str, Trajectory] = {}
     if config is not None:
         config = replace(config, settings=_typed_settings(dataset, backend, config, settings))
+    if backend != "gps":  # the rest take the DVL with [noise] dvl_sigma_mps
+        warn_dvl_sigma(dataset)
     wall0 = time.perf_counter()
     if backend in BASELINES:
         if settings:
