@@ -160,6 +160,23 @@ def test_info_lists_the_roles_and_run_takes_a_bag(
     assert p["dataset_file_count"] == 3 and p["dataset_sha256"] != hashlib.sha256().hexdigest()
 
 
+def test_calibrate_ahrs_on_a_bag_without_a_dvl_compass_is_one_line_naming_the_bag(
+    bags: dict[str, Path], harbour: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A bag's DVL message has no compass heading: ``calibrate --ahrs`` printed a NaN
+    mounting and then "yaw_rad must be in [-6.28319, 6.28319], got nan" without a file (a
+    new user's review). Now one line names the bag and the setting to give instead; the layout,
+    whose DVL log has the compass, still calibrates."""
+    assert main(["calibrate", str(bags["ros1"]), "--ahrs", "--quiet"]) == 1
+    out, err = capsys.readouterr()
+    assert "nan" not in out
+    (line,) = [ln for ln in err.splitlines() if not ln.startswith("warning:")]
+    assert str(bags["ros1"]) in line and "compass heading" in line
+    assert "[mounting.ahrs] yaw_deg" in line
+    assert main(["calibrate", str(harbour), "--ahrs", "--quiet"]) == 0
+    assert "nan deg (configured" not in capsys.readouterr().out
+
+
 def test_a_head_that_disagrees_with_the_bag_names_the_file_that_set_it(
     bags: dict[str, Path], tmp_path: Path
 ) -> None:
