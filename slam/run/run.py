@@ -24,6 +24,7 @@ import pandas as pd
 
 from sonarslam.datasets.config import dump_dataset_config
 from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.ping360 import is_ping360_log
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.settings import SettingError
 from sonarslam.slam.backends.registry import BACKENDS, backend_spec
@@ -512,6 +513,18 @@ def odometry_scale_tolerance(dataset: Dataset) -> float:
     return math.hypot(ODOMETRY_SOFT_SCALE, 3.0 * told)
 
 
+def range_setting(dataset: Dataset) -> str:
+    """The setting that gives the sonar's range scale on ``dataset``, in words: a Ping Viewer
+    log's bin size is the speed of sound times its sample period, other sources' is ``[sonar]
+    bin_size_m``."""
+    if is_ping360_log(dataset.root):
+        return (
+            "[ping360] speed_of_sound_mps: a Ping360's bin size is the speed of sound times its"
+            " sample period, so a speed of sound some per cent off scales every range by as much"
+        )
+    return "[sonar] bin_size_m"
+
+
 def _warn_odometry(dataset: Dataset, check: OdometryCheck) -> None:
     """Warn when the sonar sees the vehicle move another way than dead reckoning does: without
     GPS nothing else would show a DVL or sonar mounted the wrong way round (the estimate
@@ -559,7 +572,8 @@ def _warn_odometry(dataset: Dataset, check: OdometryCheck) -> None:
     ):
         found.append(
             f"the sonar's lengths are x{scale:.3f} ± {scale_se:.3f} dead reckoning's: check the"
-            " sonar's range ([sonar] bin_size_m; isam2.range_scale_sigma estimates its scale)"
+            f" sonar's range ({range_setting(dataset)}; isam2.range_scale_sigma estimates its"
+            " scale)"
             " and the DVL's scale ([noise] dvl_scale_sigma lets the run estimate it; allowed"
             f" here: {odometry_scale_tolerance(dataset):.3f})"
         )
