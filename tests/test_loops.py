@@ -278,9 +278,10 @@ def test_no_accepted_registration_says_why(
 ) -> None:
     """A DVL log in m/s (read as the layout's cm/s) moves dead reckoning 100 times too little:
     the odometry check found no pair and said only "no registration of 0 accepted" (a
-    new user's review). Now the line and a warning say why: dead reckoning hardly moved at
-    every start; the clean run has pairs."""
-    from sonarslam.slam.run.run import odometry_line
+    new user's review), and "0 found" loops nothing. Now the lines and a warning say why:
+    dead reckoning hardly moved at every start, its path is too short for a loop; the clean
+    run has pairs and loops."""
+    from sonarslam.slam.run.run import loop_line, odometry_line
 
     slow = tmp_path / "mps"
     shutil.copytree(nogps, slow)
@@ -308,4 +309,9 @@ def test_no_accepted_registration_says_why(
         "no registration of 0 accepted: at 12 of 12 starts dead reckoning moved less than" in line
     )
     assert "the sonar cannot check dead reckoning: at 12 of 12 starts" in err
+    # and no loop was found because the path is too short for one, not for want of returns
+    assert clean["loops_found"] >= 1 and clean["loop_search_path_m"] > 100.0
+    assert m["loops_found"] == m["loop_search_tried"] == 0
+    assert m["loop_search_path_m"] == pytest.approx(clean["loop_search_path_m"] / 100, rel=0.05)
+    assert "no loop-closure error: dead reckoning's whole path is" in loop_line(m)
     assert "implausibly slow" in err

@@ -51,6 +51,8 @@ __all__ = [
     "SAMPLE_S",
     "stated_loops",
     "find_loops",
+    "search_loops",
+    "LoopSearch",
     "loop_errors",
     "OdometryCheck",
     "OdometryPair",
@@ -71,6 +73,9 @@ LOOP_CAUSES = (
 SAMPLE_S = 2.0
 #: A scan with fewer returns than this is not registered.
 MIN_SCAN_POINTS = 10
+#: A loop's two ends are at least this far apart in time (s) and along the estimate's path (m).
+LOOP_MIN_GAP_S = 60.0
+LOOP_MIN_PATH_M = 30.0
 #: A found loop's guess covariance of the heading (deg, 1 sigma).
 GUESS_YAW_SIGMA_DEG = 10.0
 
@@ -141,26 +146,86 @@ def _scan_ending(
     return scan
 
 
+@dataclass(frozen=True)
+class LoopSearch:
+    """What :func:`search_loops` found and why it found no more.
+
+    Attributes
+    ----------
+    loops : list of Loop
+        The loops found and confirmed.
+    tried : int
+        Returns within the radius (after ``min_gap_s`` and ``min_path_m``) whose scans were
+        registered.
+    path_m : float
+        The estimate's path over the sonar span (m).
+    radius_m, min_gap_s, min_path_m : float
+        The search's radius (m), least time (s) and least path (m) between a loop's two ends.
+    """
+
+    loops: list[Loop]
+    tried: int
+    path_m: float
+    radius_m: float
+    min_gap_s: float
+    min_path_m: float
+
+    def why_none(self) -> str:
+        """Why no loop was found, in words ("" when one was)."""
+        if self.loops:
+            return ""
+        if self.tried:
+            return (
+                f"{self.tried} return(s) within {self.radius_m:.0f} m registered, none accepted"
+                " (scans that do not overlap, or a single wall in view)"
+            )
+        if self.path_m < self.min_path_m:
+            return (
+                f"dead reckoning's whole path is {self.path_m:.1f} m, under the"
+                f" {self.min_path_m:.0f} m a loop needs: is the DVL's speed right (`sonarslam"
+                " info` gives it)?"
+            )
+        return (
+            f"dead reckoning ({self.path_m:.0f} m of path) never came back within"
+            f" {self.radius_m:.0f} m of where it was {self.min_gap_s:.0f} s and"
+            f" {self.min_path_m:.0f} m of path before"
+        )
+
+
 def find_loops(
     dataset: Dataset,
     estimate: PoseSource,
     radius_m: float,
-    min_gap_s: float = 60.0,
-    min_path_m: float = 30.0,
+    min_gap_s: float = LOOP_MIN_GAP_S,
+    min_path_m: float = LOOP_MIN_PATH_M,
     config: ScanConfig | None = None,
 ) -> list[Loop]:
     """The loops found along ``estimate`` and confirmed by registering their scans (module
     docstring); only accepted registrations are loops."""
+    return search_loops(dataset, estimate, radius_m, min_gap_s, min_path_m, config).loops
+
+
+def search_loops(
+    dataset: Dataset,
+    estimate: PoseSource,
+    radius_m: float,
+    min_gap_s: float = LOOP_MIN_GAP_S,
+    min_path_m: float = LOOP_MIN_PATH_M,
+    config: ScanConfig | None = None,
+) -> LoopSearch:
+    """:func:`find_loops` with what the search tried (:class:`LoopSearch`)."""
     span = dataset.sonar_span_s
+    nothing = LoopSearch([], 0, 0.0, radius_m, min_gap_s, min_path_m)
     if span is None:
-        return []
+        return nothing
     config = config or ScanConfig()
     t = np.arange(span[0] + SAMPLE_S, span[1], SAMPLE_S)
     if t.size < 2:
-        return []
+        return nothing
     p = np.asarray(estimate.poses(t))
     path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p[:, :2], axis=0).T))])
     loops: list[Loop] = []
+    tried = 0
     j, resume_s = 0, -math.inf
     while j < t.size:
         if t[j] < resume_s:
@@ -171,6 +236,7 @@ def find_loops(
             d = np.hypot(*(p[earlier, :2] - p[j, :2]).T)
             k = int(np.argmin(d))
             if d[k] <= radius_m:
+                tried += 1
                 loop = _confirm(
                     dataset, estimate, float(t[earlier[k]]), float(t[j]), radius_m, config
                 )
@@ -178,7 +244,7 @@ def find_loops(
                     loops.append(loop)
                     resume_s = t[j] + min_gap_s
         j += 1
-    return loops
+    return LoopSearch(loops, tried, float(path[-1]), radius_m, min_gap_s, min_path_m)
 
 
 def _confirm(
@@ -278,13 +344,13 @@ class OdometryCheck:
         if self.skipped_still:
             parts.append(
                 f"at {self.skipped_still} of {self.starts} starts dead reckoning moved less than"
-                f" {self.step_m:g} m within five turns of the head (does the DVL say the vehicle"
-                " hardly moves? `sonarslam info` gives its speed)"
+                f" {self.step_m:g} m within five turns of the head: is the DVL's speed right"
+                " (`sonarslam info` gives it)?"
             )
         if self.skipped_sparse:
             parts.append(
-                f"at {self.skipped_sparse} a scan held fewer than {MIN_SCAN_POINTS} returns"
-                " (the range, [sonar] settings or the extractor's intensity_threshold?)"
+                f"at {self.skipped_sparse} a scan held fewer than {MIN_SCAN_POINTS} returns:"
+                " is the sonar's range or the extractor's intensity_threshold right?"
             )
         if self.pairs:
             parts.append(

@@ -30,11 +30,14 @@ from sonarslam.settings import SettingError
 from sonarslam.slam.backends.registry import BACKENDS, backend_spec
 from sonarslam.slam.eval.loops import (
     LOOP_CAUSES,
+    LOOP_MIN_GAP_S,
+    LOOP_MIN_PATH_M,
     LoopError,
+    LoopSearch,
     OdometryCheck,
-    find_loops,
     loop_errors,
     odometry_check,
+    search_loops,
     stated_loops,
 )
 from sonarslam.slam.io.files import check_output_dir
@@ -601,9 +604,10 @@ def loop_figures(
     loops = stated_loops(loops_rel_s, dataset.nav_span_s[0])
     dr = dead_reckoning_trajectory(dataset)
     searched = dataset.gps is None
-    odometry = None
+    odometry = search = None
     if searched:
-        loops += find_loops(dataset, dr, radius_m)
+        search = search_loops(dataset, dr, radius_m)
+        loops += search.loops
         range_m = head.n_bins * head.bin_size_m
         odometry = odometry_check(dataset, dr, min(max(ODOMETRY_STEP_SHARE * range_m, 1.0), 5.0))
         _warn_odometry(dataset, odometry)
@@ -611,7 +615,7 @@ def loop_figures(
     if result.backend != "dr":
         estimates["dr"] = dr
     errors = {name: loop_errors(tr, loops) for name, tr in estimates.items()}
-    figures = LoopFigures(radius_m, loops, errors, searched, odometry)
+    figures = LoopFigures(radius_m, loops, errors, searched, odometry, search)
     _warn_loops(dataset, result.backend, errors, radius_m)
     return figures
 
@@ -652,7 +656,17 @@ def loop_line(metrics: dict[str, Any]) -> str:
         else ""
     )
     if not m["loops"]:
-        return head + ": no loop-closure error" + _odometry_part(m)
+        why = ""
+        if found == 0 and "loop_search_tried" in m:  # older runs do not say why
+            why = LoopSearch(
+                [],
+                m["loop_search_tried"],
+                m["loop_search_path_m"],
+                m["loop_radius_m"],
+                LOOP_MIN_GAP_S,
+                LOOP_MIN_PATH_M,
+            ).why_none()
+        return head + ": no loop-closure error" + (f": {why}" if why else "") + _odometry_part(m)
     parts = [
         f"{'dead reckoning' if key == 'loop_error_dr_mean_m' else 'run' if key == 'loop_error_mean_m' else key[11:-7]}"
         f" mean {m[key]:.2f} m, max {m[key.replace('_mean_', '_max_')]:.2f}"
