@@ -317,9 +317,14 @@ def _dvl_unit(path: Path | None) -> str:
             " setting takes another unit: a log written in m/s reads 100 times slow, one in mm/s"
             " 10 times fast"
         )
-    if path is not None and path.suffix.lower() == ".csv":
+    if path is None:
+        return "the DVL's velocities are taken as m/s (DvlSeries.v_mps)"
+    if path.suffix.lower() == ".csv":
         return "the navigation CSV's dvl_vx_mps/dvl_vy_mps are read as m/s"
-    return "the DVL's velocities are read as m/s (a driver publishing cm/s reads 100 times slow)"
+    return (
+        "the DVL's velocities are read as m/s, ROS's unit: a driver publishing cm/s reads 100"
+        " times fast"
+    )
 
 
 def _check_dvl_speed(dvl: DvlSeries) -> None:

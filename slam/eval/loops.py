@@ -533,11 +533,10 @@ def odometry_check(
         "starts": counts["starts"],
         "skipped_still": counts["still"],
         "skipped_sparse": counts["sparse"],
-        "step_m": step_m,
     }
     done = [p for p in pairs if p.sonar is not None]
     if not done:
-        return OdometryCheck(len(pairs), 0, math.nan, math.nan, **tried)
+        return OdometryCheck(len(pairs), 0, math.nan, math.nan, step_m=step_m, **tried)
     angles = [p.angle_rad for p in done]
     mean = math.atan2(float(np.mean(np.sin(angles))), float(np.mean(np.cos(angles))))
     accepted = len(done)
@@ -555,5 +554,6 @@ def odometry_check(
         float(np.median(ratios)),
         heading_se,
         scale_se,
+        step_m=step_m,
         **tried,
     )
