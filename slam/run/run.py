@@ -25,6 +25,7 @@ import pandas as pd
 from sonarslam.datasets.config import dump_dataset_config
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.ping360 import is_ping360_log
+from sonarslam.datasets.rosbag import is_bag
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.settings import SettingError
 from sonarslam.slam.backends.registry import BACKENDS, backend_spec
@@ -518,12 +519,17 @@ def odometry_scale_tolerance(dataset: Dataset) -> float:
 
 def range_setting(dataset: Dataset) -> str:
     """The setting that gives the sonar's range scale on ``dataset``, in words: a Ping Viewer
-    log's bin size is the speed of sound times its sample period, other sources' is ``[sonar]
-    bin_size_m``."""
+    log's bin size is the speed of sound times its sample period, a bag's is its messages' range
+    over their bins (no setting overrides it), other sources' is ``[sonar] bin_size_m``."""
     if is_ping360_log(dataset.root):
         return (
             "[ping360] speed_of_sound_mps: a Ping360's bin size is the speed of sound times its"
             " sample period, so a speed of sound some per cent off scales every range by as much"
+        )
+    if is_bag(dataset.root):
+        return (
+            "the bag's sonar messages give it, their range over their bins: the driver's range"
+            " and speed of sound settings, which no sonarslam setting overrides"
         )
     return "[sonar] bin_size_m"
 
