@@ -14,6 +14,8 @@ repeated stamp (DVL, AHRS, GPS)        the later rows of a stamp are dropped
 DVL speed > ``dvl_max_speed_mps``      the row is flagged as without bottom lock
 DVL velocity ``dvl_spike_sigmas``      the row is flagged as without bottom lock
 scatters off both neighbours
+DVL slower than ``DVL_MIN_SPEED_MPS``  a warning naming the likely unit slip (the rows are
+in 90 % of its locked rows             kept: a vehicle may hold station)
 AHRS rate > ``ahrs_max_rate_deg_per_s``      the sample is dropped
 AHRS heading jump the gyro does        the sample is dropped (judged against the last good
 not explain                            sample turned by the gyro's integral since)
@@ -50,6 +52,8 @@ __all__ = [
     "gate_gps",
     "gate_beams",
     "dvl_spikes",
+    "dvl_speed_quantiles",
+    "DVL_MIN_SPEED_MPS",
 ]
 
 #: Neighbours of a GPS fix: those within this time (s).
@@ -323,6 +327,60 @@ def _spike_pairs(
     return pair, off
 
 
+#: The DVL's horizontal speed in 90 % of its locked rows under this (m/s) is implausible for an
+#: AUV or ASC survey: ten times below ~0.2 m/s, the slow end of such surveys (72 m an hour), is a
+#: unit slip rather than a vehicle (a log in m/s read as the marina layout's cm/s is 100 times
+#: slow). Even at rest a DVL reads its own noise (a 1-sigma ``s`` per axis gives a p90 speed of
+#: ``2.15 s``), while a unit slip shrinks the noise with the motion. docs/bad-input.md gives the
+#: marina's and the simulator's speeds against it.
+DVL_MIN_SPEED_MPS = 0.02
+
+
+def dvl_speed_quantiles(dvl: DvlSeries, quantiles: tuple[int, ...] = (50, 90)) -> dict[int, float]:
+    """Percentiles (``quantiles``, 0-100) of the DVL's horizontal speed over its locked rows
+    (m/s); NaN without a locked row."""
+    v = dvl.v_mps[dvl.valid]
+    if v.shape[0] == 0:
+        return {q: math.nan for q in quantiles}
+    speed = np.hypot(v[:, 0], v[:, 1])
+    return {q: float(np.percentile(speed, q)) for q in quantiles}
+
+
+def _dvl_unit(path: Path | None) -> str:
+    """Where the DVL's velocities come from and the unit the reader takes them in, in words."""
+    if path is not None and path.name.endswith("_DVL.log"):
+        return (
+            "the marina layout's bottomVelX/Y columns are read as cm/s, divided by 100, and no"
+            " setting takes another unit: a log written in m/s reads 100 times slow, one in mm/s"
+            " 10 times fast"
+        )
+    if path is None:
+        return "the DVL's velocities are taken as m/s (DvlSeries.v_mps)"
+    if path.suffix.lower() == ".csv":
+        return "the navigation CSV's dvl_vx_mps/dvl_vy_mps are read as m/s"
+    return (
+        "the DVL's velocities are read as m/s, ROS's unit: a driver publishing cm/s reads 100"
+        " times fast"
+    )
+
+
+def _check_dvl_speed(dvl: DvlSeries) -> None:
+    """Warn when the vehicle is implausibly slow for its whole run (:data:`DVL_MIN_SPEED_MPS`),
+    naming the likely cause: the velocities' unit."""
+    q = dvl_speed_quantiles(dvl, (50, 90))
+    if not q[90] < DVL_MIN_SPEED_MPS:
+        return
+    _warn(
+        dvl.path,
+        "DVL",
+        f"the vehicle is implausibly slow: the DVL's speed over its locked rows has median"
+        f" {q[50]:.4f} m/s and 90th percentile {q[90]:.4f} m/s, under the"
+        f" {DVL_MIN_SPEED_MPS:g} m/s that any AUV or ASC survey exceeds (ten times below the"
+        f" slowest, ~0.2 m/s; a DVL at rest reads its own noise above it): the velocities' unit is likely wrong"
+        f" ({_dvl_unit(dvl.path)}); every estimate moves that much too little",
+    )
+
+
 def gate_dvl(
     dvl: DvlSeries, gates: GateConfig, report: SensorReport, noise_sigma_mps: float = 0.0
 ) -> DvlSeries:
@@ -346,6 +404,7 @@ def gate_dvl(
                 np.hypot(vb[:, 0], vb[:, 1]) <= gates.dvl_max_speed_mps
             )
     n_fast = int(fast.sum())
+    n_valid = int(valid.sum())
     report.counts["dvl_repeated_stamps"] = n_repeat
     report.counts["dvl_speed_spikes"] = n_fast
     if n_repeat:
@@ -356,7 +415,13 @@ def gate_dvl(
             dvl.path,
             "DVL",
             f"{n_fast} row(s) faster than {gates.dvl_max_speed_mps:g} m/s taken as"
-            f" without bottom lock (first at t={first:.3f} s)",
+            f" without bottom lock (first at t={first:.3f} s)"
+            + (
+                f"; that is {n_fast} of the {n_valid} locked rows: the velocities' unit is"
+                f" likely wrong ({_dvl_unit(dvl.path)})"
+                if 2 * n_fast > n_valid
+                else ""
+            ),
         )
         valid &= ~fast
     del fast
@@ -378,6 +443,7 @@ def gate_dvl(
         valid &= ~spike
     del spike, sigma, off
     out = DvlSeries(t, v, valid, heading, dvl.path)
+    _check_dvl_speed(out)
     report.gaps["dvl"] = _warn_gaps(
         dvl.path,
         "DVL",

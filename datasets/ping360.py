@@ -104,6 +104,7 @@ from sonarslam.datasets.geodesy import geodetic_to_local_en
 from sonarslam.datasets.logfile import open_regular, read_text
 from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries
 from sonarslam.datasets.rosbag import TOPIC_PRESETS, is_bag, read_roles
+from sonarslam.datasets.toml import toml_file_line
 from sonarslam.settings import SettingError, bounded, check_fields, one_of
 
 __all__ = [
@@ -902,14 +903,14 @@ def open_ping360(
     settings = Ping360Settings()
     sonar_keys: dict[str, Any] = {}
     where = p
-    head_file: Path | None = None  # the file that set the head's n_bins or bin_size_m last
+    head_files: dict[str, Path] = {}  # the file that set the head's n_bins, bin_size_m last
     for source in (toml, Path(config_override) if config_override is not None else None):
         if source is not None:
             table, sonar = _table(source)
             settings = _settings(table, source, settings)
             sonar_keys.update(sonar)
             where = source if table else where
-            head_file = source if {"n_bins", "bin_size_m"} & set(sonar) else head_file
+            head_files.update({k: source for k in ("n_bins", "bin_size_m") if k in sonar})
     nav_path = Path(nav) if nav is not None else Path(settings.nav) if settings.nav else None
     if nav_path is None:
         raise DataError(
@@ -929,12 +930,19 @@ def open_ping360(
         calibration = f"{calibration}; over it {config_override}"
     log = read_ping360_log(p, settings, where)
     n_bins = log.beams.intensities.shape[1]
-    if ("n_bins" in sonar_keys and config.sonar.n_bins != n_bins) or (
-        "bin_size_m" in sonar_keys and not math.isclose(config.sonar.bin_size_m, log.bin_size_m)
-    ):
+    wrong = [
+        key
+        for key, differs in (
+            ("n_bins", config.sonar.n_bins != n_bins),
+            ("bin_size_m", not math.isclose(config.sonar.bin_size_m, log.bin_size_m)),
+        )
+        if key in sonar_keys and differs
+    ]
+    if wrong:
+        head_file = head_files[wrong[-1]]
         raise DataError(
-            head_file or p,
-            None,
+            head_file,
+            toml_file_line(head_file, "sonar", (wrong[-1],)),
             f"[sonar] n_bins {config.sonar.n_bins}, bin_size_m {config.sonar.bin_size_m:g}: the"
             f" log's beams have {n_bins} samples of {log.bin_size_m:g} m at"
             f" {settings.speed_of_sound_mps:g} m/s (leave them out: the log's win; the speed of"

@@ -75,6 +75,7 @@ from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.geodesy import geodetic_to_local_en, local_en_to_geodetic
 from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries
 from sonarslam.datasets.ros1bag import Ros1Bag
+from sonarslam.datasets.toml import toml_file_line
 from sonarslam.sonar.beam import Mounting
 
 __all__ = [
@@ -991,7 +992,13 @@ def open_bag(
     ):
         raise DataError(
             head_file,
-            None,
+            toml_file_line(
+                head_file,
+                "sonar",
+                ("n_bins", "bin_size_m")
+                if config.sonar.n_bins != n_bins
+                else ("bin_size_m", "n_bins"),
+            ),
             f"[sonar] n_bins {config.sonar.n_bins}, bin_size_m {config.sonar.bin_size_m:g}: the"
             f" bag's beams have {n_bins} bins of {bin_m:g} m (leave them out; the bag's win)",
         )

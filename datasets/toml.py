@@ -12,7 +12,7 @@ from typing import Any
 from sonarslam.datasets.errors import DataError
 from sonarslam.datasets.logfile import read_text, split_lines
 
-__all__ = ["read_toml", "toml_line"]
+__all__ = ["read_toml", "toml_line", "toml_file_line"]
 
 
 def read_toml(path: str | Path) -> tuple[dict[str, Any], str]:
@@ -50,3 +50,14 @@ def toml_line(text: str, table: str, key: str | None = None) -> int | None:
         if key is not None and found is not None and current == table and found.group(1) == key:
             return number
     return None
+
+
+def toml_file_line(path: str | Path, table: str, keys: tuple[str, ...]) -> int | None:
+    """The line (:func:`toml_line`) in the TOML file ``path`` of the first of ``keys`` written
+    in ``[table]``; None when none is, or the file cannot be read as UTF-8 text."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return None
+    lines = (toml_line(text, table, k) for k in keys)
+    return next((n for n in lines if n is not None), None)

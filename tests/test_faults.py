@@ -339,3 +339,60 @@ def test_two_dvl_spikes_in_a_row_are_found_and_a_real_change_of_velocity_is_not(
     found, _, off = dvl_spikes(t, v, np.ones(n, dtype=bool), GateConfig(), 0.01)
     assert np.flatnonzero(found).tolist() == [200, 201]
     assert off[200] > 0.9 and off[201] > 0.9
+
+
+def _dvl_times(folder: Path, factor: float) -> None:
+    """The DVL log's velocity columns (water and bottom, cm/s) times ``factor``."""
+    cols = (7, 8, 9, 11, 12, 13)
+    edit_log_rows(
+        _log(folder, "DVL"),
+        lambda t, f: [[f"{float(v) * factor:.6g}" if i in cols else v for i, v in enumerate(f)]],
+    )
+
+
+def test_a_dvl_log_in_another_unit_is_said_with_the_likely_cause(harbour, tmp_path):
+    """A marina-layout DVL log written in m/s (read as its cm/s) moves the vehicle 100 times
+    too little; every run ended with a wrong answer and no warning (the marina so: ATE 29 m).
+    Now opening it warns, naming the log, the speed with its unit and the columns' unit; the
+    clean log does not. One in mm/s (10 times fast) is gated as too fast, said likewise."""
+    clean, said_clean = _open(harbour)
+    assert not [s for s in said_clean if "unit" in s]
+    q_clean = run_backend(clean, "dr").metrics
+    assert 0.3 < q_clean["dvl_speed_p50_mps"] < 0.6  # the simulated vehicle's 0.45 m/s
+    slow = _copy(harbour, tmp_path / "mps")
+    _dvl_times(slow, 0.01)
+    ds, said = _open(slow)
+    line = next(s for s in said if "implausibly slow" in s)
+    assert str(_log(slow, "DVL")) in line and "bottomVelX/Y" in line and "cm/s" in line
+    m = run_backend(ds, "dr").metrics
+    assert m["dvl_speed_p50_mps"] == pytest.approx(q_clean["dvl_speed_p50_mps"] / 100, rel=1e-3)
+    assert m["ate_truth_mean_m"] > 5.0 * q_clean["ate_truth_mean_m"]  # what the warning is for
+    fast = _copy(harbour, tmp_path / "mmps")
+    _dvl_times(fast, 10.0)
+    line = next(s for s in _open(fast)[1] if "faster than 3 m/s" in s)
+    assert "_DVL.log" in line and "unit is likely wrong" in line and "mm/s" in line
+
+
+def test_a_dvl_sigma_far_above_the_dvls_scatter_is_said(harbour, tmp_path, capsys):
+    """``[noise] dvl_sigma_mps = 2.0`` on a DVL whose scatter is 0.02 m/s was taken silently
+    (a new user's review: the EKF's ATE 1.05 -> 2.04 m); now every run and ``info`` warn,
+    naming the setting, the ratio and the scatter. The simulator's own sigma does not."""
+    clean, _ = _open(harbour)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DataWarning)
+        run_backend(clean, "dr")  # the simulator's 0.02 m/s against its scatter: quiet
+    told = tmp_path / "sigma.toml"
+    told.write_text("[noise]\ndvl_sigma_mps = 2.0\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        wide = open_dataset(harbour, config_override=told)
+    with pytest.warns(DataWarning) as record:
+        run_backend(wide, "dr")
+    (line,) = [str(w.message) for w in record if "dvl_sigma_mps" in str(w.message)]
+    assert "[noise] dvl_sigma_mps = 2 m/s" in line and str(told) in line
+    scatter = run_backend(clean, "dr").metrics["dvl_scatter_p50_mps"]
+    assert 0.015 < scatter < 0.03  # the simulator's 0.02 m/s
+    assert f"{2.0 / scatter:.0f} times the DVL's own scatter (median {scatter:.3g} m/s" in line
+    assert main(["info", str(harbour), "--config", str(told)]) == 0
+    out, err = capsys.readouterr()
+    assert "[noise] dvl_sigma_mps = 2 m/s" in err and "dvl_sigma_mps too large?" in out

@@ -298,3 +298,47 @@ def test_a_sonar_some_degrees_off_and_a_range_scale_are_measured_and_named(
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         _warn_odometry(d, right)
+
+
+def test_no_accepted_registration_says_why(
+    nogps: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A DVL log in m/s (read as the layout's cm/s) moves dead reckoning 100 times too little:
+    the odometry check found no pair and said only "no registration of 0 accepted" (a
+    new user's review), and "0 found" loops nothing. Now the lines and a warning say why:
+    dead reckoning hardly moved at every start, its path is too short for a loop; the clean
+    run has pairs and loops."""
+    from sonarslam.slam.run.run import loop_line, odometry_line
+
+    slow = tmp_path / "mps"
+    shutil.copytree(nogps, slow)
+    dvl = next(slow.glob("*_DVL.log"))
+    cols = (7, 8, 9, 11, 12, 13)
+    rows = []
+    for line in dvl.read_text().splitlines():
+        f = line.split()
+        if f and not line.startswith("%"):
+            f = [f"{float(v) / 100.0:.6g}" if i in cols else v for i, v in enumerate(f)]
+            line = " ".join(f)
+        rows.append(line)
+    dvl.write_text("\n".join(rows) + "\n")
+    for src, name in ((nogps, "clean"), (slow, "mps")):
+        assert main(["run", str(src), "--backend", "dr", "--out", str(tmp_path / name)]) == 0
+    err = capsys.readouterr().err
+    clean = json.loads((tmp_path / "clean" / "metrics.json").read_text())
+    assert clean["odometry_check_accepted"] >= 5
+    assert clean["odometry_check_skipped_still"] < clean["odometry_check_starts"]
+    m = json.loads((tmp_path / "mps" / "metrics.json").read_text())
+    assert m["odometry_check_accepted"] == m["odometry_check_pairs"] == 0
+    assert m["odometry_check_skipped_still"] == m["odometry_check_starts"] == 12
+    line = odometry_line(m)
+    assert (
+        "no registration of 0 accepted: at 12 of 12 starts dead reckoning moved less than" in line
+    )
+    assert "the sonar cannot check dead reckoning: at 12 of 12 starts" in err
+    # and no loop was found because the path is too short for one, not for want of returns
+    assert clean["loops_found"] >= 1 and clean["loop_search_path_m"] > 100.0
+    assert m["loops_found"] == m["loop_search_tried"] == 0
+    assert m["loop_search_path_m"] == pytest.approx(clean["loop_search_path_m"] / 100, rel=0.05)
+    assert "no loop-closure error: dead reckoning's whole path is" in loop_line(m)
+    assert "implausibly slow" in err

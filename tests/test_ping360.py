@@ -382,3 +382,34 @@ def test_the_navigation_bag_is_read_through_rosbags_public_role_reader() -> None
     assert private == []
     assert "read_roles" in rosbag.__all__ and rosbag.read_roles.__doc__
     assert ping360.read_roles is rosbag.read_roles
+
+
+def test_a_wrong_speed_of_sound_is_named_with_its_line_and_in_the_length_warning(
+    binlog: Path, direct: Dataset, tmp_path: Path
+) -> None:
+    """A new user's review: the simulator's sonarslam.toml pins [sonar] bin_size_m, so
+    another [ping360] speed_of_sound_mps was an error naming the file but not its line; and
+    the odometry check's length ratio pointed at [sonar] bin_size_m, which a Ping Viewer log
+    does not read (its bin size is the speed of sound times the sample period)."""
+    from sonarslam.slam.eval.loops import OdometryCheck
+    from sonarslam.slam.run.run import _warn_odometry
+
+    folder = tmp_path / "sos"
+    shutil.copytree(binlog.parent, folder)
+    toml = folder / "sonarslam.toml"
+    text = toml.read_text().replace("speed_of_sound_mps = 1500.0", "speed_of_sound_mps = 1400.0")
+    toml.write_text(text)
+    line = 1 + text.splitlines().index(next(s for s in text.splitlines() if "bin_size_m" in s))
+    with pytest.raises(DataError) as err:
+        _open(folder / binlog.name)
+    assert str(err.value).startswith(f"{toml}:{line}: [sonar] n_bins 500, bin_size_m")
+    # left out, the log's bin size at 1400 m/s is taken: 1400/1500 of the layout's
+    toml.write_text("\n".join(s for s in text.splitlines() if "bin_size_m" not in s) + "\n")
+    d = _open(folder / binlog.name)
+    assert d.config.sonar.bin_size_m == pytest.approx(direct.config.sonar.bin_size_m * 1400 / 1500)
+    short = OdometryCheck(12, 7, 0.0, 0.933, 0.2, 0.005)  # what a run of it measures
+    with pytest.warns(UserWarning, match=r"x0\.933 .*\[ping360\] speed_of_sound_mps") as record:
+        _warn_odometry(d, short)
+    assert "bin_size_m" not in str(record[0].message)
+    with pytest.warns(UserWarning, match=r"x0\.933 .*\[sonar\] bin_size_m"):
+        _warn_odometry(direct, short)

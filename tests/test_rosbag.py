@@ -160,6 +160,43 @@ def test_info_lists_the_roles_and_run_takes_a_bag(
     assert p["dataset_file_count"] == 3 and p["dataset_sha256"] != hashlib.sha256().hexdigest()
 
 
+def test_calibrate_ahrs_on_a_bag_without_a_dvl_compass_is_one_line_naming_the_bag(
+    bags: dict[str, Path], harbour: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A bag's DVL message has no compass heading: ``calibrate --ahrs`` printed a NaN
+    mounting and then "yaw_rad must be in [-6.28319, 6.28319], got nan" without a file (a
+    new user's review). Now one line names the bag and the setting to give instead; the layout,
+    whose DVL log has the compass, still calibrates."""
+    assert main(["calibrate", str(bags["ros1"]), "--ahrs", "--quiet"]) == 1
+    out, err = capsys.readouterr()
+    assert "nan" not in out
+    (line,) = [ln for ln in err.splitlines() if not ln.startswith("warning:")]
+    assert str(bags["ros1"]) in line and "compass heading" in line
+    assert "[mounting.ahrs] yaw_deg" in line
+    assert main(["calibrate", str(harbour), "--ahrs", "--quiet"]) == 0
+    assert "nan deg (configured" not in capsys.readouterr().out
+
+
+def test_the_length_ratio_on_a_bag_names_its_messages_range(
+    bags: dict[str, Path], layout: Dataset
+) -> None:
+    """A bag's bin size is its sonar messages' range over their bins, which ``[sonar]
+    bin_size_m`` cannot override (a DataError): the odometry check's length-ratio warning
+    named that setting on a bag too."""
+    from sonarslam.slam.eval.loops import OdometryCheck
+    from sonarslam.slam.run.run import _warn_odometry
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        d = open_dataset(bags["ros1"])
+    short = OdometryCheck(12, 7, 0.0, 0.933, 0.2, 0.005)
+    with pytest.warns(UserWarning, match=r"x0\.933 .*sonar messages give it") as record:
+        _warn_odometry(d, short)
+    assert "[sonar] bin_size_m" not in str(record[0].message)
+    with pytest.warns(UserWarning, match=r"x0\.933 .*\[sonar\] bin_size_m"):
+        _warn_odometry(layout, short)
+
+
 def test_a_head_that_disagrees_with_the_bag_names_the_file_that_set_it(
     bags: dict[str, Path], tmp_path: Path
 ) -> None:

@@ -5,13 +5,20 @@ from __future__ import annotations
 import argparse
 import math
 
+from sonarslam.datasets.gates import DVL_MIN_SPEED_MPS
 from sonarslam.datasets.ping360 import is_ping360_log
 from sonarslam.datasets.rosbag import bag_topics, is_bag
 from sonarslam.datasets.source import check_toml_inputs, open_dataset, resolve_source
 from sonarslam.slam.model.motion import gyro_bias_against_heading
 from sonarslam.slam.run.presets import parse_settings
 from sonarslam.slam.run.settings import Setting, check_run_settings, dataset_settings, run_settings
-from sonarslam.slam.run.sources import DR_IGNORES, dvl_quality, start_pose
+from sonarslam.slam.run.sources import (
+    DR_IGNORES,
+    DVL_SIGMA_OVER_SCATTER_MAX,
+    dvl_quality,
+    start_pose,
+    warn_dvl_sigma,
+)
 
 
 def command(args: argparse.Namespace) -> int:
@@ -78,6 +85,15 @@ def command(args: argparse.Namespace) -> int:
             f" the line landmarks act there): {span[0] - t0:.1f} s to {span[1] - t0:.1f} s"
         )
     n, dq = d.config.noise, dvl_quality(d)
+    slow = (
+        f" (under {DVL_MIN_SPEED_MPS:g} m/s: implausibly slow, the velocities' unit?)"
+        if dq["dvl_speed_p90_mps"] < DVL_MIN_SPEED_MPS
+        else ""
+    )
+    print(
+        f"  DVL speed over its locked rows (m/s): median {dq['dvl_speed_p50_mps']:.3g},"
+        f" p90 {dq['dvl_speed_p90_mps']:.3g}{slow}"
+    )
     print(
         f"  DVL scatter over {n.dvl_scatter_window_s or 60.0:g} s (m/s): "
         + ", ".join(f"p{p} {dq[f'dvl_scatter_p{p}_mps']:.3f}" for p in (10, 50, 90, 99))
@@ -91,6 +107,11 @@ def command(args: argparse.Namespace) -> int:
         )
     else:
         print(f"  DVL sigma {n.dvl_sigma_mps} m/s (the scatter's excess is not added)")
+    if warn_dvl_sigma(d, dq):
+        print(
+            f"  DVL sigma over its scatter's median: x{n.dvl_sigma_mps / dq['dvl_scatter_p50_mps']:.0f}"
+            f" (over {DVL_SIGMA_OVER_SCATTER_MAX:g}: [noise] dvl_sigma_mps too large?)"
+        )
     _print_settings("dataset settings (sonarslam.toml keys)", dataset_settings(d, args.config))
     print(f"  dead reckoning (--backend dr) ignores: {', '.join(DR_IGNORES)}")
     _print_settings("run settings (sonarslam run --set NAME=VALUE)", run_settings(d, settings))

@@ -51,6 +51,8 @@ __all__ = [
     "SAMPLE_S",
     "stated_loops",
     "find_loops",
+    "search_loops",
+    "LoopSearch",
     "loop_errors",
     "ODOMETRY_CAUSES",
     "ODOMETRY_MAX_ANGLE_DEG",
@@ -86,6 +88,11 @@ ODOMETRY_CAUSES = (
 
 #: The estimate is searched for returns at this step (s).
 SAMPLE_S = 2.0
+#: A scan with fewer returns than this is not registered.
+MIN_SCAN_POINTS = 10
+#: A loop's two ends are at least this far apart in time (s) and along the estimate's path (m).
+LOOP_MIN_GAP_S = 60.0
+LOOP_MIN_PATH_M = 30.0
 #: A found loop's guess covariance of the heading (deg, 1 sigma).
 GUESS_YAW_SIGMA_DEG = 10.0
 
@@ -156,26 +163,86 @@ def _scan_ending(
     return scan
 
 
+@dataclass(frozen=True)
+class LoopSearch:
+    """What :func:`search_loops` found and why it found no more.
+
+    Attributes
+    ----------
+    loops : list of Loop
+        The loops found and confirmed.
+    tried : int
+        Returns within the radius (after ``min_gap_s`` and ``min_path_m``) whose scans were
+        registered.
+    path_m : float
+        The estimate's path over the sonar span (m).
+    radius_m, min_gap_s, min_path_m : float
+        The search's radius (m), least time (s) and least path (m) between a loop's two ends.
+    """
+
+    loops: list[Loop]
+    tried: int
+    path_m: float
+    radius_m: float
+    min_gap_s: float
+    min_path_m: float
+
+    def why_none(self) -> str:
+        """Why no loop was found, in words ("" when one was)."""
+        if self.loops:
+            return ""
+        if self.tried:
+            return (
+                f"{self.tried} return(s) within {self.radius_m:.0f} m registered, none accepted"
+                " (scans that do not overlap, or a single wall in view)"
+            )
+        if self.path_m < self.min_path_m:
+            return (
+                f"dead reckoning's whole path is {self.path_m:.1f} m, under the"
+                f" {self.min_path_m:.0f} m a loop needs: is the DVL's speed right (`sonarslam"
+                " info` gives it)?"
+            )
+        return (
+            f"dead reckoning ({self.path_m:.0f} m of path) never came back within"
+            f" {self.radius_m:.0f} m of where it was {self.min_gap_s:.0f} s and"
+            f" {self.min_path_m:.0f} m of path before"
+        )
+
+
 def find_loops(
     dataset: Dataset,
     estimate: PoseSource,
     radius_m: float,
-    min_gap_s: float = 60.0,
-    min_path_m: float = 30.0,
+    min_gap_s: float = LOOP_MIN_GAP_S,
+    min_path_m: float = LOOP_MIN_PATH_M,
     config: ScanConfig | None = None,
 ) -> list[Loop]:
     """The loops found along ``estimate`` and confirmed by registering their scans (module
     docstring); only accepted registrations are loops."""
+    return search_loops(dataset, estimate, radius_m, min_gap_s, min_path_m, config).loops
+
+
+def search_loops(
+    dataset: Dataset,
+    estimate: PoseSource,
+    radius_m: float,
+    min_gap_s: float = LOOP_MIN_GAP_S,
+    min_path_m: float = LOOP_MIN_PATH_M,
+    config: ScanConfig | None = None,
+) -> LoopSearch:
+    """:func:`find_loops` with what the search tried (:class:`LoopSearch`)."""
     span = dataset.sonar_span_s
+    nothing = LoopSearch([], 0, 0.0, radius_m, min_gap_s, min_path_m)
     if span is None:
-        return []
+        return nothing
     config = config or ScanConfig()
     t = np.arange(span[0] + SAMPLE_S, span[1], SAMPLE_S)
     if t.size < 2:
-        return []
+        return nothing
     p = np.asarray(estimate.poses(t))
     path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p[:, :2], axis=0).T))])
     loops: list[Loop] = []
+    tried = 0
     j, resume_s = 0, -math.inf
     while j < t.size:
         if t[j] < resume_s:
@@ -186,6 +253,7 @@ def find_loops(
             d = np.hypot(*(p[earlier, :2] - p[j, :2]).T)
             k = int(np.argmin(d))
             if d[k] <= radius_m:
+                tried += 1
                 loop = _confirm(
                     dataset, estimate, float(t[earlier[k]]), float(t[j]), radius_m, config
                 )
@@ -193,7 +261,7 @@ def find_loops(
                     loops.append(loop)
                     resume_s = t[j] + min_gap_s
         j += 1
-    return loops
+    return LoopSearch(loops, tried, float(path[-1]), radius_m, min_gap_s, min_path_m)
 
 
 def _confirm(
@@ -206,7 +274,7 @@ def _confirm(
 ) -> Loop | None:
     a = _scan_ending(dataset, t0_s, estimate, config)
     b = _scan_ending(dataset, t1_s, estimate, config)
-    if a is None or b is None or len(a.points_b) < 10 or len(b.points_b) < 10:
+    if a is None or b is None or min(len(a.points_b), len(b.points_b)) < MIN_SCAN_POINTS:
         return None
     guess = between(a.wTb_ref, b.wTb_ref)
     cov = np.diag([radius_m**2, radius_m**2, math.radians(GUESS_YAW_SIGMA_DEG) ** 2])
@@ -263,6 +331,15 @@ class OdometryCheck:
         for Gaussian samples) times the ratios' robust standard deviation (``1.4826`` times
         their median absolute deviation: one pair's wrong registration does not inflate it)
         over the square root of the accepted pairs; NaN below two.
+    starts : int
+        Starts tried (each a first scan; a start gives a pair or is skipped).
+    skipped_still : int
+        Starts skipped because dead reckoning moved less than ``step_m`` within five turns of
+        the head after them, or less than half of it between the two scans.
+    skipped_sparse : int
+        Starts skipped because a scan held fewer than :data:`MIN_SCAN_POINTS` returns.
+    step_m : float
+        The distance along dead reckoning between the two scans of a pair (m).
     """
 
     pairs: int
@@ -271,6 +348,35 @@ class OdometryCheck:
     scale: float
     heading_se_deg: float = math.nan
     scale_se: float = math.nan
+    starts: int = 0
+    skipped_still: int = 0
+    skipped_sparse: int = 0
+    step_m: float = math.nan
+
+    def why_none(self) -> str:
+        """Why no registration was accepted, in words ("" when one was)."""
+        if self.accepted:
+            return ""
+        parts = []
+        if self.skipped_still:
+            parts.append(
+                f"at {self.skipped_still} of {self.starts} starts dead reckoning moved less than"
+                f" {self.step_m:g} m within five turns of the head: is the DVL's speed right"
+                " (`sonarslam info` gives it)?"
+            )
+        if self.skipped_sparse:
+            parts.append(
+                f"at {self.skipped_sparse} a scan held fewer than {MIN_SCAN_POINTS} returns:"
+                " is the sonar's range or the extractor's intensity_threshold right?"
+            )
+        if self.pairs:
+            parts.append(
+                f"{self.pairs} pair(s) registered, none accepted with every direction"
+                " constrained (a single wall in view, or scans that do not overlap)"
+            )
+        if not parts:
+            parts.append("the sonar span is shorter than three turns of the head")
+        return "; ".join(parts)
 
     @property
     def turned(self) -> bool:
@@ -369,32 +475,55 @@ def odometry_pairs(
     angle_sense`` flipped) mirrors each scan about the head's zero direction: when that zero
     lies along the direction of travel the mirrored motion is the same, and no pair sees it.
     """
+    return _odometry_pairs(dataset, dead_reckoning, step_m, n_pairs, config)[0]
+
+
+def _odometry_pairs(
+    dataset: Dataset,
+    dead_reckoning: PoseSource,
+    step_m: float,
+    n_pairs: int,
+    config: ScanConfig | None,
+) -> tuple[list[OdometryPair], dict[str, int]]:
+    """:func:`odometry_pairs` and the count of starts tried and skipped, by why: ``starts``,
+    ``still`` (dead reckoning moved under ``step_m`` within five turns, or under half of it
+    between the scans), ``sparse`` (a scan of fewer than :data:`MIN_SCAN_POINTS` returns)."""
     config = config or ScanConfig()
     span = dataset.sonar_span_s
     t_beams = dataset.beams.t_s
+    counts = {"starts": 0, "still": 0, "sparse": 0}
     if span is None or t_beams.size < 2:
-        return []
+        return [], counts
     n_turn = ScanBuilder(
         config, dataset.config.sonar, dataset.config.sonar_mounting, dead_reckoning
     ).n_beams
     turn_s = float(np.median(np.diff(t_beams))) * n_turn
     t = np.arange(span[0], span[1], min(1.0, turn_s / 4.0))
     if t.size < 2:
-        return []
+        return [], counts
     p = np.asarray(dead_reckoning.poses(t))
     path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p[:, :2], axis=0).T))])
     out: list[OdometryPair] = []
     for t0 in np.linspace(span[0] + turn_s, span[1] - 2.0 * turn_s, n_pairs):
+        counts["starts"] += 1
         i0 = min(int(np.searchsorted(t, t0)), t.size - 1)
         far = np.flatnonzero((path >= path[i0] + step_m) & (t >= t0 + turn_s))
         if far.size == 0 or t[far[0]] > t0 + 5.0 * turn_s:
-            continue  # the vehicle hardly moves here
+            counts["still"] += 1  # the vehicle hardly moves here
+            continue
         a = _scan_ending(dataset, float(t0), dead_reckoning, config)
         b = _scan_ending(dataset, float(t[far[0]]), dead_reckoning, config)
-        if a is None or b is None or len(a.points_b) < 10 or len(b.points_b) < 10:
+        if (
+            a is None
+            or b is None
+            or len(a.points_b) < MIN_SCAN_POINTS
+            or len(b.points_b) < MIN_SCAN_POINTS
+        ):
+            counts["sparse"] += 1
             continue
         guess = between(a.wTb_ref, b.wTb_ref)
         if math.hypot(guess[0], guess[1]) < 0.5 * step_m:
+            counts["still"] += 1
             continue
         ref = reference_lines(a.points_b, config)
         best = None
@@ -408,7 +537,7 @@ def odometry_pairs(
         sonar = None if best is None else np.asarray(best.z, dtype=np.float64)
         cov = None if best is None else np.asarray(best.cov, dtype=np.float64)
         out.append(OdometryPair(a.t_ref_s, b.t_ref_s, np.asarray(guess), sonar, cov))
-    return out
+    return out, counts
 
 
 def odometry_check(
@@ -427,10 +556,15 @@ def odometry_check(
     :attr:`OdometryCheck.scale` from 1. The standard errors are the pairs' spread over the
     square root of their number (the scale's from their median absolute deviation).
     """
-    pairs = odometry_pairs(dataset, dead_reckoning, step_m, n_pairs, config)
+    pairs, counts = _odometry_pairs(dataset, dead_reckoning, step_m, n_pairs, config)
+    tried = {
+        "starts": counts["starts"],
+        "skipped_still": counts["still"],
+        "skipped_sparse": counts["sparse"],
+    }
     done = [p for p in pairs if p.sonar is not None]
     if not done:
-        return OdometryCheck(len(pairs), 0, math.nan, math.nan)
+        return OdometryCheck(len(pairs), 0, math.nan, math.nan, step_m=step_m, **tried)
     angles = [p.angle_rad for p in done]
     mean = math.atan2(float(np.mean(np.sin(angles))), float(np.mean(np.cos(angles))))
     accepted = len(done)
@@ -442,5 +576,12 @@ def odometry_check(
         mad = float(np.median(np.abs(np.asarray(ratios) - np.median(ratios))))
         scale_se = math.sqrt(math.pi / 2.0) * 1.4826 * mad / math.sqrt(accepted)
     return OdometryCheck(
-        len(pairs), accepted, math.degrees(mean), float(np.median(ratios)), heading_se, scale_se
+        len(pairs),
+        accepted,
+        math.degrees(mean),
+        float(np.median(ratios)),
+        heading_se,
+        scale_se,
+        step_m=step_m,
+        **tried,
     )

@@ -509,6 +509,10 @@ def _rms_change(t_s: FloatArray, r: FloatArray, lags_s: tuple[float, ...]) -> di
     return out
 
 
+#: ``calibrate_ahrs_yaw`` needs at least this many DVL rows with a compass heading.
+MIN_COMPASS_ROWS = 10
+
+
 def calibrate_ahrs_yaw(dataset: Dataset, harmonics: int = 1) -> CompassFit:
     """The AHRS mounting yaw from the DVL's own compass, GPS-free.
 
@@ -526,10 +530,26 @@ def calibrate_ahrs_yaw(dataset: Dataset, harmonics: int = 1) -> CompassFit:
         DVL rows with compass headings and the AHRS series; the DVL mounting is used.
     harmonics : int
         Harmonics of the heading fitted with the constant (0: the time mean).
+
+    Raises
+    ------
+    ValueError
+        Naming the DVL's file when fewer than :data:`MIN_COMPASS_ROWS` of its rows hold a
+        compass heading (a bag's or a navigation CSV's DVL carries none).
     """
     dvl, att = dataset.dvl, dataset.attitude
-    yaw = np.interp(dvl.t, att.t, np.unwrap(att.yaw_rad))
-    diff = wrap_angle(dvl.heading_rad - yaw)
+    has = np.isfinite(dvl.heading_rad)
+    if int(has.sum()) < max(MIN_COMPASS_ROWS, 1 + 2 * harmonics):
+        raise ValueError(
+            f"{dvl.path or dataset.root}: {int(has.sum())} of the DVL's {dvl.t.size} rows hold a"
+            " compass heading (a ROS bag's DVL message, or a navigation CSV, carries none; the"
+            " marina layout's *_DVL.log has its heading column), so --ahrs cannot find the"
+            " AHRS mounting yaw from the DVL's compass: set [mounting.ahrs] yaw_deg in"
+            " sonarslam.toml (on a bag, its /tf or the driver's frame convention gives it)"
+        )
+    t_dvl, heading = dvl.t[has], dvl.heading_rad[has]
+    yaw = np.interp(t_dvl, att.t, np.unwrap(att.yaw_rad))
+    diff = wrap_angle(heading - yaw)
     mean = float(np.angle(np.mean(np.exp(1j * diff))))
     r = wrap_angle(diff - mean)
     cols = [np.ones_like(yaw)]
@@ -547,7 +567,7 @@ def calibrate_ahrs_yaw(dataset: Dataset, harmonics: int = 1) -> CompassFit:
         mean,
         np.asarray(coef[1:], dtype=np.float64),
         float(np.std(residual)),
-        _rms_change(np.asarray(dvl.t, dtype=np.float64), residual, COMPASS_LAGS_S),
+        _rms_change(np.asarray(t_dvl, dtype=np.float64), residual, COMPASS_LAGS_S),
     )
 
 

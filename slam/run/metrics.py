@@ -20,7 +20,7 @@ import numpy as np
 from sonarslam.datasets.source import Dataset
 from sonarslam.slam.eval.ate import AteResult, ate_against_gps, ate_against_truth
 from sonarslam.slam.eval.consistency import COMPONENTS, NeesSeries, chi2_band, nees_series
-from sonarslam.slam.eval.loops import Loop, LoopError, OdometryCheck
+from sonarslam.slam.eval.loops import Loop, LoopError, LoopSearch, OdometryCheck
 from sonarslam.slam.eval.sharpness import trajectory_sharpness
 from sonarslam.slam.eval.truth import AssociationScores, association_against_truth, truth_trajectory
 from sonarslam.slam.io.trajectory import Trajectory
@@ -163,6 +163,7 @@ class DataFigures:
         "realtime_factor",
         "dvl_rows",
         "dvl_invalid_rows",
+        "dvl_speed_p{50,90}_mps",
         "dvl_scatter_p{10,50,90,99}_mps",
         "dvl_excess_s",
         "dvl_excess_from_s",
@@ -331,11 +332,15 @@ class LoopFigures:
         Whether loops were searched for (runs without GPS) besides the stated ones.
     odometry : OdometryCheck or None
         Dead reckoning's motion against the sonar's between nearby scans (runs without GPS).
+    search : LoopSearch or None
+        What the search for loops tried (runs without GPS).
     """
 
     KEYS: ClassVar[tuple[str, ...]] = (
         "loops_stated",
         "loops_found",
+        "loop_search_tried",
+        "loop_search_path_m",
         "loop_radius_m",
         "loop_reference_sigma_m",
         "loops_with_free_direction",
@@ -350,6 +355,10 @@ class LoopFigures:
         "odometry_check_scale",
         "odometry_check_heading_se_deg",
         "odometry_check_scale_se",
+        "odometry_check_starts",
+        "odometry_check_skipped_still",
+        "odometry_check_skipped_sparse",
+        "odometry_check_step_m",
     )
 
     radius_m: float
@@ -357,6 +366,7 @@ class LoopFigures:
     errors: dict[str, list[LoopError]]
     searched: bool
     odometry: OdometryCheck | None = None
+    search: LoopSearch | None = None
 
     def to_json(self) -> dict[str, JsonValue]:
         out: dict[str, JsonValue] = {
@@ -396,6 +406,9 @@ class LoopFigures:
             }
             for k, loop in enumerate(self.loops)
         ]
+        if self.search is not None:
+            out["loop_search_tried"] = self.search.tried
+            out["loop_search_path_m"] = self.search.path_m
         if self.odometry is not None:
             out["odometry_check_pairs"] = self.odometry.pairs
             out["odometry_check_accepted"] = self.odometry.accepted
@@ -403,6 +416,10 @@ class LoopFigures:
             out["odometry_check_scale"] = _finite(self.odometry.scale)
             out["odometry_check_heading_se_deg"] = _finite(self.odometry.heading_se_deg)
             out["odometry_check_scale_se"] = _finite(self.odometry.scale_se)
+            out["odometry_check_starts"] = self.odometry.starts
+            out["odometry_check_skipped_still"] = self.odometry.skipped_still
+            out["odometry_check_skipped_sparse"] = self.odometry.skipped_sparse
+            out["odometry_check_step_m"] = _finite(self.odometry.step_m)
         return out
 
 

@@ -24,18 +24,23 @@ import pandas as pd
 
 from sonarslam.datasets.config import dump_dataset_config
 from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.ping360 import is_ping360_log
+from sonarslam.datasets.rosbag import is_bag
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.settings import SettingError
 from sonarslam.slam.backends.registry import BACKENDS, backend_spec
 from sonarslam.slam.eval.loops import (
     LOOP_CAUSES,
+    LOOP_MIN_GAP_S,
+    LOOP_MIN_PATH_M,
     ODOMETRY_CAUSES,
     ODOMETRY_MIN_PAIRS,
     LoopError,
+    LoopSearch,
     OdometryCheck,
-    find_loops,
     loop_errors,
     odometry_check,
+    search_loops,
     stated_loops,
 )
 from sonarslam.slam.io.files import check_output_dir
@@ -63,6 +68,7 @@ from sonarslam.slam.run.sources import (
     dead_reckoning_trajectory,
     dvl_quality,
     start_pose_origin,
+    warn_dvl_sigma,
 )
 
 __all__ = [
@@ -180,6 +186,8 @@ def run_backend(
     trajectories: dict[str, Trajectory] = {}
     if config is not None:
         config = replace(config, settings=_typed_settings(dataset, backend, config, settings))
+    if backend != "gps":  # the rest take the DVL with [noise] dvl_sigma_mps
+        warn_dvl_sigma(dataset)
     wall0 = time.perf_counter()
     if backend in BASELINES:
         if settings:
@@ -501,6 +509,23 @@ def odometry_scale_tolerance(dataset: Dataset) -> float:
     return math.hypot(ODOMETRY_SOFT_SCALE, 3.0 * told)
 
 
+def range_setting(dataset: Dataset) -> str:
+    """The setting that gives the sonar's range scale on ``dataset``, in words: a Ping Viewer
+    log's bin size is the speed of sound times its sample period, a bag's is its messages' range
+    over their bins (no setting overrides it), other sources' is ``[sonar] bin_size_m``."""
+    if is_ping360_log(dataset.root):
+        return (
+            "[ping360] speed_of_sound_mps: a Ping360's bin size is the speed of sound times its"
+            " sample period, so a speed of sound some per cent off scales every range by as much"
+        )
+    if is_bag(dataset.root):
+        return (
+            "the bag's sonar messages give it, their range over their bins: the driver's range"
+            " and speed of sound settings, which no sonarslam setting overrides"
+        )
+    return "[sonar] bin_size_m"
+
+
 def _warn_odometry(dataset: Dataset, check: OdometryCheck, in_health: bool = False) -> None:
     """Warn when the sonar sees the vehicle move another way than dead reckoning does: without
     GPS nothing else would show a DVL or sonar mounted the wrong way round (the estimate
@@ -510,6 +535,13 @@ def _warn_odometry(dataset: Dataset, check: OdometryCheck, in_health: bool = Fal
     beyond :data:`ODOMETRY_SOFT_SE` standard errors: a mounting some degrees off, a range or DVL
     scale some per cent off). ``in_health``: the health monitor judged this check (a closed
     loop's run), and its ``odometry`` issue warns of the first level."""
+    if check.starts and check.skipped_still == check.starts:
+        warnings.warn(
+            f"{dataset.root}: the sonar cannot check dead reckoning: {check.why_none()}",
+            UserWarning,
+            stacklevel=3,
+        )
+        return
     if check.accepted < ODOMETRY_MIN_PAIRS or not math.isfinite(check.heading_deg):
         return
     seen = (
@@ -544,7 +576,8 @@ def _warn_odometry(dataset: Dataset, check: OdometryCheck, in_health: bool = Fal
     ):
         found.append(
             f"the sonar's lengths are x{scale:.3f} ± {scale_se:.3f} dead reckoning's: check the"
-            " sonar's range ([sonar] bin_size_m; isam2.range_scale_sigma estimates its scale)"
+            f" sonar's range ({range_setting(dataset)}; isam2.range_scale_sigma estimates its"
+            " scale)"
             " and the DVL's scale ([noise] dvl_scale_sigma lets the run estimate it; allowed"
             f" here: {odometry_scale_tolerance(dataset):.3f})"
         )
@@ -582,9 +615,10 @@ def loop_figures(
     loops = stated_loops(loops_rel_s, dataset.nav_span_s[0])
     dr = dead_reckoning_trajectory(dataset)
     searched = dataset.gps is None
-    odometry = None
+    odometry = search = None
     if searched:
-        loops += find_loops(dataset, dr, radius_m)
+        search = search_loops(dataset, dr, radius_m)
+        loops += search.loops
         # a closed loop's run checked it already, for its health monitor
         closed = result.figures.closed_loop if result.figures is not None else None
         odometry = closed.odometry if closed is not None else None
@@ -595,7 +629,7 @@ def loop_figures(
     if result.backend != "dr":
         estimates["dr"] = dr
     errors = {name: loop_errors(tr, loops) for name, tr in estimates.items()}
-    figures = LoopFigures(radius_m, loops, errors, searched, odometry)
+    figures = LoopFigures(radius_m, loops, errors, searched, odometry, search)
     _warn_loops(dataset, result.backend, errors, radius_m)
     return figures
 
@@ -636,7 +670,17 @@ def loop_line(metrics: dict[str, Any]) -> str:
         else ""
     )
     if not m["loops"]:
-        return head + ": no loop-closure error" + _odometry_part(m)
+        why = ""
+        if found == 0 and "loop_search_tried" in m:  # older runs do not say why
+            why = LoopSearch(
+                [],
+                m["loop_search_tried"],
+                m["loop_search_path_m"],
+                m["loop_radius_m"],
+                LOOP_MIN_GAP_S,
+                LOOP_MIN_PATH_M,
+            ).why_none()
+        return head + ": no loop-closure error" + (f": {why}" if why else "") + _odometry_part(m)
     parts = [
         f"{'dead reckoning' if key == 'loop_error_dr_mean_m' else 'run' if key == 'loop_error_mean_m' else key[11:-7]}"
         f" mean {m[key]:.2f} m, max {m[key.replace('_mean_', '_max_')]:.2f}"
@@ -672,7 +716,21 @@ def odometry_line(metrics: dict[str, Any]) -> str:
         return ""
     pairs = metrics["odometry_check_pairs"]
     if not accepted:
-        return f"dead reckoning against the sonar: no registration of {pairs} accepted"
+        why = ""
+        if "odometry_check_starts" in metrics:  # older runs do not say why
+            why = OdometryCheck(
+                pairs,
+                0,
+                math.nan,
+                math.nan,
+                starts=metrics["odometry_check_starts"],
+                skipped_still=metrics["odometry_check_skipped_still"],
+                skipped_sparse=metrics["odometry_check_skipped_sparse"],
+                step_m=metrics["odometry_check_step_m"] or math.nan,
+            ).why_none()
+        return f"dead reckoning against the sonar: no registration of {pairs} accepted" + (
+            f": {why}" if why else ""
+        )
     return (
         f"dead reckoning against the sonar ({accepted} of {pairs} registrations of scans a"
         " few metres apart): its"

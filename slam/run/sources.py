@@ -7,10 +7,13 @@ GPS + AHRS (``gps``), dead reckoning (``dr``) and the simulator's truth (``truth
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 
 import numpy as np
 
+from sonarslam.datasets.errors import DataWarning
+from sonarslam.datasets.gates import dvl_speed_quantiles
 from sonarslam.datasets.records import GpsSeries
 from sonarslam.datasets.source import Dataset
 from sonarslam.features.geometry import FloatArray
@@ -20,6 +23,8 @@ from sonarslam.slam.model.motion import body_yaw, dead_reckoning
 from sonarslam.slam.model.noise import MotionNoise, dvl_scatter
 
 __all__ = [
+    "warn_dvl_sigma",
+    "DVL_SIGMA_OVER_SCATTER_MAX",
     "motion_noise",
     "start_pose",
     "start_pose_origin",
@@ -51,11 +56,14 @@ def dvl_quality(dataset: Dataset) -> dict[str, float]:
     over ``[noise] dvl_scatter_window_s``, 60 s when that is off); the time its scatter stayed
     above the nominal one, when :func:`sonarslam.slam.model.noise.dvl_sample_sigma` added the excess as noise
     (s; 0 when off), and the first such time after the start of the logs (s, -1 if none).
+    The median and 90th percentile of its horizontal speed over the locked rows (m/s,
+    :func:`sonarslam.datasets.gates.dvl_speed_quantiles`; NaN without one).
     """
     noise = motion_noise(dataset)
     dvl = dataset.dvl
     t, v = dvl.t[dvl.valid], dvl.v_mps[dvl.valid]
-    out = {f"dvl_scatter_p{p}_mps": float("nan") for p in (10, 50, 90, 99)}
+    out = {f"dvl_speed_p{p}_mps": q for p, q in dvl_speed_quantiles(dvl, (50, 90)).items()}
+    out.update({f"dvl_scatter_p{p}_mps": float("nan") for p in (10, 50, 90, 99)})
     out.update({"dvl_excess_s": 0.0, "dvl_excess_from_s": -1.0})
     if t.size < 2:
         return out
@@ -68,6 +76,35 @@ def dvl_quality(dataset: Dataset) -> dict[str, float]:
         if over.any():
             out["dvl_excess_from_s"] = float(t[1:][over][0] - dataset.nav_span_s[0])
     return out
+
+
+#: ``[noise] dvl_sigma_mps`` more than this many times the DVL's measured scatter (the median
+#: of :func:`dvl_quality`'s) is warned of. The scatter (the Allan deviation at one sample, the
+#: vehicle's accelerations included) bounds the DVL's white noise from above, and the sigma is
+#: the part of that noise that drifts, at most about the scatter; ten times above claims an error
+#: the samples do not show and weighs the DVL 100 times less (in variance) against the sonar and
+#: the AHRS than its data say (docs/bad-input.md gives the figures).
+DVL_SIGMA_OVER_SCATTER_MAX = 10.0
+
+
+def warn_dvl_sigma(dataset: Dataset, quality: dict[str, float] | None = None) -> str:
+    """Warn when ``[noise] dvl_sigma_mps`` lies far above the DVL's measured scatter
+    (:data:`DVL_SIGMA_OVER_SCATTER_MAX`); the warning's text, or "" when it does not.
+    ``quality`` is :func:`dvl_quality`'s (computed when not given)."""
+    sigma = float(dataset.config.noise.dvl_sigma_mps)
+    scatter = (quality or dvl_quality(dataset))["dvl_scatter_p50_mps"]
+    if not (scatter > 0.0 and sigma > DVL_SIGMA_OVER_SCATTER_MAX * scatter):
+        return ""
+    message = (
+        f"{dataset.root}: [noise] dvl_sigma_mps = {sigma:g} m/s ({dataset.calibration}) is"
+        f" {sigma / scatter:.0f} times the DVL's own scatter (median {scatter:.3g} m/s over"
+        f" {dataset.config.noise.dvl_scatter_window_s or 60.0:g} s windows, `sonarslam info`),"
+        f" more than the {DVL_SIGMA_OVER_SCATTER_MAX:g} times a drift of the DVL could explain:"
+        " the estimators weigh the DVL far less than its data say (a value meant in other"
+        " units? or, if the scatter is implausibly small, DVL velocities in another unit)"
+    )
+    warnings.warn(message, DataWarning, stacklevel=2)
+    return message
 
 
 def _require_gps(dataset: Dataset) -> GpsSeries:
