@@ -102,7 +102,13 @@ from sonarslam.datasets.dataset import (
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.geodesy import geodetic_to_local_en
 from sonarslam.datasets.logfile import open_regular, read_text
-from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries
+from sonarslam.datasets.records import (
+    STEP_TOLERANCE,
+    AttitudeSeries,
+    BeamSeries,
+    DvlSeries,
+    GpsSeries,
+)
 from sonarslam.datasets.rosbag import TOPIC_PRESETS, is_bag, read_roles
 from sonarslam.datasets.toml import toml_file_line
 from sonarslam.settings import SettingError, bounded, check_fields, one_of
@@ -910,7 +916,9 @@ def open_ping360(
             settings = _settings(table, source, settings)
             sonar_keys.update(sonar)
             where = source if table else where
-            head_files.update({k: source for k in ("n_bins", "bin_size_m") if k in sonar})
+            head_files.update(
+                {k: source for k in ("n_bins", "bin_size_m", "step_deg") if k in sonar}
+            )
     nav_path = Path(nav) if nav is not None else Path(settings.nav) if settings.nav else None
     if nav_path is None:
         raise DataError(
@@ -949,8 +957,18 @@ def open_ping360(
             " sound is [ping360] speed_of_sound_mps)",
         )
     head = replace(config.sonar, n_bins=n_bins, bin_size_m=log.bin_size_m)
-    if "step_deg" not in sonar_keys and log.step_grad > 0:
-        head = replace(head, step_rad=log.step_grad * math.pi / 200.0)
+    if log.step_grad > 0:
+        own = log.step_grad * math.pi / 200.0
+        if "step_deg" not in sonar_keys:
+            head = replace(head, step_rad=own)
+        elif abs(head.step_rad / own - 1.0) > STEP_TOLERANCE:
+            raise DataError(
+                head_files["step_deg"],
+                toml_file_line(head_files["step_deg"], "sonar", ("step_deg",)),
+                f"[sonar] step_deg {math.degrees(head.step_rad):g}: the log's head steps by"
+                f" {log.step_grad} gradians ({math.degrees(own):.3g} deg; leave step_deg out,"
+                " the log's own is taken)",
+            )
     if "beam_width_deg" not in sonar_keys:
         head = replace(head, beam_width_rad=math.radians(PING360_BEAM_WIDTH_DEG))
     config = replace(config, sonar=head)

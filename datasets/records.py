@@ -29,6 +29,7 @@ __all__ = [
     "AttitudeSeries",
     "GpsSeries",
     "BeamSeries",
+    "STEP_TOLERANCE",
 ]
 
 
@@ -134,6 +135,11 @@ class GpsSeries:
         ]
 
 
+#: A configured step between beams more than this share off the beams' own is another head
+#: setting (a Micron's or a Ping360's steps differ by factors of two), not the beams' jitter.
+STEP_TOLERANCE = 0.1
+
+
 class BeamSeries(Sequence[SonarBeam]):
     """The sonar beams of a run as arrays: one row per beam, ``(N, n_bins)`` uint8 intensities.
 
@@ -229,3 +235,12 @@ class BeamSeries(Sequence[SonarBeam]):
         return BeamSeries(
             self.t_s + offset_s, self.transducer_angle_rad, self.intensities, self.thresholded
         )
+
+    def step_rad(self, min_steps: int = 20) -> float | None:
+        """The head's step between beams as the beams show it (rad): the median of the
+        magnitudes of the successive angle changes, wrapped, that are not zero (a repeated
+        angle, a sector scan's turn-about); None over fewer than ``min_steps`` of them."""
+        a = self.transducer_angle_rad
+        d = np.abs(np.angle(np.exp(1j * np.diff(a))))
+        d = d[d > 1e-9]
+        return float(np.median(d)) if d.size >= min_steps else None

@@ -73,10 +73,16 @@ from sonarslam.datasets.dataset import (
 )
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.geodesy import geodetic_to_local_en, local_en_to_geodetic
-from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries
+from sonarslam.datasets.records import (
+    STEP_TOLERANCE,
+    AttitudeSeries,
+    BeamSeries,
+    DvlSeries,
+    GpsSeries,
+)
 from sonarslam.datasets.ros1bag import Ros1Bag
 from sonarslam.datasets.toml import toml_file_line
-from sonarslam.sonar.beam import Mounting
+from sonarslam.sonar.beam import Mounting, SonarHead
 
 __all__ = [
     "bag_config",
@@ -1002,7 +1008,7 @@ def open_bag(
             f"[sonar] n_bins {config.sonar.n_bins}, bin_size_m {config.sonar.bin_size_m:g}: the"
             f" bag's beams have {n_bins} bins of {bin_m:g} m (leave them out; the bag's win)",
         )
-    config = replace(config, sonar=sonar_head)
+    config = replace(config, sonar=_beams_step(sonar_head, read.beams, files))
     series = read.beams
     if config.sonar_time_offset_s:
         series = series.shifted(config.sonar_time_offset_s)
@@ -1023,6 +1029,34 @@ def open_bag(
     if topics_file is not None and str(topics_file) not in TOPIC_PRESETS:
         d = replace(d, inputs=(Path(topics_file),))
     return d
+
+
+def _beams_step(head: SonarHead, beams: BeamSeries, files: tuple[Path | None, ...]) -> SonarHead:
+    """The head with the step between beams the beams show (:meth:`BeamSeries.step_rad`, made
+    a whole division of the turn): the sector store, the Hough resolution and the scans count
+    beams by it, so a wrong step silently halves or doubles the sector. A ``[sonar] step_deg``
+    in ``files`` (the override's, then the bag's own ``sonarslam.toml``) more than
+    :data:`STEP_TOLERANCE` off it is a :class:`DataError` naming its line; within it the file's
+    value is kept. Beams that show no step keep the head's."""
+    seen = beams.step_rad()
+    if seen is None:
+        return head
+    per_turn = max(int(round(2.0 * math.pi / seen)), 1)
+    step = 2.0 * math.pi / per_turn
+    for f in files:
+        line = toml_file_line(f, "sonar", ("step_deg",)) if f is not None else None
+        if f is None or line is None:
+            continue
+        if abs(head.step_rad / step - 1.0) > STEP_TOLERANCE:
+            raise DataError(
+                f,
+                line,
+                f"[sonar] step_deg {math.degrees(head.step_rad):g}: the bag's beams step by"
+                f" {math.degrees(seen):.3g} deg ({per_turn} a turn; leave step_deg out, the"
+                " beams' own is taken)",
+            )
+        return head
+    return replace(head, step_rad=step)
 
 
 def _file_sets_head(toml: Path) -> bool:

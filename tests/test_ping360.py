@@ -413,3 +413,22 @@ def test_a_wrong_speed_of_sound_is_named_with_its_line_and_in_the_length_warning
     assert "bin_size_m" not in str(record[0].message)
     with pytest.warns(UserWarning, match=r"x0\.933 .*\[sonar\] bin_size_m"):
         _warn_odometry(direct, short)
+
+
+def test_a_step_that_is_not_the_logs_is_refused_with_its_line(binlog: Path, tmp_path: Path) -> None:
+    """A sonarslam.toml's [sonar] step_deg twice the log's own step (its step_grad): the sector
+    store, the Hough resolution and the scans count beams by it, and it was taken over the
+    log's in silence; now refused naming its line, and left out the log's is taken."""
+    folder = tmp_path / "step"
+    shutil.copytree(binlog.parent, folder)
+    toml = folder / "sonarslam.toml"
+    text = toml.read_text()
+    own = _open(binlog).config.sonar.step_rad
+    lines = [s for s in text.splitlines() if not s.startswith("step_deg")]
+    at = lines.index("[sonar]") + 1
+    lines.insert(at, f"step_deg = {2 * math.degrees(own)!r}")
+    toml.write_text("\n".join(lines) + "\n")
+    with pytest.raises(DataError) as err:
+        _open(folder / binlog.name)
+    assert str(err.value).startswith(f"{toml}:{at + 1}: [sonar] step_deg"), str(err.value)
+    assert "the log's head steps by" in str(err.value)

@@ -308,6 +308,43 @@ def test_out_of_order_stamps_are_counted_and_sorted(short: Dataset, tmp_path: Pa
     assert np.all(np.diff(d.attitude.t) >= 0)
 
 
+def test_the_step_between_beams_is_the_beams_own(short: Dataset, tmp_path: Path) -> None:
+    """A head stepping 0.9 deg (a Micron's or a Ping360's finer step) in a bag without a
+    ``[sonar] step_deg``: the step is the beams' own (it was the default 1.8 deg, and the sector
+    store, the Hough resolution and the scans counted beams by it: half the sector, in silence);
+    a sonarslam.toml whose step_deg says otherwise is refused naming its line."""
+    from dataclasses import replace
+
+    from sonarslam.datasets.records import BeamSeries
+
+    b = short.beams
+    fine = BeamSeries(
+        b.t_s, np.mod(0.5 * np.unwrap(b.transducer_angle_rad), 2.0 * np.pi), b.intensities
+    )
+    d = replace(short, beams=fine)
+    bag = tmp_path / "fine" / "run.bag"
+    bag.parent.mkdir()
+    write_bag(d, bag, "ros1")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        opened = open_bag(bag)
+    assert math.degrees(opened.config.sonar.step_rad) == pytest.approx(0.9, abs=1e-9)
+    (bag.parent / "sonarslam.toml").write_text(
+        "[noise]\ngps_sigma_m = 1.0\n\n[sonar]\nstep_deg = 1.8\n"
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        with pytest.raises(
+            DataError,
+            match=r"sonarslam.toml:5: \[sonar\] step_deg 1.8: the bag's beams step by 0.9 deg",
+        ):
+            open_bag(bag)
+    (bag.parent / "sonarslam.toml").write_text("[sonar]\nstep_deg = 0.9\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        assert open_bag(bag).config.sonar.step_rad == pytest.approx(math.radians(0.9))
+
+
 def test_a_clock_jump_is_an_error_naming_the_topic_and_message(
     short: Dataset, tmp_path: Path
 ) -> None:
