@@ -167,6 +167,26 @@ def test_dead_reckoning_names_the_settings_it_ignores(harbour, tmp_path, capsys)
     assert all(f"# ignored by dead reckoning: {k}" in used for k in DR_IGNORES)
 
 
+def test_the_closed_loops_say_which_ahrs_sigma_they_use(harbour, tmp_path, capsys):
+    """[noise] ahrs_sigma_deg moves dead reckoning's covariance and only the closed loops'
+    start pose (their AHRS model is white noise plus a bias): info and a closed loop's
+    config_used.toml say so (a review found it 'without effect' in ekf and isam2, unsaid)."""
+    from sonarslam.slam.run.sources import CLOSED_LOOP_START_ONLY
+
+    assert main(["info", str(harbour)]) == 0
+    out = capsys.readouterr().out
+    assert "[noise] ahrs_sigma_deg for the start pose's heading only" in out
+    assert "ahrs_white_sigma_deg" in out and "ahrs_bias_sigma_deg" in out
+    assert (
+        main(["run", str(harbour), "--backend", "ekf", "--out", str(tmp_path / "e"), "--quiet"])
+        == 0
+    )
+    used = (tmp_path / "e" / "config_used.toml").read_text()
+    assert all(
+        f"): {k}" in used and "# the start pose's only" in used for k in CLOSED_LOOP_START_ONLY
+    )
+
+
 # -- the docs' rules, read from the one place they are made --------------------------------
 
 

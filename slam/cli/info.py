@@ -13,6 +13,7 @@ from sonarslam.slam.model.motion import gyro_bias_against_heading
 from sonarslam.slam.run.presets import parse_settings
 from sonarslam.slam.run.settings import Setting, check_run_settings, dataset_settings, run_settings
 from sonarslam.slam.run.sources import (
+    CLOSED_LOOP_START_ONLY,
     DR_IGNORES,
     DVL_SIGMA_OVER_SCATTER_MAX,
     dvl_quality,
@@ -114,6 +115,12 @@ def command(args: argparse.Namespace) -> int:
         )
     _print_settings("dataset settings (sonarslam.toml keys)", dataset_settings(d, args.config))
     print(f"  dead reckoning (--backend dr) ignores: {', '.join(DR_IGNORES)}")
+    print(
+        f"  the closed loops (--backend ekf, isam2) take {', '.join(CLOSED_LOOP_START_ONLY)} for"
+        f" the start pose's heading only: their AHRS model is [noise] ahrs_white_sigma_deg"
+        f" {n.ahrs_white_sigma_deg:g} deg of white noise plus a bias of [noise]"
+        f" ahrs_bias_sigma_deg {n.ahrs_bias_sigma_deg:g} deg"
+    )
     _print_settings("run settings (sonarslam run --set NAME=VALUE)", run_settings(d, settings))
     return 0
 

@@ -34,6 +34,7 @@ from sonarslam.datasets.config import dump_dataset_config
 from sonarslam.datasets.source import Dataset
 from sonarslam.features.projection import project_beams
 from sonarslam.slam.backends.isam2.g2o import graph_json_to_g2o
+from sonarslam.slam.backends.registry import BACKENDS
 from sonarslam.slam.eval.ate import ate_errors, truth_errors
 from sonarslam.slam.eval.truth import truth_trajectory, truth_walls
 from sonarslam.slam.io.files import (
@@ -60,7 +61,12 @@ from sonarslam.slam.run.closed_loop import ClosedLoopResult
 from sonarslam.slam.run.consistency_figure import CONSISTENCY_FILE, write_consistency_figure
 from sonarslam.slam.run.health import nis_streams
 from sonarslam.slam.run.presets import map_min_intensity
-from sonarslam.slam.run.sources import DR_IGNORES, dead_reckoning_trajectory, gps_ahrs_trajectory
+from sonarslam.slam.run.sources import (
+    CLOSED_LOOP_START_ONLY,
+    DR_IGNORES,
+    dead_reckoning_trajectory,
+    gps_ahrs_trajectory,
+)
 
 __all__ = ["write_run", "plot_estimates"]
 
@@ -82,6 +88,15 @@ def write_run(
     used = dump_dataset_config(dataset.config)
     if backend == "dr":
         used = "".join(f"# ignored by dead reckoning: {key}\n" for key in DR_IGNORES) + used
+    elif backend in BACKENDS:  # the closed loops
+        used = (
+            "".join(
+                f"# the start pose's only (the AHRS model: ahrs_white_sigma_deg and"
+                f" ahrs_bias_sigma_deg): {key}\n"
+                for key in CLOSED_LOOP_START_ONLY
+            )
+            + used
+        )
     files = [write_text(out / "config_used.toml", used)]
     t0, t1 = trajectory.span_s
     gps = dataset.gps

@@ -241,6 +241,11 @@ DR_IGNORES = (
     "[noise] line_sigma_theta_deg",
 )
 
+#: The dataset settings the closed loops (EKF, iSAM2) take for their start pose only: their
+#: AHRS model is ``[noise] ahrs_white_sigma_deg`` plus a bias of ``ahrs_bias_sigma_deg``.
+#: ``info`` and a closed loop's ``config_used.toml`` say so.
+CLOSED_LOOP_START_ONLY = ("[noise] ahrs_sigma_deg",)
+
 POSE_SOURCES: dict[str, Callable[[Dataset], Trajectory]] = {
     "gps": gps_ahrs_trajectory,
     "dr": dead_reckoning_trajectory,
