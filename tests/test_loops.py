@@ -17,7 +17,7 @@ from sonarslam.datasets.errors import DataWarning
 from sonarslam.datasets.source import open_dataset
 from sonarslam.features.geometry import between
 from sonarslam.slam.cli.main import main
-from sonarslam.slam.eval.loops import find_loops, loop_errors, stated_loops
+from sonarslam.slam.eval.loops import loop_errors, search_loops, stated_loops
 from sonarslam.slam.eval.truth import truth_trajectory
 from sonarslam.slam.run.sources import dead_reckoning_trajectory
 
@@ -41,7 +41,7 @@ def test_found_loops_measure_the_truth_and_dead_reckonings_error(nogps: Path) ->
         d = open_dataset(nogps)
     assert d.gps is None and d.truth is not None
     truth, dr = truth_trajectory(d), dead_reckoning_trajectory(d)
-    loops = find_loops(d, dr, radius_m=20.0)
+    loops = search_loops(d, dr, radius_m=20.0).loops
     assert len(loops) >= 2
     for loop, at_truth, at_dr in zip(
         loops, loop_errors(truth, loops), loop_errors(dr, loops), strict=True

@@ -50,7 +50,6 @@ __all__ = [
     "LoopError",
     "SAMPLE_S",
     "stated_loops",
-    "find_loops",
     "search_loops",
     "LoopSearch",
     "loop_errors",
@@ -209,19 +208,6 @@ class LoopSearch:
         )
 
 
-def find_loops(
-    dataset: Dataset,
-    estimate: PoseSource,
-    radius_m: float,
-    min_gap_s: float = LOOP_MIN_GAP_S,
-    min_path_m: float = LOOP_MIN_PATH_M,
-    config: ScanConfig | None = None,
-) -> list[Loop]:
-    """The loops found along ``estimate`` and confirmed by registering their scans (module
-    docstring); only accepted registrations are loops."""
-    return search_loops(dataset, estimate, radius_m, min_gap_s, min_path_m, config).loops
-
-
 def search_loops(
     dataset: Dataset,
     estimate: PoseSource,
@@ -230,7 +216,9 @@ def search_loops(
     min_path_m: float = LOOP_MIN_PATH_M,
     config: ScanConfig | None = None,
 ) -> LoopSearch:
-    """:func:`find_loops` with what the search tried (:class:`LoopSearch`)."""
+    """The loops found along ``estimate`` and confirmed by registering their scans (module
+    docstring; only accepted registrations are loops), with what the search tried
+    (:class:`LoopSearch`)."""
     span = dataset.sonar_span_s
     nothing = LoopSearch([], 0, 0.0, radius_m, min_gap_s, min_path_m)
     if span is None:
