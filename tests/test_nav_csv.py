@@ -204,7 +204,9 @@ def test_a_nav_csv_covering_part_of_the_log_is_said_and_counted(
     assert "outside the navigation" not in _messages(caught)
 
 
-def test_a_gain_change_in_the_log_is_said(binlog: Path, tmp_path: Path) -> None:
+def test_a_gain_change_in_the_log_is_said(
+    binlog: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     log = read_ping360_log(binlog, Ping360Settings())
     b = log.beams
     stamps = np.round((b.t_s - log.start_ms / 1000.0) * 1000).astype(np.int64)
@@ -224,3 +226,8 @@ def test_a_gain_change_in_the_log_is_said(binlog: Path, tmp_path: Path) -> None:
     assert changed.counts["ping360_gain_changes"] == 1
     np.testing.assert_array_equal(changed.beams.intensities, b.intensities)
     assert log.counts["ping360_gain_changes"] == 0
+    capsys.readouterr()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        assert main(["info", str(path), "--nav", str(binlog.parent / "nav.bag")]) == 0
+    assert "gain_setting changed 1 time(s)" in capsys.readouterr().out
