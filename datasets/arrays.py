@@ -26,11 +26,18 @@ import numpy.typing as npt
 from sonarslam.datasets.config import DatasetConfig
 from sonarslam.datasets.dataset import Dataset, check_overlap
 from sonarslam.datasets.errors import DataError
-from sonarslam.datasets.gates import SensorReport, gate_attitude, gate_beams, gate_dvl, gate_gps
+from sonarslam.datasets.gates import (
+    SensorReport,
+    gate_attitude,
+    gate_beams,
+    gate_dvl,
+    gate_gps,
+    navigation_span_s,
+)
 from sonarslam.datasets.geodesy import geodetic_to_local_en
 from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries
 
-__all__ = ["dataset_from_arrays", "gated_dataset"]
+__all__ = ["dataset_from_arrays", "degrees_row", "gated_dataset"]
 
 
 def _array(root: Path, name: str, value: npt.ArrayLike, shape: tuple[int | None, ...]) -> Any:
@@ -63,12 +70,12 @@ def _times(root: Path, name: str, value: npt.ArrayLike) -> Any:
     return t
 
 
-def _check_radians(root: Path, name: str, values: Any, unwrapped: bool = False) -> None:
-    """A :class:`DataError` naming ``name`` and the first row of angles given in degrees for
-    radians: beyond 2 pi in magnitude; for a series that may be unwrapped (``unwrapped``: any
-    branch, turns counted on), its first row beyond 2 pi (``np.unwrap`` starts where its input
-    does) or a step of more than 3 pi from one row to the next (no wrap of radians is that
-    large; a wrap of degrees is 360)."""
+def degrees_row(values: Any, unwrapped: bool = False) -> tuple[int, str] | None:
+    """The first row of angles given in degrees for radians and why, None when none shows:
+    beyond 2 pi in magnitude; for a series that may be unwrapped (``unwrapped``: any branch,
+    turns counted on), its first row beyond 2 pi (``np.unwrap`` starts where its input does)
+    or a step of more than 3 pi from one row to the next (no wrap of radians is that large; a
+    wrap of degrees is 360). Every reader of yaw in radians checks it here."""
     a = np.asarray(values, dtype=np.float64)
     lim = 2.0 * np.pi
     if not unwrapped:
@@ -82,9 +89,16 @@ def _check_radians(root: Path, name: str, values: Any, unwrapped: bool = False) 
     else:
         bad = np.flatnonzero(np.abs(np.diff(a)) > 1.5 * lim) + 1
         why = "is more than 3 pi rad from the row before"
-    if bad.size:
-        i = int(bad[0])
-        raise DataError(root, None, f"{name}: row {i} ({a[i]:g}) {why}: degrees? (np.radians)")
+    return (int(bad[0]), why) if bad.size else None
+
+
+def _check_radians(root: Path, name: str, values: Any, unwrapped: bool = False) -> None:
+    """A :class:`DataError` naming ``name`` and the first row of :func:`degrees_row`."""
+    found = degrees_row(values, unwrapped)
+    if found is not None:
+        i, why = found
+        a = float(np.asarray(values, dtype=np.float64)[i])
+        raise DataError(root, None, f"{name}: row {i} ({a:g}) {why}: degrees? (np.radians)")
 
 
 def dataset_from_arrays(
@@ -229,7 +243,7 @@ def gated_dataset(
     attitude = gate_attitude(attitude, gates, report)
     check_overlap(root, dvl, attitude)
     gated_gps = gate_gps(gps, gates, report) if gps is not None else None
-    gate_beams(beams.t_s, gates, report, sonar_path or root)
+    gate_beams(beams.t_s, gates, report, sonar_path or root, navigation_span_s(dvl, attitude))
     return Dataset(
         name=name,
         root=root,

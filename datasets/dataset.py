@@ -17,7 +17,7 @@ import numpy as np
 
 from sonarslam.datasets.config import DatasetConfig
 from sonarslam.datasets.errors import DataError, DataWarning
-from sonarslam.datasets.gates import SensorReport
+from sonarslam.datasets.gates import SensorReport, navigation_span_s
 from sonarslam.datasets.logfile import read_text
 from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries, Record
 
@@ -136,11 +136,9 @@ class Dataset:
 
     @property
     def nav_span_s(self) -> tuple[float, float]:
-        """Time span covered by both DVL and AHRS (Unix s): where the vehicle can be navigated."""
-        return (
-            max(float(self.dvl.t[0]), float(self.attitude.t[0])),
-            min(float(self.dvl.t[-1]), float(self.attitude.t[-1])),
-        )
+        """Time span covered by both DVL and AHRS (Unix s): where the vehicle can be navigated
+        (:func:`sonarslam.datasets.gates.navigation_span_s`)."""
+        return navigation_span_s(self.dvl, self.attitude)
 
     @property
     def sonar_span_s(self) -> tuple[float, float] | None:

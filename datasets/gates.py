@@ -11,6 +11,8 @@ counted in :class:`SensorReport` (``metrics.json``: ``fault_*``, ``gap_*``) with
 fault                                  what happens
 =====================================  =======================================================
 repeated stamp (DVL, AHRS, GPS)        the later rows of a stamp are dropped
+DVL velocity exactly (0, 0)            the row is flagged as without bottom lock (a DVL
+                                       reads its own noise: exact zeros are a dropout's fill)
 DVL speed > ``dvl_max_speed_mps``      the row is flagged as without bottom lock
 DVL velocity ``dvl_spike_sigmas``      the row is flagged as without bottom lock
 scatters off both neighbours
@@ -38,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from sonarslam.datasets.config import GateConfig
-from sonarslam.datasets.errors import DataWarning
+from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.geodesy import local_en_to_geodetic
 from sonarslam.datasets.records import AttitudeSeries, DvlSeries, GpsSeries
 from sonarslam.features.geometry import FloatArray
@@ -51,9 +53,12 @@ __all__ = [
     "gate_attitude",
     "gate_gps",
     "gate_beams",
+    "navigation_span_s",
+    "MAX_BEAMS_OUTSIDE_NAV",
     "dvl_spikes",
     "dvl_speed_quantiles",
     "DVL_MIN_SPEED_MPS",
+    "check_heading_sense",
 ]
 
 #: Neighbours of a GPS fix: those within this time (s).
@@ -178,12 +183,15 @@ class SensorReport:
 
     counts: dict[str, int] = field(default_factory=dict)
     gaps: dict[str, Gaps] = field(default_factory=dict)
+    beams_outside_nav: int = 0
 
     def metrics(self, span_s: tuple[float, float] | None = None) -> dict[str, Any]:
         """Flat entries for ``metrics.json``: ``fault_<kind>`` counts, and per sensor
         ``gap_<sensor>_count``, ``_total_s``, ``_longest_s`` with ``gap_spans_s`` (the first
-        :data:`LISTED_GAPS` spans per sensor, Unix s); only the gaps overlapping ``span_s``."""
+        :data:`LISTED_GAPS` spans per sensor, Unix s); only the gaps overlapping ``span_s``;
+        ``beams_outside_nav``, the sonar beams outside the navigation span (:func:`gate_beams`)."""
         out: dict[str, Any] = {f"fault_{k}": v for k, v in self.counts.items()}
+        out["beams_outside_nav"] = self.beams_outside_nav
         spans: dict[str, list[list[float]]] = {}
         for sensor, gaps in self.gaps.items():
             g = gaps
@@ -381,12 +389,40 @@ def _check_dvl_speed(dvl: DvlSeries) -> None:
     )
 
 
+def _dvl_lock_flag(path: Path | None) -> str:
+    """Where the DVL's bottom lock comes from, in words (to mark a dropout there)."""
+    if path is None:
+        return "give dvl_valid (False where the DVL had no bottom lock)"
+    if path.suffix.lower() == ".csv":
+        return (
+            "give the CSV a dvl_valid column (0 without bottom lock; without the column every"
+            " row counts as locked)"
+        )
+    if path.name.endswith("_DVL.log"):
+        return "the log's bottom-lock status marks a dropout"
+    return "the DVL message's lock flag (or a covariance) marks a dropout"
+
+
+def _exact_zeros(v_mps: FloatArray, valid: np.ndarray) -> np.ndarray:
+    """(N,) bool: locked rows whose velocity is exactly (0, 0), a block at a time."""
+    out = np.zeros(valid.size, dtype=bool)
+    for a in range(0, valid.size, BLOCK):
+        vb = v_mps[a : a + BLOCK]
+        out[a : a + BLOCK] = valid[a : a + BLOCK] & (vb[:, 0] == 0.0) & (vb[:, 1] == 0.0)
+    return out
+
+
 def gate_dvl(
     dvl: DvlSeries, gates: GateConfig, report: SensorReport, noise_sigma_mps: float = 0.0
 ) -> DvlSeries:
-    """Drop repeated stamps; flag rows faster than ``dvl_max_speed_mps``, and isolated
-    velocity spikes (:func:`dvl_spikes`, whose scatter is at least ``noise_sigma_mps``, the
-    ``[noise] dvl_sigma_mps``), as without lock.
+    """Drop repeated stamps; flag rows of exactly zero velocity, rows faster than
+    ``dvl_max_speed_mps``, and isolated velocity spikes (:func:`dvl_spikes`, whose scatter is
+    at least ``noise_sigma_mps``, the ``[noise] dvl_sigma_mps``), as without lock.
+
+    A DVL with bottom lock reads its own noise, never exactly (0, 0), even at rest: exact
+    zeros are what a logger or a driver writes for a dropout when it has no lock flag to give
+    (a CSV without its ``dvl_valid`` column). Taken as locked they would stop the vehicle;
+    taken as without lock they widen its uncertainty (the conservative side).
 
     In place: the series' arrays are compacted and its ``valid`` cleared where flagged, and the
     series returned holds views of them (give it arrays it may change)."""
@@ -396,6 +432,21 @@ def gate_dvl(
     if n_repeat:
         t, v, valid, heading = _compact(~repeat, t, v, valid, heading)
     del repeat
+    zero = _exact_zeros(v, valid)
+    n_zero = int(zero.sum())
+    report.counts["dvl_zero_velocity"] = n_zero
+    if n_zero:
+        first = float(t[np.flatnonzero(zero)[0]])
+        _warn(
+            dvl.path,
+            "DVL",
+            f"{n_zero} of the {int(valid.sum())} locked row(s) read exactly (0, 0) m/s, taken"
+            f" as without bottom lock (first at t={first:.3f} s): a DVL with bottom lock reads"
+            f" its own noise, never exact zeros, so these are a dropout's fill;"
+            f" {_dvl_lock_flag(dvl.path)}",
+        )
+        valid &= ~zero
+    del zero
     fast = np.zeros(t.size, dtype=bool)
     for a in range(0, t.size, BLOCK):
         vb = v[a : a + BLOCK]
@@ -451,6 +502,49 @@ def gate_dvl(
         "its velocity is held with a growing uncertainty, then taken as unknown",
     )
     return out
+
+
+#: The gyro's yaw rate and the heading's change must agree in sign: a correlation below this
+#: over the run is a heading in another convention than the gyro's (NED beside ENU).
+MIN_GYRO_HEADING_CORRELATION = -0.5
+#: The windows (s) over which the heading's and the gyro's changes are compared.
+HEADING_SENSE_WINDOW_S = 5.0
+#: Turning (rad) the gyro must show before the check says anything.
+MIN_TURN_FOR_SENSE_RAD = math.radians(90.0)
+
+
+def check_heading_sense(
+    path: Path, what: str, t_s: FloatArray, yaw_rad: FloatArray, rate_rad_per_s: FloatArray
+) -> None:
+    """A :class:`DataError` naming ``path`` (``what``: which heading turns against which
+    gyro, in the source's words) when the AHRS heading turns against the gyro's ``z`` rate
+    over the run: the correlation of their changes over :data:`HEADING_SENSE_WINDOW_S`
+    windows (the heading's own noise averaged out) below :data:`MIN_GYRO_HEADING_CORRELATION`
+    is a heading in NED (clockwise) beside an ENU gyro, or the other way. Silent when the
+    gyro reads nothing or the run hardly turns (:data:`MIN_TURN_FOR_SENSE_RAD`). Every reader
+    of a heading with its gyro checks it here (bags, navigation CSVs)."""
+    if t_s.size < 3 or not t_s[-1] - t_s[0] > 2.0 * HEADING_SENSE_WINDOW_S:
+        return
+    gyro = np.concatenate(
+        [[0.0], np.cumsum(0.5 * (rate_rad_per_s[1:] + rate_rad_per_s[:-1]) * np.diff(t_s))]
+    )
+    edges = np.arange(t_s[0], t_s[-1], HEADING_SENSE_WINDOW_S)
+    d_heading = np.diff(np.interp(edges, t_s, np.unwrap(yaw_rad)))
+    d_gyro = np.diff(np.interp(edges, t_s, gyro))
+    ok = np.isfinite(d_heading) & np.isfinite(d_gyro)
+    d_heading, d_gyro = d_heading[ok], d_gyro[ok]
+    power = float(np.sqrt(np.sum(d_heading**2) * np.sum(d_gyro**2)))
+    if not power > 0.0 or float(np.sum(np.abs(d_gyro))) < MIN_TURN_FOR_SENSE_RAD:
+        return
+    correlation = float(np.sum(d_heading * d_gyro)) / power
+    if correlation < MIN_GYRO_HEADING_CORRELATION:
+        raise DataError(
+            path,
+            None,
+            f"{what} (correlation {correlation:+.2f} over the run): the heading is not ENU"
+            " (REP-103: counter-clockwise from East; NED's heading psi turns clockwise, its"
+            " ENU yaw is pi/2 - psi) or the gyro is not; convert them to one convention",
+        )
 
 
 #: Samples of the AHRS heading-jump pass held as Python floats at a time.
@@ -576,9 +670,49 @@ def _outliers(t_s: FloatArray, en_m: FloatArray, gates: GateConfig) -> np.ndarra
     return out
 
 
+def navigation_span_s(dvl: DvlSeries, attitude: AttitudeSeries) -> tuple[float, float]:
+    """The time span covered by both the DVL and the AHRS (Unix s): where the vehicle can be
+    navigated, and the only sonar beams a run uses."""
+    return (
+        max(float(dvl.t[0]), float(attitude.t[0])),
+        min(float(dvl.t[-1]), float(attitude.t[-1])),
+    )
+
+
+#: More than this share of the sonar's beams outside the navigation span is warned of: a
+#: navigation that covers part of the sonar's log (the rest is dropped). Loggers started a
+#: little apart leave a few percent out: the marina's sonar starts ~183 s before its DVL, 5.4 %
+#: of its beams (docs/bad-input.md).
+MAX_BEAMS_OUTSIDE_NAV = 0.10
+
+
 def gate_beams(
-    t_s: FloatArray, gates: GateConfig, report: SensorReport, path: Path | None = None
+    t_s: FloatArray,
+    gates: GateConfig,
+    report: SensorReport,
+    path: Path | None = None,
+    nav_span_s: tuple[float, float] | None = None,
 ) -> None:
-    """The sonar's gaps (its beams are not gated: a beam is evidence, not a state)."""
+    """The sonar's gaps (its beams are not gated: a beam is evidence, not a state), and its
+    beams outside the navigation span (:func:`navigation_span_s`, when given): counted in
+    ``report.beams_outside_nav``, and a warning naming the counts and the spans when more than
+    :data:`MAX_BEAMS_OUTSIDE_NAV` of them."""
     gaps = find_gaps(t_s, gates) if t_s.size else Gaps(0.0, np.zeros((0, 2)))
     report.gaps["sonar"] = _warn_gaps(path, "sonar", gaps, "no line can correct the navigation")
+    if nav_span_s is None or not t_s.size:
+        return
+    t0, t1 = nav_span_s
+    before = int(np.searchsorted(t_s, t0, side="left"))
+    after = int(t_s.size - np.searchsorted(t_s, t1, side="right"))
+    outside = before + after
+    report.beams_outside_nav = outside
+    if outside > MAX_BEAMS_OUTSIDE_NAV * t_s.size:
+        _warn(
+            path,
+            "sonar",
+            f"{outside} of the {t_s.size} sonar beams ({100.0 * outside / t_s.size:.1f} %) lie"
+            f" outside the navigation span and are not used ({before} before it, {after} after):"
+            f" the beams cover t={float(t_s[0]):.3f}-{float(t_s[-1]):.3f} s, the navigation (DVL"
+            f" and AHRS both logging) t={t0:.3f}-{t1:.3f} s; is the navigation file a part of"
+            " the run?",
+        )

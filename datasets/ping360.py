@@ -69,7 +69,9 @@ a change of sample period or sample count (one run, one range), a log without a 
 bad checksum, a broken frame or an id the protocol does not define, a beam whose data does not
 match its sample count or whose angle is not 0-399: dropped and counted (``ping360_*``), with a
 :class:`DataWarning` naming the first; a log cut inside its last record: the record dropped,
-a warning.
+a warning. A change of the head's ``gain_setting`` during the log (the intensities change with
+it; the line extraction's thresholds hold for one gain): counted (``ping360_gain_changes``) and
+a warning naming the first (time, record, from and to).
 """
 
 from __future__ import annotations
@@ -91,7 +93,7 @@ from typing import IO, Any
 import numpy as np
 import tomli_w
 
-from sonarslam.datasets.arrays import gated_dataset
+from sonarslam.datasets.arrays import degrees_row, gated_dataset
 from sonarslam.datasets.config import DatasetConfig, load_dataset_config
 from sonarslam.datasets.dataset import (
     NEUTRAL_CALIBRATION,
@@ -100,6 +102,7 @@ from sonarslam.datasets.dataset import (
     read_truth,
 )
 from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.gates import check_heading_sense, navigation_span_s
 from sonarslam.datasets.geodesy import geodetic_to_local_en
 from sonarslam.datasets.logfile import open_regular, read_text
 from sonarslam.datasets.records import (
@@ -158,6 +161,13 @@ MAX_MESSAGE_BYTES = 8 + 0xFFFF + 2
 #: Beams this far (s) before or after the navigation's span: the file name read in the wrong
 #: time zone (an error saying so).
 ZONE_MISS_S = 900.0
+#: Civil time zones lie within this many hours of UTC (UTC-12 to UTC+14).
+MAX_ZONE_H = 14.0
+#: Zones are whole quarter hours from UTC; a miss farther than this (h) from one is not a zone:
+#: 5 min, a few minutes of loggers started apart, while a third of arbitrary offsets are
+#: farther from the nearest quarter hour.
+ZONE_STEP_H = 0.25
+ZONE_SLACK_H = 5.0 / 60.0
 _DAY_MS = 86_400_000
 _NULL = 0xFFFFFFFF
 _U32 = struct.Struct(">I")
@@ -396,6 +406,7 @@ class _Beam:
     angle_grad: int
     sample_period: int
     data: bytes
+    gain_setting: int
 
 
 def _payloads() -> dict[int, Any]:
@@ -431,7 +442,7 @@ def _decode(record: _Record, payloads: dict[int, Any]) -> tuple[str, _Beam | Non
         return "other_messages", None  # a reply without a transmission
     if not 0 <= m.angle < GRADIANS_PER_TURN or m.sample_period < 1:
         return "bad_messages", None
-    return "beam", _Beam(int(m.angle), int(m.sample_period), data)
+    return "beam", _Beam(int(m.angle), int(m.sample_period), data, int(m.gain_setting))
 
 
 @dataclass(frozen=True)
@@ -457,7 +468,7 @@ class Ping360Log:
     records : int
         Records read.
     counts : dict
-        ``ping360_*`` counts: other messages, faults dropped (module docstring).
+        ``ping360_*`` counts: other messages, faults dropped, gain changes (module docstring).
     encoding : str
         The log's strings: ``"utf-16-be"`` or ``"utf-8"``.
     """
@@ -506,6 +517,7 @@ def read_ping360_log(
             "out_of_order",
             "midnight_wraps",
             "truncated_records",
+            "gain_changes",
         )
     }
     first_fault: dict[str, _Record] = {}
@@ -522,6 +534,8 @@ def read_ping360_log(
         records = 0
         wraps, last_ms = 0, -1
         first_stamp: int | None = None
+        gain = -1
+        first_gain: tuple[int, int, int, int] | None = None  # beam, record, from, to
         for record in _records(s, encoding, counts):
             records += 1
             assert record.stamp_ms is not None
@@ -564,6 +578,11 @@ def read_ping360_log(
                 else:
                     counts["ping360_out_of_order"] += 1
             last_ms = max(last_ms, t_ms)
+            if gain >= 0 and beam.gain_setting != gain:
+                counts["ping360_gain_changes"] += 1
+                if first_gain is None:
+                    first_gain = (n, record.index, gain, beam.gain_setting)
+            gain = beam.gain_setting
             data[n] = np.frombuffer(beam.data, dtype=np.uint8)
             grads.append(beam.angle_grad)
             stamps.append(t_ms)
@@ -599,6 +618,18 @@ def read_ping360_log(
             DataWarning,
             stacklevel=2,
         )
+    if first_gain is not None:
+        i, index, before, after = first_gain
+        warnings.warn(
+            f"{p}: the head's gain_setting changed {counts['ping360_gain_changes']} time(s)"
+            f" during the log, the first at t={unix_ms[i] / 1000.0:.3f} s (record {index}):"
+            f" {_gain_name(before)} -> {_gain_name(after)}; the echoes' intensities change"
+            " with it while the line extraction's thresholds ([features]) hold for one gain, so"
+            " lines may vanish or multiply across the change: keep one gain for a run, or cut"
+            " the log there",
+            DataWarning,
+            stacklevel=2,
+        )
     return Ping360Log(
         beams=beams,
         sample_period_ticks=period,
@@ -610,6 +641,14 @@ def read_ping360_log(
         counts=counts,
         encoding=encoding,
     )
+
+
+#: The Ping360's ``gain_setting`` values (ping-protocol ``device_data``).
+PING360_GAINS = {0: "low", 1: "normal", 2: "high"}
+
+
+def _gain_name(gain: int) -> str:
+    return f"{gain} ({PING360_GAINS.get(gain, 'not a Ping360 gain')})"
 
 
 def _step_grad(grads: np.ndarray) -> int:
@@ -677,7 +716,10 @@ def read_nav_csv(
     DataError
         Naming the file and the line: a missing or unknown column, a row of another number of
         cells, a cell that is not a finite number, half a sensor's cells, a sensor's time earlier
-        than its row before, a latitude or longitude out of range, no DVL or AHRS row.
+        than its row before, a latitude or longitude out of range, no DVL or AHRS row, a yaw
+        in degrees (:func:`sonarslam.datasets.arrays.degrees_row`: its first row beyond 2 pi,
+        or a wrap of 360), a heading that turns against its gyro's rate (NED beside ENU:
+        :func:`sonarslam.datasets.gates.check_heading_sense`).
     """
     p = Path(path)
     out: dict[str, array.array[float]] = {g: array.array("d") for g in _NAV_GROUPS}
@@ -697,7 +739,15 @@ def read_nav_csv(
         if not out[group]:
             raise DataError(p, None, f"no {group.upper()} row")
     dvl = np.frombuffer(out["dvl"]).reshape(-1, 4)
-    ahrs = np.frombuffer(out["ahrs"]).reshape(-1, 3)
+    ahrs = np.frombuffer(out["ahrs"]).reshape(-1, 4)
+    degrees = degrees_row(ahrs[:, 1], unwrapped=True)
+    if degrees is not None:
+        i, why = degrees
+        raise DataError(
+            p,
+            int(ahrs[i, 3]),
+            f"ahrs_yaw_enu_rad = {ahrs[i, 1]:g} {why}: degrees? (the column is radians)",
+        )
     rate: np.ndarray = ahrs[:, 2]
     if np.isnan(rate).any():
         if not np.isnan(rate).all():
@@ -707,6 +757,14 @@ def read_nav_csv(
             np.gradient(np.unwrap(ahrs[:, 1]), t_a)
             if t_a.size > 1 and np.all(np.diff(t_a) > 0)
             else np.zeros(t_a.size)
+        )
+    else:
+        check_heading_sense(
+            p,
+            "ahrs_yaw_enu_rad turns against ahrs_yaw_rate_rad_per_s",
+            ahrs[:, 0],
+            ahrs[:, 1],
+            rate,
         )
     gps = None
     if out["gps"]:
@@ -725,7 +783,7 @@ def read_nav_csv(
 
 def _nav_rows(p: Path, rows: Any, out: dict[str, array.array[float]]) -> None:
     """The rows of a navigation CSV (``csv.reader``) into ``out``: per sensor, its rows
-    flattened (DVL: t, vx, vy, valid; AHRS: t, yaw, rate or NaN; GPS: t, lat, lon)."""
+    flattened (DVL: t, vx, vy, valid; AHRS: t, yaw, rate or NaN, line; GPS: t, lat, lon)."""
     try:
         header = [h.strip() for h in next(rows)]
     except StopIteration:
@@ -793,7 +851,7 @@ def _nav_rows(p: Path, rows: Any, out: dict[str, array.array[float]]) -> None:
                 row.append(1.0 if valid is None else valid)
             elif group == "ahrs":
                 rate_cell = values.get("ahrs_yaw_rate_rad_per_s")
-                row.append(math.nan if rate_cell is None else rate_cell)
+                row.extend((math.nan if rate_cell is None else rate_cell, float(number)))
             elif abs(row[1]) > 90.0 or abs(row[2]) > 180.0:
                 raise DataError(p, number, "gps_lat_deg or gps_lon_deg out of range")
             out[group].extend(row)
@@ -1005,20 +1063,45 @@ def _topics_path(topics_file: str | Path | None) -> tuple[Path, ...]:
 def _check_clocks(
     p: Path, beams: BeamSeries, dvl: DvlSeries, att: AttitudeSeries, settings: Ping360Settings
 ) -> None:
-    """Beams that miss the navigation's span by :data:`ZONE_MISS_S` or more: the file name's
-    clock (local time) is the likely cause, said in one line."""
-    t0, t1 = max(dvl.t[0], att.t[0]), min(dvl.t[-1], att.t[-1])
+    """Beams that miss the navigation's span by :data:`ZONE_MISS_S` or more, said in one line
+    with the likely cause: the file name's clock (local time) when the miss is a time zone
+    (within :data:`MAX_ZONE_H`, near a quarter hour), else the navigation's times not being
+    Unix seconds (milliseconds, or relative to its start)."""
+    t0, t1 = navigation_span_s(dvl, att)
     b0, b1 = float(beams.t_s[0]), float(beams.t_s[-1])
-    if t0 - b1 >= ZONE_MISS_S or b0 - t1 >= ZONE_MISS_S:
-        off_h = (t0 - b0) / 3600.0
+    if not (t0 - b1 >= ZONE_MISS_S or b0 - t1 >= ZONE_MISS_S):
+        return
+    off_h = (t0 - b0) / 3600.0
+    miss = (
+        f"the beams ({b0:.3f}-{b1:.3f} s) miss the navigation ({t0:.3f}-{t1:.3f} s) by"
+        f" {off_h:+.2f} h"
+    )
+    quarter = abs(off_h - ZONE_STEP_H * round(off_h / ZONE_STEP_H))
+    if abs(off_h) <= MAX_ZONE_H and quarter <= ZONE_SLACK_H:
         raise DataError(
             p,
             None,
-            f"the beams ({b0:.3f}-{b1:.3f} s) miss the navigation ({t0:.3f}-{t1:.3f} s) by"
-            f" {off_h:+.2f} h: the log's start comes from its file name, read as UTC"
+            f"{miss}: the log's start comes from its file name, read as UTC"
             f"{settings.utc_offset_h:+g} h (Ping Viewer names it in the computer's local time):"
             " set [ping360] utc_offset_h, or start, in sonarslam.toml",
         )
+    nav = dvl.path or att.path
+    column = "t_s column" if nav is not None and nav.suffix.lower() == ".csv" else "stamps"
+    if t0 > 100.0 * b1:
+        likely = f"milliseconds? (x{t0 / b0:.4g} the beams' times)"
+    elif t1 < ZONE_MISS_S * 1000.0:
+        likely = "relative to the start? (it starts near 0)"
+    else:
+        likely = (
+            "another epoch or clock? (or the log's start is wrong: its file name, [ping360] start)"
+        )
+    raise DataError(
+        nav or p,
+        None,
+        f"{miss}, not a time zone (beyond {MAX_ZONE_H:g} h, or more than"
+        f" {ZONE_SLACK_H * 60:g} min off a quarter hour): the navigation's {column} is not Unix"
+        f" seconds on the sonar's clock: {likely}",
+    )
 
 
 def ping360_table(log: str | Path, target: str | Path, nav: str | Path | None = None) -> str:
@@ -1065,6 +1148,7 @@ def write_ping360_log(
     sample_period_ticks: int,
     encoding: str = "utf-16-be",
     transmit_frequency_khz: int = 750,
+    gain_settings: np.ndarray | int = 1,
 ) -> Path:
     """Write beams as a Ping Viewer log of ``device_data`` messages (packed by
     ``brping.PingMessage``).
@@ -1082,6 +1166,9 @@ def write_ping360_log(
         25 ns ticks between samples.
     encoding : str
         The strings' encoding: ``"utf-16-be"`` (``QDataStream``'s) or ``"utf-8"``.
+    transmit_frequency_khz : int
+    gain_settings : int or array of int, shape (N,)
+        Each beam's ``gain_setting`` (0 low, 1 normal, 2 high).
 
     Returns
     -------
@@ -1104,19 +1191,22 @@ def write_ping360_log(
         raise ValueError("stamps must be 0 to 24 h (ms)")
     if not 1 <= sample_period_ticks <= 0xFFFF:
         raise ValueError(f"sample period {sample_period_ticks} ticks is not a uint16")
+    gains = np.broadcast_to(np.asarray(gain_settings, dtype=np.int64), stamps.shape)
+    if np.any((gains < 0) | (gains > 255)):
+        raise ValueError("gain settings must be uint8")
     p = Path(path)
     with p.open("wb") as fh:
         fh.write(_qstring(LOG_HEADER, encoding) + _I32.pack(LOG_VERSIONS[-1]))
         for text in ("sonarslam", "", "", "", ""):
             fh.write(_qstring(text, encoding))
         fh.write(_I32.pack(1) + _I32.pack(2))  # SensorFamily::PING, PingDeviceType::PING360
-        for t_ms, grad, row in zip(stamps, grads, bins, strict=True):
+        for t_ms, grad, row, gain in zip(stamps, grads, bins, gains, strict=True):
             h, rest = divmod(int(t_ms), 3_600_000)
             m, rest = divmod(rest, 60_000)
             s, ms = divmod(rest, 1000)
             msg = PingMessage(definitions.PING360_DEVICE_DATA)
             msg.mode = 1
-            msg.gain_setting = 1
+            msg.gain_setting = int(gain)
             msg.angle = int(grad)
             msg.transmit_duration = 10
             msg.sample_period = int(sample_period_ticks)

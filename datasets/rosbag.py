@@ -72,6 +72,7 @@ from sonarslam.datasets.dataset import (
     warn_assumed_mountings,
 )
 from sonarslam.datasets.errors import DataError, DataWarning
+from sonarslam.datasets.gates import check_heading_sense
 from sonarslam.datasets.geodesy import geodetic_to_local_en, local_en_to_geodetic
 from sonarslam.datasets.records import (
     STEP_TOLERANCE,
@@ -1110,53 +1111,17 @@ def _dvl_sigma_note(bag: Path, topic: str, sigma: tuple[float, int], config: Dat
     return note
 
 
-#: The gyro's yaw rate and the orientation's heading change must agree in sign: a correlation
-#: below this over the run is an orientation in another convention than the gyro's (NED).
-MIN_GYRO_HEADING_CORRELATION = -0.5
-#: The windows (s) over which the heading's and the gyro's changes are compared.
-HEADING_SENSE_WINDOW_S = 5.0
-#: Turning (rad) the gyro must show before the check says anything.
-MIN_TURN_FOR_SENSE_RAD = math.radians(90.0)
-
-
 def _imu(bag: Path, col: _Column) -> AttitudeSeries:
     t, fields, _ = col.arrays(bag)
     yaw, rate = fields["yaw"], fields["rate"]
-    _check_heading_sense(bag, col.topic, t, yaw, rate)
-    return AttitudeSeries(t, yaw, rate, bag)
-
-
-def _check_heading_sense(
-    bag: Path, topic: str, t_s: np.ndarray, yaw_rad: np.ndarray, rate_rad_per_s: np.ndarray
-) -> None:
-    """A DataError when the orientation's heading turns against the gyro's ``z`` rate over the
-    run: the correlation of their changes over :data:`HEADING_SENSE_WINDOW_S` windows (the
-    heading's own noise averaged out) below :data:`MIN_GYRO_HEADING_CORRELATION` is an
-    orientation in NED (heading clockwise) beside an ENU gyro, or the other way. Silent when
-    the gyro reads nothing or the run hardly turns."""
-    if t_s.size < 3 or not t_s[-1] - t_s[0] > 2.0 * HEADING_SENSE_WINDOW_S:
-        return
-    gyro = np.concatenate(
-        [[0.0], np.cumsum(0.5 * (rate_rad_per_s[1:] + rate_rad_per_s[:-1]) * np.diff(t_s))]
+    check_heading_sense(
+        bag,
+        f"topic {col.topic} (imu): the orientation's heading turns against angular_velocity.z",
+        t,
+        yaw,
+        rate,
     )
-    edges = np.arange(t_s[0], t_s[-1], HEADING_SENSE_WINDOW_S)
-    d_heading = np.diff(np.interp(edges, t_s, np.unwrap(yaw_rad)))
-    d_gyro = np.diff(np.interp(edges, t_s, gyro))
-    ok = np.isfinite(d_heading) & np.isfinite(d_gyro)
-    d_heading, d_gyro = d_heading[ok], d_gyro[ok]
-    power = float(np.sqrt(np.sum(d_heading**2) * np.sum(d_gyro**2)))
-    if not power > 0.0 or float(np.sum(np.abs(d_gyro))) < MIN_TURN_FOR_SENSE_RAD:
-        return
-    correlation = float(np.sum(d_heading * d_gyro)) / power
-    if correlation < MIN_GYRO_HEADING_CORRELATION:
-        raise DataError(
-            bag,
-            None,
-            f"topic {topic} (imu): the orientation's heading turns against angular_velocity.z"
-            f" (correlation {correlation:+.2f} over the run): the orientation is not ENU"
-            " (REP-103: heading counter-clockwise from East; NED's turns clockwise) or the gyro"
-            " is not; convert them to one convention",
-        )
+    return AttitudeSeries(t, yaw, rate, bag)
 
 
 def _gps(bag: Path, col: _Column) -> GpsSeries:

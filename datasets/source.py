@@ -38,7 +38,14 @@ from sonarslam.datasets.dataset import (
     warn_assumed_mountings,
 )
 from sonarslam.datasets.errors import DataError, DataWarning
-from sonarslam.datasets.gates import SensorReport, gate_attitude, gate_beams, gate_dvl, gate_gps
+from sonarslam.datasets.gates import (
+    SensorReport,
+    gate_attitude,
+    gate_beams,
+    gate_dvl,
+    gate_gps,
+    navigation_span_s,
+)
 from sonarslam.datasets.islog import read_is_log
 from sonarslam.datasets.keyframes import read_keyframes
 from sonarslam.datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti, read_setup
@@ -178,7 +185,7 @@ def open_dataset(
     gps_path = _find_one(root, "*_DGPS.log", required=False)
     gps = gate_gps(read_dgps(gps_path), gates, report) if gps_path is not None else None
     beams, sonar_path = _beams(root, config)
-    gate_beams(beams.t_s, gates, report, sonar_path)
+    gate_beams(beams.t_s, gates, report, sonar_path, navigation_span_s(dvl, attitude))
     truth_path = _find_one(root, "truth.json", required=False)
     return Dataset(
         name=root.name,

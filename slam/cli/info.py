@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from sonarslam.datasets.gates import DVL_MIN_SPEED_MPS
+from sonarslam.datasets.gates import DVL_MIN_SPEED_MPS, MAX_BEAMS_OUTSIDE_NAV
 from sonarslam.datasets.ping360 import is_ping360_log
 from sonarslam.datasets.rosbag import bag_topics, is_bag
 from sonarslam.datasets.source import check_toml_inputs, open_dataset, resolve_source
@@ -50,13 +50,17 @@ def command(args: argparse.Namespace) -> int:
     if is_ping360_log(d.root):
         c = d.report.counts
         dropped = {
-            k.removeprefix("ping360_"): v for k, v in c.items() if k.startswith("ping360_") and v
+            k.removeprefix("ping360_"): v
+            for k, v in c.items()
+            if k.startswith("ping360_") and k != "ping360_gain_changes" and v
         }
+        gain = c.get("ping360_gain_changes", 0)
         print(
             f"  Ping Viewer log: {len(d.beams)} beams of {d.config.sonar.n_bins} samples"
             f" of {d.config.sonar.bin_size_m:.6g} m (sample period and [ping360]"
             f" speed_of_sound_mps), step {d.config.sonar.step_rad * 200 / math.pi:g} gradians;"
-            f" other records: {dropped or 'none'}"
+            f" other records: {dropped or 'none'}; gain_setting "
+            + (f"changed {gain} time(s) (the intensities with it)" if gain else "constant")
         )
     nav = d.nav_beams()
     processed = ""
@@ -64,7 +68,14 @@ def command(args: argparse.Namespace) -> int:
         t_start = start_pose(d)[0]
         n_run = sum(1 for b in nav if b.t >= t_start)
         processed = f"; a run processes the {n_run} from its start pose, the first GPS fix"
-    print(f"  sonar beams {len(d.beams)} ({len(nav)} inside the navigation span{processed})")
+    outside = (
+        f" (more than {MAX_BEAMS_OUTSIDE_NAV:.0%} outside: not used)"
+        if len(d.beams) - len(nav) > MAX_BEAMS_OUTSIDE_NAV * len(d.beams)
+        else ""
+    )
+    print(
+        f"  sonar beams {len(d.beams)} ({len(nav)} inside the navigation span{processed})" + outside
+    )
     print(f"  DVL rows {d.dvl.t.size} ({int((~d.dvl.valid).sum())} without bottom lock)")
     print(f"  AHRS rows {d.attitude.t.size}; GPS fixes {0 if d.gps is None else d.gps.t.size}")
     faults = {k: v for k, v in d.report.counts.items() if v}

@@ -171,6 +171,7 @@ class DataFigures:
         "fault_<sensor>_<kind>",
         "gap_<sensor>_{count,total_s,longest_s}",
         "gap_spans_s",
+        "beams_outside_nav",
     )
 
     wall_s: float
