@@ -376,6 +376,25 @@ def test_a_belief_in_degrees_is_refused_by_name() -> None:
         WorldBelief(np.array([1.0, 2.0, 0.5]), lines_w, -np.eye(7))
 
 
+def test_a_mounting_yaw_in_degrees_is_refused_by_the_line_model() -> None:
+    """The docs' EKF example with the mounting's yaw given as 180 (degrees) to line_prediction
+    made 7 landmarks for 3 walls (2 duplicates) without a word; the line model now refuses a
+    yaw beyond 2 pi, naming the parameter, as WorldBelief does."""
+    wTb = np.array([1.0, 2.0, 0.3])
+    line_w = WALLS[0][0]
+    z, H_pose, H_line = sonarslam.line_prediction(wTb, line_w, BTS)
+    d = line_difference(z, line_world_to_frame(line_w, compose(wTb, BTS))[0])[0]
+    np.testing.assert_allclose(d, 0.0, atol=1e-12)
+    degrees = np.array([BTS[0], BTS[1], 180.0])
+    msg = r"line_prediction\(bTs=...\): .* yaw must be in radians .* got 180.0"
+    with pytest.raises(ValueError, match=msg):
+        sonarslam.line_prediction(wTb, line_w, degrees)
+    with pytest.raises(ValueError, match=r"mounting must be 3 finite numbers"):
+        sonarslam.line_prediction(wTb, line_w, BTS[:2])
+    with pytest.raises(ValueError, match=r"LandmarkAssociation\(bTs=...\): .* got 180.0"):
+        LandmarkAssociation(degrees, seeds_used=False)
+
+
 def test_line_feature_documents_its_measurement() -> None:
     from sonarslam.features.line import LineFeature
 

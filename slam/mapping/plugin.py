@@ -39,6 +39,7 @@ from sonarslam.features.line import LineFeature, check_mounting
 from sonarslam.slam.mapping.landmarks import LandmarkConfig, LandmarkMap
 from sonarslam.slam.mapping.vote import AfterVote, Belief, Decision, LandmarkBelief, NodeAnchor
 from sonarslam.slam.model.lines import (
+    check_mounting_pose,
     line_predictions,
     local_to_world_covariance,
     usable_observations,
@@ -214,7 +215,7 @@ class LandmarkAssociation:
     def __init__(
         self, bTs: npt.ArrayLike, config: LandmarkConfig | None = None, *, seeds_used: bool
     ) -> None:
-        self.bTs = np.asarray(bTs, dtype=np.float64).reshape(3)
+        self.bTs = check_mounting_pose(bTs, "LandmarkAssociation(bTs=...)")
         self.config = config if config is not None else LandmarkConfig()
         self.seeds_used = seeds_used
         self.map = LandmarkMap(self.config, self.bTs)
