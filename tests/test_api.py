@@ -30,6 +30,7 @@ from sonarslam.features.geometry import (
 )
 from sonarslam.features.line import LineFeature
 from sonarslam.settings import SettingError
+from sonarslam.sonar.beam import SonarBeam
 from sonarslam.slam.backends.isam2.config import GraphConfig
 from sonarslam.slam.backends.isam2.factors import line_factor
 from sonarslam.slam.mapping.landmarks import LandmarkConfig, LandmarkMap
@@ -393,6 +394,26 @@ def test_a_mounting_yaw_in_degrees_is_refused_by_the_line_model() -> None:
         sonarslam.line_prediction(wTb, line_w, BTS[:2])
     with pytest.raises(ValueError, match=r"LandmarkAssociation\(bTs=...\): .* got 180.0"):
         LandmarkAssociation(degrees, seeds_used=False)
+
+
+def test_a_beam_of_float_intensities_is_refused_by_name() -> None:
+    """Intensities 0-1 as floats (an image normalised) gave the front end no line and no
+    word; a beam refuses any dtype but uint8, by the rule dataset_from_arrays uses."""
+    sim = sonarslam.simulate_records(sonarslam.make_scenario("harbour", seed=0, duration_s=30.0))
+    extractor = sonarslam.LineExtractor(
+        sonarslam.extractor_preset("default"),
+        sim.scenario.head,
+        sim.scenario.sonar_mounting,
+        sim.trajectory,
+    )
+    beams = sim.beams
+    assert sum(len(extractor.add(b)) for b in beams) > 0  # the uint8 beams give lines
+    b = beams[0]
+    msg = r"SonarBeam.intensities must be uint8 echo strengths 0-255, got float64 \(floats"
+    with pytest.raises(ValueError, match=msg):
+        SonarBeam(b.t, b.transducer_angle_rad, b.intensities / 255.0)
+    with pytest.raises(ValueError, match=r"got int64 \(x.astype\(np.uint8\)"):
+        SonarBeam(b.t, b.transducer_angle_rad, b.intensities.astype(np.int64))
 
 
 def test_line_feature_documents_its_measurement() -> None:
