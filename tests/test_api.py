@@ -30,7 +30,6 @@ from sonarslam.features.geometry import (
 )
 from sonarslam.features.line import LineFeature
 from sonarslam.settings import SettingError
-from sonarslam.sonar.beam import SonarBeam
 from sonarslam.slam.backends.isam2.config import GraphConfig
 from sonarslam.slam.backends.isam2.factors import line_factor
 from sonarslam.slam.mapping.landmarks import LandmarkConfig, LandmarkMap
@@ -39,6 +38,7 @@ from sonarslam.slam.mapping.vote import Belief, LandmarkBelief
 from sonarslam.slam.model.lines import local_to_world, local_to_world_covariance
 from sonarslam.slam.run.presets import RunConfig, extractor_config, extractor_preset
 from sonarslam.slam.run.run import run_backend
+from sonarslam.sonar.beam import SonarBeam
 
 ROOT = Path(__file__).resolve().parent.parent
 #: Packages ``import sonarslam`` must not load (seconds of imports and JIT caches).
