@@ -38,7 +38,6 @@ from sonarslam.slam.mapping.vote import Belief, LandmarkBelief
 from sonarslam.slam.model.lines import local_to_world, local_to_world_covariance
 from sonarslam.slam.run.presets import RunConfig, extractor_config, extractor_preset
 from sonarslam.slam.run.run import run_backend
-from sonarslam.sonar.beam import SonarBeam
 
 ROOT = Path(__file__).resolve().parent.parent
 #: Packages ``import sonarslam`` must not load (seconds of imports and JIT caches).
@@ -411,9 +410,9 @@ def test_a_beam_of_float_intensities_is_refused_by_name() -> None:
     b = beams[0]
     msg = r"SonarBeam.intensities must be uint8 echo strengths 0-255, got float64 \(floats"
     with pytest.raises(ValueError, match=msg):
-        SonarBeam(b.t, b.transducer_angle_rad, b.intensities / 255.0)
+        sonarslam.SonarBeam(b.t, b.transducer_angle_rad, b.intensities / 255.0)
     with pytest.raises(ValueError, match=r"got int64 \(x.astype\(np.uint8\)"):
-        SonarBeam(b.t, b.transducer_angle_rad, b.intensities.astype(np.int64))
+        sonarslam.SonarBeam(b.t, b.transducer_angle_rad, b.intensities.astype(np.int64))
 
 
 def test_line_feature_documents_its_measurement() -> None:

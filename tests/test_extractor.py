@@ -634,8 +634,9 @@ def test_pose_uncertainty_widens_the_seed_ellipse_by_the_fit_pose_term() -> None
 
 def test_beams_outside_the_pose_sources_span_are_said_once_naming_the_times() -> None:
     """A trajectory that stops halfway through the sector holds its last pose for the rest
-    (its design): the extractor says so once, naming the beams' times and the span; a
-    trajectory over all the beams is taken silently. The pool's sonar stands still, so the
+    (its design): the extractor says so once, naming the beams' times and the span, those of
+    the first vote that met any (it said 300 of 500 as if all); a trajectory over all the beams
+    is taken silently. The pool's sonar stands still, so the
     held pose is the true one and the walls are found either way."""
     beams = _pool_beams(800, -70.0, seed=2010)
     t = np.array([b.t for b in beams])
@@ -647,6 +648,7 @@ def test_beams_outside_the_pose_sources_span_are_said_once_naming_the_times() ->
     assert ex.n_votes == 6 and len(said) == 1
     message = str(said[0].message)
     assert f"300 beam time(s) {t[300]:.3f}-{t[599]:.3f} s (Unix)" in message  # the first vote's
+    assert "the first vote that met any" in message and "later votes may hold more" in message
     assert f"span {t[0]:.3f}-{t[299]:.3f} s" in message
     assert set(_wall_index(lines, wall_lines_world(POOL_WALLS))) == {0, 1, 2, 3}
     whole = LineExtractor(config, POOL_HEAD, Mounting(), Trajectory(t, zero))
