@@ -38,7 +38,6 @@ if TYPE_CHECKING:  # the names as a type checker sees them; at run time they loa
     from sonarslam.features.extractor import LineExtractor
     from sonarslam.features.line import LineFeature
     from sonarslam.features.pose_source import PoseSource
-    from sonarslam.sonar.beam import SonarBeam
     from sonarslam.slam.backends.isam2.factors import line_factor
     from sonarslam.slam.mapping.landmarks import LandmarkConfig
     from sonarslam.slam.mapping.plugin import LandmarkAssociation, WorldBelief, gtsam_belief
@@ -51,6 +50,7 @@ if TYPE_CHECKING:  # the names as a type checker sees them; at run time they loa
     from sonarslam.slam.run.presets import RunConfig, extractor_preset
     from sonarslam.slam.run.run import run_backend
     from sonarslam.slam.run.sources import dead_reckoning_trajectory
+    from sonarslam.sonar.beam import SonarBeam
 
 #: Public name -> the module that defines it.
 _HOMES: dict[str, str] = {
