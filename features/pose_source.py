@@ -191,7 +191,7 @@ def _check_covariances(covs: FloatArray, t: FloatArray, method: str) -> None:
     if bad.size:
         i = int(bad[0])
         shown = np.array2string(covs[i], precision=4, separator=", ").replace("\n", "")
-        eig = f" (least eigenvalue {low[i]:.3g})" if finite[i] else ""
+        eig = f" (least eigenvalue {low[i]:.3g})" if why[i].endswith("definite") else ""
         raise ValueError(
             f"the pose source's {method} at t={t[i]:.3f} s (Unix) {why[i]}{eig}: {shown};"
             " expected the covariance of (x_m, y_m, yaw_rad) (m^2, rad^2): finite, symmetric,"
