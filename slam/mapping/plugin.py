@@ -51,12 +51,12 @@ __all__ = ["WorldBelief", "LandmarkAssociation", "gtsam_belief", "MOVE_TAIL_PROB
 #: How improbable a landmark line's move must be to be refused as not the same landmark (a
 #: belief's lines in another order than the association's ids). Between two estimates of a
 #: consistent Gaussian estimator, landmark ``j``'s mean moves by ``d ~ N(0, P_then - P_now)``,
-#: whatever was added in between (this vote's observations, a loop closure), so ``d^T P_then^-1
-#: d`` is at most chi-square with 2 degrees of freedom, whose tail beyond ``q`` is
-#: ``exp(-q / 2)``: the gate is ``q = -2 ln p`` (55.3 for 1e-12, 7.4 sigma), a false refusal
-#: once in 1e12 tests. ``P_then`` is the landmark's marginal at the previous
-#: :meth:`LandmarkAssociation.decide` (a new landmark's: its newest observation's world
-#: covariance, ``world_observation``).
+#: whatever was added in between (this vote's observations, a loop closure), so
+#: ``d^T P_then^-1 d`` is stochastically at most chi-square with 2 degrees of freedom, whose
+#: tail beyond ``q`` is ``exp(-q / 2)``: the gate is ``q = -2 ln p`` (55.3 for 1e-12, 7.4
+#: sigma), a consistent estimator's line refused once in 1e12 tests. ``P_then`` is the
+#: landmark's marginal at the previous :meth:`LandmarkAssociation.decide` (a new landmark's:
+#: its newest observation's world covariance, ``world_observation``).
 MOVE_TAIL_PROBABILITY = 1e-12
 
 
@@ -151,8 +151,8 @@ def gtsam_belief(
     line_key : callable, int -> int
         The key of landmark ``j``'s line (a 2-vector ``(rho_m, theta_rad)`` in the world):
         ``gtsam.symbol_shorthand.L``. A function of the id, so that the lines are in the
-        association's order (a list of keys in another order put every landmark on another's
-        wall); a sequence is refused (TypeError).
+        association's order whatever order the keys were made in; a sequence of keys is
+        refused (TypeError).
     association : LandmarkAssociation
         Whose landmarks (ids ``0 .. len(association.map.landmarks) - 1``) the belief holds.
     marginals : gtsam.ISAM2 or gtsam.Marginals, optional
@@ -299,7 +299,10 @@ class LandmarkAssociation:
         )
         self._pending = decision
         self._then = {
-            j: (belief.lines_w[j].copy(), belief.cov[3 + 2 * j : 5 + 2 * j, 3 + 2 * j : 5 + 2 * j])
+            j: (
+                belief.lines_w[j].copy(),
+                belief.cov[3 + 2 * j : 5 + 2 * j, 3 + 2 * j : 5 + 2 * j].copy(),
+            )
             for j in active
         }
         for new in decision.new_landmarks:  # the newest observation's world line and covariance
