@@ -36,6 +36,7 @@ from sonarslam.datasets.gates import (
 )
 from sonarslam.datasets.geodesy import geodetic_to_local_en
 from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries
+from sonarslam.sonar.beam import intensities_problem
 
 __all__ = ["dataset_from_arrays", "degrees_row", "gated_dataset"]
 
@@ -174,8 +175,9 @@ def dataset_from_arrays(
             f"beam_intensities must have shape ({bt.size}, {n_bins}) ([sonar] n_bins), got"
             f" {bins.shape}",
         )
-    if bins.dtype != np.uint8:
-        raise DataError(where, None, f"beam_intensities must be uint8, got {bins.dtype}")
+    problem = intensities_problem(bins)
+    if problem is not None:
+        raise DataError(where, None, f"beam_intensities {problem}")
     dt = _times(where, "dvl_t_s", dvl_t_s)
     v = _array(where, "dvl_v_mps", dvl_v_mps, (dt.size, 2))
     valid = np.ones(dt.size, dtype=bool) if dvl_valid is None else np.array(dvl_valid, bool)

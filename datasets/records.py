@@ -17,7 +17,7 @@ from typing import overload
 import numpy as np
 import numpy.typing as npt
 
-from sonarslam.sonar.beam import FloatArray, SonarBeam
+from sonarslam.sonar.beam import FloatArray, SonarBeam, intensities_problem
 
 __all__ = [
     "DvlVelocity",
@@ -174,8 +174,11 @@ class BeamSeries(Sequence[SonarBeam]):
                 f"t_s (N,), angles (N,), intensities (N, n_bins) expected, got {t_s.shape},"
                 f" {transducer_angle_rad.shape}, {intensities.shape}"
             )
-        if intensities.shape[0] != n or intensities.dtype != np.uint8:
-            raise ValueError(f"intensities must be ({n}, n_bins) uint8, got {intensities.shape}")
+        if intensities.shape[0] != n:
+            raise ValueError(f"intensities must be ({n}, n_bins), got {intensities.shape}")
+        problem = intensities_problem(intensities)
+        if problem is not None:
+            raise ValueError(f"BeamSeries intensities {problem}")
         self.t_s = t_s
         self.transducer_angle_rad = transducer_angle_rad
         self.intensities = intensities
@@ -195,7 +198,7 @@ class BeamSeries(Sequence[SonarBeam]):
         return cls(
             np.array([b.t for b in beams], dtype=np.float64),
             np.array([b.transducer_angle_rad for b in beams], dtype=np.float64),
-            np.stack([b.intensities for b in beams]).astype(np.uint8, copy=False),
+            np.stack([b.intensities for b in beams]),  # uint8: each beam checked its own
             bool(beams[0].thresholded),
         )
 

@@ -129,11 +129,71 @@ def checked_poses(source: PoseSource, t_s: npt.ArrayLike) -> FloatArray:
 def pose_covariances(source: PoseSource, t_s: npt.ArrayLike) -> FloatArray | None:
     """The pose covariances at times ``t_s`` (N,), shape (N, 3, 3) (m, m, rad), or None when
     the source has none at any of them: in one call where the source can
-    (:class:`BatchCovariances`), else time by time."""
+    (:class:`BatchCovariances`), else time by time.
+
+    Raises
+    ------
+    ValueError
+        A covariance that is not (3, 3), not finite, not symmetric (to 1e-6 of its largest
+        entry) or not positive semi-definite (an eigenvalue below -1e-9 of its largest entry),
+        naming the source's method, the time and what is expected.
+    """
     t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
     if isinstance(source, BatchCovariances):
-        return source.covariances(t)
-    covs = [source.covariance(float(tk)) for tk in t]
-    if any(c is None for c in covs):
+        batch = source.covariances(t)
+        if batch is None:
+            return None
+        covs = np.asarray(batch, dtype=np.float64)
+        if covs.shape != (t.size, 3, 3):
+            raise ValueError(
+                f"the pose source's covariances(t_s) of {t.size} beam times from {t[0]:.3f} s"
+                f" (Unix) must be ({t.size}, 3, 3), one covariance of (x_m, y_m, yaw_rad) per"
+                f" time, got shape {covs.shape}"
+            )
+        _check_covariances(covs, t, "covariances(t_s)")
+        return covs
+    given = [source.covariance(float(tk)) for tk in t]
+    if any(c is None for c in given):
         return None
-    return np.stack([np.asarray(c, dtype=np.float64) for c in covs]).reshape(-1, 3, 3)
+    for tk, c in zip(t, given, strict=True):
+        shape = np.shape(c)
+        if shape != (3, 3):
+            raise ValueError(
+                f"the pose source's covariance(t) at t={tk:.3f} s (Unix) must be (3, 3), the"
+                f" covariance of (x_m, y_m, yaw_rad), got shape {shape}"
+            )
+    covs = np.stack([np.asarray(c, dtype=np.float64) for c in given])
+    _check_covariances(covs, t, "covariance(t)")
+    return covs
+
+
+def _check_covariances(covs: FloatArray, t: FloatArray, method: str) -> None:
+    """Refuse a pose covariance (N, 3, 3) at times ``t`` (N,) that is not one
+    (:func:`pose_covariances`' Raises), naming ``method`` and the first time at fault."""
+    finite = np.all(np.isfinite(covs), axis=(1, 2))
+    scale = np.maximum(
+        np.max(np.abs(np.where(finite[:, None, None], covs, 0.0)), axis=(1, 2)), 1e-300
+    )
+    asym = np.max(np.abs(covs - np.transpose(covs, (0, 2, 1))), axis=(1, 2))
+    sym = 0.5 * (covs + np.transpose(covs, (0, 2, 1)))
+    low = np.full(t.size, np.inf)
+    low[finite] = np.linalg.eigvalsh(sym[finite])[:, 0]
+    why = np.where(
+        ~finite,
+        "is not finite",
+        np.where(
+            asym > 1e-6 * scale,
+            "is not symmetric",
+            np.where(low < -1e-9 * scale, "is not positive semi-definite", ""),
+        ),
+    )
+    bad = np.flatnonzero(why != "")
+    if bad.size:
+        i = int(bad[0])
+        shown = np.array2string(covs[i], precision=4, separator=", ").replace("\n", "")
+        eig = f" (least eigenvalue {low[i]:.3g})" if why[i].endswith("definite") else ""
+        raise ValueError(
+            f"the pose source's {method} at t={t[i]:.3f} s (Unix) {why[i]}{eig}: {shown};"
+            " expected the covariance of (x_m, y_m, yaw_rad) (m^2, rad^2): finite, symmetric,"
+            " positive semi-definite"
+        )

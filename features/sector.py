@@ -227,7 +227,11 @@ class Sector:
             missed = outside_span(self.pose_source, t_s)
             if missed is not None:
                 self._span_warned = True
-                warnings.warn(f"{missed} (said once per extractor)", PoseSpanWarning, stacklevel=5)
+                said = (
+                    f"{missed} (the beams of the first vote that met any: said once per"
+                    " extractor, later votes may hold more)"
+                )
+                warnings.warn(said, PoseSpanWarning, stacklevel=5)
         return compose(checked_poses(self.pose_source, t_s), self.bTs)
 
     def add(self, t_s: float, bearing_rad: float, segmented: SegmentedBeam) -> None:

@@ -15,6 +15,7 @@ __all__ = [
     "SonarHead",
     "Mounting",
     "bin_range_m",
+    "intensities_problem",
     "MAX_BINS",
     "MIN_STEP_RAD",
     "ASSUMED_MOUNTING_SOURCE",
@@ -22,6 +23,31 @@ __all__ = [
 
 #: The project's float array type (``features.geometry`` re-exports it).
 FloatArray = npt.NDArray[np.float64]
+
+
+def intensities_problem(intensities: npt.ArrayLike) -> str | None:
+    """Why ``intensities`` are not a beam's bins, or None: they must be uint8 echo strengths
+    0-255 (the one place of this rule). Floats 0-1 would be thresholded as all but empty, and
+    the front end would find no line, without a word.
+
+    Parameters
+    ----------
+    intensities : array_like, shape (..., n_bins)
+
+    Returns
+    -------
+    str or None
+        ``"must be uint8 echo strengths 0-255, got float64 ..."`` with the fix, to follow the
+        parameter's name in the caller's error; None when they are uint8.
+    """
+    dtype = np.asarray(intensities).dtype
+    if dtype == np.uint8:
+        return None
+    if np.issubdtype(dtype, np.floating):
+        fix = "floats scaled 0-1? np.round(x * 255).astype(np.uint8)"
+    else:
+        fix = "x.astype(np.uint8) if they are 0-255"
+    return f"must be uint8 echo strengths 0-255, got {dtype} ({fix})"
 
 
 def bin_range_m(bin_index: npt.ArrayLike, bin_size_m: float) -> FloatArray:
@@ -171,8 +197,11 @@ class SonarBeam:
     transducer_angle_rad : float
         Head angle as logged (rad); see :meth:`SonarHead.bearing_rad`.
     intensities : ndarray of uint8, shape (n_bins,)
-        Echo intensity per bin, 0-255. Beams that were thresholded before they reached us
-        (the marina keyframes) carry 255 for the bins that passed and 0 elsewhere.
+        Echo intensity per bin, 0-255, nearest bin first (bin ``i`` at
+        ``(i + 1) * bin_size_m``, :func:`bin_range_m`); another dtype is refused (ValueError,
+        :func:`intensities_problem`). Bins far-first are not detected: every wall would be
+        put at the wrong range. Beams that were thresholded before they reached us (the marina
+        keyframes) carry 255 for the bins that passed and 0 elsewhere.
     thresholded : bool
         True when ``intensities`` is such a 0/255 mask rather than raw echo strength.
     """
@@ -181,3 +210,8 @@ class SonarBeam:
     transducer_angle_rad: float
     intensities: npt.NDArray[np.uint8] = field(repr=False)
     thresholded: bool = False
+
+    def __post_init__(self) -> None:
+        problem = intensities_problem(self.intensities)
+        if problem is not None:
+            raise ValueError(f"SonarBeam.intensities {problem}, at t={self.t}")

@@ -4,8 +4,8 @@ and SLAM with them.
 The names a user needs are here (:data:`__all__`; the guide is ``docs/api.md``):
 
 * the front end: :class:`LineExtractor` with its :class:`ExtractorConfig` (a run's preset:
-  :func:`extractor_preset`), the poses it takes (:class:`PoseSource`) and the lines it gives
-  (:class:`LineFeature`);
+  :func:`extractor_preset`), the beams (:class:`SonarBeam`) and poses it takes
+  (:class:`PoseSource`) and the lines it gives (:class:`LineFeature`);
 * your own SLAM: :class:`LandmarkAssociation` decides which line is which landmark from your
   estimate (:class:`WorldBelief`, or :func:`gtsam_belief` of your iSAM2 /
   ``Values``; :func:`local_to_world_covariance`) and returns a :class:`Decision`;
@@ -50,6 +50,7 @@ if TYPE_CHECKING:  # the names as a type checker sees them; at run time they loa
     from sonarslam.slam.run.presets import RunConfig, extractor_preset
     from sonarslam.slam.run.run import run_backend
     from sonarslam.slam.run.sources import dead_reckoning_trajectory
+    from sonarslam.sonar.beam import SonarBeam
 
 #: Public name -> the module that defines it.
 _HOMES: dict[str, str] = {
@@ -59,6 +60,7 @@ _HOMES: dict[str, str] = {
     "extractor_preset": "sonarslam.slam.run.presets",
     "PoseSource": "sonarslam.features.pose_source",
     "LineFeature": "sonarslam.features.line",
+    "SonarBeam": "sonarslam.sonar.beam",
     # your own SLAM
     "LandmarkAssociation": "sonarslam.slam.mapping.plugin",
     "WorldBelief": "sonarslam.slam.mapping.plugin",
@@ -91,6 +93,7 @@ __all__ = [
     "LineFeature",
     "PoseSource",
     "RunConfig",
+    "SonarBeam",
     "WorldBelief",
     "dataset_from_arrays",
     "dead_reckoning_trajectory",

@@ -155,16 +155,32 @@ def test_local_to_world_covariance_is_gtsams_retract_to_first_order() -> None:
         local_to_world_covariance(wTb, np.eye(2))
 
 
+def _four_landmarks(wTb: np.ndarray) -> tuple[LandmarkAssociation, np.ndarray]:
+    """An association that made the four walls landmarks 0..3 from ``wTb`` (two votes), and
+    their world lines (4, 2)."""
+    rng = np.random.default_rng(8)
+    assoc = LandmarkAssociation(BTS, seeds_used=True)
+    assoc.decide(_vote(1.0, wTb, rng), _belief(wTb, []))
+    assoc.applied(_belief(wTb, []))
+    decision = assoc.decide(_vote(2.0, wTb, rng), _belief(wTb, []))
+    lines_w = np.array([new.line_w for new in decision.new_landmarks])
+    assoc.applied(_belief(wTb, list(lines_w)))
+    assert len(assoc.map.landmarks) == 4
+    return assoc, lines_w
+
+
 def test_gtsam_belief_reads_isam2_and_marginals_by_key_in_world_coordinates() -> None:
     rng = np.random.default_rng(7)
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
     wTb = np.array([2.0, 1.0, 0.7])
+    assoc, lines_w = _four_landmarks(wTb)
     C = np.diag([0.04, 0.09, 0.01])
     graph.add(
         gtsam.PriorFactorPose2(X(0), gtsam.Pose2(*wTb), gtsam.noiseModel.Gaussian.Covariance(C))
     )
     values.insert(X(0), gtsam.Pose2(*wTb))
-    for j, (line_w, _) in enumerate(WALLS[:2]):
+    for j in (3, 2, 1, 0):  # inserted in the other order than the ids
+        line_w = lines_w[j]
         wTs = compose(wTb, BTS)
         z = line_world_to_frame(line_w, wTs)[0] + rng.normal(0.0, [0.05, 0.01])
         graph.add(line_factor(X(0), L(j), z, R_LINE, BTS))
@@ -173,28 +189,58 @@ def test_gtsam_belief_reads_isam2_and_marginals_by_key_in_world_coordinates() ->
     isam = gtsam.ISAM2()
     isam.update(graph, values)
     estimate = isam.calculateEstimate()
-    keys = [L(1), L(0)]  # landmark j at position j: here in the other order than inserted
-    b = gtsam_belief(estimate, X(0), keys, isam)
+    b = gtsam_belief(estimate, X(0), L, assoc, isam)  # landmark j at L(j), in the ids' order
+    assert b.k == 4
     marginals = gtsam.Marginals(graph, estimate)  # relinearised at the estimate: not iSAM2's
-    batch = gtsam_belief(estimate, X(0), keys, marginals)
+    batch = gtsam_belief(estimate, X(0), L, assoc, marginals)
     np.testing.assert_allclose(
         batch.cov[:3, :3],
         local_to_world_covariance(batch.wTb, marginals.marginalCovariance(X(0))),
         rtol=1e-9,
     )
-    np.testing.assert_allclose(batch.cov[5:7, 5:7], marginals.marginalCovariance(L(0)), rtol=1e-9)
+    np.testing.assert_allclose(batch.cov[5:7, 5:7], marginals.marginalCovariance(L(1)), rtol=1e-9)
     np.testing.assert_allclose(batch.cov, b.cov, rtol=0.05, atol=1e-4)
     p = estimate.atPose2(X(0))
     np.testing.assert_allclose(b.wTb, [p.x(), p.y(), p.theta()])
-    np.testing.assert_allclose(b.lines_w[0], estimate.atVector(L(1)))
+    for j in range(4):
+        np.testing.assert_allclose(b.lines_w[j], estimate.atVector(L(j)))
     local = isam.marginalCovariance(X(0))
     np.testing.assert_allclose(b.cov[:3, :3], local_to_world_covariance(b.wTb, local), rtol=1e-9)
-    np.testing.assert_allclose(b.cov[3:5, 3:5], isam.marginalCovariance(L(1)), rtol=1e-9)
-    cross = isam.jointMarginalCovariance([X(0), L(0)]).at(X(0), L(0))
-    T = local_to_world(float(b.wTb[2]))  # L(0) is landmark 1 of the belief: columns 5:7
+    np.testing.assert_allclose(b.cov[3:5, 3:5], isam.marginalCovariance(L(0)), rtol=1e-9)
+    cross = isam.jointMarginalCovariance([X(0), L(1)]).at(X(0), L(1))
+    T = local_to_world(float(b.wTb[2]))  # landmark 1: columns 5:7
     np.testing.assert_allclose(b.cov[:3, 5:7], T @ cross, rtol=1e-9, atol=1e-15)
     assert np.abs(b.cov[:3, 3:]).max() > 1e-6  # the lines are correlated with the pose
-    assert gtsam_belief(estimate, X(0), keys).cov is None
+    assert gtsam_belief(estimate, X(0), L, assoc).cov is None
+    keys = [L(j) for j in reversed(range(4))]  # a list of keys could be in any order: refused
+    with pytest.raises(TypeError, match=r"line_key=...\) must be the function .* got list"):
+        gtsam_belief(estimate, X(0), keys, assoc)  # type: ignore[arg-type]
+
+
+def test_a_belief_in_another_order_than_the_ids_is_refused() -> None:
+    """The docs' iSAM2 example given its landmark keys reversed made 7 landmarks for 3 walls
+    (5 duplicates, one ~79 off), without a word: each line was taken for another's. A belief's
+    row j that moved since the last decide beyond any consistent update is now refused by
+    decide and applied, naming the row; a smoother's move of a few standard deviations (a loop
+    closure) still passes."""
+    wTb = np.array([-10.0, 0.0, 0.0])
+    rng = np.random.default_rng(9)
+    assoc, lines_w = _four_landmarks(wTb)
+    reversed_lines = list(lines_w[::-1])
+    with pytest.raises(ValueError, match=r"decide: belief.lines_w row 0 .* is not landmark 0"):
+        assoc.decide(_vote(3.0, wTb, rng), _belief(wTb, reversed_lines))
+    assoc.decide(_vote(3.0, wTb, rng), _belief(wTb, list(lines_w)))
+    with pytest.raises(ValueError, match=r"applied: belief.lines_w row 0 .* another order"):
+        assoc.applied(_belief(wTb, reversed_lines))
+    # a loop closure moving every line by 5 standard deviations (rho 10 cm, theta 0.57 deg)
+    moved = lines_w + np.array([5 * 0.1, 5 * 0.01])
+    assoc.applied(_belief(wTb, list(moved)))
+    decision = assoc.decide(_vote(4.0, wTb, rng), _belief(wTb, list(moved)))
+    assert len(decision.new_landmarks) == 0
+    # two landmarks swapped: the walls 40 m apart
+    swapped = moved[[1, 0, 2, 3]]
+    with pytest.raises(ValueError, match=r"row 0 .* is not landmark 0"):
+        assoc.applied(_belief(wTb, list(swapped)))
 
 
 # -- the association for one's own SLAM --------------------------------------------------------
@@ -328,6 +374,45 @@ def test_a_belief_in_degrees_is_refused_by_name() -> None:
         WorldBelief(np.array([1.0, 2.0, 0.5]), lines_w, skew)
     with pytest.raises(ValueError, match="WorldBelief.cov must be a covariance"):
         WorldBelief(np.array([1.0, 2.0, 0.5]), lines_w, -np.eye(7))
+
+
+def test_a_mounting_yaw_in_degrees_is_refused_by_the_line_model() -> None:
+    """The docs' EKF example with the mounting's yaw given as 180 (degrees) to line_prediction
+    made 7 landmarks for 3 walls (2 duplicates) without a word; the line model now refuses a
+    yaw beyond 2 pi, naming the parameter, as WorldBelief does."""
+    wTb = np.array([1.0, 2.0, 0.3])
+    line_w = WALLS[0][0]
+    z, H_pose, H_line = sonarslam.line_prediction(wTb, line_w, BTS)
+    d = line_difference(z, line_world_to_frame(line_w, compose(wTb, BTS))[0])[0]
+    np.testing.assert_allclose(d, 0.0, atol=1e-12)
+    degrees = np.array([BTS[0], BTS[1], 180.0])
+    msg = r"line_prediction\(bTs=...\): .* yaw must be in radians .* got 180.0"
+    with pytest.raises(ValueError, match=msg):
+        sonarslam.line_prediction(wTb, line_w, degrees)
+    with pytest.raises(ValueError, match=r"mounting must be 3 finite numbers"):
+        sonarslam.line_prediction(wTb, line_w, BTS[:2])
+    with pytest.raises(ValueError, match=r"LandmarkAssociation\(bTs=...\): .* got 180.0"):
+        LandmarkAssociation(degrees, seeds_used=False)
+
+
+def test_a_beam_of_float_intensities_is_refused_by_name() -> None:
+    """Intensities 0-1 as floats (an image normalised) gave the front end no line and no
+    word; a beam refuses any dtype but uint8, by the rule dataset_from_arrays uses."""
+    sim = sonarslam.simulate_records(sonarslam.make_scenario("harbour", seed=0, duration_s=30.0))
+    extractor = sonarslam.LineExtractor(
+        sonarslam.extractor_preset("default"),
+        sim.scenario.head,
+        sim.scenario.sonar_mounting,
+        sim.trajectory,
+    )
+    beams = sim.beams
+    assert sum(len(extractor.add(b)) for b in beams) > 0  # the uint8 beams give lines
+    b = beams[0]
+    msg = r"SonarBeam.intensities must be uint8 echo strengths 0-255, got float64 \(floats"
+    with pytest.raises(ValueError, match=msg):
+        sonarslam.SonarBeam(b.t, b.transducer_angle_rad, b.intensities / 255.0)
+    with pytest.raises(ValueError, match=r"got int64 \(x.astype\(np.uint8\)"):
+        sonarslam.SonarBeam(b.t, b.transducer_angle_rad, b.intensities.astype(np.int64))
 
 
 def test_line_feature_documents_its_measurement() -> None:

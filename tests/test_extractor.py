@@ -609,6 +609,70 @@ def test_pose_uncertainty_widens_the_covariance() -> None:
         assert np.trace(d) > 0.1 * np.trace(a.cov)
 
 
+@dataclass
+class GivenCovariance:
+    """A still vehicle whose pose source gives ``cov`` as the covariance at every time."""
+
+    cov: np.ndarray
+
+    def poses(self, t_s: npt.ArrayLike) -> np.ndarray:
+        return FrozenPoses((0.0, 0.0, 0.0)).poses(t_s)
+
+    def covariance(self, t_s: float) -> np.ndarray | None:
+        return self.cov
+
+
+@dataclass
+class GivenCovariances(GivenCovariance):
+    """The same, in one call for many times (a BatchCovariances)."""
+
+    def covariances(self, t_s: npt.ArrayLike) -> np.ndarray | None:
+        return np.broadcast_to(self.cov, (np.size(t_s), *self.cov.shape))
+
+
+@pytest.mark.parametrize(
+    ("source", "message"),
+    [
+        (
+            GivenCovariance(np.full((3, 3), np.nan)),
+            r"covariance\(t\) at t=1\d+\.\d+ s \(Unix\) is not finite",
+        ),
+        (
+            GivenCovariance(np.eye(2) * 1e-4),
+            r"covariance\(t\) at t=.* must be \(3, 3\).* got shape \(2, 2\)",
+        ),
+        (
+            GivenCovariance(-np.eye(3) * 1e-4),
+            r"covariance\(t\) at .* not positive semi-definite \(least eigenvalue -0.0001\)",
+        ),
+        (
+            GivenCovariance(np.triu(np.ones((3, 3))) * 1e-4),
+            r"covariance\(t\) at .* is not symmetric",
+        ),
+        (
+            GivenCovariances(np.eye(2) * 1e-4),
+            r"covariances\(t_s\) of \d+ beam times .* must be \(\d+, 3, 3\)",
+        ),
+        (
+            GivenCovariances(-np.eye(3) * 1e-4),
+            r"covariances\(t_s\) at .* not positive semi-definite",
+        ),
+    ],
+)
+def test_a_pose_covariance_that_is_not_one_is_refused_by_name(
+    source: GivenCovariance, message: str
+) -> None:
+    """With pose_uncertainty, a NaN covariance failed in a bare LinAlgError, a 2x2 one in a
+    reshape error, and a negative-definite one was taken; each is refused at the first vote,
+    naming the source's method, the time and what a covariance must be."""
+    beams = _pool_beams(600, -70.0, seed=6)
+    cfg = POOL_CONFIG.replace(pose_uncertainty=True)
+    good = GivenCovariance(np.eye(3) * 1e-4)
+    assert len(run(LineExtractor(cfg, POOL_HEAD, Mounting(), good), beams)) == 4
+    with pytest.raises(ValueError, match=r"the pose source's " + message):
+        run(LineExtractor(cfg, POOL_HEAD, Mounting(), source), beams)
+
+
 def test_pose_uncertainty_widens_the_seed_ellipse_by_the_fit_pose_term() -> None:
     """The seed's ellipse knows nothing of the poses: pose uncertainty adds the fit's pose
     term to it and leaves the line itself alone."""
@@ -634,8 +698,9 @@ def test_pose_uncertainty_widens_the_seed_ellipse_by_the_fit_pose_term() -> None
 
 def test_beams_outside_the_pose_sources_span_are_said_once_naming_the_times() -> None:
     """A trajectory that stops halfway through the sector holds its last pose for the rest
-    (its design): the extractor says so once, naming the beams' times and the span; a
-    trajectory over all the beams is taken silently. The pool's sonar stands still, so the
+    (its design): the extractor says so once, naming the beams' times and the span, those of
+    the first vote that met any (it said 300 of 500 as if all); a trajectory over all the beams
+    is taken silently. The pool's sonar stands still, so the
     held pose is the true one and the walls are found either way."""
     beams = _pool_beams(800, -70.0, seed=2010)
     t = np.array([b.t for b in beams])
@@ -647,6 +712,7 @@ def test_beams_outside_the_pose_sources_span_are_said_once_naming_the_times() ->
     assert ex.n_votes == 6 and len(said) == 1
     message = str(said[0].message)
     assert f"300 beam time(s) {t[300]:.3f}-{t[599]:.3f} s (Unix)" in message  # the first vote's
+    assert "the first vote that met any" in message and "later votes may hold more" in message
     assert f"span {t[0]:.3f}-{t[299]:.3f} s" in message
     assert set(_wall_index(lines, wall_lines_world(POOL_WALLS))) == {0, 1, 2, 3}
     whole = LineExtractor(config, POOL_HEAD, Mounting(), Trajectory(t, zero))

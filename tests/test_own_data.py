@@ -229,6 +229,10 @@ def test_a_dataset_from_arrays_is_the_directorys_and_is_gated(
         ({"dvl_t_s": "backwards"}, r"<arrays>: dvl_t_s: row 5 \(.*\) is earlier than row 4"),
         ({"ahrs_yaw_rad": "nan"}, r"ahrs_yaw_rad: row 7 is not finite"),
         ({"beam_intensities": "bins"}, r"beam_intensities must have shape \(\d+, 500\)"),
+        (
+            {"beam_intensities": "floats"},
+            r"beam_intensities must be uint8 echo strengths 0-255, got float64 \(floats scaled 0-1",
+        ),
         ({"gps_lat_lon_deg": None}, "gps_t_s and gps_lat_lon_deg go together"),
         (
             {"ahrs_yaw_rad": "degrees"},
@@ -258,6 +262,8 @@ def test_bad_arrays_are_named(
         value = value[:, :100]
     elif how == "degrees":
         value = np.degrees(value)
+    elif how == "floats":  # 0-1 instead of 0-255
+        value = np.asarray(value) / 255.0
     elif how == "wrap360":  # degrees wrapping at 360 from a start near East
         assert value is not None
         value[:8], value[8:] = 1.0, 359.0

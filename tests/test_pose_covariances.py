@@ -54,7 +54,8 @@ def test_smoothed_pose_source_batch_equals_time_by_time() -> None:
 def test_a_source_without_batch_is_asked_time_by_time() -> None:
     rng = np.random.default_rng(5)
     t = np.arange(10.0)
-    covs = rng.normal(size=(10, 3, 3))
+    A = rng.normal(size=(10, 3, 3))
+    covs = A @ np.transpose(A, (0, 2, 1))  # covariances: a source's others are refused
     traj = Trajectory(t, rng.normal(size=(10, 3)), covs)
     assert isinstance(traj, PoseSource) and not isinstance(traj, BatchCovariances)
     got = pose_covariances(traj, [0.5, 3.0, 9.5])

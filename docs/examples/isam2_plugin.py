@@ -20,8 +20,8 @@ def pose(t_s: float) -> gtsam.Pose2:
 
 
 def belief(k: int, marginals: gtsam.ISAM2 | None = None) -> sonarslam.WorldBelief:
-    keys = [L(j) for j in range(len(association.map.landmarks))]  # pose X(k), every landmark
-    return sonarslam.gtsam_belief(isam.calculateEstimate(), X(k), keys, marginals)
+    # the pose X(k) and every landmark of the association, landmark j's line at L(j)
+    return sonarslam.gtsam_belief(isam.calculateEstimate(), X(k), L, association, marginals)
 
 
 isam, graph, values = gtsam.ISAM2(), gtsam.NonlinearFactorGraph(), gtsam.Values()

@@ -17,29 +17,47 @@ lines of the extractor:
 
 Step 4 cannot be skipped: :meth:`~LandmarkAssociation.decide` refuses to decide a vote before
 the previous decision was reported applied, and a belief whose landmarks are not those the
-association made (a new landmark left out) is refused, naming the parameter.
+association made (a new landmark left out) is refused, naming the parameter. Nor can the
+landmarks be in another order than the association's ids: :func:`gtsam_belief` reads landmark
+``j`` at ``line_key(j)`` (``L``), and :meth:`~LandmarkAssociation.decide` and
+:meth:`~LandmarkAssociation.applied` refuse a belief whose line ``j`` moved, since the last
+decision, beyond any update a consistent estimator can make (:data:`MOVE_TAIL_PROBABILITY`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from sonarslam.features.geometry import FloatArray
+from sonarslam.features.geometry import FloatArray, line_difference
 from sonarslam.features.line import LineFeature, check_mounting
 from sonarslam.slam.mapping.landmarks import LandmarkConfig, LandmarkMap
 from sonarslam.slam.mapping.vote import AfterVote, Belief, Decision, LandmarkBelief, NodeAnchor
 from sonarslam.slam.model.lines import (
+    check_mounting_pose,
     line_predictions,
     local_to_world_covariance,
     usable_observations,
+    world_observation,
 )
 
-__all__ = ["WorldBelief", "LandmarkAssociation", "gtsam_belief"]
+__all__ = ["WorldBelief", "LandmarkAssociation", "gtsam_belief", "MOVE_TAIL_PROBABILITY"]
+
+#: How improbable a landmark line's move must be to be refused as not the same landmark (a
+#: belief's lines in another order than the association's ids). Between two estimates of a
+#: consistent Gaussian estimator, landmark ``j``'s mean moves by ``d ~ N(0, P_then - P_now)``,
+#: whatever was added in between (this vote's observations, a loop closure), so
+#: ``d^T P_then^-1 d`` is stochastically at most chi-square with 2 degrees of freedom, whose
+#: tail beyond ``q`` is ``exp(-q / 2)``: the gate is ``q = -2 ln p`` (55.3 for 1e-12, 7.4
+#: sigma), a consistent estimator's line refused once in 1e12 tests. ``P_then`` is the
+#: landmark's marginal at the previous :meth:`LandmarkAssociation.decide` (a new landmark's:
+#: its newest observation's world covariance, ``world_observation``).
+MOVE_TAIL_PROBABILITY = 1e-12
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,12 +132,14 @@ class WorldBelief:
 def gtsam_belief(
     estimate: Any,
     pose_key: int,
-    line_keys: Sequence[int],
+    line_key: Callable[[int], int],
+    association: LandmarkAssociation,
     marginals: Any | None = None,
 ) -> WorldBelief:
     """A :class:`WorldBelief` from a GTSAM estimate: the ``Pose2`` at ``pose_key``, the 2-vector
-    lines at ``line_keys`` and, with ``marginals``, their joint marginal covariance with the pose
-    block converted from GTSAM's local (body) frame to world ``(x, y, yaw)``
+    line of every landmark the association made, landmark ``j``'s at ``line_key(j)``, and, with
+    ``marginals``, their joint marginal covariance with the pose block converted from GTSAM's
+    local (body) frame to world ``(x, y, yaw)``
     (:func:`sonarslam.slam.model.lines.local_to_world_covariance`).
 
     Parameters
@@ -128,13 +148,29 @@ def gtsam_belief(
         ``isam.calculateEstimate()`` or a batch optimum.
     pose_key : int
         Key of the body pose of the vote, a ``Pose2``.
-    line_keys : sequence of int
-        Keys of the landmark lines (2-vectors ``(rho_m, theta_rad)`` in the world), landmark
-        ``j``'s at position ``j``.
+    line_key : callable, int -> int
+        The key of landmark ``j``'s line (a 2-vector ``(rho_m, theta_rad)`` in the world):
+        ``gtsam.symbol_shorthand.L``. A function of the id, so that the lines are in the
+        association's order whatever order the keys were made in; a sequence of keys is
+        refused (TypeError).
+    association : LandmarkAssociation
+        Whose landmarks (ids ``0 .. len(association.map.landmarks) - 1``) the belief holds.
     marginals : gtsam.ISAM2 or gtsam.Marginals, optional
         Anything with ``jointMarginalCovariance(keys)``; None: no covariance (enough for
         :meth:`LandmarkAssociation.applied` without merging).
     """
+    if not callable(line_key):
+        raise TypeError(
+            f"gtsam_belief(line_key=...) must be the function from a landmark id to its key"
+            f" (gtsam.symbol_shorthand.L), got {type(line_key).__name__}: the association's"
+            " ids fix the order"
+        )
+    if not isinstance(association, LandmarkAssociation):
+        raise TypeError(
+            "gtsam_belief(association=...) must be the LandmarkAssociation whose landmarks the"
+            f" belief holds, got {type(association).__name__}"
+        )
+    line_keys = [line_key(j) for j in range(len(association.map.landmarks))]
     p = estimate.atPose2(pose_key)
     wTb = np.array([p.x(), p.y(), p.theta()])
     lines = np.array([np.asarray(estimate.atVector(key)) for key in line_keys]).reshape(-1, 2)
@@ -179,12 +215,14 @@ class LandmarkAssociation:
     def __init__(
         self, bTs: npt.ArrayLike, config: LandmarkConfig | None = None, *, seeds_used: bool
     ) -> None:
-        self.bTs = np.asarray(bTs, dtype=np.float64).reshape(3)
+        self.bTs = check_mounting_pose(bTs, "LandmarkAssociation(bTs=...)")
         self.config = config if config is not None else LandmarkConfig()
         self.seeds_used = seeds_used
         self.map = LandmarkMap(self.config, self.bTs)
         self._pending: Decision | None = None
         self._after: AfterVote | None = None
+        #: landmark id -> its line and 2x2 covariance when last decided on (module doc)
+        self._then: dict[int, tuple[FloatArray, FloatArray]] = {}
 
     def decide(
         self, lines: Sequence[LineFeature], belief: WorldBelief, pose_key: int | None = None
@@ -200,7 +238,10 @@ class LandmarkAssociation:
             mounting than ``bTs`` are refused (ValueError naming it).
         belief : WorldBelief
             Your estimate at the vote (its time: the lines' ``t``), with its covariance, over
-            every landmark made so far.
+            every landmark made so far, row ``j`` landmark ``j``: a line that moved since the
+            last decision beyond any update of a consistent estimator
+            (:data:`MOVE_TAIL_PROBABILITY`) is refused (ValueError naming the row), as lines in
+            another order than the ids.
         pose_key : int, optional
             Your key of the pose of this vote (a graph's ``X(k)``): the new landmarks'
             observations come back with it (``NodeAnchor.node``) so that you can add their
@@ -228,6 +269,7 @@ class LandmarkAssociation:
         if belief.cov is None:
             raise ValueError("belief.cov is None: decide needs the joint covariance")
         check_mounting(lines, self.bTs, "LandmarkAssociation(bTs=...)")
+        self._check_same_landmarks(belief, "decide")
         cfg = self.config
         obs = usable_observations(list(lines), cfg.min_rho_m, cfg.line_cov_scale)
         active = [lm.id for lm in self.map.active()]
@@ -256,7 +298,45 @@ class LandmarkAssociation:
             )
         )
         self._pending = decision
+        self._then = {
+            j: (
+                belief.lines_w[j].copy(),
+                belief.cov[3 + 2 * j : 5 + 2 * j, 3 + 2 * j : 5 + 2 * j].copy(),
+            )
+            for j in active
+        }
+        for new in decision.new_landmarks:  # the newest observation's world line and covariance
+            seen = world_observation(
+                new.observations[-1][1],
+                belief.wTb,
+                belief.cov[:3, :3],
+                self.bTs,
+                cfg.line_cov_scale,
+            )
+            self._then[new.id] = (np.asarray(new.line_w, dtype=np.float64), seen.cov_w)
         return decision
+
+    def _check_same_landmarks(self, belief: WorldBelief, method: str) -> None:
+        """Refuse a belief whose line ``j`` moved since the last :meth:`decide` beyond any update
+        of a consistent estimator (:data:`MOVE_TAIL_PROBABILITY`): it is not landmark ``j``."""
+        gate = -2.0 * math.log(MOVE_TAIL_PROBABILITY)
+        active = {lm.id for lm in self.map.active()}
+        for j, (line_then, P_then) in self._then.items():
+            if j not in active:
+                continue
+            d = line_difference(belief.lines_w[j], line_then)[0]
+            q = float(d @ np.linalg.pinv(P_then) @ d)
+            if q > gate:
+                now = np.array2string(belief.lines_w[j], precision=3, separator=", ")
+                then = np.array2string(line_then, precision=3, separator=", ")
+                raise ValueError(
+                    f"LandmarkAssociation.{method}: belief.lines_w row {j} {now} is not landmark"
+                    f" {j}, {then} at the last decide: it moved {math.sqrt(q):.0f} standard"
+                    f" deviations, beyond any update of a consistent estimator (tail probability"
+                    f" {MOVE_TAIL_PROBABILITY:g}). Are your landmark lines in another order than"
+                    " the association's ids? Row j must be landmark j (gtsam_belief(estimate,"
+                    " pose_key, L, association) reads them in its order)"
+                )
 
     def applied(self, belief: WorldBelief) -> None:
         """Report your estimate right after applying the last decision (its new landmarks
@@ -277,8 +357,9 @@ class LandmarkAssociation:
             No decision is waiting to be reported (call :meth:`decide` first).
         ValueError
             ``belief`` holds another number of landmarks than the association made (the
-            decision's new landmarks were not added), or ``belief.cov`` is None when duplicates
-            are merged.
+            decision's new landmarks were not added), a line that is not the landmark of its
+            row (moved beyond :data:`MOVE_TAIL_PROBABILITY` since :meth:`decide`: another
+            order), or ``belief.cov`` is None when duplicates are merged.
         """
         decision = self._pending
         if decision is None:
@@ -289,6 +370,7 @@ class LandmarkAssociation:
                 f"belief.lines_w holds {belief.k} landmark lines, but the association made {n}:"
                 " add the decision's new_landmarks to your estimate before applied"
             )
+        self._check_same_landmarks(belief, "applied")
         self._pending = None
         if not decision.ids:  # a vote without usable lines: the earlier estimate still counts
             return

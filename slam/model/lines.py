@@ -37,6 +37,7 @@ from sonarslam.features.line import LineFeature, check_mounting
 __all__ = [
     "local_to_world",
     "local_to_world_covariance",
+    "check_mounting_pose",
     "line_prediction",
     "line_predictions",
     "line_residual",
@@ -85,6 +86,38 @@ def local_to_world_covariance(wTb: npt.ArrayLike, cov_local: npt.ArrayLike) -> F
     return A @ cov @ A.T
 
 
+def check_mounting_pose(bTs: npt.ArrayLike, where: str) -> FloatArray:
+    """A sonar mounting ``(x_m, y_m, yaw_rad)`` as 3 finite floats with the yaw in radians.
+
+    Parameters
+    ----------
+    bTs : array_like, shape (3,)
+        The mounting given to a line model.
+    where : str
+        Names the parameter in the message (``"line_prediction(bTs=...)"``).
+
+    Returns
+    -------
+    ndarray, shape (3,)
+
+    Raises
+    ------
+    ValueError
+        Not 3 finite numbers, or a yaw beyond ``2 pi`` in magnitude (degrees given for
+        radians), naming ``where`` and the value.
+    """
+    mount = np.asarray(bTs, dtype=np.float64)
+    if mount.shape != (3,) or not np.all(np.isfinite(mount)):
+        raise ValueError(f"{where}: the sonar mounting must be 3 finite numbers, got {bTs!r}")
+    if abs(mount[2]) > 2.0 * np.pi:
+        raise ValueError(
+            f"{where}: the sonar mounting's yaw must be in radians within [-2 pi, 2 pi], got"
+            f" {float(mount[2])} (degrees? np.radians; the lines' LineFeature.bTs is the"
+            " extractor's mounting)"
+        )
+    return mount
+
+
 def line_prediction(
     wTb: FloatArray, line_w: FloatArray, bTs: FloatArray
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -97,7 +130,9 @@ def line_prediction(
     line_w : ndarray, shape (2,)
         World line ``(rho_m, theta_rad)`` (need not be normalised).
     bTs : ndarray, shape (3,)
-        Sonar mounting.
+        Sonar mounting ``(x_m, y_m, yaw_rad)``: the lines' extractor's
+        (:attr:`sonarslam.features.line.LineFeature.bTs`); a yaw beyond ``2 pi`` in magnitude
+        is refused (ValueError, :func:`check_mounting_pose`).
 
     Returns
     -------
@@ -108,6 +143,7 @@ def line_prediction(
     H_line : ndarray, shape (2, 2)
         ``d z_hat / d line_w``.
     """
+    bTs = check_mounting_pose(bTs, "line_prediction(bTs=...)")
     wTs = compose(wTb, bTs)
     z_hat, H_line, H_sensor = line_world_to_frame(line_w, wTs)
     J_b, _ = compose_jacobians(wTb, bTs)
@@ -124,6 +160,7 @@ def line_predictions(
     wTb : ndarray, shape (3,)
     lines_w : ndarray, shape (K, 2)
     bTs : ndarray, shape (3,)
+        Refused as by :func:`line_prediction`.
 
     Returns
     -------
@@ -132,6 +169,7 @@ def line_predictions(
         In ``(x, y, yaw)``.
     H_line : ndarray, shape (K, 2, 2)
     """
+    bTs = check_mounting_pose(bTs, "line_predictions(bTs=...)")
     x, y, psi = compose(wTb, bTs)
     J_b, _ = compose_jacobians(wTb, bTs)
     lw = np.asarray(lines_w, dtype=np.float64).reshape(-1, 2)
