@@ -156,7 +156,7 @@ def pose_covariances(source: PoseSource, t_s: npt.ArrayLike) -> FloatArray | Non
     if any(c is None for c in given):
         return None
     for tk, c in zip(t, given, strict=True):
-        shape = np.shape(c)
+        shape = np.asarray(c).shape
         if shape != (3, 3):
             raise ValueError(
                 f"the pose source's covariance(t) at t={tk:.3f} s (Unix) must be (3, 3), the"
