@@ -39,6 +39,7 @@ innovations of a consistent filter are white with the covariance it predicts):
     Landmark count growth: a window in which at least ``landmark_min_new`` landmarks were
     created and they are more than ``landmark_new_share_max`` of the window's associations
     (a map that re-observes its walls associates far more lines than it creates landmarks).
+    The first window is not judged: the map starts empty, and every wall seen then is new.
 ``travel``
     The direction the vehicle travels in its own frame by dead reckoning (the DVL's velocities
     through its mounting, :func:`travel_direction`): judged when at least
@@ -612,6 +613,7 @@ def _check_landmarks(inputs: HealthInputs, cfg: HealthConfig) -> tuple[list[Heal
     again = count(inputs.reobserved_s)
     share = new / np.maximum(new + again, 1)
     judged = new >= cfg.landmark_min_new
+    judged[0] = False  # the map starts empty: every wall of the first window is new
     flagged = judged & (share > cfg.landmark_new_share_max)
     issues = []
     for a, b, g in _spans(edges, flagged, hi):
