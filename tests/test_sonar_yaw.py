@@ -152,6 +152,24 @@ def test_calibrate_does_not_take_a_dvl_turned_round_for_the_sonar(
     assert not metrics["health_line"].startswith("health: no inconsistency found")
 
 
+def test_calibrate_names_the_sonar_when_dead_reckoning_runs_bow_first(
+    harbour_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The sonar's yaw given 180 deg wrong, the DVL right: calibrate still refuses a change that
+    large without --accept-large-yaw, but its words follow its own evidence: dead reckoning runs
+    bow first, so the DVL's mounting looks right and the sonar's is the likely one (it said a
+    rotation this large is more likely the DVL's or the AHRS's)."""
+    toml = (harbour_bag.parent / "sonarslam.toml").read_text(encoding="utf-8")
+    sonar = tomllib.loads(toml)["mounting"]["sonar"]["yaw_deg"]
+    head, tail = toml.split("[mounting.sonar]", 1)
+    tail = tail.replace(f"yaw_deg = {sonar!r}", f"yaw_deg = {sonar - 180.0!r}", 1)
+    bag = _bag_copy(harbour_bag, tmp_path / "run", head + "[mounting.sonar]" + tail)
+    assert main(["calibrate", str(bag), "--quiet"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "sonar's configured yaw is the likely one at fault" in err, err
+    assert "more likely one of those" not in err and "--accept-large-yaw" in err, err
+
+
 def test_calibrate_keeps_the_mountings_it_assumed_assumed(
     harbour_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -265,17 +265,27 @@ def yaw_change_doubt(dataset: Dataset, yaw_rad: float) -> str | None:
         if cfg.sonar_mounting.assumed
         else f"the configured {math.degrees(current):.2f} deg ({cfg.sonar_mounting.source})"
     )
+    angle, share = travel_direction(
+        body_velocity(dataset.dvl.v_mps[dataset.dvl.valid], cfg.dvl_mounting)
+    )
+    health = HealthConfig()
+    judged = math.isfinite(angle) and share >= health.travel_min_share
+    bow_first = judged and abs(math.degrees(angle)) <= health.travel_max_angle_deg
+    if cfg.sonar_mounting.assumed:
+        verdict = "it is the sonar's yaw only if the DVL's mounting is right"
+    elif bow_first:
+        verdict = (
+            "dead reckoning moves the vehicle bow first, so the DVL's mounting looks right and"
+            " the sonar's configured yaw is the likely one at fault"
+        )
+    else:
+        verdict = "a rotation this large is more likely one of those than the sonar's"
     out = (
         f"the sonar yaw found, {math.degrees(yaw_rad):.2f} deg, is {change:+.0f} deg from {given}:"
         " map sharpness over dead-reckoning poses measures the sonar's yaw relative to dead"
         " reckoning's motion, so a DVL mounting off by an angle ([mounting.dvl] yaw_deg, or its"
         " axes' signs) moves it by as much, and an AHRS mounting off ([mounting.ahrs] yaw_deg)"
-        " turns the whole run about its start, which no map sees; "
-        + (
-            "it is the sonar's yaw only if the DVL's mounting is right"
-            if cfg.sonar_mounting.assumed
-            else "a rotation this large is more likely one of those than the sonar's"
-        )
+        f" turns the whole run about its start, which no map sees; {verdict}"
     )
     assumed = [m for m in ("dvl", "ahrs") if getattr(cfg, f"{m}_mounting").assumed]
     if assumed:
@@ -284,18 +294,12 @@ def yaw_change_doubt(dataset: Dataset, yaw_rad: float) -> str | None:
             f" identity, never given): {math.degrees(yaw_rad):.2f} deg may be the DVL's"
             " mounting, not the sonar's"
         )
-    angle, share = travel_direction(
-        body_velocity(dataset.dvl.v_mps[dataset.dvl.valid], cfg.dvl_mounting)
-    )
     if math.isfinite(angle):
-        health = HealthConfig()
         out += (
             f"; dead reckoning moves the vehicle {math.degrees(angle):+.0f} deg off its bow"
             f" ({share:.2f} of its travel one way in its own frame)"
         )
-        if share >= health.travel_min_share and (
-            abs(math.degrees(angle)) > health.travel_max_angle_deg
-        ):
+        if judged and not bow_first:
             out += ": a vehicle travels bow first, so the DVL's mounting is likely turned by that"
     return out
 
