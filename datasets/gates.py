@@ -354,8 +354,9 @@ def dvl_speed_quantiles(dvl: DvlSeries, quantiles: tuple[int, ...] = (50, 90)) -
     return {q: float(np.percentile(speed, q)) for q in quantiles}
 
 
-def _dvl_unit(path: Path | None) -> str:
-    """Where the DVL's velocities come from and the unit the reader takes them in, in words."""
+def _dvl_unit(path: Path | None, slow: bool = False) -> str:
+    """Where the DVL's velocities come from and the unit the reader takes them in, in words;
+    ``slow``: for velocities far too small (a unit larger than the one read), else too large."""
     if path is not None and path.name.endswith("_DVL.log"):
         return (
             "the marina layout's bottomVelX/Y columns are read as cm/s, divided by 100, and no"
@@ -366,6 +367,11 @@ def _dvl_unit(path: Path | None) -> str:
         return "the DVL's velocities are taken as m/s (DvlSeries.v_mps)"
     if path.suffix.lower() == ".csv":
         return "the navigation CSV's dvl_vx_mps/dvl_vy_mps are read as m/s"
+    if slow:
+        return (
+            "the DVL's velocities are read as m/s, ROS's unit: check the unit the driver"
+            " publishes, and that the topic is the DVL's bottom velocity"
+        )
     return (
         "the DVL's velocities are read as m/s, ROS's unit: a driver publishing cm/s reads 100"
         " times fast"
@@ -385,7 +391,7 @@ def _check_dvl_speed(dvl: DvlSeries) -> None:
         f" {q[50]:.4f} m/s and 90th percentile {q[90]:.4f} m/s, under the"
         f" {DVL_MIN_SPEED_MPS:g} m/s that any AUV or ASC survey exceeds (ten times below the"
         f" slowest, ~0.2 m/s; a DVL at rest reads its own noise above it): the velocities' unit is likely wrong"
-        f" ({_dvl_unit(dvl.path)}); every estimate moves that much too little",
+        f" ({_dvl_unit(dvl.path, slow=True)}); every estimate moves that much too little",
     )
 
 

@@ -13,7 +13,7 @@ from collections.abc import Callable
 import numpy as np
 
 from sonarslam.datasets.errors import DataWarning
-from sonarslam.datasets.gates import dvl_speed_quantiles
+from sonarslam.datasets.gates import DVL_MIN_SPEED_MPS, dvl_speed_quantiles
 from sonarslam.datasets.records import GpsSeries
 from sonarslam.datasets.source import Dataset
 from sonarslam.features.geometry import FloatArray
@@ -95,6 +95,8 @@ def warn_dvl_sigma(dataset: Dataset, quality: dict[str, float] | None = None) ->
     scatter = (quality or dvl_quality(dataset))["dvl_scatter_p50_mps"]
     if not (scatter > 0.0 and sigma > DVL_SIGMA_OVER_SCATTER_MAX * scatter):
         return ""
+    if dvl_speed_quantiles(dataset.dvl, (90,))[90] < DVL_MIN_SPEED_MPS:
+        return ""  # the velocities' unit is wrong, and said when read: the scatter shrank too
     message = (
         f"{dataset.root}: [noise] dvl_sigma_mps = {sigma:g} m/s ({dataset.calibration}) is"
         f" {sigma / scatter:.0f} times the DVL's own scatter (median {scatter:.3g} m/s over"
