@@ -414,6 +414,28 @@ def test_truth_json_schema(harbour_dir: Path, harbour_sim) -> None:
     assert truth["head"]["angle_sense"] == -1
 
 
+def test_a_truth_on_another_clock_is_said_with_both_spans(
+    harbour_dir: Path, tmp_path: Path
+) -> None:
+    """A truth.json whose times miss the logs' (a bag recorded with simulated time, another
+    run's truth) failed the run with "no reference position inside the trajectory's time
+    span", naming neither file nor spans."""
+    import shutil
+
+    from sonarslam.datasets.source import open_dataset
+    from sonarslam.slam.eval.truth import truth_trajectory
+
+    folder = tmp_path / "h"
+    shutil.copytree(harbour_dir, folder)
+    truth = json.loads((folder / "truth.json").read_text())
+    truth["body_poses"]["rows"] = [[r[0] - 1e6, *r[1:]] for r in truth["body_poses"]["rows"]]
+    (folder / "truth.json").write_text(json.dumps(truth))
+    with pytest.raises(
+        ValueError, match=r"truth.json's body poses \(.*\) do not meet the navigation's"
+    ):
+        truth_trajectory(open_dataset(folder))
+
+
 def test_records_are_time_ordered_and_typed(harbour_sim) -> None:
     recs = harbour_sim.records()
     t = np.array([r.t for r in recs])

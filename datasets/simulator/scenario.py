@@ -328,7 +328,11 @@ def make_scenario(kind: str, seed: int, duration_s: float | None = None) -> Scen
             noise=SensorNoise(ahrs_bias_deg=bias_deg),
             ahrs_bias_sigma_deg=AHRS_BIAS_SIGMA_DEG,
             sonar_mounting=true_mount,
-            sonar_mounting_told=told,
+            sonar_mounting_told=replace(
+                told,
+                source="the simulator's nominal mounting (this world's drawn offsets are in"
+                " truth.json only)",
+            ),
         )
     return Scenario(kind=kind, seed=seed, duration_s=duration)
 

@@ -87,7 +87,9 @@ def command(args: argparse.Namespace) -> int:
     bias, se = gyro_bias_against_heading(d.attitude)
     print(
         f"  gyro against the AHRS heading's change: {math.degrees(bias):+.3f} ±"
-        f" {math.degrees(se):.3f} deg/s (a gyro bias; [motion] yaw_rate_source ="
+        f" {math.degrees(se):.3f} deg/s"
+        f" ({'a gyro bias' if abs(bias) > 2.0 * se else 'no bias beyond twice its standard error'};"
+        " [motion] yaw_rate_source ="
         f" {d.config.yaw_rate_source!r})"
     )
     span = d.sonar_span_s

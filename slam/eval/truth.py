@@ -54,6 +54,14 @@ def truth_trajectory(dataset: Dataset) -> Trajectory:
         raise ValueError(f"{dataset.root}: no truth.json (only simulated datasets have one)")
     truth = dataset.truth
     poses = np.asarray(truth["body_poses"]["rows"], dtype=np.float64)  # t, x, y, yaw (world frame)
+    t0, t1 = dataset.nav_span_s
+    if poses.shape[0] == 0 or poses[-1, 0] < t0 or poses[0, 0] > t1:
+        span = f"{poses[0, 0]:.3f}-{poses[-1, 0]:.3f} s" if poses.shape[0] else "no pose"
+        raise ValueError(
+            f"{dataset.root}: truth.json's body poses ({span}, Unix) do not meet the"
+            f" navigation's {t0:.3f}-{t1:.3f} s: the truth is on another clock than the logs (a"
+            " bag recorded with simulated time, or another run's truth.json)"
+        )
     xy = poses[:, 1:3] - _offset(dataset)
     return Trajectory(poses[:, 0].copy(), np.column_stack([xy, wrap_angle(poses[:, 3])]))
 
