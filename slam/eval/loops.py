@@ -349,8 +349,9 @@ class OdometryCheck:
         if self.skipped_still:
             parts.append(
                 f"at {self.skipped_still} of {self.starts} starts dead reckoning moved less than"
-                f" {self.step_m:g} m within five turns of the head: is the DVL's speed right"
-                " (`sonarslam info` gives it)?"
+                f" {self.step_m:g} m within five turns of the head: a vehicle that hardly"
+                " moves, or a DVL's velocities in another unit (`sonarslam info` gives its"
+                " speed)"
             )
         if self.skipped_sparse:
             parts.append(
