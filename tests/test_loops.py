@@ -249,6 +249,8 @@ def test_a_closed_loop_whose_sonar_is_turned_round_is_not_called_healthy(
     assert abs(m["odometry_check_heading_deg"]) > 150.0
     assert m["health_flagged"] == ["odometry"], m["health_line"]
     assert "[mounting.dvl] yaw_deg" in m["health_line"]
+    # with the values in force and where they came from (the user's file here)
+    assert f"(now: [mounting.sonar] yaw_deg = {told - 180.0:g} ({wrong})" in m["health_line"]
     args[args.index("--out") + 1] = str(tmp_path / "ekf_right")
     assert main(args) == 0
     right = json.loads((tmp_path / "ekf_right" / "metrics.json").read_text())

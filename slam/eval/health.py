@@ -215,6 +215,9 @@ class HealthInputs:
         through its mounting): the ``travel`` check (not judged without rows).
     odometry : OdometryCheck or None
         The run's odometry check (runs without GPS): the ``odometry`` check.
+    mountings_said : str
+        The mountings those two checks blame, as configured, in words (their values and
+        sources), appended to their issues.
     """
 
     trajectory: Trajectory
@@ -232,6 +235,7 @@ class HealthInputs:
     n_lines: int = 0
     travel_body_mps: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
     odometry: OdometryCheck | None = None
+    mountings_said: str = ""
 
 
 @dataclass(frozen=True)
@@ -691,6 +695,7 @@ def _check_travel(inputs: HealthInputs, cfg: HealthConfig) -> tuple[list[HealthI
         " signs) is likely turned by about that; a sonar yaw calibrated by map sharpness on this"
         " dead reckoning (`sonarslam calibrate`) took the same turn: calibrate it again after"
         " the fix. A vehicle that truly travels stern- or side-first: not an error"
+        + (f" (now: {inputs.mountings_said})" if inputs.mountings_said else "")
     )
     return [HealthIssue("travel", cause, lo, hi)], 1
 
@@ -708,6 +713,7 @@ def _check_odometry(inputs: HealthInputs) -> tuple[list[HealthIssue], int]:
         f" reckoning moves it ({check.accepted} registrations of scans a few metres apart,"
         f" standard error {check.heading_se_deg:.1f} deg): one of {ODOMETRY_CAUSES} is likely"
         " wrong; every estimate of this run follows dead reckoning's motion"
+        + (f" (now: {inputs.mountings_said})" if inputs.mountings_said else "")
     )
     return [HealthIssue("odometry", cause, lo, hi)], 1
 

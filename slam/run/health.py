@@ -12,6 +12,7 @@ on simulated data only, feeds the ``nees`` check.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -133,6 +134,10 @@ def health_inputs(
         n_lines=len(result.features),
         travel_body_mps=body_velocity(dataset.dvl.v_mps[dataset.dvl.valid], c.dvl_mounting),
         odometry=odometry,
+        mountings_said=", ".join(
+            f"[mounting.{name}] yaw_deg = {math.degrees(m.yaw_rad):g} ({m.source})"
+            for name, m in (("sonar", c.sonar_mounting), ("dvl", c.dvl_mounting))
+        ),
     )
 
 
