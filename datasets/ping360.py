@@ -1086,11 +1086,17 @@ def _check_clocks(
             " set [ping360] utc_offset_h, or start, in sonarslam.toml",
         )
     nav = dvl.path or att.path
-    column = "t_s column" if nav is not None and nav.suffix.lower() == ".csv" else "stamps"
+    csv = nav is not None and nav.suffix.lower() == ".csv"
+    column = "t_s column is" if csv else "header stamps are"
     if t0 > 100.0 * b1:
         likely = f"milliseconds? (x{t0 / b0:.4g} the beams' times)"
     elif t1 < ZONE_MISS_S * 1000.0:
-        likely = "relative to the start? (it starts near 0)"
+        likely = (
+            "relative to the start? (it starts near 0)"
+            if csv
+            else "a simulated clock? (a bag recorded with use_sim_time starts near 0): record"
+            " with the wall clock, or re-stamp the bag (rosbags can rewrite one)"
+        )
     else:
         likely = (
             "another epoch or clock? (or the log's start is wrong: its file name, [ping360] start)"
@@ -1099,7 +1105,7 @@ def _check_clocks(
         nav or p,
         None,
         f"{miss}, not a time zone (beyond {MAX_ZONE_H:g} h, or more than"
-        f" {ZONE_SLACK_H * 60:g} min off a quarter hour): the navigation's {column} is not Unix"
+        f" {ZONE_SLACK_H * 60:g} min off a quarter hour): the navigation's {column} not Unix"
         f" seconds on the sonar's clock: {likely}",
     )
 
