@@ -102,8 +102,10 @@ def yaw_rate_input(
     The newest AHRS sample at or before ``t``: its gyro rate (``yaw_rate_source = "gyro"``) or
     the body heading's change from the sample before it over their time apart (``"heading"``);
     0 before the first sample, for the first sample with ``"heading"``, and when the newest
-    sample is older than ``stale_s`` (an AHRS gap), as the closed loop
-    (:func:`sonarslam.slam.run.closed_loop.run_closed_loop`) turns its heading.
+    sample is older than ``stale_s`` (an AHRS gap): the rate the closed loop
+    (:func:`sonarslam.slam.run.closed_loop.run_closed_loop`) turns its heading by, which it keeps
+    step by step from the samples it streams (so its first ``"heading"`` rate waits for its
+    second sample, where this takes the sample before).
     """
     t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
     ta = attitude.t
@@ -511,7 +513,7 @@ def dead_reckoning(
     t1_s: float,
     noise: MotionNoise,
     ahrs_deviation_rad: tuple[float, float] = (0.0, 0.0),
-    yaw_rate_source: str = "heading",
+    yaw_rate_source: str = "gyro",
 ) -> Trajectory:
     """Dead reckoning from DVL velocity and AHRS heading on the AHRS timeline (10 Hz marina).
 
