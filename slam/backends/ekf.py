@@ -12,7 +12,11 @@ State ``x = [x, y, psi, b, delta, k, g, rho_1, theta_1, ..., rho_L, theta_L]``:
   at 0);
 * ``g``: the gyro's yaw-rate bias (rad/s), a constant with prior ``gyro_bias_sigma_deg_per_s``:
   a step whose heading change integrates the gyro turns by ``dyaw - g dt``
-  (:attr:`sonarslam.slam.model.motion.MotionStep.gyro_dt_s`); the AHRS headings observe it. Left
+  (:attr:`sonarslam.slam.model.motion.MotionStep.gyro_dt_s`), and with a DVL lever arm ``r``
+  its displacement by ``g gyro_dt (-r_y, r_x)`` too (the lever-arm term ``-omega x r`` of the
+  body velocity turns with the gyro's rate, :attr:`MotionStep.dx_dbias_m_s`; that term is rotated
+  by ``delta`` and scaled by ``1 + k`` with the rest, a product of two small terms); the AHRS
+  headings observe it. Left
   out, a gyro bias (docs/design-decisions.md) is taken for the AHRS bias's walk
   when the bias walks, and the heading spins away; with the AHRS heading's own change as the rate
   (``yaw_rate_source = "heading"``) no step involves it and it stays at its prior;
@@ -374,7 +378,12 @@ class LineEkf:
             return np.zeros(3)
         x = self.kf.x
         psi, delta, k_scale = float(x[2]), float(x[4]), float(x[5])
-        dx, dy = step_displacement(psi + delta, step.dx_m, step.dy_m)
+        sx, sy = step.dx_m, step.dy_m
+        lever_bias = step.dx_dbias_m_s != 0.0 or step.dy_dbias_m_s != 0.0
+        if lever_bias:  # the DVL lever arm's term turns with the gyro's rate, bias and all
+            g = float(x[GYRO_BIAS])
+            sx, sy = sx + g * step.dx_dbias_m_s, sy + g * step.dy_dbias_m_s
+        dx, dy = step_displacement(psi + delta, sx, sy)
         gain = 1.0 + k_scale
         x[0] += gain * dx
         x[1] += gain * dy
@@ -400,6 +409,12 @@ class LineEkf:
         F[0, 5] = dx
         F[1, 5] = dy
         F[2, GYRO_BIAS] = -step.gyro_dt_s
+        if lever_bias:
+            bx, by = step_displacement(psi + delta, step.dx_dbias_m_s, step.dy_dbias_m_s)
+            F[0, GYRO_BIAS] = gain * bx
+            F[1, GYRO_BIAS] = gain * by
+        else:
+            F[0, GYRO_BIAS] = F[1, GYRO_BIAS] = 0.0
         # the vehicle block now (P_vv <- F P_vv F^T + Q); the landmark columns at the flush
         nv = self._cal.size
         P_vv = self.kf.P[:nv, :nv]
@@ -411,7 +426,7 @@ class LineEkf:
         self._Phi = F @ self._Phi
         self._pending = True
         self.t_s = step.t_s
-        bx, by = step_displacement(delta, step.dx_m, step.dy_m)  # delta and k
+        bx, by = step_displacement(delta, sx, sy)  # delta and k
         return np.array([gain * bx, gain * by, dyaw])
 
     def _flush(self) -> None:

@@ -1,9 +1,12 @@
 """The motion model: DVL body velocity and a yaw rate (or the AHRS heading), integrated.
 
-Frames: the DVL measures velocity in its own frame; ``v_b = R(dvl_yaw) v_dvl`` in the body frame
-(x forward, y left). The AHRS gives the yaw of its own frame; the body yaw is
-``psi_b = psi_ahrs - ahrs_yaw`` (mountings in :mod:`sonarslam.datasets.config`). Lever arms are ignored
-(the vehicle turns slowly; a 0.3 m arm at 5 deg/s is 2.6 cm/s, below the DVL noise).
+Frames: the DVL measures the velocity of its own point in its own frame; the body velocity
+(x forward, y left) is ``v_b = R(dvl_yaw) v_dvl - omega x r`` with ``r`` the DVL's lever arm
+(``(x_m, y_m)`` of its mounting) and ``omega`` the yaw rate the model turns by at that time
+(:func:`body_velocity`, the one place of that conversion; the rigid-body lever-arm compensation of
+Kinsey, Eustice & Whitcomb 2006, "A survey of underwater vehicle navigation", sec. 3). The AHRS gives
+the yaw of its own frame; the body yaw is ``psi_b = psi_ahrs - ahrs_yaw`` (mountings in
+:mod:`sonarslam.datasets.config`).
 
 The model, one step of ``dt`` between two records::
 
@@ -41,6 +44,7 @@ from sonarslam.sonar.beam import Mounting
 __all__ = [
     "body_velocity",
     "body_yaw",
+    "yaw_rate_input",
     "MotionStep",
     "motion_step",
     "step_displacement",
@@ -52,11 +56,77 @@ __all__ = [
 ]
 
 
-def body_velocity(v_dvl_mps: npt.ArrayLike, dvl_mounting: Mounting) -> FloatArray:
-    """DVL-frame velocities (N, 2) to body-frame velocities (N, 2) (m/s)."""
+def body_velocity(
+    v_dvl_mps: npt.ArrayLike, dvl_mounting: Mounting, yaw_rate_rad_per_s: npt.ArrayLike = 0.0
+) -> FloatArray:
+    """DVL-frame velocities (N, 2) to body-frame velocities (N, 2) (m/s), lever arm compensated.
+
+    ``v_b = R(yaw_dvl) v_dvl - omega x r``: the DVL measures the velocity of its own point,
+    which is the body origin's plus ``omega x r`` (a rigid body turning at ``omega`` about the
+    vertical, ``r = (x_m, y_m)`` the mounting's lever arm; in 2-D ``omega x r = omega (-r_y,
+    r_x)``); Kinsey, Eustice & Whitcomb 2006, "A survey of underwater vehicle navigation", sec. 3.
+
+    Parameters
+    ----------
+    v_dvl_mps : array_like, shape (N, 2) or (2,)
+        Velocities in the DVL frame (m/s).
+    dvl_mounting : Mounting
+        The DVL's ``bTs``: its yaw rotates, its ``(x_m, y_m)`` is the lever arm.
+    yaw_rate_rad_per_s : float or array_like, shape (N,)
+        The yaw rate the motion model turns by at each velocity's time (rad/s): the gyro's or
+        the AHRS heading's own change (``[motion] yaw_rate_source``, :func:`yaw_rate_input`).
+        0 gives the DVL's velocity in body axes. With no lever arm it is not used.
+    """
     v = np.atleast_2d(np.asarray(v_dvl_mps, dtype=np.float64))
     c, s = np.cos(dvl_mounting.yaw_rad), np.sin(dvl_mounting.yaw_rad)
-    return np.column_stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]])
+    v_b = np.column_stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]])
+    rx, ry = dvl_mounting.x_m, dvl_mounting.y_m
+    if rx == 0.0 and ry == 0.0:
+        return v_b
+    w = np.asarray(yaw_rate_rad_per_s, dtype=np.float64)
+    v_b[:, 0] += w * ry  # - omega x r = -omega (-r_y, r_x)
+    v_b[:, 1] -= w * rx
+    return v_b
+
+
+def yaw_rate_input(
+    t_s: npt.ArrayLike,
+    attitude: AttitudeSeries,
+    ahrs_mounting: Mounting,
+    yaw_rate_source: str,
+    stale_s: float,
+    ahrs_deviation_rad: tuple[float, float] = (0.0, 0.0),
+) -> FloatArray:
+    """The yaw rate the motion model turns by from each time on (rad/s), shape (N,), causal.
+
+    The newest AHRS sample at or before ``t``: its gyro rate (``yaw_rate_source = "gyro"``) or
+    the body heading's change from the sample before it over their time apart (``"heading"``);
+    0 before the first sample, for the first sample with ``"heading"``, and when the newest
+    sample is older than ``stale_s`` (an AHRS gap): the rate the closed loop
+    (:func:`sonarslam.slam.run.closed_loop.run_closed_loop`) turns its heading by, which it keeps
+    step by step from the samples it streams (so its first ``"heading"`` rate waits for its
+    second sample, where this takes the sample before).
+    """
+    t = np.atleast_1d(np.asarray(t_s, dtype=np.float64))
+    ta = attitude.t
+    j = np.searchsorted(ta, t, side="right") - 1
+    have = j >= 0
+    jj = np.clip(j, 0, None)
+    if yaw_rate_source == "gyro":
+        rate_at = np.asarray(attitude.yaw_rate_rad_per_s, dtype=np.float64)
+    elif yaw_rate_source == "heading":
+        rate_at = np.zeros(ta.size)
+        if ta.size > 1:
+            yaw_b = body_yaw(attitude.yaw_rad, ahrs_mounting, ahrs_deviation_rad)
+            dt = np.diff(ta)
+            ok = dt > 0.0
+            rate_at[1:][ok] = wrap_angle(np.diff(yaw_b)[ok]) / dt[ok]
+    else:
+        raise ValueError(f"yaw_rate_source must be 'gyro' or 'heading', got {yaw_rate_source!r}")
+    if ta.size == 0:
+        return np.zeros(t.size)
+    fresh = have & (t - ta[jj] <= stale_s)
+    return np.where(fresh, rate_at[jj], 0.0)
 
 
 def body_yaw(
@@ -103,6 +173,11 @@ class MotionStep:
         the rate is the gyro's, 0 when it is the AHRS heading's own change or none (an AHRS
         gap). A gyro bias ``g`` (rad/s) turns the true heading change into
         ``dyaw_rad - g * gyro_dt_s``.
+    dx_dbias_m_s, dy_dbias_m_s : float
+        The displacement's derivative by that bias (m per rad/s): the lever-arm term of
+        :func:`body_velocity` turns with the gyro's rate, so the true displacement is
+        ``(dx_m, dy_m) + g (dx_dbias_m_s, dy_dbias_m_s)`` = ``+ g gyro_dt_s (-r_y, r_x)``;
+        0 without a lever arm or off the gyro.
     var_xy_m2 : float
         Derived: the position variance per axis the step adds, one error per held DVL sample
         (:func:`sonarslam.slam.model.noise.held_velocity_variance_step`, m^2).
@@ -117,6 +192,8 @@ class MotionStep:
     held_s: float
     var_yaw_gap_rad2: float = 0.0
     gyro_dt_s: float = 0.0
+    dx_dbias_m_s: float = 0.0
+    dy_dbias_m_s: float = 0.0
     #: computed once: the driver's odometry and the back end both ask
     var_xy_m2: float = field(init=False)
 
@@ -146,6 +223,7 @@ def motion_step(
     held_from_s: float,
     var_yaw_gap_rad2: float = 0.0,
     from_gyro: bool = False,
+    lever_arm_m: tuple[float, float] = (0.0, 0.0),
 ) -> MotionStep:
     """The step from ``t_prev_s`` to ``t_s`` with a body velocity and a yaw rate held over it.
 
@@ -153,9 +231,13 @@ def motion_step(
     of the integration if later): the step's share of the sample's error grows with it.
     ``var_yaw_gap_rad2``: the heading variance an AHRS gap adds over the step (rad^2).
     ``from_gyro``: the yaw rate is the gyro's (its bias then enters, :attr:`MotionStep.gyro_dt_s`).
+    ``lever_arm_m``: the DVL's ``(x_m, y_m)`` when ``v_b_mps`` was compensated with this step's
+    yaw rate (:func:`body_velocity`): with the gyro's, the bias enters the displacement too
+    (:attr:`MotionStep.dx_dbias_m_s`).
     """
     dt = max(t_s - t_prev_s, 0.0)
     v = np.asarray(v_b_mps, dtype=np.float64)
+    gyro_dt = dt if from_gyro else 0.0
     return MotionStep(
         t_s=float(t_s),
         dt_s=dt,
@@ -165,7 +247,9 @@ def motion_step(
         sigma_v_mps=float(sigma_v_mps),
         held_s=max(t_s - held_from_s, dt),
         var_yaw_gap_rad2=float(var_yaw_gap_rad2),
-        gyro_dt_s=dt if from_gyro else 0.0,
+        gyro_dt_s=gyro_dt,
+        dx_dbias_m_s=-gyro_dt * lever_arm_m[1],
+        dy_dbias_m_s=gyro_dt * lever_arm_m[0],
     )
 
 
@@ -325,23 +409,33 @@ class OdometryChain:
 class VelocityInput:
     """Body velocity held between DVL samples, with its 1-sigma, at given times."""
 
-    v_b_mps: FloatArray  # (N, 2)
+    v_b_mps: FloatArray  # (N, 2) body velocity (lever arm compensated with the given yaw rate)
     sigma_mps: FloatArray  # (N,)
     in_dropout: np.ndarray  # (N,) bool
     sample_t_s: FloatArray  # (N,) since when the velocity has been held (Unix s)
+    v_dvl_mps: FloatArray  # (N, 2) the held velocity in the DVL frame (zero where none is)
 
 
 def velocity_input(
-    t_s: FloatArray, dvl: DvlSeries, dvl_mounting: Mounting, noise: MotionNoise
+    t_s: FloatArray,
+    dvl: DvlSeries,
+    dvl_mounting: Mounting,
+    noise: MotionNoise,
+    yaw_rate_rad_per_s: npt.ArrayLike = 0.0,
 ) -> VelocityInput:
     """Body velocity at times ``t_s``: the last valid DVL sample (zero-order hold).
 
+    The held DVL velocity becomes the body velocity at each time by :func:`body_velocity` with
+    ``yaw_rate_rad_per_s`` (scalar or shape (N,), the yaw rate the model turns by from that time
+    on, :func:`yaw_rate_input`); a caller that knows the rate only step by step (the closed
+    loop) gives none and converts :attr:`VelocityInput.v_dvl_mps` itself.
     The 1-sigma of a valid sample is :func:`sonarslam.slam.model.noise.dvl_sample_sigma`. During a
     dropout (the newest DVL row has no bottom lock, or the newest valid sample is older than
     ``dvl_stale_s``: a gap of the DVL) the last valid velocity is held and its 1-sigma grows
     linearly from that to ``gap_sigma_mps`` (or stays, when larger) over ``dvl_max_gap_s``;
     past that the velocity is zero with ``gap_sigma_mps``, held since the dropout expired.
-    Before the first valid sample it is zero, held since the query time.
+    Before the first valid sample it is zero, held since the query time. Those zeros are the
+    DVL's (its point at rest), converted like any sample.
 
     Raises
     ------
@@ -357,12 +451,13 @@ def velocity_input(
             " no velocity to navigate with",
         )
     valid_t = dvl.t[dvl.valid]
-    v_valid = body_velocity(dvl.v_mps[dvl.valid], dvl_mounting)
-    sigma_valid = dvl_sample_sigma(valid_t, v_valid, noise)
+    v_dvl_valid = np.asarray(dvl.v_mps[dvl.valid], dtype=np.float64)
+    # the sample noise from the DVL's own scatter, in body axes (no lever arm: its wobble)
+    sigma_valid = dvl_sample_sigma(valid_t, body_velocity(v_dvl_valid, dvl_mounting), noise)
     last_valid = np.searchsorted(valid_t, t_s, side="right") - 1
     last_any = np.searchsorted(dvl.t, t_s, side="right") - 1
     have = last_valid >= 0
-    v = np.where(have[:, None], v_valid[np.clip(last_valid, 0, None)], 0.0)
+    v = np.where(have[:, None], v_dvl_valid[np.clip(last_valid, 0, None)], 0.0)
     age = np.where(have, t_s - valid_t[np.clip(last_valid, 0, None)], np.inf)
     # In dropout when the newest DVL row at t is an invalid one, or the sample is stale (a gap).
     newest_invalid = (last_any >= 0) & ~dvl.valid[np.clip(last_any, 0, None)]
@@ -375,7 +470,10 @@ def velocity_input(
     sigma = np.where(expired, noise.gap_sigma_mps, sigma)
     sample_t = np.where(have, t_s - np.where(np.isfinite(age), age, 0.0), t_s)
     sample_t = np.where(expired & have, sample_t + noise.dvl_max_gap_s, sample_t)
-    return VelocityInput(v_b_mps=v, sigma_mps=sigma, in_dropout=in_dropout, sample_t_s=sample_t)
+    v_b = body_velocity(v, dvl_mounting, yaw_rate_rad_per_s)
+    return VelocityInput(
+        v_b_mps=v_b, sigma_mps=sigma, in_dropout=in_dropout, sample_t_s=sample_t, v_dvl_mps=v
+    )
 
 
 def gyro_bias_against_heading(
@@ -415,11 +513,13 @@ def dead_reckoning(
     t1_s: float,
     noise: MotionNoise,
     ahrs_deviation_rad: tuple[float, float] = (0.0, 0.0),
+    yaw_rate_source: str = "gyro",
 ) -> Trajectory:
     """Dead reckoning from DVL velocity and AHRS heading on the AHRS timeline (10 Hz marina).
 
     Position integrates ``R(psi_b) v_b`` with the velocity held from the last DVL sample
-    (:func:`velocity_input`); heading is the AHRS heading (absolute, not integrated), so the
+    (:func:`velocity_input`), its lever arm compensated with the yaw rate of
+    ``yaw_rate_source`` (:func:`yaw_rate_input`, as the closed loop turns); heading is the AHRS heading (absolute, not integrated), so the
     position covariance grows and the heading variance stays ``ahrs_sigma_rad**2``. The start
     position is ``start_wTb[:2]`` at ``t0_s`` (the first GPS fix by the ATE protocol); the start
     yaw is the AHRS's.
@@ -441,7 +541,10 @@ def dead_reckoning(
     yaw = np.where(age > 0.0, yaw_unwrapped[last], yaw)
     psi = body_yaw(yaw, ahrs_mounting, ahrs_deviation_rad)
     var_heading = noise.ahrs_sigma_rad**2 + noise.gap_heading_variance(age - noise.ahrs_stale_s)
-    vin = velocity_input(t, dvl, dvl_mounting, noise)
+    rate = yaw_rate_input(
+        t, attitude, ahrs_mounting, yaw_rate_source, noise.ahrs_stale_s, ahrs_deviation_rad
+    )
+    vin = velocity_input(t, dvl, dvl_mounting, noise, rate)
     dt = np.diff(t)
     # the steps in the world: R(psi) (dt v_b), the model's translation, all at once
     heading = np.column_stack([np.zeros((dt.size, 2)), psi[:-1]])

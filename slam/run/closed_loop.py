@@ -2,9 +2,10 @@
 
 The driver walks the merged record stream in time order. Every record first moves the back end
 to its time by one motion step (:func:`sonarslam.slam.model.motion.motion_step`: the DVL velocity held
-since its sample, causal, its noise growing through a DVL gap; the yaw rate of the gyro or of
-the AHRS heading's own change, none through an AHRS gap, where the DVL records carry the
-trajectory on). AHRS records update the heading; sonar beams go to the :class:`sonarslam.features.extractor.LineExtractor`,
+since its sample, causal, its noise growing through a DVL gap, made the body velocity with its
+lever arm compensated at the step's yaw rate (:func:`sonarslam.slam.model.motion.body_velocity`);
+the yaw rate of the gyro or of the AHRS heading's own change, none through an AHRS gap, where
+the DVL records carry the trajectory on). AHRS records update the heading; sonar beams go to the :class:`sonarslam.features.extractor.LineExtractor`,
 whose only view of the vehicle is the :class:`sonarslam.features.pose_source.PoseSource` the back end
 gives (:meth:`sonarslam.slam.backends.base.Backend.pose_source`); the lines it returns update the back end.
 With ``"scans"`` among the back end's ``constraints`` the beams also go to the scan matcher
@@ -32,7 +33,7 @@ from sonarslam.features.line import LineFeature
 from sonarslam.features.scans import ScanConfig, ScanMatcher
 from sonarslam.slam.backends.base import AnchoredOdometry, Backend, ScanBackend
 from sonarslam.slam.io.trajectory import Trajectory
-from sonarslam.slam.model.motion import body_yaw, motion_step, velocity_input
+from sonarslam.slam.model.motion import body_velocity, body_yaw, motion_step, velocity_input
 from sonarslam.slam.run.sources import motion_noise, start_pose
 from sonarslam.sonar.beam import SonarBeam
 
@@ -129,7 +130,11 @@ def run_closed_loop(
     yaw_rate = 0.0
     heading_rate = cfg.yaw_rate_source == "heading"
     prev_yaw: tuple[float, float] | None = None  # (t, body yaw) of the previous AHRS sample
+    mount = cfg.dvl_mounting
+    lever = (mount.x_m, mount.y_m)
+    has_lever = lever != (0.0, 0.0)  # its compensation needs the step's own yaw rate
     v_prev, s_prev = np.zeros(2), float(vin.sigma_mps[0]) if len(records) else 0.0
+    v_prev_dvl = np.zeros(2)
     t_prev, held_from = t0, t0  # previous record; since when its velocity sample is held
     t_ahrs = t0  # the newest AHRS sample (an AHRS gap: older than noise.ahrs_stale_s)
     extractor_s = backend_s = scan_matcher_s = 0.0
@@ -143,9 +148,16 @@ def run_closed_loop(
         rate = yaw_rate if fresh else 0.0
         var_gap = noise.ahrs_gap_variance(t_prev, rec.t, t_ahrs)
         gyro = fresh and not heading_rate  # the back end's gyro bias enters this step
-        step = motion_step(t_prev, rec.t, v_prev, s_prev, rate, held_from, var_gap, gyro)
+        if has_lever:  # the body velocity with the lever arm at the rate this step turns by
+            v_b = body_velocity(v_prev_dvl, mount, rate)[0]
+            step = motion_step(
+                t_prev, rec.t, v_b, s_prev, rate, held_from, var_gap, gyro, lever_arm_m=lever
+            )
+        else:
+            step = motion_step(t_prev, rec.t, v_prev, s_prev, rate, held_from, var_gap, gyro)
         odometry.append(rec.t, backend.predict(step), step.var_xy_m2)
         v_prev, s_prev = vin.v_b_mps[k], float(vin.sigma_mps[k])
+        v_prev_dvl = vin.v_dvl_mps[k]
         t_prev, held_from = rec.t, max(float(vin.sample_t_s[k]), t0)
         if isinstance(rec, Attitude):
             counts["ahrs"] += 1

@@ -209,6 +209,7 @@ def dead_reckoning_trajectory(dataset: Dataset) -> Trajectory:
         dataset.nav_span_s[1],
         motion_noise(dataset),
         dataset.config.ahrs_deviation_rad,
+        dataset.config.yaw_rate_source,
     )
 
 
