@@ -14,8 +14,8 @@ relative pose ``t0Tt1`` it truly had between them:
   registered onto the other (:func:`sonarslam.features.scans.icp.register_from`, from the
   estimate's relative pose with a guess covariance of ``radius_m`` and 10 deg); an accepted
   registration is the map's measure of the true ``t0Tt1`` in the directions it constrains (in
-  one it leaves free, along a single wall or between parallel ones, the guess is put back:
-  dead reckoning's, not the start the registration kept there), independent
+  one it leaves free, along a single wall, it keeps its start: the guess, dead reckoning's, or
+  one of the starts around it), independent
   of the drift between the two times (the motion correction within one turn is the odometry's,
   locally right). A registration whose position lands more than ``radius_m`` from the guess is
   rejected (*too far*): the search proposed the pair because the estimate came back within
@@ -291,28 +291,15 @@ def _confirm(
     reg = register_from(reference_lines(a.points_b, config), b.points_b, guess, cov, config)
     if not reg.accepted:
         return None, False
-    # a direction the scans leave free (along a single wall) keeps the guess, dead reckoning's
-    # relative pose (the registration keeps its start's there, which may be one of the starts
-    # moved off the guess): such a reference states no accuracy of its own
-    z = _free_to_guess(np.asarray(reg.z, dtype=np.float64), guess, reg.constrained, reg.length_m)
+    z = np.asarray(reg.z, dtype=np.float64)
     if math.hypot(*(z[:2] - guess[:2])) > radius_m:
         return None, True
+    # a direction the scans leave free (along a single wall) keeps its start, the guess or one
+    # near it: such a reference states no accuracy of its own
     free = 3 - int(reg.constrained.shape[1])
     cov = np.asarray(reg.cov, dtype=np.float64)
     sigma_m = math.sqrt(max(float(np.trace(cov[:2, :2])), 0.0)) if free == 0 else math.nan
     return Loop(a.t_ref_s, b.t_ref_s, "found", z, sigma_m, free), False
-
-
-def _free_to_guess(
-    z: FloatArray, guess: FloatArray, constrained: FloatArray, length_m: float
-) -> FloatArray:
-    """``z`` (3,) ``(x_m, y_m, yaw_rad)`` with its components along the directions of
-    ``(x, y, length_m yaw)`` that ``constrained`` (3, k, orthonormal columns) leaves free
-    replaced by ``guess``'s."""
-    D = np.diag([1.0, 1.0, length_m])
-    d = D @ np.array([guess[0] - z[0], guess[1] - z[1], float(wrap_angle(guess[2] - z[2]))])
-    step = np.linalg.solve(D, d - constrained @ (constrained.T @ d))
-    return np.array([z[0] + step[0], z[1] + step[1], float(wrap_angle(z[2] + step[2]))])
 
 
 def loop_errors(estimate: PoseSource, loops: list[Loop]) -> list[LoopError]:
