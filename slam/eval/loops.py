@@ -14,9 +14,17 @@ relative pose ``t0Tt1`` it truly had between them:
   registered onto the other (:func:`sonarslam.features.scans.icp.register_from`, from the
   estimate's relative pose with a guess covariance of ``radius_m`` and 10 deg); an accepted
   registration is the map's measure of the true ``t0Tt1`` in the directions it constrains (in
-  one it leaves free, along a single wall, it keeps the guess: dead reckoning's), independent
+  one it leaves free, along a single wall, it keeps its start: the guess, dead reckoning's, or
+  one of the starts around it), independent
   of the drift between the two times (the motion correction within one turn is the odometry's,
-  locally right).
+  locally right). A registration whose position lands more than ``radius_m`` from the guess is
+  rejected (*too far*): the search proposed the pair because the estimate came back within
+  ``radius_m``, i.e. it trusts the estimate's relative position to that radius (the same radius
+  beyond which ``run`` warns of a loop-closure error); a registration beyond it contradicts the
+  premise that proposed it and is, far more likely than a drift that large, a slide along
+  repeated structure (two parallel faces of a breakwater, a row of piers) from one of the
+  starts ``starts_sigma`` radii away. The guess covariance is the spread of those starts, not a model
+  of the estimate's drift, so a chi-squared gate on it would pass such a slide.
 
 The loops of a run are found along dead reckoning (:func:`sonarslam.slam.run.run.loop_figures`),
 not along the estimate being judged: every run of one dataset is then measured at the same loops
@@ -177,6 +185,9 @@ class LoopSearch:
         The estimate's path over the sonar span (m).
     radius_m, min_gap_s, min_path_m : float
         The search's radius (m), least time (s) and least path (m) between a loop's two ends.
+    too_far : int
+        Registrations accepted by their own tests and rejected because their position lay more
+        than ``radius_m`` from the guess (module docstring).
     """
 
     loops: list[Loop]
@@ -185,15 +196,22 @@ class LoopSearch:
     radius_m: float
     min_gap_s: float
     min_path_m: float
+    too_far: int = 0
 
     def why_none(self) -> str:
         """Why no loop was found, in words ("" when one was)."""
         if self.loops:
             return ""
         if self.tried:
+            far = (
+                f", {self.too_far} of them rejected as more than {self.radius_m:.0f} m from dead"
+                " reckoning's guess (a slide along repeated structure)"
+                if self.too_far
+                else ""
+            )
             return (
                 f"{self.tried} return(s) within {self.radius_m:.0f} m registered, none accepted"
-                " (scans that do not overlap, or a single wall in view)"
+                f" (scans that do not overlap, or a single wall in view){far}"
             )
         if self.path_m < self.min_path_m:
             return (
@@ -230,7 +248,7 @@ def search_loops(
     p = np.asarray(estimate.poses(t))
     path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p[:, :2], axis=0).T))])
     loops: list[Loop] = []
-    tried = 0
+    tried = too_far = 0
     j, resume_s = 0, -math.inf
     while j < t.size:
         if t[j] < resume_s:
@@ -242,14 +260,15 @@ def search_loops(
             k = int(np.argmin(d))
             if d[k] <= radius_m:
                 tried += 1
-                loop = _confirm(
+                loop, far = _confirm(
                     dataset, estimate, float(t[earlier[k]]), float(t[j]), radius_m, config
                 )
+                too_far += far
                 if loop is not None:
                     loops.append(loop)
                     resume_s = t[j] + min_gap_s
         j += 1
-    return LoopSearch(loops, tried, float(path[-1]), radius_m, min_gap_s, min_path_m)
+    return LoopSearch(loops, tried, float(path[-1]), radius_m, min_gap_s, min_path_m, too_far)
 
 
 def _confirm(
@@ -259,23 +278,28 @@ def _confirm(
     t1_s: float,
     radius_m: float,
     config: ScanConfig,
-) -> Loop | None:
+) -> tuple[Loop | None, bool]:
+    """The loop the scans ending at ``t0_s`` and ``t1_s`` confirm, or None; and whether an
+    accepted registration was rejected as more than ``radius_m`` from the guess (module
+    docstring)."""
     a = _scan_ending(dataset, t0_s, estimate, config)
     b = _scan_ending(dataset, t1_s, estimate, config)
     if a is None or b is None or min(len(a.points_b), len(b.points_b)) < MIN_SCAN_POINTS:
-        return None
+        return None, False
     guess = between(a.wTb_ref, b.wTb_ref)
     cov = np.diag([radius_m**2, radius_m**2, math.radians(GUESS_YAW_SIGMA_DEG) ** 2])
     reg = register_from(reference_lines(a.points_b, config), b.points_b, guess, cov, config)
     if not reg.accepted:
-        return None
-    # a direction the scans leave free (along a single wall) keeps the guess, dead reckoning's
-    # relative pose: such a reference states no accuracy of its own
+        return None, False
+    z = np.asarray(reg.z, dtype=np.float64)
+    if math.hypot(*(z[:2] - guess[:2])) > radius_m:
+        return None, True
+    # a direction the scans leave free (along a single wall) keeps its start, the guess or one
+    # near it: such a reference states no accuracy of its own
     free = 3 - int(reg.constrained.shape[1])
     cov = np.asarray(reg.cov, dtype=np.float64)
     sigma_m = math.sqrt(max(float(np.trace(cov[:2, :2])), 0.0)) if free == 0 else math.nan
-    z = np.asarray(reg.z, dtype=np.float64)
-    return Loop(a.t_ref_s, b.t_ref_s, "found", z, sigma_m, free)
+    return Loop(a.t_ref_s, b.t_ref_s, "found", z, sigma_m, free), False
 
 
 def loop_errors(estimate: PoseSource, loops: list[Loop]) -> list[LoopError]:

@@ -341,6 +341,7 @@ class LoopFigures:
         "loops_stated",
         "loops_found",
         "loop_search_tried",
+        "loop_search_too_far",
         "loop_search_path_m",
         "loop_radius_m",
         "loop_reference_sigma_m",
@@ -409,6 +410,7 @@ class LoopFigures:
         ]
         if self.search is not None:
             out["loop_search_tried"] = self.search.tried
+            out["loop_search_too_far"] = self.search.too_far
             out["loop_search_path_m"] = self.search.path_m
         if self.odometry is not None:
             out["odometry_check_pairs"] = self.odometry.pairs

@@ -664,8 +664,17 @@ def loop_line(metrics: dict[str, Any]) -> str:
     """One line of a run's loop-closure errors (``metrics.json`` ``loop_*``)."""
     m = metrics
     found = m.get("loops_found")
+    far = m.get("loop_search_too_far") or 0  # older runs do not count them
     head = f"loops: {m['loops_stated']} stated" + (
-        f", {found} found (returns within {m['loop_radius_m']:.0f} m, confirmed by scan registration)"
+        f", {found} found (returns within {m['loop_radius_m']:.0f} m, confirmed by scan"
+        " registration"
+        + (
+            f"; {far} registration(s) rejected as more than {m['loop_radius_m']:.0f} m from"
+            " dead reckoning's guess"
+            if far
+            else ""
+        )
+        + ")"
         if found is not None
         else ""
     )
@@ -679,6 +688,7 @@ def loop_line(metrics: dict[str, Any]) -> str:
                 m["loop_radius_m"],
                 LOOP_MIN_GAP_S,
                 LOOP_MIN_PATH_M,
+                m.get("loop_search_too_far") or 0,
             ).why_none()
         return head + ": no loop-closure error" + (f": {why}" if why else "") + _odometry_part(m)
     parts = [
