@@ -40,6 +40,7 @@ from sonarslam.slam.mapping.landmarks import LandmarkConfig, LandmarkMap
 from sonarslam.slam.mapping.vote import AfterVote, Belief, Decision, LandmarkBelief, NodeAnchor
 from sonarslam.slam.model.lines import (
     check_mounting_pose,
+    check_pose_radians,
     line_predictions,
     local_to_world_covariance,
     usable_observations,
@@ -86,17 +87,10 @@ class WorldBelief:
     cov: FloatArray | None = None
 
     def __post_init__(self) -> None:
-        wTb = np.asarray(self.wTb, dtype=np.float64)
+        wTb = check_pose_radians(self.wTb, "WorldBelief.wTb", "degrees? or wrap an unwrapped yaw")
         lines = np.asarray(self.lines_w, dtype=np.float64).reshape(-1, 2)
         object.__setattr__(self, "wTb", wTb)
         object.__setattr__(self, "lines_w", lines)
-        if wTb.shape != (3,) or not np.all(np.isfinite(wTb)):
-            raise ValueError(f"WorldBelief.wTb must be 3 finite numbers, got {self.wTb!r}")
-        if abs(wTb[2]) > 2.0 * np.pi:
-            raise ValueError(
-                f"WorldBelief.wTb's yaw must be in radians within [-2 pi, 2 pi], got"
-                f" {float(wTb[2])} (degrees? or wrap an unwrapped yaw)"
-            )
         if not np.all(np.isfinite(lines)):
             raise ValueError("WorldBelief.lines_w holds a line that is not finite")
         if lines.size and np.max(np.abs(lines[:, 1])) > 2.0 * np.pi:

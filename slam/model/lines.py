@@ -38,6 +38,7 @@ __all__ = [
     "local_to_world",
     "local_to_world_covariance",
     "check_mounting_pose",
+    "check_pose_radians",
     "line_prediction",
     "line_predictions",
     "line_residual",
@@ -86,15 +87,16 @@ def local_to_world_covariance(wTb: npt.ArrayLike, cov_local: npt.ArrayLike) -> F
     return A @ cov @ A.T
 
 
-def check_mounting_pose(bTs: npt.ArrayLike, where: str) -> FloatArray:
-    """A sonar mounting ``(x_m, y_m, yaw_rad)`` as 3 finite floats with the yaw in radians.
+def check_pose_radians(pose: npt.ArrayLike, where: str, hint: str) -> FloatArray:
+    """A pose ``(x_m, y_m, yaw_rad)`` as 3 finite floats with the yaw in radians.
 
     Parameters
     ----------
-    bTs : array_like, shape (3,)
-        The mounting given to a line model.
+    pose : array_like, shape (3,)
     where : str
         Names the parameter in the message (``"line_prediction(bTs=...)"``).
+    hint : str
+        What a yaw beyond ``2 pi`` likely is, for the message (``"degrees? np.radians"``).
 
     Returns
     -------
@@ -106,16 +108,24 @@ def check_mounting_pose(bTs: npt.ArrayLike, where: str) -> FloatArray:
         Not 3 finite numbers, or a yaw beyond ``2 pi`` in magnitude (degrees given for
         radians), naming ``where`` and the value.
     """
-    mount = np.asarray(bTs, dtype=np.float64)
-    if mount.shape != (3,) or not np.all(np.isfinite(mount)):
-        raise ValueError(f"{where}: the sonar mounting must be 3 finite numbers, got {bTs!r}")
-    if abs(mount[2]) > 2.0 * np.pi:
+    p = np.asarray(pose, dtype=np.float64)
+    if p.shape != (3,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"{where} must be 3 finite numbers, got {pose!r}")
+    if abs(p[2]) > 2.0 * np.pi:
         raise ValueError(
-            f"{where}: the sonar mounting's yaw must be in radians within [-2 pi, 2 pi], got"
-            f" {float(mount[2])} (degrees? np.radians; the lines' LineFeature.bTs is the"
-            " extractor's mounting)"
+            f"{where}'s yaw must be in radians within [-2 pi, 2 pi], got {float(p[2])} ({hint})"
         )
-    return mount
+    return p
+
+
+def check_mounting_pose(bTs: npt.ArrayLike, where: str) -> FloatArray:
+    """A sonar mounting ``(x_m, y_m, yaw_rad)`` given to a line model, checked by
+    :func:`check_pose_radians` (``where`` names the parameter)."""
+    return check_pose_radians(
+        bTs,
+        f"{where}: the sonar mounting",
+        "degrees? np.radians; the lines' LineFeature.bTs is the extractor's mounting",
+    )
 
 
 def line_prediction(
