@@ -166,7 +166,16 @@ def test_off_by_default_the_state_is_the_vehicle_block():
     assert not any(k.startswith("state_sonar") for k in ekf.metrics())
 
 
-@pytest.mark.parametrize("bad", [{"sonar_mount_sigma_m": 0.0}, {"range_scale_sigma": -0.1}])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"sonar_mount_sigma_m": 0.0},
+        {"range_scale_sigma": -0.1},
+        # a prior on yaw minus misalignment with either not estimated changed nothing, silently
+        {"sonar_yaw_prior": "dead_reckoning"},
+        {"sonar_yaw_prior": "dead_reckoning", "estimate_sonar_mount": True},
+    ],
+)
 def test_bad_calibration_priors_are_refused_by_name(bad):
     with pytest.raises(ValueError, match=next(iter(bad))):
         EkfConfig(**bad)

@@ -109,6 +109,29 @@ def test_report_without_gps_has_provenance_and_no_empty_figures(
     assert "--backend: gps needs a GPS" in err and "take --backend dr" in err
 
 
+def test_a_report_says_when_runs_are_not_judged_against_the_same_references(
+    nogps: Path, tmp_path: Path
+) -> None:
+    """A run after `calibrate --write` registers its loop references with the new calibration:
+    its loop errors and the run before it were ranked in one table said to share references,
+    and a worse calibration read as better (a review: EKF 0.94 -> 1.16 m against the truth, loop
+    error 0.38 -> 0.25 m). The report now groups the runs by their references and says so."""
+    run = tmp_path / "dr"
+    assert main(["run", str(nogps), "--backend", "dr", "--out", str(run), "--quiet"]) == 0
+    assert main(["report", str(run), "--out", str(tmp_path / "R1")]) == 0
+    assert "not judged against the same" not in (tmp_path / "R1" / "report.md").read_text()
+    moved = tmp_path / "dr_recalibrated"
+    shutil.copytree(run, moved)
+    metrics = json.loads((moved / "metrics.json").read_text())
+    assert metrics["loops"], "the harbour without GPS has found loops"
+    metrics["loops"][0]["t0Tt1"][0] += 0.2  # a reference registered with another calibration
+    (moved / "metrics.json").write_text(json.dumps(metrics))
+    assert main(["report", str(run), str(moved), "--out", str(tmp_path / "R2")]) == 0
+    text = (tmp_path / "R2" / "report.md").read_text()
+    assert "not judged against the same loop references" in text
+    assert "`dr`; `dr_recalibrated`" in text
+
+
 def test_every_run_of_a_dataset_is_judged_at_the_same_loops(
     nogps: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -261,3 +261,26 @@ def test_a_run_without_reference_draws_the_plane_alone(tmp_path: Path) -> None:
     h_a, w_a = matplotlib.image.imread(alone).shape[:2]
     h_b, w_b = matplotlib.image.imread(both).shape[:2]
     assert w_a / h_a < 0.75 * (w_b / h_b)  # one panel against two side by side
+
+
+def test_the_report_gives_the_dvl_misalignment_and_its_correlation_with_the_sonar_yaw():
+    """With the mounting and the misalignment both estimated, the report gave the mounting's
+    yaw (near its prior) without the misalignment and their correlation, the part that
+    explains it (metrics.json had both)."""
+    from sonarslam.slam.io.trajectory import Trajectory
+    from sonarslam.slam.run.report_data import RunData
+    from sonarslam.slam.run.report_figures import calibration_lines
+
+    tr = Trajectory(np.array([0.0, 1.0]), np.zeros((2, 3)))
+    metrics = {
+        "state_sonar_yaw_deg": 154.75,
+        "state_sonar_yaw_sd_deg": 0.5,
+        "state_misalignment_deg": 0.54,
+        "state_misalignment_sd_deg": 0.69,
+        "state_sonar_yaw_misalignment_corr": 0.7123,
+    }
+    lines = calibration_lines(RunData(Path("run"), metrics, tr, tr))
+    assert "- DVL misalignment: 0.54 ± 0.69 deg (1σ)" in lines, lines
+    assert any(
+        ln.startswith("- correlation of the sonar mounting's yaw") and "+0.71" in ln for ln in lines
+    )

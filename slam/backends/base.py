@@ -153,6 +153,14 @@ class BackendConfig(LandmarkConfig):
             raise ValueError(
                 f"constraints must be 'lines', 'scans' or 'lines,scans', got {self.constraints!r}"
             )
+        if self.sonar_yaw_prior != "body" and not (
+            self.estimate_sonar_mount and self.estimate_misalignment
+        ):
+            raise ValueError(
+                f"sonar_yaw_prior {self.sonar_yaw_prior!r} is a prior on the estimated mounting"
+                " yaw minus the estimated DVL misalignment: it needs estimate_sonar_mount and"
+                " estimate_misalignment both true (alone it would change nothing)"
+            )
 
 
 class Backend(Protocol):

@@ -162,6 +162,7 @@ _CALIBRATION = (
     ("sonar mounting y", "state_sonar_y_m", "state_sonar_y_sd_m", "m"),
     ("sonar mounting yaw", "state_sonar_yaw_deg", "state_sonar_yaw_sd_deg", "deg"),
     ("sonar range scale", "state_sonar_range_scale", "state_sonar_range_scale_sd", ""),
+    ("DVL misalignment", "state_misalignment_deg", "state_misalignment_sd_deg", "deg"),
     ("AHRS heading error (end)", "state_ahrs_bias_deg", "state_ahrs_bias_sd_deg", "deg"),
     ("DVL scale k", "state_dvl_scale", "state_dvl_scale_sd", ""),
 )
@@ -209,6 +210,12 @@ def calibration_lines(run: RunData) -> list[str]:
                 f" estimated, puts it at {in_map:.6g} in the sonar's map ({z_map:+.1f}σ)"
             )
         lines.append(text)
+    corr = m.get("state_sonar_yaw_misalignment_corr")
+    if corr is not None:
+        lines.append(
+            f"- correlation of the sonar mounting's yaw with the DVL misalignment: {corr:+.2f}"
+            " (the data see their difference far better than either)"
+        )
     return lines
 
 

@@ -149,6 +149,24 @@ def _figure(dataset: str, runs: list[GpsFreeRun], path: Path) -> Path:
     return path
 
 
+def _reference_groups(runs: list[GpsFreeRun]) -> list[list[str]]:
+    """The runs' names grouped by the loops they were judged at: their times and references
+    (``metrics.json`` ``loops``: ``t0_s``, ``t1_s``, ``t0Tt1``, to a micrometre and a
+    microradian), in the runs' order."""
+    groups: dict[tuple[Any, ...], list[str]] = {}
+    for r in runs:
+        key = tuple(
+            (
+                round(float(loop["t0_s"]), 6),
+                round(float(loop["t1_s"]), 6),
+                *(round(float(v), 6) for v in loop.get("t0Tt1") or ()),
+            )
+            for loop in r.metrics.get("loops", [])
+        )
+        groups.setdefault(key, []).append(r.name)
+    return list(groups.values())
+
+
 def gps_free_section(
     runs: list[GpsFreeRun], out: Path
 ) -> tuple[list[str], list[Path], list[dict[str, Any]]]:
@@ -190,6 +208,18 @@ def gps_free_section(
             rows.append(row)
             md.append("| " + " | ".join(_fmt(row.get(k), k) for k, _ in COLUMNS) + " |")
         md.append("")
+        shared = _reference_groups(group)
+        if len(shared) > 1:
+            md += [
+                "**These runs are not judged against the same loop references**: a found loop's"
+                " reference is a registration of the sonar's scans made with the run's own"
+                " calibration (another sonar mounting or range moves it), so the loop errors"
+                " rank runs only within a group that shares them: "
+                + "; ".join(", ".join(f"`{n}`" for n in names_) for names_ in shared)
+                + ". Against a calibration changed between runs (`sonarslam calibrate --write`),"
+                " a lower loop error is no evidence.",
+                "",
+            ]
         checks = [line for r in group for line in _run_lines(r)]
         if checks:
             md += [
