@@ -244,11 +244,14 @@ def test_the_sonar_says_which_way_dead_reckoning_should_go(
     assert main([*args, "--config", str(wrong)]) == 0
     err = capsys.readouterr().err
     assert "the sonar sees the vehicle move" in err and "[mounting.dvl] yaw_deg" in err
+    # dead reckoning has no health monitor: its own travel check says the DVL runs it stern first
+    assert "deg off its bow" in err and f"(now: [mounting.dvl] yaw_deg = {told + 180.0:g}" in err
     m = json.loads((out / "metrics.json").read_text())
     assert m["odometry_check_heading_deg"] == pytest.approx(turned.heading_deg)
     args[args.index("--out") + 1] = str(tmp_path / "dr_right")
     assert main(args) == 0
-    assert "the sonar sees the vehicle move" not in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "the sonar sees the vehicle move" not in err and "off its bow" not in err
 
 
 def test_a_closed_loop_whose_sonar_is_turned_round_is_not_called_healthy(

@@ -102,6 +102,7 @@ __all__ = [
     "median_lower_bound",
     "median_upper_bound",
     "travel_direction",
+    "travel_cause",
 ]
 
 
@@ -678,25 +679,35 @@ def travel_direction(v_body_mps: FloatArray) -> tuple[float, float]:
     return (math.atan2(sy, sx) if share > 0.0 else math.nan), share
 
 
-def _check_travel(inputs: HealthInputs, cfg: HealthConfig) -> tuple[list[HealthIssue], int]:
-    """Dead reckoning that moves the vehicle far off its bow (module docstring)."""
-    if inputs.travel_body_mps.shape[0] < cfg.min_updates:
-        return [], 0
-    angle, share = travel_direction(inputs.travel_body_mps)
+def travel_cause(v_body_mps: FloatArray, cfg: HealthConfig) -> tuple[str | None, bool]:
+    """The ``travel`` check on dead reckoning's body-frame velocities (V, 2) (m/s): ``(cause,
+    judged)``, the cause in words when the vehicle moves far off its bow (module docstring),
+    else None."""
+    if v_body_mps.shape[0] < cfg.min_updates:
+        return None, False
+    angle, share = travel_direction(v_body_mps)
     if not share >= cfg.travel_min_share:
-        return [], 0
+        return None, False
     if abs(math.degrees(angle)) <= cfg.travel_max_angle_deg:
-        return [], 1
-    lo, hi = inputs.trajectory.span_s
-    cause = (
+        return None, True
+    return (
         f"dead reckoning moves the vehicle {math.degrees(angle):+.0f} deg off its bow ({share:.2f}"
         f" of its travel one way in its own frame; limit {cfg.travel_max_angle_deg:g} deg): a"
         " vehicle travels bow first, so the DVL's mounting ([mounting.dvl] yaw_deg, or its axes'"
         " signs) is likely turned by about that; a sonar yaw calibrated by map sharpness on this"
         " dead reckoning (`sonarslam calibrate`) took the same turn: calibrate it again after"
         " the fix. A vehicle that truly travels stern- or side-first: not an error"
-        + (f" (now: {inputs.mountings_said})" if inputs.mountings_said else "")
-    )
+    ), True
+
+
+def _check_travel(inputs: HealthInputs, cfg: HealthConfig) -> tuple[list[HealthIssue], int]:
+    """Dead reckoning that moves the vehicle far off its bow (:func:`travel_cause`)."""
+    cause, judged = travel_cause(inputs.travel_body_mps, cfg)
+    if cause is None:
+        return [], int(judged)
+    lo, hi = inputs.trajectory.span_s
+    if inputs.mountings_said:
+        cause += f" (now: {inputs.mountings_said})"
     return [HealthIssue("travel", cause, lo, hi)], 1
 
 

@@ -29,6 +29,7 @@ from sonarslam.datasets.rosbag import is_bag
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.settings import SettingError
 from sonarslam.slam.backends.registry import BACKENDS, backend_spec
+from sonarslam.slam.eval.health import HealthConfig, travel_cause
 from sonarslam.slam.eval.loops import (
     LOOP_CAUSES,
     LOOP_MIN_GAP_S,
@@ -45,6 +46,7 @@ from sonarslam.slam.eval.loops import (
 )
 from sonarslam.slam.io.files import check_output_dir
 from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.model.motion import body_velocity
 from sonarslam.slam.run.closed_loop import ClosedLoopResult, run_closed_loop
 from sonarslam.slam.run.health import monitor_run
 from sonarslam.slam.run.metrics import (
@@ -203,6 +205,8 @@ def run_backend(
                 " topic): take --backend dr",
             )
         trajectory = POSE_SOURCES[backend](dataset)
+        if backend == "dr":  # no health monitor: the travel check is the one that sees a DVL
+            _warn_travel(dataset)  # turned round when the sonar was calibrated on it
     else:
         result, config, trajectories, loop = _closed_loop(
             dataset, backend, settings, t_end_s, progress, batch, config
@@ -227,6 +231,21 @@ def run_backend(
     return RunResult(
         backend, trajectory, figures.to_json(), result, config, trajectories, figures=figures
     )
+
+
+def _warn_travel(dataset: Dataset) -> None:
+    """Dead reckoning's own ``travel`` check (:func:`sonarslam.slam.eval.health.travel_cause`),
+    warned: a closed loop's health monitor judges it; a ``dr`` run has none."""
+    c = dataset.config
+    v_body = body_velocity(dataset.dvl.v_mps[dataset.dvl.valid], c.dvl_mounting)
+    cause, _ = travel_cause(v_body, HealthConfig())
+    if cause is not None:
+        warnings.warn(
+            f"{dataset.root}: {cause} (now: [mounting.dvl] yaw_deg ="
+            f" {math.degrees(c.dvl_mounting.yaw_rad):g} ({c.dvl_mounting.source}))",
+            DataWarning,
+            stacklevel=3,
+        )
 
 
 def _closed_loop(
