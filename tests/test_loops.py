@@ -464,3 +464,34 @@ def test_a_registration_farther_than_the_search_radius_from_its_guess_is_rejecte
     line = loop_line(m)
     assert f"; {search.too_far} registration(s) rejected as more than 20 m from dead" in line
     assert f"{search.too_far} of them rejected as more than 20 m" in line
+
+
+def test_a_report_of_runs_without_gps_names_each_source_and_one_dataset_once(
+    nogps: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Two bags named alike in two folders, without GPS: the report crashed writing
+    'loops_day1/run.bag.png' (a section's name put in a file name unmade); and one dataset
+    typed once relative and once absolute is one section, not two."""
+    run = tmp_path / "dr"
+    assert main(["run", str(nogps), "--backend", "dr", "--out", str(run), "--quiet"]) == 0
+    dirs = []
+    for day in ("day1", "day2"):
+        d = tmp_path / day
+        shutil.copytree(run, d)
+        metrics = json.loads((d / "metrics.json").read_text())
+        metrics["source"] = str(tmp_path / "bags" / day / "run.bag")
+        (d / "metrics.json").write_text(json.dumps(metrics))
+        dirs.append(str(d))
+    assert main(["report", *dirs, "--out", str(tmp_path / "R")]) == 0
+    text = (tmp_path / "R" / "report.md").read_text()
+    assert "### day1/run.bag" in text and "### day2/run.bag" in text
+    assert (tmp_path / "R" / "loops_day1_run.bag.png").is_file()
+    monkeypatch.chdir(nogps.parent)
+    relative = tmp_path / "relative"
+    shutil.copytree(run, relative)
+    metrics = json.loads((relative / "metrics.json").read_text())
+    metrics["source"] = nogps.name  # the same folder, typed from where it lies
+    (relative / "metrics.json").write_text(json.dumps(metrics))
+    assert main(["report", str(run), str(relative), "--out", str(tmp_path / "R2")]) == 0
+    text = (tmp_path / "R2" / "report.md").read_text()
+    assert text.count(f"### {nogps.name}") == 1, text

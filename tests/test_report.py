@@ -284,3 +284,17 @@ def test_the_report_gives_the_dvl_misalignment_and_its_correlation_with_the_sona
     assert any(
         ln.startswith("- correlation of the sonar mounting's yaw") and "+0.71" in ln for ln in lines
     )
+
+
+def test_the_aligned_error_of_a_vehicle_that_never_moves_is_no_crash():
+    """A pool world's true position never changes: the rigid alignment onto it is undetermined
+    in rotation (evo's Umeyama raised 'Degenerate covariance rank' and the report crashed); the
+    fit is then the translation of the centroids, the one rule of slam.eval.ate."""
+    from sonarslam.slam.run.report_figures import _aligned_errors
+
+    rng = np.random.default_rng(3)
+    est = rng.normal(0.0, 0.1, (50, 2))
+    ref = np.tile([4.0, -2.0], (50, 1))
+    e = _aligned_errors(est, ref)
+    assert e is not None
+    np.testing.assert_allclose(e, est - est.mean(axis=0), atol=1e-12)

@@ -32,6 +32,7 @@ __all__ = [
     "ate_against_truth",
     "ate_errors",
     "ate_of_errors",
+    "rigid_fit",
     "truth_errors",
 ]
 
@@ -61,7 +62,7 @@ def _inside(
     return np.asarray((t_s >= t0) & (t_s <= t1))
 
 
-def _rigid_fit(est: FloatArray, ref: FloatArray) -> FloatArray:
+def rigid_fit(est: FloatArray, ref: FloatArray) -> FloatArray:
     """``est`` (N, 2) moved by the rotation and translation (no scale) that best fit it onto
     ``ref`` in least squares (``evo.core.geometry.umeyama_alignment``, Umeyama 1991). Where
     either set is a single point repeated (a vehicle that did not move), every rotation fits
@@ -87,7 +88,7 @@ def ate_errors(
     est = trajectory.poses(gps.t[inside])[:, :2]
     ref = gps.en_m[inside]
     if align:
-        est = _rigid_fit(est, ref)
+        est = rigid_fit(est, ref)
     return gps.t[inside], np.hypot(*(est - ref).T)
 
 
@@ -130,7 +131,7 @@ def truth_errors(
     ref = truth.poses_wTb[inside, :2]
     est = trajectory.poses(truth.t_s[inside])[:, :2]
     if align:
-        est = _rigid_fit(est, ref)
+        est = rigid_fit(est, ref)
     return truth.t_s[inside], np.hypot(*(est - ref).T)
 
 

@@ -30,7 +30,6 @@ sd.
 from __future__ import annotations
 
 import math
-import re
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,6 +51,8 @@ from sonarslam.slam.run.report_data import (
     RunData,
     evaluate_run,
     load_run,
+    safe_name,
+    source_key,
     source_labels,
 )
 from sonarslam.slam.run.report_figures import (
@@ -88,12 +89,12 @@ class ReportResult:
 
 
 def _label(run: RunData, runs: list[RunData]) -> str:
-    same = [r for r in runs if r.backend == run.backend and r.source == run.source]
+    same = [
+        r
+        for r in runs
+        if r.backend == run.backend and source_key(r.source) == source_key(run.source)
+    ]
     return run.backend if len(same) == 1 else f"{run.backend} ({run.name})"
-
-
-def _safe(name: str) -> str:
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
 
 
 def _fmt(v: Any, digits: int = 2) -> str:
@@ -428,8 +429,8 @@ def report(
         segments = segment_table(group, labels)
         md += _dataset_section(name, group, group_rows, segments)
         figs = [
-            trajectory_figure(group, labels, out / f"trajectories_{_safe(name)}.png"),
-            segment_figure(segments, name, out / f"segments_{_safe(name)}.png"),
+            trajectory_figure(group, labels, out / f"trajectories_{safe_name(name)}.png"),
+            segment_figure(segments, name, out / f"segments_{safe_name(name)}.png"),
         ]
         dataset_figs.append((name, figs))
         figures += figs
@@ -445,7 +446,7 @@ def report(
         md += [f"### {name}", ""] + [f"![{p.stem}]({p.name})\n" for p in figs]
     for run in runs:
         lab = labels[str(run.run_dir)]
-        tag = _safe(run.name)
+        tag = safe_name(run.name)
         figs = []
         if run.landmarks is not None:
             p = map_figure(run, lab, out / f"map_{tag}.png")

@@ -5,6 +5,8 @@
 from __future__ import annotations
 
 import json
+import os
+import re
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -86,10 +88,23 @@ class RunData:
         return self.run_dir.name
 
 
+def safe_name(name: str) -> str:
+    """``name`` made a file name's part: runs of other characters than letters, digits, ``_``,
+    ``.`` and ``-`` (a section's ``day1/run.bag``) become one ``_``."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
+
+
+def source_key(source: str) -> str:
+    """One key for one dataset however its path was typed: the path made absolute (against the
+    working directory) and normalised, so that ``../d/run.bag`` and ``/tmp/d/run.bag`` are one."""
+    return os.path.normpath(os.path.abspath(source))
+
+
 def source_labels(sources: Iterable[str]) -> dict[str, str]:
     """A name per source for the report's sections: its file name, or as many of its last path
     parts as tell it from the other sources' (``day1/run.bag``, ``day2/run.bag``)."""
-    unique = sorted(set(sources))
+    given = list(sources)
+    unique = sorted({source_key(s) for s in given})
     parts = {s: Path(s).parts or (s,) for s in unique}
     labels = {}
     for s in unique:
@@ -97,7 +112,7 @@ def source_labels(sources: Iterable[str]) -> dict[str, str]:
         while k < len(parts[s]) and any(o != s and parts[o][-k:] == parts[s][-k:] for o in unique):
             k += 1
         labels[s] = "/".join(parts[s][-k:])
-    return labels
+    return {s: labels[source_key(s)] for s in given}
 
 
 def load_run(run_dir: str | Path, open_source: bool = True) -> RunData:

@@ -13,10 +13,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from evo.core.geometry import umeyama_alignment
 
 from sonarslam.features.projection import project_beams
-from sonarslam.slam.eval.ate import ate_errors, truth_errors
+from sonarslam.slam.eval.ate import ate_errors, rigid_fit, truth_errors
 from sonarslam.slam.eval.consistency import chi2_band, nees_series, pose_errors
 from sonarslam.slam.eval.truth import (
     calibration_sigmas,
@@ -104,8 +103,7 @@ def _aligned_errors(est_xy: FloatArray, ref_xy: FloatArray) -> FloatArray | None
     positions onto the reference's: the error without the start fix and a constant heading."""
     if est_xy.shape[0] < 3:
         return None
-    r, t, _ = umeyama_alignment(est_xy.T, ref_xy.T, False)
-    return np.asarray((r @ est_xy.T).T + t - ref_xy, dtype=np.float64)
+    return np.asarray(rigid_fit(est_xy, ref_xy) - ref_xy, dtype=np.float64)
 
 
 def error_figure(run: RunData, label: str, out: Path) -> Path:

@@ -29,7 +29,7 @@ from sonarslam.slam.io.trajectory import (
     read_tum,
     trajectory_stem,
 )
-from sonarslam.slam.run.report_data import source_labels
+from sonarslam.slam.run.report_data import safe_name, source_labels
 from sonarslam.slam.run.run import odometry_line
 
 __all__ = ["is_gps_free", "GpsFreeRun", "load_gps_free", "gps_free_section"]
@@ -229,7 +229,7 @@ def gps_free_section(
                 *checks,
                 "",
             ]
-        fig = _figure(dataset, group, out / f"loops_{dataset}.png")
+        fig = _figure(dataset, group, out / f"loops_{safe_name(dataset)}.png")
         figures.append(fig)
         md += [f"![{fig.stem}]({fig.name})", ""]
         for r in group:
