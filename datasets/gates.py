@@ -390,8 +390,9 @@ def _check_dvl_speed(dvl: DvlSeries) -> None:
         f"the vehicle is implausibly slow: the DVL's speed over its locked rows has median"
         f" {q[50]:.4f} m/s and 90th percentile {q[90]:.4f} m/s, under the"
         f" {DVL_MIN_SPEED_MPS:g} m/s that any AUV or ASC survey exceeds (ten times below the"
-        f" slowest, ~0.2 m/s; a DVL at rest reads its own noise above it): the velocities' unit is likely wrong"
-        f" ({_dvl_unit(dvl.path, slow=True)}); every estimate moves that much too little",
+        f" slowest, ~0.2 m/s): unless the vehicle hovered the whole run, the velocities' unit is"
+        f" likely wrong ({_dvl_unit(dvl.path, slow=True)}) and every estimate moves that much"
+        " too little",
     )
 
 
@@ -409,12 +410,28 @@ def _dvl_lock_flag(path: Path | None) -> str:
     return "the DVL message's lock flag (or a covariance) marks a dropout"
 
 
+#: A locked row of exactly (0, 0) is a dropout's fill when the locked rows about it move faster
+#: than this (m/s): a moving vehicle's DVL reads its motion and noise; a hovering one's, at a
+#: DVL's resolution (a millimetre a second), can read exact zeros.
+ZERO_FILL_MIN_SPEED_MPS = 0.05
+
+
 def _exact_zeros(v_mps: FloatArray, valid: np.ndarray) -> np.ndarray:
-    """(N,) bool: locked rows whose velocity is exactly (0, 0), a block at a time."""
+    """(N,) bool: locked rows whose velocity is exactly (0, 0) while the vehicle moves (the
+    median speed of the two locked non-zero rows either side over
+    :data:`ZERO_FILL_MIN_SPEED_MPS`), a block at a time."""
     out = np.zeros(valid.size, dtype=bool)
     for a in range(0, valid.size, BLOCK):
         vb = v_mps[a : a + BLOCK]
         out[a : a + BLOCK] = valid[a : a + BLOCK] & (vb[:, 0] == 0.0) & (vb[:, 1] == 0.0)
+    zeros = np.flatnonzero(out)
+    moving = np.flatnonzero(valid & ~out)
+    if zeros.size == 0 or moving.size == 0:
+        return out  # none, or every locked row zero: no motion to judge them by
+    speed = np.hypot(v_mps[moving, 0], v_mps[moving, 1])
+    k = np.searchsorted(moving, zeros)
+    around = np.stack([np.clip(k + d, 0, moving.size - 1) for d in (-2, -1, 0, 1)], axis=1)
+    out[zeros[np.median(speed[around], axis=1) <= ZERO_FILL_MIN_SPEED_MPS]] = False
     return out
 
 

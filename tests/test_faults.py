@@ -407,3 +407,34 @@ def test_a_dvl_sigma_far_above_the_dvls_scatter_is_said(harbour, tmp_path, capsy
     assert main(["info", str(harbour), "--config", str(told)]) == 0
     out, err = capsys.readouterr()
     assert "[noise] dvl_sigma_mps = 2 m/s" in err and "dvl_sigma_mps too large?" in out
+
+
+def test_exact_zeros_are_a_dropout_fill_only_while_the_vehicle_moves():
+    """A hovering vehicle's DVL at a millimetre a second reads exact (0, 0) now and then: those
+    rows are readings, kept (a review's still pool, rounded to 1 mm/s: one dropped and said as
+    'never exact zeros'); a (0, 0) row amid a vehicle at 0.5 m/s is a dropout's fill, dropped."""
+    from sonarslam.datasets.config import GateConfig
+    from sonarslam.datasets.gates import SensorReport, gate_dvl
+    from sonarslam.datasets.records import DvlSeries
+
+    rng = np.random.default_rng(11)
+    n = 400
+    t = 1.7e9 + np.arange(n) / 5.0
+    still = np.round(rng.normal(0.0, 0.002, (n, 2)), 3)
+    assert np.sum(np.all(still == 0.0, axis=1)) >= 5  # exact zeros among the readings
+    report = SensorReport()
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        gate_dvl(DvlSeries(t, still, np.ones(n, dtype=bool), np.zeros(n)), GateConfig(), report)
+    assert report.counts["dvl_zero_velocity"] == 0
+    assert not [w for w in said if "exactly (0, 0)" in str(w.message)]
+    moving = np.column_stack([np.full(n, 0.5), np.zeros(n)]) + rng.normal(0.0, 0.01, (n, 2))
+    moving[[100, 101, 250]] = 0.0
+    report = SensorReport()
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        out = gate_dvl(
+            DvlSeries(t, moving, np.ones(n, dtype=bool), np.zeros(n)), GateConfig(), report
+        )
+    assert report.counts["dvl_zero_velocity"] == 3
+    assert not out.valid[[100, 101, 250]].any()

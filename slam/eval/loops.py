@@ -216,8 +216,8 @@ class LoopSearch:
         if self.path_m < self.min_path_m:
             return (
                 f"dead reckoning's whole path is {self.path_m:.1f} m, under the"
-                f" {self.min_path_m:.0f} m a loop needs: is the DVL's speed right (`sonarslam"
-                " info` gives it)?"
+                f" {self.min_path_m:.0f} m a loop needs: a vehicle that hardly moves, or a DVL's"
+                " velocities in another unit (`sonarslam info` gives its speed)"
             )
         return (
             f"dead reckoning ({self.path_m:.0f} m of path) never came back within"
