@@ -304,6 +304,8 @@ def test_a_covariance_ten_times_too_small_trips_the_nees_check() -> None:
     covered = sum(i.t1_s - i.t0_s for i in report.issues)
     assert covered >= 0.6 * 600.0, covered
     assert all("median NEES" in i.cause and "against the truth" in i.cause for i in report.issues)
+    # a span of several windows gives its worst window's median, and says so
+    assert all("in the worst 120 s window" in i.cause for i in report.issues)
     m = report.metrics()
     assert m["health_nees_flagged"] == len(report.issues) and m["health_flagged"] == ["nees"]
 

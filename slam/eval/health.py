@@ -467,7 +467,7 @@ def _check_nees(
             HealthIssue(
                 "nees",
                 f"the pose error is beyond its covariance: median NEES {medians[worst]:.1f}"
-                f" against the truth over {cfg.window_s:g} s (chi2({series.dof}) median"
+                f" against the truth in the worst {cfg.window_s:g} s window (chi2({series.dof}) median"
                 f" {chi2.ppf(0.5, series.dof):.2f}; limit {gate:.1f})",
                 max(a, float(t[0])),
                 min(b, float(t[-1])),
@@ -481,7 +481,7 @@ def _check_nees(
             HealthIssue(
                 "nees",
                 f"the pose error is far within its covariance: median NEES {medians[least]:.3f}"
-                f" against the truth over {cfg.window_s:g} s (chi2({series.dof}) median"
+                f" against the truth in the least {cfg.window_s:g} s window (chi2({series.dof}) median"
                 f" {chi2.ppf(0.5, series.dof):.2f}; under-confident below {low:.3f})",
                 max(a, float(t[0])),
                 min(b, float(t[-1])),
