@@ -11,8 +11,9 @@ counted in :class:`SensorReport` (``metrics.json``: ``fault_*``, ``gap_*``) with
 fault                                  what happens
 =====================================  =======================================================
 repeated stamp (DVL, AHRS, GPS)        the later rows of a stamp are dropped
-DVL velocity exactly (0, 0)            the row is flagged as without bottom lock (a DVL
-                                       reads its own noise: exact zeros are a dropout's fill)
+DVL velocity exactly (0, 0) while      the row is flagged as without bottom lock (a moving
+the rows about it move                 vehicle's DVL reads its motion and noise: exact zeros
+                                       are a dropout's fill)
 DVL speed > ``dvl_max_speed_mps``      the row is flagged as without bottom lock
 DVL velocity ``dvl_spike_sigmas``      the row is flagged as without bottom lock
 scatters off both neighbours
@@ -338,9 +339,10 @@ def _spike_pairs(
 #: The DVL's horizontal speed in 90 % of its locked rows under this (m/s) is implausible for an
 #: AUV or ASC survey: ten times below ~0.2 m/s, the slow end of such surveys (72 m an hour), is a
 #: unit slip rather than a vehicle (a log in m/s read as the marina layout's cm/s is 100 times
-#: slow). Even at rest a DVL reads its own noise (a 1-sigma ``s`` per axis gives a p90 speed of
-#: ``2.15 s``), while a unit slip shrinks the noise with the motion. docs/bad-input.md gives the
-#: marina's and the simulator's speeds against it.
+#: slow). At rest a DVL reads its own noise (a 1-sigma ``s`` per axis gives a p90 speed of
+#: ``2.15 s``), above it for most DVLs, while a unit slip shrinks the noise with the motion; a
+#: quiet DVL on a vehicle that hovers the whole run can be under it, which the warning allows.
+#: docs/bad-input.md gives the marina's and the simulator's speeds against it.
 DVL_MIN_SPEED_MPS = 0.02
 
 
@@ -419,11 +421,8 @@ ZERO_FILL_MIN_SPEED_MPS = 0.05
 def _exact_zeros(v_mps: FloatArray, valid: np.ndarray) -> np.ndarray:
     """(N,) bool: locked rows whose velocity is exactly (0, 0) while the vehicle moves (the
     median speed of the two locked non-zero rows either side over
-    :data:`ZERO_FILL_MIN_SPEED_MPS`), a block at a time."""
-    out = np.zeros(valid.size, dtype=bool)
-    for a in range(0, valid.size, BLOCK):
-        vb = v_mps[a : a + BLOCK]
-        out[a : a + BLOCK] = valid[a : a + BLOCK] & (vb[:, 0] == 0.0) & (vb[:, 1] == 0.0)
+    :data:`ZERO_FILL_MIN_SPEED_MPS`)."""
+    out = valid & (v_mps[:, 0] == 0.0) & (v_mps[:, 1] == 0.0)
     zeros = np.flatnonzero(out)
     moving = np.flatnonzero(valid & ~out)
     if zeros.size == 0 or moving.size == 0:
@@ -442,10 +441,12 @@ def gate_dvl(
     ``dvl_max_speed_mps``, and isolated velocity spikes (:func:`dvl_spikes`, whose scatter is
     at least ``noise_sigma_mps``, the ``[noise] dvl_sigma_mps``), as without lock.
 
-    A DVL with bottom lock reads its own noise, never exactly (0, 0), even at rest: exact
-    zeros are what a logger or a driver writes for a dropout when it has no lock flag to give
-    (a CSV without its ``dvl_valid`` column). Taken as locked they would stop the vehicle;
-    taken as without lock they widen its uncertainty (the conservative side).
+    A DVL with bottom lock on a moving vehicle reads its motion and noise, never exactly
+    (0, 0): exact zeros there are what a logger or a driver writes for a dropout when it has
+    no lock flag to give (a CSV without its ``dvl_valid`` column). Taken as locked they would
+    stop the vehicle; taken as without lock they widen its uncertainty (the conservative
+    side). A hovering vehicle's DVL, at its resolution, can read exact zeros: those are kept
+    (:data:`ZERO_FILL_MIN_SPEED_MPS`).
 
     In place: the series' arrays are compacted and its ``valid`` cleared where flagged, and the
     series returned holds views of them (give it arrays it may change)."""
@@ -464,8 +465,8 @@ def gate_dvl(
             dvl.path,
             "DVL",
             f"{n_zero} of the {int(valid.sum())} locked row(s) read exactly (0, 0) m/s, taken"
-            f" as without bottom lock (first at t={first:.3f} s): a DVL with bottom lock reads"
-            f" its own noise, never exact zeros, so these are a dropout's fill;"
+            f" as without bottom lock (first at t={first:.3f} s): a moving vehicle's DVL reads"
+            f" its motion and noise, never exact zeros, so these are a dropout's fill;"
             f" {_dvl_lock_flag(dvl.path)}",
         )
         valid &= ~zero

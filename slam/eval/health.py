@@ -102,6 +102,7 @@ __all__ = [
     "median_lower_bound",
     "median_upper_bound",
     "travel_direction",
+    "travel_judgement",
     "travel_cause",
 ]
 
@@ -679,17 +680,24 @@ def travel_direction(v_body_mps: FloatArray) -> tuple[float, float]:
     return (math.atan2(sy, sx) if share > 0.0 else math.nan), share
 
 
+def travel_judgement(v_body_mps: FloatArray, cfg: HealthConfig) -> tuple[float, float, bool, bool]:
+    """:func:`travel_direction` judged: ``(angle_rad, share, judged, off_bow)``, ``judged`` when
+    at least ``cfg.travel_min_share`` of the travel goes one way, ``off_bow`` when it is then
+    more than ``cfg.travel_max_angle_deg`` off the bow."""
+    angle, share = travel_direction(v_body_mps)
+    judged = share >= cfg.travel_min_share  # NaN (no motion): not judged
+    return angle, share, judged, judged and abs(math.degrees(angle)) > cfg.travel_max_angle_deg
+
+
 def travel_cause(v_body_mps: FloatArray, cfg: HealthConfig) -> tuple[str | None, bool]:
     """The ``travel`` check on dead reckoning's body-frame velocities (V, 2) (m/s): ``(cause,
     judged)``, the cause in words when the vehicle moves far off its bow (module docstring),
     else None."""
     if v_body_mps.shape[0] < cfg.min_updates:
         return None, False
-    angle, share = travel_direction(v_body_mps)
-    if not share >= cfg.travel_min_share:
-        return None, False
-    if abs(math.degrees(angle)) <= cfg.travel_max_angle_deg:
-        return None, True
+    angle, share, judged, off_bow = travel_judgement(v_body_mps, cfg)
+    if not off_bow:
+        return None, judged
     return (
         f"dead reckoning moves the vehicle {math.degrees(angle):+.0f} deg off its bow ({share:.2f}"
         f" of its travel one way in its own frame; limit {cfg.travel_max_angle_deg:g} deg): a"

@@ -23,11 +23,12 @@ from sonarslam.features.line import LineFeature
 from sonarslam.features.pose_source import PoseSource
 from sonarslam.features.projection import beam_points
 from sonarslam.slam.backends.registry import backend_spec
-from sonarslam.slam.eval.health import HealthConfig, travel_direction
+from sonarslam.slam.eval.health import HealthConfig, travel_judgement
 from sonarslam.slam.eval.sharpness import map_entropy, map_entropy_variance
-from sonarslam.slam.model.motion import body_velocity, body_yaw
+from sonarslam.slam.model.motion import body_yaw
 from sonarslam.slam.run.closed_loop import ClosedLoopResult, run_closed_loop
 from sonarslam.slam.run.presets import map_min_intensity, run_config
+from sonarslam.slam.run.sources import dvl_body_velocities
 
 __all__ = [
     "YawSearch",
@@ -265,12 +266,8 @@ def yaw_change_doubt(dataset: Dataset, yaw_rad: float) -> str | None:
         if cfg.sonar_mounting.assumed
         else f"the configured {math.degrees(current):.2f} deg ({cfg.sonar_mounting.source})"
     )
-    angle, share = travel_direction(
-        body_velocity(dataset.dvl.v_mps[dataset.dvl.valid], cfg.dvl_mounting)
-    )
-    health = HealthConfig()
-    judged = math.isfinite(angle) and share >= health.travel_min_share
-    bow_first = judged and abs(math.degrees(angle)) <= health.travel_max_angle_deg
+    angle, share, judged, off_bow = travel_judgement(dvl_body_velocities(dataset), HealthConfig())
+    bow_first = judged and not off_bow
     if cfg.sonar_mounting.assumed:
         verdict = "it is the sonar's yaw only if the DVL's mounting is right"
     elif bow_first:
@@ -299,7 +296,7 @@ def yaw_change_doubt(dataset: Dataset, yaw_rad: float) -> str | None:
             f"; dead reckoning moves the vehicle {math.degrees(angle):+.0f} deg off its bow"
             f" ({share:.2f} of its travel one way in its own frame)"
         )
-        if judged and not bow_first:
+        if off_bow:
             out += ": a vehicle travels bow first, so the DVL's mounting is likely turned by that"
     return out
 

@@ -12,7 +12,6 @@ on simulated data only, feeds the ``nees`` check.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -28,9 +27,13 @@ from sonarslam.slam.eval.health import (
 )
 from sonarslam.slam.eval.loops import OdometryCheck
 from sonarslam.slam.eval.truth import truth_trajectory
-from sonarslam.slam.model.motion import body_velocity, body_yaw
+from sonarslam.slam.model.motion import body_yaw
 from sonarslam.slam.run.closed_loop import ClosedLoopResult
-from sonarslam.slam.run.sources import dead_reckoning_trajectory
+from sonarslam.slam.run.sources import (
+    dead_reckoning_trajectory,
+    dvl_body_velocities,
+    mounting_yaw_said,
+)
 
 __all__ = ["nis_streams", "health_inputs", "monitor_run"]
 
@@ -132,10 +135,10 @@ def health_inputs(
         # the beams the extractor saw: none when the back end takes no lines (scans only)
         n_beams=int(result.counts.get("beams", 0)) if "lines" in cfg.constraint_kinds else 0,
         n_lines=len(result.features),
-        travel_body_mps=body_velocity(dataset.dvl.v_mps[dataset.dvl.valid], c.dvl_mounting),
+        travel_body_mps=dvl_body_velocities(dataset),
         odometry=odometry,
         mountings_said=", ".join(
-            f"[mounting.{name}] yaw_deg = {math.degrees(m.yaw_rad):g} ({m.source})"
+            mounting_yaw_said(name, m)
             for name, m in (("sonar", c.sonar_mounting), ("dvl", c.dvl_mounting))
         ),
     )

@@ -46,7 +46,6 @@ from sonarslam.slam.eval.loops import (
 )
 from sonarslam.slam.io.files import check_output_dir
 from sonarslam.slam.io.trajectory import Trajectory
-from sonarslam.slam.model.motion import body_velocity
 from sonarslam.slam.run.closed_loop import ClosedLoopResult, run_closed_loop
 from sonarslam.slam.run.health import monitor_run
 from sonarslam.slam.run.metrics import (
@@ -68,7 +67,9 @@ from sonarslam.slam.run.provenance import provenance
 from sonarslam.slam.run.sources import (
     POSE_SOURCES,
     dead_reckoning_trajectory,
+    dvl_body_velocities,
     dvl_quality,
+    mounting_yaw_said,
     start_pose_origin,
     warn_dvl_sigma,
 )
@@ -188,8 +189,9 @@ def run_backend(
     trajectories: dict[str, Trajectory] = {}
     if config is not None:
         config = replace(config, settings=_typed_settings(dataset, backend, config, settings))
+    quality = dvl_quality(dataset)
     if backend != "gps":  # the rest take the DVL with [noise] dvl_sigma_mps
-        warn_dvl_sigma(dataset)
+        warn_dvl_sigma(dataset, quality)
     wall0 = time.perf_counter()
     if backend in BASELINES:
         if settings:
@@ -221,7 +223,7 @@ def run_backend(
         source=str(dataset.root),
         backend=backend,
         trajectory=trajectory_figures(dataset, trajectory, ""),
-        data=_data_figures(dataset, trajectory, wall_s),
+        data=_data_figures(dataset, trajectory, wall_s, quality),
         closed_loop=loop,
         others=[trajectory_figures(dataset, tr, name) for name, tr in trajectories.items()],
         calibration=dataset.calibration,
@@ -236,13 +238,11 @@ def run_backend(
 def _warn_travel(dataset: Dataset) -> None:
     """Dead reckoning's own ``travel`` check (:func:`sonarslam.slam.eval.health.travel_cause`),
     warned: a closed loop's health monitor judges it; a ``dr`` run has none."""
-    c = dataset.config
-    v_body = body_velocity(dataset.dvl.v_mps[dataset.dvl.valid], c.dvl_mounting)
-    cause, _ = travel_cause(v_body, HealthConfig())
+    cause, _ = travel_cause(dvl_body_velocities(dataset), HealthConfig())
     if cause is not None:
         warnings.warn(
-            f"{dataset.root}: {cause} (now: [mounting.dvl] yaw_deg ="
-            f" {math.degrees(c.dvl_mounting.yaw_rad):g} ({c.dvl_mounting.source}))",
+            f"{dataset.root}: {cause} (now:"
+            f" {mounting_yaw_said('dvl', dataset.config.dvl_mounting)})",
             DataWarning,
             stacklevel=3,
         )
@@ -351,16 +351,19 @@ def _differences(default: Any, given: Any, prefix: str) -> dict[str, Any]:
     return out
 
 
-def _data_figures(dataset: Dataset, trajectory: Trajectory, wall_s: float) -> DataFigures:
+def _data_figures(
+    dataset: Dataset, trajectory: Trajectory, wall_s: float, quality: dict[str, float]
+) -> DataFigures:
     """The run's wall time and its data's span, the DVL's rows and quality, the GPS's
-    coverage and the gates' faults and gaps over the trajectory's span."""
+    coverage and the gates' faults and gaps over the trajectory's span; ``quality`` is
+    :func:`sonarslam.slam.run.sources.dvl_quality`'s."""
     t0, t1 = trajectory.span_s
     return DataFigures(
         wall_s=wall_s,
         data_s=t1 - t0,
         dvl_rows=int(dataset.dvl.t.size),
         dvl_invalid_rows=int((~dataset.dvl.valid).sum()),
-        dvl_quality=dvl_quality(dataset),
+        dvl_quality=quality,
         gps_uncovered_s=_gps_uncovered_s(dataset, trajectory),
         faults_and_gaps=dataset.report.metrics((t0, t1)),
     )
@@ -638,12 +641,11 @@ def loop_figures(
     if searched:
         search = search_loops(dataset, dr, radius_m)
         loops += search.loops
-        # a closed loop's run checked it already, for its health monitor
+        # a closed loop's run checked it already, and its health monitor judged it
         closed = result.figures.closed_loop if result.figures is not None else None
-        odometry = closed.odometry if closed is not None else None
-        if odometry is None:
-            odometry = dataset_odometry_check(dataset, dr)
-        _warn_odometry(dataset, odometry, in_health=odometry is not None and closed is not None)
+        judged = closed.odometry if closed is not None else None
+        odometry = judged if judged is not None else dataset_odometry_check(dataset, dr)
+        _warn_odometry(dataset, odometry, in_health=judged is not None)
     estimates: dict[str, Trajectory] = {"": result.trajectory, **result.trajectories}
     if result.backend != "dr":
         estimates["dr"] = dr

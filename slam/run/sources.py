@@ -7,6 +7,7 @@ GPS + AHRS (``gps``), dead reckoning (``dr``) and the simulator's truth (``truth
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Callable
 
@@ -19,11 +20,14 @@ from sonarslam.datasets.source import Dataset
 from sonarslam.features.geometry import FloatArray
 from sonarslam.slam.eval.truth import truth_trajectory
 from sonarslam.slam.io.trajectory import Trajectory
-from sonarslam.slam.model.motion import body_yaw, dead_reckoning
+from sonarslam.slam.model.motion import body_velocity, body_yaw, dead_reckoning
 from sonarslam.slam.model.noise import MotionNoise, dvl_scatter
+from sonarslam.sonar.beam import Mounting
 
 __all__ = [
     "warn_dvl_sigma",
+    "dvl_body_velocities",
+    "mounting_yaw_said",
     "DVL_SIGMA_OVER_SCATTER_MAX",
     "motion_noise",
     "start_pose",
@@ -78,6 +82,20 @@ def dvl_quality(dataset: Dataset) -> dict[str, float]:
     return out
 
 
+def dvl_body_velocities(dataset: Dataset) -> FloatArray:
+    """The locked DVL rows' velocities in the body frame, shape (V, 2) (m/s): through the DVL's
+    mounting, without the lever arm's turning term (which way the vehicle travels: the
+    ``travel`` check, :func:`sonarslam.slam.eval.health.travel_judgement`)."""
+    dvl = dataset.dvl
+    return body_velocity(dvl.v_mps[dvl.valid], dataset.config.dvl_mounting)
+
+
+def mounting_yaw_said(sensor: str, mounting: Mounting) -> str:
+    """``"[mounting.<sensor>] yaw_deg = <deg> (<source>)"``: a mounting as in force, for a
+    message that blames it."""
+    return f"[mounting.{sensor}] yaw_deg = {math.degrees(mounting.yaw_rad):g} ({mounting.source})"
+
+
 #: ``[noise] dvl_sigma_mps`` more than this many times the DVL's measured scatter (the median
 #: of :func:`dvl_quality`'s) is warned of. The scatter (the Allan deviation at one sample, the
 #: vehicle's accelerations included) bounds the DVL's white noise from above, and the sigma is
@@ -92,10 +110,11 @@ def warn_dvl_sigma(dataset: Dataset, quality: dict[str, float] | None = None) ->
     (:data:`DVL_SIGMA_OVER_SCATTER_MAX`); the warning's text, or "" when it does not.
     ``quality`` is :func:`dvl_quality`'s (computed when not given)."""
     sigma = float(dataset.config.noise.dvl_sigma_mps)
-    scatter = (quality or dvl_quality(dataset))["dvl_scatter_p50_mps"]
+    q = quality or dvl_quality(dataset)
+    scatter = q["dvl_scatter_p50_mps"]
     if not (scatter > 0.0 and sigma > DVL_SIGMA_OVER_SCATTER_MAX * scatter):
         return ""
-    if dvl_speed_quantiles(dataset.dvl, (90,))[90] < DVL_MIN_SPEED_MPS:
+    if q["dvl_speed_p90_mps"] < DVL_MIN_SPEED_MPS:
         return ""  # the velocities' unit is wrong, and said when read: the scatter shrank too
     message = (
         f"{dataset.root}: [noise] dvl_sigma_mps = {sigma:g} m/s ({dataset.calibration}) is"

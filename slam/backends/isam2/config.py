@@ -15,7 +15,8 @@ __all__ = ["GraphConfig"]
 class GraphConfig(BackendConfig):
     """Settings of the factor graph: those of :class:`sonarslam.slam.backends.base.BackendConfig`
     (the sonar's calibration as state among them: ``C(0)`` the mounting, ``R(0)`` the range
-    scale, shared by every line and scan observation) and the following. With the sonar's mounting a variable, estimate the DVL's misalignment too
+    scale, shared by every line and scan observation) and the following. With the sonar's
+    mounting a variable, estimate the DVL's misalignment too
     (``estimate_misalignment``): it takes the crab a DVL's lateral bias puts on the odometry,
     which the mounting's yaw would otherwise absorb (docs/calibration.md, "Calibration as state:
     the three together").
