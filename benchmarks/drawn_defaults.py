@@ -1,16 +1,22 @@
 """Two or more settings of a back end on drawn worlds, against the truth: which default.
 
 python benchmarks/drawn_defaults.py --seeds 0-9 [--cache out/sim-drawn] [--workers 2] \\
-    [--backend isam2|ekf] --variant NAME=SCOPE.FIELD=V,SCOPE.FIELD=V ... [--out DIR]
+    [--backend isam2|ekf] [--noise-model FILE] --variant NAME=SCOPE.FIELD=V,SCOPE.FIELD=V ... \\
+    [--out DIR]
 
 Each seed's drawn world is simulated and calibrated GPS-free once into ``--cache`` (as
 ``sonarslam sweep --calibrate`` does: :func:`sonarslam.slam.run.sweep.simulate_cached`,
 :func:`~sonarslam.slam.run.sweep.calibrate_cached`), then run (``sonarslam run WORLD --config
 calibration.toml``, a process each, ``--workers`` at a time) with dead reckoning and with
 ``--backend`` (the factor graph by default) under each ``--variant`` (``NAME=`` alone: the
-defaults). Per variant, for the online and (a smoother's) the smoothed estimates over the seeds: the mean ATE against the truth, unaligned and
-SE(2)-aligned; the share of worlds where it beats dead reckoning and the count worse than it by
-more than 10 %; the pose ANEES (the mean over the runs of each run's mean NEES against the
+defaults). ``--noise-model FILE`` (e.g. ``benchmarks/marina_noise_model.toml``) is a partial
+``sonarslam.toml`` laid over each world's calibration (the estimators told another noise model
+than the world's own; written beside it as ``calibration+<stem>.toml``). Per variant, for the
+online and (a smoother's) the smoothed estimates over the seeds: the mean ATE against the truth,
+unaligned and SE(2)-aligned; the share of worlds where it beats dead reckoning, the count worse
+than it by more than 10 % and the worst ``ATE / ATE_DR - 1``; the association precision and
+recall against the true walls, pooled over the runs (every pairing weighs the same); the pose
+ANEES (the mean over the runs of each run's mean NEES against the
 truth, :func:`sonarslam.slam.eval.consistency.nees_series`) and the runs above 10; and where the
 run estimates them, the share of worlds whose sonar mounting (x, y, yaw) and range scale lie
 within 2 sigma of the truth (:func:`sonarslam.slam.eval.truth.true_calibration`). The truth is
@@ -26,6 +32,7 @@ import argparse
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 import warnings
@@ -34,8 +41,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import tomli_w
 
 from sonarslam.datasets.errors import DataWarning
+from sonarslam.datasets.toml import read_toml
 from sonarslam.slam.eval.consistency import nees_series
 from sonarslam.slam.eval.truth import calibration_sigmas, true_calibration
 from sonarslam.slam.run.report_data import load_run
@@ -66,6 +75,22 @@ def run_one(world: str, calibration: str, args: list[str], out: Path) -> dict[st
     return dict(json.loads((out / "metrics.json").read_text()))
 
 
+def with_noise_model(calibration: str, model: Path | None) -> str:
+    """The world's calibration with ``model``'s tables laid over it (key by key), written beside
+    it once; the calibration itself when ``model`` is None."""
+    if model is None:
+        return calibration
+    path = Path(calibration).with_name(f"calibration+{model.stem}.toml")
+    merged, _ = read_toml(calibration)
+    extra, _ = read_toml(model)
+    for table, keys in extra.items():
+        merged[table] = {**merged.get(table, {}), **keys}
+    text = tomli_w.dumps(merged)
+    if not path.is_file() or path.read_text() != text:
+        path.write_text(text)
+    return str(path)
+
+
 def score(runs: dict[int, dict[str, Any]], dr: dict[int, dict[str, Any]], dirs: dict[int, Path]):
     """The figures of one variant over its seeds (module docstring)."""
     seeds = sorted(runs)
@@ -84,6 +109,8 @@ def score(runs: dict[int, dict[str, Any]], dr: dict[int, dict[str, Any]], dirs: 
             "beats_dr_aligned": float(np.mean(a < dr_a)),
             "worse_10pct": int(np.sum(u > 1.1 * dr_u)),
             "worse_10pct_aligned": int(np.sum(a > 1.1 * dr_a)),
+            "worst_vs_dr": float(np.max(u / dr_u - 1.0)),
+            "worst_vs_dr_aligned": float(np.max(a / dr_a - 1.0)),
             "per_seed": {s: [float(x), float(y)] for s, x, y in zip(seeds, u, a, strict=True)},
         }
     nees = []
@@ -98,6 +125,15 @@ def score(runs: dict[int, dict[str, Any]], dr: dict[int, dict[str, Any]], dirs: 
         for key in CALIBRATION:
             if key in runs[s]:
                 within[key].append(abs(calibration_sigmas(runs[s], truth, key)) <= 2.0)
+    n = np.array([runs[s].get("truth_associations", 0) or 0 for s in seeds], dtype=float)
+    m = np.array([runs[s].get("truth_reobservations", 0) or 0 for s in seeds], dtype=float)
+    prec = np.array([runs[s].get("truth_precision", 0.0) or 0.0 for s in seeds])
+    rec = np.array([runs[s].get("truth_recall", 0.0) or 0.0 for s in seeds])
+    prec, rec = np.nan_to_num(prec), np.nan_to_num(rec)
+    out["precision"] = float((prec * n).sum() / max(n.sum(), 1.0))
+    out["recall"] = float((rec * m).sum() / max(m.sum(), 1.0))
+    out["pairings"] = int(n.sum())
+    out["nees_per_seed"] = {s: float(x) for s, x in zip(seeds, nees, strict=True)}
     out["anees"] = float(np.mean(nees))
     out["nees_median"] = float(np.median(nees))
     out["nees_above_10"] = int(np.sum(np.array(nees) > 10.0))
@@ -108,8 +144,9 @@ def score(runs: dict[int, dict[str, Any]], dr: dict[int, dict[str, Any]], dirs: 
 def table(result: dict[str, Any]) -> str:
     rows = [
         "| variant | estimate | ATE mean / aligned (m) | beats DR / aligned | worse by > 10 %"
-        " / aligned | ANEES (median; runs > 10) | within 2σ: x, y, yaw, range scale |",
-        "|---|---|---|---|---|---|---|",
+        " / aligned (worst) | ANEES (median; runs > 10) | precision / recall |"
+        " within 2σ: x, y, yaw, range scale |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for name, v in result["variants"].items():
         w = v["within_2sigma"]
@@ -121,11 +158,13 @@ def table(result: dict[str, Any]) -> str:
                 if label == "online"
                 else ""
             )
+            pr = f"{100 * v['precision']:.2f} % / {100 * v['recall']:.2f} %"
             rows.append(
                 f"| {name} | {label} | {e['ate_mean_m']:.2f} / {e['ate_aligned_mean_m']:.2f} | "
                 f"{100 * e['beats_dr']:.0f} % / {100 * e['beats_dr_aligned']:.0f} % | "
-                f"{e['worse_10pct']} / {e['worse_10pct_aligned']} | {nees} | "
-                f"{cal if label == 'online' else ''} |"
+                f"{e['worse_10pct']} / {e['worse_10pct_aligned']} ({100 * e['worst_vs_dr']:+.0f} %"
+                f" / {100 * e['worst_vs_dr_aligned']:+.0f} %) | {nees} | "
+                f"{pr if label == 'online' else ''} | {cal if label == 'online' else ''} |"
             )
     dr = result["dr_mean_m"]
     return f"dead reckoning: {dr[0]:.2f} / aligned {dr[1]:.2f} m\n\n" + "\n".join(rows) + "\n"
@@ -140,17 +179,27 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--variant", action="append", required=True, metavar="NAME=[SCOPE.FIELD=V,...]")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--backend", default="isam2", choices=["isam2", "ekf"])
+    ap.add_argument(
+        "--noise-model",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="a partial sonarslam.toml over each world's calibration (the noise model told)",
+    )
     ap.add_argument("--out", type=Path, default=Path("out/drawn_defaults"))
     args = ap.parse_args(argv)
     variants: dict[str, list[str]] = {}
     for v in args.variant:
         name, _, sets = v.partition("=")
-        variants[name] = [a for s in sets.split(",") if s for a in ("--set", s)]
+        # a comma starts the next setting only before SCOPE.FIELD= (a value may hold commas:
+        # isam2.learn_noise=heading,lines)
+        parts = re.split(r",(?=[A-Za-z_][\w.]*\.[\w]+=)", sets)
+        variants[name] = [a for s in parts if s for a in ("--set", s)]
     seeds = parse_seeds(args.seeds)
     worlds = {}
     for s in seeds:
         folder = simulate_cached("drawn", s, None, args.cache)
-        worlds[s] = (folder, calibrate_cached(folder))
+        worlds[s] = (folder, with_noise_model(calibrate_cached(folder), args.noise_model))
     jobs = []  # seed by seed: a partial run has whole worlds
     for s in seeds:
         jobs.append(("dr", s, ["--backend", "dr"]))
@@ -169,6 +218,7 @@ def main(argv: list[str] | None = None) -> int:
     result = {
         "seeds": seeds,
         "backend": args.backend,
+        "noise_model": None if args.noise_model is None else str(args.noise_model),
         "variants_settings": variants,
         "dr_mean_m": [
             float(np.mean([m["ate_truth_mean_m"] for m in dr.values()])),
