@@ -28,8 +28,15 @@ from sonarslam.slam.run.presets import apply_overrides, backend_config
 ROOT = Path(__file__).resolve().parent.parent
 
 #: Free-form words, no list of choices: where a mounting's numbers come from; the back ends'
-#: ``constraints``, a comma list its class parses and checks (BackendConfig.__post_init__).
-FREE_TEXT = {("Mounting", "source"), ("EkfConfig", "constraints"), ("GraphConfig", "constraints")}
+#: ``constraints`` and ``learn_noise``, comma lists their class parses and checks
+#: (BackendConfig.__post_init__).
+FREE_TEXT = {
+    ("Mounting", "source"),
+    ("EkfConfig", "constraints"),
+    ("GraphConfig", "constraints"),
+    ("EkfConfig", "learn_noise"),
+    ("GraphConfig", "learn_noise"),
+}
 
 
 def _config_classes() -> list[type]:

@@ -27,6 +27,7 @@ from sonarslam.features.line import LineFeature
 from sonarslam.features.pose_source import PoseSource
 from sonarslam.features.scans import Scan, ScanMatcher
 from sonarslam.settings import bounded, one_of
+from sonarslam.slam.backends.learned import LEARN_KINDS
 from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.mapping.landmarks import LandmarkConfig, LandmarkMap
 from sonarslam.slam.model.lines import VoteObservations, usable_observations
@@ -121,6 +122,22 @@ class BackendConfig(LandmarkConfig):
         What corrects the odometry, comma-separated: ``"lines"`` (line landmarks from the line
         extractor), ``"scans"`` (relative poses from the scan matcher,
         :mod:`sonarslam.features.scans`), or ``"lines,scans"``. A back end that cannot take one says so.
+    learn_noise : str
+        What the loop learns from its innovations, comma-separated
+        (:mod:`sonarslam.slam.model.noise_learning`, :mod:`sonarslam.slam.backends.learned`):
+        ``"heading"`` (the heading error's random walk, at least ``ahrs_bias_walk_deg_per_sqrt_s``),
+        ``"dvl_scale"`` (a random walk of the DVL's scale error, at least 0), ``"lines"`` (a factor
+        on the line covariances, at least 1), ``"scans"`` (a factor on the revisit
+        registrations' covariances, at least 1; the factor graph with scans); ``""``: nothing,
+        every value as told. The learned values over time are ``noise.csv`` and ``noise_*`` in
+        ``metrics.json``.
+    learn_heading_start_deg_per_sqrt_s : float
+        The heading walk a loop learning it (``"heading"``) starts from, when above the
+        configured one: the walk it takes until its innovations say otherwise.
+    learn_memory_s : float
+        The time the learner remembers (s; its sums forget by ``exp(-dt / learn_memory_s)``).
+    learn_every : int
+        The learner takes a step every this many innovations.
     """
 
     noise: NoiseConfig = field(default_factory=NoiseConfig)
@@ -135,6 +152,15 @@ class BackendConfig(LandmarkConfig):
     robust: str | None = one_of(None, None, "huber", "cauchy")
     robust_k: float = bounded(1.345, 0.0, math.inf, low_open=True)
     constraints: str = "lines"
+    learn_noise: str = ""
+    learn_heading_start_deg_per_sqrt_s: float = bounded(0.0, 0.0, 1.0)
+    learn_memory_s: float = bounded(300.0, 1.0, 1e6)
+    learn_every: int = bounded(5, 1, 10_000)
+
+    @property
+    def learned_kinds(self) -> frozenset[str]:
+        """The kinds in :attr:`learn_noise`."""
+        return frozenset(c.strip() for c in self.learn_noise.split(",") if c.strip())
 
     @property
     def calibrated(self) -> bool:
@@ -152,6 +178,12 @@ class BackendConfig(LandmarkConfig):
         if not kinds or not kinds <= {"lines", "scans"}:
             raise ValueError(
                 f"constraints must be 'lines', 'scans' or 'lines,scans', got {self.constraints!r}"
+            )
+        unknown = self.learned_kinds - set(LEARN_KINDS)
+        if unknown:
+            raise ValueError(
+                f"learn_noise takes a comma list of {', '.join(LEARN_KINDS)}, got"
+                f" {self.learn_noise!r} ({', '.join(sorted(unknown))} unknown)"
             )
         if self.sonar_yaw_prior != "body" and not (
             self.estimate_sonar_mount and self.estimate_misalignment
@@ -248,11 +280,16 @@ class ScanBackend(Protocol):
         ...
 
 
-def vote_observations(features: list[LineFeature], config: LandmarkConfig) -> VoteObservations:
+def vote_observations(
+    features: list[LineFeature], config: LandmarkConfig, line_cov_scale: float | None = None
+) -> VoteObservations:
     """The lines of one vote the landmark layer may use, the rules of
-    :class:`sonarslam.slam.mapping.landmarks.LandmarkConfig` (``min_rho_m``, ``line_cov_scale``;
+    :class:`sonarslam.slam.mapping.landmarks.LandmarkConfig` (``min_rho_m``, ``line_cov_scale``
+    or the one given, the landmark layer's in force:
+    :attr:`sonarslam.slam.mapping.landmarks.LandmarkMap.line_cov_scale`;
     :func:`sonarslam.slam.model.lines.usable_observations`)."""
-    return usable_observations(features, config.min_rho_m, config.line_cov_scale)
+    scale = config.line_cov_scale if line_cov_scale is None else line_cov_scale
+    return usable_observations(features, config.min_rho_m, scale)
 
 
 def ids_of_features(

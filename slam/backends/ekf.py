@@ -85,6 +85,7 @@ from sonarslam.slam.backends.base import (
     ids_of_features,
     vote_observations,
 )
+from sonarslam.slam.backends.learned import LearnedNoise
 from sonarslam.slam.io.states import HEADING_ERROR_FILE, write_heading_error
 from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.mapping.landmarks import LandmarkMap
@@ -282,6 +283,12 @@ class LineEkf:
         self._first_line_w: dict[int, FloatArray] = {}  # each landmark's first estimate (FEJ)
         self._kernel = robust_kernel(config.robust, config.robust_k)
         self._var_walk = np.deg2rad(config.noise.ahrs_bias_walk_deg_per_sqrt_s) ** 2  # rad^2/s
+        if "scans" in config.learned_kinds:
+            raise ValueError("learn_noise: the EKF takes no scans to learn their scale from")
+        #: the noise learned from the innovations (``learn_noise``), or the configured one
+        self.noise = LearnedNoise.of(config)
+        self.noise.advance(t0_s, wTb0)
+        self.noise_changes = 0  # steps of the learner that changed a value
         self.heading_error: list[tuple[float, float, float]] = []  # (t, b rad, var rad^2)
         self._pose_lin = np.zeros(3)  # the pose the vote's Jacobians are taken at (FEJ)
         self._cal_lin = (self.bTs.copy(), 1.0)  # and the calibration (mounting, range scale)
@@ -422,12 +429,38 @@ class LineEkf:
         P_vv[0, 0] += step.var_xy_m2
         P_vv[1, 1] += step.var_xy_m2
         P_vv[2, 2] += step.var_yaw_rad2(self.config.noise.gyro_sigma_rad_per_s)
-        P_vv[3, 3] += self._var_walk * step.dt_s
+        self._walks(P_vv, step)
         self._Phi = F @ self._Phi
         self._pending = True
         self.t_s = step.t_s
         bx, by = step_displacement(delta, sx, sy)  # delta and k
         return np.array([gain * bx, gain * by, dyaw])
+
+    def _walks(self, P_vv: FloatArray, step: MotionStep) -> None:
+        """The random walks' process noise of one step, in place on the vehicle block: the
+        heading error's ``q dt`` and the DVL scale's (the configured or, when learned, the
+        learned value, :class:`sonarslam.slam.backends.learned.LearnedNoise`).
+
+        The AHRS measures ``psi + b`` and ``b`` walks. A step that turns by the gyro leaves
+        ``psi``'s error alone and the walk is ``b``'s. A step that turns by the AHRS heading's
+        own change (``yaw_rate_source = "heading"``) turns by the walk too: ``psi``'s error
+        grows by the same increment ``w`` by which ``b``'s falls (``b`` is predicted constant),
+        so the noise is ``q dt [[1, -1], [-1, 1]]`` on ``(psi, b)`` and ``psi + b``, what the
+        AHRS sees, is untouched. (A configured walk with that rate is refused,
+        :class:`sonarslam.datasets.config.DatasetConfig`: the configured part stays ``b``'s; the
+        learned excess over it is coupled.)"""
+        dt = step.dt_s
+        P_vv[AHRS_BIAS, AHRS_BIAS] += self._var_walk * dt
+        extra = (self.noise.value("heading_walk") - self._var_walk) * dt
+        if extra > 0.0:
+            if step.gyro_dt_s > 0.0 or step.var_yaw_gap_rad2 > 0.0:
+                P_vv[AHRS_BIAS, AHRS_BIAS] += extra
+            else:
+                P_vv[YAW, YAW] += extra
+                P_vv[AHRS_BIAS, AHRS_BIAS] += extra
+                P_vv[YAW, AHRS_BIAS] -= extra
+                P_vv[AHRS_BIAS, YAW] -= extra
+        P_vv[DVL_SCALE, DVL_SCALE] += self.noise.value("dvl_scale_walk") * dt
 
     def _flush(self) -> None:
         """Apply the batched steps' Jacobian product to the vehicle-landmark block of P:
@@ -460,6 +493,7 @@ class LineEkf:
         K = np.asarray(self.kf.K)
         for _, _, C in self._clones.values():
             C -= K @ (H @ C)
+
         # filterpy's Joseph form (I - K H) P (I - K H)^T + K R K^T is symmetric only to
         # round-off, and nothing else symmetrises P: over hundreds of updates of a filter
         # whose variances span 1e-8 to 1e2 the asymmetry grows until P is indefinite, a gate's
@@ -496,6 +530,7 @@ class LineEkf:
         self.heading_innovations.append((t_s, nu, S))
         h = np.zeros(x.size)
         h[: self._cal.size] = self._h_heading
+
         if self._clones:
             k = P @ h / (float(h @ P @ h) + r)  # the gain scalar_joseph_update applies
             for _, _, C in self._clones.values():
@@ -503,7 +538,9 @@ class LineEkf:
         self.kf.x, self.kf.P = scalar_joseph_update(x, P, h, nu, r)
         self._normalise()
         self._own_stats["ahrs_updates"] += 1
-        if self._var_walk > 0.0:  # the filtered heading error's track (heading_error.csv)
+        self.noise.advance(t_s, self.kf.x[POSE])
+        if self._var_walk > 0.0 or self.noise.learns("heading_walk"):
+            # the filtered heading error's track (heading_error.csv)
             b = self.kf.x[AHRS_BIAS]
             self.heading_error.append((t_s, float(b), float(self.kf.P[AHRS_BIAS, AHRS_BIAS])))
         return True
@@ -563,13 +600,23 @@ class LineEkf:
         associations and new landmarks (:meth:`sonarslam.slam.mapping.landmarks.LandmarkMap.vote`); the
         decision applied here. The landmark id of each feature (None: not associated)."""
         wall0 = time.perf_counter()
-        obs = vote_observations(features, self.config)
+        obs = vote_observations(features, self.config, self.map.line_cov_scale)
         decision = self.map.vote(self._belief(obs))
         self._apply(decision)
+        if self.noise.on and obs.features:
+            self._learn([new.id for new in decision.new_landmarks])
         live = {c.view for c in self.map.tentative}
         self._clones = {v: c for v, c in self._clones.items() if v in live}
         self.vote_wall_s.append(time.perf_counter() - wall0)
         return ids_of_features(features, obs.features, decision.ids)
+
+    def _learn(self, new_landmarks: list[int]) -> None:
+        """This vote's innovations into the noise learner; the line covariance scale it learned
+        in force from the next vote on."""
+        self.noise.advance(self.t_s, self.x[POSE])
+        if self.noise.take_lines(self.map, new_landmarks):
+            self.noise_changes += 1
+            self.map.line_cov_scale = self.config.line_cov_scale * self.noise.value("line_scale")
 
     def _belief(self, obs: VoteObservations) -> Belief:
         """Every active landmark predicted from the whole state (the Jacobians at this vote's
@@ -653,7 +700,7 @@ class LineEkf:
         innovation's Mahalanobis distance (:class:`sonarslam.slam.backends.base.BackendConfig`)."""
         z_hat, H = self.predict_line(landmark_id)
         nu, flipped = line_difference(f.z, z_hat)
-        R = np.asarray(f.cov) * self.config.line_cov_scale
+        R = np.asarray(f.cov) * self.map.line_cov_scale
         R = FLIP_RHO @ R @ FLIP_RHO if flipped else R
         if self._kernel is not None:
             d = float(np.sqrt(nu @ np.linalg.solve(H @ self.P @ H.T + R, nu)))
@@ -674,7 +721,7 @@ class LineEkf:
         cross = obs.G_pose @ P[POSE, :]  # (2, n)
         P_new[n:, :n] = cross
         P_new[:n, n:] = cross.T
-        R = np.asarray(f.cov) * self.config.line_cov_scale
+        R = np.asarray(f.cov) * self.map.line_cov_scale
         P_new[n:, n:] = obs.G_pose @ P[POSE, POSE] @ obs.G_pose.T + obs.G_z @ R @ obs.G_z.T
         self.kf = _filter(np.concatenate([x, obs.line_w]), P_new)
         for v, (pose, P_then, C) in self._clones.items():
@@ -705,7 +752,7 @@ class LineEkf:
         cross = G @ P[:nv, :]  # (2, n)
         P_new[n:, :n] = cross
         P_new[:n, n:] = cross.T
-        R = np.asarray(f.cov) * self.config.line_cov_scale
+        R = np.asarray(f.cov) * self.map.line_cov_scale
         P_new[n:, n:] = G @ P[:nv, :nv] @ G.T + G_z @ R @ G_z.T
         self.kf = _filter(np.concatenate([x, line_w]), P_new)
         for v, (pose, P_then, C) in self._clones.items():
@@ -767,7 +814,7 @@ class LineEkf:
             out["state_misalignment_deg"] = float(np.rad2deg(x[MISALIGNMENT]))
             sd = np.sqrt(P[MISALIGNMENT, MISALIGNMENT])
             out["state_misalignment_sd_deg"] = float(np.rad2deg(sd))
-        if self.config.noise.dvl_scale_sigma > 0.0:
+        if self.config.noise.dvl_scale_sigma > 0.0 or self.noise.learns("dvl_scale_walk"):
             out["state_dvl_scale"] = float(x[DVL_SCALE])
             out["state_dvl_scale_sd"] = float(np.sqrt(P[DVL_SCALE, DVL_SCALE]))
         if self._gyro_s > 0.0:
@@ -775,7 +822,7 @@ class LineEkf:
             out["state_gyro_bias_sd_deg_per_s"] = float(
                 np.rad2deg(np.sqrt(P[GYRO_BIAS, GYRO_BIAS]))
             )
-        return out | self._calibration_metrics(x, P)
+        return out | self._calibration_metrics(x, P) | self.noise.metrics()
 
     def _calibration_metrics(self, x: FloatArray, P: FloatArray) -> dict[str, float | int]:
         """The sonar's calibration estimates with their sd, under the factor graph's keys
@@ -801,8 +848,10 @@ class LineEkf:
 
     def save(self, out_dir: Path) -> list[Path]:
         """The filtered AHRS heading error's track ``heading_error.csv`` when it walks
-        (:mod:`sonarslam.slam.io.states`); nothing else."""
+        (:mod:`sonarslam.slam.io.states`) and the learned noise's ``noise.csv`` when the loop
+        learns it (:mod:`sonarslam.slam.backends.learned`); nothing else."""
+        out = self.noise.save(Path(out_dir))
         if not self.heading_error:
-            return []
+            return out
         t, b, var = (np.array(c) for c in zip(*self.heading_error, strict=True))
-        return [write_heading_error(Path(out_dir) / HEADING_ERROR_FILE, t, b, np.sqrt(var))]
+        return [write_heading_error(Path(out_dir) / HEADING_ERROR_FILE, t, b, np.sqrt(var)), *out]

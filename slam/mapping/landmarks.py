@@ -65,6 +65,7 @@ __all__ = [
     "Landmark",
     "Tentative",
     "Innovation",
+    "JointInnovation",
     "LandmarkMap",
     "landmark_record",
 ]
@@ -208,13 +209,39 @@ class Tentative:
 @dataclass(frozen=True, eq=False)
 class Innovation:
     """A pairing's innovation: time (Unix s), landmark id, ``nu = z - z_hat`` (2,) sign-free,
-    its predicted covariance ``S = H P H^T + R`` (2, 2) and the observation's ``R`` (2, 2)."""
+    its predicted covariance ``S = H P H^T + R`` (2, 2) and the observation's ``R`` (2, 2) (with
+    the line covariance scale in force, :attr:`LandmarkMap.line_cov_scale`, which is
+    ``line_scale``); ``H_pose`` (2, 3), the prediction's Jacobian by the body pose ``(x_m, y_m,
+    yaw_rad)``; ``wTb`` (3,), the vote's pose; ``used``, whether the observation updated the
+    estimate (``reobservation_min_move_m``)."""
 
     t_s: float
     landmark: int
     nu: FloatArray
     S: FloatArray
     R: FloatArray
+    H_pose: FloatArray | None = None
+    wTb: FloatArray | None = None
+    used: bool = True
+    line_scale: float = 1.0
+
+
+@dataclass(frozen=True, eq=False)
+class JointInnovation:
+    """The innovations of one vote's used pairings together: time (Unix s), their landmarks
+    (m,), ``nu`` (2m,) stacked sign-free, their joint predicted covariance ``S`` (2m, 2m), whose
+    off-diagonal blocks ``H_a P H_b^T`` hold the pose's (and shared states') error that every
+    pairing of the vote sees, the observations' ``R`` (m, 2, 2) with ``line_scale`` in force,
+    the Jacobians by the body pose ``H_pose`` (m, 2, 3) and the vote's pose ``wTb`` (3,)."""
+
+    t_s: float
+    landmarks: tuple[int, ...]
+    nu: FloatArray
+    S: FloatArray
+    R: FloatArray
+    H_pose: FloatArray
+    wTb: FloatArray
+    line_scale: float = 1.0
 
 
 class LandmarkMap:
@@ -252,11 +279,16 @@ class LandmarkMap:
         self.seed_log: list[tuple[LineFeature, int]] = []
         #: every pairing's innovation (:class:`Innovation`), for the NIS
         self.innovations: list[Innovation] = []
+        #: each vote's used pairings' innovations together (:class:`JointInnovation`)
+        self.joint_innovations: list[JointInnovation] = []
         # the last vote's segments (landmark id, sonar-frame end points (2, 2)) and landmarks,
         # until the estimate after its update settles them (:meth:`settle`)
         self._growth: list[tuple[int, FloatArray]] = []
         self._touched: list[int] = []
         self._decided_t: float | None = None  # the time of the last vote decided with lines
+        #: the factor on every line covariance now: ``line_cov_scale`` times the learned
+        #: ``line_scale`` (:mod:`sonarslam.slam.model.noise_learning`), set by the back end
+        self.line_cov_scale = float(config.line_cov_scale)
 
     def __len__(self) -> int:
         return len(self.landmarks)
@@ -338,11 +370,13 @@ class LandmarkMap:
             z_hat, H = belief.z_hat[live], belief.H[live]
             problem = AssociationProblem(belief.z, belief.R, z_hat, H, belief.P, allowed)
             pairing = associate(problem, cfg.association)
-            self._log_innovations(problem, pairing, candidates, use)
         paired = [(candidates[j], use[i]) for i, j in enumerate(pairing) if j is not None]
         ids: list[int | None] = [None if j is None else candidates[j].id for j in pairing]
         self.stats["associated"] += len(paired)
         pairs = self._moved_enough(paired, belief.wTb)
+        if candidates:
+            used = {id(f) for _, f in pairs}
+            self._log_innovations(problem, pairing, candidates, use, belief.wTb, used)
         for lm, _ in pairs:
             lm.n_obs += 1
         new: list[NewLandmark] = []
@@ -401,9 +435,14 @@ class LandmarkMap:
         pairing: list[int | None],
         candidates: list[Landmark],
         use: list[LineFeature],
+        wTb: FloatArray,
+        used: set[int],
     ) -> None:
         """The innovation of every pairing made, with its predicted covariance (before the
-        update): their NIS is chi2(2) when the line covariances and the back end are honest."""
+        update): their NIS is chi2(2) when the line covariances and the back end are honest.
+        ``used``: the ``id`` of the observations that update the estimate."""
+        scale = self.line_cov_scale / self.config.line_cov_scale
+        rows: list[tuple[int, FloatArray, FloatArray, FloatArray]] = []  # used: (j, nu, R, H)
         for i, j in enumerate(pairing):
             if j is None:
                 continue
@@ -411,7 +450,38 @@ class LandmarkMap:
             R = FLIP_RHO @ problem.R[i] @ FLIP_RHO if flipped else problem.R[i]
             H = problem.H[j]
             S = H @ problem.P @ H.T + R
-            self.innovations.append(Innovation(use[i].t, candidates[j].id, nu, S, R))
+            if id(use[i]) in used:
+                rows.append((j, nu, R, H))
+            self.innovations.append(
+                Innovation(
+                    use[i].t,
+                    candidates[j].id,
+                    nu,
+                    S,
+                    R,
+                    H[:, :3].copy(),
+                    np.asarray(wTb, dtype=np.float64).copy(),
+                    id(use[i]) in used,
+                    scale,
+                )
+            )
+        if rows:
+            Hs = np.concatenate([h for _, _, _, h in rows])  # (2m, d)
+            S_joint = Hs @ problem.P @ Hs.T
+            for a, (_, _, R, _) in enumerate(rows):
+                S_joint[2 * a : 2 * a + 2, 2 * a : 2 * a + 2] += R
+            self.joint_innovations.append(
+                JointInnovation(
+                    use[0].t,
+                    tuple(candidates[j].id for j, _, _, _ in rows),
+                    np.concatenate([nu for _, nu, _, _ in rows]),
+                    S_joint,
+                    np.array([R for _, _, R, _ in rows]),
+                    np.array([h[:, :3] for _, _, _, h in rows]),
+                    np.asarray(wTb, dtype=np.float64).copy(),
+                    scale,
+                )
+            )
 
     def nis(self) -> FloatArray:
         """NIS ``nu^T S^-1 nu`` of every pairing made so far, shape (K,)."""
@@ -422,8 +492,8 @@ class LandmarkMap:
         ``tentative_observations`` times."""
         cfg = self.config
         wTb = belief.wTb
-        obs = world_observation(f, wTb, belief.P_pose, self.bTs, cfg.line_cov_scale)
-        R = np.asarray(f.cov) * cfg.line_cov_scale
+        obs = world_observation(f, wTb, belief.P_pose, self.bTs, self.line_cov_scale)
+        R = np.asarray(f.cov) * self.line_cov_scale
         kept = [c for c in self.tentative if f.t - c.t <= cfg.tentative_max_age_s]
         self.stats["tentative_dropped"] += len(self.tentative) - len(kept)
         self.stats["tentative_dropped_observations"] += sum(
@@ -437,7 +507,7 @@ class LandmarkMap:
             if cfg.tentative_joint_gate and belief.view_pairs is not None:
                 pair = belief.view_pairs.get(cand.view)
             if pair is not None:
-                R1 = cand.observations[0][1].cov * cfg.line_cov_scale
+                R1 = cand.observations[0][1].cov * self.line_cov_scale
                 d2 = self.tentative_distance(cand.observations[0][1].z, R1, f.z, R, pair)
             else:
                 nu, _ = line_difference(obs.line_w, cand.line_w)

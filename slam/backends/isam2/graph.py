@@ -80,6 +80,7 @@ from sonarslam.slam.backends.isam2.odometry import NodeOdometry, local_covarianc
 from sonarslam.slam.backends.isam2.pose_source import NodeTable, SmoothedPoseSource
 from sonarslam.slam.backends.isam2.redecided import RedecidedGraph, redecided_graph
 from sonarslam.slam.backends.isam2.scans import ScanConstraints
+from sonarslam.slam.backends.learned import LearnedNoise
 from sonarslam.slam.io.states import HEADING_ERROR_FILE, write_heading_error
 from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.mapping.landmarks import Landmark, LandmarkMap
@@ -152,6 +153,15 @@ class LineIsam2:
         self._after: AfterVote | None = None  # the estimate after the last vote's update
         self._n_nodes = 0
         self._var_walk = np.deg2rad(config.noise.ahrs_bias_walk_deg_per_sqrt_s) ** 2  # rad^2/s
+        #: the noise learned from the innovations (``learn_noise``), or the configured one
+        self.noise = LearnedNoise.of(config)
+        self.noise.advance(t0_s, np.asarray(wTb0))
+        self.noise_changes = 0  # steps of the learner that changed a value
+        # a bias per node when it walks (told or learned), a DVL scale per node when its walk
+        # is learned
+        self._walking_bias = self._var_walk > 0.0 or self.noise.learns("heading_walk")
+        self._walking_scale = self.noise.learns("dvl_scale_walk")
+        self._scaled = config.noise.dvl_scale_sigma > 0.0 or self._walking_scale
         self._bias_estimate = float(np.deg2rad(config.ahrs_bias_prior_deg))  # the newest node's
         self._last_node_t = -np.inf
         self._last_heading_t = -np.inf
@@ -170,6 +180,7 @@ class LineIsam2:
         self._anchor_cov_rows: tuple[tuple[float, ...], ...] = ((0.0,) * 3,) * 3
 
         self.scans = ScanConstraints(self, config) if "scans" in config.constraint_kinds else None
+        self._learned_in_force()
         records, values = start_records(np.asarray(wTb0), np.asarray(P0), config, self.bTs)
         for record in records:
             self._add_factor(record)
@@ -257,8 +268,20 @@ class LineIsam2:
         self._own_stats["pose_nodes"] += 1
 
     def _bias_key(self, k: int) -> int:
-        """The AHRS bias at node ``k``: ``B(k)`` with a random walk, else the constant ``B(0)``."""
-        return int(B(k)) if self._var_walk > 0.0 else int(B(0))
+        """The AHRS bias at node ``k``: ``B(k)`` with a random walk (told or learned), else the
+        constant ``B(0)``."""
+        return int(B(k)) if self._walking_bias else int(B(0))
+
+    def _scale_key(self, k: int) -> int:
+        """The DVL scale error over the odometry from node ``k``: ``K(k)`` when its walk is
+        learned, else the constant ``K(0)``."""
+        return int(K(k)) if self._walking_scale else int(K(0))
+
+    def _learned_in_force(self) -> None:
+        """The learned values into what they act on: the odometry's (heading walk), the
+        landmark layer's line covariance scale, the scan constraints' (their own)."""
+        self.odometry.heading_walk_rad2_per_s = self.noise.value("heading_walk") - self._var_walk
+        self.map.line_cov_scale = self.config.line_cov_scale * self.noise.value("line_scale")
 
     def _add_node(self) -> int:
         """A node at the current time: its odometry factor, its AHRS heading factor and, with a
@@ -266,17 +289,28 @@ class LineIsam2:
         k = self._n_nodes
         rel = self.odometry.since_node
         cfg = self.config
-        if self._var_walk > 0.0:
-            var = max(self._var_walk * (self.t_s - self._last_node_t), 1e-12)
+        dt = self.t_s - self._last_node_t
+        if self._walking_bias:
+            # the learned excess over the configured walk twice over the steps that turn by the
+            # AHRS heading's own change (odometry.NodeOdometry.step)
+            excess = self.noise.value("heading_walk") - self._var_walk
+            var = self._var_walk * dt + excess * (dt + self.odometry.heading_rate_s)
+            var = max(var, 1e-12)
             self._add_factor(
                 FactorRecord.of(FactorKind.BETWEEN_VECTOR, [B(k - 1), B(k)], [0.0], [[var]])
             )
             self._pending_values.insert(B(k), np.array([self._bias_estimate]))
-        if cfg.estimate_misalignment or cfg.estimate_gyro_scale or cfg.noise.dvl_scale_sigma > 0.0:
+        if self._walking_scale and k >= 2:
+            var = max(self.noise.value("dvl_scale_walk") * dt, 1e-12)
+            self._add_factor(
+                FactorRecord.of(FactorKind.BETWEEN_VECTOR, [K(k - 2), K(k - 1)], [0.0], [[var]])
+            )
+            self._pending_values.insert(K(k - 1), np.array([self.odometry.dvl_gain - 1.0]))
+        if cfg.estimate_misalignment or cfg.estimate_gyro_scale or self._scaled:
             keys = [X(k - 1), X(k)]
             keys += [D(0)] if cfg.estimate_misalignment else []
             keys += [G(0)] if cfg.estimate_gyro_scale else []
-            keys += [K(0)] if cfg.noise.dvl_scale_sigma > 0.0 else []
+            keys += [self._scale_key(k - 1)] if self._scaled else []
             terms = OdometryTerms(rel.yaw_raw, (rel.jx, rel.jy), self.odometry.node_scale)
             record = FactorRecord.of(
                 FactorKind.DVL_GYRO_ODOMETRY, keys, rel.pose, local_covariance(rel), odometry=terms
@@ -295,6 +329,7 @@ class LineIsam2:
             self._add_factor(FactorRecord.of(FactorKind.HEADING_BIAS, keys, [z], [[var]]))
         self._pending_values.insert(X(k), gtsam.Pose2(*self.pose))
         self._register_node(k, self.t_s)
+        self.noise.advance(self.t_s, self.pose)
         return k
 
     def _update(self, extra_iterations: int = 0) -> None:
@@ -336,8 +371,8 @@ class LineIsam2:
         if self.config.estimate_gyro_scale:
             scale = float(self.isam.calculateEstimateVector(G(0))[0])
         gain = 1.0
-        if self.config.noise.dvl_scale_sigma > 0.0:
-            gain += float(self.isam.calculateEstimateVector(K(0))[0])
+        if self._scaled:
+            gain += float(self.isam.calculateEstimateVector(self._scale_key(max(k - 1, 0)))[0])
         self.odometry.re_anchor(delta, scale, gain)
         self._bias_estimate = float(self.isam.calculateEstimateVector(self._bias_key(k))[0])
         self._stale = True
@@ -382,13 +417,27 @@ class LineIsam2:
         (:meth:`sonarslam.slam.mapping.landmarks.LandmarkMap.vote`); the decision applied here as factors
         and variables, then an update. The landmark id of each feature (None: not associated)."""
         wall0 = time.perf_counter()
-        obs = vote_observations(features, self.config)
+        obs = vote_observations(features, self.config, self.map.line_cov_scale)
         belief = self._belief(obs)
         decision = self.map.vote(belief)
         if belief.anchor is not None:
             self._apply(decision, belief.anchor)
+            if self.noise.on:
+                self._learn([new.id for new in decision.new_landmarks])
         self.vote_wall_s.append(time.perf_counter() - wall0)
         return ids_of_features(features, obs.features, decision.ids)
+
+    def _learn(self, new_landmarks: list[int]) -> None:
+        """This vote's innovations into the noise learner; the learned values in force from now
+        on (new factors take them; those in the graph keep theirs)."""
+        self.noise.advance(self.t_s, self.pose)
+        if self.noise.take_lines(self.map, new_landmarks):
+            self.learned_changed()
+
+    def learned_changed(self) -> None:
+        """The learner changed a value: into force."""
+        self.noise_changes += 1
+        self._learned_in_force()
 
     def _belief(self, obs: VoteObservations) -> Belief:
         """The vote's node (:meth:`node_now`), the candidate landmarks
@@ -577,7 +626,7 @@ class LineIsam2:
                     FactorKind.LINE_OBSERVATION_CALIBRATED,
                     [X(k), L(lm_id), *self.calibration_keys()],
                     f.z,
-                    np.asarray(f.cov) * cfg.line_cov_scale,
+                    np.asarray(f.cov) * self.map.line_cov_scale,
                     bTs=self.bTs.copy(),
                     kTb=compose(np.asarray(bTs, dtype=np.float64), inverse(self.bTs)),
                     robust=robust,
@@ -589,7 +638,7 @@ class LineIsam2:
                 FactorKind.LINE_OBSERVATION,
                 [X(k), L(lm_id)],
                 f.z,
-                np.asarray(f.cov) * cfg.line_cov_scale,
+                np.asarray(f.cov) * self.map.line_cov_scale,
                 bTs=np.asarray(bTs, dtype=np.float64),
                 robust=robust,
             )
@@ -810,7 +859,7 @@ class LineIsam2:
             out["isam2_updates"] = int(update_ms.size)
             out["isam2_update_p50_ms"] = float(np.percentile(update_ms, 50))
             out["isam2_update_p99_ms"] = float(np.percentile(update_ms, 99))
-        return out | self._state_metrics()
+        return out | self._state_metrics() | self.noise.metrics()
 
     def _state_metrics(self) -> dict[str, float | int]:
         """The final estimates of the vehicle's constants with their sd (``state_*``, as the
@@ -821,8 +870,8 @@ class LineIsam2:
         terms = [("ahrs_bias", self._bias_key(self._n_nodes - 1), True)]
         if self.config.estimate_misalignment:
             terms.append(("misalignment", int(D(0)), True))
-        if self.config.noise.dvl_scale_sigma > 0.0:
-            terms.append(("dvl_scale", int(K(0)), False))
+        if self._scaled:
+            terms.append(("dvl_scale", self._scale_key(max(self._n_nodes - 2, 0)), False))
         for name, key, degrees in terms:
             v, sd = float(values.atVector(key)[0]), float(np.sqrt(marginal(key)[0, 0]))
             unit = "_deg" if degrees else ""
@@ -858,14 +907,15 @@ class LineIsam2:
 
     def heading_error_track(self) -> tuple[FloatArray, FloatArray, FloatArray] | None:
         """The AHRS heading error ``b`` at every node with its marginal sd, when it walks
-        (``ahrs_bias_walk_deg_per_sqrt_s > 0``: one ``B(k)`` per node); None for a constant bias.
+        (``ahrs_bias_walk_deg_per_sqrt_s > 0`` or learned: one ``B(k)`` per node); None for a
+        constant bias.
 
         Returns
         -------
         t_s, b_rad, sd_rad : ndarray, shape (N,)
             Node times (Unix s), the estimate and its sd (rad).
         """
-        if self._var_walk <= 0.0:
+        if not self._walking_bias:
             return None
         marginal = self._marginals()
         values = self.estimate()
@@ -886,7 +936,7 @@ class LineIsam2:
             "config": {k: v for k, v in asdict(self.config).items() if k != "association"},
         }
         save_graph(path, self.records, values, meta)
-        out = [path]
+        out = [path, *self.noise.save(Path(out_dir))]
         track = self.heading_error_track()
         if track is not None:
             out.append(write_heading_error(Path(out_dir) / HEADING_ERROR_FILE, *track))

@@ -38,6 +38,7 @@ from sonarslam.slam.backends.isam2.factors import (
 
 __all__ = [
     "GRAPH_FORMAT",
+    "LEARNED_SCALE_SIGMA",
     "key_name",
     "key_of",
     "pose_of",
@@ -52,6 +53,10 @@ __all__ = [
 ]
 
 GRAPH_FORMAT = "sonarslam-graph/1"
+
+#: The prior sigma of the DVL scale error ``K(0)`` of a graph told none (``dvl_scale_sigma =
+#: 0``) that learns its walk (``learn_noise`` with ``"dvl_scale"``): 0, numerically.
+LEARNED_SCALE_SIGMA = 1e-4
 
 
 def key_name(key: int) -> str:
@@ -416,8 +421,10 @@ def start_records(
     if config.estimate_gyro_scale:
         records.append(FactorRecord.of(prior, [G(0)], [1.0], [[config.gyro_scale_sigma**2]]))
         values.insert(G(0), np.ones(1))
-    if config.noise.dvl_scale_sigma > 0.0:
-        records.append(FactorRecord.of(prior, [K(0)], [0.0], [[config.noise.dvl_scale_sigma**2]]))
+    if config.noise.dvl_scale_sigma > 0.0 or "dvl_scale" in config.learned_kinds:
+        # a scale error learned to walk from none told starts known to LEARNED_SCALE_SIGMA
+        sigma = max(config.noise.dvl_scale_sigma, LEARNED_SCALE_SIGMA)
+        records.append(FactorRecord.of(prior, [K(0)], [0.0], [[sigma**2]]))
         values.insert(K(0), np.zeros(1))
     if config.estimate_sonar_mount:
         if bTs is None:

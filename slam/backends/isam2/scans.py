@@ -51,6 +51,7 @@ from sonarslam.features.scans.matcher import ScanMatcher
 from sonarslam.features.scans.scan import Scan
 from sonarslam.slam.backends.isam2.config import GraphConfig
 from sonarslam.slam.backends.isam2.graph_io import FactorKind, FactorRecord, Robust
+from sonarslam.slam.backends.learned import LearnedNoise
 from sonarslam.slam.model.lines import local_to_world
 
 __all__ = [
@@ -93,6 +94,15 @@ class ScanGraph(Protocol):
 
     def scan_update(self, extra_iterations: int = 0) -> None:
         """Pending factors into iSAM2."""
+        ...
+
+    @property
+    def noise(self) -> LearnedNoise:
+        """The graph's learned noise (the revisits' covariance scale among it)."""
+        ...
+
+    def learned_changed(self) -> None:
+        """The learner changed a value: into force."""
         ...
 
 
@@ -221,14 +231,17 @@ class ScanConstraints:
         self.graph.add_scan_factor(self._record(j, k, reg, kind))
 
     def _record(self, j: int, k: int, reg: Registration, kind: str) -> FactorRecord:
-        """The ``BetweenFactorPose2`` record between the nodes of scans ``j`` and ``k``."""
+        """The ``BetweenFactorPose2`` record between the nodes of scans ``j`` and ``k``; a
+        revisit's covariance times the learned scan scale
+        (:class:`sonarslam.slam.backends.learned.LearnedNoise`)."""
         (nj, jn_T_j), (nk, kn_T_k) = self.log.nodes[j], self.log.nodes[k]
         a = compose(jn_T_j, reg.z)
         z = compose(a, inverse(kn_T_k))
         J1_a, J1_z = compose_jacobians(jn_T_j, reg.z)
         J2_a, _ = compose_jacobians(a, inverse(kn_T_k))
         J = J2_a @ J1_z
-        cov = J @ reg.cov @ J.T
+        scale = self.graph.noise.value("scan_scale") if kind == "revisit" else 1.0
+        cov = scale * (J @ reg.cov @ J.T)
         A = local_to_world(-float(z[2]))  # plain -> the measurement's local tangent
         calibration = self.graph.calibration_keys() if self.config.scan_calibration else []
         if calibration:
@@ -257,6 +270,7 @@ class ScanConstraints:
         node, kTref = self.graph.node_now()
         k = scan.index
         self.log.nodes[k] = (node, kTref)
+        self.graph.noise.mark(("S", k))
         self._t.append(scan.t_ref_s)
         self._cov.append(np.full((3, 3), np.inf))
         if cfg.scan_consecutive and k >= 1 and (k - 1) in self.log.nodes:
@@ -352,7 +366,13 @@ class ScanConstraints:
             nis = None
             if reg.accepted:
                 nu = np.array([*(reg.z[:2] - jTk[:2]), wrap_angle(reg.z[2] - jTk[2])])
-                nis = float(nu @ np.linalg.solve(S + reg.cov, nu))
+                scale = self.graph.noise.value("scan_scale")
+                nis = float(nu @ np.linalg.solve(S + scale * reg.cov, nu))
+                yaw_j = float(self._pose(j)[2])
+                if self.graph.noise.add_registration(
+                    self._t[k], nu, S, reg.cov, ("S", j), ("S", k), yaw_j, pose_k[:2]
+                ):
+                    self.graph.learned_changed()
             ok = reg.accepted and (
                 cfg.revisit_gate == "registration" or (nis or 0.0) <= self._compat
             )

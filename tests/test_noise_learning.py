@@ -1,0 +1,178 @@
+"""The noise learned online (issue 42): the relative pose error of the walks against Monte Carlo,
+the gate's expectation, the learner recovering a walk and a measurement scale on a filter of its
+own, and the EKF's heading walk on a step that turns by the AHRS heading's own change."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from sonarslam.slam.backends.ekf import AHRS_BIAS, YAW, EkfConfig, LineEkf
+from sonarslam.slam.model.motion import MotionStep
+from sonarslam.slam.model.noise_learning import (
+    NoiseLearner,
+    PathMoments,
+    expected_factor,
+    walk_sensitivities,
+)
+from sonarslam.sonar.beam import Mounting
+
+
+def _path(n: int = 400, dt: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """A curving path at 1 m/s: times (n,), positions (n, 2)."""
+    t = dt * np.arange(n)
+    yaw = 0.3 * np.sin(t / 40.0) + t / 120.0
+    v = np.column_stack([np.cos(yaw), np.sin(yaw)])
+    p = np.vstack([np.zeros(2), np.cumsum(v[:-1] * dt, axis=0)])
+    return t, p
+
+
+def test_path_moments_integrate_the_path() -> None:
+    t, p = _path()
+    m = PathMoments()
+    for ti, pi in zip(t, p, strict=True):
+        m.advance(float(ti), pi)
+    T, m1, m2 = m.snapshot()
+    rel = p - p[0]
+    assert T == pytest.approx(t[-1] - t[0], abs=1e-12)
+    # trapezoids of a piecewise-linear path: exact to its linear pieces
+    np.testing.assert_allclose(m1, np.trapezoid(rel, t, axis=0), rtol=1e-12, atol=1e-9)
+    outer = np.einsum("ni,nj->nij", rel, rel)
+    np.testing.assert_allclose(m2, np.trapezoid(outer, t, axis=0), rtol=2e-3, atol=1e-6)
+
+
+def test_walk_sensitivities_match_monte_carlo() -> None:
+    """The pose error at the end of a path, relative to its start, of a heading error walking at
+    ``q`` and of a DVL scale error walking at ``q``: its covariance per unit ``q`` is
+    :func:`walk_sensitivities`' (the module's derivation by parts), within the Monte Carlo's
+    sampling error."""
+    rng = np.random.default_rng(3)
+    t, p = _path(n=241)
+    dt = np.diff(t)
+    v = np.diff(p, axis=0) / dt[:, None]
+    m = PathMoments()
+    m.advance(float(t[0]), p[0])
+    start = m.snapshot()
+    for ti, pi in zip(t[1:], p[1:], strict=True):
+        m.advance(float(ti), pi)
+    D_h, D_k = walk_sensitivities(start, m.snapshot(), m.relative(p[-1]))
+    n = 6000
+    # heading error walking from 0 over each step (its value at the step's start moves it)
+    e = np.cumsum(rng.normal(0.0, np.sqrt(dt), (n, dt.size)), axis=1)
+    e_start = np.hstack([np.zeros((n, 1)), e[:, :-1]])
+    perp = np.column_stack([-v[:, 1], v[:, 0]])
+    dp = np.einsum("ns,sk->nk", e_start * dt, perp)
+    err_h = np.column_stack([dp, e[:, -1]])
+    cov_h = np.cov(err_h.T)
+    sd = np.sqrt(np.diag(D_h))
+    np.testing.assert_allclose(cov_h / np.outer(sd, sd), D_h / np.outer(sd, sd), atol=0.06)
+    # a DVL scale error walking: each step's displacement times (1 + k)
+    k = np.cumsum(rng.normal(0.0, np.sqrt(dt), (n, dt.size)), axis=1)
+    k_start = np.hstack([np.zeros((n, 1)), k[:, :-1]])
+    err_k = np.einsum("ns,sk->nk", k_start * dt, v)
+    cov_k = np.cov(err_k.T)
+    sd = np.sqrt(np.diag(D_k[:2, :2]))
+    np.testing.assert_allclose(cov_k / np.outer(sd, sd), D_k[:2, :2] / np.outer(sd, sd), atol=0.06)
+    assert np.all(D_k[2] == 0.0)
+
+
+@pytest.mark.parametrize(("dof", "gate"), [(2, 0.99), (4, 0.99), (3, None)])
+def test_expected_factor(dof: int, gate: float | None) -> None:
+    """``E[nu nu^T] = c S`` of a chi2(d) innovation kept inside its gate, or winsorised."""
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=(400_000, dof))
+    r2 = np.sum(x**2, axis=1)
+    c, w = expected_factor(dof, gate)
+    if gate is not None:
+        assert w == pytest.approx(chi2.ppf(gate, dof))
+        kept = r2[r2 <= w]
+        assert float(np.mean(kept)) / dof == pytest.approx(c, rel=3e-3)
+    else:
+        assert float(np.mean(np.minimum(r2, w))) / dof == pytest.approx(c, rel=3e-3)
+
+
+def test_learner_recovers_a_walk_and_a_measurement_scale() -> None:
+    """A scalar state walking at ``q`` seen after gaps of 1 to 200 s with a noise 4 times the
+    told one; a Kalman filter told no walk and the noise as told learns both (its derivatives
+    of the innovation variance by each propagated exactly), within 40 % over the last 2,000
+    innovations."""
+    rng = np.random.default_rng(1)
+    q_true, r0, lam_true = 1e-5, 3e-4, 4.0
+    learner = NoiseLearner({"heading_walk": 0.0, "line_scale": 1.0}, memory_s=40_000.0, every=5)
+    x = xh = 0.0
+    P, dPq, dPl, t = 1e-3, 0.0, 0.0, 0.0
+    q_seen, lam_seen = [], []
+    for k in range(6000):
+        dt = float(rng.choice([1.0, 5.0, 50.0, 200.0]))
+        t += dt
+        x += rng.normal(0.0, math.sqrt(q_true * dt))
+        q, lam = learner.value("heading_walk"), learner.value("line_scale")
+        P += q * dt
+        dPq += dt
+        nu = x + rng.normal(0.0, math.sqrt(lam_true * r0)) - xh
+        S = P + lam * r0
+        D = {"heading_walk": np.array([[dPq]]), "line_scale": np.array([[dPl + r0]])}
+        learner.add(t, np.array([nu]), np.array([[S]]), D)
+        K = P / S
+        xh += K * nu
+        P *= 1.0 - K
+        dPq *= (1.0 - K) ** 2
+        dPl = (1.0 - K) ** 2 * dPl + K**2 * r0
+        if k >= 4000:
+            q_seen.append(learner.value("heading_walk"))
+            lam_seen.append(learner.value("line_scale"))
+    assert np.mean(q_seen) == pytest.approx(q_true, rel=0.4)
+    assert np.mean(lam_seen) == pytest.approx(lam_true, rel=0.4)
+    assert learner.history[0][1][0] == 0.0  # the start: the floors
+    assert min(v[1][2] for v in learner.history) >= 1.0  # never below the told noise
+
+
+def test_learner_stays_at_its_floor_when_told_right() -> None:
+    """Innovations drawn as the told noise predicts them: the learned values stay near their
+    floors (the mean over the last 2,000 innovations within 10 % of the line scale's, the walk
+    within a tenth of its reference size)."""
+    rng = np.random.default_rng(2)
+    q0 = 1e-6
+    learner = NoiseLearner({"line_scale": 1.0, "heading_walk": q0}, memory_s=500.0, every=5)
+    R = np.diag([0.04, 1e-4])
+    h = np.array([[5.0], [-1.0]])  # a line's derivative by the heading
+    lam_seen, q_seen = [], []
+    for k in range(4000):
+        D_h = float(rng.uniform(1.0, 100.0)) * h @ h.T
+        truth = R + q0 * D_h + 1e-3 * np.eye(2)
+        nu = rng.multivariate_normal(np.zeros(2), truth)
+        lam, q = learner.value("line_scale"), learner.value("heading_walk")
+        S = lam * R + q * D_h + 1e-3 * np.eye(2)
+        learner.add(float(k), nu, S, {"line_scale": R, "heading_walk": D_h})
+        if k >= 2000:
+            lam_seen.append(learner.value("line_scale"))
+            q_seen.append(learner.value("heading_walk"))
+    assert np.mean(lam_seen) < 1.10
+    assert np.mean(q_seen) < q0 + 0.1 * math.radians(0.1) ** 2
+
+
+def test_ekf_heading_walk_on_a_heading_rate_step() -> None:
+    """A step that turns by the AHRS heading's own change carries the walk ``w`` into ``psi``
+    and ``-w`` into ``b``: ``psi + b`` (what the AHRS sees) keeps its variance, ``psi - b``'s
+    grows by ``4 q dt``; a gyro step puts it on ``b`` alone."""
+    q = math.radians(0.2) ** 2
+    cfg = EkfConfig(learn_noise="heading", learn_heading_start_deg_per_sqrt_s=0.2)
+    ekf = LineEkf(0.0, np.zeros(3), np.eye(3) * 0.01, Mounting(), cfg)
+    P0 = ekf.P[:4, :4].copy()
+    ekf.predict(MotionStep(2.0, 2.0, 1.0, 0.0, 0.0, 0.05, 0.1))  # gyro_dt_s = 0: heading rate
+    P1 = ekf.P
+    plus = np.zeros(ekf.x.size)
+    plus[[YAW, AHRS_BIAS]] = 1.0
+    minus = np.zeros(ekf.x.size)
+    minus[[YAW, AHRS_BIAS]] = [1.0, -1.0]
+    gyro_yaw = (2.0 * cfg.noise.gyro_sigma_rad_per_s) ** 2  # the step's own yaw noise
+    assert plus @ P1 @ plus - plus[:4] @ P0 @ plus[:4] == pytest.approx(gyro_yaw, rel=1e-9)
+    grown = minus @ P1 @ minus - minus[:4] @ P0 @ minus[:4]
+    assert grown == pytest.approx(4.0 * q * 2.0 + gyro_yaw, rel=1e-9)
+    ekf2 = LineEkf(0.0, np.zeros(3), np.eye(3) * 0.01, Mounting(), cfg)
+    before = ekf2.P[AHRS_BIAS, AHRS_BIAS]
+    ekf2.predict(MotionStep(2.0, 2.0, 1.0, 0.0, 0.0, 0.05, 0.1, gyro_dt_s=2.0))
+    assert ekf2.P[AHRS_BIAS, AHRS_BIAS] - before == pytest.approx(q * 2.0, rel=1e-9)
