@@ -10,7 +10,10 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from sonarslam.datasets.errors import DataError
 from sonarslam.slam.backends.ekf import AHRS_BIAS, YAW, EkfConfig, LineEkf
+from sonarslam.slam.io.plots import plot_learned_noise
+from sonarslam.slam.io.states import NOISE_FILE, read_learned_noise, write_learned_noise
 from sonarslam.slam.model.motion import MotionStep
 from sonarslam.slam.model.noise_learning import (
     NoiseLearner,
@@ -176,3 +179,22 @@ def test_ekf_heading_walk_on_a_heading_rate_step() -> None:
     before = ekf2.P[AHRS_BIAS, AHRS_BIAS]
     ekf2.predict(MotionStep(2.0, 2.0, 1.0, 0.0, 0.0, 0.05, 0.1, gyro_dt_s=2.0))
     assert ekf2.P[AHRS_BIAS, AHRS_BIAS] - before == pytest.approx(q * 2.0, rel=1e-9)
+
+
+def test_noise_csv_round_trip_and_figure(tmp_path) -> None:
+    """``noise.csv`` reads back what was written (NaN where not learned), refuses another
+    header naming the file and line, and ``sonarslam report`` draws it."""
+    t = np.array([100.0, 110.0, 130.0])
+    v = np.array(
+        [[0.0, np.nan, 1.0, np.nan], [0.05, np.nan, 1.5, np.nan], [0.1, np.nan, 2.0, np.nan]]
+    )
+    path = write_learned_noise(tmp_path / NOISE_FILE, t, v)
+    t2, v2 = read_learned_noise(path)
+    np.testing.assert_allclose(t2, t, atol=1e-6)
+    np.testing.assert_allclose(v2, v, rtol=1e-5, equal_nan=True)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,b\n1,2\n")
+    with pytest.raises(DataError, match="bad.csv"):
+        read_learned_noise(bad)
+    png = plot_learned_noise(tmp_path / "noise.png", t2, v2, "learned")
+    assert png.stat().st_size > 1000

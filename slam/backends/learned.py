@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from sonarslam.features.geometry import FloatArray
+from sonarslam.slam.io.states import NOISE_FILE, write_learned_noise
 from sonarslam.slam.mapping.landmarks import LandmarkMap
 from sonarslam.slam.model.noise_learning import (
     NoiseLearner,
@@ -33,7 +34,7 @@ from sonarslam.slam.model.noise_learning import (
 if TYPE_CHECKING:  # base imports LEARN_KINDS from here
     from sonarslam.slam.backends.base import BackendConfig
 
-__all__ = ["LEARN_KINDS", "NOISE_FILE", "LearnedNoise", "write_learned_noise"]
+__all__ = ["LEARN_KINDS", "LearnedNoise"]
 
 #: The kinds of ``learn_noise`` and the parameter each learns.
 LEARN_KINDS = {
@@ -42,31 +43,6 @@ LEARN_KINDS = {
     "lines": "line_scale",
     "scans": "scan_scale",
 }
-
-#: The file of the learned values' track in a run directory.
-NOISE_FILE = "noise.csv"
-
-
-def write_learned_noise(path: str | Path, history: list[tuple[float, tuple[float, ...]]]) -> Path:
-    """``noise.csv``: ``t_s`` and every parameter of
-    :data:`sonarslam.slam.model.noise_learning.LEARNED`, in its order (the heading walk in deg/sqrt(s), the
-    DVL scale walk in 1/sqrt(s), the scales as factors; empty where not learned) at the start
-    and after each step."""
-    p = Path(path)
-    head = "t_s,heading_walk_deg_per_sqrt_s,dvl_scale_walk_per_sqrt_s,line_scale,scan_scale"
-    rows = [head]
-    for t, values in history:
-        h, k, line, scan = values
-        cells = [
-            f"{t:.6f}",
-            "" if math.isnan(h) else f"{math.degrees(math.sqrt(h)):.6g}",
-            "" if math.isnan(k) else f"{math.sqrt(k):.6g}",
-            "" if math.isnan(line) else f"{line:.6g}",
-            "" if math.isnan(scan) else f"{scan:.6g}",
-        ]
-        rows.append(",".join(cells))
-    p.write_text("\n".join(rows) + "\n")
-    return p
 
 
 class LearnedNoise:
@@ -250,7 +226,13 @@ class LearnedNoise:
         return {} if self.learner is None else self.learner.metrics()
 
     def save(self, out_dir: Path) -> list[Path]:
-        """``noise.csv`` (:func:`write_learned_noise`) when something is learned."""
+        """``noise.csv`` (:func:`sonarslam.slam.io.states.write_learned_noise`: the heading walk
+        in deg/sqrt(s), the DVL scale walk in 1/sqrt(s), the factors) when something is
+        learned."""
         if self.learner is None or not self.learner.history:
             return []
-        return [write_learned_noise(Path(out_dir) / NOISE_FILE, self.learner.history)]
+        t = np.array([h[0] for h in self.learner.history])
+        v = np.array([h[1] for h in self.learner.history])
+        v[:, 0] = np.rad2deg(np.sqrt(v[:, 0]))
+        v[:, 1] = np.sqrt(v[:, 1])
+        return [write_learned_noise(Path(out_dir) / NOISE_FILE, t, v)]

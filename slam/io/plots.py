@@ -34,6 +34,7 @@ __all__ = [
     "plot_anees",
     "plot_sweep",
     "plot_worlds",
+    "plot_learned_noise",
 ]
 
 
@@ -525,6 +526,42 @@ def plot_heading_error(
     ax.grid(True, lw=0.3)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
     ax.set_title(title)
+    out = Path(path)
+    fig.savefig(out, bbox_inches="tight")
+    return out
+
+
+#: The learned noise's panels: column of ``noise.csv`` (:data:`sonarslam.slam.io.states.NOISE_COLUMNS`
+#: order) -> its axis label.
+_NOISE_LABELS = (
+    "heading walk (deg/√s)",
+    "DVL scale walk (1/√s)",
+    "line covariance ×",
+    "revisit covariance ×",
+)
+
+
+def plot_learned_noise(path: str | Path, t_s: FloatArray, values: FloatArray, title: str) -> Path:
+    """The noise a loop learned over time: one step panel per learned column (NaN columns are
+    not learned and left out).
+
+    Parameters
+    ----------
+    t_s : ndarray, shape (N,)
+        Unix s of the start and each step.
+    values : ndarray, shape (N, 4)
+        ``noise.csv``'s columns (:func:`sonarslam.slam.io.states.read_learned_noise`).
+    """
+    cols = [c for c in range(values.shape[1]) if np.any(np.isfinite(values[:, c]))]
+    fig = Figure(figsize=(12, 1.0 + 1.6 * max(len(cols), 1)), dpi=100, layout="constrained")
+    axes = np.atleast_1d(fig.subplots(max(len(cols), 1), 1, sharex=True))
+    tt = t_s - (float(t_s[0]) if t_s.size else 0.0)
+    for ax, c in zip(axes, cols, strict=False):
+        ax.step(tt, values[:, c], where="post", color="tab:blue", lw=1.0)
+        ax.set_ylabel(_NOISE_LABELS[c], fontsize="small")
+        ax.grid(True, lw=0.3)
+    axes[-1].set_xlabel("time (s)")
+    axes[0].set_title(title)
     out = Path(path)
     fig.savefig(out, bbox_inches="tight")
     return out

@@ -94,7 +94,12 @@ def health_inputs(
         created[j] = min(created.get(j, f.t), f.t)
     m = backend.metrics()
     t0 = float(result.trajectory.t_s[0])
-    walk = float(np.deg2rad(cfg.noise.ahrs_bias_walk_deg_per_sqrt_s))
+    # the model in force: a walk the loop learned (learn_noise) is judged as told, at its largest
+    walk_deg = max(
+        cfg.noise.ahrs_bias_walk_deg_per_sqrt_s,
+        float(m.get("noise_heading_walk_deg_per_sqrt_s_max", 0.0)),
+    )
+    walk = float(np.deg2rad(walk_deg))
     bias_sigma = float(np.deg2rad(cfg.noise.ahrs_bias_sigma_deg))
     states = []
     if "state_ahrs_bias_deg" in m:
@@ -110,9 +115,9 @@ def health_inputs(
             )
         )
     if "state_dvl_scale" in m:
-        states.append(
-            StateValue("DVL scale", float(m["state_dvl_scale"]), cfg.noise.dvl_scale_sigma, "")
-        )
+        scale_walk = float(m.get("noise_dvl_scale_walk_per_sqrt_s_max", 0.0))
+        sigma = float(np.hypot(cfg.noise.dvl_scale_sigma, scale_walk * np.sqrt(t_end - t0)))
+        states.append(StateValue("DVL scale", float(m["state_dvl_scale"]), sigma, ""))
     gyro_sigma = getattr(cfg, "gyro_bias_sigma_deg_per_s", None)
     if "state_gyro_bias_deg_per_s" in m and gyro_sigma is not None:
         states.append(

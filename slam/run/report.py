@@ -20,6 +20,7 @@ re-opens the run's dataset when it is still there, and writes into ``OUT``:
 * ``nees_<run>.png``: pose and position NEES in time with their chi2 bands (simulated runs);
 * ``heading_error_<run>.png``: the AHRS heading error's track with its 2-sigma band (runs whose
   heading error walks, ``heading_error.csv``), with the simulator's true error;
+* ``noise_<run>.png``: the noise the run learned over time (``noise.csv``, ``learn_noise``);
 * ``consistency_<run>.png``: the run's own ``consistency.png`` (NEES against the truth or GPS,
   and a closed loop's NIS: :mod:`sonarslam.slam.run.consistency_figure`), when it wrote one.
 
@@ -60,6 +61,7 @@ from sonarslam.slam.run.report_figures import (
     calibration_lines,
     error_figure,
     heading_error_figure,
+    learned_noise_figure,
     map_figure,
     nees_figure,
     segment_figure,
@@ -458,6 +460,9 @@ def report(
         heading = heading_error_figure(run, lab, out / f"heading_error_{tag}.png")
         if heading is not None:
             figs.append(heading)
+        learned = learned_noise_figure(run, lab, out / f"noise_{tag}.png")
+        if learned is not None:
+            figs.append(learned)
         if (run.run_dir / "consistency.png").is_file():  # the NIS is in the run's files only
             figs.append(out / f"consistency_{tag}.png")
             shutil.copyfile(run.run_dir / "consistency.png", figs[-1])

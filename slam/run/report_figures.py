@@ -27,11 +27,17 @@ from sonarslam.slam.io.maps import MapLayers, landmark_layers, plot_map
 from sonarslam.slam.io.plots import (
     plot_error_bounds,
     plot_heading_error,
+    plot_learned_noise,
     plot_nees,
     plot_segment_ate,
     plot_trajectories,
 )
-from sonarslam.slam.io.states import HEADING_ERROR_FILE, read_heading_error
+from sonarslam.slam.io.states import (
+    HEADING_ERROR_FILE,
+    NOISE_FILE,
+    read_heading_error,
+    read_learned_noise,
+)
 from sonarslam.slam.io.trajectory import FloatArray, Trajectory, cov_file
 from sonarslam.slam.run.presets import map_min_intensity
 from sonarslam.slam.run.report_data import RunData
@@ -44,6 +50,7 @@ __all__ = [
     "error_figure",
     "nees_figure",
     "heading_error_figure",
+    "learned_noise_figure",
     "calibration_lines",
     "map_figure",
     "trajectory_figure",
@@ -154,6 +161,17 @@ def heading_error_figure(run: RunData, label: str, out: Path) -> Path | None:
     return plot_heading_error(out, t, b, sd, title, truth)
 
 
+def learned_noise_figure(run: RunData, label: str, out: Path) -> Path | None:
+    """The noise the run learned over time (``noise.csv``, ``learn_noise``); None when it
+    learned none."""
+    path = run.run_dir / NOISE_FILE
+    if not path.exists():
+        return None
+    t, values = read_learned_noise(path)
+    title = f"{run.dataset_name}: {label}, the noise learned from its innovations"
+    return plot_learned_noise(out, t, values, title)
+
+
 #: The calibration estimates of ``metrics.json``: (label, key, its sd's key, unit).
 _CALIBRATION = (
     ("sonar mounting x", "state_sonar_x_m", "state_sonar_x_sd_m", "m"),
@@ -214,7 +232,22 @@ def calibration_lines(run: RunData) -> list[str]:
             f"- correlation of the sonar mounting's yaw with the DVL misalignment: {corr:+.2f}"
             " (the data see their difference far better than either)"
         )
+    for label, key, unit in _LEARNED:
+        if f"{key}_final" in m:
+            lines.append(
+                f"- learned {label}: {m[f'{key}_final']:.3g} at the end, at most"
+                f" {m[f'{key}_max']:.3g}{unit}"
+            )
     return lines
+
+
+#: The learned noise of ``metrics.json`` (``noise_*_{final,max}``): (label, key, unit).
+_LEARNED = (
+    ("heading walk", "noise_heading_walk_deg_per_sqrt_s", " deg/√s"),
+    ("DVL scale walk", "noise_dvl_scale_walk_per_sqrt_s", " /√s"),
+    ("line covariance factor", "noise_line_scale", ""),
+    ("revisit covariance factor", "noise_scan_scale", ""),
+)
 
 
 def nees_figure(run: RunData, label: str, out: Path) -> Path:
