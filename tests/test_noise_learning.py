@@ -1,6 +1,6 @@
-"""The noise learned online (issue 42): the relative pose error of the walks against Monte Carlo,
-the gate's expectation, the learner recovering a walk and a measurement scale on a filter of its
-own, and the EKF's heading walk on a step that turns by the AHRS heading's own change."""
+"""The noise learned online: the relative pose error of the walks against Monte Carlo, the gate's
+expectation, the learner recovering a walk and a measurement scale on a filter of its own, the
+heading walk learned only where the gyro turns the heading, ``noise.csv``."""
 
 from __future__ import annotations
 
@@ -8,10 +8,12 @@ import math
 
 import numpy as np
 import pytest
+from gtsam.symbol_shorthand import B
 from scipy.stats import chi2
 
 from sonarslam.datasets.errors import DataError
-from sonarslam.slam.backends.ekf import AHRS_BIAS, YAW, EkfConfig, LineEkf
+from sonarslam.slam.backends.ekf import AHRS_BIAS
+from sonarslam.slam.backends.registry import backend_spec
 from sonarslam.slam.io.plots import plot_learned_noise
 from sonarslam.slam.io.states import NOISE_FILE, read_learned_noise, write_learned_noise
 from sonarslam.slam.model.motion import MotionStep
@@ -157,28 +159,29 @@ def test_learner_stays_at_its_floor_when_told_right() -> None:
     assert np.mean(q_seen) < q0 + 0.1 * math.radians(0.1) ** 2
 
 
-def test_ekf_heading_walk_on_a_heading_rate_step() -> None:
-    """A step that turns by the AHRS heading's own change carries the walk ``w`` into ``psi``
-    and ``-w`` into ``b``: ``psi + b`` (what the AHRS sees) keeps its variance, ``psi - b``'s
-    grows by ``4 q dt``; a gyro step puts it on ``b`` alone."""
+@pytest.mark.parametrize("name", ["ekf", "isam2"])
+def test_the_heading_walk_is_learned_where_the_gyro_turns_the_heading(name: str) -> None:
+    """A loop whose first step turns by the gyro keeps learning the heading walk (from its
+    start value: the bias's variance grows by it, and the graph gets a bias per node); one
+    whose first step turns by the AHRS heading's own change learns it no more (the told walk,
+    here none: one bias)."""
+    spec = backend_spec(name)
+    cfg = spec.config_type(learn_noise="heading,lines", learn_heading_start_deg_per_sqrt_s=0.2)
     q = math.radians(0.2) ** 2
-    cfg = EkfConfig(learn_noise="heading", learn_heading_start_deg_per_sqrt_s=0.2)
-    ekf = LineEkf(0.0, np.zeros(3), np.eye(3) * 0.01, Mounting(), cfg)
-    P0 = ekf.P[:4, :4].copy()
-    ekf.predict(MotionStep(2.0, 2.0, 1.0, 0.0, 0.0, 0.05, 0.1))  # gyro_dt_s = 0: heading rate
-    P1 = ekf.P
-    plus = np.zeros(ekf.x.size)
-    plus[[YAW, AHRS_BIAS]] = 1.0
-    minus = np.zeros(ekf.x.size)
-    minus[[YAW, AHRS_BIAS]] = [1.0, -1.0]
-    gyro_yaw = (2.0 * cfg.noise.gyro_sigma_rad_per_s) ** 2  # the step's own yaw noise
-    assert plus @ P1 @ plus - plus[:4] @ P0 @ plus[:4] == pytest.approx(gyro_yaw, rel=1e-9)
-    grown = minus @ P1 @ minus - minus[:4] @ P0 @ minus[:4]
-    assert grown == pytest.approx(4.0 * q * 2.0 + gyro_yaw, rel=1e-9)
-    ekf2 = LineEkf(0.0, np.zeros(3), np.eye(3) * 0.01, Mounting(), cfg)
-    before = ekf2.P[AHRS_BIAS, AHRS_BIAS]
-    ekf2.predict(MotionStep(2.0, 2.0, 1.0, 0.0, 0.0, 0.05, 0.1, gyro_dt_s=2.0))
-    assert ekf2.P[AHRS_BIAS, AHRS_BIAS] - before == pytest.approx(q * 2.0, rel=1e-9)
+    for gyro in (True, False):
+        be = spec.make(0.0, np.zeros(3), np.eye(3) * 0.01, Mounting(), cfg)
+        for k in range(1, 101):
+            dt = 0.1
+            be.predict(MotionStep(k * dt, dt, 0.1, 0.0, 0.0, 0.05, 0.1, gyro_dt_s=dt * gyro))
+        assert be.noise.learns("heading_walk") is gyro
+        assert be.noise.learns("line_scale")
+        if name == "ekf":
+            told = math.radians(cfg.noise.ahrs_bias_sigma_deg) ** 2
+            assert be.P[AHRS_BIAS, AHRS_BIAS] == pytest.approx(told + gyro * q * 10.0, rel=1e-9)
+        else:
+            be.finish()
+            keys = {int(k) for k in be.isam.getLinearizationPoint().keys()}
+            assert (int(B(1)) in keys) is gyro
 
 
 def test_noise_csv_round_trip_and_figure(tmp_path) -> None:

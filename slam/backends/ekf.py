@@ -383,6 +383,7 @@ class LineEkf:
         """
         if step.dt_s <= 0.0:
             return np.zeros(3)
+        self.noise.see_step(step)
         x = self.kf.x
         psi, delta, k_scale = float(x[2]), float(x[4]), float(x[5])
         sx, sy = step.dx_m, step.dy_m
@@ -438,28 +439,11 @@ class LineEkf:
 
     def _walks(self, P_vv: FloatArray, step: MotionStep) -> None:
         """The random walks' process noise of one step, in place on the vehicle block: the
-        heading error's ``q dt`` and the DVL scale's (the configured or, when learned, the
-        learned value, :class:`sonarslam.slam.backends.learned.LearnedNoise`).
-
-        The AHRS measures ``psi + b`` and ``b`` walks. A step that turns by the gyro leaves
-        ``psi``'s error alone and the walk is ``b``'s. A step that turns by the AHRS heading's
-        own change (``yaw_rate_source = "heading"``) turns by the walk too: ``psi``'s error
-        grows by the same increment ``w`` by which ``b``'s falls (``b`` is predicted constant),
-        so the noise is ``q dt [[1, -1], [-1, 1]]`` on ``(psi, b)`` and ``psi + b``, what the
-        AHRS sees, is untouched. (A configured walk with that rate is refused,
-        :class:`sonarslam.datasets.config.DatasetConfig`: the configured part stays ``b``'s; the
-        learned excess over it is coupled.)"""
+        AHRS heading error's ``q dt`` and the DVL scale's (the configured or, when learned, the
+        learned value, :class:`sonarslam.slam.backends.learned.LearnedNoise`, which learns the
+        heading walk only where the gyro turns the heading)."""
         dt = step.dt_s
-        P_vv[AHRS_BIAS, AHRS_BIAS] += self._var_walk * dt
-        extra = (self.noise.value("heading_walk") - self._var_walk) * dt
-        if extra > 0.0:
-            if step.gyro_dt_s > 0.0 or step.var_yaw_gap_rad2 > 0.0:
-                P_vv[AHRS_BIAS, AHRS_BIAS] += extra
-            else:
-                P_vv[YAW, YAW] += extra
-                P_vv[AHRS_BIAS, AHRS_BIAS] += extra
-                P_vv[YAW, AHRS_BIAS] -= extra
-                P_vv[AHRS_BIAS, YAW] -= extra
+        P_vv[AHRS_BIAS, AHRS_BIAS] += self.noise.value("heading_walk") * dt
         P_vv[DVL_SCALE, DVL_SCALE] += self.noise.value("dvl_scale_walk") * dt
 
     def _flush(self) -> None:

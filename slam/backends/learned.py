@@ -25,6 +25,7 @@ import numpy as np
 from sonarslam.features.geometry import FloatArray
 from sonarslam.slam.io.states import NOISE_FILE, write_learned_noise
 from sonarslam.slam.mapping.landmarks import LandmarkMap
+from sonarslam.slam.model.motion import MotionStep
 from sonarslam.slam.model.noise_learning import (
     NoiseLearner,
     PathMoments,
@@ -98,6 +99,7 @@ class LearnedNoise:
             if heading_walk_start_rad2_per_s > heading_walk_rad2_per_s:
                 self.learner.set(0.0, "heading_walk", heading_walk_start_rad2_per_s)
                 self.learner.history.clear()
+        self._rate_seen = False
         self.moments = PathMoments()
         self._marks: dict[Hashable, tuple[float, FloatArray, FloatArray]] = {}
         self._seen = 0  # innovations of the landmark layer taken so far
@@ -129,6 +131,23 @@ class LearnedNoise:
         if self.learner is not None and self.learner.learns(name):
             return self.learner.value(name)
         return self._configured[name]
+
+    def see_step(self, step: MotionStep) -> bool:
+        """The loop's first motion step (with an AHRS, not in a gap) says how its heading
+        turns: by the AHRS heading's own change (``yaw_rate_source = "heading"``), the heading
+        walk is not learned (True: dropped). The walk would then be the prediction's own error
+        as well as the AHRS's, with nothing but the lines to tell a heading error from a turn;
+        by the gyro, the walk is the AHRS's alone and the gyro holds the heading between the
+        lines (docs/consistency.md, "Noise learned online": on the marina the walk learned with
+        the heading's own change hands the heading to the lines and loses metres)."""
+        if self._rate_seen or step.dt_s <= 0.0 or step.var_yaw_gap_rad2 > 0.0:
+            return False
+        self._rate_seen = True
+        if step.gyro_dt_s > 0.0 or not self.learns("heading_walk"):
+            return False
+        assert self.learner is not None
+        self.learner.drop("heading_walk")
+        return True
 
     def advance(self, t_s: float, xy_m: FloatArray) -> None:
         """The estimated path reached ``xy_m`` at ``t_s``."""

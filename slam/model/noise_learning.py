@@ -262,6 +262,18 @@ class NoiseLearner:
     def learns(self, name: str) -> bool:
         return name in self._params
 
+    def drop(self, name: str) -> None:
+        """Learn ``name`` no more: it leaves the learner (its value is then the configured
+        one, :meth:`learns` is False)."""
+        if name not in self._params:
+            return
+        i = self._names.index(name)
+        keep = [j for j in range(len(self._names)) if j != i]
+        self._g = self._g[keep]
+        self._F = self._F[np.ix_(keep, keep)]
+        del self._params[name]
+        self._names.pop(i)
+
     def set(self, t_s: float, name: str, value: float) -> bool:
         """A parameter's value set (within its bounds), as a start above its floor; True when
         it changed."""

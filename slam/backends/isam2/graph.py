@@ -233,6 +233,8 @@ class LineIsam2:
         """
         if step.dt_s <= 0.0:
             return np.zeros(3)
+        if self.noise.see_step(step):  # the heading's own change: no learned walk, one bias
+            self._walking_bias = self._var_walk > 0.0
         rel = self.odometry.step(step)
         self.t_s = step.t_s
         if self.t_s - self._last_node_t >= self.config.node_period_s:
@@ -278,9 +280,8 @@ class LineIsam2:
         return int(K(k)) if self._walking_scale else int(K(0))
 
     def _learned_in_force(self) -> None:
-        """The learned values into what they act on: the odometry's (heading walk), the
-        landmark layer's line covariance scale, the scan constraints' (their own)."""
-        self.odometry.heading_walk_rad2_per_s = self.noise.value("heading_walk") - self._var_walk
+        """The learned values into what they act on: the landmark layer's line covariance scale
+        (the walks and the scan scale are read when their factors are made)."""
         self.map.line_cov_scale = self.config.line_cov_scale * self.noise.value("line_scale")
 
     def _add_node(self) -> int:
@@ -291,11 +292,7 @@ class LineIsam2:
         cfg = self.config
         dt = self.t_s - self._last_node_t
         if self._walking_bias:
-            # the learned excess over the configured walk twice over the steps that turn by the
-            # AHRS heading's own change (odometry.NodeOdometry.step)
-            excess = self.noise.value("heading_walk") - self._var_walk
-            var = self._var_walk * dt + excess * (dt + self.odometry.heading_rate_s)
-            var = max(var, 1e-12)
+            var = max(self.noise.value("heading_walk") * dt, 1e-12)
             self._add_factor(
                 FactorRecord.of(FactorKind.BETWEEN_VECTOR, [B(k - 1), B(k)], [0.0], [[var]])
             )

@@ -101,28 +101,12 @@ class NodeOdometry:
         self.scale = 1.0  # the gyro scale used to integrate (the newest estimate)
         self.node_scale = 1.0  # the gyro scale of the newest node's start
         self.dvl_gain = 1.0  # 1 + the DVL scale error used to integrate (the newest estimate)
-        #: the heading error's learned walk beyond the configured one (rad^2/s), which a step
-        #: turning by the AHRS heading's own change turns by too (``yaw_rate_source =
-        #: "heading"``): its yaw variance grows by it
-        self.heading_walk_rad2_per_s = 0.0
-        #: how long the steps since the newest node turned by the AHRS heading's own change (s)
-        self.heading_rate_s = 0.0
         self.headings = HeadingMean()
 
     def step(self, step: MotionStep) -> FloatArray:
         """Integrate one motion step; returns the relative motion ``bTb'`` applied."""
         qv = step.var_xy_m2 if self.dvl_noise == "hold" else step.var_xy_white_m2
         qr = step.var_yaw_rad2(self.gyro_sigma_rad_per_s)
-        if (
-            self.heading_walk_rad2_per_s > 0.0
-            and step.gyro_dt_s == 0.0
-            and step.var_yaw_gap_rad2 == 0.0
-        ):
-            # the heading walk's increment w turns the step by w and the bias by -w: two
-            # independent factors of twice its variance each (this yaw, the bias walk's) give
-            # the pair psi - b the freedom of the exact coupled one; psi + b is the AHRS's
-            qr += 2.0 * self.heading_walk_rad2_per_s * step.dt_s
-            self.heading_rate_s += step.dt_s
         syaw = self.scale * step.dyaw_rad
         # the odometry factor's measurement: delta = 0, the gyro scale of the node's start
         self.since_node.step(step.dx_m, step.dy_m, syaw, qv, qr, step.dyaw_rad)
@@ -149,7 +133,6 @@ class NodeOdometry:
         """A node was added now: the next factor's motion starts here."""
         self.since_node.reset()
         self.node_scale = self.scale
-        self.heading_rate_s = 0.0
 
     def re_anchor(self, delta_rad: float, scale: float, dvl_gain: float = 1.0) -> None:
         """The newest node was optimised: the current pose is it composed with the motion since
