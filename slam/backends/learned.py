@@ -29,6 +29,7 @@ from sonarslam.slam.model.motion import MotionStep
 from sonarslam.slam.model.noise_learning import (
     NoiseLearner,
     PathMoments,
+    Snapshot,
     walk_sensitivities,
 )
 
@@ -101,7 +102,7 @@ class LearnedNoise:
                 self.learner.history.clear()
         self._rate_seen = False
         self.moments = PathMoments()
-        self._marks: dict[Hashable, tuple[float, FloatArray, FloatArray]] = {}
+        self._marks: dict[Hashable, Snapshot] = {}
         self._seen = 0  # innovations of the landmark layer taken so far
 
     @classmethod

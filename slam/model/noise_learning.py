@@ -70,6 +70,7 @@ __all__ = [
     "WINSOR_PROBABILITY",
     "expected_factor",
     "PathMoments",
+    "Snapshot",
     "walk_sensitivities",
     "NoiseLearner",
 ]
@@ -121,8 +122,8 @@ class PathMoments:
     any interval's. Times relative to the first, positions to the first position (their
     magnitudes stay small).
 
-    A snapshot (:meth:`snapshot`) is ``(t_s, m1 (2,), m2 (2, 2))``: the moments from the start up
-    to ``t_s``.
+    A snapshot (:meth:`snapshot`) is ``(t_s, m1 (2,), m2 (2, 2), p (2,))``: the moments from the
+    start up to ``t_s`` (relative) and the position then.
     """
 
     def __init__(self) -> None:
@@ -154,9 +155,9 @@ class PathMoments:
         )
         self._t, self._p = t, p
 
-    def snapshot(self) -> tuple[float, FloatArray, FloatArray]:
-        """The moments now (relative time, ``int p``, ``int p p^T``)."""
-        return self._t, self._m1.copy(), self._m2.copy()
+    def snapshot(self) -> Snapshot:
+        """The moments now (relative time, ``int p``, ``int p p^T``, the position)."""
+        return self._t, self._m1.copy(), self._m2.copy(), self._p.copy()
 
     def relative(self, xy_m: FloatArray) -> FloatArray:
         """A world position in the moments' frame."""
@@ -165,15 +166,20 @@ class PathMoments:
 
 _R90 = np.array([[0.0, -1.0], [1.0, 0.0]])
 
+#: :meth:`PathMoments.snapshot`: (relative time s, int p (2,), int p p^T (2, 2), p (2,)).
+Snapshot = tuple[float, FloatArray, FloatArray, FloatArray]
+
 
 def walk_sensitivities(
-    then: tuple[float, FloatArray, FloatArray],
-    now: tuple[float, FloatArray, FloatArray],
-    p_now: FloatArray,
+    then: Snapshot, now: Snapshot, p_now: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
     """The covariance of the pose error ``(x_m, y_m, yaw_rad)`` at ``now`` relative to
     ``then`` per unit walk (module docstring): ``(D_heading, D_scale)``, shapes (3, 3), for a
-    heading error walking at 1 rad^2/s and a DVL scale error walking at 1/s.
+    heading error walking at 1 rad^2/s and a DVL scale error walking at 1/s since the start of
+    the moments. A heading error the two times share turns the path and the map together and
+    moves nothing between them: only its walk between them counts. A scale error they share
+    stretches the path between them: its walk before ``then`` counts too, by ``t_then dp
+    dp^T`` (``dp`` the displacement between them).
 
     Parameters
     ----------
@@ -194,7 +200,8 @@ def walk_sensitivities(
     D_h[:2, 2] = D_h[2, :2] = _R90 @ lever
     D_h[2, 2] = T
     D_k = np.zeros((3, 3))
-    D_k[:2, :2] = inner
+    dp = p - then[3]
+    D_k[:2, :2] = inner + max(then[0], 0.0) * np.outer(dp, dp)
     return D_h, D_k
 
 
