@@ -203,6 +203,9 @@ def run_closed_loop(
                 features.extend(found)
                 landmark_ids.extend(ids)
     trajectory = Trajectory(np.asarray(traj_t), np.asarray(traj_p), np.asarray(traj_c))
+    # associations a back end revised after their vote (a re-test when a loop closed)
+    revised: dict[int, int | None] = getattr(backend, "revised_ids", {})
+    landmark_ids = [revised.get(id(f), lm) for f, lm in zip(features, landmark_ids, strict=True)]
     seeded = {id(f): lm for f, lm in backend.map.seed_log}
     return ClosedLoopResult(
         trajectory=trajectory,

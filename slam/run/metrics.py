@@ -246,6 +246,7 @@ class ClosedLoopFigures:
         "redecided_moved",
         "redecided_stretches",
         "redecided_passes",
+        "retest_{runs,factors,removed}",
         "scan_revisit_incompatible",
         "truth_precision",
         "truth_recall",

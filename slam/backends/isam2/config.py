@@ -132,6 +132,12 @@ class GraphConfig(BackendConfig):
         None: not made.
     redecide_passes : int
         Re-decisions, each at the previous one's optimum.
+    retest_window_s : float or None
+        When an update moves the newest optimised node beyond the chi2(3) 0.99 gate of its own
+        marginal before it (a loop closed), the line factors of this recent past (s) are tested
+        again at the new estimate with their node's and landmark's joint marginal, and those
+        beyond the association gate removed (:mod:`sonarslam.slam.backends.isam2.retest`).
+        None: never.
     """
 
     ahrs_bias_prior_deg: float = bounded(0.0, -180.0, 180.0)
@@ -166,3 +172,4 @@ class GraphConfig(BackendConfig):
     batch_optimizer: str = one_of("lm", "lm", "gnc")
     redecide_stretch_m: float | None = bounded(None, 0.0, 1e5, low_open=True)
     redecide_passes: int = bounded(1, 1, 10)
+    retest_window_s: float | None = bounded(None, 0.0, 1e5, low_open=True)

@@ -79,6 +79,7 @@ from sonarslam.slam.backends.isam2.graph_io import (
 from sonarslam.slam.backends.isam2.odometry import NodeOdometry, local_covariance
 from sonarslam.slam.backends.isam2.pose_source import NodeTable, SmoothedPoseSource
 from sonarslam.slam.backends.isam2.redecided import RedecidedGraph, redecided_graph
+from sonarslam.slam.backends.isam2.retest import LineRetest
 from sonarslam.slam.backends.isam2.scans import ScanConstraints
 from sonarslam.slam.backends.learned import LearnedNoise
 from sonarslam.slam.io.states import HEADING_ERROR_FILE, write_heading_error
@@ -146,6 +147,15 @@ class LineIsam2:
         self._pending = gtsam.NonlinearFactorGraph()
         self._pending_values = gtsam.Values()
         self._pending_nodes: list[tuple[int, float, FloatArray]] = []  # (k, t, chain at t)
+        self._pending_records: list[FactorRecord] = []  # the pending factors' records
+        #: recent line associations re-tested when a loop closes (``retest_window_s``)
+        self.retest = (
+            LineRetest(config.retest_window_s, config.association.gate_probability)
+            if config.retest_window_s is not None
+            else None
+        )
+        self._vote_pose = (np.zeros(3), np.eye(3))  # the vote's pose and covariance (world)
+        self._vote_t_s = -np.inf  # the time of its lines
         self._own_stats = {"ahrs_updates": 0, "pose_nodes": 0, "isam_updates": 0, "factors": 0}
         self.timing_s = {"isam_update": 0.0, "marginals": 0.0, "association": 0.0}
         self.update_log: list[tuple[float, float, int]] = []  # (t, wall s, new factors)
@@ -261,6 +271,13 @@ class LineIsam2:
     def _add_factor(self, record: FactorRecord) -> None:
         self._pending.add(record.to_gtsam())
         self.records.append(record)
+        self._pending_records.append(record)
+
+    @property
+    def revised_ids(self) -> dict[int, int | None]:
+        """Observations whose association a re-test revised (``retest_window_s``):
+        ``id(feature)`` -> the landmark now (None: none), for the run's associations."""
+        return {} if self.retest is None else self.retest.revised
 
     def _register_node(self, k: int, t_s: float) -> None:
         self._pending_nodes.append((k, t_s, self.odometry.chain.now))
@@ -336,7 +353,10 @@ class LineIsam2:
         for (:meth:`refresh`).
         """
         t0 = time.perf_counter()
-        self.isam.update(self._pending, self._pending_values)
+        result = self.isam.update(self._pending, self._pending_values)
+        if self.retest is not None:
+            self.retest.indexed(self._pending_records, list(result.getNewFactorsIndices()))
+        self._pending_records = []
         for _ in range(extra_iterations):
             self.isam.update()
         wall = time.perf_counter() - t0
@@ -352,6 +372,8 @@ class LineIsam2:
             self.nodes.add(t, odo)
         self._pending_nodes = []
         self._last_update_t = self.t_s
+        if self.retest is not None:
+            self._retest()
         # anchor: the newest node, now
         k = self._n_nodes - 1
         t1 = time.perf_counter()
@@ -376,6 +398,21 @@ class LineIsam2:
         for j in self._new_landmarks:  # marginals for the loose gate
             self._lm_cov[j] = self.isam.marginalCovariance(L(j))
         self._new_landmarks = []
+
+    def _retest(self) -> None:
+        """The recent lines whose vote the estimate moved beyond re-tested, the factors that fail
+        removed (:class:`sonarslam.slam.backends.isam2.retest.LineRetest`)."""
+        assert self.retest is not None
+        t0 = time.perf_counter()
+        removed = self.retest.run(self.isam, self.t_s)
+        if removed:
+            indices = [int(item.index) for item in removed if item.index is not None]
+            self.isam.update(gtsam.NonlinearFactorGraph(), gtsam.Values(), indices)
+            for i in indices:
+                self.graph.remove(i)
+            gone = {id(item.record) for item in removed}
+            self.records = [r for r in self.records if id(r) not in gone]
+        self.timing_s["retest"] = self.timing_s.get("retest", 0.0) + time.perf_counter() - t0
 
     def _set_anchor(self, pose: FloatArray) -> None:
         self._anchor_pose = pose
@@ -447,6 +484,8 @@ class LineIsam2:
             k, kTb = self.node_now()
             anchor = NodeAnchor(k, compose(kTb, self.bTs))
         pose_w, P_pose_w = self.pose, self.pose_cov
+        self._vote_pose = (pose_w.copy(), np.asarray(P_pose_w).copy())
+        self._vote_t_s = float(obs.features[0].t) if obs.features else self.t_s
         active = [lm for lm in self.map.landmarks if lm.merged_into is None]
         if obs.features:
             cands = self._candidates(obs.z, obs.R, pose_w, P_pose_w, active)
@@ -618,20 +657,17 @@ class LineIsam2:
         cfg = self.config
         robust = None if cfg.robust is None else Robust(cfg.robust, cfg.robust_k)
         if cfg.calibrated:
-            self._add_factor(
-                FactorRecord.of(
-                    FactorKind.LINE_OBSERVATION_CALIBRATED,
-                    [X(k), L(lm_id), *self.calibration_keys()],
-                    f.z,
-                    np.asarray(f.cov) * self.map.line_cov_scale,
-                    bTs=self.bTs.copy(),
-                    kTb=compose(np.asarray(bTs, dtype=np.float64), inverse(self.bTs)),
-                    robust=robust,
-                )
+            record = FactorRecord.of(
+                FactorKind.LINE_OBSERVATION_CALIBRATED,
+                [X(k), L(lm_id), *self.calibration_keys()],
+                f.z,
+                np.asarray(f.cov) * self.map.line_cov_scale,
+                bTs=self.bTs.copy(),
+                kTb=compose(np.asarray(bTs, dtype=np.float64), inverse(self.bTs)),
+                robust=robust,
             )
-            return
-        self._add_factor(
-            FactorRecord.of(
+        else:
+            record = FactorRecord.of(
                 FactorKind.LINE_OBSERVATION,
                 [X(k), L(lm_id)],
                 f.z,
@@ -639,7 +675,10 @@ class LineIsam2:
                 bTs=np.asarray(bTs, dtype=np.float64),
                 robust=robust,
             )
-        )
+        self._add_factor(record)
+        if self.retest is not None and f.t >= self._vote_t_s:  # this vote's, not a seed's
+            kTb = compose(np.asarray(bTs, dtype=np.float64), inverse(self.bTs))
+            self.retest.added(record, k, lm_id, f, kTb, *self._vote_pose)
 
     def _add_landmark(self, new: NewLandmark) -> None:
         """``L(id)`` at the newest observation's world line, with a factor per observation."""
@@ -849,6 +888,8 @@ class LineIsam2:
         if self.scans is not None:
             out.update(self.scans.metrics())
         out.update(self._gnc_stats)
+        if self.retest is not None:
+            out.update(self.retest.stats)
         if self._redecided is not None:
             out.update(self._redecided.metrics())
         update_ms = 1e3 * np.array([wall for _, wall, _ in self.update_log])
