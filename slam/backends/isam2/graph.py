@@ -101,6 +101,13 @@ from sonarslam.sonar.beam import Mounting
 
 __all__ = ["GraphConfig", "LineIsam2", "LINE_EQUALITY_SIGMAS"]
 
+#: The least walk of a bias (rad^2/s) or DVL scale (1/s) per node: a walk learned down to none
+#: (its floor, 0) would tie the nodes' variables by variances of 1e-12 and make iSAM2's system
+#: indeterminate ("near variable b282", drawn 6 told the marina's noise model). 0.005 deg/sqrt(s)
+#: is 0.2 deg over half an hour; 1e-5/sqrt(s), 4e-4 of scale.
+MIN_WALK_RAD2_PER_S = float(np.deg2rad(0.005) ** 2)
+MIN_SCALE_WALK_PER_S = 1e-10
+
 #: The noise of a ``LineEquality`` factor (rho m, theta rad): two landmarks found to be one wall
 #: are the same line.
 LINE_EQUALITY_SIGMAS = (1e-3, 1e-5)
@@ -309,13 +316,13 @@ class LineIsam2:
         cfg = self.config
         dt = self.t_s - self._last_node_t
         if self._walking_bias:
-            var = max(self.noise.value("heading_walk") * dt, 1e-12)
+            var = max(self.noise.value("heading_walk"), MIN_WALK_RAD2_PER_S) * max(dt, 1e-3)
             self._add_factor(
                 FactorRecord.of(FactorKind.BETWEEN_VECTOR, [B(k - 1), B(k)], [0.0], [[var]])
             )
             self._pending_values.insert(B(k), np.array([self._bias_estimate]))
         if self._walking_scale and k >= 2:
-            var = max(self.noise.value("dvl_scale_walk") * dt, 1e-12)
+            var = max(self.noise.value("dvl_scale_walk"), MIN_SCALE_WALK_PER_S) * max(dt, 1e-3)
             self._add_factor(
                 FactorRecord.of(FactorKind.BETWEEN_VECTOR, [K(k - 2), K(k - 1)], [0.0], [[var]])
             )
