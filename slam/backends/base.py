@@ -134,6 +134,8 @@ class BackendConfig(LandmarkConfig):
     learn_heading_start_deg_per_sqrt_s : float
         The heading walk a loop learning it (``"heading"``) starts from, when above the
         configured one: the walk it takes until its innovations say otherwise.
+    learn_dvl_scale_start_per_sqrt_s : float
+        The DVL scale walk a loop learning it (``"dvl_scale"``) starts from (1/sqrt(s)).
     learn_memory_s : float
         The time the learner remembers (s; its sums forget by ``exp(-dt / learn_memory_s)``).
     learn_every : int
@@ -154,6 +156,7 @@ class BackendConfig(LandmarkConfig):
     constraints: str = "lines"
     learn_noise: str = ""
     learn_heading_start_deg_per_sqrt_s: float = bounded(0.0, 0.0, 1.0)
+    learn_dvl_scale_start_per_sqrt_s: float = bounded(0.0, 0.0, 0.01)
     learn_memory_s: float = bounded(300.0, 1.0, 1e6)
     learn_every: int = bounded(5, 1, 10_000)
 

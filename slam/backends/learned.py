@@ -61,6 +61,8 @@ class LearnedNoise:
         The heading walk the learner starts from when above the floor: before the innovations
         say otherwise, the heading error is taken to walk at least this fast (a map made in the
         first minutes with a heading error the loop was not told of keeps it).
+    dvl_scale_walk_start_per_s : float
+        The same for the DVL scale's walk (1/s).
     gate_probability : float
         The association gate the line innovations were kept in.
     memory_s : float
@@ -74,6 +76,7 @@ class LearnedNoise:
         heading_walk_rad2_per_s: float,
         gate_probability: float,
         heading_walk_start_rad2_per_s: float = 0.0,
+        dvl_scale_walk_start_per_s: float = 0.0,
         memory_s: float = 300.0,
         every: int = 10,
     ) -> None:
@@ -96,10 +99,15 @@ class LearnedNoise:
         )
         self._gate = gate_probability
         #: the heading walk's measurement (``"heading"`` learned)
-        if self.learner is not None and self.learner.learns("heading_walk"):
-            if heading_walk_start_rad2_per_s > heading_walk_rad2_per_s:
-                self.learner.set(0.0, "heading_walk", heading_walk_start_rad2_per_s)
-                self.learner.history.clear()
+        starts = {
+            "heading_walk": heading_walk_start_rad2_per_s,
+            "dvl_scale_walk": dvl_scale_walk_start_per_s,
+        }
+        for name, start in starts.items():
+            if self.learner is not None and self.learner.learns(name) and start > floors[name]:
+                self.learner.set(0.0, name, start)
+        if self.learner is not None:
+            self.learner.history.clear()
         self._rate_seen = False
         self.moments = PathMoments()
         self._marks: dict[Hashable, Snapshot] = {}
@@ -114,6 +122,7 @@ class LearnedNoise:
             math.radians(config.noise.ahrs_bias_walk_deg_per_sqrt_s) ** 2,
             config.association.gate_probability,
             math.radians(config.learn_heading_start_deg_per_sqrt_s) ** 2,
+            config.learn_dvl_scale_start_per_sqrt_s**2,
             config.learn_memory_s,
             config.learn_every,
         )
