@@ -50,8 +50,9 @@ from sonarslam.slam.eval.truth import calibration_sigmas, true_calibration
 from sonarslam.slam.run.report_data import load_run
 from sonarslam.slam.run.sweep import calibrate_cached, parse_seeds, simulate_cached
 
-#: The estimates scored: label -> the metrics.json infix of its ATE keys.
-ESTIMATES = {"online": "", "smoothed": "_smoothed"}
+#: The estimates scored: label -> the metrics.json infix of its ATE keys (an estimate a run does
+#: not make is left out: a filter's smoothed, a graph's offline before that estimate exists).
+ESTIMATES = {"online": "", "smoothed": "_smoothed", "offline": "_offline"}
 #: The calibration estimates scored against the truth (``metrics.json`` keys).
 CALIBRATION = (
     "state_sonar_x_m",
