@@ -32,6 +32,8 @@ __all__ = [
     "ate_against_truth",
     "ate_errors",
     "ate_of_errors",
+    "half_split_s",
+    "halves",
     "rigid_fit",
     "truth_errors",
 ]
@@ -90,6 +92,20 @@ def ate_errors(
     if align:
         est = rigid_fit(est, ref)
     return gps.t[inside], np.hypot(*(est - ref).T)
+
+
+def half_split_s(span_s: tuple[float, float]) -> float:
+    """The time that cuts a span into its two halves (Unix s): its middle. On the marina the
+    sonar span's is 1,501 s after its first beam: the first half is where a default may be
+    informed by GPS, the second the held-out one (docs/design-decisions.md)."""
+    return 0.5 * (span_s[0] + span_s[1])
+
+
+def halves(t_s: FloatArray, errors_m: FloatArray, split_s: float) -> tuple[AteResult, AteResult]:
+    """The statistics of errors at times up to ``split_s`` and after it (ValueError when a half
+    has none)."""
+    first = np.asarray(t_s) <= split_s
+    return ate_of_errors(errors_m[first]), ate_of_errors(errors_m[~first])
 
 
 def ate_of_errors(errors_m: FloatArray) -> AteResult:

@@ -28,6 +28,7 @@ from sonarslam.datasets.ping360 import is_ping360_log
 from sonarslam.datasets.rosbag import is_bag
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.settings import SettingError
+from sonarslam.slam.backends.isam2.graph import LineIsam2
 from sonarslam.slam.backends.registry import BACKENDS, backend_spec
 from sonarslam.slam.eval.health import HealthConfig, travel_cause
 from sonarslam.slam.eval.loops import (
@@ -56,6 +57,7 @@ from sonarslam.slam.run.metrics import (
     closed_loop_figures,
     trajectory_figures,
 )
+from sonarslam.slam.run.offline import offline_of_run, wants_offline
 from sonarslam.slam.run.outputs import write_run
 from sonarslam.slam.run.presets import (
     RunConfig,
@@ -193,6 +195,7 @@ def run_backend(
     if backend != "gps":  # the rest take the DVL with [noise] dvl_sigma_mps
         warn_dvl_sigma(dataset, quality)
     wall0 = time.perf_counter()
+    offline_s = 0.0
     if backend in BASELINES:
         if settings:
             raise SettingError(
@@ -210,11 +213,12 @@ def run_backend(
         if backend == "dr":  # no health monitor: the travel check is the one that sees a DVL
             _warn_travel(dataset)  # turned round when the sonar was calibrated on it
     else:
-        result, config, trajectories, loop = _closed_loop(
+        result, config, trajectories, loop, offline_s = _closed_loop(
             dataset, backend, settings, t_end_s, progress, batch, config
         )
         trajectory = result.trajectory
-    wall_s = time.perf_counter() - wall0
+    # the loop's own time: the offline estimate after it is timed apart (offline_s)
+    wall_s = time.perf_counter() - wall0 - offline_s
     if t_end_s is not None and trajectory.t_s[-1] > t_end_s:
         trajectory = trajectory.clip(trajectory.t_s[0], t_end_s)
     for tr in (trajectory, *trajectories.values()):
@@ -256,10 +260,11 @@ def _closed_loop(
     progress: bool,
     batch: bool,
     typed: RunConfig | None = None,
-) -> tuple[ClosedLoopResult, RunConfig, dict[str, Trajectory], ClosedLoopFigures]:
+) -> tuple[ClosedLoopResult, RunConfig, dict[str, Trajectory], ClosedLoopFigures, float]:
     """A closed loop of ``backend`` on the dataset (:func:`run_backend`): its result, its
-    configuration (``typed``, or made from ``settings``), the back end's other trajectories and
-    the loop's figures with the health monitor's verdict (which warns here)."""
+    configuration (``typed``, or made from ``settings``), the back end's other trajectories (the
+    factor graph's offline estimate among them), the loop's figures with the health monitor's
+    verdict (which warns here) and the offline estimate's wall time (s)."""
     spec = backend_spec(backend)
     if batch and not spec.smoother:
         raise SettingError("--batch", f"back end {backend!r} does not smooth")
@@ -283,12 +288,19 @@ def _closed_loop(
     )
     result.backend.finish()
     trajectories = result.backend.trajectories(batch)
+    offline_s = 0.0
+    if wants_offline(config.backend):
+        assert isinstance(result.backend, LineIsam2), "the offline estimate is the graph's"
+        wall0 = time.perf_counter()
+        result.backend.offline = offline_of_run(dataset, result.backend, config.scans)
+        trajectories["offline"] = result.backend.offline.trajectory
+        offline_s = time.perf_counter() - wall0
     # without GPS the sonar's motion against dead reckoning's is a check of the run too
     odometry = dataset_odometry_check(dataset) if dataset.gps is None else None
     health = monitor_run(dataset, result, odometry=odometry)  # GPS-free: against its own model
     loop = closed_loop_figures(dataset, result, config, health.metrics(), health.line(), odometry)
     health.warn()
-    return result, config, trajectories, loop
+    return result, config, trajectories, loop, offline_s
 
 
 def _typed_settings(
@@ -811,11 +823,12 @@ def summary_line(metrics: dict[str, Any]) -> str:
 
 
 def smoothed_lines(metrics: dict[str, Any]) -> list[str]:
-    """A line each for a factor graph's smoothed and batch trajectories (``--batch``) in
-    :func:`summary_line`'s terms: against the truth (simulated runs), against GPS over the sonar
-    span and the whole run; none for a run without them."""
+    """A line each for a factor graph's other trajectories (smoothed, ``--batch``, lines
+    re-decided, offline) in :func:`summary_line`'s terms: against the truth (simulated runs),
+    against GPS over the sonar span and the whole run; none for a run without them. The
+    offline estimate's line ends with its decisions."""
     lines = []
-    for name in ("smoothed", "batch"):
+    for name in ("smoothed", "batch", "redecided", "offline"):
         f = _row_figures(metrics, name)
         parts = []
         if np.isfinite(f["truth"]):
@@ -831,6 +844,14 @@ def smoothed_lines(metrics: dict[str, Any]) -> list[str]:
         if gps:
             against = "against the simulated GPS: " if parts else ""
             parts.append(against + "; ".join(gps))
+        if parts and name == "offline" and "offline_passes" in metrics:
+            parts.append(
+                f"{metrics['offline_revisits_kept']} of {metrics['offline_revisits_registered']}"
+                f" registered revisits kept, {metrics.get('offline_lines_stretches', 0)} wall"
+                f" stretches, {metrics['offline_passes']} passes"
+                f" ({'settled' if metrics['offline_settled'] else 'not settled'}),"
+                f" {metrics['offline_s']:.1f} s"
+            )
         if parts:
             lines.append(f"{metrics['backend']} {name}: " + "; ".join(parts))
     return lines
