@@ -221,9 +221,9 @@ def read_dvl_json(path: str | Path, settings: NavLogSettings | None = None) -> N
     )
 
 
-#: Dead-reckoning reports whose offsets (their ``ts`` less the running sum at the velocity
-#: report before them) a running median takes: a lost velocity report steps the offset, the
-#: median follows the step within this many reports.
+#: Dead-reckoning reports over which the running sum's offset is bracketed
+#: (:func:`_anchor_offsets`): a lost velocity report steps the offset; within this many
+#: reports the bracket follows it.
 ANCHOR_WINDOW = 9
 
 
@@ -267,17 +267,12 @@ def _velocity_times(
     cum = np.cumsum(dt) * 1e-3
     cum -= cum[0]
     if anchored.any():
-        idx = after[anchored]
-        offsets = ts[anchored] - cum[idx]
-        half = ANCHOR_WINDOW // 2
-        smooth = np.array(
-            [np.median(offsets[max(0, j - half) : j + half + 1]) for j in range(offsets.size)]
-        )
+        offsets = _anchor_offsets(ts[anchored], after[anchored], cum)
         notes.append(
             "clock: the running sum of the velocity reports' time (ms since the report before),"
-            " anchored on the dead-reckoning reports' ts (Unix s)"
+            " anchored on the dead-reckoning reports' ts (Unix s) between them"
         )
-        return cum + np.interp(np.arange(n), idx, smooth), 0
+        return cum + np.interp(np.arange(n), after[anchored], offsets), 0
     offset = _start(
         p,
         settings,
@@ -288,6 +283,25 @@ def _velocity_times(
         " [navlog] start"
     )
     return cum + offset, patches
+
+
+def _anchor_offsets(ts: np.ndarray, after: np.ndarray, cum: np.ndarray) -> np.ndarray:
+    """The running sum's offset to Unix time at each dead-reckoning report: a report stamped
+    ``ts`` came between the velocity reports ``after`` and ``after + 1``, so the offset lies in
+    ``[ts - cum[after + 1], ts - cum[after]]``; over :data:`ANCHOR_WINDOW` reports the
+    intersection of those intervals, its middle (the median of their middles where a lost
+    report makes them disagree)."""
+    last = cum.size - 1
+    upper = ts - cum[after]
+    lower = ts - cum[np.minimum(after + 1, last)]
+    lower = np.where(after < last, lower, upper - 1.0)  # after the last: bounded above only
+    half = ANCHOR_WINDOW // 2
+    out = np.empty(ts.size)
+    for j in range(ts.size):
+        w = slice(max(0, j - half), j + half + 1)
+        lo, hi = float(np.max(lower[w])), float(np.min(upper[w]))
+        out[j] = 0.5 * (lo + hi) if lo <= hi else float(np.median(0.5 * (lower[w] + upper[w])))
+    return out
 
 
 def _start(p: Path, settings: NavLogSettings, why: str) -> float:

@@ -294,9 +294,9 @@ _TLOG_USE = {
     "GLOBAL_POSITION_INT": "the autopilot's velocity (without LOCAL_POSITION_NED)",
     "GPS_INPUT": "ruler (Underwater GPS)",
     "GPS_RAW_INT": "ruler (without GPS_INPUT)",
-    "DISTANCE_SENSOR": "not used (altitude)",
-    "SCALED_IMU2": "not used (ATTITUDE's yawspeed is the rate)",
-    "RAW_IMU": "not used (ATTITUDE's yawspeed is the rate)",
+    "DISTANCE_SENSOR": "not read (altitude)",
+    "SCALED_IMU2": "not read (ATTITUDE's yawspeed is the rate)",
+    "RAW_IMU": "not read (ATTITUDE's yawspeed is the rate)",
 }
 
 
@@ -419,14 +419,21 @@ def read_tlog(path: str | Path, settings: NavLogSettings | None = None) -> NavLo
     names = {k: v.msgname for k, v in dialect.mavlink_map.items()}
     wanted = {k: n for k, n in names.items() if n in _TLOG_FIELDS}
     faults = _Faults()
-    times: dict[int, array.array[float]] = {}
+    times: dict[int, array.array[float]] = {}  # the streams read: every record's time
+    seen: dict[int, list[float]] = {}  # the others: count, first and last time
     rows: dict[tuple[str, tuple[int, int]], _Rows] = {}
     for t, packet, offset in _iter_tlog(p, codec, faults):
         msgid = _msgid(packet)
-        times.setdefault(msgid, array.array("d")).append(t)
         name = wanted.get(msgid)
         if name is None:
+            c = seen.get(msgid)
+            if c is None:
+                seen[msgid] = [1.0, t, t]
+            else:
+                c[0] += 1.0
+                c[1], c[2] = min(c[1], t), max(c[2], t)
             continue
+        times.setdefault(msgid, array.array("d")).append(t)
         try:
             m = codec.decode(bytearray(packet))
         except Exception:  # pymavlink's MAVError: a packet whose checksum fails
@@ -438,24 +445,20 @@ def read_tlog(path: str | Path, settings: NavLogSettings | None = None) -> NavLo
         if key not in rows:
             rows[key] = _Rows(_TLOG_FIELDS[name])
         rows[key].add(t, _tlog_values(name, m))
-    if not times:
+    if not times and not seen:
         raise DataError(p, None, "no MAVLink record frames: not a QGroundControl .tlog")
     counts = _fault_counts(p, faults, "record")
     picked, other = _dominant(rows)
     counts["navlog_other_sources"] = other
-    streams = tuple(
-        sorted(
-            (
-                stream_of(
-                    names.get(i, f"id {i}"),
-                    np.frombuffer(ts, dtype=np.float64),
-                    _TLOG_USE.get(names.get(i, ""), ""),
-                )
-                for i, ts in times.items()
-            ),
-            key=lambda s: s.name,
-        )
-    )
+    listed = [
+        stream_of(names[i], np.frombuffer(ts, dtype=np.float64), _TLOG_USE.get(names[i], ""))
+        for i, ts in times.items()
+    ]
+    for i, (n, first, last) in seen.items():  # not read: no gaps looked for
+        rate = (n - 1.0) / (last - first) if last > first else 0.0
+        name = names.get(i, f"id {i}")
+        listed.append(Stream(name, int(n), first, last, rate, 0, 0.0, _TLOG_USE.get(name, "")))
+    streams = tuple(sorted(listed, key=lambda s: s.name))
     return _nav_log(p, TLOG_KIND, streams, picked, counts)
 
 

@@ -74,9 +74,9 @@ __all__ = [
 ]
 
 #: The least 1-sigma (m/s) an autopilot's velocity estimate is taken with as odometry
-#: (module docstring); measured in tests/test_navlog.py on a simulated autopilot that
-#: smooths the DVL over 0.5 s and reports at 10 Hz (its dead reckoning's NEES).
-AUTOPILOT_VELOCITY_SIGMA_MPS = 0.1
+#: (module docstring): at it, the dead reckoning's NEES on a simulated autopilot (the DVL held
+#: between its samples, smoothed over 0.5 s, at 10 Hz) is the DVL's own deltas' (docs/data.md).
+AUTOPILOT_VELOCITY_SIGMA_MPS = 0.2
 #: What each kind of navigation log is, in words.
 NAV_LOG_KINDS = {
     "tlog": TLOG_KIND,
@@ -351,7 +351,13 @@ def describe_nav_log(log: NavLog) -> list[str]:
             lines.append(f"  {s.name:<{width}}  none{'  ' + s.use if s.use else ''}")
             continue
         span = s.t_last_s - s.t_first_s
-        gaps = f"{s.gaps} gap(s), longest {s.longest_gap_s:.1f} s" if s.gaps else "no gap"
+        gaps = (
+            f"{s.gaps} gap(s), longest {s.longest_gap_s:.1f} s"
+            if s.gaps
+            else "no gap"
+            if s.use and not s.use.startswith("not read")
+            else "gaps not looked for"
+        )
         lines.append(
             f"  {s.name:<{width}} {s.count:>8}  {s.rate_hz:7.2f} Hz  {s.t_first_s - t0:8.1f} to"
             f" {s.t_first_s - t0 + span:8.1f} s  {gaps}{'  -> ' + s.use if s.use else ''}"
