@@ -24,43 +24,12 @@ import tracemalloc
 import warnings
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import pin_one_core, write_result  # noqa: E402
 
-from sonarslam.datasets.mavlink import mavlink_dialect, read_tlog  # noqa: E402
-
-RATES_HZ = {"att": 20, "lpn": 10, "vpd": 5, "imu": 10, "hb": 1, "servo": 94}
-
-
-def write_hour(path: Path, span_s: float, corrupt: int, seed: int = 0) -> Path:
-    """A ``.tlog`` of ``span_s`` at :data:`RATES_HZ` (module docstring)."""
-    dialect = mavlink_dialect()
-    mav = dialect.MAVLink(None, srcSystem=1, srcComponent=1)
-    packets = {
-        "att": dialect.MAVLink_attitude_message(1, 0.0, 0.0, 0.5, 0.0, 0.0, 0.01),
-        "lpn": dialect.MAVLink_local_position_ned_message(1, 0, 0, 0, 0.2, 0.1, 0),
-        "vpd": dialect.MAVLink_vision_position_delta_message(
-            0, 200000, [0, 0, 0], [0.04, 0.0, 0.0], 90.0
-        ),
-        "imu": dialect.MAVLink_scaled_imu2_message(1, 0, 0, -1000, 0, 0, 0, 0, 0, 0),
-        "hb": dialect.MAVLink_heartbeat_message(12, 3, 209, 19, 4, 3),
-        "servo": dialect.MAVLink_servo_output_raw_message(1, 0, *([1500] * 8)),
-    }
-    records: list[tuple[float, bytes]] = []
-    for name, rate in RATES_HZ.items():
-        packet = bytes(packets[name].pack(mav))
-        for t in 1_700_000_000.0 + np.arange(0.0, span_s, 1.0 / rate):
-            records.append((float(t), int(t * 1e6).to_bytes(8, "big") + packet))
-    records.sort(key=lambda r: r[0])
-    data = bytearray(b"".join(r for _, r in records))
-    rng = np.random.default_rng(seed)
-    for at in rng.uniform(0.1, 0.9, corrupt) * len(data):
-        data[int(at) : int(at) + 200] = rng.integers(0, 256, 200, dtype=np.uint8).tobytes()
-    path.write_bytes(bytes(data))
-    return path
+from sonarslam.datasets.mavlink import read_tlog  # noqa: E402
+from sonarslam.datasets.simulator.bluerov import BUSY_RATES_HZ, write_busy_tlog  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -72,7 +41,7 @@ def main(argv: list[str] | None = None) -> int:
     cpu = pin_one_core()
     span = args.hours * 3600.0
     with tempfile.TemporaryDirectory(prefix="navlog_reading_") as tmp:
-        path = write_hour(Path(tmp) / "hour.tlog", span, args.corrupt)
+        path = write_busy_tlog(Path(tmp) / "hour.tlog", span, args.corrupt)
         size = path.stat().st_size
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the corrupt chunks' counted warning
@@ -85,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
             tracemalloc.stop()
     row = {
         "span_s": span,
-        "records": int(span * sum(RATES_HZ.values())),
+        "records": int(span * sum(BUSY_RATES_HZ.values())),
         "file_bytes": size,
         "wall_s": round(wall_s, 3),
         "cpu_s": round(cpu_s, 3),

@@ -378,21 +378,13 @@ def _iter_tlog(path: Path, codec: Any, faults: _Faults) -> Iterator[tuple[float,
             if n == -1:
                 faults.cut_tail_bytes = size - offset
                 return
-            if n is None:
-                found = _tlog_resync(w, offset + 1, last_t, codec)
-                end = size if found < 0 else found
-                faults.skipped(offset, end - offset)
-                if found < 0:
-                    return
-                offset = found
-                continue
-            record = w.get(offset, 8 + n)
-            if _msgid(record[8:]) not in codec_ids and not _vouched(
-                w, offset + 8 + n, last_t, codec
+            record = w.get(offset, 8 + n) if n is not None else b""
+            if n is None or (
+                _msgid(record[8:]) not in codec_ids
+                and not _vouched(w, offset + 8 + n, last_t, codec)
             ):
                 found = _tlog_resync(w, offset + 1, last_t, codec)
-                end = size if found < 0 else found
-                faults.skipped(offset, end - offset)
+                faults.skipped(offset, (size if found < 0 else found) - offset)
                 if found < 0:
                     return
                 offset = found

@@ -20,7 +20,7 @@ import pytest
 from sonarslam.datasets.dataset import Dataset
 from sonarslam.datasets.dvljson import read_dvl_json
 from sonarslam.datasets.errors import DataError, DataWarning
-from sonarslam.datasets.mavlink import mavlink_dialect, read_dataflash, read_tlog
+from sonarslam.datasets.mavlink import read_dataflash, read_tlog
 from sonarslam.datasets.navlog import (
     AUTOPILOT_VELOCITY_SIGMA_MPS,
     nav_log_kind,
@@ -32,6 +32,7 @@ from sonarslam.datasets.qgccsv import read_qgc_csv
 from sonarslam.datasets.simulator.bluerov import (
     autopilot_velocity,
     write_bluerov_nav,
+    write_busy_tlog,
     write_dataflash,
     write_dvl_json,
     write_qgc_csv,
@@ -307,32 +308,6 @@ def test_the_autopilot_velocity_is_taken_with_an_honest_noise(
     assert nees < 0.5 * nees_silent, (nees, nees_silent)
 
 
-def _tlog_of(path: Path, span_s: float) -> Path:
-    """``span_s`` of a BlueROV2 as QGroundControl logs it: 140 records a second of six types
-    (the payloads repeated, the stamps not), two thirds of them servo outputs nobody reads."""
-    dialect = mavlink_dialect()
-    mav = dialect.MAVLink(None, srcSystem=1, srcComponent=1)
-    packets = {
-        "att": dialect.MAVLink_attitude_message(1, 0.0, 0.0, 0.5, 0.0, 0.0, 0.01),
-        "lpn": dialect.MAVLink_local_position_ned_message(1, 0, 0, 0, 0.2, 0.1, 0),
-        "vpd": dialect.MAVLink_vision_position_delta_message(
-            0, 200000, [0, 0, 0], [0.04, 0.0, 0.0], 90.0
-        ),
-        "imu": dialect.MAVLink_scaled_imu2_message(1, 0, 0, -1000, 0, 0, 0, 0, 0, 0),
-        "hb": dialect.MAVLink_heartbeat_message(12, 3, 209, 19, 4, 3),
-        "servo": dialect.MAVLink_servo_output_raw_message(1, 0, *([1500] * 8)),
-    }
-    rates = {"att": 20, "lpn": 10, "vpd": 5, "imu": 10, "hb": 1, "servo": 94}
-    records = []
-    for name, rate in rates.items():
-        packet = bytes(packets[name].pack(mav))
-        for t in 1_700_000_000.0 + np.arange(0.0, span_s, 1.0 / rate):
-            records.append((float(t), int(t * 1e6).to_bytes(8, "big") + packet))
-    records.sort(key=lambda r: r[0])
-    path.write_bytes(b"".join(r for _, r in records))
-    return path
-
-
 def _traced_peak(path: Path) -> int:
     tracemalloc.start()
     try:
@@ -346,7 +321,8 @@ def test_a_tlog_reads_fifty_times_faster_than_real_time_in_flat_memory(tmp_path:
     """Read at least 50x real time (an hour: benchmarks/navlog_reading.py); the memory grows
     with the streams read (8 bytes a value), not with the file: a minute more of log adds less
     than half its bytes (the servo outputs, two thirds of it, are counted, not kept)."""
-    short, long = _tlog_of(tmp_path / "a.tlog", 60.0), _tlog_of(tmp_path / "b.tlog", 120.0)
+    short = write_busy_tlog(tmp_path / "a.tlog", 60.0)
+    long = write_busy_tlog(tmp_path / "b.tlog", 120.0)
     began = time.perf_counter()
     log = read_tlog(long)
     wall = time.perf_counter() - began

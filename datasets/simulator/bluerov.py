@@ -38,9 +38,7 @@ from __future__ import annotations
 import json
 import math
 import struct
-import tempfile
 import warnings
-from dataclasses import replace
 from datetime import UTC, datetime, timedelta, timezone
 from pathlib import Path
 from typing import Any
@@ -59,9 +57,7 @@ from sonarslam.datasets.mavlink import (
     mavlink_dialect,
 )
 from sonarslam.datasets.qgccsv import QGC_GPS_LOCKS
-from sonarslam.datasets.simulator.ping360 import ping360_head, write_ping360_run
-from sonarslam.datasets.simulator.scenario import make_scenario, simulate_records
-from sonarslam.datasets.simulator.writer import drop_gps, write_dataset
+from sonarslam.datasets.simulator.ping360 import simulate_ping360
 from sonarslam.datasets.source import open_dataset
 from sonarslam.features.geometry import FloatArray
 
@@ -69,6 +65,7 @@ __all__ = [
     "NAV_KINDS",
     "autopilot_velocity",
     "write_tlog",
+    "write_busy_tlog",
     "write_dataflash",
     "write_dvl_json",
     "write_qgc_csv",
@@ -140,6 +137,45 @@ def _corrupt(data: bytearray, rng: np.random.Generator, chunks: int) -> bytearra
             m = int(rng.integers(50, 200))
             out[i:i] = rng.integers(0, 256, m, dtype=np.uint8).tobytes()
     return out
+
+
+#: A BlueROV2's telemetry as QGroundControl logs it, records a second by stream: the reader's
+#: streams and the many it only counts (:func:`write_busy_tlog`).
+BUSY_RATES_HZ = {"att": 20, "lpn": 10, "vpd": 5, "imu": 10, "hb": 1, "servo": 94}
+
+
+def write_busy_tlog(
+    path: str | Path, span_s: float, corrupt_chunks: int = 0, seed: int = 0
+) -> Path:
+    """A ``.tlog`` of ``span_s`` at :data:`BUSY_RATES_HZ` (``ATTITUDE``, ``LOCAL_POSITION_NED``,
+    ``VISION_POSITION_DELTA``, ``SCALED_IMU2``, ``HEARTBEAT``, ``SERVO_OUTPUT_RAW``), the
+    payloads repeated, each record's stamp its own, ``corrupt_chunks`` of 200 bytes overwritten:
+    a file to measure the reading's speed and memory by."""
+    dialect = mavlink_dialect()
+    mav = dialect.MAVLink(None, srcSystem=1, srcComponent=1)
+    packets = {
+        "att": dialect.MAVLink_attitude_message(1, 0.0, 0.0, 0.5, 0.0, 0.0, 0.01),
+        "lpn": dialect.MAVLink_local_position_ned_message(1, 0, 0, 0, 0.2, 0.1, 0),
+        "vpd": dialect.MAVLink_vision_position_delta_message(
+            0, 200000, [0, 0, 0], [0.04, 0.0, 0.0], 90.0
+        ),
+        "imu": dialect.MAVLink_scaled_imu2_message(1, 0, 0, -1000, 0, 0, 0, 0, 0, 0),
+        "hb": dialect.MAVLink_heartbeat_message(12, 3, 209, 19, 4, 3),
+        "servo": dialect.MAVLink_servo_output_raw_message(1, 0, *([1500] * 8)),
+    }
+    records: list[tuple[float, bytes]] = []
+    for name, rate in BUSY_RATES_HZ.items():
+        packet = bytes(packets[name].pack(mav))
+        for t in 1_700_000_000.0 + np.arange(0.0, span_s, 1.0 / rate):
+            records.append((float(t), int(t * 1e6).to_bytes(8, "big") + packet))
+    records.sort(key=lambda r: r[0])
+    data = bytearray(b"".join(r for _, r in records))
+    rng = np.random.default_rng(seed)
+    for at in rng.uniform(0.1, 0.9, corrupt_chunks) * len(data):
+        data[int(at) : int(at) + 200] = rng.integers(0, 256, 200, dtype=np.uint8).tobytes()
+    p = Path(path)
+    p.write_bytes(bytes(data))
+    return p
 
 
 def write_tlog(
@@ -501,19 +537,13 @@ def simulate_bluerov(
     ``.bin`` and the navigation ``nav`` (module docstring), with ``sonarslam.toml`` (``[ping360]
     nav`` the first navigation file, ``[navlog]`` where needed) and ``truth.json``. Returns the
     ``.bin`` and the navigation files."""
-    scenario = make_scenario(kind, seed, duration_s)
-    scenario = replace(scenario, head=ping360_head(scenario.head))
     out = Path(out_dir)
-    with tempfile.TemporaryDirectory() as tmp:
-        layout = write_dataset(simulate_records(scenario), Path(tmp) / "run")
-        if not gps:
-            drop_gps(layout)
-        with warnings.catch_warnings():  # the sensors' gaps are the simulator's own
-            warnings.simplefilter("ignore", DataWarning)
-            dataset = open_dataset(layout)
-        log = write_ping360_run(dataset, out, layout)
-        (out / "nav.bag").unlink()
-        files, navlog = write_bluerov_nav(dataset, out, nav, seed)
+    log = simulate_ping360(kind, seed, out, duration_s, gps)
+    with warnings.catch_warnings():  # the sensors' gaps are the simulator's own
+        warnings.simplefilter("ignore", DataWarning)
+        dataset = open_dataset(log)  # its navigation from the bag written beside it
+    (out / "nav.bag").unlink()
+    files, navlog = write_bluerov_nav(dataset, out, nav, seed)
     toml = dump_dataset_config(dataset.config) + (
         f'\n[ping360]\nnav = "{files[0].name}"\nspeed_of_sound_mps = 1500.0\n' + navlog
     )
