@@ -84,7 +84,7 @@ import re
 import struct
 import tomllib
 import warnings
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime, timedelta, timezone
 from pathlib import Path
@@ -105,6 +105,7 @@ from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.gates import check_heading_sense, navigation_span_s
 from sonarslam.datasets.geodesy import geodetic_to_local_en
 from sonarslam.datasets.logfile import open_regular, read_text
+from sonarslam.datasets.navlog import is_nav_log, navigation, navlog_settings, read_nav_log
 from sonarslam.datasets.records import (
     STEP_TOLERANCE,
     AttitudeSeries,
@@ -869,23 +870,49 @@ def _bag_navigation(
     return read.dvl, read.attitude, read.gps, counts
 
 
+def _nav_paths(
+    nav: str | Path | Sequence[str | Path] | None, settings: Ping360Settings
+) -> tuple[Path, ...]:
+    """The navigation files: ``--nav`` (one or several), else ``[ping360] nav``."""
+    if nav is None:
+        return (Path(settings.nav),) if settings.nav else ()
+    if isinstance(nav, (str, Path)):
+        return (Path(nav),)
+    return tuple(Path(n) for n in nav)
+
+
 def _navigation(
-    nav: Path, topics_file: str | Path | None
-) -> tuple[DvlSeries, AttitudeSeries, GpsSeries | None, dict[str, int]]:
-    if is_bag(nav):
-        return _bag_navigation(nav, topics_file)
-    if nav.suffix.lower() == ".csv":
-        if topics_file is not None:
-            raise DataError(Path(topics_file), None, "--topics is for a navigation bag, not a CSV")
-        dvl, att, gps = read_nav_csv(nav)
-        return dvl, att, gps, {}
-    if not nav.exists():
-        raise DataError(nav, None, "the Ping360's navigation: no such file or bag")
-    raise DataError(
-        nav,
-        None,
-        "the Ping360's navigation must be a ROS bag (.bag, .mcap, a bag directory) or a .csv",
-    )
+    navs: tuple[Path, ...],
+    topics_file: str | Path | None,
+    config: DatasetConfig,
+    tomls: tuple[Path | str | None, ...],
+) -> tuple[DvlSeries, AttitudeSeries, GpsSeries | None, dict[str, int], DatasetConfig, str]:
+    """The DVL, AHRS and GPS of the navigation, its counts, the configuration (a BlueROV2's
+    log may set the DVL's frame and noise: :func:`sonarslam.datasets.navlog.navigation`) and
+    what was taken from which file ("" for a bag or a navigation CSV)."""
+    nav = navs[0]
+    if len(navs) == 1 and not is_nav_log(nav):
+        if is_bag(nav):
+            return (*_bag_navigation(nav, topics_file), config, "")
+        if nav.suffix.lower() == ".csv":
+            if topics_file is not None:
+                raise DataError(
+                    Path(topics_file), None, "--topics is for a navigation bag, not a CSV"
+                )
+            dvl, att, gps = read_nav_csv(nav)
+            return dvl, att, gps, {}, config, ""
+        if not nav.exists():
+            raise DataError(nav, None, "the Ping360's navigation: no such file or bag")
+        raise DataError(
+            nav,
+            None,
+            "the Ping360's navigation must be a ROS bag (.bag, .mcap, a bag directory), a .csv,"
+            " or a BlueROV2's own log (.tlog, ArduSub dataflash .bin, DVL A50 JSON,"
+            " QGroundControl CSV)",
+        )
+    settings = navlog_settings(*tomls)
+    found = navigation([read_nav_log(n, settings) for n in navs], config, settings)
+    return found.dvl, found.attitude, found.gps, found.counts, found.config, found.said
 
 
 # -- the dataset ---------------------------------------------------------------------------------
@@ -940,7 +967,7 @@ def open_ping360(
     path: str | Path,
     config_override: str | Path | None = None,
     topics_file: str | Path | None = None,
-    nav: str | Path | None = None,
+    nav: str | Path | Sequence[str | Path] | None = None,
 ) -> Dataset:
     """A Ping Viewer ``.bin`` log and its navigation as a gated :class:`Dataset`.
 
@@ -952,8 +979,9 @@ def open_ping360(
         A ``sonarslam.toml``-format file over it (its ``[ping360]`` keys too).
     topics_file : str or Path, optional
         The navigation bag's roles (``[topics]`` dvl, imu, gps).
-    nav : str or Path, optional
-        The navigation (a ROS bag or a CSV), over ``[ping360] nav``.
+    nav : str or Path, or a sequence of them, optional
+        The navigation (a ROS bag or a CSV; or a BlueROV2's own logs, one or several:
+        :mod:`sonarslam.datasets.navlog`), over ``[ping360] nav``.
 
     Raises
     ------
@@ -977,8 +1005,8 @@ def open_ping360(
             head_files.update(
                 {k: source for k in ("n_bins", "bin_size_m", "step_deg") if k in sonar}
             )
-    nav_path = Path(nav) if nav is not None else Path(settings.nav) if settings.nav else None
-    if nav_path is None:
+    nav_paths = _nav_paths(nav, settings)
+    if not nav_paths:
         raise DataError(
             p,
             None,
@@ -1033,7 +1061,10 @@ def open_ping360(
     beams = log.beams
     if config.sonar_time_offset_s:
         beams = beams.shifted(config.sonar_time_offset_s)
-    dvl, att, gps, nav_counts = _navigation(nav_path, topics_file)
+    dvl, att, gps, nav_counts, config, said = _navigation(
+        nav_paths, topics_file, config, (toml, config_override)
+    )
+    calibration = f"{calibration}; {said}" if said else calibration
     _check_clocks(p, beams, dvl, att, settings)
     truth = p.parent / "truth.json"
     d = gated_dataset(
@@ -1050,7 +1081,7 @@ def open_ping360(
     )
     d.report.counts.update(log.counts)
     d.report.counts.update(nav_counts)
-    return replace(d, inputs=(nav_path, *_topics_path(topics_file)))
+    return replace(d, inputs=(*nav_paths, *_topics_path(topics_file)))
 
 
 def _topics_path(topics_file: str | Path | None) -> tuple[Path, ...]:

@@ -15,11 +15,13 @@ from evo.core.geometry import umeyama_alignment
 from sonarslam.datasets.errors import DataWarning
 from sonarslam.datasets.rosbag import BAG_KINDS
 from sonarslam.datasets.simulator import KINDS, simulate
+from sonarslam.datasets.simulator.bluerov import NAV_KINDS
 from sonarslam.datasets.source import open_dataset
 from sonarslam.slam.cli.common import POSES
 from sonarslam.slam.cli.main import build_parser, main
 from sonarslam.slam.cli.parsers import (
     BACKENDS,
+    BLUEROV_NAV_KINDS,
     COMMANDS,
     EXTRACTOR_PRESETS,
     SIM_DURATION_S,
@@ -103,6 +105,7 @@ def test_the_parsers_offer_the_registries_choices():
     assert EXTRACTOR_PRESETS == tuple(sorted(PRESETS))
     assert WORLDS == KINDS
     assert PARSER_BAG_KINDS == BAG_KINDS
+    assert BLUEROV_NAV_KINDS == NAV_KINDS
     assert SIM_DURATION_S == DEMO_SIM_DURATION_S
     # and every command module runs: its command(args) is there
     for name, _, module in COMMANDS:

@@ -82,9 +82,13 @@ def add_source(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--nav",
-        metavar="BAG_OR_CSV",
-        help="a Ping Viewer .bin's navigation: a ROS bag (DVL, IMU, GPS topics) or a CSV"
-        " (docs/data.md; default: [ping360] nav of the sonarslam.toml beside the .bin)",
+        metavar="FILE",
+        action="append",
+        help="a Ping Viewer .bin's navigation: a ROS bag (DVL, IMU, GPS topics), a CSV, or a"
+        " BlueROV2's own logs told by their content (a QGroundControl .tlog or CSV export, an"
+        " ArduSub dataflash .bin, a Water Linked DVL A50 JSON log); repeat it to take the DVL"
+        " from one and the heading from another (docs/data.md; default: [ping360] nav of the"
+        " sonarslam.toml beside the .bin)",
     )
 
 

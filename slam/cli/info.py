@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 from sonarslam.datasets.gates import DVL_MIN_SPEED_MPS, MAX_BEAMS_OUTSIDE_NAV
+from sonarslam.datasets.navlog import describe_nav_log, is_nav_log, navlog_settings, read_nav_log
 from sonarslam.datasets.ping360 import is_ping360_log
 from sonarslam.datasets.rosbag import bag_topics, is_bag
 from sonarslam.datasets.source import check_toml_inputs, open_dataset, resolve_source
@@ -25,6 +27,8 @@ from sonarslam.slam.run.sources import (
 def command(args: argparse.Namespace) -> int:
     settings = parse_settings(args.set)
     check_run_settings(settings)
+    if Path(args.source).is_file() and is_nav_log(args.source):
+        return _nav_log(args)
     if is_bag(args.source):
         check_toml_inputs(resolve_source(args.source), args.topics)
         topics = bag_topics(args.source, args.topics)
@@ -135,6 +139,16 @@ def command(args: argparse.Namespace) -> int:
         f" ahrs_bias_sigma_deg {n.ahrs_bias_sigma_deg:g} deg"
     )
     _print_settings("run settings (sonarslam run --set NAME=VALUE)", run_settings(d, settings))
+    return 0
+
+
+def _nav_log(args: argparse.Namespace) -> int:
+    """A navigation log alone: what it holds, what a run would take from it."""
+    path = Path(args.source)
+    beside = path.parent / "sonarslam.toml"
+    settings = navlog_settings(beside if beside.is_file() else None, args.config)
+    for line in describe_nav_log(read_nav_log(path, settings)):
+        print(line)
     return 0
 
 

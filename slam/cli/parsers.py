@@ -25,7 +25,15 @@ from sonarslam.slam.cli.common import (
     parse_loop,
 )
 
-__all__ = ["COMMANDS", "BACKENDS", "BAG_KINDS", "EXTRACTOR_PRESETS", "WORLDS", "SIM_DURATION_S"]
+__all__ = [
+    "COMMANDS",
+    "BACKENDS",
+    "BAG_KINDS",
+    "BLUEROV_NAV_KINDS",
+    "EXTRACTOR_PRESETS",
+    "WORLDS",
+    "SIM_DURATION_S",
+]
 
 #: ``--backend``: :func:`sonarslam.slam.run.run.backend_names` (the baselines, then the closed
 #: loops of :data:`sonarslam.slam.backends.registry.BACKENDS`).
@@ -36,6 +44,8 @@ EXTRACTOR_PRESETS = ("default", "marina", "marina-fit", "marina-seed")
 WORLDS = ("pool", "harbour", "random", "drift", "drawn")
 #: ``simulate --bag``: :data:`sonarslam.datasets.rosbag.BAG_KINDS`.
 BAG_KINDS = ("ros1", "mcap", "sqlite3")
+#: ``simulate --bluerov``: :data:`sonarslam.datasets.simulator.bluerov.NAV_KINDS`.
+BLUEROV_NAV_KINDS = ("tlog", "dataflash", "dvl_json", "dvl_json_v1", "qgc_csv")
 #: ``demo --sim-duration``'s default: :data:`sonarslam.slam.run.demo.SIM_DURATION_S` (s).
 SIM_DURATION_S = 600.0
 
@@ -79,6 +89,19 @@ def _simulate(sub: Subparsers) -> argparse.ArgumentParser:
         help="leave the GPS out, whatever the output: the layout without its *_DGPS.log, a bag"
         " (--bag, any --preset) without a NavSatFix topic, a Ping360 run's nav.bag likewise; runs"
         " on it are measured against truth.json and their loops (docs/data.md, 'Without GPS')",
+    )
+    p.add_argument(
+        "--bluerov",
+        choices=BLUEROV_NAV_KINDS,
+        default=None,
+        metavar="NAV",
+        help="write the run as a BlueROV2 logs it: a Ping Viewer OUT/<start>.bin and the"
+        " navigation as NAV, with its writer's known defects (corrupt chunks, json_v1's relative"
+        " times, QGroundControl's 1 Hz rounded CSV): tlog (QGroundControl .tlog: ATTITUDE, the"
+        " DVL's VISION_POSITION_DELTA, the autopilot's LOCAL_POSITION_NED, an Underwater GPS's"
+        " GPS_INPUT), dataflash (an ArduSub .BIN), dvl_json (the A50's json_v3), dvl_json_v1"
+        " (json_v1 and an ATTITUDE-only .tlog for the heading), qgc_csv (QGroundControl's CSV"
+        " export); sonarslam.toml's [ping360] nav names it (choices: %(choices)s)",
     )
     p.add_argument(
         "--ping360",
@@ -265,7 +288,11 @@ def _calibrate(sub: Subparsers) -> argparse.ArgumentParser:
 
 def _info(sub: Subparsers) -> argparse.ArgumentParser:
     p = sub.add_parser(
-        "info", help="what a dataset holds, every setting with its unit and source", epilog=EPILOG
+        "info",
+        help="what a dataset holds, every setting with its unit and source; of a navigation log"
+        " alone (a .tlog, a dataflash .bin, a DVL A50 JSON log, a QGroundControl CSV): its"
+        " messages, rates, spans and gaps, and which stream would be the odometry and heading",
+        epilog=EPILOG,
     )
     add_source(p)
     add_topics(p)

@@ -12,6 +12,7 @@ from sonarslam.datasets.config import dump_dataset_config
 from sonarslam.datasets.errors import DataWarning
 from sonarslam.datasets.rosbag import bag_config, write_bag
 from sonarslam.datasets.simulator import simulate
+from sonarslam.datasets.simulator.bluerov import simulate_bluerov
 from sonarslam.datasets.simulator.ping360 import simulate_ping360
 from sonarslam.datasets.simulator.writer import drop_gps
 from sonarslam.datasets.source import open_dataset
@@ -21,6 +22,25 @@ from sonarslam.slam.io.files import check_output_dir
 
 def command(args: argparse.Namespace) -> int:
     check_output_dir(args.out)
+    if args.bluerov is not None:
+        if args.bag is not None or args.ping360:
+            raise SettingError("--bluerov", "a BlueROV2 run is a .bin and its logs: no --bag")
+        log, navs = simulate_bluerov(
+            args.kind,
+            seed=args.seed,
+            out_dir=args.out,
+            nav=args.bluerov,
+            duration_s=args.duration,
+            gps=not args.no_gps,
+        )
+        print(
+            f"simulated {args.kind} (seed {args.seed}) written as a BlueROV2 logs it: {log}, with"
+            f" {', '.join(str(n) for n in navs)} ({args.bluerov}) and sonarslam.toml"
+            " ([ping360] nav); run it: sonarslam run "
+            + str(log)
+            + ("".join(f" --nav {n}" for n in navs) if len(navs) > 1 else "")
+        )
+        return 0
     if args.ping360:
         if args.bag is not None:
             raise SettingError("--ping360", "a Ping360 run's navigation is a ROS 1 bag: no --bag")

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -461,7 +462,7 @@ def run(
     start_enu: tuple[float, float, float] | None = None,
     topics_file: str | Path | None = None,
     loops_rel_s: list[tuple[float, float]] | None = None,
-    nav: str | Path | None = None,
+    nav: str | Path | Sequence[str | Path] | None = None,
 ) -> RunResult:
     """Open a dataset, run a back end on it (:func:`run_backend`) and write the run directory
     (:func:`sonarslam.slam.run.outputs.write_run`).
