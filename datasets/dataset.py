@@ -19,7 +19,14 @@ from sonarslam.datasets.config import DatasetConfig
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.gates import SensorReport, navigation_span_s
 from sonarslam.datasets.logfile import read_text
-from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries, Record
+from sonarslam.datasets.records import (
+    AttitudeSeries,
+    BeamSeries,
+    DvlSeries,
+    GpsSeries,
+    Record,
+    SonarSegment,
+)
 
 __all__ = ["Dataset", "NEUTRAL_CALIBRATION", "check_overlap", "neutral_warning", "read_truth"]
 
@@ -119,6 +126,10 @@ class Dataset:
         Files (or bag directories) read besides ``root`` and the ``sonarslam.toml`` and
         ``truth.json`` in or beside it: a ``--topics`` file, a Ping360 log's navigation
         (``metrics.json`` provenance digests them).
+    segments : tuple of SonarSegment
+        The stretches of the beams of one head setting (range, bin size, gain, sector), in
+        time order, on the beams' clock: a Ping Viewer log's (``sonarslam info`` lists them);
+        empty for a source of one setting.
     """
 
     name: str
@@ -133,6 +144,7 @@ class Dataset:
     calibration: str = ""
     start_enu: tuple[float, float, float] | None = None
     inputs: tuple[Path, ...] = ()
+    segments: tuple[SonarSegment, ...] = ()
 
     @property
     def nav_span_s(self) -> tuple[float, float]:
