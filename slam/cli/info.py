@@ -8,7 +8,7 @@ import math
 from sonarslam.datasets.gates import DVL_MIN_SPEED_MPS, MAX_BEAMS_OUTSIDE_NAV
 from sonarslam.datasets.ping360 import is_ping360_log
 from sonarslam.datasets.rosbag import bag_topics, is_bag
-from sonarslam.datasets.source import check_toml_inputs, open_dataset, resolve_source
+from sonarslam.datasets.source import Dataset, check_toml_inputs, open_dataset, resolve_source
 from sonarslam.slam.model.motion import gyro_bias_against_heading
 from sonarslam.slam.run.presets import parse_settings
 from sonarslam.slam.run.settings import Setting, check_run_settings, dataset_settings, run_settings
@@ -56,12 +56,13 @@ def command(args: argparse.Namespace) -> int:
         }
         gain = c.get("ping360_gain_changes", 0)
         print(
-            f"  Ping Viewer log: {len(d.beams)} beams of {d.config.sonar.n_bins} samples"
-            f" of {d.config.sonar.bin_size_m:.6g} m (sample period and [ping360]"
+            f"  Ping Viewer log: {len(d.beams)} beams of up to {d.config.sonar.n_bins} samples,"
+            f" the head's bins {d.config.sonar.bin_size_m:.6g} m (sample period and [ping360]"
             f" speed_of_sound_mps), step {d.config.sonar.step_rad * 200 / math.pi:g} gradians;"
-            f" other records: {dropped or 'none'}; gain_setting "
+            f" other messages and bytes dropped: {dropped or 'none'}; gain_setting "
             + (f"changed {gain} time(s) (the intensities with it)" if gain else "constant")
         )
+    _print_segments(d)
     nav = d.nav_beams()
     processed = ""
     if d.gps is not None and nav:
@@ -136,6 +137,23 @@ def command(args: argparse.Namespace) -> int:
     )
     _print_settings("run settings (sonarslam run --set NAME=VALUE)", run_settings(d, settings))
     return 0
+
+
+def _print_segments(d: Dataset) -> None:
+    """The log's segments (one range, gain, sector each), times as --span takes them."""
+    if len(d.segments) < 2:
+        return
+    t0 = d.nav_span_s[0]
+    print(
+        f"  {len(d.segments)} segments (a range, gain or sector each; each beam with its own bin"
+        " size; --span T0,T1 takes part of the log, s from the start of the navigation):"
+    )
+    for k, g in enumerate(d.segments, 1):
+        print(
+            f"    {k}: {g.t0_s - t0:.3f} to {g.t1_s - t0:.3f} s, {g.beams} beams of"
+            f" {g.n_bins} samples of {g.bin_size_m * 1000:.4g} mm (range {g.range_m:.2f} m),"
+            f" {g.setting}"
+        )
 
 
 def _print_settings(title: str, settings: list[Setting]) -> None:
