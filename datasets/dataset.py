@@ -9,7 +9,7 @@ import json
 import tomllib
 import warnings
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +28,14 @@ from sonarslam.datasets.records import (
     SonarSegment,
 )
 
-__all__ = ["Dataset", "NEUTRAL_CALIBRATION", "check_overlap", "neutral_warning", "read_truth"]
+__all__ = [
+    "Dataset",
+    "NEUTRAL_CALIBRATION",
+    "check_overlap",
+    "neutral_warning",
+    "read_truth",
+    "dataset_span",
+]
 
 _NEUTRAL = "neutral: no sonarslam.toml, so identity mountings, no clock offset and default noise"
 #: :attr:`Dataset.calibration` of a run that is not the marina and has no ``sonarslam.toml``.
@@ -194,6 +201,63 @@ class Dataset:
         ]
         for item in heapq.merge(*streams):
             yield item[3]
+
+
+def dataset_span(dataset: Dataset, span_rel_s: tuple[float, float]) -> Dataset:
+    """The part of ``dataset`` from ``T0`` to ``T1`` of ``span_rel_s`` (s from the start of its
+    navigation, :attr:`Dataset.nav_span_s`, as ``--loop`` and ``sonarslam info``'s segments
+    count): its beams, DVL, AHRS and GPS rows in ``[start + T0, start + T1]``, its segments cut
+    to it (``--span``). The gates' report stays the whole source's.
+
+    Raises
+    ------
+    DataError
+        A span that leaves fewer than two DVL or AHRS rows (no time to navigate) or no beam,
+        naming the span and the source's own.
+    """
+    t_nav0, t_nav1 = dataset.nav_span_s
+    lo, hi = t_nav0 + span_rel_s[0], t_nav0 + span_rel_s[1]
+    said = (
+        f"--span {span_rel_s[0]:g},{span_rel_s[1]:g} (s from the start of the navigation, whose"
+        f" span is 0-{t_nav1 - t_nav0:.3f} s)"
+    )
+    d, a, g = dataset.dvl, dataset.attitude, dataset.gps
+    keep_d = (d.t >= lo) & (d.t <= hi)
+    keep_a = (a.t >= lo) & (a.t <= hi)
+    for name, keep in (("DVL", keep_d), ("AHRS", keep_a)):
+        if np.count_nonzero(keep) < 2:
+            raise DataError(
+                dataset.root,
+                None,
+                f"{said} holds {np.count_nonzero(keep)} {name} row(s): a run needs a time span"
+                " to navigate",
+            )
+    beams = dataset.beams.between(lo, hi)
+    if not beams:
+        raise DataError(dataset.root, None, f"{said} holds no sonar beam")
+    gps = None
+    if g is not None:
+        keep_g = (g.t >= lo) & (g.t <= hi)
+        fix = None if g.fix is None else g.fix[keep_g]
+        gps = replace(g, t=g.t[keep_g], en_m=g.en_m[keep_g], fix=fix) if keep_g.any() else None
+    cut = [replace(s, t0_s=max(s.t0_s, lo), t1_s=min(s.t1_s, hi)) for s in dataset.segments]
+    segments = tuple(
+        replace(s, beams=len(beams.between(s.t0_s, s.t1_s))) for s in cut if s.t0_s <= s.t1_s
+    )
+    return replace(
+        dataset,
+        beams=beams,
+        dvl=replace(
+            d, t=d.t[keep_d], v_mps=d.v_mps[keep_d], valid=d.valid[keep_d],
+            heading_rad=d.heading_rad[keep_d],
+        ),
+        attitude=replace(
+            a, t=a.t[keep_a], yaw_rad=a.yaw_rad[keep_a],
+            yaw_rate_rad_per_s=a.yaw_rate_rad_per_s[keep_a],
+        ),
+        gps=gps,
+        segments=segments,
+    )  # fmt: skip
 
 
 #: DVL and AHRS whose overlap covers less than this share of their logs' span, or leaves out

@@ -530,3 +530,28 @@ def test_bytes_in_no_message_are_counted_by_their_cause(small: Path) -> None:
     assert (c["ping360_stray_bytes"], c["ping360_checksum_errors"]) == (len(tail), 1)
     assert c["ping360_truncated_records"] == 1 and c["ping360_cut_messages"] == 0
     np.testing.assert_array_equal(log.beams.intensities, whole.beams.intensities[[0, 1, 3, 4]])
+
+
+def test_span_takes_part_of_any_source(
+    binlog: Path, layout: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--span T0,T1 (s from the start of the navigation) takes that part of a .bin or of a
+    directory: its beams, navigation and GPS; a span with nothing in it is one line."""
+    whole = _open(binlog)
+    t0 = whole.nav_span_s[0]
+    for source in (binlog, layout):
+        part = _open(source, span_s=(20.0, 60.0))
+        assert part.nav_span_s[0] >= t0 + 20.0 - 0.2 and part.nav_span_s[1] <= t0 + 60.0
+        assert part.beams.t_s[0] >= t0 + 20.0 and part.beams.t_s[-1] <= t0 + 60.0
+        inside = (whole.beams.t_s >= t0 + 20.0) & (whole.beams.t_s <= t0 + 60.0)
+        assert len(part.beams) == np.count_nonzero(inside) > 500
+        assert part.gps is not None and part.gps.t[0] >= t0 + 20.0
+    out = tmp_path / "run"
+    args = ["run", str(binlog), "--span", "20,60", "--out", str(out), "--quiet"]
+    assert main(args) == 0
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["provenance"]["span_s"] == [20.0, 60.0] and m["data_s"] < 40.0 + 1e-6
+    assert main(["info", str(binlog), "--span", "400,500"]) == 1
+    assert "--span 400,500 (s from the start of the navigation, whose span is 0-1" in (
+        capsys.readouterr().err
+    )

@@ -86,6 +86,15 @@ def add_source(p: argparse.ArgumentParser) -> None:
         help="a Ping Viewer .bin's navigation: a ROS bag (DVL, IMU, GPS topics) or a CSV"
         " (docs/data.md; default: [ping360] nav of the sonarslam.toml beside the .bin)",
     )
+    p.add_argument(
+        "--span",
+        type=parse_loop,
+        default=None,
+        metavar="T0,T1",
+        help="take the part of the source from T0 to T1 (s from the start of the navigation, as"
+        " info's segments; a .bin without navigation: from its first beam): its beams,"
+        " navigation and GPS; --loop times then count from T0",
+    )
 
 
 def add_topics(p: argparse.ArgumentParser) -> None:
@@ -151,7 +160,8 @@ UNIX_TIME_S = 1e8
 
 
 def parse_loop(text: str) -> tuple[float, float]:
-    """``T0,T1`` (s from the start of the navigation, ``0 <= T0 < T1``); an argparse ``type``."""
+    """``T0,T1`` (s from the start of the navigation, ``0 <= T0 < T1``); an argparse ``type``
+    (``--loop``, ``--span``)."""
     parts = text.split(",")
     if len(parts) != 2:
         raise argparse.ArgumentTypeError(f"must be T0,T1 (s from the start), got {text!r}")

@@ -12,8 +12,9 @@ from sonarslam.slam.run.extraction import extract
 
 def command(args: argparse.Namespace) -> int:
     source: str | Dataset = args.source
-    if args.start is not None or args.nav is not None:
-        source = replace(open_dataset(args.source, nav=args.nav), start_enu=args.start)
+    if args.start is not None or args.nav is not None or args.span is not None:
+        opened = open_dataset(args.source, nav=args.nav, span_s=args.span)
+        source = replace(opened, start_enu=args.start)
     result = extract(
         source,
         args.poses,

@@ -36,7 +36,11 @@ def command(args: argparse.Namespace) -> int:
                 f"  {t.topic:<{width}}  {t.msgtype:<46} {t.count:>8} msgs {t.rate_hz:>8.2f} Hz  {role}"
             )
     d = open_dataset(
-        args.source, config_override=args.config, topics_file=args.topics, nav=args.nav
+        args.source,
+        config_override=args.config,
+        topics_file=args.topics,
+        nav=args.nav,
+        span_s=args.span,
     )
     t0, t1 = d.nav_span_s
     kind = (

@@ -15,7 +15,7 @@ from sonarslam.slam.run.sources import pose_source_by_name
 
 def command(args: argparse.Namespace) -> int:
     out = check_output_file(args.out, ".png")
-    dataset = open_dataset(args.source, nav=args.nav)
+    dataset = open_dataset(args.source, nav=args.nav, span_s=args.span)
     poses = pose_source_by_name(dataset, args.poses)
     beams = dataset.nav_beams()
     min_intensity = map_min_intensity(beams) if args.min_intensity is None else args.min_intensity

@@ -450,13 +450,16 @@ def run(
     topics_file: str | Path | None = None,
     loops_rel_s: list[tuple[float, float]] | None = None,
     nav: str | Path | None = None,
+    span_s: tuple[float, float] | None = None,
 ) -> RunResult:
     """Open a dataset, run a back end on it (:func:`run_backend`) and write the run directory
     (:func:`sonarslam.slam.run.outputs.write_run`).
 
     ``loops_rel_s``: pairs of times (s from the start of the navigation) at which the vehicle
     was at one place; with them, or without GPS, the run measures the loop-closure error
-    (:func:`loop_figures`).
+    (:func:`loop_figures`). ``span_s``: only the part of the source from ``T0`` to ``T1`` (s
+    from the start of its navigation; :func:`sonarslam.datasets.dataset.dataset_span`), whose
+    start the loops' times then count from.
 
     ``config``: a ``sonarslam.toml``-format file whose keys replace the dataset's calibration
     (:func:`sonarslam.datasets.source.open_dataset`); the configuration used is written to
@@ -477,7 +480,9 @@ def run(
         check_settings(backend, settings)
     if batch and (backend in BASELINES or not backend_spec(backend).smoother):
         raise SettingError("--batch", f"back end {backend!r} does not smooth")
-    dataset = open_dataset(source, config_override=config, topics_file=topics_file, nav=nav)
+    dataset = open_dataset(
+        source, config_override=config, topics_file=topics_file, nav=nav, span_s=span_s
+    )
     if start_enu is not None:
         dataset = replace(dataset, start_enu=start_enu)
     result = run_backend(dataset, backend, settings, progress=progress, batch=batch)
@@ -492,6 +497,8 @@ def run(
         batch,
         also=dataset.inputs,
     )
+    if span_s is not None:  # part of the source: said where the figures come from
+        result.figures.provenance["span_s"] = [float(span_s[0]), float(span_s[1])]
     result.metrics = result.figures.to_json()
     result.files = write_run(
         Path(out_dir),
