@@ -137,6 +137,12 @@ class Dataset:
         The stretches of the beams of one head setting (range, bin size, gain, sector), in
         time order, on the beams' clock: a Ping Viewer log's (``sonarslam info`` lists them);
         empty for a source of one setting.
+    still : bool
+        No navigation was given (a sonar log alone: a tank test, a head on a pier): the head
+        is taken as still, at :attr:`start_enu` (the origin heading East when not given).
+        ``dvl`` and ``attitude`` then hold two rows without bottom lock spanning the beams,
+        no measurement: dead reckoning is the still pose
+        (:func:`sonarslam.slam.run.sources.dead_reckoning_trajectory`), and nothing else runs.
     """
 
     name: str
@@ -152,6 +158,7 @@ class Dataset:
     start_enu: tuple[float, float, float] | None = None
     inputs: tuple[Path, ...] = ()
     segments: tuple[SonarSegment, ...] = ()
+    still: bool = False
 
     @property
     def nav_span_s(self) -> tuple[float, float]:

@@ -123,7 +123,12 @@ from sonarslam.datasets.dataset import (
     read_truth,
 )
 from sonarslam.datasets.errors import DataError, DataWarning
-from sonarslam.datasets.gates import check_heading_sense, navigation_span_s
+from sonarslam.datasets.gates import (
+    SensorReport,
+    check_heading_sense,
+    gate_beams,
+    navigation_span_s,
+)
 from sonarslam.datasets.geodesy import geodetic_to_local_en
 from sonarslam.datasets.logfile import open_regular, read_text
 from sonarslam.datasets.records import (
@@ -151,6 +156,7 @@ __all__ = [
     "is_ping360_log",
     "sample_spacing_m",
     "ascii_digits",
+    "STILL_HEAD",
     "log_start_from_name",
     "read_ping360_log",
     "ping360_table",
@@ -1233,8 +1239,13 @@ def open_ping360(
     Raises
     ------
     DataError
-        No navigation given, and every fault of :func:`read_ping360_log`, :func:`read_nav_csv`
-        and the bag reader, naming the file.
+        Every fault of :func:`read_ping360_log`, :func:`read_nav_csv` and the bag reader,
+        naming the file.
+
+    Notes
+    -----
+    Without any navigation (no ``nav``, no ``[ping360] nav``) the log is read as a still head
+    (:attr:`Dataset.still`, :data:`STILL_HEAD`), said by a :class:`DataWarning`.
     """
     p = Path(path)
     beside = p.parent / "sonarslam.toml"
@@ -1253,13 +1264,6 @@ def open_ping360(
                 {k: source for k in ("n_bins", "bin_size_m", "step_deg") if k in sonar}
             )
     nav_path = Path(nav) if nav is not None else Path(settings.nav) if settings.nav else None
-    if nav_path is None:
-        raise DataError(
-            p,
-            None,
-            "a Ping360 log needs its navigation (DVL and AHRS): give --nav BAG_OR_CSV, or"
-            ' [ping360] nav = "nav.bag" in sonarslam.toml beside it (docs/data.md)',
-        )
     if toml is not None:
         config, calibration = load_dataset_config(toml), str(toml)
     else:
@@ -1310,6 +1314,12 @@ def open_ping360(
     beams = log.beams
     if config.sonar_time_offset_s:
         beams = beams.shifted(config.sonar_time_offset_s)
+    offset = config.sonar_time_offset_s
+    segments = tuple(replace(g, t0_s=g.t0_s + offset, t1_s=g.t1_s + offset) for g in log.segments)
+    if nav_path is None:
+        if topics_file is not None:
+            raise DataError(Path(topics_file), None, "--topics is for a navigation bag: none given")
+        return _still_dataset(p, config, calibration, beams, log, segments)
     dvl, att, gps, nav_counts = _navigation(nav_path, topics_file)
     _check_clocks(p, beams, dvl, att, settings)
     truth = p.parent / "truth.json"
@@ -1327,9 +1337,50 @@ def open_ping360(
     )
     d.report.counts.update(log.counts)
     d.report.counts.update(nav_counts)
-    offset = config.sonar_time_offset_s
-    segments = tuple(replace(g, t0_s=g.t0_s + offset, t1_s=g.t1_s + offset) for g in log.segments)
     return replace(d, inputs=(nav_path, *_topics_path(topics_file)), segments=segments)
+
+
+#: What a log without navigation is read as, said by a warning and wherever a run starts.
+STILL_HEAD = (
+    "no navigation (no --nav, no [ping360] nav): read as a still head at --start X,Y,YAW"
+    " (default the origin, heading East: YAW 0); dead reckoning (--backend dr, --poses dr) is"
+    " that pose, and the EKF and iSAM2 need a navigation"
+)
+
+
+def _still_dataset(
+    p: Path,
+    config: DatasetConfig,
+    calibration: str,
+    beams: BeamSeries,
+    log: Ping360Log,
+    segments: tuple[SonarSegment, ...],
+) -> Dataset:
+    """A log without navigation as a still head (:attr:`Dataset.still`): the beams gated
+    (their gaps), a DVL and an AHRS of two rows without bottom lock that span them and measure
+    nothing."""
+    warnings.warn(f"{p}: {STILL_HEAD}", DataWarning, stacklevel=4)
+    t0 = float(beams.t_s[0])
+    t1 = max(float(beams.t_s[-1]), t0 + 1e-3)
+    t = np.array([t0, t1])
+    report = SensorReport()
+    gate_beams(beams.t_s, config.gates, report, p, (t0, t1))
+    report.counts.update(log.counts)
+    truth = p.parent / "truth.json"
+    return Dataset(
+        name=p.stem,
+        root=p,
+        config=config,
+        beams=beams,
+        dvl=DvlSeries(t, np.zeros((2, 2)), np.zeros(2, dtype=bool), np.full(2, np.nan)),
+        attitude=AttitudeSeries(t.copy(), np.zeros(2), np.zeros(2)),
+        gps=None,
+        truth=read_truth(truth) if truth.is_file() else None,
+        report=report,
+        calibration=calibration,
+        segments=segments,
+        still=True,
+    )
 
 
 def _topics_path(topics_file: str | Path | None) -> tuple[Path, ...]:

@@ -311,11 +311,38 @@ def test_the_date_comes_from_the_file_name_or_the_settings(small: Path, tmp_path
     assert log.start_ms == 1_714_645_867_250 and log.beams.t_s[0] == 1_714_645_867.3
 
 
-def test_a_bin_needs_its_navigation_and_clocks_that_meet(binlog: Path, tmp_path: Path) -> None:
+def test_a_bin_alone_is_a_still_head_and_clocks_must_meet(
+    binlog: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Without navigation a .bin is read as a still head at --start (said plainly): info,
+    plot-scans, extract and run --backend dr work on it, the closed loops are refused."""
     alone = tmp_path / binlog.name
     shutil.copy(binlog, alone)
-    with pytest.raises(DataError, match=r"needs its navigation .* --nav BAG_OR_CSV"):
-        _open(alone)
+    with pytest.warns(DataWarning, match=r"no navigation .* read as a still head at --start"):
+        still = open_dataset(alone)
+    assert still.still and still.gps is None and len(still.beams) > 1000
+    start = replace(still, start_enu=(3.0, -2.0, math.radians(30.0)))
+    track = dead_reckoning_trajectory(start)
+    assert track.covs is None and track.span_s == pytest.approx(still.nav_span_s, abs=1e-9)
+    poses = track.poses(still.beams.t_s)
+    np.testing.assert_allclose(poses - poses[:1], 0.0, atol=1e-12)
+    np.testing.assert_allclose(poses[0], [3.0, -2.0, math.radians(30.0)], atol=1e-12)
+    out = tmp_path / "out"
+    assert main(["info", str(alone)]) == 0
+    said = capsys.readouterr().out
+    assert "start pose: no navigation: a still head at (0, 0) m heading 0 deg" in said
+    assert main(["run", str(alone), "--backend", "ekf", "--out", str(out), "--quiet"]) == 2
+    assert "ekf needs a DVL and an AHRS (--nav BAG_OR_CSV)" in capsys.readouterr().err
+    args = ["--start", "3,-2,30", "--out"]
+    assert main(["run", str(alone), *args, str(out / "dr"), "--quiet"]) == 0
+    said = capsys.readouterr().out
+    assert "start pose: no navigation: a still head at (3, -2) m heading 30 deg" in said
+    dr = np.loadtxt(out / "dr" / "dr.tum")
+    np.testing.assert_allclose(dr[:, 1:3], [[3.0, -2.0]] * len(dr), atol=1e-9)
+    assert main(["plot-scans", str(alone), *args, str(out / "scans.png")]) == 0
+    assert "with dr poses" in capsys.readouterr().out
+    assert main(["extract", str(alone), *args, str(out / "lines"), "--quiet"]) == 0
+    assert json.loads((out / "lines" / "extract.json").read_text())["poses"] == "dr"
     nav = binlog.parent / "nav.bag"
     assert _open(alone, nav=nav).calibration.startswith("neutral")  # never the marina's
     # the file name read in the wrong zone: the beams miss the navigation, said in one line

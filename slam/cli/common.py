@@ -18,6 +18,7 @@ __all__ = [
     "add_quiet",
     "add_start",
     "parse_start",
+    "poses_for",
     "number",
     "POSES",
 ]
@@ -84,7 +85,8 @@ def add_source(p: argparse.ArgumentParser) -> None:
         "--nav",
         metavar="BAG_OR_CSV",
         help="a Ping Viewer .bin's navigation: a ROS bag (DVL, IMU, GPS topics) or a CSV"
-        " (docs/data.md; default: [ping360] nav of the sonarslam.toml beside the .bin)",
+        " (docs/data.md; default: [ping360] nav of the sonarslam.toml beside the .bin; without"
+        " either, the .bin alone is read as a still head at --start)",
     )
     p.add_argument(
         "--span",
@@ -128,15 +130,23 @@ def add_config_and_set(p: argparse.ArgumentParser) -> None:
     )
 
 
-def add_poses(p: argparse.ArgumentParser, default: str, note: str = "") -> None:
-    """``--poses``: one of :data:`POSES`."""
+def add_poses(p: argparse.ArgumentParser, default: str | None, note: str = "") -> None:
+    """``--poses``: one of :data:`POSES`; a ``default`` of None is :func:`poses_for`'s."""
+    said = (
+        default or "gps when the source has GPS, else dr (a log without navigation: its still head)"
+    )
     p.add_argument(
         "--poses",
         default=default,
         choices=POSES,
         help=f"pose source: gps (GPS+AHRS), dr (dead reckoning), truth (simulated only);"
-        f" default {default}{note}",
+        f" default {said}{note}",
     )
+
+
+def poses_for(poses: str | None, has_gps: bool) -> str:
+    """``--poses`` as given, else ``gps`` for a source with GPS and ``dr`` for one without."""
+    return poses if poses is not None else "gps" if has_gps else "dr"
 
 
 def add_quiet(p: argparse.ArgumentParser) -> None:
@@ -187,5 +197,6 @@ def add_start(p: argparse.ArgumentParser) -> None:
         metavar="X,Y[,YAW]",
         help="start position in the local East-North frame (m); default: the first GPS fix, or"
         " without GPS the origin. The heading is the AHRS's: a YAW given (deg CCW from East) must"
-        " agree with it within 3 [noise] ahrs_sigma_deg",
+        " agree with it within 3 [noise] ahrs_sigma_deg. A .bin without navigation: the still"
+        " head's pose, the whole log long (YAW default 0: East)",
     )

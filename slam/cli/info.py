@@ -6,7 +6,7 @@ import argparse
 import math
 
 from sonarslam.datasets.gates import DVL_MIN_SPEED_MPS, MAX_BEAMS_OUTSIDE_NAV
-from sonarslam.datasets.ping360 import is_ping360_log
+from sonarslam.datasets.ping360 import STILL_HEAD, is_ping360_log
 from sonarslam.datasets.rosbag import bag_topics, is_bag
 from sonarslam.datasets.source import Dataset, check_toml_inputs, open_dataset, resolve_source
 from sonarslam.slam.model.motion import gyro_bias_against_heading
@@ -18,6 +18,7 @@ from sonarslam.slam.run.sources import (
     DVL_SIGMA_OVER_SCATTER_MAX,
     dvl_quality,
     start_pose,
+    start_pose_origin,
     warn_dvl_sigma,
 )
 
@@ -67,6 +68,16 @@ def command(args: argparse.Namespace) -> int:
             + (f"changed {gain} time(s) (the intensities with it)" if gain else "constant")
         )
     _print_segments(d)
+    if d.still:
+        sonar = d.report.gaps.get("sonar")
+        print(
+            f"  sonar beams {len(d.beams)} over {d.beams.t_s[-1] - d.beams.t_s[0]:.1f} s"
+            + (f"; gaps {sonar.count} (longest {sonar.longest_s:.1f} s)" if sonar else "")
+        )
+        print(f"  {STILL_HEAD}")
+        print(f"  start pose: {start_pose_origin(d)}")
+        _print_settings("dataset settings (sonarslam.toml keys)", dataset_settings(d, args.config))
+        return 0
     nav = d.nav_beams()
     processed = ""
     if d.gps is not None and nav:

@@ -136,7 +136,7 @@ def _plot_scans(sub: Subparsers) -> argparse.ArgumentParser:
         "plot-scans", help="project the sonar bins into the world and draw them", epilog=EPILOG
     )
     add_source(p)
-    add_poses(p, "gps")
+    add_poses(p, None)
     p.add_argument("--out", default="out/scans.png", help="PNG file (default out/scans.png)")
     p.add_argument(
         "--min-intensity",
@@ -145,6 +145,7 @@ def _plot_scans(sub: Subparsers) -> argparse.ArgumentParser:
         help="smallest intensity drawn, 0-255 (default: every bin of thresholded beams, the "
         "extractor's threshold for raw beams)",
     )
+    add_start(p)
     return p
 
 
@@ -153,7 +154,7 @@ def _extract(sub: Subparsers) -> argparse.ArgumentParser:
         "extract", help="extract line features with a pose source and draw them", epilog=EPILOG
     )
     add_source(p)
-    add_poses(p, "gps")
+    add_poses(p, None)
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument(
         "--config", default=None, help="TOML of extractor settings over the preset ([extractor])"

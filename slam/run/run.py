@@ -187,10 +187,16 @@ def run_backend(
     loop: ClosedLoopFigures | None = None
     result: ClosedLoopResult | None = None
     trajectories: dict[str, Trajectory] = {}
+    if dataset.still and backend != "dr":
+        raise SettingError(
+            "--backend",
+            f"{dataset.root} has no navigation, so it is read as a still head: --backend dr"
+            f" runs on it (the still pose); {backend} needs a DVL and an AHRS (--nav BAG_OR_CSV)",
+        )
     if config is not None:
         config = replace(config, settings=_typed_settings(dataset, backend, config, settings))
     quality = dvl_quality(dataset)
-    if backend != "gps":  # the rest take the DVL with [noise] dvl_sigma_mps
+    if backend != "gps" and not dataset.still:  # the rest take the DVL, [noise] dvl_sigma_mps
         warn_dvl_sigma(dataset, quality)
     wall0 = time.perf_counter()
     if backend in BASELINES:
@@ -207,8 +213,9 @@ def run_backend(
                 " topic): take --backend dr",
             )
         trajectory = POSE_SOURCES[backend](dataset)
-        if backend == "dr":  # no health monitor: the travel check is the one that sees a DVL
-            _warn_travel(dataset)  # turned round when the sonar was calibrated on it
+        if backend == "dr" and not dataset.still:  # no health monitor: the travel check is
+            _warn_travel(dataset)  # the one that sees a DVL turned round when the sonar was
+            # calibrated on it
     else:
         result, config, trajectories, loop = _closed_loop(
             dataset, backend, settings, t_end_s, progress, batch, config
@@ -406,6 +413,11 @@ def evaluation(dataset: Dataset) -> str:
     (``loop_*``), the map's entropy (``map_entropy_nats``, lower is sharper) and the pictures."""
     if dataset.gps is not None:
         return "gps and truth" if dataset.truth is not None else "gps"
+    if dataset.still:
+        still = "a still head (no navigation)"
+        if dataset.truth is not None:
+            return f"truth; {still}"
+        return f"{still}: no ATE, no loops; the map's entropy (map_entropy_nats) and the pictures"
     if dataset.truth is not None:
         return "truth and loops (no GPS)"
     return (
@@ -487,7 +499,9 @@ def run(
         dataset = replace(dataset, start_enu=start_enu)
     result = run_backend(dataset, backend, settings, progress=progress, batch=batch)
     assert result.figures is not None
-    if loops_rel_s or dataset.gps is None:
+    if dataset.still and loops_rel_s:
+        raise SettingError("--loop", f"{dataset.root} is a still head (no navigation): no loop")
+    if (loops_rel_s or dataset.gps is None) and not dataset.still:  # a still head has none
         result.figures.loops = loop_figures(dataset, result, loops_rel_s or [])
     result.figures.provenance = provenance(
         backend,
