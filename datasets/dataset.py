@@ -26,6 +26,7 @@ from sonarslam.datasets.records import (
     GpsSeries,
     Record,
     SonarSegment,
+    farthest_segment,
 )
 
 __all__ = [
@@ -214,7 +215,10 @@ def dataset_span(dataset: Dataset, span_rel_s: tuple[float, float]) -> Dataset:
     """The part of ``dataset`` from ``T0`` to ``T1`` of ``span_rel_s`` (s from the start of its
     navigation, :attr:`Dataset.nav_span_s`, as ``--loop`` and ``sonarslam info``'s segments
     count): its beams, DVL, AHRS and GPS rows in ``[start + T0, start + T1]``, its segments cut
-    to it (``--span``). The gates' report stays the whole source's.
+    to it and the head theirs (``--span``: the farthest-reaching segment left,
+    :func:`~sonarslam.datasets.records.farthest_segment`, sets the head's bin size, the most
+    samples left its bins). A still head's (no navigation) two rows span the beams left. The
+    gates' report stays the whole source's.
 
     Raises
     ------
@@ -229,6 +233,14 @@ def dataset_span(dataset: Dataset, span_rel_s: tuple[float, float]) -> Dataset:
         f" span is 0-{t_nav1 - t_nav0:.3f} s)"
     )
     d, a, g = dataset.dvl, dataset.attitude, dataset.gps
+    beams = dataset.beams.between(lo, hi)
+    if not beams:
+        raise DataError(dataset.root, None, f"{said} holds no sonar beam")
+    if dataset.still:  # no navigation: its two rows span the beams
+        t0, t1 = float(beams.t_s[0]), max(float(beams.t_s[-1]), float(beams.t_s[0]) + 1e-3)
+        lo, hi = min(lo, t0), max(hi, t1)
+        d = replace(d, t=np.array([t0, t1]))
+        a = replace(a, t=np.array([t0, t1]))
     keep_d = (d.t >= lo) & (d.t <= hi)
     keep_a = (a.t >= lo) & (a.t <= hi)
     for name, keep in (("DVL", keep_d), ("AHRS", keep_a)):
@@ -239,9 +251,6 @@ def dataset_span(dataset: Dataset, span_rel_s: tuple[float, float]) -> Dataset:
                 f"{said} holds {np.count_nonzero(keep)} {name} row(s): a run needs a time span"
                 " to navigate",
             )
-    beams = dataset.beams.between(lo, hi)
-    if not beams:
-        raise DataError(dataset.root, None, f"{said} holds no sonar beam")
     gps = None
     if g is not None:
         keep_g = (g.t >= lo) & (g.t <= hi)
@@ -251,8 +260,26 @@ def dataset_span(dataset: Dataset, span_rel_s: tuple[float, float]) -> Dataset:
     segments = tuple(
         replace(s, beams=len(beams.between(s.t0_s, s.t1_s))) for s in cut if s.t0_s <= s.t1_s
     )
+    config = dataset.config
+    if segments:
+        n_bins = max(s.n_bins for s in segments)
+        head = replace(
+            config.sonar, n_bins=n_bins, bin_size_m=farthest_segment(segments).bin_size_m
+        )
+        own = beams.bin_size_m
+        if own is not None and np.all(own == head.bin_size_m):
+            own = None
+        beams = BeamSeries(
+            beams.t_s,
+            beams.transducer_angle_rad,
+            beams.intensities[:, :n_bins],
+            beams.thresholded,
+            own,
+        )
+        config = replace(config, sonar=head)
     return replace(
         dataset,
+        config=config,
         beams=beams,
         dvl=replace(
             d, t=d.t[keep_d], v_mps=d.v_mps[keep_d], valid=d.valid[keep_d],

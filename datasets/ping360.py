@@ -138,6 +138,7 @@ from sonarslam.datasets.records import (
     DvlSeries,
     GpsSeries,
     SonarSegment,
+    farthest_segment,
 )
 from sonarslam.datasets.rosbag import TOPIC_PRESETS, is_bag, read_roles
 from sonarslam.datasets.toml import toml_file_line
@@ -841,8 +842,12 @@ def read_ping360_log(
         bin_m[setting] if np.unique(bin_m[setting]).size > 1 else None,
     )
     segments = _segments(t_s, setting, keys, bin_m)
-    per_key = np.bincount(setting, minlength=len(keys))
-    far = max(range(len(keys)), key=lambda k: (keys[k][0] * bin_m[k], per_key[k]))
+    farthest = farthest_segment(segments)
+    far = next(
+        k
+        for k, key in enumerate(keys)
+        if (key[0], bin_m[k]) == (farthest.n_bins, farthest.bin_size_m)
+    )
     if counts["ping360_out_of_order"]:
         warnings.warn(
             f"{p}: {counts['ping360_out_of_order']} beam(s) stamped earlier than the one before,"

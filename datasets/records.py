@@ -30,6 +30,7 @@ __all__ = [
     "GpsSeries",
     "BeamSeries",
     "SonarSegment",
+    "farthest_segment",
     "STEP_TOLERANCE",
 ]
 
@@ -165,6 +166,13 @@ class SonarSegment:
     def range_m(self) -> float:
         """Range of its last bin (m)."""
         return self.n_bins * self.bin_size_m
+
+
+def farthest_segment(segments: Sequence[SonarSegment]) -> SonarSegment:
+    """The segment whose range reaches farthest (of those, the one of most beams): the head of
+    a log of several (its bin size is the head's, the Hough grid spans its range; the rows are
+    as wide as the most bins of any)."""
+    return max(segments, key=lambda g: (g.range_m, g.beams))
 
 
 #: A configured step between beams more than this share off the beams' own is another head

@@ -178,3 +178,17 @@ def test_simulate_writes_the_field_defects_it_is_asked_for(
     assert [round(g.range_m) for g in d.segments] == [2, 15, 6]
     assert main(["simulate", "pool", "--no-nav", "--out", str(tmp_path / "x")]) == 2
     assert "--no-nav: a Ping360 log's defect: give --ping360 too" in capsys.readouterr().err
+
+
+def test_span_takes_a_segment_and_its_head(field_log: Path, still: Dataset) -> None:
+    """--span after the setup seconds: the pool's own 6 m segment alone, and the head its own
+    (500 bins of 12 mm), not the 60 m segment's the whole log's head has."""
+    t0 = still.nav_span_s[0]
+    fourth = still.segments[3]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        part = open_dataset(field_log, span_s=(fourth.t0_s - t0, 60.0))
+    assert part.still and [g.beams for g in part.segments] == [fourth.beams]
+    assert (part.config.sonar.n_bins, part.config.sonar.bin_size_m) == (500, 0.012)
+    assert part.beams.intensities.shape == (fourth.beams, 500) and part.beams.bin_size_m is None
+    assert part.nav_span_s == (fourth.t0_s, fourth.t1_s)
