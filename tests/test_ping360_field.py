@@ -192,3 +192,12 @@ def test_span_takes_a_segment_and_its_head(field_log: Path, still: Dataset) -> N
     assert (part.config.sonar.n_bins, part.config.sonar.bin_size_m) == (500, 0.012)
     assert part.beams.intensities.shape == (fourth.beams, 500) and part.beams.bin_size_m is None
     assert part.nav_span_s == (fourth.t0_s, fourth.t1_s)
+
+
+def test_a_log_of_segments_is_not_written_as_a_bag_of_one_range(
+    still: Dataset, tmp_path: Path
+) -> None:
+    from sonarslam.datasets.rosbag import write_bag
+
+    with pytest.raises(ValueError, match=r"several bin sizes \(segments\) cannot be written"):
+        write_bag(still, tmp_path / "x.bag", "ros1")

@@ -132,9 +132,7 @@ def add_config_and_set(p: argparse.ArgumentParser) -> None:
 
 def add_poses(p: argparse.ArgumentParser, default: str | None, note: str = "") -> None:
     """``--poses``: one of :data:`POSES`; a ``default`` of None is :func:`poses_for`'s."""
-    said = (
-        default or "gps when the source has GPS, else dr (a log without navigation: its still head)"
-    )
+    said = default or "gps (a .bin without navigation: dr, its still head)"
     p.add_argument(
         "--poses",
         default=default,
@@ -144,9 +142,10 @@ def add_poses(p: argparse.ArgumentParser, default: str | None, note: str = "") -
     )
 
 
-def poses_for(poses: str | None, has_gps: bool) -> str:
-    """``--poses`` as given, else ``gps`` for a source with GPS and ``dr`` for one without."""
-    return poses if poses is not None else "gps" if has_gps else "dr"
+def poses_for(poses: str | None, still: bool) -> str:
+    """``--poses`` as given, else ``gps``; of a still head (a ``.bin`` without navigation, no
+    GPS either) ``dr``, its pose."""
+    return poses if poses is not None else "dr" if still else "gps"
 
 
 def add_quiet(p: argparse.ArgumentParser) -> None:

@@ -21,7 +21,7 @@ def command(args: argparse.Namespace) -> int:
         print(f"start pose: {start_pose_origin(source)}")
     result = extract(
         source,
-        poses_for(args.poses, source.gps is not None),
+        poses_for(args.poses, source.still),
         args.out,
         config_path=args.config,
         preset=args.preset,

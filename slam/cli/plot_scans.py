@@ -20,7 +20,7 @@ def command(args: argparse.Namespace) -> int:
     dataset = replace(
         open_dataset(args.source, nav=args.nav, span_s=args.span), start_enu=args.start
     )
-    name = poses_for(args.poses, dataset.gps is not None)
+    name = poses_for(args.poses, dataset.still)
     poses = pose_source_by_name(dataset, name)
     beams = dataset.nav_beams()
     min_intensity = map_min_intensity(beams) if args.min_intensity is None else args.min_intensity
