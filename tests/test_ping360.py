@@ -582,3 +582,19 @@ def test_span_takes_part_of_any_source(
     assert "--span 400,500 (s from the start of the navigation, whose span is 0-1" in (
         capsys.readouterr().err
     )
+
+
+def test_a_log_that_ends_inside_a_message_keeps_the_whole_ones(tmp_path: Path) -> None:
+    """Records split as the link reads: the log closed between two records of one message
+    drops that message, counted as unfinished and named so; the beams before it are whole."""
+    p = tmp_path / "20240502-103107250.bin"
+    bins = (np.arange(6 * 200).reshape(6, 200) % 251).astype(np.uint8)
+    write_ping360_log(
+        p, np.arange(6) * 100, np.arange(6) * 2, bins, 1000, split_rng=np.random.default_rng(5)
+    )
+    recs = _records(p)
+    p.write_bytes(p.read_bytes()[: recs[-1][0]])  # without its last record
+    with pytest.warns(DataWarning, match=r"1 message the log ends inside, dropped \(\d+ bytes\)"):
+        log = read_ping360_log(p)
+    assert log.counts["ping360_unfinished_messages"] == 1
+    np.testing.assert_array_equal(log.beams.intensities, bins[:5])
