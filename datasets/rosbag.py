@@ -1420,6 +1420,13 @@ def _messages(store: Any, d: Dataset) -> Iterator[tuple[float, str, Any]]:
     """(time, role, message) of a dataset in time order: the inverse of :func:`open_bag`."""
     T = store.types
     vec = T["geometry_msgs/msg/Vector3"]
+    if d.beams.bin_size_m is not None and np.any(d.beams.bin_size_m != d.config.sonar.bin_size_m):
+        # the bag's reader takes one range for every beam: written with the head's, a
+        # segment's echoes would read back at the wrong ranges
+        raise ValueError(
+            f"{d.root}: beams of several bin sizes (segments) cannot be written as a bag of one"
+            " range: take one segment (--span, datasets.dataset.dataset_span)"
+        )
     n = d.config.sonar.n_bins
     range_m = n * d.config.sonar.bin_size_m
     ranges = (np.arange(1, n + 1) * d.config.sonar.bin_size_m).astype(np.float32)

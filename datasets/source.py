@@ -33,6 +33,7 @@ from sonarslam.datasets.dataset import (
     NEUTRAL_CALIBRATION,
     Dataset,
     check_overlap,
+    dataset_span,
     mounting_tables,
     neutral_warning,
     read_truth,
@@ -143,6 +144,7 @@ def open_dataset(
     config_override: str | Path | None = None,
     topics_file: str | Path | None = None,
     nav: str | Path | Sequence[str | Path] | None = None,
+    span_s: tuple[float, float] | None = None,
 ) -> Dataset:
     """Read a dataset directory, a ROS bag, a Ping Viewer log or a named source into a
     :class:`Dataset`.
@@ -163,6 +165,9 @@ def open_dataset(
     nav : str or Path, or a sequence of them, optional
         A ``.bin``'s navigation (a ROS bag, a CSV, a BlueROV2's own logs:
         :mod:`sonarslam.datasets.navlog`), over its ``[ping360] nav``.
+    span_s : (float, float), optional
+        Only the part from ``T0`` to ``T1`` (s from the start of the navigation,
+        :func:`sonarslam.datasets.dataset.dataset_span`; ``--span``).
 
     Raises
     ------
@@ -171,6 +176,17 @@ def open_dataset(
         logs that do not overlap in time, a malformed ``truth.json``. Sensor faults that
         pass the readers are gated with warnings (:mod:`sonarslam.datasets.gates`).
     """
+    dataset = _open(source, config_override, topics_file, nav)
+    return dataset if span_s is None else dataset_span(dataset, span_s)
+
+
+def _open(
+    source: str | Path,
+    config_override: str | Path | None,
+    topics_file: str | Path | None,
+    nav: str | Path | Sequence[str | Path] | None,
+) -> Dataset:
+    """:func:`open_dataset` of the whole source."""
     root = resolve_source(source)
     if is_ping360_log(root):
         check_toml_inputs(root, topics_file)

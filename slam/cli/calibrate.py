@@ -28,7 +28,7 @@ from sonarslam.slam.run.sources import pose_source_by_name
 
 
 def _open(args: argparse.Namespace) -> Dataset:
-    dataset = open_dataset(args.source, config_override=args.config, nav=args.nav)
+    dataset = open_dataset(args.source, config_override=args.config, nav=args.nav, span_s=args.span)
     if args.start is not None:
         dataset = replace(dataset, start_enu=args.start)
     print(f"calibration of {dataset.name}: {dataset.calibration}")

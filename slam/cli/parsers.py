@@ -107,9 +107,38 @@ def _simulate(sub: Subparsers) -> argparse.ArgumentParser:
         "--ping360",
         action="store_true",
         help="write the run as a Ping360 logs it instead: a Ping Viewer OUT/<start>.bin (a"
-        " Ping360-shaped head: whole gradians, 25 ns sample periods) and OUT/nav.bag",
+        " Ping360-shaped head: whole gradians, 25 ns sample periods; its records split"
+        " mid-message as Ping Viewer's serial link delivers them) and OUT/nav.bag",
+    )
+    p.add_argument(
+        "--first-ranges",
+        type=_ranges,
+        default=(),
+        metavar="M,M",
+        help="with --ping360: the log starts at these ranges (m), 3 s each, before the world's"
+        " head (e.g. 2,15: Ping Viewer opens at 2 m), each beam rendered at its range with"
+        " 1200 samples; the log is read as segments",
+    )
+    p.add_argument(
+        "--persian-digits",
+        action="store_true",
+        help="with --ping360: the file name and the records' stamps in Extended Arabic-Indic"
+        " digits, as Ping Viewer on a Persian-locale Windows writes them",
+    )
+    p.add_argument(
+        "--no-nav",
+        action="store_true",
+        help="with --ping360: the .bin alone, no nav.bag (a tank test; read as a still head)",
     )
     return p
+
+
+def _ranges(text: str) -> tuple[float, ...]:
+    """``M,M,...``: ranges (m); an argparse ``type``."""
+    try:
+        return tuple(float(number(float, 0.75, 100.0)(v.strip())) for v in text.split(","))
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f"ranges M,M in m, 0.75-100: {exc}") from None
 
 
 def _run(sub: Subparsers) -> argparse.ArgumentParser:
@@ -159,7 +188,7 @@ def _plot_scans(sub: Subparsers) -> argparse.ArgumentParser:
         "plot-scans", help="project the sonar bins into the world and draw them", epilog=EPILOG
     )
     add_source(p)
-    add_poses(p, "gps")
+    add_poses(p, None)
     p.add_argument("--out", default="out/scans.png", help="PNG file (default out/scans.png)")
     p.add_argument(
         "--min-intensity",
@@ -168,6 +197,7 @@ def _plot_scans(sub: Subparsers) -> argparse.ArgumentParser:
         help="smallest intensity drawn, 0-255 (default: every bin of thresholded beams, the "
         "extractor's threshold for raw beams)",
     )
+    add_start(p)
     return p
 
 
@@ -176,7 +206,7 @@ def _extract(sub: Subparsers) -> argparse.ArgumentParser:
         "extract", help="extract line features with a pose source and draw them", epilog=EPILOG
     )
     add_source(p)
-    add_poses(p, "gps")
+    add_poses(p, None)
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument(
         "--config", default=None, help="TOML of extractor settings over the preset ([extractor])"

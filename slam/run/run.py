@@ -190,10 +190,16 @@ def run_backend(
     loop: ClosedLoopFigures | None = None
     result: ClosedLoopResult | None = None
     trajectories: dict[str, Trajectory] = {}
+    if dataset.still and backend != "dr":
+        raise SettingError(
+            "--backend",
+            f"{dataset.root} has no navigation, so it is read as a still head: --backend dr"
+            f" runs on it (the still pose); {backend} needs a DVL and an AHRS (--nav BAG_OR_CSV)",
+        )
     if config is not None:
         config = replace(config, settings=_typed_settings(dataset, backend, config, settings))
     quality = dvl_quality(dataset)
-    if backend != "gps":  # the rest take the DVL with [noise] dvl_sigma_mps
+    if backend != "gps" and not dataset.still:  # the rest take the DVL, [noise] dvl_sigma_mps
         warn_dvl_sigma(dataset, quality)
     wall0 = time.perf_counter()
     offline_s = 0.0
@@ -211,8 +217,9 @@ def run_backend(
                 " topic): take --backend dr",
             )
         trajectory = POSE_SOURCES[backend](dataset)
-        if backend == "dr":  # no health monitor: the travel check is the one that sees a DVL
-            _warn_travel(dataset)  # turned round when the sonar was calibrated on it
+        if backend == "dr" and not dataset.still:  # no health monitor: the travel check is
+            _warn_travel(dataset)  # the one that sees a DVL turned round when the sonar was
+            # calibrated on it
     else:
         result, config, trajectories, loop, offline_s = _closed_loop(
             dataset, backend, settings, t_end_s, progress, batch, config
@@ -419,6 +426,11 @@ def evaluation(dataset: Dataset) -> str:
     (``loop_*``), the map's entropy (``map_entropy_nats``, lower is sharper) and the pictures."""
     if dataset.gps is not None:
         return "gps and truth" if dataset.truth is not None else "gps"
+    if dataset.still:
+        still = "a still head (no navigation)"
+        if dataset.truth is not None:
+            return f"truth; {still}"
+        return f"{still}: no ATE, no loops; the map's entropy (map_entropy_nats) and the pictures"
     if dataset.truth is not None:
         return "truth and loops (no GPS)"
     return (
@@ -463,13 +475,16 @@ def run(
     topics_file: str | Path | None = None,
     loops_rel_s: list[tuple[float, float]] | None = None,
     nav: str | Path | Sequence[str | Path] | None = None,
+    span_s: tuple[float, float] | None = None,
 ) -> RunResult:
     """Open a dataset, run a back end on it (:func:`run_backend`) and write the run directory
     (:func:`sonarslam.slam.run.outputs.write_run`).
 
     ``loops_rel_s``: pairs of times (s from the start of the navigation) at which the vehicle
     was at one place; with them, or without GPS, the run measures the loop-closure error
-    (:func:`loop_figures`).
+    (:func:`loop_figures`). ``span_s``: only the part of the source from ``T0`` to ``T1`` (s
+    from the start of its navigation; :func:`sonarslam.datasets.dataset.dataset_span`), whose
+    start the loops' times then count from.
 
     ``config``: a ``sonarslam.toml``-format file whose keys replace the dataset's calibration
     (:func:`sonarslam.datasets.source.open_dataset`); the configuration used is written to
@@ -490,12 +505,16 @@ def run(
         check_settings(backend, settings)
     if batch and (backend in BASELINES or not backend_spec(backend).smoother):
         raise SettingError("--batch", f"back end {backend!r} does not smooth")
-    dataset = open_dataset(source, config_override=config, topics_file=topics_file, nav=nav)
+    dataset = open_dataset(
+        source, config_override=config, topics_file=topics_file, nav=nav, span_s=span_s
+    )
     if start_enu is not None:
         dataset = replace(dataset, start_enu=start_enu)
     result = run_backend(dataset, backend, settings, progress=progress, batch=batch)
     assert result.figures is not None
-    if loops_rel_s or dataset.gps is None:
+    if dataset.still and loops_rel_s:
+        raise SettingError("--loop", f"{dataset.root} is a still head (no navigation): no loop")
+    if (loops_rel_s or dataset.gps is None) and not dataset.still:  # a still head has none
         result.figures.loops = loop_figures(dataset, result, loops_rel_s or [])
     result.figures.provenance = provenance(
         backend,
@@ -505,6 +524,8 @@ def run(
         batch,
         also=dataset.inputs,
     )
+    if span_s is not None:  # part of the source: said where the figures come from
+        result.figures.provenance["span_s"] = [float(span_s[0]), float(span_s[1])]
     result.metrics = result.figures.to_json()
     result.files = write_run(
         Path(out_dir),

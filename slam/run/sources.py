@@ -137,8 +137,22 @@ def _require_gps(dataset: Dataset) -> GpsSeries:
     return dataset.gps
 
 
+def _still_pose(dataset: Dataset) -> FloatArray:
+    """The pose of a still head (:attr:`Dataset.still`): ``--start``'s, the yaw 0 (East)
+    when not given, else the origin heading East."""
+    x, y, yaw = dataset.start_enu if dataset.start_enu is not None else (0.0, 0.0, 0.0)
+    return np.array([x, y, yaw if np.isfinite(yaw) else 0.0])
+
+
 def start_pose_origin(dataset: Dataset) -> str:
     """Where :func:`start_pose` takes the start from, in words (``metrics.json start_pose``)."""
+    if dataset.still:
+        x, y, yaw = _still_pose(dataset)
+        given = "given (--start)" if dataset.start_enu is not None else "not given (--start)"
+        return (
+            f"no navigation: a still head at ({x:g}, {y:g}) m heading {math.degrees(yaw):g} deg"
+            f" CCW from East, {given}, the whole log long"
+        )
     if dataset.start_enu is not None:
         x, y, _ = dataset.start_enu
         where = "the first GPS fix's time" if dataset.gps is not None else "the navigation's start"
@@ -158,9 +172,13 @@ def start_pose(dataset: Dataset) -> tuple[float, FloatArray, FloatArray]:
     ``--start``) replaces the position at the same time; a heading given with it must agree with
     the AHRS's within 3 ``ahrs_sigma_deg`` (``ValueError`` otherwise): the heading is always the
     AHRS's. The covariance is
-    ``diag(gps_sigma_m^2, gps_sigma_m^2, ahrs_sigma^2)`` in every case.
+    ``diag(gps_sigma_m^2, gps_sigma_m^2, ahrs_sigma^2)`` in every case. A still head
+    (:attr:`Dataset.still`, no navigation) starts at its pose (``--start``), exactly: its
+    covariance is zero.
     """
     t_nav0, t_nav1 = dataset.nav_span_s
+    if dataset.still:
+        return float(t_nav0), _still_pose(dataset), np.zeros((3, 3))
     if dataset.gps is not None:
         gps = dataset.gps
         inside = np.flatnonzero((gps.t >= t_nav0) & (gps.t <= t_nav1))
@@ -215,8 +233,19 @@ def dead_reckoning_trajectory(dataset: Dataset) -> Trajectory:
     ValueError
         No GPS fix inside the navigation span, or a given start heading that disagrees with the
         AHRS (:func:`start_pose`).
+
+    Notes
+    -----
+    A still head (:attr:`Dataset.still`, a sonar log without navigation) has no motion to
+    reckon: its trajectory is its pose (:func:`start_pose`) at every second of the beams'
+    span, without a covariance (the pose is given, not estimated: the lines' covariances are
+    the sonar's alone, as with any pose source that has none; and no NEES is taken of it).
     """
     t0, pose0, cov0 = start_pose(dataset)
+    if dataset.still:
+        t1 = dataset.nav_span_s[1]
+        t = np.unique(np.r_[np.arange(t0, t1, 1.0), t1])
+        return Trajectory(t, np.tile(pose0, (t.size, 1)), None)
     return dead_reckoning(
         dataset.attitude,
         dataset.dvl,
