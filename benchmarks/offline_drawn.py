@@ -108,7 +108,9 @@ def world_job(job: tuple[int, str, str, str, Path, dict[str, dict[str, Any]]]) -
             if cached.is_file():
                 row["variants"][name] = json.loads(cached.read_text())
                 continue
-            cfg = replace_checked(OfflineConfig(), fields, prefix="isam2.offline.")
+            cfg = replace_checked(
+                OfflineConfig(), fields, prefix="isam2.offline.", parse_strings=False
+            )
             cpu0 = time.process_time()
             found = offline_from_saved(graph_dir, dataset, cfg)
             cpu = time.process_time() - cpu0

@@ -44,11 +44,11 @@ class OfflineConfig:
         The joint decision's truncation (graduated non-convexity with a truncated least-squares
         cost): a revisit whose squared Mahalanobis residual exceeds chi2(3) at this
         probability is an outlier.
-    noise_scales : {"measurements", "all", "none"}
+    noise_scales : {"measurements", "all", None}
         Which covariance scales are estimated from the residuals of the consistent set
         (variance components), each at least 1 (never more confident than the model says):
         ``"measurements"``, the revisits' and the lines'; ``"all"``, the odometry's and the
-        AHRS headings' too; ``"none"``.
+        AHRS headings' too; None (``none``): as configured.
     settle_share : float
         The decisions have settled when fewer than this share of them (revisits kept or
         dropped, line observations on another stretch) changed in a pass.
@@ -68,7 +68,7 @@ class OfflineConfig:
     revisits_per_scan: int = bounded(4, 1, 100)
     yaw_sigma_deg: float | None = bounded(None, 0.0, 180.0, low_open=True)
     decision_probability: float = bounded(0.99, 0.0, 1.0, low_open=True, high_open=True)
-    noise_scales: str = one_of("measurements", "measurements", "all", "none")
+    noise_scales: str | None = one_of("measurements", "measurements", "all", None)
     settle_share: float = bounded(0.02, 0.0, 1.0)
     lines: bool = True
     stretch_m: float = bounded(80.0, 0.0, 1e5, low_open=True)

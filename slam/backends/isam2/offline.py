@@ -621,7 +621,7 @@ def offline_estimate(
         known = [*base, *lines]
         start = _start_values([*known, *revisits], current)
         known_graph = _decision_graph(_scaled(known, scales), start)
-        if config.noise_scales != "none" and p == 0:
+        if config.noise_scales is not None and p == 0:
             scales["revisit"] = _robust_scale(known_graph, revisits, start)
         decided = gnc_tls(known_graph, _scaled(revisits, scales), start, c2, gnc_lm)
         inliers = [revisits[i] for i in decided.inliers]
@@ -647,7 +647,7 @@ def offline_estimate(
         estimate = optimise_records(_scaled(final, scales), estimate, lm, line_starts)
         clock("lines")
         # step 6: the noise scales from the consistent set
-        if config.noise_scales != "none":
+        if config.noise_scales is not None:
             groups = GROUPS if config.noise_scales == "all" else ("revisit", "line")
             scales, estimate = _variance_components(final, scales, groups, estimate, lm)
         log.scales = dict(scales)
