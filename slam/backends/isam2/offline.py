@@ -50,7 +50,7 @@ from typing import Any
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import X
+from gtsam.symbol_shorthand import C, R, X
 from scipy.stats import chi2
 
 from sonarslam.features.geometry import FloatArray, between
@@ -256,7 +256,7 @@ def group_of(record: FactorRecord) -> str:
     if record.kind is FactorKind.HEADING_BIAS:
         return "heading"
     if record.constraint == OFFLINE_REVISIT:
-        return "revisit"
+        return "revisit"  # plain or calibrated
     if record.kind is FactorKind.DVL_GYRO_ODOMETRY or (
         record.kind is FactorKind.BETWEEN_POSE and record.constraint is None
     ):
@@ -327,8 +327,12 @@ class _Pairs:
         mounting: Mounting,
         scan_config: ScanConfig,
         poses: NodePoses,
+        calibration: list[int],
     ) -> None:
         self.poses = poses
+        #: the graph's sonar calibration variables (``C(0)``, ``R(0)``) the revisits take, if any
+        self.calibration = calibration
+        self.bTs = mounting.as_pose()
         t0, t1 = poses.span_s
         self.matcher = ScanMatcher(scan_config, head, mounting, poses)
         for beam in beams:
@@ -413,9 +417,20 @@ class _Pairs:
             _decoupled(reg.cov, config.yaw_sigma_deg),
             self.node_T_ref[k],
         )
+        nodes = [X(int(self.node[j])), X(int(self.node[k]))]
+        if self.calibration:  # the run estimated the sonar's calibration: the scans take it
+            return FactorRecord.of(
+                FactorKind.SCAN_CALIBRATED,
+                [*nodes, *self.calibration],
+                z,
+                0.5 * (cov + cov.T),
+                bTs=self.bTs,
+                robust=robust,
+                constraint=OFFLINE_REVISIT,
+            )
         return FactorRecord.of(
             FactorKind.BETWEEN_POSE,
-            [X(int(self.node[j])), X(int(self.node[k]))],
+            nodes,
             z,
             0.5 * (cov + cov.T),
             robust=robust,
@@ -460,6 +475,55 @@ class _Clock:
         now = time.perf_counter()
         self.timing_s[step] = self.timing_s.get(step, 0.0) + now - self._t
         self._t = now
+
+
+def _decided_lines(
+    known: gtsam.NonlinearFactorGraph,
+    lines: list[FactorRecord],
+    line_starts: dict[int, np.ndarray],
+    decision: Redecision,
+    scales: dict[str, float],
+    values: gtsam.Values,
+    config: OfflineConfig,
+    params: gtsam.LevenbergMarquardtParams,
+) -> tuple[list[FactorRecord], Redecision]:
+    """Step 5's lines chosen jointly, as the revisits are: graduated non-convexity over the
+    line observations with the odometry, headings and kept revisits known, truncated at
+    chi2(2) ``decision_probability``; an observation it drops is dropped (its stretch -1 in
+    the returned decision), and so is a stretch left with fewer than two. Each stretch has a
+    prior of 100 m and 10 rad for the decision alone (one whose observations are all dropped
+    stays defined)."""
+    graph = gtsam.NonlinearFactorGraph(known)
+    start = gtsam.Values(values)
+    loose = gtsam.noiseModel.Diagonal.Sigmas(np.array([100.0, 10.0]))
+    for key, line in line_starts.items():
+        graph.add(gtsam.PriorFactorVector(key, np.asarray(line, dtype=np.float64), loose))
+        if start.exists(key):
+            start.update(key, np.asarray(line, dtype=np.float64))
+        else:
+            start.insert(key, np.asarray(line, dtype=np.float64))
+    c2 = float(chi2.ppf(config.decision_probability, 2))
+    found = gnc_tls(graph, _scaled(lines, scales), _start_values_from(graph, start), c2, params)
+    keep = found.weights > 0.5
+    count = Counter(r.keys[1] for r, k in zip(lines, keep, strict=True) if k)
+    keep &= np.array([count[r.keys[1]] >= 2 for r in lines])
+    # the kept lines' observations, in the order of the decision's stretch labels
+    stretch = decision.stretch.copy()
+    kept_rows = np.flatnonzero(stretch >= 0)
+    stretch[kept_rows[~keep]] = -1
+    return [r for r, k in zip(lines, keep, strict=True) if k], replace(decision, stretch=stretch)
+
+
+def _start_values_from(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> gtsam.Values:
+    """``values`` of the variables ``graph`` uses."""
+    keys = set(graph.keyVector())
+    out = gtsam.Values()
+    for key in keys:
+        if gtsam.Symbol(key).chr() == ord("x"):
+            out.insert(key, values.atPose2(key))
+        else:
+            out.insert(key, values.atVector(key))
+    return out
 
 
 def _line_counts(decision: Redecision) -> dict[str, int]:
@@ -572,6 +636,7 @@ def offline_estimate(
     node_t = np.asarray(node_t_s, dtype=np.float64)
     n = node_t.size
     base = base_records(records)
+    calibration = [int(key) for key in (C(0), R(0)) if values.exists(key)]
     first_partition = _line_records(records) if config.lines else []
     redecide_config = RedecideConfig(max_stretch_m=config.stretch_m, association=association)
     lm = gtsam.LevenbergMarquardtParams()
@@ -603,6 +668,7 @@ def offline_estimate(
             sonar_mounting,
             scan_config,
             NodePoses(node_t, _node_poses(current, n), odometry),
+            calibration,
         )
         log.scans = len(pairs.scans)
         clock("scans")
@@ -642,6 +708,17 @@ def offline_estimate(
                 redecide_config,
             )
             lines = [replace(r, cov=r.cov / scales["line"]) for r in out if is_line_record(r)]
+            if config.decide_lines and lines:
+                lines, decision = _decided_lines(
+                    _decision_graph(_scaled([*base, *inliers], scales), estimate),
+                    lines,
+                    line_starts,
+                    decision,
+                    scales,
+                    estimate,
+                    config,
+                    gnc_lm,
+                )
             log.lines = _line_counts(decision)
         final = [*base, *inliers, *lines]
         estimate = optimise_records(_scaled(final, scales), estimate, lm, line_starts)
