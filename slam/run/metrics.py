@@ -361,6 +361,8 @@ class LoopFigures:
         "odometry_check_skipped_still",
         "odometry_check_skipped_sparse",
         "odometry_check_step_m",
+        "odometry_check_lateral_gain",
+        "odometry_check_lateral_gain_se",
     )
 
     radius_m: float
@@ -423,6 +425,8 @@ class LoopFigures:
             out["odometry_check_skipped_still"] = self.odometry.skipped_still
             out["odometry_check_skipped_sparse"] = self.odometry.skipped_sparse
             out["odometry_check_step_m"] = _finite(self.odometry.step_m)
+            out["odometry_check_lateral_gain"] = _finite(self.odometry.lateral_gain)
+            out["odometry_check_lateral_gain_se"] = _finite(self.odometry.lateral_gain_se)
         return out
 
 

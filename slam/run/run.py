@@ -70,8 +70,10 @@ from sonarslam.slam.run.sources import (
     dead_reckoning_trajectory,
     dvl_body_velocities,
     dvl_quality,
+    lateral_mirror_trajectory,
     mounting_yaw_said,
     start_pose_origin,
+    warn_dvl_lever_arm,
     warn_dvl_sigma,
 )
 
@@ -191,8 +193,9 @@ def run_backend(
     if config is not None:
         config = replace(config, settings=_typed_settings(dataset, backend, config, settings))
     quality = dvl_quality(dataset)
-    if backend != "gps":  # the rest take the DVL with [noise] dvl_sigma_mps
+    if backend != "gps":  # the rest take the DVL with [noise] dvl_sigma_mps and its lever arm
         warn_dvl_sigma(dataset, quality)
+        warn_dvl_lever_arm(dataset)
     wall0 = time.perf_counter()
     if backend in BASELINES:
         if settings:
@@ -284,8 +287,8 @@ def _closed_loop(
     )
     result.backend.finish()
     trajectories = result.backend.trajectories(batch)
-    # without GPS the sonar's motion against dead reckoning's is a check of the run too
-    odometry = dataset_odometry_check(dataset) if dataset.gps is None else None
+    # the sonar's motion against dead reckoning's is a check of the run too (GPS-free)
+    odometry = dataset_odometry_check(dataset)
     health = monitor_run(dataset, result, odometry=odometry)  # GPS-free: against its own model
     loop = closed_loop_figures(dataset, result, config, health.metrics(), health.line(), odometry)
     health.warn()
@@ -485,6 +488,8 @@ def run(
     assert result.figures is not None
     if loops_rel_s or dataset.gps is None:
         result.figures.loops = loop_figures(dataset, result, loops_rel_s or [])
+    elif backend != "gps":  # with GPS too: a mirror or a range scale no ATE would name
+        _check_odometry(dataset, result)
     result.figures.provenance = provenance(
         backend,
         dataset.root,
@@ -513,6 +518,11 @@ LOOP_RADIUS_SHARE = 0.4
 #: Without GPS, scans this share of the sonar's range apart along dead reckoning (within 1-5 m)
 #: check its direction of motion against the sonar's (:func:`sonarslam.slam.eval.loops.odometry_check`).
 ODOMETRY_STEP_SHARE = 0.1
+#: Pairs of scans the run's odometry check registers: 24, not the function's 12, so that the
+#: lateral gain (a mirrored DVL lateral axis) is decided on a 300 s harbour whose crab is +-4
+#: deg (12 pairs: standard errors 0.18-0.50, one mirror of three missed; 24: 0.13-0.22, each
+#: found; 0.2 s more of CPU).
+ODOMETRY_PAIRS = 24
 #: The softer level: a mean angle beyond this (deg), or a length ratio further from 1 than
 #: :func:`odometry_scale_tolerance`, each also beyond :data:`ODOMETRY_SOFT_SE` of its own
 #: standard errors, over at least :data:`ODOMETRY_SOFT_MIN_PAIRS` registrations (docs/outputs.md
@@ -582,6 +592,18 @@ def _warn_odometry(dataset: Dataset, check: OdometryCheck, in_health: bool = Fal
             stacklevel=3,
         )
         return
+    if check.mirrored:
+        warnings.warn(
+            f"{dataset.root}: the sonar sees the vehicle move sideways the other way from dead"
+            f" reckoning: the DVL's lateral velocity fits x{check.lateral_gain:+.2f} ±"
+            f" {check.lateral_gain_se:.2f} ({check.accepted} registrations of scans a few metres"
+            " apart; +1 when right, -1 when mirrored): the DVL's lateral axis has the wrong sign"
+            " (its y negated in the log, or a y-right DVL read as y-left). [mounting.dvl]"
+            " yaw_deg cannot undo a mirror: negate the DVL's y where its velocities are written"
+            " (the log's column, the CSV's dvl_vy, the driver's frame)",
+            DataWarning,
+            stacklevel=3,
+        )
     if check.accepted < ODOMETRY_SOFT_MIN_PAIRS:
         return
     found = []
@@ -616,11 +638,24 @@ def _warn_odometry(dataset: Dataset, check: OdometryCheck, in_health: bool = Fal
 def dataset_odometry_check(dataset: Dataset, dr: Trajectory | None = None) -> OdometryCheck:
     """The odometry check of a run (:func:`sonarslam.slam.eval.loops.odometry_check`): scans
     :data:`ODOMETRY_STEP_SHARE` of the sonar's range apart (within 1-5 m) along dead reckoning
-    (``dr``, made when not given)."""
+    (``dr``, made when not given), with the lateral gain against dead reckoning with the DVL's
+    lateral velocity mirrored (:func:`sonarslam.slam.run.sources.lateral_mirror_trajectory`)."""
     head = dataset.config.sonar
     range_m = head.n_bins * head.bin_size_m
     dr = dr if dr is not None else dead_reckoning_trajectory(dataset)
-    return odometry_check(dataset, dr, min(max(ODOMETRY_STEP_SHARE * range_m, 1.0), 5.0))
+    step_m = min(max(ODOMETRY_STEP_SHARE * range_m, 1.0), 5.0)
+    return odometry_check(
+        dataset, dr, step_m, ODOMETRY_PAIRS, mirrored=lateral_mirror_trajectory(dataset)
+    )
+
+
+def _check_odometry(dataset: Dataset, result: RunResult) -> None:
+    """The odometry check's warnings on a run whose loops are not measured (it has GPS): the
+    closed loop's check, which its health monitor judged, or one made here."""
+    closed = result.figures.closed_loop if result.figures is not None else None
+    judged = closed.odometry if closed is not None else None
+    odometry = judged if judged is not None else dataset_odometry_check(dataset)
+    _warn_odometry(dataset, odometry, in_health=judged is not None)
 
 
 def loop_figures(
