@@ -10,7 +10,10 @@ forward of the body origin (a BlueROV2's A50 sits about there) and opened with:
 * ``mirror``: the DVL's velocity mirrored across the body's forward axis (the lateral axis of
   the wrong sign): the odometry check's lateral gain (:attr:`OdometryCheck.mirrored`);
 * ``range``: ``[sonar] bin_size_m`` 4 % long (a speed of sound 4 % off): the odometry check's
-  length ratio (``run``'s softer warning, :func:`sonarslam.slam.run.run.odometry_scale_tolerance`).
+  length ratio (``run``'s softer warning, :func:`sonarslam.slam.run.run.odometry_scale_tolerance`);
+* ``clock 0.5``, ``clock 1.0``: ``[sonar] time_offset_s`` 0.5 and 1 s above the truth (the
+  sonar's clock that much later than the setting says): the run's clock check
+  (:func:`sonarslam.slam.run.calibration.sonar_clock_doubt`).
 
 The truth is not looked at: only whether each check speaks. ``--marina`` adds the marina's
 correct run (``SONARSLAM_DATA``). Usage::
@@ -29,9 +32,11 @@ from dataclasses import replace
 from pathlib import Path
 
 from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.slam.run.calibration import sonar_clock_doubt
 from sonarslam.slam.run.run import dataset_odometry_check, odometry_scale_tolerance
 from sonarslam.slam.run.sources import (
     DVL_LEVER_ARM_TOLERANCE_M,
+    dead_reckoning_trajectory,
     dvl_lever_arm_from_turns,
 )
 
@@ -83,8 +88,19 @@ def range_flag(ds: Dataset, check) -> bool:
     )
 
 
-def measure(name: str, ds: Dataset, inject: bool = True) -> list[str]:
-    rows = []
+def clock_flag(ds: Dataset) -> bool:
+    return sonar_clock_doubt(ds, dead_reckoning_trajectory(ds)) is not None
+
+
+def late_clock(ds: Dataset, late_s: float, tmp: Path) -> Dataset:
+    """``ds`` reopened with ``[sonar] time_offset_s`` ``late_s`` above its own."""
+    toml = tmp / f"clock{late_s}.toml"
+    toml.write_text(f"[sonar]\ntime_offset_s = {ds.config.sonar_time_offset_s + late_s}\n")
+    return open_dataset(ds.root, config_override=toml)
+
+
+def measure(name: str, ds: Dataset, tmp: Path, inject: bool = True) -> list[str]:
+    rows = [f"{name} correct: clock {clock_flag(ds)}"]
     odo = dataset_odometry_check(ds)
     lever, text = lever_flag(ds)
     rows.append(
@@ -110,6 +126,11 @@ def measure(name: str, ds: Dataset, inject: bool = True) -> list[str]:
         f"{name} range: range {range_flag(scaled, odo)} (x{odo.scale:.3f}±{odo.scale_se:.3f},"
         f" {odo.accepted} reg.)"
     )
+    for late_s in (0.5, 1.0):
+        doubt = sonar_clock_doubt(
+            late := late_clock(ds, late_s, tmp), dead_reckoning_trajectory(late)
+        )
+        rows.append(f"{name} clock {late_s}: clock {doubt is not None} ({doubt})")
     return rows
 
 
@@ -130,11 +151,11 @@ def main(argv: list[str] | None = None) -> int:
         for kind in args.kinds.split(","):
             for seed in _seeds(args.seeds):
                 ds = simulate(kind, seed, args.duration, Path(tmp) / f"{kind}{seed}")
-                for row in measure(f"{kind} {seed}", ds):
+                for row in measure(f"{kind} {seed}", ds, Path(tmp)):
                     print(row, flush=True)
-    if args.marina:
-        for row in measure("marina", open_dataset("marina"), inject=True):
-            print(row, flush=True)
+        if args.marina:
+            for row in measure("marina", open_dataset("marina"), Path(tmp), inject=True):
+                print(row, flush=True)
     return 0
 
 

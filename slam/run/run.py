@@ -47,6 +47,7 @@ from sonarslam.slam.eval.loops import (
 )
 from sonarslam.slam.io.files import check_output_dir
 from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.run.calibration import sonar_clock_doubt
 from sonarslam.slam.run.closed_loop import ClosedLoopResult, run_closed_loop
 from sonarslam.slam.run.health import monitor_run
 from sonarslam.slam.run.metrics import (
@@ -490,6 +491,8 @@ def run(
         result.figures.loops = loop_figures(dataset, result, loops_rel_s or [])
     elif backend != "gps":  # with GPS too: a mirror or a range scale no ATE would name
         _check_odometry(dataset, result)
+    if backend != "gps" and dataset.sonar_span_s is not None:
+        _check_sonar_clock(dataset)
     result.figures.provenance = provenance(
         backend,
         dataset.root,
@@ -647,6 +650,15 @@ def dataset_odometry_check(dataset: Dataset, dr: Trajectory | None = None) -> Od
     return odometry_check(
         dataset, dr, step_m, ODOMETRY_PAIRS, mirrored=lateral_mirror_trajectory(dataset)
     )
+
+
+def _check_sonar_clock(dataset: Dataset) -> None:
+    """Warn when the sonar clock offset of the sharpest map (dead reckoning's poses, GPS-free)
+    is not ``[sonar] time_offset_s`` (:func:`sonarslam.slam.run.calibration.sonar_clock_doubt`):
+    a clock late by under a second runs every estimate silently worse."""
+    doubt = sonar_clock_doubt(dataset, dead_reckoning_trajectory(dataset))
+    if doubt:
+        warnings.warn(f"{dataset.root}: {doubt}", DataWarning, stacklevel=3)
 
 
 def _check_odometry(dataset: Dataset, result: RunResult) -> None:
