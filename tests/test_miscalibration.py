@@ -139,26 +139,16 @@ def test_a_sonar_clock_half_a_second_late_is_named(harbour: Path, tmp_path: Path
     0.07 -> 0.15 m; 1 s: 1.08 and 0.43 m), silently. The run's clock check (the map-entropy
     search of ``calibrate --time-offset`` over +-1.5 s with dead reckoning's poses) finds the
     sharpest map at +0.07 s and names the setting; the correct clock stays silent."""
-    from sonarslam.slam.backends.registry import backend_spec
-    from sonarslam.slam.run.closed_loop import run_closed_loop
-    from sonarslam.slam.run.presets import run_config
+    from sonarslam.slam.run.calibration import ekf_closed_loop
 
     toml = tmp_path / "clock.toml"
     toml.write_text("[sonar]\ntime_offset_s = 0.5\n")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DataWarning)
         late = open_dataset(harbour, config_override=toml)
-    spec = backend_spec("ekf")
     ates = []
     for ds in (_open(harbour), late):
-        config = run_config(ds.beams, "ekf", noise=ds.config.noise)
-        mount = ds.config.sonar_mounting
-        res = run_closed_loop(
-            ds,
-            lambda t0, p0, P0, m=mount, c=config: spec.make(t0, p0, P0, m, c.backend),
-            config.extractor,
-            progress=False,
-        )
+        res = ekf_closed_loop(ds)
         truth = truth_trajectory(ds)
         ates.append(ate_against_truth(res.trajectory, truth, align=True).ate_mean_m)
     assert ates[1] > ates[0] + 0.05, ates
