@@ -278,7 +278,8 @@ class ClosedLoopFigures:
     truth: AssociationScores | None = None
     health: Mapping[str, JsonValue] = field(default_factory=dict)
     health_line: str = ""
-    #: the odometry check the health monitor judged (runs without GPS), for the loop figures
+    #: the odometry check the health monitor judged (every closed loop, with GPS or without),
+    #: for the loop figures
     odometry: OdometryCheck | None = None
 
     def to_json(self) -> dict[str, JsonValue]:
