@@ -48,7 +48,7 @@ innovations of a consistent filter are white with the covariance it predicts):
     it stern- or side-first, and the map is as sharp with the sonar's yaw turned alike, so no
     other check sees it (docs/calibration.md).
 ``odometry``
-    Every closed loop (with GPS too since issue 41): the sonar's motion between nearby scans
+    Every closed loop, with GPS or without: the sonar's motion between nearby scans
     against dead reckoning's (:func:`sonarslam.slam.eval.loops.odometry_check`), flagged when they disagree by more than
     :data:`sonarslam.slam.eval.loops.ODOMETRY_MAX_ANGLE_DEG` (a sensor mounted the wrong way
     round: :attr:`sonarslam.slam.eval.loops.OdometryCheck.turned`).

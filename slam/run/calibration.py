@@ -509,8 +509,9 @@ def sonar_clock_doubt(dataset: Dataset, pose_source: PoseSource) -> str | None:
     return (
         f"the map is sharpest with the sonar's clock at [sonar] time_offset_s ="
         f" {found.best_offset_s:+.2f} s, not the configured {configured:g} s (the sonar's clock"
-        f" {abs(found.best_offset_s - configured):.2f} s {late}r than that says;"
-        f" {found.verdict()}): set it, or"
+        f" {abs(found.best_offset_s - configured):.2f} s {late}r than that says; the minimum"
+        f" {found.depth:.1f} noise units below the median, {found.margin:.1f} below the best"
+        f" offset more than {CLOCK_BASIN_S:g} s away): set it, or"
         " check it with `sonarslam calibrate SOURCE --time-offset`; every estimate places each"
         " echo with the pose of another time"
     )
