@@ -139,7 +139,7 @@ def test_a_sonar_clock_half_a_second_late_is_named(harbour: Path, tmp_path: Path
     0.07 -> 0.15 m; 1 s: 1.08 and 0.43 m), silently. The run's clock check (the map-entropy
     search of ``calibrate --time-offset`` over +-1.5 s with dead reckoning's poses) finds the
     sharpest map at +0.07 s and names the setting; the correct clock stays silent."""
-    from sonarslam.slam.run.calibration import ekf_closed_loop
+    from sonarslam.slam.run.calibration import ekf_closed_loop, sonar_clock_doubt
 
     toml = tmp_path / "clock.toml"
     toml.write_text("[sonar]\ntime_offset_s = 0.5\n")
@@ -155,7 +155,8 @@ def test_a_sonar_clock_half_a_second_late_is_named(harbour: Path, tmp_path: Path
     with warnings.catch_warnings(record=True) as record:
         warnings.simplefilter("always")
         run(harbour, "dr", tmp_path / "late", progress=False, config=toml)
-        run(harbour, "dr", tmp_path / "right", progress=False)
     said = [str(w.message) for w in record if "time_offset_s" in str(w.message)]
     assert len(said) == 1, said
     assert "not the configured 0.5 s" in said[0] and "calibrate SOURCE --time-offset" in said[0]
+    right = _open(harbour)
+    assert sonar_clock_doubt(right, dead_reckoning_trajectory(right)) is None
