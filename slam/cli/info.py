@@ -17,10 +17,13 @@ from sonarslam.slam.run.settings import Setting, check_run_settings, dataset_set
 from sonarslam.slam.run.sources import (
     CLOSED_LOOP_START_ONLY,
     DR_IGNORES,
+    DVL_LEVER_ARM_TOLERANCE_M,
     DVL_SIGMA_OVER_SCATTER_MAX,
+    dvl_lever_arm_from_turns,
     dvl_quality,
     start_pose,
     start_pose_origin,
+    warn_dvl_lever_arm,
     warn_dvl_sigma,
 )
 
@@ -145,6 +148,17 @@ def command(args: argparse.Namespace) -> int:
         print(
             f"  DVL sigma over its scatter's median: x{n.dvl_sigma_mps / dq['dvl_scatter_p50_mps']:.0f}"
             f" (over {DVL_SIGMA_OVER_SCATTER_MAX:g}: [noise] dvl_sigma_mps too large?)"
+        )
+    lever = dvl_lever_arm_from_turns(d)
+    print(
+        f"  DVL position its turns imply (m): x {lever.x_m:+.2f} ± {lever.x_se_m:.2f},"
+        f" y {lever.y_m:+.2f} ± {lever.y_se_m:.2f}"
+        f" ([mounting.dvl] x_m {d.config.dvl_mounting.x_m:g}, y_m {d.config.dvl_mounting.y_m:g})"
+    )
+    if warn_dvl_lever_arm(d, lever):
+        print(
+            f"  DVL lever arm: more than {DVL_LEVER_ARM_TOLERANCE_M:g} m from [mounting.dvl]"
+            " x_m, y_m (in metres? a lateral axis of the wrong sign?)"
         )
     _print_settings("dataset settings (sonarslam.toml keys)", dataset_settings(d, args.config))
     print(f"  dead reckoning (--backend dr) ignores: {', '.join(DR_IGNORES)}")

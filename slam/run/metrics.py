@@ -314,7 +314,8 @@ class ClosedLoopFigures:
     truth: AssociationScores | None = None
     health: Mapping[str, JsonValue] = field(default_factory=dict)
     health_line: str = ""
-    #: the odometry check the health monitor judged (runs without GPS), for the loop figures
+    #: the odometry check the health monitor judged (every closed loop, with GPS or without),
+    #: for the loop figures
     odometry: OdometryCheck | None = None
 
     def to_json(self) -> dict[str, JsonValue]:
@@ -397,6 +398,8 @@ class LoopFigures:
         "odometry_check_skipped_still",
         "odometry_check_skipped_sparse",
         "odometry_check_step_m",
+        "odometry_check_lateral_gain",
+        "odometry_check_lateral_gain_se",
     )
 
     radius_m: float
@@ -459,6 +462,8 @@ class LoopFigures:
             out["odometry_check_skipped_still"] = self.odometry.skipped_still
             out["odometry_check_skipped_sparse"] = self.odometry.skipped_sparse
             out["odometry_check_step_m"] = _finite(self.odometry.step_m)
+            out["odometry_check_lateral_gain"] = _finite(self.odometry.lateral_gain)
+            out["odometry_check_lateral_gain_se"] = _finite(self.odometry.lateral_gain_se)
         return out
 
 

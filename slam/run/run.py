@@ -48,6 +48,7 @@ from sonarslam.slam.eval.loops import (
 )
 from sonarslam.slam.io.files import check_output_dir
 from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.run.calibration import sonar_clock_doubt
 from sonarslam.slam.run.closed_loop import ClosedLoopResult, run_closed_loop
 from sonarslam.slam.run.health import monitor_run
 from sonarslam.slam.run.metrics import (
@@ -72,8 +73,10 @@ from sonarslam.slam.run.sources import (
     dead_reckoning_trajectory,
     dvl_body_velocities,
     dvl_quality,
+    lateral_mirror_trajectory,
     mounting_yaw_said,
     start_pose_origin,
+    warn_dvl_lever_arm,
     warn_dvl_sigma,
 )
 
@@ -199,8 +202,9 @@ def run_backend(
     if config is not None:
         config = replace(config, settings=_typed_settings(dataset, backend, config, settings))
     quality = dvl_quality(dataset)
-    if backend != "gps" and not dataset.still:  # the rest take the DVL, [noise] dvl_sigma_mps
+    if backend != "gps" and not dataset.still:  # the DVL, its dvl_sigma_mps and lever arm
         warn_dvl_sigma(dataset, quality)
+        warn_dvl_lever_arm(dataset)
     wall0 = time.perf_counter()
     offline_s = 0.0
     if backend in BASELINES:
@@ -303,8 +307,8 @@ def _closed_loop(
         result.backend.offline = offline_of_run(dataset, result.backend, config.scans)
         trajectories["offline"] = result.backend.offline.trajectory
         offline_s = time.perf_counter() - wall0
-    # without GPS the sonar's motion against dead reckoning's is a check of the run too
-    odometry = dataset_odometry_check(dataset) if dataset.gps is None else None
+    # the sonar's motion against dead reckoning's is a check of the run too (GPS-free)
+    odometry = dataset_odometry_check(dataset)
     health = monitor_run(dataset, result, odometry=odometry)  # GPS-free: against its own model
     loop = closed_loop_figures(dataset, result, config, health.metrics(), health.line(), odometry)
     health.warn()
@@ -516,6 +520,10 @@ def run(
         raise SettingError("--loop", f"{dataset.root} is a still head (no navigation): no loop")
     if (loops_rel_s or dataset.gps is None) and not dataset.still:  # a still head has none
         result.figures.loops = loop_figures(dataset, result, loops_rel_s or [])
+    elif backend != "gps" and not dataset.still:  # with GPS: a mirror, a range scale no ATE names
+        _check_odometry(dataset, result)
+    if backend != "gps" and not dataset.still and dataset.sonar_span_s is not None:
+        _check_sonar_clock(dataset)  # a still head's map is the same at any clock
     result.figures.provenance = provenance(
         backend,
         dataset.root,
@@ -546,6 +554,11 @@ LOOP_RADIUS_SHARE = 0.4
 #: Without GPS, scans this share of the sonar's range apart along dead reckoning (within 1-5 m)
 #: check its direction of motion against the sonar's (:func:`sonarslam.slam.eval.loops.odometry_check`).
 ODOMETRY_STEP_SHARE = 0.1
+#: Pairs of scans the run's odometry check registers: 24, not the function's 12, so that the
+#: lateral gain (a mirrored DVL lateral axis) is decided on a 300 s harbour whose crab is +-4
+#: deg (12 pairs: standard errors 0.18-0.50, one mirror of three missed; 24: 0.13-0.22, each
+#: found; 0.2 s more of CPU).
+ODOMETRY_PAIRS = 24
 #: The softer level: a mean angle beyond this (deg), or a length ratio further from 1 than
 #: :func:`odometry_scale_tolerance`, each also beyond :data:`ODOMETRY_SOFT_SE` of its own
 #: standard errors, over at least :data:`ODOMETRY_SOFT_MIN_PAIRS` registrations (docs/outputs.md
@@ -615,6 +628,18 @@ def _warn_odometry(dataset: Dataset, check: OdometryCheck, in_health: bool = Fal
             stacklevel=3,
         )
         return
+    if check.mirrored:
+        warnings.warn(
+            f"{dataset.root}: the sonar sees the vehicle move sideways the other way from dead"
+            f" reckoning: the DVL's lateral velocity fits x{check.lateral_gain:+.2f} ±"
+            f" {check.lateral_gain_se:.2f} ({check.accepted} registrations of scans a few metres"
+            " apart; +1 when right, -1 when mirrored): the DVL's lateral axis has the wrong sign"
+            " (its y negated in the log, or a y-right DVL read as y-left). [mounting.dvl]"
+            " yaw_deg cannot undo a mirror: negate the DVL's y where its velocities are written"
+            " (the log's column, the CSV's dvl_vy, the driver's frame)",
+            DataWarning,
+            stacklevel=3,
+        )
     if check.accepted < ODOMETRY_SOFT_MIN_PAIRS:
         return
     found = []
@@ -649,11 +674,33 @@ def _warn_odometry(dataset: Dataset, check: OdometryCheck, in_health: bool = Fal
 def dataset_odometry_check(dataset: Dataset, dr: Trajectory | None = None) -> OdometryCheck:
     """The odometry check of a run (:func:`sonarslam.slam.eval.loops.odometry_check`): scans
     :data:`ODOMETRY_STEP_SHARE` of the sonar's range apart (within 1-5 m) along dead reckoning
-    (``dr``, made when not given)."""
+    (``dr``, made when not given), with the lateral gain against dead reckoning with the DVL's
+    lateral velocity mirrored (:func:`sonarslam.slam.run.sources.lateral_mirror_trajectory`)."""
     head = dataset.config.sonar
     range_m = head.n_bins * head.bin_size_m
     dr = dr if dr is not None else dead_reckoning_trajectory(dataset)
-    return odometry_check(dataset, dr, min(max(ODOMETRY_STEP_SHARE * range_m, 1.0), 5.0))
+    step_m = min(max(ODOMETRY_STEP_SHARE * range_m, 1.0), 5.0)
+    return odometry_check(
+        dataset, dr, step_m, ODOMETRY_PAIRS, mirrored=lateral_mirror_trajectory(dataset)
+    )
+
+
+def _check_sonar_clock(dataset: Dataset) -> None:
+    """Warn when the sonar clock offset of the sharpest map (dead reckoning's poses, GPS-free)
+    is not ``[sonar] time_offset_s`` (:func:`sonarslam.slam.run.calibration.sonar_clock_doubt`):
+    a clock late by under a second runs every estimate silently worse."""
+    doubt = sonar_clock_doubt(dataset, dead_reckoning_trajectory(dataset))
+    if doubt:
+        warnings.warn(f"{dataset.root}: {doubt}", DataWarning, stacklevel=3)
+
+
+def _check_odometry(dataset: Dataset, result: RunResult) -> None:
+    """The odometry check's warnings on a run whose loops are not measured (it has GPS): the
+    closed loop's check, which its health monitor judged, or one made here."""
+    closed = result.figures.closed_loop if result.figures is not None else None
+    judged = closed.odometry if closed is not None else None
+    odometry = judged if judged is not None else dataset_odometry_check(dataset)
+    _warn_odometry(dataset, odometry, in_health=judged is not None)
 
 
 def loop_figures(
