@@ -17,7 +17,8 @@ worlds, unaligned and SE(2)-aligned, of the online, smoothed and offline estimat
 worlds where the offline estimate beats dead reckoning and the smoothed estimate; the count worse
 than dead reckoning by more than 10 %; the offline estimate's CPU seconds.
 
-Writes ``OUT/result.json`` (every world's figures) and prints the table.
+Writes ``OUT/result.json`` (every world's figures), each world's runs and offline trajectories
+(``OUT/worlds/NOISE/SEED/``), and prints the table.
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ from sonarslam.settings import parse_text, replace_checked
 from sonarslam.slam.backends.isam2.config import OfflineConfig
 from sonarslam.slam.eval.ate import ate_against_truth
 from sonarslam.slam.eval.truth import truth_trajectory
+from sonarslam.slam.io.trajectory import write_tum
 from sonarslam.slam.run.offline import offline_from_saved
 from sonarslam.slam.run.sweep import calibrate_cached, parse_seeds, simulate_cached
 
@@ -117,6 +119,7 @@ def world_job(job: tuple[int, str, str, str, Path, dict[str, dict[str, Any]]]) -
             u = ate_against_truth(found.trajectory, truth).ate_mean_m
             a = ate_against_truth(found.trajectory, truth, align=True).ate_mean_m
             v = {"ate": [u, a], "cpu_s": cpu, **found.metrics()}
+            write_tum(out / f"offline_{name}.tum", found.trajectory)
             cached.write_text(json.dumps(v) + "\n")
             row["variants"][name] = v
     return row
