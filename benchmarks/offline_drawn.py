@@ -15,7 +15,8 @@ then made from the saved run (:func:`sonarslam.slam.run.offline.offline_from_sav
 variants share one online run. Scored against the truth (a ruler only): the mean ATE over the
 worlds, unaligned and SE(2)-aligned, of the online, smoothed and offline estimates; the share of
 worlds where the offline estimate beats dead reckoning and the smoothed estimate; the count worse
-than dead reckoning by more than 10 %; the offline estimate's CPU seconds.
+than dead reckoning by more than 10 %; the offline estimate's pose ANEES against the truth (its
+covariance's honesty: 3 when consistent) and CPU seconds.
 
 Writes ``OUT/result.json`` (every world's figures), each world's runs and offline trajectories
 (``OUT/worlds/NOISE/SEED/``), and prints the table.
@@ -45,6 +46,7 @@ from sonarslam.datasets.source import open_dataset
 from sonarslam.settings import parse_text, replace_checked
 from sonarslam.slam.backends.isam2.config import OfflineConfig
 from sonarslam.slam.eval.ate import ate_against_truth
+from sonarslam.slam.eval.consistency import nees_series
 from sonarslam.slam.eval.truth import truth_trajectory
 from sonarslam.slam.io.trajectory import write_tum
 from sonarslam.slam.run.offline import offline_from_saved
@@ -118,7 +120,8 @@ def world_job(job: tuple[int, str, str, str, Path, dict[str, dict[str, Any]]]) -
             cpu = time.process_time() - cpu0
             u = ate_against_truth(found.trajectory, truth).ate_mean_m
             a = ate_against_truth(found.trajectory, truth, align=True).ate_mean_m
-            v = {"ate": [u, a], "cpu_s": cpu, **found.metrics()}
+            nees = nees_series(found.trajectory, truth, "pose").mean
+            v = {"ate": [u, a], "nees_pose": nees, "cpu_s": cpu, **found.metrics()}
             write_tum(out / f"offline_{name}.tum", found.trajectory)
             cached.write_text(json.dumps(v) + "\n")
             row["variants"][name] = v
@@ -145,6 +148,8 @@ def summary(rows: list[dict[str, Any]], name: str) -> dict[str, Any]:
             "worse_than_dr_10pct": int(np.sum(off[:, i] > 1.1 * dr)),
         }
     out["cpu_s_mean"] = float(np.mean([r["variants"][name]["cpu_s"] for r in rows]))
+    nees = [r["variants"][name].get("nees_pose", float("nan")) for r in rows]
+    out["anees_pose"] = float(np.nanmean(nees)) if np.isfinite(nees).any() else float("nan")
     return out
 
 
@@ -152,8 +157,8 @@ def table(result: dict[str, Any]) -> str:
     lines = [
         "| noise | variant | worlds | offline / smoothed / online / DR, mean m (aligned) |"
         " offline beats DR (aligned) | beats smoothed (aligned) | worse than DR by > 10 % |"
-        " CPU s |",
-        "|---|---|---|---|---|---|---|---|",
+        " offline ANEES (pose, 3 dof) | CPU s |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for noise, variants in result["summary"].items():
         for name, s in variants.items():
@@ -166,7 +171,7 @@ def table(result: dict[str, Any]) -> str:
                 f" {100 * u['beats_dr']:.0f} % ({100 * a['beats_dr']:.0f} %) |"
                 f" {100 * u['beats_smoothed']:.0f} % ({100 * a['beats_smoothed']:.0f} %) |"
                 f" {u['worse_than_dr_10pct']} ({a['worse_than_dr_10pct']}) |"
-                f" {s['cpu_s_mean']:.1f} |"
+                f" {s['anees_pose']:.2f} | {s['cpu_s_mean']:.1f} |"
             )
     return "\n".join(lines) + "\n"
 

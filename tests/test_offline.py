@@ -222,3 +222,22 @@ def test_the_offline_estimate_is_off_with_one_setting(simulated, tmp_path):
     )
     assert "offline" not in off.trajectories and "offline_passes" not in off.metrics
     assert not (tmp_path / "off" / "isam2_offline.tum").exists()
+
+
+def test_offline_from_saved_refuses_another_runs_dataset(simulated, tmp_path):
+    """A saved run given another dataset is refused: another world on the same clock by its
+    files' digest (the run's provenance), a part of the run's own by the spans too (its nodes
+    outside that part's navigation); a folder that is no run is refused by name."""
+    from sonarslam import offline_from_saved, open_dataset
+    from sonarslam.settings import SettingError
+    from sonarslam.slam.run.run import run
+
+    run(simulated("harbour", 4, 100.0), "isam2", tmp_path / "r", progress=False)
+    other = open_dataset(simulated("harbour", 5, 100.0))
+    part = open_dataset(simulated("harbour", 4, 100.0), span_s=(60.0, 90.0))
+    with pytest.raises(SettingError, match="is not the dataset .* was run on"):
+        offline_from_saved(tmp_path / "r", other)
+    with pytest.raises(SettingError, match="is not the run's dataset"):
+        offline_from_saved(tmp_path / "r", part, check_dataset=False)
+    with pytest.raises(SettingError, match="no such run directory"):
+        offline_from_saved(tmp_path / "nothing", other)

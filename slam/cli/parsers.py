@@ -171,7 +171,10 @@ def _run(sub: Subparsers) -> argparse.ArgumentParser:
     p.add_argument(
         "--batch",
         action="store_true",
-        help="isam2 only: a final batch Levenberg-Marquardt pass (isam2_batch.tum, ate_*_batch_m)",
+        help="isam2 only: a final batch Levenberg-Marquardt pass (isam2_batch.tum, ate_*_batch_m);"
+        " isam2 also makes its offline estimate after every run (isam2_offline.tum: every revisit"
+        " and line decided again with hindsight, about a minute on the marina;"
+        " --set isam2.offline=false turns it off, docs/offline.md)",
     )
     add_config_and_set(p)
     p.add_argument(

@@ -64,6 +64,9 @@ TRAJECTORY_STYLES: dict[str, TrajectoryStyle] = {
     "isam2_smoothed": TrajectoryStyle("#CC79A7", (0, (6, 1.5, 1, 1.5, 1, 1.5)), "iSAM2 smoothed"),
     "isam2_batch": TrajectoryStyle("#56B4E9", ":", "iSAM2 batch"),
     "isam2_redecided": TrajectoryStyle("#E69F00", (0, (8, 2)), "iSAM2 lines re-decided"),
+    # the palette's eighth colour, its yellow, is too faint on white: black, dashed unlike the
+    # truth's solid line
+    "isam2_offline": TrajectoryStyle("#000000", (0, (4, 1.5, 1, 1.5)), "iSAM2 offline"),
 }
 
 

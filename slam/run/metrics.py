@@ -269,6 +269,7 @@ class ClosedLoopFigures:
         "offline_passes",
         "offline_settled",
         "offline_changed",
+        "offline_decisions",
         "offline_scans",
         "offline_revisit_candidates",
         "offline_revisits_registered",

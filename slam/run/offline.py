@@ -29,6 +29,7 @@ from sonarslam.slam.backends.isam2.graph import LineIsam2
 from sonarslam.slam.backends.isam2.graph_io import FactorRecord, Robust, key_of
 from sonarslam.slam.backends.isam2.offline import OfflineResult, offline_estimate
 from sonarslam.slam.run.presets import SCAN_PRESETS, apply_overrides, preset_for
+from sonarslam.slam.run.provenance import dataset_digests
 from sonarslam.slam.run.sources import dead_reckoning_trajectory
 from sonarslam.sonar.beam import SonarBeam
 
@@ -57,6 +58,7 @@ def _estimate(
 ) -> OfflineResult:
     cfg = dataset.config
     t0, t1 = float(node_t_s[0]), float(node_t_s[-1])
+    _check_covers(dataset, t0, t1)
     robust = None if graph.scan_robust is None else Robust(graph.scan_robust, graph.scan_robust_k)
     return offline_estimate(
         records,
@@ -71,6 +73,27 @@ def _estimate(
         graph.association,
         robust,
     )
+
+
+#: The run's nodes may start or end this far (s) outside the dataset's navigation (its start
+#: pose is the first GPS fix inside it; its last node the last record).
+SPAN_TOLERANCE_S = 1.0
+
+
+def _check_covers(dataset: Dataset, t0_s: float, t1_s: float) -> None:
+    """Refuse a dataset that is not the run's: its navigation must cover the run's nodes
+    (``t0_s`` to ``t1_s``, Unix s) and its sonar must have beams among them."""
+    n0, n1 = dataset.nav_span_s
+    beams = np.asarray(dataset.beams.t_s)
+    inside = int(np.count_nonzero((beams >= t0_s) & (beams <= t1_s)))
+    if t0_s < n0 - SPAN_TOLERANCE_S or t1_s > n1 + SPAN_TOLERANCE_S or inside == 0:
+        raise SettingError(
+            "dataset",
+            f"{dataset.root} is not the run's dataset: the run's nodes span {t0_s:.3f} to"
+            f" {t1_s:.3f} s (Unix), its navigation {n0:.3f} to {n1:.3f} s, with {inside} sonar"
+            " beams among the nodes (give the dataset the run was made on, with the same"
+            " --config and --span)",
+        )
 
 
 def offline_of_run(dataset: Dataset, backend: LineIsam2, scans: ScanConfig) -> OfflineResult:
@@ -94,6 +117,7 @@ def offline_from_saved(
     dataset: Dataset,
     offline: OfflineConfig | None = None,
     scans: ScanConfig | None = None,
+    check_dataset: bool = True,
 ) -> OfflineResult:
     """The offline estimate of a saved factor-graph run: its ``graph.json`` (records, values,
     node times and settings) and the dataset it was run on.
@@ -109,14 +133,20 @@ def offline_from_saved(
     scans : ScanConfig, optional
         Default: the scan preset of the dataset's beams with the run's ``scans.*`` settings
         (``metrics.json``), as the run took them.
+    check_dataset : bool
+        Refuse a dataset whose files' digest is not the run's (``metrics.json``
+        ``provenance.dataset_sha256``): another dataset, or this one's files changed since.
 
     Raises
     ------
     SettingError
-        ``run_dir`` holds no factor graph (``graph.json``).
+        ``run_dir`` is no directory, holds no factor graph (``graph.json``), or ``dataset``
+        does not cover the run's nodes (another dataset than the run's).
     """
     run = Path(run_dir)
     path = run / "graph.json"
+    if not run.is_dir():
+        raise SettingError("run_dir", f"{run}: no such run directory")
     if not path.is_file():
         raise SettingError("run_dir", f"{run} has no graph.json: not a factor-graph run")
     doc = json.loads(path.read_text())
@@ -135,7 +165,11 @@ def offline_from_saved(
     node_t = np.array([node_times[f"x{k}"] for k in range(n)], dtype=np.float64)
     if not all(values.exists(X(k)) for k in range(n)):
         raise SettingError("run_dir", f"{path}: its values lack some of its {n} nodes")
-    settings = _saved_settings(run)
+    saved = _saved_metrics(run)
+    if check_dataset:
+        _check_digest(run, saved, dataset)
+    found = saved.get("settings", {})
+    settings = dict(found) if isinstance(found, dict) else {}
     graph = _graph_config(doc["meta"].get("config", {}))
     if scans is None:
         scan_settings = {
@@ -146,12 +180,27 @@ def offline_from_saved(
     return _estimate(dataset, records, values, node_t, graph, scans, offline)
 
 
-def _saved_settings(run: Path) -> dict[str, Any]:
+def _saved_metrics(run: Path) -> dict[str, Any]:
     metrics = run / "metrics.json"
-    if not metrics.is_file():
-        return {}
-    found = json.loads(metrics.read_text()).get("settings", {})
+    found = json.loads(metrics.read_text()) if metrics.is_file() else {}
     return dict(found) if isinstance(found, dict) else {}
+
+
+def _check_digest(run: Path, metrics: dict[str, Any], dataset: Dataset) -> None:
+    """Refuse ``dataset`` when the run recorded the digest of the files it read
+    (``provenance.dataset_sha256``) and this dataset's differ."""
+    recorded = (metrics.get("provenance") or {}).get("dataset_sha256")
+    if not recorded:
+        return
+    digest = dataset_digests(Path(dataset.root), dataset.inputs)[0]
+    if digest != recorded:
+        raise SettingError(
+            "dataset",
+            f"{dataset.root} is not the dataset {run} was run on: its files' SHA-256"
+            f" {digest[:12]}... is not the run's {recorded[:12]}... (metrics.json provenance:"
+            f" {metrics.get('source')}); give that dataset, or check_dataset=False if its files"
+            " changed on purpose",
+        )
 
 
 def _graph_config(saved: dict[str, Any]) -> GraphConfig:

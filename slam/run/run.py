@@ -914,16 +914,29 @@ def smoothed_lines(metrics: dict[str, Any]) -> list[str]:
             against = "against the simulated GPS: " if parts else ""
             parts.append(against + "; ".join(gps))
         if parts and name == "offline" and "offline_passes" in metrics:
-            parts.append(
-                f"{metrics['offline_revisits_kept']} of {metrics['offline_revisits_registered']}"
-                f" registered revisits kept, {metrics.get('offline_lines_stretches', 0)} wall"
-                f" stretches, {metrics['offline_passes']} passes"
-                f" ({'settled' if metrics['offline_settled'] else 'not settled'}),"
-                f" {metrics['offline_s']:.1f} s"
-            )
+            parts.append(offline_words(metrics))
         if parts:
             lines.append(f"{metrics['backend']} {name}: " + "; ".join(parts))
     return lines
+
+
+def offline_words(m: dict[str, Any]) -> str:
+    """What the offline estimate decided and how long it took, in a run's words
+    (``metrics.json``'s ``offline_*``)."""
+    passes = m["offline_passes"]
+    if m["offline_settled"]:
+        settled = f"settled after {passes} passes"
+    else:
+        settled = (
+            f"still changing after {passes} passes ({m['offline_changed']} of"
+            f" {m['offline_decisions']} decisions in the last; a valid estimate, another"
+            " pass would move it: isam2.offline.max_passes)"
+        )
+    return (
+        f"{m['offline_revisits_kept']} of {m['offline_revisits_registered']} registered"
+        f" revisits kept, {m.get('offline_lines_stretches', 0)} wall stretches, {settled};"
+        f" decided in {m['offline_s']:.1f} s after the run"
+    )
 
 
 def _row_figures(m: dict[str, Any], name: str | None) -> dict[str, float]:

@@ -119,6 +119,9 @@ class OfflinePass:
     changed : int
         Revisits kept or dropped differently from the previous pass, plus line observations on
         another stretch (a partition's changes); -1 in the first pass.
+    decisions : int
+        The revisits registered and the line observations decided: what ``changed`` is a share
+        of.
     settled : bool
         Fewer than ``settle_share`` of the decisions changed: the last pass.
     wall_s : float
@@ -135,6 +138,7 @@ class OfflinePass:
     scales: dict[str, float] = field(default_factory=dict)
     lines: dict[str, int] = field(default_factory=dict)
     changed: int = -1
+    decisions: int = 0
     settled: bool = False
     wall_s: float = 0.0
     timing_s: dict[str, float] = field(default_factory=dict)
@@ -171,6 +175,7 @@ class OfflineResult:
             "offline_passes": len(self.passes),
             "offline_settled": int(last.settled),
             "offline_changed": last.changed,
+            "offline_decisions": last.decisions,
             "offline_scans": last.scans,
             "offline_revisit_candidates": last.candidates,
             "offline_revisits_registered": last.registered,
@@ -734,12 +739,12 @@ def offline_estimate(
         if kept_before is not None:
             log.changed = len(kept ^ kept_before) + _partition_changes(stretch_before, stretch)
         kept_before, stretch_before = kept, stretch
-        decisions = len(registered) + int(stretch.size)
+        log.decisions = len(registered) + int(stretch.size)
         current = _merge(current, estimate)
         graph_records = _scaled(final, scales)
         log.wall_s = time.perf_counter() - wall0
         passes.append(log)
-        log.settled = 0 <= log.changed <= config.settle_share * decisions
+        log.settled = 0 <= log.changed <= config.settle_share * log.decisions
         if log.settled:
             break
     marginals = gtsam.Marginals(_graph(graph_records), _start_values(graph_records, current))
