@@ -55,10 +55,6 @@ class OfflineConfig:
     lines : bool
         The line observations re-decided at each pass's estimate and kept in the graph;
         False: a pose graph of odometry, headings and revisits.
-    decide_lines : bool
-        The re-decided lines chosen jointly as the revisits are (graduated non-convexity,
-        chi2(2) at ``decision_probability``), the odometry, headings and kept revisits known: a
-        line observation inconsistent with them is dropped, and a stretch left with one.
     stretch_m : float
         The longest stretch of a wall one re-decided landmark stands for (m)
         (:class:`sonarslam.slam.mapping.redecide.RedecideConfig`).
@@ -75,7 +71,6 @@ class OfflineConfig:
     noise_scales: str | None = one_of("measurements", "measurements", "all", None)
     settle_share: float = bounded(0.02, 0.0, 1.0)
     lines: bool = True
-    decide_lines: bool = False
     stretch_m: float = bounded(80.0, 0.0, 1e5, low_open=True)
 
     def __post_init__(self) -> None:

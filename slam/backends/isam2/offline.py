@@ -482,55 +482,6 @@ class _Clock:
         self._t = now
 
 
-def _decided_lines(
-    known: gtsam.NonlinearFactorGraph,
-    lines: list[FactorRecord],
-    line_starts: dict[int, np.ndarray],
-    decision: Redecision,
-    scales: dict[str, float],
-    values: gtsam.Values,
-    config: OfflineConfig,
-    params: gtsam.LevenbergMarquardtParams,
-) -> tuple[list[FactorRecord], Redecision]:
-    """Step 5's lines chosen jointly, as the revisits are: graduated non-convexity over the
-    line observations with the odometry, headings and kept revisits known, truncated at
-    chi2(2) ``decision_probability``; an observation it drops is dropped (its stretch -1 in
-    the returned decision), and so is a stretch left with fewer than two. Each stretch has a
-    prior of 100 m and 10 rad for the decision alone (one whose observations are all dropped
-    stays defined)."""
-    graph = gtsam.NonlinearFactorGraph(known)
-    start = gtsam.Values(values)
-    loose = gtsam.noiseModel.Diagonal.Sigmas(np.array([100.0, 10.0]))
-    for key, line in line_starts.items():
-        graph.add(gtsam.PriorFactorVector(key, np.asarray(line, dtype=np.float64), loose))
-        if start.exists(key):
-            start.update(key, np.asarray(line, dtype=np.float64))
-        else:
-            start.insert(key, np.asarray(line, dtype=np.float64))
-    c2 = float(chi2.ppf(config.decision_probability, 2))
-    found = gnc_tls(graph, _scaled(lines, scales), _start_values_from(graph, start), c2, params)
-    keep = found.weights > 0.5
-    count = Counter(r.keys[1] for r, k in zip(lines, keep, strict=True) if k)
-    keep &= np.array([count[r.keys[1]] >= 2 for r in lines])
-    # the kept lines' observations, in the order of the decision's stretch labels
-    stretch = decision.stretch.copy()
-    kept_rows = np.flatnonzero(stretch >= 0)
-    stretch[kept_rows[~keep]] = -1
-    return [r for r, k in zip(lines, keep, strict=True) if k], replace(decision, stretch=stretch)
-
-
-def _start_values_from(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> gtsam.Values:
-    """``values`` of the variables ``graph`` uses."""
-    keys = set(graph.keyVector())
-    out = gtsam.Values()
-    for key in keys:
-        if gtsam.Symbol(key).chr() == ord("x"):
-            out.insert(key, values.atPose2(key))
-        else:
-            out.insert(key, values.atVector(key))
-    return out
-
-
 def _line_counts(decision: Redecision) -> dict[str, int]:
     n = int(decision.stretch.size)
     return {
@@ -713,17 +664,6 @@ def offline_estimate(
                 redecide_config,
             )
             lines = [replace(r, cov=r.cov / scales["line"]) for r in out if is_line_record(r)]
-            if config.decide_lines and lines:
-                lines, decision = _decided_lines(
-                    _decision_graph(_scaled([*base, *inliers], scales), estimate),
-                    lines,
-                    line_starts,
-                    decision,
-                    scales,
-                    estimate,
-                    config,
-                    gnc_lm,
-                )
             log.lines = _line_counts(decision)
         final = [*base, *inliers, *lines]
         estimate = optimise_records(_scaled(final, scales), estimate, lm, line_starts)
