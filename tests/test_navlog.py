@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import time
+import tomllib
 import tracemalloc
 import warnings
 from dataclasses import replace
@@ -365,3 +366,37 @@ def test_a_still_vehicle_in_a_qgc_export_runs_and_is_told_what_the_export_is(
     _, pose0, _ = start_pose(d)
     miss = float(np.hypot(*(truth[0, :2] - pose0[:2])))  # the first GPS fix's noise
     assert result.metrics["ate_truth_mean_m"] == pytest.approx(miss, abs=1e-6)
+
+
+def test_ping360_nav_takes_a_list_and_the_json_v1_dive_runs_alone(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`[ping360] nav` takes a list of files as `--nav` may be repeated: the A50's json_v1
+    (velocities only) and the autopilot's ATTITUDE-only .tlog (the heading), both written by
+    `simulate --bluerov dvl_json_v1`, so the .bin runs alone (a review: `nav = "dvl.json"`
+    only, "no heading in dvl.json", and a list refused as "must be a string"); a list that is
+    not of file names is named; `calibrate --write` keeps the list, relative to the new file."""
+    from sonarslam.datasets.ping360 import ping360_table
+
+    folder = tmp_path / "v1"
+    assert (
+        main(
+            ["simulate", "pool", "--duration", "20", "--bluerov", "dvl_json_v1"]
+            + ["--out", str(folder)]
+        )
+        == 0
+    )
+    said = capsys.readouterr().out
+    log = next(folder.glob("*.bin"))
+    assert f"run it: sonarslam run {log}\n" in said  # no --nav needed
+    toml = folder / "sonarslam.toml"
+    assert 'nav = ["dvl.json", "attitude.tlog"]' in toml.read_text()
+    d = _quiet_open(log)
+    assert "odometry" in d.calibration and "of dvl.json" in d.calibration
+    assert "of attitude.tlog" in d.calibration  # the heading
+    kept = tomllib.loads(ping360_table(log, folder / "new.toml"))["ping360"]["nav"]
+    assert kept == ["dvl.json", "attitude.tlog"]
+    text = toml.read_text().replace('"attitude.tlog"', "3")
+    toml.write_text(text)
+    with pytest.raises(DataError, match=r"\[ping360\] nav must be a file name or a list of"):
+        _quiet_open(log)
