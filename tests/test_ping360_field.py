@@ -230,3 +230,14 @@ def test_a_wrong_start_shows_against_the_truth_as_it_is(still: Dataset) -> None:
     f = trajectory_figures(still, right, "")
     assert f.ate_truth is not None and f.ate_truth.ate_max_m < 1e-9
     assert f.heading_truth is not None and f.heading_truth.max_deg < 1e-9
+
+
+def test_a_span_without_navigation_counts_from_the_first_beam(still: Dataset) -> None:
+    """Without navigation --span counts from the first beam, and its error says so (a review:
+    "s from the start of the navigation" of a log that has none)."""
+    from sonarslam.datasets.dataset import dataset_span
+    from sonarslam.datasets.errors import DataError
+
+    assert still.nav_span_s[0] == pytest.approx(float(still.beams.t_s[0]), abs=1e-9)
+    with pytest.raises(DataError, match=r"--span 100,110 \(s from the first beam, the log"):
+        dataset_span(still, (100.0, 110.0))

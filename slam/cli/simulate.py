@@ -1,4 +1,5 @@
-"""``sonarslam simulate``: a simulated run written in the marina layout."""
+"""``sonarslam simulate``: a simulated run written in the marina layout, as a ROS bag, or as a
+Ping Viewer ``.bin`` with its navigation (a ``nav.bag``, or a BlueROV2's own logs)."""
 
 from __future__ import annotations
 

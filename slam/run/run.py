@@ -197,7 +197,10 @@ def run_backend(
         raise SettingError(
             "--backend",
             f"{dataset.root} has no navigation, so it is read as a still head: --backend dr"
-            f" runs on it (the still pose); {backend} needs a DVL and an AHRS (--nav BAG_OR_CSV)",
+            f" runs on it (the still pose); {backend} needs a DVL and an AHRS: --nav FILE (a ROS"
+            " bag, the navigation CSV, or the vehicle's own logs: a QGroundControl .tlog, an"
+            " ArduSub dataflash .bin, a Water Linked A50 JSON log, a QGroundControl CSV export;"
+            " repeat it to take the DVL from one and the heading from another)",
         )
     if config is not None:
         config = replace(config, settings=_typed_settings(dataset, backend, config, settings))
