@@ -214,8 +214,8 @@ class Dataset:
 def dataset_span(dataset: Dataset, span_rel_s: tuple[float, float]) -> Dataset:
     """The part of ``dataset`` from ``T0`` to ``T1`` of ``span_rel_s`` (s from the start of its
     navigation, :attr:`Dataset.nav_span_s`, as ``--loop`` and ``sonarslam info``'s segments
-    count): its beams, DVL, AHRS and GPS rows in ``[start + T0, start + T1]``, its segments cut
-    to it and the head theirs (``--span``: the farthest-reaching segment left,
+    count; a still head's, without navigation, from its first beam): its beams, DVL, AHRS and
+    GPS rows in ``[start + T0, start + T1]``, its segments cut to it and the head theirs (``--span``: the farthest-reaching segment left,
     :func:`~sonarslam.datasets.records.farthest_segment`, sets the head's bin size, the most
     samples left its bins). A still head's (no navigation) two rows span the beams left. The
     gates' report stays the whole source's.
@@ -228,10 +228,12 @@ def dataset_span(dataset: Dataset, span_rel_s: tuple[float, float]) -> Dataset:
     """
     t_nav0, t_nav1 = dataset.nav_span_s
     lo, hi = t_nav0 + span_rel_s[0], t_nav0 + span_rel_s[1]
-    said = (
-        f"--span {span_rel_s[0]:g},{span_rel_s[1]:g} (s from the start of the navigation, whose"
-        f" span is 0-{t_nav1 - t_nav0:.3f} s)"
+    start = (
+        "the first beam, the log having no navigation; the beams span"
+        if dataset.still
+        else "the start of the navigation, whose span is"
     )
+    said = f"--span {span_rel_s[0]:g},{span_rel_s[1]:g} (s from {start} 0-{t_nav1 - t_nav0:.3f} s)"
     d, a, g = dataset.dvl, dataset.attitude, dataset.gps
     beams = dataset.beams.between(lo, hi)
     if not beams:

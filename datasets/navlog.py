@@ -204,7 +204,9 @@ def _heading_frame_velocity(autopilot: Any, attitude: AttitudeSeries, source: st
     e, n = autopilot.v_en_mps[:, 0], autopilot.v_en_mps[:, 1]
     v = np.column_stack([c * e + s * n, -s * e + c * n])
     v[~inside] = 0.0
-    return DvlSeries(t.copy(), v, inside, np.full(t.size, np.nan), autopilot.path)
+    return DvlSeries(
+        t.copy(), v, inside, np.full(t.size, np.nan), autopilot.path, autopilot.resolution_mps
+    )
 
 
 def navigation(
@@ -320,8 +322,9 @@ def _autopilot_config(config: DatasetConfig, log: NavLog) -> DatasetConfig:
     d = config.dvl_mounting
     if (d.x_m, d.y_m, d.yaw_rad) != (0.0, 0.0, ahrs.yaw_rad):
         changed.append(
-            f"[mounting.dvl] ({d.x_m:g} m, {d.y_m:g} m, {math.degrees(d.yaw_rad):g} deg) is the"
-            " AHRS's for it"
+            f"[mounting.dvl] ({d.x_m:g} m, {d.y_m:g} m, {math.degrees(d.yaw_rad):g} deg) replaced"
+            f" by the AHRS's (0 m, 0 m, {math.degrees(ahrs.yaw_rad):g} deg): the velocity is the"
+            " vehicle's, in the heading's frame"
         )
     if noise.dvl_sigma_mps < AUTOPILOT_VELOCITY_SIGMA_MPS:
         changed.append(

@@ -140,11 +140,14 @@ class WorldVelocity:
     v_en_mps : ndarray, shape (N, 2)
         East and North velocity (m/s).
     path : Path
+    resolution_mps : float
+        The quantum the log rounds the velocity to (m/s; 0: not rounded).
     """
 
     t: FloatArray
     v_en_mps: FloatArray
     path: Path
+    resolution_mps: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -220,9 +220,11 @@ class Ping360Settings:
 
     Attributes
     ----------
-    nav : str
-        The navigation: a ROS bag or a CSV (:func:`read_nav_csv`), relative to the
-        ``sonarslam.toml``; "" none (then ``--nav``).
+    nav : tuple of str
+        The navigation: a ROS bag, a CSV (:func:`read_nav_csv`) or the vehicle's own logs
+        (:mod:`sonarslam.datasets.navlog`), one file or several (as ``--nav`` repeated: the
+        DVL from one, the heading from another), each relative to the ``sonarslam.toml``; in
+        TOML a file name or a list of them; () none (then ``--nav``).
     speed_of_sound_mps : float
         Speed of sound in the water (m/s): ``bin_size_m`` follows from it.
     utc_offset_h : float
@@ -236,7 +238,7 @@ class Ping360Settings:
         ``"time_of_day"`` (older logs) or ``"auto"`` (module docstring).
     """
 
-    nav: str = ""
+    nav: tuple[str, ...] = ()
     speed_of_sound_mps: float = bounded(SPEED_OF_SOUND_MPS, 1300.0, 1700.0)
     utc_offset_h: float = bounded(0.0, -14.0, 14.0)
     start: str = ""
@@ -1161,7 +1163,7 @@ def _nav_paths(
 ) -> tuple[Path, ...]:
     """The navigation files: ``--nav`` (one or several), else ``[ping360] nav``."""
     if nav is None:
-        return (Path(settings.nav),) if settings.nav else ()
+        return tuple(Path(n) for n in settings.nav)
     if isinstance(nav, (str, Path)):
         return (Path(nav),)
     return tuple(Path(n) for n in nav)
@@ -1216,6 +1218,20 @@ def _table(path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
     return ping, sonar if isinstance(sonar, dict) else {}
 
 
+def _nav_names(value: Any, path: Path) -> list[str]:
+    """``[ping360] nav`` as a list of file names: a string ("" none) or a list of strings; a
+    :class:`DataError` naming ``path`` for anything else."""
+    names = [value] if isinstance(value, str) else value
+    if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
+        raise DataError(
+            path,
+            None,
+            f"[ping360] nav must be a file name or a list of file names (as --nav repeated:"
+            f' nav = ["dvl.json", "attitude.tlog"]), got {value!r}',
+        )
+    return [n for n in names if n]
+
+
 def _settings(table: dict[str, Any], path: Path, base: Ping360Settings) -> Ping360Settings:
     known = {"nav", "speed_of_sound_mps", "utc_offset_h", "start", "stamps"}
     unknown = sorted(set(table) - known)
@@ -1224,17 +1240,19 @@ def _settings(table: dict[str, Any], path: Path, base: Ping360Settings) -> Ping3
             path, None, f"unknown key(s) {unknown} in [ping360]; allowed: {sorted(known)}"
         )
     values = dict(table)
-    for key in ("nav", "start", "stamps"):
+    for key in ("start", "stamps"):
         if key in values and not isinstance(values[key], str):
             raise DataError(path, None, f"[ping360] {key} must be a string, got {values[key]!r}")
+    if "nav" in values:
+        values["nav"] = tuple(
+            str((path.parent / n).resolve()) for n in _nav_names(values["nav"], path)
+        )
     for key in ("speed_of_sound_mps", "utc_offset_h"):
         v = values.get(key)
         if key in values and (isinstance(v, bool) or not isinstance(v, (int, float))):
             raise DataError(path, None, f"[ping360] {key} must be a number, got {v!r}")
         if key in values:
             values[key] = float(v)  # type: ignore[arg-type]
-    if values.get("nav"):
-        values["nav"] = str((path.parent / values["nav"]).resolve())
     try:
         return replace(base, **values)
     except (SettingError, ValueError) as exc:
@@ -1476,25 +1494,30 @@ def _check_clocks(
     )
 
 
-def ping360_table(log: str | Path, target: str | Path, nav: str | Path | None = None) -> str:
+def ping360_table(
+    log: str | Path,
+    target: str | Path,
+    nav: str | Path | Sequence[str | Path] | None = None,
+) -> str:
     """The ``[ping360]`` table of a ``.bin``'s ``sonarslam.toml`` as TOML text, for a
     ``sonarslam.toml`` written to ``target`` (``sonarslam calibrate --write``): its ``nav``
-    (``nav`` when given) relative to ``target``'s folder when it lies under it, else absolute;
-    "" when there is nothing to keep."""
+    (``nav`` when given: one file or several, as ``--nav`` repeated) relative to ``target``'s
+    folder when it lies under it, else absolute, one file as a string, several as a list; ""
+    when there is nothing to keep."""
     p = Path(log)
     toml = p.parent / "sonarslam.toml"
     table = dict(_table(toml)[0]) if toml.is_file() else {}
-    if table.get("nav"):
-        table["nav"] = str((toml.parent / table["nav"]).resolve())
+    paths = [toml.parent / n for n in _nav_names(table.pop("nav", ""), toml)]
     if nav is not None:
-        table["nav"] = str(Path(nav).resolve())
+        paths = [Path(nav)] if isinstance(nav, (str, Path)) else [Path(n) for n in nav]
+    folder = Path(target).resolve().parent
+    names = []
+    for n in (q.resolve() for q in paths):
+        names.append(n.relative_to(folder).as_posix() if n.is_relative_to(folder) else str(n))
+    if names:
+        table = {"nav": names[0] if len(names) == 1 else names, **table}
     if not table:
         return ""
-    if "nav" in table:
-        folder = Path(target).resolve().parent
-        nav_path = Path(table["nav"])
-        if nav_path.is_relative_to(folder):
-            table["nav"] = nav_path.relative_to(folder).as_posix()
     return "\n" + tomli_w.dumps({"ping360": table})
 
 

@@ -75,6 +75,8 @@ QGC_GPS_LOCKS = {
 }
 _STAMP = re.compile(r"(\d{4})-(\d\d)-(\d\d) (\d\d):(\d\d):(\d\d)\.(\d{3})")
 _EMPTY = ("", "nan", "-nan", "--.--", "n/a")
+#: ``localPosition.vx``, ``vy``'s display decimals (``LocalPositionFact.json``): 1, so 0.1 m/s.
+QGC_VELOCITY_RESOLUTION_MPS = 0.1
 _COLUMNS = ("heading", "yawRate", "localPosition.vx", "localPosition.vy", "gps.lat", "gps.lon")
 
 
@@ -174,7 +176,7 @@ def read_qgc_csv(path: str | Path, settings: NavLogSettings | None = None) -> Na
     autopilot = None
     if vel.any():
         v_en = np.column_stack([a["localPosition.vy"][vel], a["localPosition.vx"][vel]])
-        autopilot = WorldVelocity(t[vel], v_en, p)
+        autopilot = WorldVelocity(t[vel], v_en, p, QGC_VELOCITY_RESOLUTION_MPS)
     fix = np.isfinite(a["gps.lat"]) & np.isfinite(a["gps.lon"])
     fix &= ~((a["gps.lat"] == 0.0) & (a["gps.lon"] == 0.0))
     lock = a["gps.lock"]

@@ -92,6 +92,9 @@ class DvlSeries:
     valid: np.ndarray  # (N,) bool, bottom lock
     heading_rad: FloatArray  # (N,) DVL compass as yaw CCW from East of the DVL x axis
     path: Path | None = None  # the log it was read from (for messages)
+    #: the velocities' quantum when the log rounds them (m/s; QGroundControl's CSV export: 0.1,
+    #: so a vehicle under 0.05 m/s per axis reads exactly 0); 0: a DVL's own, fine resolution
+    resolution_mps: float = 0.0
 
     def records(self) -> list[DvlVelocity]:
         return [

@@ -51,12 +51,24 @@ def test_every_command_has_help(capsys):
     assert {"simulate", "run", "plot-scans", "calibrate", "info", "demo", "extract"} <= set(
         commands
     )
+    takes_source = {"run", "plot-scans", "extract", "calibrate", "info"}
     for name in commands:
         with pytest.raises(SystemExit) as exc:
             main([name, "--help"])
         assert exc.value.code == 0
-        out = capsys.readouterr().out
-        assert "usage: sonarslam " + name in out and "SONARSLAM_DATA" in out
+        out = " ".join(capsys.readouterr().out.split())  # argparse's line breaks undone
+        assert "usage: sonarslam " + name in out
+        # the SOURCE epilog where a SOURCE is taken only (a review: demo's and report's too)
+        assert ("a SOURCE is" in out) == (name in takes_source), name
+        assert "SONARSLAM_DATA" in out or name in ("simulate", "report", "sweep"), name
+        # --span's --loop clause where --loop is (a review: extract, plot-scans and info too)
+        span = out[out.index("--span T0,T1") :] if "--span T0,T1" in out else ""
+        assert ("--loop times then count from T0" in span) == (name == "run"), name
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    said = out[out.index("simulate simulate") : out.index("run run a back end")]
+    assert "ROS bag" in said and "Ping Viewer" in said and "BlueROV2" in said, said
 
 
 #: What ``--version`` and ``--help`` must not import: each costs seconds on the 2-core machine

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import time
+import tomllib
 import tracemalloc
 import warnings
 from dataclasses import replace
@@ -331,3 +332,71 @@ def test_a_tlog_reads_fifty_times_faster_than_real_time_in_flat_memory(tmp_path:
     grown = _traced_peak(long) - _traced_peak(short)
     added = long.stat().st_size - short.stat().st_size
     assert grown < 0.5 * added, (grown, added)
+
+
+def test_a_still_vehicle_in_a_qgc_export_runs_and_is_told_what_the_export_is(
+    tmp_path: Path,
+) -> None:
+    """The simulated pool's vehicle holds still: QGroundControl's export rounds its velocity to
+    0.1 m/s, so every row reads (0, 0). Those are readings under the export's resolution, not
+    a dropout's fill (a review: every row flagged, `run` refused the dataset, and the warning
+    asked the export for a dvl_valid column, which is the navigation CSV's); dead reckoning
+    holds still at its start; the warnings name the export and the mounting that replaced the
+    DVL's."""
+    from sonarslam.datasets.simulator.bluerov import simulate_bluerov
+    from sonarslam.slam.eval.truth import truth_trajectory
+    from sonarslam.slam.run.sources import start_pose
+
+    log, _ = simulate_bluerov("pool", 0, tmp_path / "rov", "qgc_csv", duration_s=20.0)
+    with pytest.warns(DataWarning) as said:
+        d = open_dataset(log)
+    text = " ".join(str(w.message) for w in said)
+    assert "dvl_valid" not in text and "exactly (0, 0)" not in text
+    assert "[mounting.dvl] (0 m, 0 m, -90 deg) replaced by the AHRS's (0 m, 0 m, 0 deg)" in text, (
+        text
+    )
+    assert "QGroundControl's CSV export rounds" in text  # the still vehicle's slowness said
+    assert d.dvl.valid.all() and not d.dvl.v_mps.any()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        result = run_backend(d, "dr")
+    dr = result.trajectory.poses_wTb
+    np.testing.assert_allclose(dr[:, :2] - dr[0, :2], 0.0, atol=1e-9)  # holds still
+    truth = truth_trajectory(d).poses_wTb
+    _, pose0, _ = start_pose(d)
+    miss = float(np.hypot(*(truth[0, :2] - pose0[:2])))  # the first GPS fix's noise
+    assert result.metrics["ate_truth_mean_m"] == pytest.approx(miss, abs=1e-6)
+
+
+def test_ping360_nav_takes_a_list_and_the_json_v1_dive_runs_alone(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`[ping360] nav` takes a list of files as `--nav` may be repeated: the A50's json_v1
+    (velocities only) and the autopilot's ATTITUDE-only .tlog (the heading), both written by
+    `simulate --bluerov dvl_json_v1`, so the .bin runs alone (a review: `nav = "dvl.json"`
+    only, "no heading in dvl.json", and a list refused as "must be a string"); a list that is
+    not of file names is named; `calibrate --write` keeps the list, relative to the new file."""
+    from sonarslam.datasets.ping360 import ping360_table
+
+    folder = tmp_path / "v1"
+    assert (
+        main(
+            ["simulate", "pool", "--duration", "20", "--bluerov", "dvl_json_v1"]
+            + ["--out", str(folder)]
+        )
+        == 0
+    )
+    said = capsys.readouterr().out
+    log = next(folder.glob("*.bin"))
+    assert f"run it: sonarslam run {log}\n" in said  # no --nav needed
+    toml = folder / "sonarslam.toml"
+    assert 'nav = ["dvl.json", "attitude.tlog"]' in toml.read_text()
+    d = _quiet_open(log)
+    assert "odometry" in d.calibration and "of dvl.json" in d.calibration
+    assert "of attitude.tlog" in d.calibration  # the heading
+    kept = tomllib.loads(ping360_table(log, folder / "new.toml"))["ping360"]["nav"]
+    assert kept == ["dvl.json", "attitude.tlog"]
+    text = toml.read_text().replace('"attitude.tlog"', "3")
+    toml.write_text(text)
+    with pytest.raises(DataError, match=r"\[ping360\] nav must be a file name or a list of"):
+        _quiet_open(log)

@@ -332,7 +332,11 @@ def test_a_bin_alone_is_a_still_head_and_clocks_must_meet(
     said = capsys.readouterr().out
     assert "start pose: no navigation: a still head at (0, 0) m heading 0 deg" in said
     assert main(["run", str(alone), "--backend", "ekf", "--out", str(out), "--quiet"]) == 2
-    assert "ekf needs a DVL and an AHRS (--nav BAG_OR_CSV)" in capsys.readouterr().err
+    err = capsys.readouterr().err  # every kind of navigation --nav takes (a review: BAG_OR_CSV)
+    assert "ekf needs a DVL and an AHRS: --nav FILE" in err
+    assert all(
+        k in err for k in ("ROS bag", "CSV", ".tlog", "dataflash", "A50 JSON", "QGroundControl CSV")
+    )
     args = ["--start", "3,-2,30", "--out"]
     assert main(["run", str(alone), *args, str(out / "dr"), "--quiet"]) == 0
     said = capsys.readouterr().out

@@ -201,3 +201,43 @@ def test_a_log_of_segments_is_not_written_as_a_bag_of_one_range(
 
     with pytest.raises(ValueError, match=r"several bin sizes \(segments\) cannot be written"):
         write_bag(still, tmp_path / "x.bag", "ros1")
+
+
+def test_a_wrong_start_shows_against_the_truth_as_it_is(still: Dataset) -> None:
+    """A still head's pose is the one given (--start): against the truth as truth.json has it
+    (the simulator's world frame, not moved onto the start), a wrong start's position and
+    heading errors are the distances to the true pose (a review: ATE 0.00 m for any start, the
+    heading never compared), and the true start's are zero."""
+    from sonarslam.slam.run.metrics import trajectory_figures
+    from sonarslam.slam.run.run import summary_line
+
+    rows = json.loads((Path(still.root).parent / "truth.json").read_text())["body_poses"]["rows"]
+    x, y, yaw = rows[0][1:]
+    truth = truth_trajectory(still)
+    np.testing.assert_allclose(truth.poses_wTb[0], [x, y, yaw], atol=1e-12)
+    wrong = (5.0, 5.0, math.radians(90.0))
+    head = dead_reckoning_trajectory(replace(still, start_enu=wrong))
+    f = trajectory_figures(still, head, "")
+    assert f.ate_truth is not None and f.heading_truth is not None
+    assert f.ate_truth.ate_mean_m == pytest.approx(math.hypot(5.0 - x, 5.0 - y), abs=1e-9)
+    miss_deg = abs(math.degrees(math.remainder(wrong[2] - yaw, math.tau)))
+    assert miss_deg > 90.0  # the pool's head looks about -170 deg
+    assert f.heading_truth.mean_deg == pytest.approx(miss_deg, abs=1e-9)
+    m = {"backend": "dr", "evaluation": "truth", "data_s": 1.0, "wall_s": 1.0}
+    m.update(realtime_factor=1.0, **f.span_json())
+    assert f"heading mean {miss_deg:.1f} deg" in summary_line(m)
+    right = dead_reckoning_trajectory(replace(still, start_enu=(x, y, yaw)))
+    f = trajectory_figures(still, right, "")
+    assert f.ate_truth is not None and f.ate_truth.ate_max_m < 1e-9
+    assert f.heading_truth is not None and f.heading_truth.max_deg < 1e-9
+
+
+def test_a_span_without_navigation_counts_from_the_first_beam(still: Dataset) -> None:
+    """Without navigation --span counts from the first beam, and its error says so (a review:
+    "s from the start of the navigation" of a log that has none)."""
+    from sonarslam.datasets.dataset import dataset_span
+    from sonarslam.datasets.errors import DataError
+
+    assert still.nav_span_s[0] == pytest.approx(float(still.beams.t_s[0]), abs=1e-9)
+    with pytest.raises(DataError, match=r"--span 100,110 \(s from the first beam, the log"):
+        dataset_span(still, (100.0, 110.0))

@@ -535,7 +535,7 @@ def simulate_bluerov(
 ) -> tuple[Path, list[Path]]:
     """Simulate ``kind`` with a Ping360-shaped head and write it as a BlueROV2 logs it: the
     ``.bin`` and the navigation ``nav`` (module docstring), with ``sonarslam.toml`` (``[ping360]
-    nav`` the first navigation file, ``[navlog]`` where needed) and ``truth.json``. Returns the
+    nav`` the navigation files, ``[navlog]`` where needed) and ``truth.json``. Returns the
     ``.bin`` and the navigation files."""
     out = Path(out_dir)
     log = simulate_ping360(kind, seed, out, duration_s, gps)
@@ -544,8 +544,10 @@ def simulate_bluerov(
         dataset = open_dataset(log)  # its navigation from the bag written beside it
     (out / "nav.bag").unlink()
     files, navlog = write_bluerov_nav(dataset, out, nav, seed)
+    names = ", ".join(f'"{f.name}"' for f in files)
+    nav_toml = names if len(files) == 1 else f"[{names}]"
     toml = dump_dataset_config(dataset.config) + (
-        f'\n[ping360]\nnav = "{files[0].name}"\nspeed_of_sound_mps = 1500.0\n' + navlog
+        f"\n[ping360]\nnav = {nav_toml}\nspeed_of_sound_mps = 1500.0\n" + navlog
     )
     (out / "sonarslam.toml").write_text(toml, encoding="utf-8")
     return log, files

@@ -42,7 +42,7 @@ def _write(args: argparse.Namespace, config: DatasetConfig) -> None:
         path = Path(args.write)
         text = dump_dataset_config(config)
         if is_ping360_log(args.source):
-            text += ping360_table(args.source, path, args.nav[0] if args.nav else None)
+            text += ping360_table(args.source, path, args.nav or None)
         path.write_text(text, encoding="utf-8")
         print(f"written: {path}")
 

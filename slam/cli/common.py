@@ -74,8 +74,9 @@ class Subparsers(Protocol):
     def add_parser(self, name: str, **kwargs: object) -> argparse.ArgumentParser: ...
 
 
-def add_source(p: argparse.ArgumentParser) -> None:
-    """The positional SOURCE of a command that reads a dataset."""
+def add_source(p: argparse.ArgumentParser, loop: bool = False) -> None:
+    """The positional SOURCE of a command that reads a dataset, with ``--nav`` and ``--span``
+    (``loop``: the command takes ``--loop`` too, whose times then count from the span's T0)."""
     p.add_argument(
         "source",
         help="dataset directory, ROS bag (.bag, .mcap, ROS 2 bag directory), Ping Viewer .bin"
@@ -99,7 +100,7 @@ def add_source(p: argparse.ArgumentParser) -> None:
         metavar="T0,T1",
         help="take the part of the source from T0 to T1 (s from the start of the navigation, as"
         " info's segments; a .bin without navigation: from its first beam): its beams,"
-        " navigation and GPS; --loop times then count from T0",
+        " navigation and GPS" + ("; --loop times then count from T0" if loop else ""),
     )
 
 

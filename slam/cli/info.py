@@ -187,9 +187,10 @@ def _print_segments(d: Dataset) -> None:
     if len(d.segments) < 2:
         return
     t0 = d.nav_span_s[0]
+    origin = "the first beam (no navigation)" if d.still else "the start of the navigation"
     print(
         f"  {len(d.segments)} segments (a range, gain or sector each; each beam with its own bin"
-        " size; --span T0,T1 takes part of the log, s from the start of the navigation):"
+        f" size; --span T0,T1 takes part of the log, s from {origin}):"
     )
     for k, g in enumerate(d.segments, 1):
         print(

@@ -51,7 +51,11 @@ SIM_DURATION_S = 600.0
 
 
 def _simulate(sub: Subparsers) -> argparse.ArgumentParser:
-    p = sub.add_parser("simulate", help="simulate a run in the marina layout", epilog=EPILOG)
+    p = sub.add_parser(
+        "simulate",
+        help="simulate a run and write it in the marina layout, as a ROS bag (--bag), or as a"
+        " Ping Viewer .bin with its navigation (--ping360) or a BlueROV2's logs (--bluerov)",
+    )
     p.add_argument(
         "kind",
         choices=WORLDS,
@@ -147,7 +151,7 @@ def _run(sub: Subparsers) -> argparse.ArgumentParser:
         help="run a back end and evaluate it against GPS (and the truth on simulated data)",
         epilog=EPILOG,
     )
-    add_source(p)
+    add_source(p, loop=True)
     p.add_argument(
         "--backend",
         default="dr",
@@ -231,7 +235,8 @@ def _demo(sub: Subparsers) -> argparse.ArgumentParser:
         "demo",
         help="the main job (make run): both closed loops and dead reckoning on the marina or, "
         "without it, a simulated harbour",
-        epilog=EPILOG,
+        epilog="Data: the marina is found under $SONARSLAM_DATA/marina; without it the demo"
+        " simulates a harbour (--sim-duration).",
     )
     p.add_argument("--out", default="out", help="output directory (default out)")
     p.add_argument(
@@ -337,7 +342,6 @@ def _report(sub: Subparsers) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "report",
         help="side-by-side report of run directories: table, maps, errors, NEES",
-        epilog=EPILOG,
     )
     p.add_argument("dirs", nargs="+", help="run directories written by 'sonarslam run'")
     p.add_argument("--out", required=True, help="output directory (report.md and PNGs)")
@@ -362,7 +366,6 @@ def _sweep(sub: Subparsers) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "sweep",
         help="Monte Carlo runs and parameter grids on Dask: ATE and ANEES per back end",
-        epilog=EPILOG,
     )
     p.add_argument("--seeds", default="0-9", help="seeds: 0-49, 3, or 0,2,5-7 (default 0-9)")
     p.add_argument(

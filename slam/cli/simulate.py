@@ -1,4 +1,5 @@
-"""``sonarslam simulate``: a simulated run written in the marina layout."""
+"""``sonarslam simulate``: a simulated run written in the marina layout, as a ROS bag, or as a
+Ping Viewer ``.bin`` with its navigation (a ``nav.bag``, or a BlueROV2's own logs)."""
 
 from __future__ import annotations
 
@@ -43,9 +44,7 @@ def command(args: argparse.Namespace) -> int:
         print(
             f"simulated {args.kind} (seed {args.seed}) written as a BlueROV2 logs it: {log}, with"
             f" {', '.join(str(n) for n in navs)} ({args.bluerov}) and sonarslam.toml"
-            " ([ping360] nav); run it: sonarslam run "
-            + str(log)
-            + ("".join(f" --nav {n}" for n in navs) if len(navs) > 1 else "")
+            f" ([ping360] nav); run it: sonarslam run {log}"
         )
         return 0
     if args.ping360:

@@ -20,12 +20,14 @@ import numpy as np
 from sonarslam.datasets.source import Dataset
 from sonarslam.slam.eval.ate import (
     AteResult,
+    HeadingResult,
     ate_against_gps,
     ate_against_truth,
     ate_errors,
     ate_of_errors,
     half_split_s,
     halves,
+    heading_against_truth,
 )
 from sonarslam.slam.eval.consistency import COMPONENTS, NeesSeries, chi2_band, nees_series
 from sonarslam.slam.eval.loops import Loop, LoopError, LoopSearch, OdometryCheck
@@ -65,6 +67,8 @@ class TrajectoryFigures:
         ``ate_sonar_aligned`` over them.
     ate_truth, ate_truth_aligned : AteResult or None
         Simulated data: against the truth.
+    heading_truth : HeadingResult or None
+        Simulated data: the heading error against the truth (as it is).
     map_entropy_nats : float or None
         The map's entropy projected with the trajectory (:mod:`sonarslam.slam.eval.sharpness`).
     nees : dict of str to NeesSeries
@@ -90,6 +94,9 @@ class TrajectoryFigures:
         "map_entropy_<name>_nats",
         "ate_truth_*",
         "ate_truth_aligned_*",
+        "heading_truth_mean_deg",
+        "heading_truth_max_deg",
+        "heading_truth_<name>_{mean,max}_deg",
         "ate_mean_<name>_m",
         "ate_max_<name>_m",
         "ate_aligned_mean_<name>_m",
@@ -114,6 +121,7 @@ class TrajectoryFigures:
     sonar_halves: tuple[AteResult, AteResult, AteResult, AteResult] | None = None
     ate_truth: AteResult | None = None
     ate_truth_aligned: AteResult | None = None
+    heading_truth: HeadingResult | None = None
     map_entropy_nats: float | None = None
     nees: Mapping[str, NeesSeries] = field(default_factory=dict)
 
@@ -167,6 +175,9 @@ class TrajectoryFigures:
         if self.ate_truth is not None and self.ate_truth_aligned is not None:
             out.update(self.ate_truth.as_dict(f"ate_truth{suffix}"))
             out.update(self.ate_truth_aligned.as_dict(f"ate_truth_aligned{suffix}"))
+        if self.heading_truth is not None:
+            out[f"heading_truth{suffix}_mean_deg"] = self.heading_truth.mean_deg
+            out[f"heading_truth{suffix}_max_deg"] = self.heading_truth.max_deg
         return out
 
     def entropy_json(self) -> dict[str, JsonValue]:
@@ -586,12 +597,14 @@ def trajectory_figures(dataset: Dataset, trajectory: Trajectory, name: str) -> T
             halves_found = (*halves(t, e, split), *halves(t, e_aligned, split))
     truth_figures: tuple[AteResult | None, AteResult | None] = (None, None)
     nees: dict[str, NeesSeries] = {}
+    heading = None
     if dataset.truth is not None:
         truth = truth_trajectory(dataset)
         truth_figures = (
             ate_against_truth(trajectory, truth),
             ate_against_truth(trajectory, truth, align=True),
         )
+        heading = heading_against_truth(trajectory, truth)
         if not name and trajectory.covs is not None:
             nees = {block: nees_series(trajectory, truth, block) for block in COMPONENTS}
     return TrajectoryFigures(
@@ -604,6 +617,7 @@ def trajectory_figures(dataset: Dataset, trajectory: Trajectory, name: str) -> T
         sonar_halves=halves_found,
         ate_truth=truth_figures[0],
         ate_truth_aligned=truth_figures[1],
+        heading_truth=heading,
         map_entropy_nats=_sharpness(dataset, trajectory),
         nees=nees,
     )

@@ -197,7 +197,10 @@ def run_backend(
         raise SettingError(
             "--backend",
             f"{dataset.root} has no navigation, so it is read as a still head: --backend dr"
-            f" runs on it (the still pose); {backend} needs a DVL and an AHRS (--nav BAG_OR_CSV)",
+            f" runs on it (the still pose); {backend} needs a DVL and an AHRS: --nav FILE (a ROS"
+            " bag, the navigation CSV, or the vehicle's own logs: a QGroundControl .tlog, an"
+            " ArduSub dataflash .bin, a Water Linked A50 JSON log, a QGroundControl CSV export;"
+            " repeat it to take the DVL from one and the heading from another)",
         )
     if config is not None:
         config = replace(config, settings=_typed_settings(dataset, backend, config, settings))
@@ -434,7 +437,11 @@ def evaluation(dataset: Dataset) -> str:
         still = "a still head (no navigation)"
         if dataset.truth is not None:
             return f"truth; {still}"
-        return f"{still}: no ATE, no loops; the map's entropy (map_entropy_nats) and the pictures"
+        # one head turn's map moved rigidly: its entropy changes only with where the cells fall
+        return (
+            f"{still}: no ATE, no loops; the pictures (map_entropy_nats does not judge a still"
+            " head's pose)"
+        )
     if dataset.truth is not None:
         return "truth and loops (no GPS)"
     return (
@@ -872,9 +879,14 @@ def summary_line(metrics: dict[str, Any]) -> str:
     if "ate_truth_mean_m" in m:
         truth = (
             f"against the truth ATE mean {m['ate_truth_mean_m']:.2f} m, max "
-            f"{m['ate_truth_max_m']:.2f} (rigidly aligned {m['ate_truth_aligned_mean_m']:.2f}); "
-            "against the simulated GPS: "
+            f"{m['ate_truth_max_m']:.2f} (rigidly aligned {m['ate_truth_aligned_mean_m']:.2f})"
         )
+        if "heading_truth_mean_deg" in m:
+            truth += (
+                f", heading mean {m['heading_truth_mean_deg']:.1f} deg, max"
+                f" {m['heading_truth_max_deg']:.1f}"
+            )
+        truth += "; against the simulated GPS: "
     if "ate_mean_m" not in m:
         entropy = m.get("map_entropy_nats")
         sharp = f"map entropy {entropy:.3f} nats" if entropy is not None else "no map"
