@@ -12,6 +12,10 @@ beams' own array (which a run holds: what the reading adds beyond it must not gr
 log)::
 
     taskset -c 1 .venv/bin/python benchmarks/ping360_reading.py --minutes 5 20
+    taskset -c 1 .venv/bin/python benchmarks/ping360_reading.py --minutes 5 20 --split
+
+``--split``: the records as Ping Viewer writes them from a serial link (a record a read of
+the link, ``write_ping360_log``'s ``split_rng``: each message over two or three records).
 
 Target (issue 30): >= 50x real time on one core.
 """
@@ -35,8 +39,9 @@ N_SAMPLES, SAMPLE_PERIOD_TICKS = 1200, 2222  # ~50 m at 1500 m/s
 START_MS = 1_700_000_000_000  # the log's start (Unix ms): its file name
 
 
-def write(folder: Path, minutes: float) -> tuple[Path, Path]:
-    """A log of ``minutes`` and its navigation CSV in ``folder``."""
+def write(folder: Path, minutes: float, split: bool = False) -> tuple[Path, Path]:
+    """A log of ``minutes`` and its navigation CSV in ``folder``; its records split as a
+    serial link delivers them when ``split``."""
     from sonarslam.datasets.ping360 import log_file_name, write_ping360_log
 
     rng = np.random.default_rng(0)
@@ -45,7 +50,12 @@ def write(folder: Path, minutes: float) -> tuple[Path, Path]:
     grads = (2 * np.arange(n)) % 400
     bins = rng.integers(0, 60, (n, N_SAMPLES), dtype=np.uint8)
     log = write_ping360_log(
-        folder / log_file_name(START_MS), stamps, grads, bins, SAMPLE_PERIOD_TICKS
+        folder / log_file_name(START_MS),
+        stamps,
+        grads,
+        bins,
+        SAMPLE_PERIOD_TICKS,
+        split_rng=np.random.default_rng(1) if split else None,
     )
     t0 = START_MS / 1000.0
     lines = ["t_s,dvl_vx_mps,dvl_vy_mps,ahrs_yaw_enu_rad,ahrs_yaw_rate_rad_per_s"]
@@ -95,6 +105,7 @@ def _status_mb(key: str) -> float:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--minutes", type=float, nargs="+", default=[5.0, 20.0])
+    ap.add_argument("--split", action="store_true", help="records split as a serial link reads")
     ap.add_argument("--read", nargs=3, help=argparse.SUPPRESS)  # the child: LOG NAV WHOLE
     args = ap.parse_args()
     if args.read:
@@ -105,7 +116,7 @@ def main() -> int:
         for minutes in args.minutes:
             folder = Path(tmp) / f"{minutes:g}min"
             folder.mkdir()
-            log, nav = write(folder, minutes)
+            log, nav = write(folder, minutes, args.split)
             for whole in ("0", "1"):
                 out = subprocess.run(
                     [sys.executable, __file__, "--read", str(log), str(nav), whole],
@@ -115,6 +126,7 @@ def main() -> int:
                 ).stdout
                 row = {
                     "minutes": minutes,
+                    "records": "split" if args.split else "a message each",
                     "what": "dataset (log + CSV nav + gates)" if whole == "1" else "log alone",
                     "log_mb": log.stat().st_size / 2**20,
                     **json.loads(out),

@@ -414,8 +414,8 @@ def _tables(p: Path, text: str, data: dict[str, Any]) -> dict[str, dict[str, Any
     the schema, or a value where a table belongs, is a DataError (with its line when found)."""
     out: dict[str, dict[str, Any]] = {}
     for name, table in data.items():
-        if name in ("topics", "ping360"):  # a bag's roles (sonarslam.datasets.rosbag), a
-            continue  # Ping Viewer log's own settings (sonarslam.datasets.ping360)
+        if name in ("topics", "ping360", "navlog"):  # a bag's roles (datasets.rosbag), a Ping
+            continue  # Viewer log's own settings (datasets.ping360), a navigation log's (navlog)
         if name == "mounting" and isinstance(table, dict):
             for sub, inner in table.items():
                 out.update(_tables(p, text, {f"mounting.{sub}": inner}))

@@ -9,7 +9,7 @@ import json
 import tomllib
 import warnings
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -19,9 +19,24 @@ from sonarslam.datasets.config import DatasetConfig
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.gates import SensorReport, navigation_span_s
 from sonarslam.datasets.logfile import read_text
-from sonarslam.datasets.records import AttitudeSeries, BeamSeries, DvlSeries, GpsSeries, Record
+from sonarslam.datasets.records import (
+    AttitudeSeries,
+    BeamSeries,
+    DvlSeries,
+    GpsSeries,
+    Record,
+    SonarSegment,
+    farthest_segment,
+)
 
-__all__ = ["Dataset", "NEUTRAL_CALIBRATION", "check_overlap", "neutral_warning", "read_truth"]
+__all__ = [
+    "Dataset",
+    "NEUTRAL_CALIBRATION",
+    "check_overlap",
+    "neutral_warning",
+    "read_truth",
+    "dataset_span",
+]
 
 _NEUTRAL = "neutral: no sonarslam.toml, so identity mountings, no clock offset and default noise"
 #: :attr:`Dataset.calibration` of a run that is not the marina and has no ``sonarslam.toml``.
@@ -119,6 +134,16 @@ class Dataset:
         Files (or bag directories) read besides ``root`` and the ``sonarslam.toml`` and
         ``truth.json`` in or beside it: a ``--topics`` file, a Ping360 log's navigation
         (``metrics.json`` provenance digests them).
+    segments : tuple of SonarSegment
+        The stretches of the beams of one head setting (range, bin size, gain, sector), in
+        time order, on the beams' clock: a Ping Viewer log's (``sonarslam info`` lists them);
+        empty for a source of one setting.
+    still : bool
+        No navigation was given (a sonar log alone: a tank test, a head on a pier): the head
+        is taken as still, at :attr:`start_enu` (the origin heading East when not given).
+        ``dvl`` and ``attitude`` then hold two rows without bottom lock spanning the beams,
+        no measurement: dead reckoning is the still pose
+        (:func:`sonarslam.slam.run.sources.dead_reckoning_trajectory`), and nothing else runs.
     """
 
     name: str
@@ -133,6 +158,8 @@ class Dataset:
     calibration: str = ""
     start_enu: tuple[float, float, float] | None = None
     inputs: tuple[Path, ...] = ()
+    segments: tuple[SonarSegment, ...] = ()
+    still: bool = False
 
     @property
     def nav_span_s(self) -> tuple[float, float]:
@@ -182,6 +209,91 @@ class Dataset:
         ]
         for item in heapq.merge(*streams):
             yield item[3]
+
+
+def dataset_span(dataset: Dataset, span_rel_s: tuple[float, float]) -> Dataset:
+    """The part of ``dataset`` from ``T0`` to ``T1`` of ``span_rel_s`` (s from the start of its
+    navigation, :attr:`Dataset.nav_span_s`, as ``--loop`` and ``sonarslam info``'s segments
+    count; a still head's, without navigation, from its first beam): its beams, DVL, AHRS and
+    GPS rows in ``[start + T0, start + T1]``, its segments cut to it and the head theirs (``--span``: the farthest-reaching segment left,
+    :func:`~sonarslam.datasets.records.farthest_segment`, sets the head's bin size, the most
+    samples left its bins). A still head's (no navigation) two rows span the beams left. The
+    gates' report stays the whole source's.
+
+    Raises
+    ------
+    DataError
+        A span that leaves fewer than two DVL or AHRS rows (no time to navigate) or no beam,
+        naming the span and the source's own.
+    """
+    t_nav0, t_nav1 = dataset.nav_span_s
+    lo, hi = t_nav0 + span_rel_s[0], t_nav0 + span_rel_s[1]
+    start = (
+        "the first beam, the log having no navigation; the beams span"
+        if dataset.still
+        else "the start of the navigation, whose span is"
+    )
+    said = f"--span {span_rel_s[0]:g},{span_rel_s[1]:g} (s from {start} 0-{t_nav1 - t_nav0:.3f} s)"
+    d, a, g = dataset.dvl, dataset.attitude, dataset.gps
+    beams = dataset.beams.between(lo, hi)
+    if not beams:
+        raise DataError(dataset.root, None, f"{said} holds no sonar beam")
+    if dataset.still:  # no navigation: its two rows span the beams
+        t0, t1 = float(beams.t_s[0]), max(float(beams.t_s[-1]), float(beams.t_s[0]) + 1e-3)
+        lo, hi = min(lo, t0), max(hi, t1)
+        d = replace(d, t=np.array([t0, t1]))
+        a = replace(a, t=np.array([t0, t1]))
+    keep_d = (d.t >= lo) & (d.t <= hi)
+    keep_a = (a.t >= lo) & (a.t <= hi)
+    for name, keep in (("DVL", keep_d), ("AHRS", keep_a)):
+        if np.count_nonzero(keep) < 2:
+            raise DataError(
+                dataset.root,
+                None,
+                f"{said} holds {np.count_nonzero(keep)} {name} row(s): a run needs a time span"
+                " to navigate",
+            )
+    gps = None
+    if g is not None:
+        keep_g = (g.t >= lo) & (g.t <= hi)
+        fix = None if g.fix is None else g.fix[keep_g]
+        gps = replace(g, t=g.t[keep_g], en_m=g.en_m[keep_g], fix=fix) if keep_g.any() else None
+    cut = [replace(s, t0_s=max(s.t0_s, lo), t1_s=min(s.t1_s, hi)) for s in dataset.segments]
+    segments = tuple(
+        replace(s, beams=len(beams.between(s.t0_s, s.t1_s))) for s in cut if s.t0_s <= s.t1_s
+    )
+    config = dataset.config
+    if segments:
+        n_bins = max(s.n_bins for s in segments)
+        head = replace(
+            config.sonar, n_bins=n_bins, bin_size_m=farthest_segment(segments).bin_size_m
+        )
+        own = beams.bin_size_m
+        if own is not None and np.all(own == head.bin_size_m):
+            own = None
+        beams = BeamSeries(
+            beams.t_s,
+            beams.transducer_angle_rad,
+            beams.intensities[:, :n_bins],
+            beams.thresholded,
+            own,
+        )
+        config = replace(config, sonar=head)
+    return replace(
+        dataset,
+        config=config,
+        beams=beams,
+        dvl=replace(
+            d, t=d.t[keep_d], v_mps=d.v_mps[keep_d], valid=d.valid[keep_d],
+            heading_rad=d.heading_rad[keep_d],
+        ),
+        attitude=replace(
+            a, t=a.t[keep_a], yaw_rad=a.yaw_rad[keep_a],
+            yaw_rate_rad_per_s=a.yaw_rate_rad_per_s[keep_a],
+        ),
+        gps=gps,
+        segments=segments,
+    )  # fmt: skip
 
 
 #: DVL and AHRS whose overlap covers less than this share of their logs' span, or leaves out

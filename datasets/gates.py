@@ -356,9 +356,23 @@ def dvl_speed_quantiles(dvl: DvlSeries, quantiles: tuple[int, ...] = (50, 90)) -
     return {q: float(np.percentile(speed, q)) for q in quantiles}
 
 
+def _is_qgc_export(path: Path | None) -> bool:
+    if path is None or path.suffix.lower() != ".csv":
+        return False
+    from sonarslam.datasets.qgccsv import is_qgc_csv  # the reader's own test of the header
+
+    return is_qgc_csv(path)
+
+
 def _dvl_unit(path: Path | None, slow: bool = False) -> str:
     """Where the DVL's velocities come from and the unit the reader takes them in, in words;
     ``slow``: for velocities far too small (a unit larger than the one read), else too large."""
+    if _is_qgc_export(path):
+        return (
+            "QGroundControl's CSV export rounds the autopilot's velocity to 0.1 m/s, in the speed"
+            " unit its settings display (m/s by default): a vehicle slower than 0.05 m/s reads"
+            " exactly 0"
+        )
     if path is not None and path.name.endswith("_DVL.log"):
         return (
             "the marina layout's bottomVelX/Y columns are read as cm/s, divided by 100, and no"
@@ -402,6 +416,12 @@ def _dvl_lock_flag(path: Path | None) -> str:
     """Where the DVL's bottom lock comes from, in words (to mark a dropout there)."""
     if path is None:
         return "give dvl_valid (False where the DVL had no bottom lock)"
+    if _is_qgc_export(path):
+        return (
+            "QGroundControl's CSV export has no lock flag (its velocity is the autopilot's"
+            " estimate): give the DVL's own velocities (a .tlog's VISION_POSITION_DELTA or the"
+            " A50's JSON) for its bottom lock"
+        )
     if path.suffix.lower() == ".csv":
         return (
             "give the CSV a dvl_valid column (0 without bottom lock; without the column every"
@@ -418,19 +438,24 @@ def _dvl_lock_flag(path: Path | None) -> str:
 ZERO_FILL_MIN_SPEED_MPS = 0.05
 
 
-def _exact_zeros(v_mps: FloatArray, valid: np.ndarray) -> np.ndarray:
+def _exact_zeros(v_mps: FloatArray, valid: np.ndarray, resolution_mps: float = 0.0) -> np.ndarray:
     """(N,) bool: locked rows whose velocity is exactly (0, 0) while the vehicle moves (the
     median speed of the two locked non-zero rows either side over
-    :data:`ZERO_FILL_MIN_SPEED_MPS`)."""
+    :data:`ZERO_FILL_MIN_SPEED_MPS` plus ``resolution_mps``, the quantum a log rounds the
+    velocities to: there a vehicle under half of it reads 0, and one at its quantum beside;
+    a rounded log's rows all zero are a vehicle that held still, a DVL's a dead stream)."""
     out = valid & (v_mps[:, 0] == 0.0) & (v_mps[:, 1] == 0.0)
     zeros = np.flatnonzero(out)
     moving = np.flatnonzero(valid & ~out)
-    if zeros.size == 0 or moving.size == 0:
-        return out  # none, or every locked row zero: no motion to judge them by
+    if zeros.size == 0:
+        return out
+    if moving.size == 0:  # every locked row zero: no motion to judge them by
+        return out if resolution_mps <= 0.0 else np.zeros_like(out)
     speed = np.hypot(v_mps[moving, 0], v_mps[moving, 1])
     k = np.searchsorted(moving, zeros)
     around = np.stack([np.clip(k + d, 0, moving.size - 1) for d in (-2, -1, 0, 1)], axis=1)
-    out[zeros[np.median(speed[around], axis=1) <= ZERO_FILL_MIN_SPEED_MPS]] = False
+    limit = ZERO_FILL_MIN_SPEED_MPS + resolution_mps
+    out[zeros[np.median(speed[around], axis=1) <= limit]] = False
     return out
 
 
@@ -456,7 +481,7 @@ def gate_dvl(
     if n_repeat:
         t, v, valid, heading = _compact(~repeat, t, v, valid, heading)
     del repeat
-    zero = _exact_zeros(v, valid)
+    zero = _exact_zeros(v, valid, dvl.resolution_mps)
     n_zero = int(zero.sum())
     report.counts["dvl_zero_velocity"] = n_zero
     if n_zero:
@@ -517,7 +542,7 @@ def gate_dvl(
         )
         valid &= ~spike
     del spike, sigma, off
-    out = DvlSeries(t, v, valid, heading, dvl.path)
+    out = DvlSeries(t, v, valid, heading, dvl.path, dvl.resolution_mps)
     _check_dvl_speed(out)
     report.gaps["dvl"] = _warn_gaps(
         dvl.path,

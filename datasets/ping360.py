@@ -4,14 +4,21 @@ simulator's round trip).
 
 The ``.bin`` layout (Ping Viewer's ``FileLink``/``LogSensorStruct``, written through Qt's
 ``QDataStream``, big-endian; ``src/link/filelink.cpp`` and ``src/link/logsensorstruct.cpp`` of
-github.com/bluerobotics/ping-viewer, and its ``examples/decode_sensor_binary_log.py``; read
-at ping-viewer commit 1ed4508 and ``bluerobotics-ping`` 0.2.5):
+github.com/bluerobotics/ping-viewer, and its ``examples/decode_sensor_binary_log.py``; what a
+record holds from ``src/sensor/sensor.cpp`` and ``src/link/seriallink.cpp``, the ranges from
+``src/sensor/ping360.h``/``.cpp``; the framing from ``brping/pingmessage.py``'s ``PingParser``
+of github.com/bluerobotics/ping-python; read at ping-viewer commit 1ed4508, ping-python
+13338a0 and ``bluerobotics-ping`` 0.2.5):
 
 * a header: the string ``"PingViewer sensor log file"``, the log version (int32, 1), five
   strings of Ping Viewer's build (hash, date, tag, OS name, OS version), the sensor family and
   type (two int32);
-* then records, each a time stamp string ``"hh:mm:ss.zzz"`` and the raw bytes of one
-  ping-protocol message as the device sent it.
+* then records, each a time stamp string ``"hh:mm:ss.zzz"`` and the bytes Ping Viewer's link
+  read at once (``FileLink::writeData`` logs what ``Sensor::connectLinkLog`` passes on from the
+  link's ``newData``: ``SerialLink`` emits ``readAll()`` on each ``readyRead``). A record is
+  not a message: one message's bytes may straddle two records, and a record may hold several.
+  The records' bytes are read as one stream and framed into messages across them
+  (:class:`_Framer`); a message takes the stamp of the record that holds its first byte.
 
 A string is a uint32 byte count (``0xFFFFFFFF``: a null string) and its bytes: UTF-16
 big-endian as ``QDataStream`` writes a ``QString``; logs in UTF-8 exist too (the reference
@@ -21,7 +28,9 @@ the header. A message's bytes are a uint32 count and the bytes.
 The time stamp is *not* a time of day: since July 2019 (ping-viewer commit f893d00) it is the
 time elapsed since the log was opened (``QElapsedTimer``) formatted as a time of day; the date
 and time of the start are only in the file name, ``yyyyMMdd-hhmmsszzz.bin``
-(``src/filemanager/filemanager.h``), in the logging computer's local time. Older logs stamped
+(``src/filemanager/filemanager.h``), in the logging computer's local time. Qt 5 formats both
+in the system locale's digits: a Persian-locale Windows writes them in Extended Arabic-Indic
+digits (U+06F0-U+06F9); any script's decimal digits are read (:func:`ascii_digits`). Older logs stamped
 the computer's time of day. :attr:`Ping360Settings.stamps` ``"auto"`` takes the stamps as a
 time of day when the first one is nearer the file name's time of day than zero, else as elapsed
 time. A stamp more than 12 h earlier than the one before has crossed midnight (a day is added,
@@ -58,20 +67,30 @@ The rest of a run:
   :func:`sonarslam.datasets.rosbag.read_roles`; a sonar topic in it is not read) or a CSV
   (:func:`read_nav_csv`).
 
-The head's ``n_bins`` and ``bin_size_m`` are the log's (a ``sonarslam.toml`` that says otherwise
-is an error); its step is the median change of angle between beams and its beam width the
-Ping360's 2 deg (datasheet), unless ``sonarslam.toml`` sets them.
+Segments. The user changes the range (Ping Viewer opens at 2 m; every log is set to 15 or
+60 m in its first seconds: ``Ping360::set_range`` keeps 1200 samples and changes the sample
+period), the gain or the sector during a log. The beams are read as segments
+(:class:`~sonarslam.datasets.records.SonarSegment`): runs of one sample count, sample period,
+``gain_setting`` and, for ``auto_device_data``, sector (start, stop, step), each beam with its
+own bin size (``BeamSeries.bin_size_m``) and its row padded with zeros to the most samples of
+the log. The head's ``n_bins`` is that most, its ``bin_size_m`` the farthest-reaching
+segment's (the Hough grid spans its range; a ``sonarslam.toml`` that says otherwise is an
+error); its step is the median change of angle between beams and its beam width the Ping360's
+2 deg (datasheet), unless ``sonarslam.toml`` sets them. ``sonarslam info`` lists the segments;
+``--span T0,T1`` takes part of a log.
 
 Bad logs: a file that is not a Ping Viewer log, a record whose lengths are not a record's, a
 stamp that is not ``hh:mm:ss.zzz`` or jumps back more than :data:`BACK_JUMP_S` (less than 12 h),
-a change of sample period or sample count (one run, one range), a log without a beam: a
-:class:`DataError` naming the file, the record's index and its byte offset. A message with a
-bad checksum, a broken frame or an id the protocol does not define, a beam whose data does not
-match its sample count or whose angle is not 0-399: dropped and counted (``ping360_*``), with a
-:class:`DataWarning` naming the first; a log cut inside its last record: the record dropped,
-a warning. A change of the head's ``gain_setting`` during the log (the intensities change with
-it; the line extraction's thresholds hold for one gain): counted (``ping360_gain_changes``) and
-a warning naming the first (time, record, from and to).
+a log without a beam: a :class:`DataError` naming the file, the record's index and its byte
+offset. Bytes that form no message are dropped and counted by cause (:class:`_Framer`: a
+message cut short, a wrong checksum, stray bytes, a message the log ends inside; their bytes
+``ping360_dropped_bytes``), and so are whole messages of an id the protocol does not define
+and beams whose data does not match their sample count or whose angle is not 0-399
+(``ping360_*``), each cause with a :class:`DataWarning` naming it and its first record; a log
+cut inside its last record: the record dropped, a warning. A change of the head's
+``gain_setting`` during the log (the intensities change with it; the line extraction's
+thresholds hold for one gain): a segment, counted (``ping360_gain_changes``) and a warning
+naming the first (time, record, from and to).
 """
 
 from __future__ import annotations
@@ -83,8 +102,10 @@ import math
 import re
 import struct
 import tomllib
+import unicodedata
 import warnings
-from collections.abc import Iterator
+from collections import deque
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime, timedelta, timezone
 from pathlib import Path
@@ -102,15 +123,23 @@ from sonarslam.datasets.dataset import (
     read_truth,
 )
 from sonarslam.datasets.errors import DataError, DataWarning
-from sonarslam.datasets.gates import check_heading_sense, navigation_span_s
+from sonarslam.datasets.gates import (
+    SensorReport,
+    check_heading_sense,
+    gate_beams,
+    navigation_span_s,
+)
 from sonarslam.datasets.geodesy import geodetic_to_local_en
 from sonarslam.datasets.logfile import open_regular, read_text
+from sonarslam.datasets.navlog import is_nav_log, navigation, navlog_settings, read_nav_log
 from sonarslam.datasets.records import (
     STEP_TOLERANCE,
     AttitudeSeries,
     BeamSeries,
     DvlSeries,
     GpsSeries,
+    SonarSegment,
+    farthest_segment,
 )
 from sonarslam.datasets.rosbag import TOPIC_PRESETS, is_bag, read_roles
 from sonarslam.datasets.toml import toml_file_line
@@ -128,6 +157,8 @@ __all__ = [
     "Ping360Log",
     "is_ping360_log",
     "sample_spacing_m",
+    "ascii_digits",
+    "STILL_HEAD",
     "log_start_from_name",
     "read_ping360_log",
     "ping360_table",
@@ -156,8 +187,11 @@ GRADIANS_PER_TURN = 400
 #: A beam stamp earlier than the one before by more than this (s, and less than 12 h) is a
 #: clock jump: an error; less is counted (``ping360_out_of_order``) and sorted.
 BACK_JUMP_S = 1.0
-#: Longest message accepted (bytes): a ping-protocol frame of the largest payload.
-MAX_MESSAGE_BYTES = 8 + 0xFFFF + 2
+#: Longest record accepted (bytes): Ping Viewer logs what its link read at once, a fraction of
+#: a second of the head's output; more is a corrupt length.
+MAX_RECORD_BYTES = 1 << 24
+#: Longest record stamp accepted (bytes): ``hh:mm:ss.zzz``, 12 characters of up to 4 bytes.
+MAX_STAMP_BYTES = 48
 #: Beams this far (s) before or after the navigation's span: the file name read in the wrong
 #: time zone (an error saying so).
 ZONE_MISS_S = 900.0
@@ -173,9 +207,10 @@ _NULL = 0xFFFFFFFF
 _U32 = struct.Struct(">I")
 _I32 = struct.Struct(">i")
 _FRAME = struct.Struct("<2sHHBB")
-_STAMP = re.compile(r"(\d\d):([0-5]\d):([0-5]\d)\.(\d\d\d)")
-#: ``yyyyMMdd-hhmmsszzz`` in a file name (``FileManager::_fileName``).
-_NAME = re.compile(r"(\d{8})-(\d{9})")
+#: A record's stamp, its digits made ASCII first (:func:`ascii_digits`).
+_STAMP = re.compile(r"([0-9]{2}):([0-5][0-9]):([0-5][0-9])\.([0-9]{3})")
+#: ``yyyyMMdd-hhmmsszzz`` in a file name (``FileManager::_fileName``), its digits made ASCII.
+_NAME = re.compile(r"([0-9]{8})-([0-9]{9})")
 STAMP_KINDS = ("auto", "elapsed", "time_of_day")
 
 
@@ -185,9 +220,11 @@ class Ping360Settings:
 
     Attributes
     ----------
-    nav : str
-        The navigation: a ROS bag or a CSV (:func:`read_nav_csv`), relative to the
-        ``sonarslam.toml``; "" none (then ``--nav``).
+    nav : tuple of str
+        The navigation: a ROS bag, a CSV (:func:`read_nav_csv`) or the vehicle's own logs
+        (:mod:`sonarslam.datasets.navlog`), one file or several (as ``--nav`` repeated: the
+        DVL from one, the heading from another), each relative to the ``sonarslam.toml``; in
+        TOML a file name or a list of them; () none (then ``--nav``).
     speed_of_sound_mps : float
         Speed of sound in the water (m/s): ``bin_size_m`` follows from it.
     utc_offset_h : float
@@ -201,7 +238,7 @@ class Ping360Settings:
         ``"time_of_day"`` (older logs) or ``"auto"`` (module docstring).
     """
 
-    nav: str = ""
+    nav: tuple[str, ...] = ()
     speed_of_sound_mps: float = bounded(SPEED_OF_SOUND_MPS, 1300.0, 1700.0)
     utc_offset_h: float = bounded(0.0, -14.0, 14.0)
     start: str = ""
@@ -222,12 +259,25 @@ def sample_spacing_m(sample_period_ticks: int, speed_of_sound_mps: float) -> flo
     return speed_of_sound_mps * (sample_period_ticks * TICK_S) / 2.0
 
 
+def ascii_digits(text: str) -> str:
+    """``text`` with every Unicode decimal digit (``str.isdecimal``: the ASCII ones, and those of
+    other scripts, as the Extended Arabic-Indic U+06F0-U+06F9 a Persian-locale Windows writes)
+    made its ASCII digit (``unicodedata.decimal``); every other character kept.
+
+    Qt 5 formats a ``QTime`` or ``QDateTime`` with a format string in the system locale
+    (``QLocale::system()``, with the locale's own digits), and Ping Viewer names its logs and
+    stamps its records so (``FileManager::createFileName``, ``FileLink::writeData``)."""
+    if text.isascii():
+        return text
+    return "".join(str(unicodedata.decimal(c)) if c.isdecimal() else c for c in text)
+
+
 def log_start_from_name(path: str | Path, utc_offset_h: float = 0.0) -> int:
-    """The date and time in a Ping Viewer log's name (``yyyyMMdd-hhmmsszzz``) as Unix ms, the
-    name's clock being UTC + ``utc_offset_h``; a :class:`DataError` naming the file when its
-    name holds none."""
+    """The date and time in a Ping Viewer log's name (``yyyyMMdd-hhmmsszzz``, in any script's
+    decimal digits: :func:`ascii_digits`) as Unix ms, the name's clock being UTC +
+    ``utc_offset_h``; a :class:`DataError` naming the file when its name holds none."""
     p = Path(path)
-    found = _NAME.search(p.stem)
+    found = _NAME.search(ascii_digits(p.stem))
     when = None
     if found is not None:
         try:
@@ -330,21 +380,22 @@ def _header(s: _Stream) -> str:
 class _Record:
     index: int  # 0-based, in the file
     offset: int  # byte offset of the record in the file
-    stamp_ms: int | None  # None: an empty stamp (the end, as Ping Viewer reads it)
-    message: bytes
+    stamp_ms: int  # the stamp, ms since midnight of its (elapsed or local) clock
+    data: bytes  # the bytes the link read at once: parts of messages, whole ones, several
 
 
 def _stamp_ms(s: _Stream, index: int, offset: int, raw: bytes, encoding: str) -> int:
     try:
-        text = raw.decode(encoding)
+        text: str | bytes = raw.decode(encoding)
     except UnicodeDecodeError:
-        text = ""
-    found = _STAMP.fullmatch(text)
+        text = raw
+    found = _STAMP.fullmatch(ascii_digits(text)) if isinstance(text, str) else None
     if found is None:
         raise DataError(
             s.path,
             None,
-            f"record {index} (byte offset {offset}): time stamp {raw[:32]!r} is not hh:mm:ss.zzz",
+            f"record {index} (byte offset {offset}): time stamp {text[:32]!r} is not"
+            " hh:mm:ss.zzz (in decimal digits of any script)",
         )
     h, m, sec, ms = (int(g) for g in found.groups())
     return ((h * 60 + m) * 60 + sec) * 1000 + ms
@@ -352,7 +403,6 @@ def _stamp_ms(s: _Stream, index: int, offset: int, raw: bytes, encoding: str) ->
 
 def _records(s: _Stream, encoding: str, counts: dict[str, int]) -> Iterator[_Record]:
     """The records after the header, one at a time (module docstring for what ends them)."""
-    stamp_bytes = 24 if encoding == "utf-16-be" else 12
     index = 0
     while s.offset < s.size:
         offset = s.offset
@@ -370,25 +420,25 @@ def _records(s: _Stream, encoding: str, counts: dict[str, int]) -> Iterator[_Rec
                 )
                 counts["ping360_unread_bytes"] = left
             return
-        if n is not None and n != stamp_bytes:
+        if n is not None and n > MAX_STAMP_BYTES:
             raise DataError(
                 s.path,
                 None,
-                f"record {index} (byte offset {offset}): a time stamp of {n} bytes, not"
-                f" {stamp_bytes} (a corrupt log)",
+                f"record {index} (byte offset {offset}): a time stamp of {n} bytes, not the"
+                f" {MAX_STAMP_BYTES} at most of hh:mm:ss.zzz (a corrupt log)",
             )
-        stamp = s.take(stamp_bytes) if n is not None else None
+        stamp = s.take(n) if n is not None else None
         raw = s.take(4) if stamp is not None else None
         size = _U32.unpack(raw)[0] if raw is not None else None
-        if size is not None and size != _NULL and size > MAX_MESSAGE_BYTES:
+        if size is not None and size != _NULL and size > MAX_RECORD_BYTES:
             raise DataError(
                 s.path,
                 None,
-                f"record {index} (byte offset {offset}): a message of {size} bytes, more than a"
-                f" ping-protocol message ({MAX_MESSAGE_BYTES}; a corrupt log)",
+                f"record {index} (byte offset {offset}): a record of {size} bytes, more than the"
+                f" {MAX_RECORD_BYTES} Ping Viewer reads from its link at once (a corrupt log)",
             )
-        message = b"" if size == _NULL else (s.take(size) if size is not None else None)
-        if stamp is None or message is None:
+        data = b"" if size == _NULL else (s.take(size) if size is not None else None)
+        if stamp is None or data is None:
             warnings.warn(
                 f"{s.path}: the log ends inside record {index} (byte offset {offset}): the"
                 " record is dropped",
@@ -397,16 +447,158 @@ def _records(s: _Stream, encoding: str, counts: dict[str, int]) -> Iterator[_Rec
             )
             counts["ping360_truncated_records"] = 1
             return
-        yield _Record(index, offset, _stamp_ms(s, index, offset, stamp, encoding), message)
+        yield _Record(index, offset, _stamp_ms(s, index, offset, stamp, encoding), data)
         index += 1
 
 
-@dataclass
+_LENGTH_ID = struct.Struct("<HH")
+_START = b"BR"
+
+
+class _Framer:
+    """The ping-protocol messages of a log's byte stream, fed a record at a time.
+
+    A record holds what Ping Viewer's link read at once (``SerialLink``: ``readAll()`` on
+    ``readyRead``, logged by ``FileLink::writeData``), not a message: one message's bytes may
+    straddle records and a record may hold several. So the records' bytes are one stream,
+    framed as ``brping.PingParser`` frames it: ``"BR"``, payload length, message id, source and
+    destination ids, the payload, and a checksum (the sum of the bytes before it). Each
+    message takes the record that holds its first byte (its stamp is the nearest to the
+    ping). A start whose header no message of the protocol could have (a known id with
+    another length) is not one; a frame whose checksum is wrong is searched again from its
+    second byte, so that a message that begins inside it is found. Bytes that are in no
+    message are dropped, by cause:
+
+    ``cut_messages``
+        a message whose bytes end before its length (the next message begins inside it: the
+        link lost bytes);
+    ``checksum_errors``
+        a whole message whose checksum is wrong (its bytes changed on the way);
+    ``stray_bytes``
+        bytes before any message start (noise, or the end of a message the log began in);
+    ``unfinished_messages``
+        the log ends inside a message.
+    """
+
+    def __init__(self, payloads: dict[int, Any]) -> None:
+        self.payloads = payloads
+        self.buf = bytearray()
+        self.base = 0  # stream position of buf[0]
+        self.pieces: deque[tuple[int, _Record]] = deque()  # stream position of each record
+        # the run of dropped bytes in progress: start, kind ("stray", "frame"), the failed
+        # frame's end, the record of its first byte
+        self.run: tuple[int, str, int, _Record] | None = None
+        #: cause -> [occurrences, bytes]; cause -> the record of the first occurrence
+        self.lost: dict[str, list[int]] = {}
+        self.first: dict[str, _Record] = {}
+
+    def _plausible(self, length: int, msg_id: int) -> bool:
+        spec = self.payloads.get(msg_id)
+        if spec is None:
+            return True  # an id the protocol does not define: its checksum decides
+        fixed = int(spec["payload_length"])
+        return length >= fixed if "data" in spec["field_names"] else length == fixed
+
+    def _record_at(self, position: int) -> _Record:
+        """The record that holds the byte at stream ``position``."""
+        found = self.pieces[0][1]
+        for start, record in self.pieces:
+            if start > position:
+                break
+            found = record
+        return found
+
+    def _count(self, cause: str, n_bytes: int, record: _Record) -> None:
+        entry = self.lost.setdefault(cause, [0, 0])
+        entry[0] += 1
+        entry[1] += n_bytes
+        self.first.setdefault(cause, record)
+
+    def _lose(self, position: int, kind: str, frame_end: int = 0) -> None:
+        """The byte at stream ``position`` is in no message: open a run of dropped bytes
+        there (a failed frame ends a run of stray bytes and opens its own)."""
+        if self.run is not None and not (kind == "frame" and self.run[1] == "stray"):
+            return
+        if self.run is not None:
+            self._close(position)
+        self.run = (position, kind, frame_end, self._record_at(position))
+
+    def _close(self, position: int) -> None:
+        """The run of dropped bytes ends at stream ``position`` (a message, or the end)."""
+        if self.run is None:
+            return
+        start, kind, frame_end, record = self.run
+        if kind == "stray":
+            cause = "stray_bytes"
+        else:
+            cause = "cut_messages" if position < frame_end else "checksum_errors"
+        self._count(cause, position - start, record)
+        self.run = None
+
+    def feed(self, record: _Record) -> list[tuple[_Record, bytes]]:
+        """The messages that ``record``'s bytes complete, each with the record of its first
+        byte."""
+        buf = self.buf
+        if record.data:
+            self.pieces.append((self.base + len(buf), record))
+            buf += record.data
+        out: list[tuple[_Record, bytes]] = []
+        pos = 0
+        while len(buf) - pos >= 2:
+            if buf[pos] != _START[0] or buf[pos + 1] != _START[1]:
+                j = buf.find(_START, pos + 1)
+                if j < 0:
+                    j = len(buf) - 1 if buf[-1] == _START[0] else len(buf)
+                self._lose(self.base + pos, "stray")
+                pos = j
+                continue
+            if len(buf) - pos < 8:
+                break
+            length, msg_id = _LENGTH_ID.unpack_from(buf, pos + 2)
+            if not self._plausible(length, msg_id):
+                self._lose(self.base + pos, "stray")
+                pos += 1
+                continue
+            end = pos + 10 + length
+            if len(buf) < end:
+                break
+            if sum(buf[pos : end - 2]) & 0xFFFF == buf[end - 2] | buf[end - 1] << 8:
+                self._close(self.base + pos)
+                out.append((self._record_at(self.base + pos), bytes(buf[pos:end])))
+                pos = end
+            else:
+                self._lose(self.base + pos, "frame", self.base + end)
+                pos += 1
+        del buf[:pos]
+        self.base += pos
+        while len(self.pieces) > 1 and self.pieces[1][0] <= self.base:
+            self.pieces.popleft()
+        return out
+
+    def finish(self) -> None:
+        """The end of the log: the bytes left are dropped (an open run, a message the log
+        ends inside, stray bytes)."""
+        end = self.base + len(self.buf)
+        if self.run is not None:
+            self._close(end)
+        elif self.buf:
+            record = self._record_at(self.base)
+            head = bytes(self.buf[:8])
+            starts = head.startswith(_START) or head == _START[:1]
+            if starts and len(head) == 8:
+                starts = self._plausible(*_LENGTH_ID.unpack_from(head, 2))
+            self._count("unfinished_messages" if starts else "stray_bytes", len(self.buf), record)
+        self.buf.clear()
+        self.base = end
+
+
+@dataclass(frozen=True)
 class _Beam:
     angle_grad: int
     sample_period: int
     data: bytes
     gain_setting: int
+    sector: tuple[int, int, int] | None  # auto_device_data's start, stop angles and step
 
 
 def _payloads() -> dict[int, Any]:
@@ -415,26 +607,19 @@ def _payloads() -> dict[int, Any]:
     return definitions.payload_dict_all  # type: ignore[no-any-return]
 
 
-def _decode(record: _Record, payloads: dict[int, Any]) -> tuple[str, _Beam | None]:
-    """What a record's message is (``"beam"``, ``"other"``, or the fault counted) and its
-    beam."""
+def _decode(frame: bytes, payloads: dict[int, Any]) -> tuple[str, _Beam | None]:
+    """What a message (a whole frame whose checksum holds) is (``"beam"``, ``"other"``, or the
+    fault counted) and its beam."""
     from brping import PingMessage  # lazy: only .bin logs load brping
 
-    msg = record.message
-    if len(msg) < 10:
-        return "bad_messages", None
-    start, length, msg_id, _, _ = _FRAME.unpack_from(msg)
-    if start != b"BR" or length + 10 != len(msg):
-        return "bad_messages", None
-    if (sum(msg[:-2]) & 0xFFFF) != int.from_bytes(msg[-2:], "little"):
-        return "checksum_errors", None
+    msg_id = _LENGTH_ID.unpack_from(frame, 2)[1]
     if msg_id not in payloads:
         return "unknown_messages", None
     if msg_id not in (DEVICE_DATA, AUTO_DEVICE_DATA):
         return "other_messages", None
-    if length < payloads[msg_id]["payload_length"]:
+    if len(frame) - 10 < payloads[msg_id]["payload_length"]:
         return "bad_messages", None
-    m = PingMessage(msg_data=msg)
+    m = PingMessage(msg_data=frame)
     data = bytes(m.data)
     if m.data_length != len(data) or m.number_of_samples != len(data):
         return "bad_messages", None
@@ -442,7 +627,33 @@ def _decode(record: _Record, payloads: dict[int, Any]) -> tuple[str, _Beam | Non
         return "other_messages", None  # a reply without a transmission
     if not 0 <= m.angle < GRADIANS_PER_TURN or m.sample_period < 1:
         return "bad_messages", None
-    return "beam", _Beam(int(m.angle), int(m.sample_period), data, int(m.gain_setting))
+    sector = None
+    if msg_id == AUTO_DEVICE_DATA:
+        sector = (int(m.start_angle), int(m.stop_angle), int(m.num_steps))
+    return "beam", _Beam(int(m.angle), int(m.sample_period), data, int(m.gain_setting), sector)
+
+
+class _SampleRows:
+    """The beams' samples, a row each, in an array grown as needed (by half again when full,
+    and widened with zeros for a beam of more samples than any before)."""
+
+    def __init__(self, rows: int, width: int) -> None:
+        self.data = np.zeros((max(rows, 1), width), np.uint8)
+        self.n = 0
+
+    def append(self, samples: bytes) -> None:
+        rows, width = self.data.shape
+        if self.n == rows or len(samples) > width:
+            grown = np.zeros(
+                (rows + rows // 2 + 1 if self.n == rows else rows, max(width, len(samples))),
+                np.uint8,
+            )
+            grown[: self.n, :width] = self.data[: self.n]
+            self.data = grown
+        row = self.data[self.n]
+        row[: len(samples)] = np.frombuffer(samples, dtype=np.uint8)
+        row[len(samples) :] = 0
+        self.n += 1
 
 
 @dataclass(frozen=True)
@@ -453,11 +664,17 @@ class Ping360Log:
     ----------
     beams : BeamSeries
         Times (Unix s), transducer angles (rad, ``gradians * pi / 200``), intensities
-        ``(N, n_samples)`` uint8, nearest sample first; in time order.
+        ``(N, n_bins)`` uint8, nearest sample first, a beam of fewer samples padded with
+        zeros; in time order. With segments of several bin sizes, each beam's own
+        (``beams.bin_size_m``), else None.
+    segments : tuple of SonarSegment
+        The stretches of one range, gain and sector, in time order (module docstring).
+    n_bins : int
+        The most samples of a beam.
     sample_period_ticks : int
-        ``sample_period`` of every beam (25 ns ticks).
+        ``sample_period`` of the segment that reaches farthest (25 ns ticks).
     bin_size_m : float
-        :func:`sample_spacing_m` at the settings' speed of sound (m).
+        :func:`sample_spacing_m` of it at the settings' speed of sound (m): the head's.
     step_grad : int
         Median change of angle between consecutive beams (gradians); 0 with one beam.
     start_ms : int
@@ -468,12 +685,15 @@ class Ping360Log:
     records : int
         Records read.
     counts : dict
-        ``ping360_*`` counts: other messages, faults dropped, gain changes (module docstring).
+        ``ping360_*`` counts: other messages, faults dropped and their bytes, gain changes
+        (module docstring).
     encoding : str
         The log's strings: ``"utf-16-be"`` or ``"utf-8"``.
     """
 
     beams: BeamSeries
+    segments: tuple[SonarSegment, ...]
+    n_bins: int
     sample_period_ticks: int
     bin_size_m: float
     step_grad: int
@@ -484,12 +704,30 @@ class Ping360Log:
     encoding: str
 
 
+#: The counts of a log (``ping360_*``): messages, faults, and the bytes dropped.
+_COUNTS = (
+    "other_messages",
+    "bad_messages",
+    "unknown_messages",
+    "checksum_errors",
+    "cut_messages",
+    "unfinished_messages",
+    "stray_bytes",
+    "dropped_bytes",
+    "out_of_order",
+    "midnight_wraps",
+    "truncated_records",
+    "gain_changes",
+)
+
+
 def read_ping360_log(
     path: str | Path, settings: Ping360Settings | None = None, where: Path | None = None
 ) -> Ping360Log:
     """Read the Ping360 beams of a Ping Viewer ``.bin`` log, streamed: the file is read a
-    record at a time into one array of beams sized from the file (module docstring for the
-    layout, the times and the faults).
+    record at a time, its bytes framed into messages across records (:class:`_Framer`), the
+    beams into one array sized from the file (module docstring for the layout, the times, the
+    segments and the faults).
 
     Parameters
     ----------
@@ -507,30 +745,19 @@ def read_ping360_log(
     p = Path(path)
     settings = settings or Ping360Settings()
     payloads = _payloads()
-    counts = {
-        f"ping360_{k}": 0
-        for k in (
-            "other_messages",
-            "bad_messages",
-            "checksum_errors",
-            "unknown_messages",
-            "out_of_order",
-            "midnight_wraps",
-            "truncated_records",
-            "gain_changes",
-        )
-    }
+    counts = {f"ping360_{k}": 0 for k in _COUNTS}
     first_fault: dict[str, _Record] = {}
+    framer = _Framer(payloads)
     with open_regular(p) as fh:
         size = fh.seek(0, io.SEEK_END)
         fh.seek(0)
         s = _Stream(fh, p, size)
         encoding = _header(s)
-        stamp_bytes = 24 if encoding == "utf-16-be" else 12
-        data: np.ndarray | None = None
+        rows: _SampleRows | None = None
         grads = array.array("H")
         stamps = array.array("q")
-        n_bins, period, n = 0, 0, 0
+        setting_of = array.array("I")  # each beam's index in settings_seen
+        settings_seen: dict[tuple[int, int, int, tuple[int, int, int] | None], int] = {}
         records = 0
         wraps, last_ms = 0, -1
         first_stamp: int | None = None
@@ -538,61 +765,59 @@ def read_ping360_log(
         first_gain: tuple[int, int, int, int] | None = None  # beam, record, from, to
         for record in _records(s, encoding, counts):
             records += 1
-            assert record.stamp_ms is not None
             if first_stamp is None:
                 first_stamp = record.stamp_ms
-            kind, beam = _decode(record, payloads)
-            if beam is None:
-                counts[f"ping360_{kind}"] += 1
-                first_fault.setdefault(kind, record)
-                continue
-            if data is None:
-                n_bins, period = len(beam.data), beam.sample_period
-                # every record from here on a beam at most: the array holds them all, and
-                # beams are nearly all of a Ping360 log
-                smallest = 4 + stamp_bytes + 4 + 10 + 14 + n_bins
-                data = np.empty((max((size - record.offset) // smallest, 1), n_bins), np.uint8)
-            elif len(beam.data) != n_bins or beam.sample_period != period:
-                raise DataError(
-                    p,
-                    None,
-                    f"record {record.index} (byte offset {record.offset}): a beam of"
-                    f" {len(beam.data)} samples every {beam.sample_period} ticks after"
-                    f" {n_bins} every {period} (the range changed: one run a range; cut the"
-                    " log there)",
-                )
-            t_ms = record.stamp_ms + wraps * _DAY_MS
-            if last_ms >= 0 and t_ms < last_ms:
-                if last_ms - t_ms > _DAY_MS // 2:
-                    wraps += 1
-                    t_ms += _DAY_MS
-                    counts["ping360_midnight_wraps"] += 1
-                elif last_ms - t_ms > BACK_JUMP_S * 1000:
-                    raise DataError(
-                        p,
-                        None,
-                        f"record {record.index} (byte offset {record.offset}): its stamp is"
-                        f" {(last_ms - t_ms) / 1000:.3f} s earlier than the beam before (a"
-                        f" clock jump beyond {BACK_JUMP_S:g} s)",
-                    )
-                else:
-                    counts["ping360_out_of_order"] += 1
-            last_ms = max(last_ms, t_ms)
-            if gain >= 0 and beam.gain_setting != gain:
-                counts["ping360_gain_changes"] += 1
-                if first_gain is None:
-                    first_gain = (n, record.index, gain, beam.gain_setting)
-            gain = beam.gain_setting
-            data[n] = np.frombuffer(beam.data, dtype=np.uint8)
-            grads.append(beam.angle_grad)
-            stamps.append(t_ms)
-            n += 1
-    if data is None or first_stamp is None:
+            for at, frame in framer.feed(record):
+                kind, beam = _decode(frame, payloads)
+                if beam is None:
+                    counts[f"ping360_{kind}"] += 1
+                    first_fault.setdefault(kind, at)
+                    continue
+                if rows is None:
+                    # beams are nearly all of a Ping360 log: as many rows as messages of this
+                    # beam's size the rest of the file could hold (grown if a segment of
+                    # fewer samples needs more)
+                    smallest = 10 + 14 + 2 + len(beam.data)
+                    rows = _SampleRows((size - at.offset) // smallest, len(beam.data))
+                t_ms = at.stamp_ms + wraps * _DAY_MS
+                if last_ms >= 0 and t_ms < last_ms:
+                    if last_ms - t_ms > _DAY_MS // 2:
+                        wraps += 1
+                        t_ms += _DAY_MS
+                        counts["ping360_midnight_wraps"] += 1
+                    elif last_ms - t_ms > BACK_JUMP_S * 1000:
+                        raise DataError(
+                            p,
+                            None,
+                            f"record {at.index} (byte offset {at.offset}): its stamp is"
+                            f" {(last_ms - t_ms) / 1000:.3f} s earlier than the beam before (a"
+                            f" clock jump beyond {BACK_JUMP_S:g} s)",
+                        )
+                    else:
+                        counts["ping360_out_of_order"] += 1
+                last_ms = max(last_ms, t_ms)
+                if gain >= 0 and beam.gain_setting != gain:
+                    counts["ping360_gain_changes"] += 1
+                    if first_gain is None:
+                        first_gain = (rows.n, at.index, gain, beam.gain_setting)
+                gain = beam.gain_setting
+                key = (len(beam.data), beam.sample_period, beam.gain_setting, beam.sector)
+                if key not in settings_seen:
+                    settings_seen[key] = len(settings_seen)
+                setting_of.append(settings_seen[key])
+                rows.append(beam.data)
+                grads.append(beam.angle_grad)
+                stamps.append(t_ms)
+        framer.finish()
+    for cause, (occurrences, n_bytes) in framer.lost.items():
+        counts[f"ping360_{cause}"] = n_bytes if cause == "stray_bytes" else occurrences
+        counts["ping360_dropped_bytes"] += n_bytes
+    if rows is None or first_stamp is None:
         found = ", ".join(f"{k} {v}" for k, v in counts.items() if v) or "no record"
         raise DataError(
             p, None, f"no Ping360 beam (device_data 2300, auto_device_data 2301): {found}"
         )
-    _warn_faults(p, counts, first_fault)
+    _warn_faults(p, counts, first_fault, framer)
     start_ms = _start_ms(p, settings, where or p)
     kind = settings.stamps
     if kind == "auto":
@@ -603,13 +828,28 @@ def read_ping360_log(
     if kind == "time_of_day":
         local_ms = start_ms + int(round(settings.utc_offset_h * 3_600_000))
         base_ms = start_ms - local_ms % _DAY_MS  # the start's (local) midnight
+    n = rows.n
     unix_ms = np.frombuffer(stamps, dtype=np.int64) + base_ms
     order = np.argsort(unix_ms, kind="stable")
+    if not counts["ping360_out_of_order"]:
+        order = np.arange(n)
+    keys = list(settings_seen)
+    setting = np.frombuffer(setting_of, dtype=np.uint32)[order]
+    bin_m = np.array([sample_spacing_m(k[1], settings.speed_of_sound_mps) for k in keys])
+    t_s = (unix_ms[order] / 1000.0).astype(np.float64)
     beams = BeamSeries(
-        (unix_ms[order] / 1000.0).astype(np.float64),
+        t_s,
         (np.frombuffer(grads, dtype=np.uint16)[order] * (math.pi / 200.0)).astype(np.float64),
-        data[:n][order] if counts["ping360_out_of_order"] else data[:n],
+        rows.data[:n][order] if counts["ping360_out_of_order"] else rows.data[:n],
         False,
+        bin_m[setting] if np.unique(bin_m[setting]).size > 1 else None,
+    )
+    segments = _segments(t_s, setting, keys, bin_m)
+    farthest = farthest_segment(segments)
+    far = next(
+        k
+        for k, key in enumerate(keys)
+        if (key[0], bin_m[k]) == (farthest.n_bins, farthest.bin_size_m)
     )
     if counts["ping360_out_of_order"]:
         warnings.warn(
@@ -625,15 +865,17 @@ def read_ping360_log(
             f" during the log, the first at t={unix_ms[i] / 1000.0:.3f} s (record {index}):"
             f" {_gain_name(before)} -> {_gain_name(after)}; the echoes' intensities change"
             " with it while the line extraction's thresholds ([features]) hold for one gain, so"
-            " lines may vanish or multiply across the change: keep one gain for a run, or cut"
-            " the log there",
+            " lines may vanish or multiply across the change: the log is read as segments"
+            " (sonarslam info lists them); take one gain's with --span T0,T1",
             DataWarning,
             stacklevel=2,
         )
     return Ping360Log(
         beams=beams,
-        sample_period_ticks=period,
-        bin_size_m=sample_spacing_m(period, settings.speed_of_sound_mps),
+        segments=segments,
+        n_bins=int(rows.data.shape[1]),
+        sample_period_ticks=keys[far][1],
+        bin_size_m=float(bin_m[far]),
         step_grad=_step_grad(np.frombuffer(grads, dtype=np.uint16)),
         start_ms=start_ms,
         stamps=kind,
@@ -641,6 +883,42 @@ def read_ping360_log(
         counts=counts,
         encoding=encoding,
     )
+
+
+def _said(key: tuple[int, int, int, tuple[int, int, int] | None]) -> str:
+    """A beam setting in words: its sample period, gain and (auto_device_data) sector."""
+    n, period, gain, sector = key
+    words = f"sample period {period} ticks, gain {_gain_name(gain)}"
+    if sector is not None:
+        start, stop, step = sector
+        words += f", scanning {start}-{stop} gradians by {step}"
+    return words
+
+
+def _segments(
+    t_s: np.ndarray,
+    setting: np.ndarray,
+    keys: list[tuple[int, int, int, tuple[int, int, int] | None]],
+    bin_m: np.ndarray,
+) -> tuple[SonarSegment, ...]:
+    """The runs of beams of one setting, in time order."""
+    cuts = np.flatnonzero(np.diff(setting.astype(np.int64))) + 1
+    starts = np.r_[0, cuts]
+    ends = np.r_[cuts, setting.size]
+    out = []
+    for a, b in zip(starts, ends, strict=True):
+        k = int(setting[a])
+        out.append(
+            SonarSegment(
+                t0_s=float(t_s[a]),
+                t1_s=float(t_s[b - 1]),
+                beams=int(b - a),
+                n_bins=keys[k][0],
+                bin_size_m=float(bin_m[k]),
+                setting=_said(keys[k]),
+            )
+        )
+    return tuple(out)
 
 
 #: The Ping360's ``gain_setting`` values (ping-protocol ``device_data``).
@@ -661,25 +939,36 @@ def _step_grad(grads: np.ndarray) -> int:
     return int(np.median(d)) if d.size else 0
 
 
+#: The faults of a log in words (``ping360_<fault>``): what was dropped, and why.
 _FAULTS = {
-    "bad_messages": "a message that is not a well-formed Ping360 message (frame, lengths,"
-    " samples or angle)",
-    "checksum_errors": "a message whose checksum is wrong",
-    "unknown_messages": "a message id the ping protocol does not define",
+    "cut_messages": "message(s) cut short, dropped: their bytes end before their length (the"
+    " next message begins inside them: the link lost bytes)",
+    "checksum_errors": "message(s) with a wrong checksum, dropped (their bytes changed on the"
+    " link)",
+    "unfinished_messages": "message the log ends inside, dropped",
+    "stray_bytes": "byte(s) outside any message, dropped (noise on the link, or the end of a"
+    " message the log began in)",
+    "bad_messages": "Ping360 beam message(s) whose fields disagree (sample count, data length"
+    " or angle), dropped",
+    "unknown_messages": "message(s) of an id the ping protocol does not define, dropped",
 }
 
 
-def _warn_faults(p: Path, counts: dict[str, int], first: dict[str, _Record]) -> None:
+def _warn_faults(
+    p: Path, counts: dict[str, int], first: dict[str, _Record], framer: _Framer
+) -> None:
     for kind, what in _FAULTS.items():
         n = counts[f"ping360_{kind}"]
-        if n:
-            r = first[kind]
-            warnings.warn(
-                f"{p}: {n} record(s) dropped, each {what}; the first is record {r.index} (byte"
-                f" offset {r.offset})",
-                DataWarning,
-                stacklevel=3,
-            )
+        if not n:
+            continue
+        r = first.get(kind) or framer.first[kind]
+        lost = framer.lost.get(kind)
+        size = f" ({lost[1]} bytes)" if lost is not None and kind != "stray_bytes" else ""
+        warnings.warn(
+            f"{p}: {n} {what}{size}; the first in record {r.index} (byte offset {r.offset})",
+            DataWarning,
+            stacklevel=3,
+        )
 
 
 # -- the navigation ----------------------------------------------------------------------------
@@ -869,23 +1158,49 @@ def _bag_navigation(
     return read.dvl, read.attitude, read.gps, counts
 
 
+def _nav_paths(
+    nav: str | Path | Sequence[str | Path] | None, settings: Ping360Settings
+) -> tuple[Path, ...]:
+    """The navigation files: ``--nav`` (one or several), else ``[ping360] nav``."""
+    if nav is None:
+        return tuple(Path(n) for n in settings.nav)
+    if isinstance(nav, (str, Path)):
+        return (Path(nav),)
+    return tuple(Path(n) for n in nav)
+
+
 def _navigation(
-    nav: Path, topics_file: str | Path | None
-) -> tuple[DvlSeries, AttitudeSeries, GpsSeries | None, dict[str, int]]:
-    if is_bag(nav):
-        return _bag_navigation(nav, topics_file)
-    if nav.suffix.lower() == ".csv":
-        if topics_file is not None:
-            raise DataError(Path(topics_file), None, "--topics is for a navigation bag, not a CSV")
-        dvl, att, gps = read_nav_csv(nav)
-        return dvl, att, gps, {}
-    if not nav.exists():
-        raise DataError(nav, None, "the Ping360's navigation: no such file or bag")
-    raise DataError(
-        nav,
-        None,
-        "the Ping360's navigation must be a ROS bag (.bag, .mcap, a bag directory) or a .csv",
-    )
+    navs: tuple[Path, ...],
+    topics_file: str | Path | None,
+    config: DatasetConfig,
+    tomls: tuple[Path | str | None, ...],
+) -> tuple[DvlSeries, AttitudeSeries, GpsSeries | None, dict[str, int], DatasetConfig, str]:
+    """The DVL, AHRS and GPS of the navigation, its counts, the configuration (a BlueROV2's
+    log may set the DVL's frame and noise: :func:`sonarslam.datasets.navlog.navigation`) and
+    what was taken from which file ("" for a bag or a navigation CSV)."""
+    nav = navs[0]
+    if len(navs) == 1 and not is_nav_log(nav):
+        if is_bag(nav):
+            return (*_bag_navigation(nav, topics_file), config, "")
+        if nav.suffix.lower() == ".csv":
+            if topics_file is not None:
+                raise DataError(
+                    Path(topics_file), None, "--topics is for a navigation bag, not a CSV"
+                )
+            dvl, att, gps = read_nav_csv(nav)
+            return dvl, att, gps, {}, config, ""
+        if not nav.exists():
+            raise DataError(nav, None, "the Ping360's navigation: no such file or bag")
+        raise DataError(
+            nav,
+            None,
+            "the Ping360's navigation must be a ROS bag (.bag, .mcap, a bag directory), a .csv,"
+            " or a BlueROV2's own log (.tlog, ArduSub dataflash .bin, DVL A50 JSON,"
+            " QGroundControl CSV)",
+        )
+    settings = navlog_settings(*tomls)
+    found = navigation([read_nav_log(n, settings) for n in navs], config, settings)
+    return found.dvl, found.attitude, found.gps, found.counts, found.config, found.said
 
 
 # -- the dataset ---------------------------------------------------------------------------------
@@ -903,6 +1218,20 @@ def _table(path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
     return ping, sonar if isinstance(sonar, dict) else {}
 
 
+def _nav_names(value: Any, path: Path) -> list[str]:
+    """``[ping360] nav`` as a list of file names: a string ("" none) or a list of strings; a
+    :class:`DataError` naming ``path`` for anything else."""
+    names = [value] if isinstance(value, str) else value
+    if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
+        raise DataError(
+            path,
+            None,
+            f"[ping360] nav must be a file name or a list of file names (as --nav repeated:"
+            f' nav = ["dvl.json", "attitude.tlog"]), got {value!r}',
+        )
+    return [n for n in names if n]
+
+
 def _settings(table: dict[str, Any], path: Path, base: Ping360Settings) -> Ping360Settings:
     known = {"nav", "speed_of_sound_mps", "utc_offset_h", "start", "stamps"}
     unknown = sorted(set(table) - known)
@@ -911,17 +1240,19 @@ def _settings(table: dict[str, Any], path: Path, base: Ping360Settings) -> Ping3
             path, None, f"unknown key(s) {unknown} in [ping360]; allowed: {sorted(known)}"
         )
     values = dict(table)
-    for key in ("nav", "start", "stamps"):
+    for key in ("start", "stamps"):
         if key in values and not isinstance(values[key], str):
             raise DataError(path, None, f"[ping360] {key} must be a string, got {values[key]!r}")
+    if "nav" in values:
+        values["nav"] = tuple(
+            str((path.parent / n).resolve()) for n in _nav_names(values["nav"], path)
+        )
     for key in ("speed_of_sound_mps", "utc_offset_h"):
         v = values.get(key)
         if key in values and (isinstance(v, bool) or not isinstance(v, (int, float))):
             raise DataError(path, None, f"[ping360] {key} must be a number, got {v!r}")
         if key in values:
             values[key] = float(v)  # type: ignore[arg-type]
-    if values.get("nav"):
-        values["nav"] = str((path.parent / values["nav"]).resolve())
     try:
         return replace(base, **values)
     except (SettingError, ValueError) as exc:
@@ -940,7 +1271,7 @@ def open_ping360(
     path: str | Path,
     config_override: str | Path | None = None,
     topics_file: str | Path | None = None,
-    nav: str | Path | None = None,
+    nav: str | Path | Sequence[str | Path] | None = None,
 ) -> Dataset:
     """A Ping Viewer ``.bin`` log and its navigation as a gated :class:`Dataset`.
 
@@ -952,14 +1283,20 @@ def open_ping360(
         A ``sonarslam.toml``-format file over it (its ``[ping360]`` keys too).
     topics_file : str or Path, optional
         The navigation bag's roles (``[topics]`` dvl, imu, gps).
-    nav : str or Path, optional
-        The navigation (a ROS bag or a CSV), over ``[ping360] nav``.
+    nav : str or Path, or a sequence of them, optional
+        The navigation (a ROS bag or a CSV; or a BlueROV2's own logs, one or several:
+        :mod:`sonarslam.datasets.navlog`), over ``[ping360] nav``.
 
     Raises
     ------
     DataError
-        No navigation given, and every fault of :func:`read_ping360_log`, :func:`read_nav_csv`
-        and the bag reader, naming the file.
+        Every fault of :func:`read_ping360_log`, :func:`read_nav_csv` and the bag reader,
+        naming the file.
+
+    Notes
+    -----
+    Without any navigation (no ``nav``, no ``[ping360] nav``) the log is read as a still head
+    (:attr:`Dataset.still`, :data:`STILL_HEAD`), said by a :class:`DataWarning`.
     """
     p = Path(path)
     beside = p.parent / "sonarslam.toml"
@@ -977,14 +1314,7 @@ def open_ping360(
             head_files.update(
                 {k: source for k in ("n_bins", "bin_size_m", "step_deg") if k in sonar}
             )
-    nav_path = Path(nav) if nav is not None else Path(settings.nav) if settings.nav else None
-    if nav_path is None:
-        raise DataError(
-            p,
-            None,
-            "a Ping360 log needs its navigation (DVL and AHRS): give --nav BAG_OR_CSV, or"
-            ' [ping360] nav = "nav.bag" in sonarslam.toml beside it (docs/data.md)',
-        )
+    nav_paths = _nav_paths(nav, settings)
     if toml is not None:
         config, calibration = load_dataset_config(toml), str(toml)
     else:
@@ -995,7 +1325,7 @@ def open_ping360(
         config = load_dataset_config(config_override, base=config)
         calibration = f"{calibration}; over it {config_override}"
     log = read_ping360_log(p, settings, where)
-    n_bins = log.beams.intensities.shape[1]
+    n_bins = log.n_bins
     wrong = [
         key
         for key, differs in (
@@ -1011,8 +1341,10 @@ def open_ping360(
             toml_file_line(head_file, "sonar", (wrong[-1],)),
             f"[sonar] n_bins {config.sonar.n_bins}, bin_size_m {config.sonar.bin_size_m:g}: the"
             f" log's beams have {n_bins} samples of {log.bin_size_m:g} m at"
-            f" {settings.speed_of_sound_mps:g} m/s (leave them out: the log's win; the speed of"
-            " sound is [ping360] speed_of_sound_mps)",
+            f" {settings.speed_of_sound_mps:g} m/s"
+            + (" (its farthest-reaching segment)" if len(log.segments) > 1 else "")
+            + " (leave them out: the log's win; the speed of sound is [ping360]"
+            " speed_of_sound_mps)",
         )
     head = replace(config.sonar, n_bins=n_bins, bin_size_m=log.bin_size_m)
     if log.step_grad > 0:
@@ -1033,7 +1365,16 @@ def open_ping360(
     beams = log.beams
     if config.sonar_time_offset_s:
         beams = beams.shifted(config.sonar_time_offset_s)
-    dvl, att, gps, nav_counts = _navigation(nav_path, topics_file)
+    offset = config.sonar_time_offset_s
+    segments = tuple(replace(g, t0_s=g.t0_s + offset, t1_s=g.t1_s + offset) for g in log.segments)
+    if not nav_paths:
+        if topics_file is not None:
+            raise DataError(Path(topics_file), None, "--topics is for a navigation bag: none given")
+        return _still_dataset(p, config, calibration, beams, log, segments)
+    dvl, att, gps, nav_counts, config, said = _navigation(
+        nav_paths, topics_file, config, (toml, config_override)
+    )
+    calibration = f"{calibration}; {said}" if said else calibration
     _check_clocks(p, beams, dvl, att, settings)
     truth = p.parent / "truth.json"
     d = gated_dataset(
@@ -1050,7 +1391,50 @@ def open_ping360(
     )
     d.report.counts.update(log.counts)
     d.report.counts.update(nav_counts)
-    return replace(d, inputs=(nav_path, *_topics_path(topics_file)))
+    return replace(d, inputs=(*nav_paths, *_topics_path(topics_file)), segments=segments)
+
+
+#: What a log without navigation is read as, said by a warning and wherever a run starts.
+STILL_HEAD = (
+    "no navigation (no --nav, no [ping360] nav): read as a still head at --start X,Y,YAW"
+    " (default the origin, heading East: YAW 0); dead reckoning (--backend dr, --poses dr) is"
+    " that pose, and the EKF and iSAM2 need a navigation"
+)
+
+
+def _still_dataset(
+    p: Path,
+    config: DatasetConfig,
+    calibration: str,
+    beams: BeamSeries,
+    log: Ping360Log,
+    segments: tuple[SonarSegment, ...],
+) -> Dataset:
+    """A log without navigation as a still head (:attr:`Dataset.still`): the beams gated
+    (their gaps), a DVL and an AHRS of two rows without bottom lock that span them and measure
+    nothing."""
+    warnings.warn(f"{p}: {STILL_HEAD}", DataWarning, stacklevel=4)
+    t0 = float(beams.t_s[0])
+    t1 = max(float(beams.t_s[-1]), t0 + 1e-3)
+    t = np.array([t0, t1])
+    report = SensorReport()
+    gate_beams(beams.t_s, config.gates, report, p, (t0, t1))
+    report.counts.update(log.counts)
+    truth = p.parent / "truth.json"
+    return Dataset(
+        name=p.stem,
+        root=p,
+        config=config,
+        beams=beams,
+        dvl=DvlSeries(t, np.zeros((2, 2)), np.zeros(2, dtype=bool), np.full(2, np.nan)),
+        attitude=AttitudeSeries(t.copy(), np.zeros(2), np.zeros(2)),
+        gps=None,
+        truth=read_truth(truth) if truth.is_file() else None,
+        report=report,
+        calibration=calibration,
+        segments=segments,
+        still=True,
+    )
 
 
 def _topics_path(topics_file: str | Path | None) -> tuple[Path, ...]:
@@ -1110,35 +1494,51 @@ def _check_clocks(
     )
 
 
-def ping360_table(log: str | Path, target: str | Path, nav: str | Path | None = None) -> str:
+def ping360_table(
+    log: str | Path,
+    target: str | Path,
+    nav: str | Path | Sequence[str | Path] | None = None,
+) -> str:
     """The ``[ping360]`` table of a ``.bin``'s ``sonarslam.toml`` as TOML text, for a
     ``sonarslam.toml`` written to ``target`` (``sonarslam calibrate --write``): its ``nav``
-    (``nav`` when given) relative to ``target``'s folder when it lies under it, else absolute;
-    "" when there is nothing to keep."""
+    (``nav`` when given: one file or several, as ``--nav`` repeated) relative to ``target``'s
+    folder when it lies under it, else absolute, one file as a string, several as a list; ""
+    when there is nothing to keep."""
     p = Path(log)
     toml = p.parent / "sonarslam.toml"
     table = dict(_table(toml)[0]) if toml.is_file() else {}
-    if table.get("nav"):
-        table["nav"] = str((toml.parent / table["nav"]).resolve())
+    paths = [toml.parent / n for n in _nav_names(table.pop("nav", ""), toml)]
     if nav is not None:
-        table["nav"] = str(Path(nav).resolve())
+        paths = [Path(nav)] if isinstance(nav, (str, Path)) else [Path(n) for n in nav]
+    folder = Path(target).resolve().parent
+    names = []
+    for n in (q.resolve() for q in paths):
+        names.append(n.relative_to(folder).as_posix() if n.is_relative_to(folder) else str(n))
+    if names:
+        table = {"nav": names[0] if len(names) == 1 else names, **table}
     if not table:
         return ""
-    if "nav" in table:
-        folder = Path(target).resolve().parent
-        nav_path = Path(table["nav"])
-        if nav_path.is_relative_to(folder):
-            table["nav"] = nav_path.relative_to(folder).as_posix()
     return "\n" + tomli_w.dumps({"ping360": table})
 
 
 # -- writing (the simulator's round trip) ---------------------------------------------------------
 
 
-def log_file_name(start_ms: int) -> str:
-    """Ping Viewer's name of a log started at ``start_ms`` (Unix ms, named in UTC)."""
+def _in_digits(text: str, zero: str) -> str:
+    """``text`` with its ASCII digits written in the script whose zero is ``zero``
+    (``"0"``: as they are; ``"\\u06f0"``: Extended Arabic-Indic, a Persian-locale Windows)."""
+    if zero == "0":
+        return text
+    if not (len(zero) == 1 and zero.isdecimal() and unicodedata.decimal(zero) == 0):
+        raise ValueError(f"{zero!r} is not the zero digit of a script")
+    return "".join(chr(ord(zero) + int(c)) if c.isascii() and c.isdigit() else c for c in text)
+
+
+def log_file_name(start_ms: int, zero: str = "0") -> str:
+    """Ping Viewer's name of a log started at ``start_ms`` (Unix ms, named in UTC), in the
+    digits whose zero is ``zero`` (:func:`ascii_digits` reads any)."""
     when = datetime.fromtimestamp(start_ms // 1000, tz=UTC)
-    return f"{when:%Y%m%d-%H%M%S}{start_ms % 1000:03d}.bin"
+    return _in_digits(f"{when:%Y%m%d-%H%M%S}{start_ms % 1000:03d}", zero) + ".bin"
 
 
 def _qstring(text: str, encoding: str) -> bytes:
@@ -1146,18 +1546,30 @@ def _qstring(text: str, encoding: str) -> bytes:
     return _U32.pack(len(raw)) + raw
 
 
+#: Records of a log written as a link delivers its bytes (``write_ping360_log``'s
+#: ``split_rng``): each this share of the smallest message at most, so that no record holds
+#: the starts of two beams (Ping Viewer's serial link reads a few hundred bytes at a time).
+SPLIT_SHARE = 0.6
+
+
 def write_ping360_log(
     path: str | Path,
     stamps_ms: np.ndarray,
     angles_grad: np.ndarray,
     intensities: np.ndarray,
-    sample_period_ticks: int,
+    sample_period_ticks: int | np.ndarray,
     encoding: str = "utf-16-be",
     transmit_frequency_khz: int = 750,
     gain_settings: np.ndarray | int = 1,
+    *,
+    n_samples: np.ndarray | None = None,
+    split_rng: np.random.Generator | None = None,
+    zero: str = "0",
+    lose: tuple[int, ...] = (),
 ) -> Path:
     """Write beams as a Ping Viewer log of ``device_data`` messages (packed by
-    ``brping.PingMessage``).
+    ``brping.PingMessage``), a message a record or its bytes split across records as Ping
+    Viewer's link delivers them.
 
     Parameters
     ----------
@@ -1167,14 +1579,28 @@ def write_ping360_log(
         Each beam's stamp: ms since the log's start (below a day).
     angles_grad : array of int, shape (N,)
         Head angles (gradians, 0-399).
-    intensities : array of uint8, shape (N, n_samples)
-    sample_period_ticks : int
-        25 ns ticks between samples.
+    intensities : array of uint8, shape (N, n)
+        The samples, nearest first: a beam's first ``n_samples`` of its row.
+    sample_period_ticks : int or array of int, shape (N,)
+        25 ns ticks between samples (each beam's: a log whose range changes).
     encoding : str
         The strings' encoding: ``"utf-16-be"`` (``QDataStream``'s) or ``"utf-8"``.
     transmit_frequency_khz : int
     gain_settings : int or array of int, shape (N,)
         Each beam's ``gain_setting`` (0 low, 1 normal, 2 high).
+    n_samples : array of int, shape (N,), optional
+        Each beam's sample count (200-1200 on a Ping360); default: the rows' width.
+    split_rng : numpy.random.Generator, optional
+        Write the messages' bytes as one stream cut into records of 1 to
+        :data:`SPLIT_SHARE` of the smallest message bytes (uniform), each stamped with the
+        stamp of the message its last byte belongs to (a message's first byte is then in a
+        record of its own stamp); None: a message a record (the module docstring).
+    zero : str
+        The zero digit of the stamps' script (``"0"``; ``"\\u06f0"``, Extended Arabic-Indic,
+        as a Persian-locale Windows writes them).
+    lose : tuple of int
+        Beams whose bytes lose their middle third on the way (messages cut short, as a
+        serial link that drops bytes delivers them; read back, they are counted, not beams).
 
     Returns
     -------
@@ -1195,32 +1621,66 @@ def write_ping360_log(
         raise ValueError("angles must be whole gradians 0-399")
     if np.any((stamps < 0) | (stamps >= _DAY_MS)):
         raise ValueError("stamps must be 0 to 24 h (ms)")
-    if not 1 <= sample_period_ticks <= 0xFFFF:
-        raise ValueError(f"sample period {sample_period_ticks} ticks is not a uint16")
+    periods = np.broadcast_to(np.asarray(sample_period_ticks, dtype=np.int64), stamps.shape)
+    if np.any((periods < 1) | (periods > 0xFFFF)):
+        raise ValueError(f"sample periods {sample_period_ticks} ticks are not uint16s")
     gains = np.broadcast_to(np.asarray(gain_settings, dtype=np.int64), stamps.shape)
     if np.any((gains < 0) | (gains > 255)):
         raise ValueError("gain settings must be uint8")
+    counts = np.broadcast_to(
+        np.asarray(bins.shape[1] if n_samples is None else n_samples, dtype=np.int64),
+        stamps.shape,
+    )
+    if np.any((counts < 1) | (counts > bins.shape[1])):
+        raise ValueError(f"n_samples must be 1 to the rows' {bins.shape[1]}")
+    messages = []
+    for k, (grad, row, gain, period, count) in enumerate(
+        zip(grads, bins, gains, periods, counts, strict=True)
+    ):
+        msg = PingMessage(definitions.PING360_DEVICE_DATA)
+        msg.mode = 1
+        msg.gain_setting = int(gain)
+        msg.angle = int(grad)
+        msg.transmit_duration = 10
+        msg.sample_period = int(period)
+        msg.transmit_frequency = transmit_frequency_khz
+        msg.number_of_samples = int(count)
+        msg.data_length = int(count)
+        msg.data = bytearray(row[:count].tobytes())
+        raw = bytes(msg.pack_msg_data())
+        if k in lose:
+            raw = raw[: len(raw) // 3] + raw[2 * len(raw) // 3 :]
+        messages.append(raw)
     p = Path(path)
     with p.open("wb") as fh:
         fh.write(_qstring(LOG_HEADER, encoding) + _I32.pack(LOG_VERSIONS[-1]))
         for text in ("sonarslam", "", "", "", ""):
             fh.write(_qstring(text, encoding))
         fh.write(_I32.pack(1) + _I32.pack(2))  # SensorFamily::PING, PingDeviceType::PING360
-        for t_ms, grad, row, gain in zip(stamps, grads, bins, gains, strict=True):
+        for t_ms, data in _records_of(messages, stamps, split_rng):
             h, rest = divmod(int(t_ms), 3_600_000)
             m, rest = divmod(rest, 60_000)
             s, ms = divmod(rest, 1000)
-            msg = PingMessage(definitions.PING360_DEVICE_DATA)
-            msg.mode = 1
-            msg.gain_setting = int(gain)
-            msg.angle = int(grad)
-            msg.transmit_duration = 10
-            msg.sample_period = int(sample_period_ticks)
-            msg.transmit_frequency = transmit_frequency_khz
-            msg.number_of_samples = row.size
-            msg.data_length = row.size
-            msg.data = bytearray(row.tobytes())
-            raw = bytes(msg.pack_msg_data())
-            fh.write(_qstring(f"{h:02d}:{m:02d}:{s:02d}.{ms:03d}", encoding))
-            fh.write(_U32.pack(len(raw)) + raw)
+            fh.write(_qstring(_in_digits(f"{h:02d}:{m:02d}:{s:02d}.{ms:03d}", zero), encoding))
+            fh.write(_U32.pack(len(data)) + data)
     return p
+
+
+def _records_of(
+    messages: list[bytes], stamps: np.ndarray, rng: np.random.Generator | None
+) -> Iterator[tuple[int, bytes]]:
+    """(stamp, bytes) of each record: a message each, or the stream of their bytes cut as
+    ``write_ping360_log``'s ``split_rng`` says."""
+    if rng is None:
+        yield from zip(stamps, messages, strict=True)
+        return
+    stream = b"".join(messages)
+    ends = np.cumsum([len(m) for m in messages])  # each message's end in the stream
+    longest = max(int(SPLIT_SHARE * min(len(m) for m in messages)), 1)
+    at = 0
+    while at < len(stream):
+        size = int(rng.integers(1, longest + 1))
+        end = min(at + size, len(stream))
+        owner = int(np.searchsorted(ends, end - 1, side="right"))  # of the last byte
+        yield int(stamps[owner]), stream[at:end]
+        at = end

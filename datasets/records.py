@@ -29,6 +29,8 @@ __all__ = [
     "AttitudeSeries",
     "GpsSeries",
     "BeamSeries",
+    "SonarSegment",
+    "farthest_segment",
     "STEP_TOLERANCE",
 ]
 
@@ -90,6 +92,9 @@ class DvlSeries:
     valid: np.ndarray  # (N,) bool, bottom lock
     heading_rad: FloatArray  # (N,) DVL compass as yaw CCW from East of the DVL x axis
     path: Path | None = None  # the log it was read from (for messages)
+    #: the velocities' quantum when the log rounds them (m/s; QGroundControl's CSV export: 0.1,
+    #: so a vehicle under 0.05 m/s per axis reads exactly 0); 0: a DVL's own, fine resolution
+    resolution_mps: float = 0.0
 
     def records(self) -> list[DvlVelocity]:
         return [
@@ -135,6 +140,44 @@ class GpsSeries:
         ]
 
 
+@dataclass(frozen=True)
+class SonarSegment:
+    """A stretch of a log's beams of one head setting: its range, bin size, gain and sector
+    (a Ping Viewer log changes them as the user does, :mod:`sonarslam.datasets.ping360`).
+
+    Attributes
+    ----------
+    t0_s, t1_s : float
+        Its first and last beam's time (Unix s).
+    beams : int
+    n_bins : int
+        Samples of each of its beams.
+    bin_size_m : float
+        Range step between its bins (m).
+    setting : str
+        The rest of the setting in words (the sample period, the gain, the sector).
+    """
+
+    t0_s: float
+    t1_s: float
+    beams: int
+    n_bins: int
+    bin_size_m: float
+    setting: str
+
+    @property
+    def range_m(self) -> float:
+        """Range of its last bin (m)."""
+        return self.n_bins * self.bin_size_m
+
+
+def farthest_segment(segments: Sequence[SonarSegment]) -> SonarSegment:
+    """The segment whose range reaches farthest (of those, the one of most beams): the head of
+    a log of several (its bin size is the head's, the Hough grid spans its range; the rows are
+    as wide as the most bins of any)."""
+    return max(segments, key=lambda g: (g.range_m, g.beams))
+
+
 #: A configured step between beams more than this share off the beams' own is another head
 #: setting (a Micron's or a Ping360's steps differ by factors of two), not the beams' jitter.
 STEP_TOLERANCE = 0.1
@@ -157,9 +200,13 @@ class BeamSeries(Sequence[SonarBeam]):
     intensities : ndarray of uint8, shape (N, n_bins)
     thresholded : bool
         The rows are 0/255 masks (the marina keyframes), not raw echo strength.
+    bin_size_m : ndarray, shape (N,), optional
+        Each beam's own range step between bins (m), for a log whose range changes (its
+        segments, :class:`SonarSegment`; a beam of fewer bins than the row is padded with
+        zeros); None: every beam has the head's (``SonarHead.bin_size_m``).
     """
 
-    __slots__ = ("t_s", "transducer_angle_rad", "intensities", "thresholded")
+    __slots__ = ("t_s", "transducer_angle_rad", "intensities", "thresholded", "bin_size_m")
 
     def __init__(
         self,
@@ -167,6 +214,7 @@ class BeamSeries(Sequence[SonarBeam]):
         transducer_angle_rad: FloatArray,
         intensities: npt.NDArray[np.uint8],
         thresholded: bool = False,
+        bin_size_m: FloatArray | None = None,
     ) -> None:
         n = t_s.shape[0]
         if t_s.shape != (n,) or transducer_angle_rad.shape != (n,) or intensities.ndim != 2:
@@ -179,10 +227,15 @@ class BeamSeries(Sequence[SonarBeam]):
         problem = intensities_problem(intensities)
         if problem is not None:
             raise ValueError(f"BeamSeries intensities {problem}")
+        if bin_size_m is not None and (
+            bin_size_m.shape != (n,) or not np.all(np.isfinite(bin_size_m) & (bin_size_m > 0))
+        ):
+            raise ValueError(f"bin_size_m must be ({n},) of positive finite ranges (m)")
         self.t_s = t_s
         self.transducer_angle_rad = transducer_angle_rad
         self.intensities = intensities
         self.thresholded = thresholded
+        self.bin_size_m = bin_size_m
 
     @classmethod
     def empty(cls, n_bins: int, thresholded: bool = False) -> BeamSeries:
@@ -195,11 +248,15 @@ class BeamSeries(Sequence[SonarBeam]):
             return beams
         if not beams:
             return cls.empty(0)
+        own = [b.bin_size_m for b in beams]
+        if any(m is not None for m in own) and any(m is None for m in own):
+            raise ValueError("beams with their own bin_size_m and beams without cannot be mixed")
         return cls(
             np.array([b.t for b in beams], dtype=np.float64),
             np.array([b.transducer_angle_rad for b in beams], dtype=np.float64),
             np.stack([b.intensities for b in beams]),  # uint8: each beam checked its own
             bool(beams[0].thresholded),
+            None if own[0] is None else np.array(own, dtype=np.float64),
         )
 
     def __len__(self) -> int:
@@ -212,15 +269,21 @@ class BeamSeries(Sequence[SonarBeam]):
     def __getitem__(self, i: slice) -> BeamSeries: ...
 
     def __getitem__(self, i: int | slice) -> SonarBeam | BeamSeries:
+        own = self.bin_size_m
         if isinstance(i, slice):
             return BeamSeries(
-                self.t_s[i], self.transducer_angle_rad[i], self.intensities[i], self.thresholded
+                self.t_s[i],
+                self.transducer_angle_rad[i],
+                self.intensities[i],
+                self.thresholded,
+                None if own is None else own[i],
             )
         return SonarBeam(
             t=float(self.t_s[i]),
             transducer_angle_rad=float(self.transducer_angle_rad[i]),
             intensities=self.intensities[i],
             thresholded=self.thresholded,
+            bin_size_m=None if own is None else float(own[i]),
         )
 
     def __iter__(self) -> Iterator[SonarBeam]:
@@ -236,7 +299,11 @@ class BeamSeries(Sequence[SonarBeam]):
     def shifted(self, offset_s: float) -> BeamSeries:
         """The same beams ``offset_s`` later (a clock offset); the bins are shared."""
         return BeamSeries(
-            self.t_s + offset_s, self.transducer_angle_rad, self.intensities, self.thresholded
+            self.t_s + offset_s,
+            self.transducer_angle_rad,
+            self.intensities,
+            self.thresholded,
+            self.bin_size_m,
         )
 
     def step_rad(self, min_steps: int = 20) -> float | None:

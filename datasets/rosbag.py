@@ -20,12 +20,20 @@ sonar   ``sensor_msgs/LaserScan`` (one beam a message)      ``angle_min`` (rad, 
                                                             ``range_max / n``
         ``ping360_sonar/SonarEcho``                         ``angle`` (rad), ``intensities``,
                                                             bin size ``range / number_of_samples``
+        ``ping360_sonar_msgs/SonarEcho`` (the ROS 2         ``angle`` (rad, the head's own, in
+        driver's)                                           [-pi, pi)), ``intensities``, the bin
+                                                            size of the sample period the driver
+                                                            set (:func:`ping360_driver_bin_m`)
         ``bluerobotics_sonar_msgs/SonarPing360``            ``angle`` (gradians), ``profile_data``,
                                                             bin size ``range / n``
 dvl     ``geometry_msgs/TwistWithCovarianceStamped``,       ``twist.twist.linear`` x, y in the
         ``nav_msgs/Odometry``                               message's frame (the DVL's), m/s;
                                                             a NaN or a negative first variance
                                                             is a row without bottom lock
+        Water Linked ``dvl_msgs/DVL``,                      ``velocity`` x and minus y (the A50's
+        ``waterlinked_a50_ros_driver/DVL``,                 frame has y to the right),
+        ``TransducerReportStamped`` (``waterlinked_dvl``,   ``velocity_valid``; ``fom`` said
+        ``waterlinked_a50``: ``report.vx``, ``vy``)         beside ``[noise] dvl_sigma_mps``
 imu     ``sensor_msgs/Imu``                                 yaw of ``orientation`` (ENU, REP-103),
                                                             ``angular_velocity.z`` (rad/s)
 gps     ``sensor_msgs/NavSatFix``                           latitude, longitude; ``status < 0`` is
@@ -99,6 +107,10 @@ __all__ = [
     "BagRoles",
     "write_bag",
     "transform_msg",
+    "ping360_driver_bin_m",
+    "OLDER_DEFINITIONS",
+    "TRANSDUCER_REPORT_TYPES",
+    "WATERLINKED_DVL_TYPES",
 ]
 
 ROLES = ("sonar", "dvl", "imu", "gps")
@@ -107,6 +119,7 @@ ROLE_TYPES: dict[str, tuple[str, ...]] = {
     "sonar": (
         "sensor_msgs/msg/LaserScan",
         "ping360_sonar/msg/SonarEcho",
+        "ping360_sonar_msgs/msg/SonarEcho",
         "bluerobotics_sonar_msgs/msg/SonarPing360",
         "marine_acoustic_msgs/msg/ProjectedSonarImage",
     ),
@@ -115,6 +128,8 @@ ROLE_TYPES: dict[str, tuple[str, ...]] = {
         "nav_msgs/msg/Odometry",
         "dvl_msgs/msg/DVL",
         "waterlinked_a50_ros_driver/msg/DVL",
+        "waterlinked_dvl/msg/TransducerReportStamped",
+        "waterlinked_a50/msg/TransducerReportStamped",
         "marine_acoustic_msgs/msg/Dvl",
         "cirs_girona_cala_viuda/msg/LinkquestDvl",
     ),
@@ -122,16 +137,31 @@ ROLE_TYPES: dict[str, tuple[str, ...]] = {
     "gps": ("sensor_msgs/msg/NavSatFix",),
 }
 #: Water Linked's DVL message: ROS 2 (``dvl_msgs``) and ROS 1 (``waterlinked_a50_ros_driver``).
+#: Like every Water Linked driver they copy the A50's report: its velocity in the DVL's frame
+#: x forward, y right (starboard), z down (docs.waterlinked.com, "Axes"), read here with y
+#: negated to the project's y left.
 WATERLINKED_DVL_TYPES = ("dvl_msgs/msg/DVL", "waterlinked_a50_ros_driver/msg/DVL")
+#: The A50's report wrapped whole (``report.vx``...): ROS 1 ``waterlinked_dvl`` (a header) and
+#: its ROS 2 port ``waterlinked_a50`` (no header: ``timestamp``, ns of the ROS clock).
+TRANSDUCER_REPORT_TYPES = (
+    "waterlinked_dvl/msg/TransducerReportStamped",
+    "waterlinked_a50/msg/TransducerReportStamped",
+)
 REQUIRED_ROLES = ("sonar", "dvl", "imu")
 #: A stamp whose step differs from the bag's own (receive) clock's step by more than this (s)
 #: is a clock jump: an error, never a trajectory bent by it.
 CLOCK_JUMP_S = 1.0
 #: Custom messages, for bags that carry no definitions (ROS 2 sqlite3), written from the drivers'
-#: public ``.msg`` files: ``ping360_sonar`` (CentraleNantesRobotics); ``bluerobotics_sonar_msgs``
-#: (itskalvik/bluerobotics_sonar); Water Linked's DVL (waterlinked/dvl-a50-ros-driver,
-#: ``msg/DVL.msg`` and ``msg/DVLBeam.msg`` at e86b038, ROS 1; the same fields are taken as the
-#: ROS 2 ``dvl_msgs``'s); ``marine_acoustic_msgs`` 2.0.2 (apl-ocean-engineering/marine_msgs at
+#: public ``.msg`` files: ``ping360_sonar`` (CentraleNantesRobotics, its ROS 1 node) and
+#: ``ping360_sonar_msgs`` (its ROS 2 driver, ``ping360_sonar_msgs/msg/SonarEcho.msg`` at
+#: fa53b8f: the same fields); ``bluerobotics_sonar_msgs`` (itskalvik/bluerobotics_sonar); Water
+#: Linked's DVL (waterlinked/dvl-a50-ros-driver, ``msg/DVL.msg`` and ``msg/DVLBeam.msg`` at
+#: e86b038, ROS 1; the ROS 2 ``dvl_msgs`` of paagutie/dvl_msgs at 555525e, which added
+#: ``covariance``, ``time_of_validity`` and ``time_of_transmission`` in 2025: a bag of the
+#: older layout without definitions is read with :data:`OLDER_DEFINITIONS`); the A50's
+#: ``TransducerReportStamped`` (uri-ocean-robotics/waterlinked_dvl at 2aaecc2, ROS 1, and its
+#: ROS 2 port timzarhansen/waterlinked_a50_dvl_ros2 at 4533199, whose ``Transducer.msg`` could
+#: not be read: taken as the ROS 1 one's fields); ``marine_acoustic_msgs`` 2.0.2 (apl-ocean-engineering/marine_msgs at
 #: 88e39b6: ``Dvl``, ``ProjectedSonarImage``, ``PingInfo``, ``SonarImageData``); the caves data
 #: set's DVL (``cirs_girona_cala_viuda/msg/LinkquestDvl``: PickNikRobotics/cirs_girona_cala_viuda
 #: at 366029a, the ROS 2 port of the data set, whose field names are the ROS 1 original's in
@@ -140,6 +170,34 @@ CUSTOM_MSG_DEFINITIONS = {
     "ping360_sonar/msg/SonarEcho": (
         "std_msgs/Header header\nfloat32 angle\nuint8 gain\nuint16 number_of_samples\n"
         "uint16 transmit_frequency\nuint16 speed_of_sound\nuint8 range\nuint8[] intensities\n"
+    ),
+    "ping360_sonar_msgs/msg/SonarEcho": (
+        "std_msgs/Header header\nfloat32 angle\nuint8 gain\nuint16 number_of_samples\n"
+        "uint16 transmit_frequency\nuint16 speed_of_sound\nuint8 range\nuint8[] intensities\n"
+    ),
+    "waterlinked_dvl/msg/Transducer": (
+        "int32 id\nfloat64 velocity\nfloat64 distance\nfloat64 rssi\nfloat64 nsd\nbool beam_valid\n"
+    ),
+    "waterlinked_dvl/msg/TransducerReport": (
+        "float64 vx\nfloat64 vy\nfloat64 vz\nfloat64 fom\nfloat64 altitude\n"
+        "waterlinked_dvl/Transducer[] transducers\nbool velocity_valid\nint32 status\n"
+        "string format\nfloat64 time\nfloat64[9] covariance\nbuiltin_interfaces/Time"
+        " time_of_validity\nbuiltin_interfaces/Time time_of_transmission\n"
+    ),
+    "waterlinked_dvl/msg/TransducerReportStamped": (
+        "std_msgs/Header header\nwaterlinked_dvl/TransducerReport report\n"
+    ),
+    "waterlinked_a50/msg/Transducer": (
+        "int32 id\nfloat64 velocity\nfloat64 distance\nfloat64 rssi\nfloat64 nsd\nbool beam_valid\n"
+    ),
+    "waterlinked_a50/msg/TransducerReport": (
+        "float64 vx\nfloat64 vy\nfloat64 vz\nfloat64 fom\nfloat64 altitude\n"
+        "waterlinked_a50/Transducer[] transducers\nbool velocity_valid\nint32 status\n"
+        "string format\nstring type\nfloat64 time\nfloat64[9] covariance\n"
+        "uint64 time_of_validity\nuint64 time_of_transmission\n"
+    ),
+    "waterlinked_a50/msg/TransducerReportStamped": (
+        "uint64 timestamp\nwaterlinked_a50/TransducerReport report\n"
     ),
     "bluerobotics_sonar_msgs/msg/SonarPing360": (
         "std_msgs/Header header\nfloat32 distance\nuint8 mode\nuint8 gain_setting\nuint16 angle\n"
@@ -151,8 +209,9 @@ CUSTOM_MSG_DEFINITIONS = {
     ),
     "dvl_msgs/msg/DVL": (
         "std_msgs/Header header\nfloat64 time\ngeometry_msgs/Vector3 velocity\nfloat64 fom\n"
-        "float64 altitude\ndvl_msgs/DVLBeam[] beams\nbool velocity_valid\nint64 status\n"
-        "string form\n"
+        "float64[] covariance\nfloat64 altitude\ndvl_msgs/DVLBeam[] beams\n"
+        "bool velocity_valid\nint64 status\nint64 time_of_validity\n"
+        "int64 time_of_transmission\nstring form\n"
     ),
     "marine_acoustic_msgs/msg/Dvl": (
         "uint8 DVL_MODE_BOTTOM=1\nuint8 DVL_MODE_WATER=2\nuint8 DVL_TYPE_PISTON=0\n"
@@ -186,6 +245,17 @@ CUSTOM_MSG_DEFINITIONS = {
         "int32 watervelocityearthflag\nfloat64 roll\nfloat64 pitch\nfloat64 heading\n"
         "float64 altitude\nfloat64 temperature\nfloat64 pressure\nfloat64 salinity\n"
         "float64 soundspeed\nstring rawdata\n"
+    ),
+}
+#: Older layouts of a custom type under another name, tried when a message does not decode
+#: with the current one (a ROS 2 sqlite3 bag carries no definitions): ``dvl_msgs/DVL`` before
+#: its 2025 fields.
+OLDER_DEFINITIONS = {
+    "dvl_msgs/msg/DVL": (
+        "dvl_msgs/msg/DVLBefore2025",
+        "std_msgs/Header header\nfloat64 time\ngeometry_msgs/Vector3 velocity\nfloat64 fom\n"
+        "float64 altitude\ndvl_msgs/DVLBeam[] beams\nbool velocity_valid\nint64 status\n"
+        "string form\n",
     ),
 }
 #: Named sets of topics (``--topics NAME`` or ``preset = "NAME"`` under ``[topics]``), each
@@ -243,6 +313,8 @@ def _typestore(ros1: bool = False) -> Any:
     types: dict[str, Any] = {}
     for name, text in CUSTOM_MSG_DEFINITIONS.items():
         types.update(get_types_from_msg(text, name))
+    for older, text in OLDER_DEFINITIONS.values():
+        types.update(get_types_from_msg(text, older))
     if "tf2_msgs/msg/TFMessage" not in store.types:
         types.update(get_types_from_msg(_TF_MESSAGE, "tf2_msgs/msg/TFMessage"))
     store.register(types)
@@ -433,6 +505,8 @@ def bag_topics(bag: str | Path, topics_file: str | Path | None = None) -> list[T
 
 
 def _stamp(msg: Any) -> float:
+    if not hasattr(msg, "header"):  # waterlinked_a50's report: a ns stamp of the ROS clock
+        return float(msg.timestamp) * 1e-9
     s = msg.header.stamp
     return float(s.sec) + 1e-9 * float(s.nanosec)
 
@@ -600,6 +674,7 @@ REP103_SONAR_TYPES = ("sensor_msgs/msg/LaserScan", "marine_acoustic_msgs/msg/Pro
 _RADIAN_ANGLE_FIELDS = {
     "sensor_msgs/msg/LaserScan": "angle_min",
     "ping360_sonar/msg/SonarEcho": "angle",
+    "ping360_sonar_msgs/msg/SonarEcho": "angle",
 }
 
 
@@ -637,6 +712,10 @@ def _sonar_row(msgtype: str, msg: Any) -> tuple[float, float, np.ndarray]:
         bins = np.asarray(msg.intensities, dtype=np.uint8)
         angle = _checked_radians(msgtype, float(msg.angle))
         return angle, float(msg.range) / max(bins.size, 1), bins
+    if msgtype == "ping360_sonar_msgs/msg/SonarEcho":
+        bins = np.asarray(msg.intensities, dtype=np.uint8)
+        angle = _checked_radians(msgtype, float(msg.angle))
+        return angle, ping360_driver_bin_m(float(msg.range), bins.size, msg.speed_of_sound), bins
     if msgtype == "marine_acoustic_msgs/msg/ProjectedSonarImage":
         return _projected_row(msg)
     bins = np.asarray(msg.profile_data, dtype=np.uint8)
@@ -644,6 +723,24 @@ def _sonar_row(msgtype: str, msg: Any) -> tuple[float, float, np.ndarray]:
     if not 0.0 <= grad < 400.0:
         raise ValueError(f"angle {grad:g} is not a Ping360 head angle (gradians, 0-399)")
     return grad * GRADIANS_TO_RAD, float(msg.range) / max(bins.size, 1), bins
+
+
+#: The Ping360's sample period is whole ticks of 25 ns (ping-protocol ``sample_period``).
+PING360_TICK_S = 25e-9
+
+
+def ping360_driver_bin_m(range_m: float, n_samples: int, speed_of_sound_mps: float) -> float:
+    """The bin size (m) of a beam the ROS 2 ``ping360_sonar`` driver asked for: it sets the
+    head's ``sample_period`` to ``2 range / (n c 25 ns)`` truncated to whole ticks
+    (``Ping360Interface::configureTransducer``, CentraleNantesRobotics/ping360_sonar at
+    fa53b8f), so a sample spans ``c period 25 ns / 2``, up to one tick in ~80 (1.25 %) short
+    of the ``range / n`` its ``rangeFrom`` and its message's ``range`` imply."""
+    if n_samples < 1 or not speed_of_sound_mps > 0 or not range_m > 0:
+        raise ValueError(
+            f"range {range_m:g} m, {n_samples} samples at {speed_of_sound_mps:g} m/s: no bin size"
+        )
+    ticks = math.floor(2.0 * range_m / (n_samples * speed_of_sound_mps * PING360_TICK_S))
+    return speed_of_sound_mps * max(ticks, 1) * PING360_TICK_S / 2.0
 
 
 def _projected_row(msg: Any) -> tuple[float, float, np.ndarray]:
@@ -676,9 +773,14 @@ def _dvl_row(msgtype: str, msg: Any) -> tuple[float, float, float, float]:
         ok = not var < 0.0
         sigma = math.sqrt(var) if var > 0.0 else math.nan
     elif msgtype in WATERLINKED_DVL_TYPES:
-        vx, vy = float(msg.velocity.x), float(msg.velocity.y)
+        vx, vy = float(msg.velocity.x), -float(msg.velocity.y)  # y right (the A50's) to left
         ok = bool(msg.velocity_valid)
         sigma = float(msg.fom)  # Water Linked: the velocities' figure of merit (m/s)
+    elif msgtype in TRANSDUCER_REPORT_TYPES:
+        r = msg.report
+        vx, vy = float(r.vx), -float(r.vy)  # y right (the A50's) to left
+        ok = bool(r.velocity_valid)
+        sigma = float(r.fom)
     elif msgtype == "marine_acoustic_msgs/msg/Dvl":
         vx, vy = float(msg.velocity.x), float(msg.velocity.y)
         ok = int(msg.velocity_mode) == 1 and int(msg.num_good_beams) >= 3  # bottom track
@@ -779,7 +881,7 @@ def _read_columns(
                     bag, None, f"topic {topic} message {index}: stamp {t!r} is not a time"
                 )
             column = columns[role]
-            if not column.n:
+            if not column.n and hasattr(msg, "header"):
                 column.frame = str(msg.header.frame_id).lstrip("/")
             column.add(bag, index, t, log_ns * 1e-9, row, bins)
     except DataError:
@@ -794,6 +896,11 @@ def _decode(bag: Path, reader: Any, raw: bytes, msgtype: str, topic: str, index:
     try:
         return reader.deserialize(raw, msgtype)
     except Exception as exc:
+        if msgtype in OLDER_DEFINITIONS:
+            try:
+                return reader.deserialize(raw, OLDER_DEFINITIONS[msgtype][0])
+            except Exception:  # neither layout: the first error is the one to say
+                pass
         raise DataError(
             bag,
             None,
@@ -1313,6 +1420,13 @@ def _messages(store: Any, d: Dataset) -> Iterator[tuple[float, str, Any]]:
     """(time, role, message) of a dataset in time order: the inverse of :func:`open_bag`."""
     T = store.types
     vec = T["geometry_msgs/msg/Vector3"]
+    if d.beams.bin_size_m is not None and np.any(d.beams.bin_size_m != d.config.sonar.bin_size_m):
+        # the bag's reader takes one range for every beam: written with the head's, a
+        # segment's echoes would read back at the wrong ranges
+        raise ValueError(
+            f"{d.root}: beams of several bin sizes (segments) cannot be written as a bag of one"
+            " range: take one segment (--span, datasets.dataset.dataset_span)"
+        )
     n = d.config.sonar.n_bins
     range_m = n * d.config.sonar.bin_size_m
     ranges = (np.arange(1, n + 1) * d.config.sonar.bin_size_m).astype(np.float32)

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import os
 import warnings
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -32,6 +33,7 @@ from sonarslam.datasets.dataset import (
     NEUTRAL_CALIBRATION,
     Dataset,
     check_overlap,
+    dataset_span,
     mounting_tables,
     neutral_warning,
     read_truth,
@@ -49,6 +51,7 @@ from sonarslam.datasets.gates import (
 from sonarslam.datasets.islog import read_is_log
 from sonarslam.datasets.keyframes import read_keyframes
 from sonarslam.datasets.marina import read_dgps, read_dvl, read_is_timestamps, read_mti, read_setup
+from sonarslam.datasets.navlog import NAV_LOG_KINDS, nav_log_kind
 from sonarslam.datasets.ping360 import is_ping360_log, open_ping360
 from sonarslam.datasets.records import BeamSeries
 from sonarslam.datasets.rosbag import TOPIC_PRESETS, is_bag, open_bag
@@ -90,6 +93,14 @@ def resolve_source(source: str | Path) -> Path:
     """A named source (``marina``) under ``$SONARSLAM_DATA``, a directory, a ROS bag or a Ping
     Viewer ``.bin`` log."""
     path = Path(source)
+    kind = nav_log_kind(path) if path.is_file() else None
+    if kind is not None:
+        raise DataError(
+            path,
+            None,
+            f"a navigation log ({NAV_LOG_KINDS[kind]}), not a sonar log: give it as --nav beside the"
+            " Ping Viewer .bin (sonarslam info FILE says what it holds)",
+        )
     if path.is_dir() or is_bag(path) or is_ping360_log(path):
         return path
     if str(source) in NAMED_SOURCES:
@@ -132,7 +143,8 @@ def open_dataset(
     source: str | Path,
     config_override: str | Path | None = None,
     topics_file: str | Path | None = None,
-    nav: str | Path | None = None,
+    nav: str | Path | Sequence[str | Path] | None = None,
+    span_s: tuple[float, float] | None = None,
 ) -> Dataset:
     """Read a dataset directory, a ROS bag, a Ping Viewer log or a named source into a
     :class:`Dataset`.
@@ -150,8 +162,12 @@ def open_dataset(
     topics_file : str or Path, optional
         A bag's roles (``[topics]``: ``sonar``, ``dvl``, ``imu``, ``gps``), for a bag or a
         ``.bin``'s navigation bag.
-    nav : str or Path, optional
-        A ``.bin``'s navigation (a ROS bag or a CSV), over its ``[ping360] nav``.
+    nav : str or Path, or a sequence of them, optional
+        A ``.bin``'s navigation (a ROS bag, a CSV, a BlueROV2's own logs:
+        :mod:`sonarslam.datasets.navlog`), over its ``[ping360] nav``.
+    span_s : (float, float), optional
+        Only the part from ``T0`` to ``T1`` (s from the start of the navigation,
+        :func:`sonarslam.datasets.dataset.dataset_span`; ``--span``).
 
     Raises
     ------
@@ -160,12 +176,24 @@ def open_dataset(
         logs that do not overlap in time, a malformed ``truth.json``. Sensor faults that
         pass the readers are gated with warnings (:mod:`sonarslam.datasets.gates`).
     """
+    dataset = _open(source, config_override, topics_file, nav)
+    return dataset if span_s is None else dataset_span(dataset, span_s)
+
+
+def _open(
+    source: str | Path,
+    config_override: str | Path | None,
+    topics_file: str | Path | None,
+    nav: str | Path | Sequence[str | Path] | None,
+) -> Dataset:
+    """:func:`open_dataset` of the whole source."""
     root = resolve_source(source)
     if is_ping360_log(root):
         check_toml_inputs(root, topics_file)
         return open_ping360(root, config_override, topics_file, nav)
     if nav is not None:
-        raise DataError(Path(nav), None, "--nav is for a Ping Viewer .bin log")
+        first = nav if isinstance(nav, (str, Path)) else next(iter(nav), "--nav")
+        raise DataError(Path(first), None, "--nav is for a Ping Viewer .bin log")
     if is_bag(root):
         check_toml_inputs(root, topics_file)
         return open_bag(root, config_override, topics_file)

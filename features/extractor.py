@@ -36,7 +36,7 @@ from sonarslam.features.uncertainty import (
     support_mask,
 )
 from sonarslam.settings import SettingError
-from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead, bin_range_m
+from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead, beam_bin_size_m, bin_range_m
 from sonarslam.sonar.segmentation import SegmentedBeam, segment_intensities
 
 __all__ = ["LineExtractor", "segment_with"]
@@ -174,11 +174,9 @@ class LineExtractor:
         self.line_systematic_cov = np.diag([cfg.line_sigma_rho_m, cfg.line_sigma_theta_rad]) ** 2
         self._since_vote = 0
         self.n_votes = 0
-        ranges_m = bin_range_m(np.arange(head.n_bins), head.bin_size_m)
-        #: bins a threshold is applied to, per beam, and the raw beams' counts before the check
-        self._bins_in_range = int(
-            np.count_nonzero((ranges_m >= cfg.min_range_m) & (ranges_m <= self.max_range_m))
-        )
+        #: bins a threshold is applied to, per beam of a bin size, and the raw beams' counts
+        #: before the check
+        self._bins_in_range: dict[float, int] = {}
         self._raw_bins_seen = 0
         self._raw_bins_passed = 0
         self._threshold_checked = False
@@ -210,16 +208,26 @@ class LineExtractor:
         """
         self._check_beam(beam)
         cfg = self.config
-        seg = segment_with(cfg, self.head.bin_size_m, beam.intensities, beam.thresholded)
+        bin_m = beam_bin_size_m(beam, self.head)
+        seg = segment_with(cfg, bin_m, beam.intensities, beam.thresholded)
         if not beam.thresholded and not self._threshold_checked:
-            self._raw_bins_seen += self._bins_in_range
+            self._raw_bins_seen += self._in_range(bin_m)
             self._raw_bins_passed += int(seg.threshold_bins.size)
         bearing = float(self.head.angle_sense * beam.transducer_angle_rad)
-        self.sector.add(float(beam.t), bearing, seg)
+        self.sector.add(float(beam.t), bearing, seg, beam.bin_size_m)
         self._since_vote += 1
         if self.sector.is_full and self._since_vote >= cfg.vote_every_n_beams:
             return self.vote()
         return []
+
+    def _in_range(self, bin_size_m: float) -> int:
+        """The bins of a beam of ``bin_size_m`` (m) that a threshold is applied to."""
+        n = self._bins_in_range.get(bin_size_m)
+        if n is None:
+            ranges_m = bin_range_m(np.arange(self.head.n_bins), bin_size_m)
+            inside = (ranges_m >= self.config.min_range_m) & (ranges_m <= self.max_range_m)
+            n = self._bins_in_range[bin_size_m] = int(np.count_nonzero(inside))
+        return n
 
     def _check_beam(self, beam: SonarBeam) -> None:
         """Refuse a beam earlier than the one before or with an angle that is not radians

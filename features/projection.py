@@ -8,7 +8,7 @@ import numpy as np
 
 from sonarslam.features.geometry import FloatArray, compose
 from sonarslam.features.pose_source import PoseSource
-from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead
+from sonarslam.sonar.beam import Mounting, SonarBeam, SonarHead, beam_bin_size_m
 
 __all__ = ["beam_points", "project_beams"]
 
@@ -23,6 +23,8 @@ def beam_points(
     beam_index : ndarray of int, shape (N,)
         Index in ``beams`` of each bin.
     range_m : ndarray, shape (N,)
+        Range of the bin (m), with its beam's own bin size
+        (:func:`~sonarslam.sonar.beam.beam_bin_size_m`).
     bearing_rad : ndarray, shape (N,)
         Bearing in the sonar frame (:meth:`SonarHead.bearing_rad`).
     """
@@ -32,9 +34,14 @@ def beam_points(
     bi, bins = np.nonzero(stack >= min_intensity)
     bi = bi.astype(np.int64)
     angles = np.array([b.transducer_angle_rad for b in beams])
+    if hasattr(beams, "bin_size_m"):  # a BeamSeries: its array, or None (the head's)
+        own = beams.bin_size_m
+        sizes = None if own is None else own[bi]
+    else:
+        sizes = np.array([beam_bin_size_m(b, head) for b in beams])[bi]
     return (
         bi,
-        head.bin_range_m(bins),
+        head.bin_range_m(bins, sizes),
         head.bearing_rad(angles[bi]),
     )
 

@@ -234,9 +234,16 @@ class Sector:
                 warnings.warn(said, PoseSpanWarning, stacklevel=5)
         return compose(checked_poses(self.pose_source, t_s), self.bTs)
 
-    def add(self, t_s: float, bearing_rad: float, segmented: SegmentedBeam) -> None:
-        """Store one segmented beam (:meth:`sonarslam.sonar.store.SectorStore.add`)."""
-        slot = self.store.add(t_s, bearing_rad, segmented)
+    def add(
+        self,
+        t_s: float,
+        bearing_rad: float,
+        segmented: SegmentedBeam,
+        bin_size_m: float | None = None,
+    ) -> None:
+        """Store one segmented beam of its own bin size (m; None: the head's)
+        (:meth:`sonarslam.sonar.store.SectorStore.add`)."""
+        slot = self.store.add(t_s, bearing_rad, segmented, bin_size_m)
         if not self.requery_poses:
             self._wTs[slot] = self.sonar_poses(t_s)[0]
 

@@ -15,6 +15,7 @@ __all__ = [
     "SonarHead",
     "Mounting",
     "bin_range_m",
+    "beam_bin_size_m",
     "intensities_problem",
     "MAX_BINS",
     "MIN_STEP_RAD",
@@ -50,10 +51,10 @@ def intensities_problem(intensities: npt.ArrayLike) -> str | None:
     return f"must be uint8 echo strengths 0-255, got {dtype} ({fix})"
 
 
-def bin_range_m(bin_index: npt.ArrayLike, bin_size_m: float) -> FloatArray:
+def bin_range_m(bin_index: npt.ArrayLike, bin_size_m: npt.ArrayLike) -> FloatArray:
     """Range (m) of 0-based bin indices: ``(i + 1) * bin_size_m`` (the one place of this rule;
     bin 500 of the marina's 0.1 m bins is at 50.0 m)."""
-    return (np.asarray(bin_index, dtype=np.float64) + 1.0) * bin_size_m
+    return (np.asarray(bin_index, dtype=np.float64) + 1.0) * np.asarray(bin_size_m, np.float64)
 
 
 #: Largest echo range offset of a head (m), either sign: an echo is kept metres, not tens of
@@ -119,10 +120,14 @@ class SonarHead:
         """Range of the last bin (m)."""
         return self.n_bins * self.bin_size_m
 
-    def bin_range_m(self, bin_index: npt.ArrayLike) -> FloatArray:
+    def bin_range_m(
+        self, bin_index: npt.ArrayLike, bin_size_m: npt.ArrayLike | None = None
+    ) -> FloatArray:
         """Range (m) of the surface behind 0-based bin indices: :func:`bin_range_m` less
-        ``range_offset_m``."""
-        return bin_range_m(bin_index, self.bin_size_m) - self.range_offset_m
+        ``range_offset_m``; of bins of ``bin_size_m`` (m, a beam's own: a scalar, or one per
+        index) when given, else of the head's."""
+        size = self.bin_size_m if bin_size_m is None else bin_size_m
+        return bin_range_m(bin_index, size) - self.range_offset_m
 
     def bin_ranges_m(self) -> FloatArray:
         """Range of every bin, shape ``(n_bins,)`` (m)."""
@@ -204,14 +209,26 @@ class SonarBeam:
         keyframes) carry 255 for the bins that passed and 0 elsewhere.
     thresholded : bool
         True when ``intensities`` is such a 0/255 mask rather than raw echo strength.
+    bin_size_m : float or None
+        The beam's own range step between bins (m), when its log changes range (a Ping
+        Viewer log's segments); None: the head's (:func:`beam_bin_size_m`).
     """
 
     t: float
     transducer_angle_rad: float
     intensities: npt.NDArray[np.uint8] = field(repr=False)
     thresholded: bool = False
+    bin_size_m: float | None = None
 
     def __post_init__(self) -> None:
         problem = intensities_problem(self.intensities)
         if problem is not None:
             raise ValueError(f"SonarBeam.intensities {problem}, at t={self.t}")
+        if self.bin_size_m is not None and not 0.0 < self.bin_size_m < np.inf:
+            raise ValueError(f"SonarBeam.bin_size_m must be a positive range (m), at t={self.t}")
+
+
+def beam_bin_size_m(beam: SonarBeam, head: SonarHead) -> float:
+    """The range step between ``beam``'s bins (m): its own (a log whose range changes), else
+    the head's. Every consumer of a beam's bins takes its bin size here."""
+    return head.bin_size_m if beam.bin_size_m is None else beam.bin_size_m

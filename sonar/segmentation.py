@@ -42,7 +42,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.ndimage import maximum_filter1d
 
-from sonarslam.sonar.beam import SonarBeam, SonarHead, bin_range_m
+from sonarslam.sonar.beam import SonarBeam, SonarHead, beam_bin_size_m, bin_range_m
 
 __all__ = ["SegmentedBeam", "segment_intensities", "segment_beam", "leading_edge_bins"]
 
@@ -253,13 +253,14 @@ def segment_beam(
     min_range_m: float = 0.0,
     max_range_m: float | None = None,
 ) -> SegmentedBeam:
-    """Segment a :class:`~sonarslam.sonar.beam.SonarBeam` with its head settings.
+    """Segment a :class:`~sonarslam.sonar.beam.SonarBeam` with its head settings (its own bin
+    size when it has one, :func:`~sonarslam.sonar.beam.beam_bin_size_m`).
 
     See :func:`segment_intensities`; ``beam.thresholded`` selects the mask behaviour.
     """
     return segment_intensities(
         beam.intensities,
-        head.bin_size_m,
+        beam_bin_size_m(beam, head),
         intensity_threshold=intensity_threshold,
         max_intensity_difference=max_intensity_difference,
         min_distance_m=min_distance_m,
@@ -292,6 +293,7 @@ def leading_edge_bins(
     ----------
     beam : SonarBeam
     head : SonarHead
+        Its bin size, unless the beam has its own.
     run_gap_m : float
         Returns closer than this along the beam are one run (m).
     min_range_m : float
@@ -310,7 +312,7 @@ def leading_edge_bins(
     given = inten > 0 if beam.thresholded else inten >= intensity_threshold
     seg = segment_intensities(
         np.where(given, 255, 0).astype(np.uint8),
-        head.bin_size_m,
+        beam_bin_size_m(beam, head),
         intensity_threshold=1.0,
         max_intensity_difference=0.0,
         min_distance_m=run_gap_m,

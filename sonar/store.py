@@ -133,7 +133,13 @@ class SectorStore:
         self._fin_count[:] = 0
         self._thr_count[:] = 0
 
-    def add(self, t_s: float, bearing_rad: float, segmented: SegmentedBeam) -> int:
+    def add(
+        self,
+        t_s: float,
+        bearing_rad: float,
+        segmented: SegmentedBeam,
+        bin_size_m: float | None = None,
+    ) -> int:
         """Store one segmented beam, evicting the oldest when full; returns its slot.
 
         Parameters
@@ -144,16 +150,20 @@ class SectorStore:
             Beam bearing in the sonar frame (rad), ``head.bearing_rad(transducer_angle)``.
         segmented : SegmentedBeam
             Output of :func:`sonarslam.sonar.segmentation.segment_intensities` for this beam.
+        bin_size_m : float, optional
+            The beam's own range step between bins (m,
+            :func:`sonarslam.sonar.beam.beam_bin_size_m`); None: the head's. Its bins must
+            fit the head's ``n_bins``.
         """
         k = self._next  # when full, this is the oldest beam's slot: it is overwritten
         self._t[k] = t_s
         self._bearing[k] = bearing_rad
         thr = segmented.threshold_bins
         self._thr_count[k] = thr.size
-        self._thr_range[k, : thr.size] = self.head.bin_range_m(thr)
+        self._thr_range[k, : thr.size] = self.head.bin_range_m(thr, bin_size_m)
         fin = segmented.final_bins
         self._fin_alive[k] = False
-        self._fin_range[k, : fin.size] = self.head.bin_range_m(fin)
+        self._fin_range[k, : fin.size] = self.head.bin_range_m(fin, bin_size_m)
         self._fin_int[k, : fin.size] = segmented.final_intensities
         self._fin_alive[k, : fin.size] = True
         self._fin_count[k] = fin.size

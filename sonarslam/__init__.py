@@ -14,7 +14,8 @@ The names a user needs are here (:data:`__all__`; the guide is ``docs/api.md``):
   :class:`LandmarkConfig` the rules;
 * data and runs: :func:`open_dataset` (a :class:`Dataset` from a directory or a ROS bag;
   :func:`dataset_from_arrays` from numpy arrays), :func:`dead_reckoning_trajectory`,
-  :func:`run_backend` with a typed :class:`RunConfig`, and the simulator
+  :func:`run_backend` with a typed :class:`RunConfig`, :func:`offline_from_saved` (the
+  factor graph's offline estimate of a saved run, with :class:`OfflineConfig`), and the simulator
   (:func:`make_scenario`, :func:`simulate_records` in memory, :func:`simulate` to files).
 
 Each name is imported when first used (PEP 562), so ``import sonarslam`` loads none of gtsam,
@@ -38,6 +39,7 @@ if TYPE_CHECKING:  # the names as a type checker sees them; at run time they loa
     from sonarslam.features.extractor import LineExtractor
     from sonarslam.features.line import LineFeature
     from sonarslam.features.pose_source import PoseSource
+    from sonarslam.slam.backends.isam2.config import OfflineConfig
     from sonarslam.slam.backends.isam2.factors import line_factor
     from sonarslam.slam.mapping.landmarks import LandmarkConfig
     from sonarslam.slam.mapping.plugin import LandmarkAssociation, WorldBelief, gtsam_belief
@@ -47,6 +49,7 @@ if TYPE_CHECKING:  # the names as a type checker sees them; at run time they loa
         local_to_world_covariance,
         world_observation,
     )
+    from sonarslam.slam.run.offline import offline_from_saved
     from sonarslam.slam.run.presets import RunConfig, extractor_preset
     from sonarslam.slam.run.run import run_backend
     from sonarslam.slam.run.sources import dead_reckoning_trajectory
@@ -78,6 +81,8 @@ _HOMES: dict[str, str] = {
     "dead_reckoning_trajectory": "sonarslam.slam.run.sources",
     "run_backend": "sonarslam.slam.run.run",
     "RunConfig": "sonarslam.slam.run.presets",
+    "offline_from_saved": "sonarslam.slam.run.offline",
+    "OfflineConfig": "sonarslam.slam.backends.isam2.config",
     "make_scenario": "sonarslam.datasets.simulator",
     "simulate_records": "sonarslam.datasets.simulator",
     "simulate": "sonarslam.datasets.simulator",
@@ -91,6 +96,7 @@ __all__ = [
     "LandmarkConfig",
     "LineExtractor",
     "LineFeature",
+    "OfflineConfig",
     "PoseSource",
     "RunConfig",
     "SonarBeam",
@@ -103,6 +109,7 @@ __all__ = [
     "line_prediction",
     "local_to_world_covariance",
     "make_scenario",
+    "offline_from_saved",
     "open_dataset",
     "run_backend",
     "simulate",

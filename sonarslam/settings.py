@@ -128,6 +128,11 @@ class SettingError(ValueError):
         self.message = message
         super().__init__(f"{key}: {message}")
 
+    def __reduce__(self) -> tuple[type[SettingError], tuple[str, str]]:
+        # pickled with its two arguments (a process pool's worker raising it: the default
+        # pickles the one joined message and cannot build it again)
+        return (type(self), (self.key, self.message))
+
 
 def parse_text(text: str) -> Any:
     """A value typed on the command line, by its look: ``true``/``false``, ``none``/``null``,

@@ -15,11 +15,13 @@ from evo.core.geometry import umeyama_alignment
 from sonarslam.datasets.errors import DataWarning
 from sonarslam.datasets.rosbag import BAG_KINDS
 from sonarslam.datasets.simulator import KINDS, simulate
+from sonarslam.datasets.simulator.bluerov import NAV_KINDS
 from sonarslam.datasets.source import open_dataset
 from sonarslam.slam.cli.common import POSES
 from sonarslam.slam.cli.main import build_parser, main
 from sonarslam.slam.cli.parsers import (
     BACKENDS,
+    BLUEROV_NAV_KINDS,
     COMMANDS,
     EXTRACTOR_PRESETS,
     SIM_DURATION_S,
@@ -49,12 +51,24 @@ def test_every_command_has_help(capsys):
     assert {"simulate", "run", "plot-scans", "calibrate", "info", "demo", "extract"} <= set(
         commands
     )
+    takes_source = {"run", "plot-scans", "extract", "calibrate", "info"}
     for name in commands:
         with pytest.raises(SystemExit) as exc:
             main([name, "--help"])
         assert exc.value.code == 0
-        out = capsys.readouterr().out
-        assert "usage: sonarslam " + name in out and "SONARSLAM_DATA" in out
+        out = " ".join(capsys.readouterr().out.split())  # argparse's line breaks undone
+        assert "usage: sonarslam " + name in out
+        # the SOURCE epilog where a SOURCE is taken only (a review: demo's and report's too)
+        assert ("a SOURCE is" in out) == (name in takes_source), name
+        assert "SONARSLAM_DATA" in out or name in ("simulate", "report", "sweep"), name
+        # --span's --loop clause where --loop is (a review: extract, plot-scans and info too)
+        span = out[out.index("--span T0,T1") :] if "--span T0,T1" in out else ""
+        assert ("--loop times then count from T0" in span) == (name == "run"), name
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    said = out[out.index("simulate simulate") : out.index("run run a back end")]
+    assert "ROS bag" in said and "Ping Viewer" in said and "BlueROV2" in said, said
 
 
 #: What ``--version`` and ``--help`` must not import: each costs seconds on the 2-core machine
@@ -103,6 +117,7 @@ def test_the_parsers_offer_the_registries_choices():
     assert EXTRACTOR_PRESETS == tuple(sorted(PRESETS))
     assert WORLDS == KINDS
     assert PARSER_BAG_KINDS == BAG_KINDS
+    assert BLUEROV_NAV_KINDS == NAV_KINDS
     assert SIM_DURATION_S == DEMO_SIM_DURATION_S
     # and every command module runs: its command(args) is there
     for name, _, module in COMMANDS:

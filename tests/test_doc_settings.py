@@ -15,6 +15,7 @@ import pytest
 
 import sonarslam.datasets.config as dataset_config
 from sonarslam.datasets.config import MARINA_CONFIG, config_tables, load_dataset_config
+from sonarslam.datasets.navlog import navlog_settings
 from sonarslam.datasets.ping360 import ping360_settings
 from sonarslam.features.config import ExtractorConfig
 from sonarslam.features.scans import ScanConfig
@@ -64,7 +65,14 @@ def test_every_toml_example_loads_through_the_loader(where: str, text: str, tmp_
         ping = ping360_settings(path)
         for key, value in written.pop("ping360").items():
             got = getattr(ping, key)
-            assert (Path(got).name if key == "nav" else got) == value, f"{where}: [ping360] {key}"
+            if key == "nav":  # the files resolved against the folder; a name or a list
+                got = [Path(n).name for n in got]
+                value = [value] if isinstance(value, str) else value
+            assert got == value, f"{where}: [ping360] {key}"
+    if "navlog" in written:  # a navigation log's own table, read by its own loader
+        navlog = navlog_settings(path)
+        for key, value in written.pop("navlog").items():
+            assert getattr(navlog, key) == value, f"{where}: [navlog] {key}"
     for table, key, value in _keys(written):
         if isinstance(value, float | int) and not isinstance(value, bool):
             assert tables[table][key] == pytest.approx(value), f"{where}: [{table}] {key}"

@@ -438,3 +438,42 @@ def test_exact_zeros_are_a_dropout_fill_only_while_the_vehicle_moves():
         )
     assert report.counts["dvl_zero_velocity"] == 3
     assert not out.valid[[100, 101, 250]].any()
+
+
+def test_exact_zeros_of_a_rounded_velocity_are_readings(tmp_path):
+    """A velocity logged to 0.1 m/s (QGroundControl's CSV export, ``resolution_mps``) reads
+    (0, 0) whenever the vehicle is slower than 0.05 m/s per axis: readings, kept, also when
+    every row is zero (a vehicle holding station) and beside rows of 0.1 m/s; a (0, 0) row
+    amid 0.5 m/s is still a fill, and the message names the export, which has no lock flag
+    (not the navigation CSV's dvl_valid column)."""
+    from sonarslam.datasets.config import GateConfig
+    from sonarslam.datasets.gates import SensorReport, gate_dvl
+    from sonarslam.datasets.records import DvlSeries
+
+    export = tmp_path / "2024-05-02 10-31-07 vehicle1.csv"
+    export.write_text("Timestamp,heading,localPosition.vx,localPosition.vy\n", encoding="utf-8")
+    rng = np.random.default_rng(12)
+    n = 200
+    t = 1.7e9 + np.arange(n, dtype=float)
+    slow = np.round(rng.normal(0.03, 0.03, (n, 2)), 1)  # 0 and 0.1 m/s, mixed
+    assert 20 < np.sum(np.all(slow == 0.0, axis=1)) < n - 20
+    for v in (slow, np.zeros((n, 2))):
+        report = SensorReport()
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            out = gate_dvl(
+                DvlSeries(t, v, np.ones(n, bool), np.zeros(n), export, 0.1), GateConfig(), report
+            )
+        assert report.counts["dvl_zero_velocity"] == 0 and out.valid.all()
+        assert out.resolution_mps == 0.1
+        assert not [w for w in said if "exactly (0, 0)" in str(w.message)]
+    moving = np.round(np.column_stack([np.full(n, 0.5), np.zeros(n)]), 1)
+    moving[[50, 120]] = 0.0
+    report = SensorReport()
+    with pytest.warns(DataWarning, match="exactly") as said:
+        out = gate_dvl(
+            DvlSeries(t, moving, np.ones(n, bool), np.zeros(n), export, 0.1), GateConfig(), report
+        )
+    assert report.counts["dvl_zero_velocity"] == 2 and not out.valid[[50, 120]].any()
+    (line,) = [str(w.message) for w in said if "exactly" in str(w.message)]
+    assert "dvl_valid" not in line and "QGroundControl's CSV export has no lock flag" in line

@@ -247,7 +247,11 @@ def test_the_sonar_says_which_way_dead_reckoning_should_go(
     # dead reckoning has no health monitor: its own travel check says the DVL runs it stern first
     assert "deg off its bow" in err and f"(now: [mounting.dvl] yaw_deg = {told + 180.0:g}" in err
     m = json.loads((out / "metrics.json").read_text())
-    assert m["odometry_check_heading_deg"] == pytest.approx(turned.heading_deg)
+    from sonarslam.slam.run.run import dataset_odometry_check  # the run's: 24 pairs
+
+    assert m["odometry_check_heading_deg"] == pytest.approx(
+        dataset_odometry_check(d_wrong).heading_deg
+    )
     args[args.index("--out") + 1] = str(tmp_path / "dr_right")
     assert main(args) == 0
     err = capsys.readouterr().err
@@ -336,7 +340,7 @@ def test_no_accepted_registration_says_why(
     new user's review), and "0 found" loops nothing. Now the lines and a warning say why:
     dead reckoning hardly moved at every start, its path is too short for a loop; the clean
     run has pairs and loops."""
-    from sonarslam.slam.run.run import loop_line, odometry_line
+    from sonarslam.slam.run.run import ODOMETRY_PAIRS, loop_line, odometry_line
 
     slow = tmp_path / "mps"
     shutil.copytree(nogps, slow)
@@ -358,12 +362,12 @@ def test_no_accepted_registration_says_why(
     assert clean["odometry_check_skipped_still"] < clean["odometry_check_starts"]
     m = json.loads((tmp_path / "mps" / "metrics.json").read_text())
     assert m["odometry_check_accepted"] == m["odometry_check_pairs"] == 0
-    assert m["odometry_check_skipped_still"] == m["odometry_check_starts"] == 12
+    assert m["odometry_check_skipped_still"] == m["odometry_check_starts"] == ODOMETRY_PAIRS
     line = odometry_line(m)
     assert (
-        "no registration of 0 accepted: at 12 of 12 starts dead reckoning moved less than" in line
+        "no registration of 0 accepted: at 24 of 24 starts dead reckoning moved less than" in line
     )
-    assert "the sonar cannot check dead reckoning: at 12 of 12 starts" in err
+    assert "the sonar cannot check dead reckoning: at 24 of 24 starts" in err
     # and no loop was found because the path is too short for one, not for want of returns
     assert clean["loops_found"] >= 1 and clean["loop_search_path_m"] > 100.0
     assert m["loops_found"] == m["loop_search_tried"] == 0

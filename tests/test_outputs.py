@@ -284,6 +284,26 @@ def test_map_png_writes_each_landmark_id_by_its_segment():
     }
 
 
+def test_a_map_shows_every_landmark_and_bin_it_draws():
+    """A run's map stopped at ~7 m, where its bins were dense, with its one landmark at 15 m
+    cut out (issue 41): the box holds every segment, every bin and the trajectory drawn."""
+    from sonarslam.slam.io.maps import data_box
+    from sonarslam.slam.io.trajectory import Trajectory
+
+    rng = np.random.default_rng(41)
+    bins = rng.uniform(-7.0, 7.0, (5000, 2))
+    stray = np.array([[-12.0, 3.0]])  # one bin far from the rest
+    landmark = np.array([[15.0, -4.0], [15.0, 4.0]])
+    track = Trajectory(np.array([0.0, 1.0]), np.array([[0.0, 0.0, 0.0], [1.0, 0.5, 0.0]]))
+    layers = MapLayers(np.concatenate([bins, stray]), {"dr": track}, [landmark], segment_ids=[0])
+    lo, hi = data_box(layers)
+    assert np.all(lo <= [-12.0, -7.0]) and np.all(hi >= [15.0, 7.0])
+    assert np.all(lo >= [-12.0 - 1.5, -7.0 - 1.5]) and np.all(hi <= [15.0 + 1.5, 7.0 + 1.5])
+    ax = Figure().subplots()
+    draw_map(ax, layers, (lo, hi))
+    assert ax.get_xlim()[1] >= 15.0 and [t.get_text() for t in ax.texts] == ["0"]
+
+
 def test_provenance_of_a_single_file_source_digests_what_the_run_reads(tmp_path: Path) -> None:
     """A Ping Viewer log (or a bag file): the file, the sonarslam.toml and truth.json beside it
     and its navigation elsewhere (a bag directory), each by its bytes; not the folder's other

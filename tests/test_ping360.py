@@ -240,8 +240,11 @@ def test_bad_messages_are_counted_and_dropped(small: Path) -> None:
     with pytest.warns(DataWarning) as caught:
         log = read_ping360_log(small)
     text = " ".join(str(w.message) for w in caught)
-    assert f"the first is record 1 (byte offset {recs[1][0]})" in text
-    assert f"the first is record 3 (byte offset {recs[3][0]})" in text
+    assert (
+        f"1 message(s) with a wrong checksum, dropped (their bytes changed on the link) ({len(recs[1][1]) - 32} bytes); the first in record 1 (byte offset {recs[1][0]})"
+        in text
+    )
+    assert f"the first in record 3 (byte offset {recs[3][0]})" in text
     assert log.counts["ping360_checksum_errors"] == 1
     assert log.counts["ping360_unknown_messages"] == 1
     assert log.counts["ping360_other_messages"] == 1
@@ -265,10 +268,9 @@ def test_a_log_cut_short_keeps_its_whole_records(small: Path) -> None:
     [
         ("empty", r"an empty file, not a Ping Viewer log"),
         ("header", r"not a Ping Viewer log: it does not start with the string"),
-        ("stamp", r"record 2 \(byte offset \d+\): time stamp b'.*' is not hh:mm:ss.zzz"),
+        ("stamp", r"record 2 \(byte offset \d+\): time stamp '00x00:00.250' is not hh:mm:ss.zzz"),
         ("back", r"record 3 \(byte offset \d+\): its stamp is 2.000 s earlier .* clock jump"),
-        ("length", r"record 1 \(byte offset \d+\): a message of 4294967040 bytes"),
-        ("range", r"record 2 \(byte offset \d+\): a beam of 200 samples every 900 ticks after"),
+        ("length", r"record 1 \(byte offset \d+\): a record of 4294967040 bytes"),
     ],
 )
 def test_a_bad_log_is_one_error_naming_the_record(small: Path, damage: str, message: str) -> None:
@@ -284,8 +286,8 @@ def test_a_bad_log_is_one_error_naming_the_record(small: Path, damage: str, mess
         data[recs[1][0] + 28 : recs[1][0] + 32] = struct.pack(">I", 0xFFFFFF00)
     else:
         bins = np.zeros((4, 200), np.uint8)
-        stamps = [50, 2150, 2300, 300] if damage == "back" else [0, 100, 200, 300]
-        periods = [1000, 1000, 900 if damage == "range" else 1000, 1000]
+        stamps = [50, 2150, 2300, 300]
+        periods = [1000, 1000, 1000, 1000]
         parts = []
         for k in range(4):
             tmp = small.parent / f"part{k}.bin"
@@ -309,11 +311,42 @@ def test_the_date_comes_from_the_file_name_or_the_settings(small: Path, tmp_path
     assert log.start_ms == 1_714_645_867_250 and log.beams.t_s[0] == 1_714_645_867.3
 
 
-def test_a_bin_needs_its_navigation_and_clocks_that_meet(binlog: Path, tmp_path: Path) -> None:
+def test_a_bin_alone_is_a_still_head_and_clocks_must_meet(
+    binlog: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Without navigation a .bin is read as a still head at --start (said plainly): info,
+    plot-scans, extract and run --backend dr work on it, the closed loops are refused."""
     alone = tmp_path / binlog.name
     shutil.copy(binlog, alone)
-    with pytest.raises(DataError, match=r"needs its navigation .* --nav BAG_OR_CSV"):
-        _open(alone)
+    with pytest.warns(DataWarning, match=r"no navigation .* read as a still head at --start"):
+        still = open_dataset(alone)
+    assert still.still and still.gps is None and len(still.beams) > 1000
+    start = replace(still, start_enu=(3.0, -2.0, math.radians(30.0)))
+    track = dead_reckoning_trajectory(start)
+    assert track.covs is None and track.span_s == pytest.approx(still.nav_span_s, abs=1e-9)
+    poses = track.poses(still.beams.t_s)
+    np.testing.assert_allclose(poses - poses[:1], 0.0, atol=1e-12)
+    np.testing.assert_allclose(poses[0], [3.0, -2.0, math.radians(30.0)], atol=1e-12)
+    out = tmp_path / "out"
+    assert main(["info", str(alone)]) == 0
+    said = capsys.readouterr().out
+    assert "start pose: no navigation: a still head at (0, 0) m heading 0 deg" in said
+    assert main(["run", str(alone), "--backend", "ekf", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err  # every kind of navigation --nav takes (a review: BAG_OR_CSV)
+    assert "ekf needs a DVL and an AHRS: --nav FILE" in err
+    assert all(
+        k in err for k in ("ROS bag", "CSV", ".tlog", "dataflash", "A50 JSON", "QGroundControl CSV")
+    )
+    args = ["--start", "3,-2,30", "--out"]
+    assert main(["run", str(alone), *args, str(out / "dr"), "--quiet"]) == 0
+    said = capsys.readouterr().out
+    assert "start pose: no navigation: a still head at (3, -2) m heading 30 deg" in said
+    dr = np.loadtxt(out / "dr" / "dr.tum")
+    np.testing.assert_allclose(dr[:, 1:3], [[3.0, -2.0]] * len(dr), atol=1e-9)
+    assert main(["plot-scans", str(alone), *args, str(out / "scans.png")]) == 0
+    assert "with dr poses" in capsys.readouterr().out
+    assert main(["extract", str(alone), *args, str(out / "lines"), "--quiet"]) == 0
+    assert json.loads((out / "lines" / "extract.json").read_text())["poses"] == "dr"
     nav = binlog.parent / "nav.bag"
     assert _open(alone, nav=nav).calibration.startswith("neutral")  # never the marina's
     # the file name read in the wrong zone: the beams miss the navigation, said in one line
@@ -432,3 +465,140 @@ def test_a_step_that_is_not_the_logs_is_refused_with_its_line(binlog: Path, tmp_
         _open(folder / binlog.name)
     assert str(err.value).startswith(f"{toml}:{at + 1}: [sonar] step_deg"), str(err.value)
     assert "the log's head steps by" in str(err.value)
+
+
+# -- Ping Viewer's logs as written (issue 41, item 1) ------------------------------------------
+
+PERSIAN_ZERO = "\u06f0"
+
+
+def _record(stamp: str, data: bytes) -> bytes:
+    """One UTF-16 record: a stamp and the bytes the link read."""
+    text = stamp.encode("utf-16-be")
+    return struct.pack(">I", len(text)) + text + struct.pack(">I", len(data)) + data
+
+
+def test_digits_of_any_script_are_read_as_their_ascii_digit() -> None:
+    from sonarslam.datasets.ping360 import ascii_digits
+
+    # Extended Arabic-Indic (Persian), Arabic-Indic, Devanagari, full-width: str.isdecimal
+    for zero in ("\u06f0", "\u0660", "\u0966", "\uff10"):
+        text = "".join(chr(ord(zero) + d) for d in (2, 0, 2, 4)) + "-x:."
+        assert ascii_digits(text) == "2024-x:."
+    assert ascii_digits("²") == "²"  # a superscript is a digit, not a decimal one: kept
+
+
+@pytest.mark.parametrize("encoding", ["utf-16-be", "utf-8"])
+def test_split_records_persian_digits_and_range_changes_read_whole(
+    tmp_path: Path, encoding: str
+) -> None:
+    """What Ping Viewer writes (FileLink::writeData logs each serial read, not each message;
+    Qt 5 stamps in the system locale's digits): beams whose bytes straddle records are joined,
+    the stamps and the file name in Persian digits read, the ranges 2 -> 15 -> 60 m read as
+    three segments of their own bin size; only two messages whose middles the link lost are
+    dropped, counted as cut short."""
+    rng = np.random.default_rng(41)
+    n = 120
+    bins = rng.integers(0, 256, (n, 1200)).astype(np.uint8)
+    periods = np.repeat([88, 666, 2666], 40)  # Ping Viewer's sample periods for 2, 15, 60 m
+    counts = np.repeat([1200, 1000, 1200], 40)
+    stamps = 500 + 37 * np.arange(n)
+    start_ms = 1_700_000_000_123
+    name = tmp_path / log_file_name(start_ms, zero=PERSIAN_ZERO)
+    assert name.name == "۲۰۲۳۱۱۱۴-۲۲۱۳۲۰۱۲۳.bin"
+    write_ping360_log(
+        name, stamps, np.arange(n) * 2 % 400, bins, periods, encoding,
+        n_samples=counts, split_rng=np.random.default_rng(7), zero=PERSIAN_ZERO, lose=(10, 70),
+    )  # fmt: skip
+    with pytest.warns(DataWarning) as caught:
+        log = read_ping360_log(name)
+    said = [str(w.message) for w in caught]
+    assert len(said) == 1 and "2 message(s) cut short, dropped: their bytes end before" in said[0]
+    assert log.counts["ping360_cut_messages"] == 2
+    sent = [8 + 14 + int(counts[k]) + 2 for k in (10, 70)]  # header, fields, data, checksum
+    # what arrived of each: its first and last thirds
+    assert log.counts["ping360_dropped_bytes"] == sum(m - (2 * m // 3 - m // 3) for m in sent)
+    faults = [k for k, v in log.counts.items() if v and "cut" not in k and "dropped" not in k]
+    assert faults == []
+    keep = np.setdiff1d(np.arange(n), [10, 70])
+    assert len(log.beams) == keep.size and log.records > 3 * n  # a beam over several records
+    np.testing.assert_array_equal(np.rint(log.beams.t_s * 1000) - start_ms, stamps[keep])
+    for i, k in enumerate(keep):
+        np.testing.assert_array_equal(log.beams.intensities[i, : counts[k]], bins[k, : counts[k]])
+    assert not log.beams.intensities[40:78, 1000:].any()  # the 15 m beams' padding
+    sizes = [sample_spacing_m(t, 1500.0) for t in (88, 666, 2666)]
+    assert [(g.beams, g.n_bins, g.bin_size_m) for g in log.segments] == [
+        (39, 1200, sizes[0]), (39, 1000, sizes[1]), (40, 1200, sizes[2])
+    ]  # fmt: skip
+    assert log.segments[1].t0_s == (start_ms + stamps[40]) / 1000.0
+    assert log.segments[2].range_m == pytest.approx(60.0, abs=0.02)  # whole ticks: 59.985 m
+    assert log.beams.bin_size_m is not None
+    np.testing.assert_array_equal(log.beams.bin_size_m, np.repeat(sizes, [39, 39, 40]))
+    # the head is the farthest-reaching segment's; rows as wide as the most samples
+    assert log.bin_size_m == sizes[2] and log.n_bins == 1200 and log.sample_period_ticks == 2666
+
+
+def test_bytes_in_no_message_are_counted_by_their_cause(small: Path) -> None:
+    """A log opened mid-message begins with the end of one (stray bytes); a flipped byte
+    breaks one message's checksum; the log cut inside its last message: each dropped, counted
+    under its own cause and named so, and nothing else is lost."""
+    recs = _records(small)
+    whole = read_ping360_log(small)
+    body = bytearray(b"".join(r[1] for r in recs))
+    tail = recs[0][1][32 + 150 :]  # the end of a message: no "BR" in it
+    assert b"BR" not in tail
+    # record 2's message: a sample flipped (its checksum no longer holds)
+    body[recs[2][0] - recs[0][0] + 32 + 10 + 14 + 50] ^= 0x01
+    data = small.read_bytes()[: recs[0][0]] + _record("00:00:00.010", tail) + bytes(body)
+    small.write_bytes(data[: len(data) - 40])  # inside the last message
+    with pytest.warns(DataWarning) as caught:
+        log = read_ping360_log(small)
+    said = " | ".join(str(w.message) for w in caught)
+    assert f"{len(tail)} byte(s) outside any message, dropped" in said
+    assert "1 message(s) with a wrong checksum, dropped" in said
+    assert "the log ends inside record 6" in said  # its record, cut: dropped with it
+    c = log.counts
+    assert (c["ping360_stray_bytes"], c["ping360_checksum_errors"]) == (len(tail), 1)
+    assert c["ping360_truncated_records"] == 1 and c["ping360_cut_messages"] == 0
+    np.testing.assert_array_equal(log.beams.intensities, whole.beams.intensities[[0, 1, 3, 4]])
+
+
+def test_span_takes_part_of_any_source(
+    binlog: Path, layout: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--span T0,T1 (s from the start of the navigation) takes that part of a .bin or of a
+    directory: its beams, navigation and GPS; a span with nothing in it is one line."""
+    whole = _open(binlog)
+    t0 = whole.nav_span_s[0]
+    for source in (binlog, layout):
+        part = _open(source, span_s=(20.0, 60.0))
+        assert part.nav_span_s[0] >= t0 + 20.0 - 0.2 and part.nav_span_s[1] <= t0 + 60.0
+        assert part.beams.t_s[0] >= t0 + 20.0 and part.beams.t_s[-1] <= t0 + 60.0
+        inside = (whole.beams.t_s >= t0 + 20.0) & (whole.beams.t_s <= t0 + 60.0)
+        assert len(part.beams) == np.count_nonzero(inside) > 500
+        assert part.gps is not None and part.gps.t[0] >= t0 + 20.0
+    out = tmp_path / "run"
+    args = ["run", str(binlog), "--span", "20,60", "--out", str(out), "--quiet"]
+    assert main(args) == 0
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["provenance"]["span_s"] == [20.0, 60.0] and m["data_s"] < 40.0 + 1e-6
+    assert main(["info", str(binlog), "--span", "400,500"]) == 1
+    assert "--span 400,500 (s from the start of the navigation, whose span is 0-1" in (
+        capsys.readouterr().err
+    )
+
+
+def test_a_log_that_ends_inside_a_message_keeps_the_whole_ones(tmp_path: Path) -> None:
+    """Records split as the link reads: the log closed between two records of one message
+    drops that message, counted as unfinished and named so; the beams before it are whole."""
+    p = tmp_path / "20240502-103107250.bin"
+    bins = (np.arange(6 * 200).reshape(6, 200) % 251).astype(np.uint8)
+    write_ping360_log(
+        p, np.arange(6) * 100, np.arange(6) * 2, bins, 1000, split_rng=np.random.default_rng(5)
+    )
+    recs = _records(p)
+    p.write_bytes(p.read_bytes()[: recs[-1][0]])  # without its last record
+    with pytest.warns(DataWarning, match=r"1 message the log ends inside, dropped \(\d+ bytes\)"):
+        log = read_ping360_log(p)
+    assert log.counts["ping360_unfinished_messages"] == 1
+    np.testing.assert_array_equal(log.beams.intensities, bins[:5])

@@ -20,6 +20,9 @@ from sonarslam.datasets.config import dump_dataset_config
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.rosbag import (
     CLOCK_JUMP_S,
+    CUSTOM_MSG_DEFINITIONS,
+    OLDER_DEFINITIONS,
+    _decode,
     _messages,
     _stamp_of,
     _typestore,
@@ -678,16 +681,19 @@ def test_water_linked_and_marine_acoustic_dvls_and_a_projected_sonar_image(
             if role == "dvl":
                 v = msg.twist.twist.linear  # type: ignore[attr-defined]
                 ok = k not in lost and bool(short.dvl.valid[k])
-                if dvl_type == "dvl_msgs/msg/DVL":
+                if dvl_type == "dvl_msgs/msg/DVL":  # the A50's frame: y to the right
                     msg = T[dvl_type](
                         header=h,
                         time=0.0,
-                        velocity=v,
+                        velocity=vec(x=v.x, y=-v.y, z=0.0),
                         fom=0.1,
+                        covariance=np.zeros(9),
                         altitude=3.0,
                         beams=[],
                         velocity_valid=ok,
                         status=0,
+                        time_of_validity=0,
+                        time_of_transmission=0,
                         form="json_v3",
                     )
                 else:
@@ -927,3 +933,128 @@ def test_the_caves_preset_and_mountings_from_the_transforms(
     assert "from the bag's transforms (base sparus)" in capsys.readouterr().out
     m = json.loads((tmp_path / "r" / "metrics.json").read_text())
     assert "from the bag's transforms (base sparus)" in m["calibration"]
+
+
+@pytest.mark.parametrize(
+    "dvl_type",
+    [
+        "waterlinked_a50/msg/TransducerReportStamped",
+        "waterlinked_dvl/msg/TransducerReportStamped",
+        "dvl_msgs/msg/DVLBefore2025",
+    ],
+)
+def test_the_ros2_drivers_ping360_and_water_linked_types(
+    dvl_type: str, short: Dataset, tmp_path: Path
+) -> None:
+    """The ROS 2 Ping360 driver's ``ping360_sonar_msgs/SonarEcho`` (radians in [-pi, pi), a
+    range of whole metres, the bin of the sample period it set) and the A50's reports (its
+    frame: y to the right) in a ROS 2 sqlite3 bag without definitions: the beams and the DVL
+    read back as the run's; ``dvl_msgs/DVL`` of the layout before 2025 too."""
+    store = _typestore()
+    T = store.types
+    n, range_m, c = short.config.sonar.n_bins, 20, 1500
+    period = math.floor(2.0 * range_m / (n * c * 25e-9))
+    msgs: list[tuple[float, str, object]] = []
+    k = 0
+    for t, role, msg in _messages(store, short):
+        if role == "sonar":
+            bearing = float(msg.angle_min)  # type: ignore[attr-defined]
+            head = np.angle(np.exp(-1j * bearing))  # the head's own angle (clockwise)
+            msg = T["ping360_sonar_msgs/msg/SonarEcho"](
+                header=msg.header,  # type: ignore[attr-defined]
+                angle=np.float32(head),
+                gain=1,
+                number_of_samples=n,
+                transmit_frequency=740,
+                speed_of_sound=c,
+                range=range_m,
+                intensities=np.asarray(msg.intensities, dtype=np.uint8),  # type: ignore[attr-defined]
+            )
+        elif role == "dvl":
+            v = msg.twist.twist.linear  # type: ignore[attr-defined]
+            ok = bool(short.dvl.valid[k])
+            k += 1
+            h = msg.header  # type: ignore[attr-defined]
+            if dvl_type.startswith("dvl_msgs"):
+                msg = T[dvl_type](
+                    header=h, time=0.0, velocity=T["geometry_msgs/msg/Vector3"](
+                        x=v.x, y=-v.y, z=0.0), fom=0.01, altitude=2.0, beams=[],
+                    velocity_valid=ok, status=0, form="json_v2",
+                )  # fmt: skip
+            else:
+                pkg = dvl_type.split("/")[0]
+                stamp = T["builtin_interfaces/msg/Time"](sec=0, nanosec=0)
+                times = {"time_of_validity": 0, "time_of_transmission": 0}
+                if pkg == "waterlinked_dvl":
+                    times = {"time_of_validity": stamp, "time_of_transmission": stamp}
+                report = T[f"{pkg}/msg/TransducerReport"](
+                    vx=v.x, vy=-v.y, vz=0.0, fom=0.01, altitude=2.0, transducers=[],
+                    velocity_valid=ok, status=0, format="json_v3",
+                    **({"type": "velocity"} if pkg == "waterlinked_a50" else {}),
+                    time=100.0, covariance=np.zeros(9), **times,
+                )  # fmt: skip
+                stamped = (
+                    {"header": h}
+                    if pkg == "waterlinked_dvl"
+                    else {"timestamp": int(round(t * 1e9))}
+                )
+                msg = T[dvl_type](report=report, **stamped)
+        msgs.append((t, role, msg))
+    topics = {
+        "sonar": ("/scan_echo", "ping360_sonar_msgs/msg/SonarEcho"),
+        "dvl": ("/dvl", dvl_type),
+        "imu": ("/imu", "sensor_msgs/msg/Imu"),
+    }
+    writer_store = store
+    if dvl_type.startswith("dvl_msgs"):  # as the driver named it, in its layout of then
+        from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+        writer_store = get_typestore(Stores.ROS2_HUMBLE)
+        writer_store.register(
+            get_types_from_msg(
+                CUSTOM_MSG_DEFINITIONS["dvl_msgs/msg/DVLBeam"], "dvl_msgs/msg/DVLBeam"
+            )
+            | get_types_from_msg(OLDER_DEFINITIONS["dvl_msgs/msg/DVL"][1], "dvl_msgs/msg/DVL")
+            | get_types_from_msg(
+                CUSTOM_MSG_DEFINITIONS["ping360_sonar_msgs/msg/SonarEcho"],
+                "ping360_sonar_msgs/msg/SonarEcho",
+            )
+        )
+        topics["dvl"] = ("/dvl", "dvl_msgs/msg/DVL")
+    bag = _write(tmp_path / "b", "sqlite3", writer_store, topics, msgs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        d = open_bag(bag)
+    assert d.config.sonar.angle_sense == -1  # the head's own angle
+    assert math.isclose(d.config.sonar.bin_size_m, c * period * 25e-9 / 2.0, rel_tol=1e-12)
+    assert d.config.sonar.bin_size_m < range_m / n  # the truncated period, not range / n
+    got = d.config.sonar.bearing_rad(d.beams.transducer_angle_rad)
+    want = short.config.sonar.bearing_rad(short.beams.transducer_angle_rad)
+    assert np.max(np.abs(np.angle(np.exp(1j * (got - want))))) < 1e-6  # float32 angles
+    valid = short.dvl.valid
+    np.testing.assert_array_equal(d.dvl.valid, valid)
+    np.testing.assert_allclose(d.dvl.v_mps[valid], short.dvl.v_mps[valid], atol=1e-12)
+    np.testing.assert_allclose(d.dvl.t, short.dvl.t, atol=1e-6)
+
+
+def test_a_dvl_msgs_of_the_older_layout_decodes_without_definitions() -> None:
+    """A ROS 2 bag without definitions is read with CUSTOM_MSG_DEFINITIONS: a ``dvl_msgs/DVL``
+    of the layout before 2025 does not decode with the current one, and is read with the
+    older (OLDER_DEFINITIONS)."""
+    store = _typestore()
+    T = store.types
+    older = OLDER_DEFINITIONS["dvl_msgs/msg/DVL"][0]
+    h = T["std_msgs/msg/Header"](
+        stamp=T["builtin_interfaces/msg/Time"](sec=5, nanosec=0), frame_id="d"
+    )
+    v = T["geometry_msgs/msg/Vector3"](x=0.5, y=-0.1, z=0.0)
+    msg = T[older](header=h, time=100.0, velocity=v, fom=0.01, altitude=2.0, beams=[],
+                   velocity_valid=True, status=0, form="json_v2")  # fmt: skip
+    raw = store.serialize_cdr(msg, older)
+
+    class Reader:
+        def deserialize(self, data: bytes, typ: str) -> object:
+            return store.deserialize_cdr(data, typ)
+
+    got = _decode(Path("b"), Reader(), raw, "dvl_msgs/msg/DVL", "/dvl", 0)
+    assert float(got.velocity.x) == 0.5 and float(got.altitude) == 2.0

@@ -46,3 +46,43 @@ def test_a_calibrated_range_offset_moves_every_bin_to_the_surface(tmp_path) -> N
     path = tmp_path / "sonarslam.toml"
     path.write_text(dump_dataset_config(DatasetConfig(sonar=head)))
     assert load_dataset_config(path).sonar.range_offset_m == 0.25
+
+
+def test_a_beam_of_its_own_bin_size_is_placed_by_it_everywhere() -> None:
+    """A log whose range changes (a Ping Viewer log's segments): the store, the projection,
+    the scans and the beam series take each beam's own bin size, the head's where it has
+    none (issue 41)."""
+    from sonarslam.datasets.records import BeamSeries
+    from sonarslam.features.geometry import FloatArray
+    from sonarslam.features.projection import beam_points
+    from sonarslam.features.scans.config import ScanConfig
+    from sonarslam.features.scans.scan import ScanBuilder
+    from sonarslam.sonar.beam import Mounting
+
+    head = SonarHead(n_bins=50, bin_size_m=0.2, step_rad=float(np.pi / 2), range_offset_m=0.05)
+    store = SectorStore(head, sector_rad=np.pi)
+    store.add(0.0, 0.0, _segmented([9]), bin_size_m=0.01)  # a 0.5 m segment's beam
+    store.add(1.0, 0.0, _segmented([9]))
+    np.testing.assert_allclose(store.stored().final.range_m, [0.05, 1.95], atol=1e-12)
+    rows = np.zeros((4, 50), np.uint8)
+    rows[:, 9] = 200
+    own = np.array([0.01, 0.01, 0.2, 0.2])
+    series = BeamSeries(np.arange(4.0), np.zeros(4), rows, False, own)
+    for beams in (series, list(series), series[1:], series.shifted(5.0).between(6.5, 9.0)):
+        _, r, _ = beam_points(beams, head, 100)
+        np.testing.assert_allclose(r, (10 * own - 0.05)[4 - len(beams) :], atol=1e-12)
+    again = BeamSeries.of(list(series)).bin_size_m
+    assert again is not None and again.tolist() == own.tolist()
+
+    class Still:
+        def poses(self, t_s: FloatArray) -> FloatArray:
+            return np.zeros((np.size(t_s), 3))
+
+        def covariance(self, t_s: float) -> None:
+            return None
+
+    config = ScanConfig(min_range_m=0.0, intensity_threshold=100.0)
+    builder = ScanBuilder(config, head, Mounting(), Still())
+    done = [builder.add(b) for b in series]  # four beams of a quarter turn each: one scan
+    assert done[-1] is not None
+    np.testing.assert_allclose(done[-1].points_b[:, 0], 10 * own - 0.05, atol=1e-12)

@@ -94,7 +94,7 @@ class ScanBuilder:
         )
         self._t.append(beam.t)
         self._bearing.append(float(self.head.bearing_rad(beam.transducer_angle_rad)))
-        self._ranges.append(self.head.bin_range_m(bins))
+        self._ranges.append(self.head.bin_range_m(bins, beam.bin_size_m))
         if len(self._t) < self.n_beams:
             return None
         scan = self._complete()

@@ -28,7 +28,7 @@ from sonarslam.slam.run.sources import pose_source_by_name
 
 
 def _open(args: argparse.Namespace) -> Dataset:
-    dataset = open_dataset(args.source, config_override=args.config, nav=args.nav)
+    dataset = open_dataset(args.source, config_override=args.config, nav=args.nav, span_s=args.span)
     if args.start is not None:
         dataset = replace(dataset, start_enu=args.start)
     print(f"calibration of {dataset.name}: {dataset.calibration}")
@@ -42,7 +42,7 @@ def _write(args: argparse.Namespace, config: DatasetConfig) -> None:
         path = Path(args.write)
         text = dump_dataset_config(config)
         if is_ping360_log(args.source):
-            text += ping360_table(args.source, path, args.nav)
+            text += ping360_table(args.source, path, args.nav or None)
         path.write_text(text, encoding="utf-8")
         print(f"written: {path}")
 

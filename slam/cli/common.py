@@ -18,6 +18,7 @@ __all__ = [
     "add_quiet",
     "add_start",
     "parse_start",
+    "poses_for",
     "number",
     "POSES",
 ]
@@ -73,8 +74,9 @@ class Subparsers(Protocol):
     def add_parser(self, name: str, **kwargs: object) -> argparse.ArgumentParser: ...
 
 
-def add_source(p: argparse.ArgumentParser) -> None:
-    """The positional SOURCE of a command that reads a dataset."""
+def add_source(p: argparse.ArgumentParser, loop: bool = False) -> None:
+    """The positional SOURCE of a command that reads a dataset, with ``--nav`` and ``--span``
+    (``loop``: the command takes ``--loop`` too, whose times then count from the span's T0)."""
     p.add_argument(
         "source",
         help="dataset directory, ROS bag (.bag, .mcap, ROS 2 bag directory), Ping Viewer .bin"
@@ -82,9 +84,23 @@ def add_source(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--nav",
-        metavar="BAG_OR_CSV",
-        help="a Ping Viewer .bin's navigation: a ROS bag (DVL, IMU, GPS topics) or a CSV"
-        " (docs/data.md; default: [ping360] nav of the sonarslam.toml beside the .bin)",
+        metavar="FILE",
+        action="append",
+        help="a Ping Viewer .bin's navigation: a ROS bag (DVL, IMU, GPS topics), a CSV, or a"
+        " BlueROV2's own logs told by their content (a QGroundControl .tlog or CSV export, an"
+        " ArduSub dataflash .bin, a Water Linked DVL A50 JSON log); repeat it to take the DVL"
+        " from one and the heading from another (docs/data.md; default: [ping360] nav of the"
+        " sonarslam.toml beside the .bin; without either, the .bin alone is read as a still"
+        " head at --start)",
+    )
+    p.add_argument(
+        "--span",
+        type=parse_loop,
+        default=None,
+        metavar="T0,T1",
+        help="take the part of the source from T0 to T1 (s from the start of the navigation, as"
+        " info's segments; a .bin without navigation: from its first beam): its beams,"
+        " navigation and GPS" + ("; --loop times then count from T0" if loop else ""),
     )
 
 
@@ -119,15 +135,22 @@ def add_config_and_set(p: argparse.ArgumentParser) -> None:
     )
 
 
-def add_poses(p: argparse.ArgumentParser, default: str, note: str = "") -> None:
-    """``--poses``: one of :data:`POSES`."""
+def add_poses(p: argparse.ArgumentParser, default: str | None, note: str = "") -> None:
+    """``--poses``: one of :data:`POSES`; a ``default`` of None is :func:`poses_for`'s."""
+    said = default or "gps (a .bin without navigation: dr, its still head)"
     p.add_argument(
         "--poses",
         default=default,
         choices=POSES,
         help=f"pose source: gps (GPS+AHRS), dr (dead reckoning), truth (simulated only);"
-        f" default {default}{note}",
+        f" default {said}{note}",
     )
+
+
+def poses_for(poses: str | None, still: bool) -> str:
+    """``--poses`` as given, else ``gps``; of a still head (a ``.bin`` without navigation, no
+    GPS either) ``dr``, its pose."""
+    return poses if poses is not None else "dr" if still else "gps"
 
 
 def add_quiet(p: argparse.ArgumentParser) -> None:
@@ -151,7 +174,8 @@ UNIX_TIME_S = 1e8
 
 
 def parse_loop(text: str) -> tuple[float, float]:
-    """``T0,T1`` (s from the start of the navigation, ``0 <= T0 < T1``); an argparse ``type``."""
+    """``T0,T1`` (s from the start of the navigation, ``0 <= T0 < T1``); an argparse ``type``
+    (``--loop``, ``--span``)."""
     parts = text.split(",")
     if len(parts) != 2:
         raise argparse.ArgumentTypeError(f"must be T0,T1 (s from the start), got {text!r}")
@@ -177,5 +201,6 @@ def add_start(p: argparse.ArgumentParser) -> None:
         metavar="X,Y[,YAW]",
         help="start position in the local East-North frame (m); default: the first GPS fix, or"
         " without GPS the origin. The heading is the AHRS's: a YAW given (deg CCW from East) must"
-        " agree with it within 3 [noise] ahrs_sigma_deg",
+        " agree with it within 3 [noise] ahrs_sigma_deg. A .bin without navigation: the still"
+        " head's pose, the whole log long (YAW default 0: East)",
     )

@@ -7,16 +7,21 @@ from dataclasses import replace
 from pathlib import Path
 
 from sonarslam.datasets.source import Dataset, open_dataset
+from sonarslam.slam.cli.common import poses_for
+from sonarslam.slam.io.files import check_output_dir
 from sonarslam.slam.run.extraction import extract
+from sonarslam.slam.run.sources import start_pose_origin
 
 
 def command(args: argparse.Namespace) -> int:
-    source: str | Dataset = args.source
-    if args.start is not None or args.nav is not None:
-        source = replace(open_dataset(args.source, nav=args.nav), start_enu=args.start)
+    check_output_dir(args.out)  # before the data is read, as extract() does
+    opened = open_dataset(args.source, nav=args.nav, span_s=args.span)
+    source: Dataset = replace(opened, start_enu=args.start)
+    if source.still:
+        print(f"start pose: {start_pose_origin(source)}")
     result = extract(
         source,
-        args.poses,
+        poses_for(args.poses, source.still),
         args.out,
         config_path=args.config,
         preset=args.preset,

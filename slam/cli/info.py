@@ -4,20 +4,26 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 from sonarslam.datasets.gates import DVL_MIN_SPEED_MPS, MAX_BEAMS_OUTSIDE_NAV
-from sonarslam.datasets.ping360 import is_ping360_log
+from sonarslam.datasets.navlog import describe_nav_log, is_nav_log, navlog_settings, read_nav_log
+from sonarslam.datasets.ping360 import STILL_HEAD, is_ping360_log
 from sonarslam.datasets.rosbag import bag_topics, is_bag
-from sonarslam.datasets.source import check_toml_inputs, open_dataset, resolve_source
+from sonarslam.datasets.source import Dataset, check_toml_inputs, open_dataset, resolve_source
 from sonarslam.slam.model.motion import gyro_bias_against_heading
 from sonarslam.slam.run.presets import parse_settings
 from sonarslam.slam.run.settings import Setting, check_run_settings, dataset_settings, run_settings
 from sonarslam.slam.run.sources import (
     CLOSED_LOOP_START_ONLY,
     DR_IGNORES,
+    DVL_LEVER_ARM_TOLERANCE_M,
     DVL_SIGMA_OVER_SCATTER_MAX,
+    dvl_lever_arm_from_turns,
     dvl_quality,
     start_pose,
+    start_pose_origin,
+    warn_dvl_lever_arm,
     warn_dvl_sigma,
 )
 
@@ -25,6 +31,8 @@ from sonarslam.slam.run.sources import (
 def command(args: argparse.Namespace) -> int:
     settings = parse_settings(args.set)
     check_run_settings(settings)
+    if Path(args.source).is_file() and is_nav_log(args.source):
+        return _nav_log(args)
     if is_bag(args.source):
         check_toml_inputs(resolve_source(args.source), args.topics)
         topics = bag_topics(args.source, args.topics)
@@ -36,7 +44,11 @@ def command(args: argparse.Namespace) -> int:
                 f"  {t.topic:<{width}}  {t.msgtype:<46} {t.count:>8} msgs {t.rate_hz:>8.2f} Hz  {role}"
             )
     d = open_dataset(
-        args.source, config_override=args.config, topics_file=args.topics, nav=args.nav
+        args.source,
+        config_override=args.config,
+        topics_file=args.topics,
+        nav=args.nav,
+        span_s=args.span,
     )
     t0, t1 = d.nav_span_s
     kind = (
@@ -56,12 +68,23 @@ def command(args: argparse.Namespace) -> int:
         }
         gain = c.get("ping360_gain_changes", 0)
         print(
-            f"  Ping Viewer log: {len(d.beams)} beams of {d.config.sonar.n_bins} samples"
-            f" of {d.config.sonar.bin_size_m:.6g} m (sample period and [ping360]"
+            f"  Ping Viewer log: {len(d.beams)} beams of up to {d.config.sonar.n_bins} samples,"
+            f" the head's bins {d.config.sonar.bin_size_m:.6g} m (sample period and [ping360]"
             f" speed_of_sound_mps), step {d.config.sonar.step_rad * 200 / math.pi:g} gradians;"
-            f" other records: {dropped or 'none'}; gain_setting "
+            f" other messages and bytes dropped: {dropped or 'none'}; gain_setting "
             + (f"changed {gain} time(s) (the intensities with it)" if gain else "constant")
         )
+    _print_segments(d)
+    if d.still:
+        sonar = d.report.gaps.get("sonar")
+        print(
+            f"  sonar beams {len(d.beams)} over {d.beams.t_s[-1] - d.beams.t_s[0]:.1f} s"
+            + (f"; gaps {sonar.count} (longest {sonar.longest_s:.1f} s)" if sonar else "")
+        )
+        print(f"  {STILL_HEAD}")
+        print(f"  start pose: {start_pose_origin(d)}")
+        _print_settings("dataset settings (sonarslam.toml keys)", dataset_settings(d, args.config))
+        return 0
     nav = d.nav_beams()
     processed = ""
     if d.gps is not None and nav:
@@ -126,6 +149,17 @@ def command(args: argparse.Namespace) -> int:
             f"  DVL sigma over its scatter's median: x{n.dvl_sigma_mps / dq['dvl_scatter_p50_mps']:.0f}"
             f" (over {DVL_SIGMA_OVER_SCATTER_MAX:g}: [noise] dvl_sigma_mps too large?)"
         )
+    lever = dvl_lever_arm_from_turns(d)
+    print(
+        f"  DVL position its turns imply (m): x {lever.x_m:+.2f} ± {lever.x_se_m:.2f},"
+        f" y {lever.y_m:+.2f} ± {lever.y_se_m:.2f}"
+        f" ([mounting.dvl] x_m {d.config.dvl_mounting.x_m:g}, y_m {d.config.dvl_mounting.y_m:g})"
+    )
+    if warn_dvl_lever_arm(d, lever):
+        print(
+            f"  DVL lever arm: more than {DVL_LEVER_ARM_TOLERANCE_M:g} m from [mounting.dvl]"
+            " x_m, y_m (in metres? a lateral axis of the wrong sign?)"
+        )
     _print_settings("dataset settings (sonarslam.toml keys)", dataset_settings(d, args.config))
     print(f"  dead reckoning (--backend dr) ignores: {', '.join(DR_IGNORES)}")
     print(
@@ -136,6 +170,34 @@ def command(args: argparse.Namespace) -> int:
     )
     _print_settings("run settings (sonarslam run --set NAME=VALUE)", run_settings(d, settings))
     return 0
+
+
+def _nav_log(args: argparse.Namespace) -> int:
+    """A navigation log alone: what it holds, what a run would take from it."""
+    path = Path(args.source)
+    beside = path.parent / "sonarslam.toml"
+    settings = navlog_settings(beside if beside.is_file() else None, args.config)
+    for line in describe_nav_log(read_nav_log(path, settings)):
+        print(line)
+    return 0
+
+
+def _print_segments(d: Dataset) -> None:
+    """The log's segments (one range, gain, sector each), times as --span takes them."""
+    if len(d.segments) < 2:
+        return
+    t0 = d.nav_span_s[0]
+    origin = "the first beam (no navigation)" if d.still else "the start of the navigation"
+    print(
+        f"  {len(d.segments)} segments (a range, gain or sector each; each beam with its own bin"
+        f" size; --span T0,T1 takes part of the log, s from {origin}):"
+    )
+    for k, g in enumerate(d.segments, 1):
+        print(
+            f"    {k}: {g.t0_s - t0:.3f} to {g.t1_s - t0:.3f} s, {g.beams} beams of"
+            f" {g.n_bins} samples of {g.bin_size_m * 1000:.4g} mm (range {g.range_m:.2f} m),"
+            f" {g.setting}"
+        )
 
 
 def _print_settings(title: str, settings: list[Setting]) -> None:

@@ -25,7 +25,15 @@ from sonarslam.slam.cli.common import (
     parse_loop,
 )
 
-__all__ = ["COMMANDS", "BACKENDS", "BAG_KINDS", "EXTRACTOR_PRESETS", "WORLDS", "SIM_DURATION_S"]
+__all__ = [
+    "COMMANDS",
+    "BACKENDS",
+    "BAG_KINDS",
+    "BLUEROV_NAV_KINDS",
+    "EXTRACTOR_PRESETS",
+    "WORLDS",
+    "SIM_DURATION_S",
+]
 
 #: ``--backend``: :func:`sonarslam.slam.run.run.backend_names` (the baselines, then the closed
 #: loops of :data:`sonarslam.slam.backends.registry.BACKENDS`).
@@ -36,12 +44,18 @@ EXTRACTOR_PRESETS = ("default", "marina", "marina-fit", "marina-seed")
 WORLDS = ("pool", "harbour", "random", "drift", "drawn")
 #: ``simulate --bag``: :data:`sonarslam.datasets.rosbag.BAG_KINDS`.
 BAG_KINDS = ("ros1", "mcap", "sqlite3")
+#: ``simulate --bluerov``: :data:`sonarslam.datasets.simulator.bluerov.NAV_KINDS`.
+BLUEROV_NAV_KINDS = ("tlog", "dataflash", "dvl_json", "dvl_json_v1", "qgc_csv")
 #: ``demo --sim-duration``'s default: :data:`sonarslam.slam.run.demo.SIM_DURATION_S` (s).
 SIM_DURATION_S = 600.0
 
 
 def _simulate(sub: Subparsers) -> argparse.ArgumentParser:
-    p = sub.add_parser("simulate", help="simulate a run in the marina layout", epilog=EPILOG)
+    p = sub.add_parser(
+        "simulate",
+        help="simulate a run and write it in the marina layout, as a ROS bag (--bag), or as a"
+        " Ping Viewer .bin with its navigation (--ping360) or a BlueROV2's logs (--bluerov)",
+    )
     p.add_argument(
         "kind",
         choices=WORLDS,
@@ -81,12 +95,54 @@ def _simulate(sub: Subparsers) -> argparse.ArgumentParser:
         " on it are measured against truth.json and their loops (docs/data.md, 'Without GPS')",
     )
     p.add_argument(
+        "--bluerov",
+        choices=BLUEROV_NAV_KINDS,
+        default=None,
+        metavar="NAV",
+        help="write the run as a BlueROV2 logs it: a Ping Viewer OUT/<start>.bin and the"
+        " navigation as NAV, with its writer's known defects (corrupt chunks, json_v1's relative"
+        " times, QGroundControl's 1 Hz rounded CSV): tlog (QGroundControl .tlog: ATTITUDE, the"
+        " DVL's VISION_POSITION_DELTA, the autopilot's LOCAL_POSITION_NED, an Underwater GPS's"
+        " GPS_INPUT), dataflash (an ArduSub .BIN), dvl_json (the A50's json_v3), dvl_json_v1"
+        " (json_v1 and an ATTITUDE-only .tlog for the heading), qgc_csv (QGroundControl's CSV"
+        " export); sonarslam.toml's [ping360] nav names it (choices: %(choices)s)",
+    )
+    p.add_argument(
         "--ping360",
         action="store_true",
         help="write the run as a Ping360 logs it instead: a Ping Viewer OUT/<start>.bin (a"
-        " Ping360-shaped head: whole gradians, 25 ns sample periods) and OUT/nav.bag",
+        " Ping360-shaped head: whole gradians, 25 ns sample periods; its records split"
+        " mid-message as Ping Viewer's serial link delivers them) and OUT/nav.bag",
+    )
+    p.add_argument(
+        "--first-ranges",
+        type=_ranges,
+        default=(),
+        metavar="M,M",
+        help="with --ping360: the log starts at these ranges (m), 3 s each, before the world's"
+        " head (e.g. 2,15: Ping Viewer opens at 2 m), each beam rendered at its range with"
+        " 1200 samples; the log is read as segments",
+    )
+    p.add_argument(
+        "--persian-digits",
+        action="store_true",
+        help="with --ping360: the file name and the records' stamps in Extended Arabic-Indic"
+        " digits, as Ping Viewer on a Persian-locale Windows writes them",
+    )
+    p.add_argument(
+        "--no-nav",
+        action="store_true",
+        help="with --ping360: the .bin alone, no nav.bag (a tank test; read as a still head)",
     )
     return p
+
+
+def _ranges(text: str) -> tuple[float, ...]:
+    """``M,M,...``: ranges (m); an argparse ``type``."""
+    try:
+        return tuple(float(number(float, 0.75, 100.0)(v.strip())) for v in text.split(","))
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f"ranges M,M in m, 0.75-100: {exc}") from None
 
 
 def _run(sub: Subparsers) -> argparse.ArgumentParser:
@@ -95,7 +151,7 @@ def _run(sub: Subparsers) -> argparse.ArgumentParser:
         help="run a back end and evaluate it against GPS (and the truth on simulated data)",
         epilog=EPILOG,
     )
-    add_source(p)
+    add_source(p, loop=True)
     p.add_argument(
         "--backend",
         default="dr",
@@ -119,7 +175,10 @@ def _run(sub: Subparsers) -> argparse.ArgumentParser:
     p.add_argument(
         "--batch",
         action="store_true",
-        help="isam2 only: a final batch Levenberg-Marquardt pass (isam2_batch.tum, ate_*_batch_m)",
+        help="isam2 only: a final batch Levenberg-Marquardt pass (isam2_batch.tum, ate_*_batch_m);"
+        " isam2 also makes its offline estimate after every run (isam2_offline.tum: every revisit"
+        " and line decided again with hindsight, about a minute on the marina;"
+        " --set isam2.offline=false turns it off, docs/offline.md)",
     )
     add_config_and_set(p)
     p.add_argument(
@@ -136,7 +195,7 @@ def _plot_scans(sub: Subparsers) -> argparse.ArgumentParser:
         "plot-scans", help="project the sonar bins into the world and draw them", epilog=EPILOG
     )
     add_source(p)
-    add_poses(p, "gps")
+    add_poses(p, None)
     p.add_argument("--out", default="out/scans.png", help="PNG file (default out/scans.png)")
     p.add_argument(
         "--min-intensity",
@@ -145,6 +204,7 @@ def _plot_scans(sub: Subparsers) -> argparse.ArgumentParser:
         help="smallest intensity drawn, 0-255 (default: every bin of thresholded beams, the "
         "extractor's threshold for raw beams)",
     )
+    add_start(p)
     return p
 
 
@@ -153,7 +213,7 @@ def _extract(sub: Subparsers) -> argparse.ArgumentParser:
         "extract", help="extract line features with a pose source and draw them", epilog=EPILOG
     )
     add_source(p)
-    add_poses(p, "gps")
+    add_poses(p, None)
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument(
         "--config", default=None, help="TOML of extractor settings over the preset ([extractor])"
@@ -175,7 +235,8 @@ def _demo(sub: Subparsers) -> argparse.ArgumentParser:
         "demo",
         help="the main job (make run): both closed loops and dead reckoning on the marina or, "
         "without it, a simulated harbour",
-        epilog=EPILOG,
+        epilog="Data: the marina is found under $SONARSLAM_DATA/marina; without it the demo"
+        " simulates a harbour (--sim-duration).",
     )
     p.add_argument("--out", default="out", help="output directory (default out)")
     p.add_argument(
@@ -265,7 +326,11 @@ def _calibrate(sub: Subparsers) -> argparse.ArgumentParser:
 
 def _info(sub: Subparsers) -> argparse.ArgumentParser:
     p = sub.add_parser(
-        "info", help="what a dataset holds, every setting with its unit and source", epilog=EPILOG
+        "info",
+        help="what a dataset holds, every setting with its unit and source; of a navigation log"
+        " alone (a .tlog, a dataflash .bin, a DVL A50 JSON log, a QGroundControl CSV): its"
+        " messages, rates, spans and gaps, and which stream would be the odometry and heading",
+        epilog=EPILOG,
     )
     add_source(p)
     add_topics(p)
@@ -277,7 +342,6 @@ def _report(sub: Subparsers) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "report",
         help="side-by-side report of run directories: table, maps, errors, NEES",
-        epilog=EPILOG,
     )
     p.add_argument("dirs", nargs="+", help="run directories written by 'sonarslam run'")
     p.add_argument("--out", required=True, help="output directory (report.md and PNGs)")
@@ -302,7 +366,6 @@ def _sweep(sub: Subparsers) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "sweep",
         help="Monte Carlo runs and parameter grids on Dask: ATE and ANEES per back end",
-        epilog=EPILOG,
     )
     p.add_argument("--seeds", default="0-9", help="seeds: 0-49, 3, or 0,2,5-7 (default 0-9)")
     p.add_argument(

@@ -23,6 +23,7 @@ def command(args: argparse.Namespace) -> int:
         topics_file=args.topics,
         loops_rel_s=args.loop,
         nav=args.nav,
+        span_s=args.span,
     )
     m = result.metrics
     print(f"calibration: {m['calibration']}")

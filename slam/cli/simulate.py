@@ -1,4 +1,5 @@
-"""``sonarslam simulate``: a simulated run written in the marina layout."""
+"""``sonarslam simulate``: a simulated run written in the marina layout, as a ROS bag, or as a
+Ping Viewer ``.bin`` with its navigation (a ``nav.bag``, or a BlueROV2's own logs)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ from sonarslam.datasets.config import dump_dataset_config
 from sonarslam.datasets.errors import DataWarning
 from sonarslam.datasets.rosbag import bag_config, write_bag
 from sonarslam.datasets.simulator import simulate
-from sonarslam.datasets.simulator.ping360 import simulate_ping360
+from sonarslam.datasets.simulator.bluerov import simulate_bluerov
+from sonarslam.datasets.simulator.ping360 import PERSIAN_ZERO, Ping360Defects, simulate_ping360
 from sonarslam.datasets.simulator.writer import drop_gps
 from sonarslam.datasets.source import open_dataset
 from sonarslam.settings import SettingError
@@ -21,19 +23,53 @@ from sonarslam.slam.io.files import check_output_dir
 
 def command(args: argparse.Namespace) -> int:
     check_output_dir(args.out)
+    for flag, given in (
+        ("--first-ranges", args.first_ranges),
+        ("--persian-digits", args.persian_digits),
+        ("--no-nav", args.no_nav),
+    ):
+        if given and not args.ping360:
+            raise SettingError(flag, "a Ping360 log's defect: give --ping360 too")
+    if args.bluerov is not None:
+        if args.bag is not None or args.ping360:
+            raise SettingError("--bluerov", "a BlueROV2 run is a .bin and its logs: no --bag")
+        log, navs = simulate_bluerov(
+            args.kind,
+            seed=args.seed,
+            out_dir=args.out,
+            nav=args.bluerov,
+            duration_s=args.duration,
+            gps=not args.no_gps,
+        )
+        print(
+            f"simulated {args.kind} (seed {args.seed}) written as a BlueROV2 logs it: {log}, with"
+            f" {', '.join(str(n) for n in navs)} ({args.bluerov}) and sonarslam.toml"
+            f" ([ping360] nav); run it: sonarslam run {log}"
+        )
+        return 0
     if args.ping360:
         if args.bag is not None:
             raise SettingError("--ping360", "a Ping360 run's navigation is a ROS 1 bag: no --bag")
+        defects = Ping360Defects(
+            zero_digit=PERSIAN_ZERO if args.persian_digits else "0",
+            first_ranges_m=args.first_ranges,
+            nav=not args.no_nav,
+        )
         log = simulate_ping360(
             args.kind,
             seed=args.seed,
             out_dir=args.out,
             duration_s=args.duration,
             gps=not args.no_gps,
+            defects=defects,
+        )
+        nav = (
+            f"with {log.parent / 'nav.bag'} and sonarslam.toml ([ping360] nav)"
+            if defects.nav
+            else "without navigation (a still head), with sonarslam.toml"
         )
         print(
-            f"simulated {args.kind} (seed {args.seed}) written as a Ping360 logs it: {log}, with"
-            f" {log.parent / 'nav.bag'} and sonarslam.toml ([ping360] nav)"
+            f"simulated {args.kind} (seed {args.seed}) written as a Ping360 logs it: {log}, {nav}"
         )
         return 0
     if (

@@ -23,15 +23,19 @@ import numpy as np
 from evo.core.geometry import GeometryException, umeyama_alignment
 
 from sonarslam.datasets.records import GpsSeries
-from sonarslam.features.geometry import FloatArray
+from sonarslam.features.geometry import FloatArray, wrap_angle
 from sonarslam.slam.io.trajectory import Trajectory
 
 __all__ = [
     "AteResult",
+    "HeadingResult",
     "ate_against_gps",
     "ate_against_truth",
     "ate_errors",
     "ate_of_errors",
+    "half_split_s",
+    "halves",
+    "heading_against_truth",
     "rigid_fit",
     "truth_errors",
 ]
@@ -92,6 +96,20 @@ def ate_errors(
     return gps.t[inside], np.hypot(*(est - ref).T)
 
 
+def half_split_s(span_s: tuple[float, float]) -> float:
+    """The time that cuts a span into its two halves (Unix s): its middle. On the marina the
+    sonar span's is 1,501 s after its first beam: the first half is where a default may be
+    informed by GPS, the second the held-out one (docs/design-decisions.md)."""
+    return 0.5 * (span_s[0] + span_s[1])
+
+
+def halves(t_s: FloatArray, errors_m: FloatArray, split_s: float) -> tuple[AteResult, AteResult]:
+    """The statistics of errors at times up to ``split_s`` and after it (ValueError when a half
+    has none)."""
+    first = np.asarray(t_s) <= split_s
+    return ate_of_errors(errors_m[first]), ate_of_errors(errors_m[~first])
+
+
 def ate_of_errors(errors_m: FloatArray) -> AteResult:
     """The statistics of position errors (m); ValueError when there are none."""
     e = np.asarray(errors_m, dtype=np.float64)
@@ -117,6 +135,30 @@ def ate_against_gps(
     rigid SE(2) fit onto the fixes, as ``evo_ape -a``); raises ValueError when no fix is
     inside."""
     return ate_of_errors(ate_errors(trajectory, gps, span_s, align)[1])
+
+
+@dataclass(frozen=True)
+class HeadingResult:
+    """Heading error statistics (deg, absolute, wrapped to [0, 180]) over ``n`` true poses."""
+
+    mean_deg: float
+    max_deg: float
+    n: int
+
+
+def heading_against_truth(
+    trajectory: Trajectory, truth: Trajectory, span_s: tuple[float, float] | None = None
+) -> HeadingResult:
+    """The heading error of ``trajectory`` at the true poses inside its span (and ``span_s``):
+    the mean and max of ``|wrap(yaw - true yaw)|`` (deg). No alignment: beside the ATE as it
+    is, it shows a wrong start heading, which no position error shows of a still head (its
+    position is given apart from its heading). ValueError when no true pose is inside."""
+    inside = _inside(truth.t_s, trajectory, span_s)
+    if not np.any(inside):
+        raise ValueError("no reference pose inside the trajectory's time span")
+    yaw = trajectory.poses(truth.t_s[inside])[:, 2]
+    miss = np.abs(np.rad2deg(wrap_angle(yaw - truth.poses_wTb[inside, 2])))
+    return HeadingResult(float(miss.mean()), float(miss.max()), int(miss.size))
 
 
 def truth_errors(

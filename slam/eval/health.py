@@ -48,8 +48,8 @@ innovations of a consistent filter are white with the covariance it predicts):
     it stern- or side-first, and the map is as sharp with the sonar's yaw turned alike, so no
     other check sees it (docs/calibration.md).
 ``odometry``
-    Runs without GPS: the sonar's motion between nearby scans against dead reckoning's
-    (:func:`sonarslam.slam.eval.loops.odometry_check`), flagged when they disagree by more than
+    Every closed loop, with GPS or without: the sonar's motion between nearby scans
+    against dead reckoning's (:func:`sonarslam.slam.eval.loops.odometry_check`), flagged when they disagree by more than
     :data:`sonarslam.slam.eval.loops.ODOMETRY_MAX_ANGLE_DEG` (a sensor mounted the wrong way
     round: :attr:`sonarslam.slam.eval.loops.OdometryCheck.turned`).
 ``lines``
@@ -216,7 +216,7 @@ class HealthInputs:
         Dead reckoning's velocities in the body frame (m/s; the DVL's rows with bottom lock
         through its mounting): the ``travel`` check (not judged without rows).
     odometry : OdometryCheck or None
-        The run's odometry check (runs without GPS): the ``odometry`` check.
+        The run's odometry check (every closed loop's): the ``odometry`` check.
     mountings_said : str
         The mountings those two checks blame, as configured, in words (their values and
         sources), appended to their issues.

@@ -68,6 +68,9 @@ __all__ = [
     "OdometryPair",
     "odometry_pairs",
     "odometry_check",
+    "lateral_gain",
+    "LATERAL_GAIN_SIGMAS",
+    "LATERAL_GAIN_MAX_SE",
 ]
 
 #: Where a loop-closure error, or a map that does not re-find its walls, can come from (the
@@ -92,6 +95,16 @@ ODOMETRY_CAUSES = (
     " angle_sense: a mirror turns the motion only where the head's zero is not along the"
     " travel)"
 )
+
+#: The lateral gain (:func:`lateral_gain`) says a mirror when it is below 0 and this many of its
+#: standard errors below 1 ...
+LATERAL_GAIN_SIGMAS = 4.0
+#: ... with a standard error under this (over 0.5 the pairs' sideways motion is within the
+#: registrations' noise: a vehicle that never crabs, whose mirror changes little).
+LATERAL_GAIN_MAX_SE = 0.5
+#: Added in quadrature to a registration's position sigma in :func:`lateral_gain` (m): dead
+#: reckoning's own error over a pair and the scans' motion correction.
+LATERAL_GAIN_FLOOR_M = 0.05
 
 #: The estimate is searched for returns at this step (s).
 SAMPLE_S = 2.0
@@ -352,6 +365,14 @@ class OdometryCheck:
         Starts skipped because a scan held fewer than :data:`MIN_SCAN_POINTS` returns.
     step_m : float
         The distance along dead reckoning between the two scans of a pair (m).
+    lateral_gain : float
+        What the sonar says the body's lateral velocity is to be multiplied by
+        (:func:`lateral_gain`): 1 when the DVL's lateral axis is right, -1 when it is mirrored;
+        NaN when not fitted (no mirrored dead reckoning given, or fewer than
+        :data:`ODOMETRY_MIN_PAIRS` registrations).
+    lateral_gain_se : float
+        Its standard error; large when the vehicle hardly moves sideways (nothing to tell a
+        mirror by).
     """
 
     pairs: int
@@ -364,6 +385,8 @@ class OdometryCheck:
     skipped_still: int = 0
     skipped_sparse: int = 0
     step_m: float = math.nan
+    lateral_gain: float = math.nan
+    lateral_gain_se: float = math.nan
 
     def why_none(self) -> str:
         """Why no registration was accepted, in words ("" when one was)."""
@@ -390,6 +413,21 @@ class OdometryCheck:
         if not parts:
             parts.append("the sonar span is shorter than three turns of the head")
         return "; ".join(parts)
+
+    @property
+    def mirrored(self) -> bool:
+        """True when the sonar says the body's lateral velocity has the wrong sign: the lateral
+        gain below 0 and more than :data:`LATERAL_GAIN_SIGMAS` standard errors from 1, with a
+        standard error under :data:`LATERAL_GAIN_MAX_SE` (a vehicle that moves sideways enough
+        to tell), over at least :data:`ODOMETRY_MIN_PAIRS` registrations."""
+        g, se = self.lateral_gain, self.lateral_gain_se
+        return (
+            self.accepted >= ODOMETRY_MIN_PAIRS
+            and math.isfinite(g)
+            and se < LATERAL_GAIN_MAX_SE
+            and g < 0.0
+            and 1.0 - g > LATERAL_GAIN_SIGMAS * se
+        )
 
     @property
     def turned(self) -> bool:
@@ -553,12 +591,63 @@ def _odometry_pairs(
     return out, counts
 
 
+def lateral_gain(pairs: list[OdometryPair], mirrored: PoseSource) -> tuple[float, float]:
+    """The gain on the body's lateral velocity that makes dead reckoning move as the sonar sees
+    it, and its standard error (GPS-free).
+
+    ``mirrored`` is dead reckoning with the body's lateral velocity negated. Between a pair's
+    two scans dead reckoning's translation is ``A + B`` and the mirrored one's ``A - B``: ``A``
+    the integral of the forward velocity, ``B`` of the lateral one, both turned by the heading.
+    The sonar's translation is fitted as ``s A + g B`` over the registered pairs, weighted by
+    each registration's position covariance (plus :data:`LATERAL_GAIN_FLOOR_M`), a pair whose
+    residual is beyond the 99.9 % chi-square bound of two dimensions dropped once; ``g`` is 1
+    when the lateral axis is right and -1 when it is mirrored (``s`` is the range scale's
+    ratio, which :attr:`OdometryCheck.scale` gives robustly). The standard error is the fit's,
+    inflated by the residuals' chi-square per degree of freedom when above 1. NaN, inf with
+    fewer than :data:`ODOMETRY_MIN_PAIRS` registrations.
+    """
+    done = [p for p in pairs if p.sonar is not None and p.cov is not None]
+    if len(done) < ODOMETRY_MIN_PAIRS:
+        return math.nan, math.inf
+    rows_a, rows_b, z, w = [], [], [], []
+    for p in done:
+        assert p.sonar is not None and p.cov is not None  # for the type checker: done's
+        m = np.asarray(mirrored.poses(np.array([p.t0_s, p.t1_s])))
+        t_m = between(m[0], m[1])[:2]
+        t_d = np.asarray(p.dead_reckoning[:2])
+        rows_a.append(0.5 * (t_d + t_m))
+        rows_b.append(0.5 * (t_d - t_m))
+        z.append(np.asarray(p.sonar[:2]))
+        cov = np.asarray(p.cov, dtype=np.float64)[:2, :2] + LATERAL_GAIN_FLOOR_M**2 * np.eye(2)
+        w.append(np.linalg.inv(cov))
+    a, b, zz, ww = map(np.asarray, (rows_a, rows_b, z, w))
+    design = np.stack([a, b], axis=2)  # (n, 2, 2): columns s, g
+    keep = np.ones(len(done), dtype=bool)
+    for _ in range(2):
+        info = np.einsum("nji,njk,nkl->il", design[keep], ww[keep], design[keep])
+        rhs = np.einsum("nji,njk,nk->i", design[keep], ww[keep], zz[keep])
+        if np.linalg.cond(info) > 1e12:
+            return math.nan, math.inf
+        x = np.linalg.solve(info, rhs)
+        r = zz - np.einsum("nij,j->ni", design, x)
+        chi2 = np.einsum("ni,nij,nj->n", r, ww, r)
+        drop = chi2 > 13.8  # chi2.ppf(0.999, 2)
+        if drop.sum() == 0 or keep.sum() - drop.sum() < ODOMETRY_MIN_PAIRS:
+            break
+        keep = ~drop
+    dof = max(2 * int(keep.sum()) - 2, 1)
+    inflate = max(float(chi2[keep].sum()) / dof, 1.0)
+    se = math.sqrt(float(np.linalg.inv(info)[1, 1]) * inflate)
+    return float(x[1]), se
+
+
 def odometry_check(
     dataset: Dataset,
     dead_reckoning: PoseSource,
     step_m: float,
     n_pairs: int = 12,
     config: ScanConfig | None = None,
+    mirrored: PoseSource | None = None,
 ) -> OdometryCheck:
     """Register pairs of scans ``step_m`` apart along dead reckoning's path and compare the
     sonar's relative pose with dead reckoning's (GPS-free): :func:`odometry_pairs` summed up.
@@ -567,7 +656,9 @@ def odometry_check(
     yaw_deg`` says, turns :attr:`OdometryCheck.heading_deg` from 0 by that angle (a mirrored
     sonar need not: :func:`odometry_pairs`); the sonar's range scale against the DVL's moves
     :attr:`OdometryCheck.scale` from 1. The standard errors are the pairs' spread over the
-    square root of their number (the scale's from their median absolute deviation).
+    square root of their number (the scale's from their median absolute deviation). With
+    ``mirrored`` (dead reckoning with the body's lateral velocity negated) the lateral gain is
+    fitted too (:func:`lateral_gain`): a DVL lateral axis of the wrong sign.
     """
     pairs, counts = _odometry_pairs(dataset, dead_reckoning, step_m, n_pairs, config)
     tried = {
@@ -588,6 +679,7 @@ def odometry_check(
         heading_se = math.degrees(float(np.std(spread, ddof=1)) / math.sqrt(accepted))
         mad = float(np.median(np.abs(np.asarray(ratios) - np.median(ratios))))
         scale_se = math.sqrt(math.pi / 2.0) * 1.4826 * mad / math.sqrt(accepted)
+    gain, gain_se = lateral_gain(pairs, mirrored) if mirrored is not None else (math.nan, math.nan)
     return OdometryCheck(
         len(pairs),
         accepted,
@@ -596,5 +688,7 @@ def odometry_check(
         heading_se,
         scale_se,
         step_m=step_m,
+        lateral_gain=gain,
+        lateral_gain_se=gain_se,
         **tried,
     )

@@ -5,7 +5,10 @@ The readers put every dataset in the local frame of its first GPS fix; the simul
 in its own world frame, so everything here is shifted by ``first_fix_enu_m`` (``truth.json``).
 Without GPS the run's frame has its origin where the run starts (the start of the navigation
 span, or the pose a user gave): the truth is shifted so that its position there is that origin
-(its headings are East-referenced in both frames, so no rotation).
+(its headings are East-referenced in both frames, so no rotation). A still head (no navigation)
+is the exception: its whole pose, heading too, is the one given (``--start``), so it is compared
+with the truth as ``truth.json`` has it (the simulator's world frame, in which ``--start`` is
+given), never moved onto the start: a wrong start shows as its distance and heading error.
 """
 
 from __future__ import annotations
@@ -49,7 +52,8 @@ __all__ = [
 
 
 def truth_trajectory(dataset: Dataset) -> Trajectory:
-    """The simulator's true body poses, shifted into the readers' local frame (first GPS fix)."""
+    """The simulator's true body poses, shifted into the readers' local frame (first GPS fix;
+    see the module's docstring for a run without GPS and a still head)."""
     if dataset.truth is None:
         raise ValueError(f"{dataset.root}: no truth.json (only simulated datasets have one)")
     truth = dataset.truth
@@ -162,11 +166,14 @@ def calibration_sigmas(
 
 
 def _offset(dataset: Dataset) -> FloatArray:
-    """World minus the readers' frame (m): the first GPS fix's world position; without GPS, the
+    """World minus the readers' frame (m): the first GPS fix's world position; a still head's
+    none (its pose is given in the world frame, see the module's docstring); without GPS, the
     true position at the navigation's start minus the start position given (or the origin)."""
     assert dataset.truth is not None
     if dataset.gps is not None:
         return np.asarray(dataset.truth.get("first_fix_enu_m", [0.0, 0.0]), dtype=np.float64)
+    if dataset.still:
+        return np.zeros(2)
     rows = np.asarray(dataset.truth["body_poses"]["rows"], dtype=np.float64)
     t0 = dataset.nav_span_s[0]
     at = np.array([np.interp(t0, rows[:, 0], rows[:, 1]), np.interp(t0, rows[:, 0], rows[:, 2])])

@@ -1,9 +1,10 @@
 """Map pictures: sonar bins projected into the world, trajectories, line segments with their
 95 % bands, and on simulated data the true walls and the true trajectory.
 
-Every map is cropped to the data (where the bins are dense, and the trajectories, plus a margin),
-so a stray bin or a landmark extent reaching past what was observed does
-not stretch the axes; the figure takes the data's aspect, and the legend sits outside the axes.
+Every map shows all it draws (the bins, the trajectories, the segments, plus a margin): a
+landmark or a beam the run reports is never cropped out (a landmark's segment is bounded by
+the bins that show it, :func:`seen_extent`); the figure takes the data's aspect, and the
+legend sits outside the axes.
 Matplotlib's object interface (``Figure``): importing this module changes no global state.
 """
 
@@ -63,6 +64,9 @@ TRAJECTORY_STYLES: dict[str, TrajectoryStyle] = {
     "isam2_smoothed": TrajectoryStyle("#CC79A7", (0, (6, 1.5, 1, 1.5, 1, 1.5)), "iSAM2 smoothed"),
     "isam2_batch": TrajectoryStyle("#56B4E9", ":", "iSAM2 batch"),
     "isam2_redecided": TrajectoryStyle("#E69F00", (0, (8, 2)), "iSAM2 lines re-decided"),
+    # the palette's eighth colour, its yellow, is too faint on white: black, dashed unlike the
+    # truth's solid line
+    "isam2_offline": TrajectoryStyle("#000000", (0, (4, 1.5, 1, 1.5)), "iSAM2 offline"),
 }
 
 
@@ -113,28 +117,15 @@ class MapLayers:
 SEGMENT_COLOUR = "#ff7f00"
 
 
-def _dense_box(points_w: FloatArray, cells: int = 100, share: float = 5e-4) -> FloatArray:
-    """Corners (2, 2) of the cells of a ``cells`` x ``cells`` grid holding at least ``share`` of
-    the bins (and 3): the walls, without the thin spray of noise and multipath around them."""
-    lo, hi = np.quantile(points_w, [0.001, 0.999], axis=0)
-    h, xe, ye = np.histogram2d(
-        points_w[:, 0], points_w[:, 1], bins=cells, range=[[lo[0], hi[0]], [lo[1], hi[1]]]
-    )
-    ix, iy = np.nonzero(h >= max(3.0, share * points_w.shape[0]))
-    if ix.size == 0:
-        return np.stack([lo, hi])
-    return np.array([[xe[ix.min()], ye[iy.min()]], [xe[ix.max() + 1], ye[iy.max() + 1]]])
-
-
 def data_box(layers: MapLayers, margin: float = 0.04) -> tuple[FloatArray, FloatArray]:
-    """Lower-left and upper-right corners (m) of what a map shows: where the bins are dense
-    (:func:`_dense_box`) and the trajectories, with a margin (neither the segments, whose extent may reach
-    past what was observed, nor the true walls, which may stand where the run never went)."""
+    """Lower-left and upper-right corners (m) of what a map shows: everything it draws, the
+    bins, the trajectories and the segments (a landmark the run reports is never cropped out:
+    a run's map stopped at 7 m with its one landmark at 15 m), with a margin; not the true
+    walls, which may stand where the run never went (drawn where they cross the box)."""
     parts = [tr.poses_wTb[:, :2] for tr in layers.trajectories.values() if tr.t_s.size]
     if layers.points_w.shape[0]:
-        parts.append(_dense_box(layers.points_w))
-    if not parts and layers.segments_w:
-        parts = [np.concatenate([np.asarray(s) for s in layers.segments_w])]
+        parts.append(layers.points_w)
+    parts += [np.asarray(s, dtype=np.float64).reshape(-1, 2) for s in layers.segments_w]
     if not parts:
         return np.array([-1.0, -1.0]), np.array([1.0, 1.0])
     allp = np.concatenate(parts)

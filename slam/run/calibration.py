@@ -39,6 +39,8 @@ __all__ = [
     "yaw_change_doubt",
     "ClockSearch",
     "calibrate_time_offset",
+    "sonar_clock_doubt",
+    "CLOCK_DOUBT_S",
     "CompassFit",
     "calibrate_ahrs_yaw",
     "heading_deviation_from_lines",
@@ -458,6 +460,60 @@ def calibrate_time_offset(
         configured + float(coarse[second]),
         (float(costs[second]) - float(costs[k])) / noise,
         at_edge=k in (0, coarse.size - 1),
+    )
+
+
+#: A run (:func:`sonar_clock_doubt`) searches the sonar clock offset over the configured one +-
+#: this (s): a clock late by under a second is inside, and the marina's search costs 5 s of CPU
+#: (its whole +-3 s, 12 s).
+CLOCK_CHECK_HALF_RANGE_S = 1.5
+#: ... and warns when the sharpest map's offset lies this far (s) from ``[sonar] time_offset_s``:
+#: the search finds the simulated clocks within -0.03 to +0.10 s, and the marina's bottom is
+#: flat within 0.12 s of its best (docs/calibration.md).
+CLOCK_DOUBT_S = 0.3
+#: ... with a minimum this many noise units below the median of the +-1.5 s grid (not
+#: ``calibrate``'s 2.5 over +-3 s: the narrower grid's median lies nearer the bottom, and a
+#: correct 300 s harbour's minimum stood 2.1-2.5 units deep, its offset within 0.2 s of the
+#: truth) and ``calibrate``'s margin.
+CLOCK_CHECK_MIN_DEPTH = 1.5
+
+
+def sonar_clock_doubt(dataset: Dataset, pose_source: PoseSource) -> str | None:
+    """Why ``[sonar] time_offset_s`` looks wrong, in words, or None (GPS-free).
+
+    :func:`calibrate_time_offset` over +- :data:`CLOCK_CHECK_HALF_RANGE_S` with ``pose_source``
+    (dead reckoning): a minimum that stands out (depth :data:`CLOCK_CHECK_MIN_DEPTH`, the margin
+    ``calibrate`` requires) more than :data:`CLOCK_DOUBT_S` from the configured offset, or at an
+    end of the range (the clock may be off by more). None when the sonar span
+    is too short to search, or the objective is too flat to say (a sonar that sees no walls)."""
+    try:
+        found = calibrate_time_offset(dataset, pose_source, half_range_s=CLOCK_CHECK_HALF_RANGE_S)
+    except DataError:
+        return None  # fewer than ten turns of the head
+    if found.depth < CLOCK_CHECK_MIN_DEPTH:
+        return None
+    configured = found.configured_offset_s
+    if found.at_edge:
+        edge = configured + (1 if found.best_offset_s > configured else -1) * (
+            CLOCK_CHECK_HALF_RANGE_S
+        )
+        return (
+            f"the map is sharpest at the end of the offsets searched ({edge:+.2f} s, the"
+            f" configured [sonar] time_offset_s = {configured:g} s +- {CLOCK_CHECK_HALF_RANGE_S:g}"
+            " s): the sonar's clock may be off by more; `sonarslam calibrate SOURCE"
+            " --time-offset` with [sonar] time_offset_s set near that end finds it"
+        )
+    if found.margin < MIN_CLOCK_MARGIN or abs(found.best_offset_s - configured) <= CLOCK_DOUBT_S:
+        return None
+    late = "late" if found.best_offset_s < configured else "earl"
+    return (
+        f"the map is sharpest with the sonar's clock at [sonar] time_offset_s ="
+        f" {found.best_offset_s:+.2f} s, not the configured {configured:g} s (the sonar's clock"
+        f" {abs(found.best_offset_s - configured):.2f} s {late}r than that says; the minimum"
+        f" {found.depth:.1f} noise units below the median, {found.margin:.1f} below the best"
+        f" offset more than {CLOCK_BASIN_S:g} s away): set it, or"
+        " check it with `sonarslam calibrate SOURCE --time-offset`; every estimate places each"
+        " echo with the pose of another time"
     )
 
 

@@ -18,7 +18,17 @@ from typing import ClassVar
 import numpy as np
 
 from sonarslam.datasets.source import Dataset
-from sonarslam.slam.eval.ate import AteResult, ate_against_gps, ate_against_truth
+from sonarslam.slam.eval.ate import (
+    AteResult,
+    HeadingResult,
+    ate_against_gps,
+    ate_against_truth,
+    ate_errors,
+    ate_of_errors,
+    half_split_s,
+    halves,
+    heading_against_truth,
+)
 from sonarslam.slam.eval.consistency import COMPONENTS, NeesSeries, chi2_band, nees_series
 from sonarslam.slam.eval.loops import Loop, LoopError, LoopSearch, OdometryCheck
 from sonarslam.slam.eval.sharpness import trajectory_sharpness
@@ -57,6 +67,8 @@ class TrajectoryFigures:
         ``ate_sonar_aligned`` over them.
     ate_truth, ate_truth_aligned : AteResult or None
         Simulated data: against the truth.
+    heading_truth : HeadingResult or None
+        Simulated data: the heading error against the truth (as it is).
     map_entropy_nats : float or None
         The map's entropy projected with the trajectory (:mod:`sonarslam.slam.eval.sharpness`).
     nees : dict of str to NeesSeries
@@ -76,10 +88,15 @@ class TrajectoryFigures:
         "ate_sonar_*",
         "ate_aligned_*",
         "ate_sonar_aligned_*",
+        "sonar_half_split_s",
+        "ate_sonar{,_aligned}_half{1,2}{,_<name>}_{mean,max}_m",
         "map_entropy_nats",
         "map_entropy_<name>_nats",
         "ate_truth_*",
         "ate_truth_aligned_*",
+        "heading_truth_mean_deg",
+        "heading_truth_max_deg",
+        "heading_truth_<name>_{mean,max}_deg",
         "ate_mean_<name>_m",
         "ate_max_<name>_m",
         "ate_aligned_mean_<name>_m",
@@ -99,8 +116,12 @@ class TrajectoryFigures:
     sonar_span_s: tuple[float, float] | None = None
     ate_sonar: AteResult | None = None
     ate_sonar_aligned: AteResult | None = None
+    #: the sonar span's two halves (:func:`sonarslam.slam.eval.ate.half_split_s`): unaligned
+    #: first and second, then aligned (the whole span's fit) first and second
+    sonar_halves: tuple[AteResult, AteResult, AteResult, AteResult] | None = None
     ate_truth: AteResult | None = None
     ate_truth_aligned: AteResult | None = None
+    heading_truth: HeadingResult | None = None
     map_entropy_nats: float | None = None
     nees: Mapping[str, NeesSeries] = field(default_factory=dict)
 
@@ -139,9 +160,24 @@ class TrajectoryFigures:
                 out["sonar_span_s"] = [self.sonar_span_s[0], self.sonar_span_s[1]]
             out.update(self.ate_sonar.as_dict(f"ate_sonar{suffix}"))
             out.update(self.ate_sonar_aligned.as_dict(f"ate_sonar_aligned{suffix}"))
+        if self.sonar_halves is not None and self.sonar_span_s is not None:
+            if not suffix:
+                out["sonar_half_split_s"] = half_split_s(self.sonar_span_s)
+            names = (
+                "ate_sonar_half1",
+                "ate_sonar_half2",
+                "ate_sonar_aligned_half1",
+                "ate_sonar_aligned_half2",
+            )
+            for name, ate in zip(names, self.sonar_halves, strict=True):
+                out[f"{name}{suffix}_mean_m"] = ate.ate_mean_m
+                out[f"{name}{suffix}_max_m"] = ate.ate_max_m
         if self.ate_truth is not None and self.ate_truth_aligned is not None:
             out.update(self.ate_truth.as_dict(f"ate_truth{suffix}"))
             out.update(self.ate_truth_aligned.as_dict(f"ate_truth_aligned{suffix}"))
+        if self.heading_truth is not None:
+            out[f"heading_truth{suffix}_mean_deg"] = self.heading_truth.mean_deg
+            out[f"heading_truth{suffix}_max_deg"] = self.heading_truth.max_deg
         return out
 
     def entropy_json(self) -> dict[str, JsonValue]:
@@ -247,6 +283,18 @@ class ClosedLoopFigures:
         "redecided_stretches",
         "redecided_passes",
         "retest_{runs,factors,removed}",
+        "offline_passes",
+        "offline_settled",
+        "offline_changed",
+        "offline_decisions",
+        "offline_scans",
+        "offline_revisit_candidates",
+        "offline_revisits_registered",
+        "offline_revisits_kept",
+        "offline_rejected_<reason>",
+        "offline_{odometry,heading,revisit,line}_scale",
+        "offline_lines_{observations,kept,dropped,moved,stretches}",
+        "offline_s",
         "scan_revisit_incompatible",
         "truth_precision",
         "truth_recall",
@@ -284,7 +332,8 @@ class ClosedLoopFigures:
     truth: AssociationScores | None = None
     health: Mapping[str, JsonValue] = field(default_factory=dict)
     health_line: str = ""
-    #: the odometry check the health monitor judged (runs without GPS), for the loop figures
+    #: the odometry check the health monitor judged (every closed loop, with GPS or without),
+    #: for the loop figures
     odometry: OdometryCheck | None = None
 
     def to_json(self) -> dict[str, JsonValue]:
@@ -367,6 +416,8 @@ class LoopFigures:
         "odometry_check_skipped_still",
         "odometry_check_skipped_sparse",
         "odometry_check_step_m",
+        "odometry_check_lateral_gain",
+        "odometry_check_lateral_gain_se",
     )
 
     radius_m: float
@@ -429,6 +480,8 @@ class LoopFigures:
             out["odometry_check_skipped_still"] = self.odometry.skipped_still
             out["odometry_check_skipped_sparse"] = self.odometry.skipped_sparse
             out["odometry_check_step_m"] = _finite(self.odometry.step_m)
+            out["odometry_check_lateral_gain"] = _finite(self.odometry.lateral_gain)
+            out["odometry_check_lateral_gain_se"] = _finite(self.odometry.lateral_gain_se)
         return out
 
 
@@ -540,19 +593,24 @@ def trajectory_figures(dataset: Dataset, trajectory: Trajectory, name: str) -> T
         gps is not None and span is not None and bool(np.any(_in(gps.t, span, trajectory.span_s)))
     )
     sonar: tuple[AteResult | None, AteResult | None] = (None, None)
+    halves_found = None
     if gps is not None and span is not None and inside:
-        sonar = (
-            ate_against_gps(trajectory, gps, span),
-            ate_against_gps(trajectory, gps, span, align=True),
-        )
+        t, e = ate_errors(trajectory, gps, span)
+        _, e_aligned = ate_errors(trajectory, gps, span, align=True)
+        sonar = (ate_of_errors(e), ate_of_errors(e_aligned))
+        split = half_split_s(span)
+        if np.any(t <= split) and np.any(t > split):
+            halves_found = (*halves(t, e, split), *halves(t, e_aligned, split))
     truth_figures: tuple[AteResult | None, AteResult | None] = (None, None)
     nees: dict[str, NeesSeries] = {}
+    heading = None
     if dataset.truth is not None:
         truth = truth_trajectory(dataset)
         truth_figures = (
             ate_against_truth(trajectory, truth),
             ate_against_truth(trajectory, truth, align=True),
         )
+        heading = heading_against_truth(trajectory, truth)
         if not name and trajectory.covs is not None:
             nees = {block: nees_series(trajectory, truth, block) for block in COMPONENTS}
     return TrajectoryFigures(
@@ -562,8 +620,10 @@ def trajectory_figures(dataset: Dataset, trajectory: Trajectory, name: str) -> T
         sonar_span_s=(span[0], span[1]) if span is not None and inside else None,
         ate_sonar=sonar[0],
         ate_sonar_aligned=sonar[1],
+        sonar_halves=halves_found,
         ate_truth=truth_figures[0],
         ate_truth_aligned=truth_figures[1],
+        heading_truth=heading,
         map_entropy_nats=_sharpness(dataset, trajectory),
         nees=nees,
     )

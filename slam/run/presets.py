@@ -356,7 +356,7 @@ def check_combination(dataset: Dataset, backend: str) -> None:
         )
 
 
-_ALIASES = {"association": "association.method"}
+_ALIASES = {"association": "association.method", "offline": "offline.enabled"}
 #: Back-end settings that moved or were renamed, with their new names: an old one is a
 #: SettingError naming the new one (not an alias: one name per setting).
 RENAMED_SETTINGS = {

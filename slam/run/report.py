@@ -179,9 +179,10 @@ def _run_row(run: RunData, rpe_delta_m: float, align: bool) -> dict[str, Any]:
     }
 
 
-#: A run's other trajectories (a factor graph's smoothed, batch and lines-re-decided estimates)
-#: by the suffix of their metrics.json keys, with the keys of the run's own row they take.
-_OTHER_TRAJECTORIES = ("smoothed", "batch", "redecided")
+#: A run's other trajectories (a factor graph's smoothed, batch, lines-re-decided and offline
+#: estimates) by the suffix of their metrics.json keys, with the keys of the run's own row they
+#: take.
+_OTHER_TRAJECTORIES = ("smoothed", "batch", "redecided", "offline")
 
 
 def _other_rows(run: RunData) -> list[dict[str, Any]]:

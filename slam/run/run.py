@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -28,6 +29,7 @@ from sonarslam.datasets.ping360 import is_ping360_log
 from sonarslam.datasets.rosbag import is_bag
 from sonarslam.datasets.source import Dataset, open_dataset
 from sonarslam.settings import SettingError
+from sonarslam.slam.backends.isam2.graph import LineIsam2
 from sonarslam.slam.backends.registry import BACKENDS, backend_spec
 from sonarslam.slam.eval.health import HealthConfig, travel_cause
 from sonarslam.slam.eval.loops import (
@@ -46,6 +48,7 @@ from sonarslam.slam.eval.loops import (
 )
 from sonarslam.slam.io.files import check_output_dir
 from sonarslam.slam.io.trajectory import Trajectory
+from sonarslam.slam.run.calibration import sonar_clock_doubt
 from sonarslam.slam.run.closed_loop import ClosedLoopResult, run_closed_loop
 from sonarslam.slam.run.health import monitor_run
 from sonarslam.slam.run.metrics import (
@@ -56,6 +59,7 @@ from sonarslam.slam.run.metrics import (
     closed_loop_figures,
     trajectory_figures,
 )
+from sonarslam.slam.run.offline import offline_of_run, wants_offline
 from sonarslam.slam.run.outputs import write_run
 from sonarslam.slam.run.presets import (
     RunConfig,
@@ -69,8 +73,10 @@ from sonarslam.slam.run.sources import (
     dead_reckoning_trajectory,
     dvl_body_velocities,
     dvl_quality,
+    lateral_mirror_trajectory,
     mounting_yaw_said,
     start_pose_origin,
+    warn_dvl_lever_arm,
     warn_dvl_sigma,
 )
 
@@ -187,12 +193,23 @@ def run_backend(
     loop: ClosedLoopFigures | None = None
     result: ClosedLoopResult | None = None
     trajectories: dict[str, Trajectory] = {}
+    if dataset.still and backend != "dr":
+        raise SettingError(
+            "--backend",
+            f"{dataset.root} has no navigation, so it is read as a still head: --backend dr"
+            f" runs on it (the still pose); {backend} needs a DVL and an AHRS: --nav FILE (a ROS"
+            " bag, the navigation CSV, or the vehicle's own logs: a QGroundControl .tlog, an"
+            " ArduSub dataflash .bin, a Water Linked A50 JSON log, a QGroundControl CSV export;"
+            " repeat it to take the DVL from one and the heading from another)",
+        )
     if config is not None:
         config = replace(config, settings=_typed_settings(dataset, backend, config, settings))
     quality = dvl_quality(dataset)
-    if backend != "gps":  # the rest take the DVL with [noise] dvl_sigma_mps
+    if backend != "gps" and not dataset.still:  # the DVL, its dvl_sigma_mps and lever arm
         warn_dvl_sigma(dataset, quality)
+        warn_dvl_lever_arm(dataset)
     wall0 = time.perf_counter()
+    offline_s = 0.0
     if backend in BASELINES:
         if settings:
             raise SettingError(
@@ -207,14 +224,16 @@ def run_backend(
                 " topic): take --backend dr",
             )
         trajectory = POSE_SOURCES[backend](dataset)
-        if backend == "dr":  # no health monitor: the travel check is the one that sees a DVL
-            _warn_travel(dataset)  # turned round when the sonar was calibrated on it
+        if backend == "dr" and not dataset.still:  # no health monitor: the travel check is
+            _warn_travel(dataset)  # the one that sees a DVL turned round when the sonar was
+            # calibrated on it
     else:
-        result, config, trajectories, loop = _closed_loop(
+        result, config, trajectories, loop, offline_s = _closed_loop(
             dataset, backend, settings, t_end_s, progress, batch, config
         )
         trajectory = result.trajectory
-    wall_s = time.perf_counter() - wall0
+    # the loop's own time: the offline estimate after it is timed apart (offline_s)
+    wall_s = time.perf_counter() - wall0 - offline_s
     if t_end_s is not None and trajectory.t_s[-1] > t_end_s:
         trajectory = trajectory.clip(trajectory.t_s[0], t_end_s)
     for tr in (trajectory, *trajectories.values()):
@@ -256,10 +275,11 @@ def _closed_loop(
     progress: bool,
     batch: bool,
     typed: RunConfig | None = None,
-) -> tuple[ClosedLoopResult, RunConfig, dict[str, Trajectory], ClosedLoopFigures]:
+) -> tuple[ClosedLoopResult, RunConfig, dict[str, Trajectory], ClosedLoopFigures, float]:
     """A closed loop of ``backend`` on the dataset (:func:`run_backend`): its result, its
-    configuration (``typed``, or made from ``settings``), the back end's other trajectories and
-    the loop's figures with the health monitor's verdict (which warns here)."""
+    configuration (``typed``, or made from ``settings``), the back end's other trajectories (the
+    factor graph's offline estimate among them), the loop's figures with the health monitor's
+    verdict (which warns here) and the offline estimate's wall time (s)."""
     spec = backend_spec(backend)
     if batch and not spec.smoother:
         raise SettingError("--batch", f"back end {backend!r} does not smooth")
@@ -283,12 +303,19 @@ def _closed_loop(
     )
     result.backend.finish()
     trajectories = result.backend.trajectories(batch)
-    # without GPS the sonar's motion against dead reckoning's is a check of the run too
-    odometry = dataset_odometry_check(dataset) if dataset.gps is None else None
+    offline_s = 0.0
+    if wants_offline(config.backend):
+        assert isinstance(result.backend, LineIsam2), "the offline estimate is the graph's"
+        wall0 = time.perf_counter()
+        result.backend.offline = offline_of_run(dataset, result.backend, config.scans)
+        trajectories["offline"] = result.backend.offline.trajectory
+        offline_s = time.perf_counter() - wall0
+    # the sonar's motion against dead reckoning's is a check of the run too (GPS-free)
+    odometry = dataset_odometry_check(dataset)
     health = monitor_run(dataset, result, odometry=odometry)  # GPS-free: against its own model
     loop = closed_loop_figures(dataset, result, config, health.metrics(), health.line(), odometry)
     health.warn()
-    return result, config, trajectories, loop
+    return result, config, trajectories, loop, offline_s
 
 
 def _typed_settings(
@@ -406,6 +433,15 @@ def evaluation(dataset: Dataset) -> str:
     (``loop_*``), the map's entropy (``map_entropy_nats``, lower is sharper) and the pictures."""
     if dataset.gps is not None:
         return "gps and truth" if dataset.truth is not None else "gps"
+    if dataset.still:
+        still = "a still head (no navigation)"
+        if dataset.truth is not None:
+            return f"truth; {still}"
+        # one head turn's map moved rigidly: its entropy changes only with where the cells fall
+        return (
+            f"{still}: no ATE, no loops; the pictures (map_entropy_nats does not judge a still"
+            " head's pose)"
+        )
     if dataset.truth is not None:
         return "truth and loops (no GPS)"
     return (
@@ -449,14 +485,17 @@ def run(
     start_enu: tuple[float, float, float] | None = None,
     topics_file: str | Path | None = None,
     loops_rel_s: list[tuple[float, float]] | None = None,
-    nav: str | Path | None = None,
+    nav: str | Path | Sequence[str | Path] | None = None,
+    span_s: tuple[float, float] | None = None,
 ) -> RunResult:
     """Open a dataset, run a back end on it (:func:`run_backend`) and write the run directory
     (:func:`sonarslam.slam.run.outputs.write_run`).
 
     ``loops_rel_s``: pairs of times (s from the start of the navigation) at which the vehicle
     was at one place; with them, or without GPS, the run measures the loop-closure error
-    (:func:`loop_figures`).
+    (:func:`loop_figures`). ``span_s``: only the part of the source from ``T0`` to ``T1`` (s
+    from the start of its navigation; :func:`sonarslam.datasets.dataset.dataset_span`), whose
+    start the loops' times then count from.
 
     ``config``: a ``sonarslam.toml``-format file whose keys replace the dataset's calibration
     (:func:`sonarslam.datasets.source.open_dataset`); the configuration used is written to
@@ -477,13 +516,21 @@ def run(
         check_settings(backend, settings)
     if batch and (backend in BASELINES or not backend_spec(backend).smoother):
         raise SettingError("--batch", f"back end {backend!r} does not smooth")
-    dataset = open_dataset(source, config_override=config, topics_file=topics_file, nav=nav)
+    dataset = open_dataset(
+        source, config_override=config, topics_file=topics_file, nav=nav, span_s=span_s
+    )
     if start_enu is not None:
         dataset = replace(dataset, start_enu=start_enu)
     result = run_backend(dataset, backend, settings, progress=progress, batch=batch)
     assert result.figures is not None
-    if loops_rel_s or dataset.gps is None:
+    if dataset.still and loops_rel_s:
+        raise SettingError("--loop", f"{dataset.root} is a still head (no navigation): no loop")
+    if (loops_rel_s or dataset.gps is None) and not dataset.still:  # a still head has none
         result.figures.loops = loop_figures(dataset, result, loops_rel_s or [])
+    elif backend != "gps" and not dataset.still:  # with GPS: a mirror, a range scale no ATE names
+        _check_odometry(dataset, result)
+    if backend != "gps" and not dataset.still and dataset.sonar_span_s is not None:
+        _check_sonar_clock(dataset)  # a still head's map is the same at any clock
     result.figures.provenance = provenance(
         backend,
         dataset.root,
@@ -492,6 +539,8 @@ def run(
         batch,
         also=dataset.inputs,
     )
+    if span_s is not None:  # part of the source: said where the figures come from
+        result.figures.provenance["span_s"] = [float(span_s[0]), float(span_s[1])]
     result.metrics = result.figures.to_json()
     result.files = write_run(
         Path(out_dir),
@@ -512,6 +561,11 @@ LOOP_RADIUS_SHARE = 0.4
 #: Without GPS, scans this share of the sonar's range apart along dead reckoning (within 1-5 m)
 #: check its direction of motion against the sonar's (:func:`sonarslam.slam.eval.loops.odometry_check`).
 ODOMETRY_STEP_SHARE = 0.1
+#: Pairs of scans the run's odometry check registers: 24, not the function's 12, so that the
+#: lateral gain (a mirrored DVL lateral axis) is decided on a 300 s harbour whose crab is +-4
+#: deg (12 pairs: standard errors 0.18-0.50, one mirror of three missed; 24: 0.13-0.22, each
+#: found; 0.2 s more of CPU).
+ODOMETRY_PAIRS = 24
 #: The softer level: a mean angle beyond this (deg), or a length ratio further from 1 than
 #: :func:`odometry_scale_tolerance`, each also beyond :data:`ODOMETRY_SOFT_SE` of its own
 #: standard errors, over at least :data:`ODOMETRY_SOFT_MIN_PAIRS` registrations (docs/outputs.md
@@ -581,6 +635,18 @@ def _warn_odometry(dataset: Dataset, check: OdometryCheck, in_health: bool = Fal
             stacklevel=3,
         )
         return
+    if check.mirrored:
+        warnings.warn(
+            f"{dataset.root}: the sonar sees the vehicle move sideways the other way from dead"
+            f" reckoning: the DVL's lateral velocity fits x{check.lateral_gain:+.2f} ±"
+            f" {check.lateral_gain_se:.2f} ({check.accepted} registrations of scans a few metres"
+            " apart; +1 when right, -1 when mirrored): the DVL's lateral axis has the wrong sign"
+            " (its y negated in the log, or a y-right DVL read as y-left). [mounting.dvl]"
+            " yaw_deg cannot undo a mirror: negate the DVL's y where its velocities are written"
+            " (the log's column, the CSV's dvl_vy, the driver's frame)",
+            DataWarning,
+            stacklevel=3,
+        )
     if check.accepted < ODOMETRY_SOFT_MIN_PAIRS:
         return
     found = []
@@ -615,11 +681,33 @@ def _warn_odometry(dataset: Dataset, check: OdometryCheck, in_health: bool = Fal
 def dataset_odometry_check(dataset: Dataset, dr: Trajectory | None = None) -> OdometryCheck:
     """The odometry check of a run (:func:`sonarslam.slam.eval.loops.odometry_check`): scans
     :data:`ODOMETRY_STEP_SHARE` of the sonar's range apart (within 1-5 m) along dead reckoning
-    (``dr``, made when not given)."""
+    (``dr``, made when not given), with the lateral gain against dead reckoning with the DVL's
+    lateral velocity mirrored (:func:`sonarslam.slam.run.sources.lateral_mirror_trajectory`)."""
     head = dataset.config.sonar
     range_m = head.n_bins * head.bin_size_m
     dr = dr if dr is not None else dead_reckoning_trajectory(dataset)
-    return odometry_check(dataset, dr, min(max(ODOMETRY_STEP_SHARE * range_m, 1.0), 5.0))
+    step_m = min(max(ODOMETRY_STEP_SHARE * range_m, 1.0), 5.0)
+    return odometry_check(
+        dataset, dr, step_m, ODOMETRY_PAIRS, mirrored=lateral_mirror_trajectory(dataset)
+    )
+
+
+def _check_sonar_clock(dataset: Dataset) -> None:
+    """Warn when the sonar clock offset of the sharpest map (dead reckoning's poses, GPS-free)
+    is not ``[sonar] time_offset_s`` (:func:`sonarslam.slam.run.calibration.sonar_clock_doubt`):
+    a clock late by under a second runs every estimate silently worse."""
+    doubt = sonar_clock_doubt(dataset, dead_reckoning_trajectory(dataset))
+    if doubt:
+        warnings.warn(f"{dataset.root}: {doubt}", DataWarning, stacklevel=3)
+
+
+def _check_odometry(dataset: Dataset, result: RunResult) -> None:
+    """The odometry check's warnings on a run whose loops are not measured (it has GPS): the
+    closed loop's check, which its health monitor judged, or one made here."""
+    closed = result.figures.closed_loop if result.figures is not None else None
+    judged = closed.odometry if closed is not None else None
+    odometry = judged if judged is not None else dataset_odometry_check(dataset)
+    _warn_odometry(dataset, odometry, in_health=judged is not None)
 
 
 def loop_figures(
@@ -791,9 +879,14 @@ def summary_line(metrics: dict[str, Any]) -> str:
     if "ate_truth_mean_m" in m:
         truth = (
             f"against the truth ATE mean {m['ate_truth_mean_m']:.2f} m, max "
-            f"{m['ate_truth_max_m']:.2f} (rigidly aligned {m['ate_truth_aligned_mean_m']:.2f}); "
-            "against the simulated GPS: "
+            f"{m['ate_truth_max_m']:.2f} (rigidly aligned {m['ate_truth_aligned_mean_m']:.2f})"
         )
+        if "heading_truth_mean_deg" in m:
+            truth += (
+                f", heading mean {m['heading_truth_mean_deg']:.1f} deg, max"
+                f" {m['heading_truth_max_deg']:.1f}"
+            )
+        truth += "; against the simulated GPS: "
     if "ate_mean_m" not in m:
         entropy = m.get("map_entropy_nats")
         sharp = f"map entropy {entropy:.3f} nats" if entropy is not None else "no map"
@@ -811,11 +904,12 @@ def summary_line(metrics: dict[str, Any]) -> str:
 
 
 def smoothed_lines(metrics: dict[str, Any]) -> list[str]:
-    """A line each for a factor graph's smoothed and batch trajectories (``--batch``) in
-    :func:`summary_line`'s terms: against the truth (simulated runs), against GPS over the sonar
-    span and the whole run; none for a run without them."""
+    """A line each for a factor graph's other trajectories (smoothed, ``--batch``, lines
+    re-decided, offline) in :func:`summary_line`'s terms: against the truth (simulated runs),
+    against GPS over the sonar span and the whole run; none for a run without them. The
+    offline estimate's line ends with its decisions."""
     lines = []
-    for name in ("smoothed", "batch"):
+    for name in ("smoothed", "batch", "redecided", "offline"):
         f = _row_figures(metrics, name)
         parts = []
         if np.isfinite(f["truth"]):
@@ -831,9 +925,30 @@ def smoothed_lines(metrics: dict[str, Any]) -> list[str]:
         if gps:
             against = "against the simulated GPS: " if parts else ""
             parts.append(against + "; ".join(gps))
+        if parts and name == "offline" and "offline_passes" in metrics:
+            parts.append(offline_words(metrics))
         if parts:
             lines.append(f"{metrics['backend']} {name}: " + "; ".join(parts))
     return lines
+
+
+def offline_words(m: dict[str, Any]) -> str:
+    """What the offline estimate decided and how long it took, in a run's words
+    (``metrics.json``'s ``offline_*``)."""
+    passes = m["offline_passes"]
+    if m["offline_settled"]:
+        settled = f"settled after {passes} passes"
+    else:
+        settled = (
+            f"still changing after {passes} passes ({m['offline_changed']} of"
+            f" {m['offline_decisions']} decisions in the last; a valid estimate, another"
+            " pass would move it: isam2.offline.max_passes)"
+        )
+    return (
+        f"{m['offline_revisits_kept']} of {m['offline_revisits_registered']} registered"
+        f" revisits kept, {m.get('offline_lines_stretches', 0)} wall stretches, {settled};"
+        f" decided in {m['offline_s']:.1f} s after the run"
+    )
 
 
 def _row_figures(m: dict[str, Any], name: str | None) -> dict[str, float]:

@@ -57,6 +57,7 @@ from sonarslam.slam.io.trajectory import Trajectory
 from sonarslam.slam.run.calibration import require_turns
 from sonarslam.slam.run.presets import extractor_config, preset_for
 from sonarslam.slam.run.sources import dead_reckoning_trajectory
+from sonarslam.sonar.beam import beam_bin_size_m
 
 __all__ = [
     "RangeOffsetFit",
@@ -93,9 +94,9 @@ def calibrate_range_offset(dataset: Dataset, every: int = 1) -> RangeOffsetFit:
         n = sum(int(np.count_nonzero(np.diff(np.r_[0, b.intensities > 0]) == 1)) for b in beams)
         return RangeOffsetFit(0.0, 0.0, n, "thresholded runs: the kept bin is the leading edge")
     cfg = extractor_config(preset_for(beams))
-    bin_m = dataset.config.sonar.bin_size_m
     offsets: list[float] = []
     for b in beams:
+        bin_m = beam_bin_size_m(b, dataset.config.sonar)  # a segment's own
         seg = segment_with(cfg, bin_m, b.intensities, thresholded=False)
         intensity = b.intensities.astype(np.float64)
         for k in seg.final_bins:

@@ -3,12 +3,78 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
-from sonarslam.settings import bounded, one_of
+from sonarslam.settings import bounded, check_fields, one_of
 from sonarslam.slam.backends.base import BackendConfig
 
-__all__ = ["GraphConfig"]
+__all__ = ["GraphConfig", "OfflineConfig"]
+
+
+@dataclass(frozen=True)
+class OfflineConfig:
+    """The estimate made after the run with hindsight
+    (:func:`sonarslam.slam.backends.isam2.offline.offline_estimate`): every revisit and line
+    decided again from the whole run.
+
+    Attributes
+    ----------
+    enabled : bool
+        Made after every iSAM2 run (``--set isam2.offline=false``: not made).
+    max_passes : int
+        Candidates, registrations, the joint decision, the lines and the noise scales are
+        decided again at each pass's optimum until the decisions stop changing, at most this
+        many times.
+    start : {"smoothed", "odometry"}
+        The first pass's estimate: the run's smoothed one, or the optimum of the odometry and
+        headings alone (no revisit or line decided while drifting shapes the first scans).
+    revisit_radius_m : float
+        Two scans whose reference positions in the current estimate are this close are a
+        revisit candidate (m).
+    revisit_min_gap_s : float
+        ... when at least this far apart in time (s).
+    revisits_per_scan : int
+        At most this many per scan, spread over time: the candidates in time order cut into
+        this many groups, the nearest of each.
+    yaw_sigma_deg : float or None
+        A registration's yaw decoupled from its translation with this sigma (deg): the same walls
+        seen from another pass turn a registration's yaw more than its Hessian says, and the
+        AHRS observes the heading. None: the registration's own covariance.
+    decision_probability : float
+        The joint decision's truncation (graduated non-convexity with a truncated least-squares
+        cost): a revisit whose squared Mahalanobis residual exceeds chi2(3) at this
+        probability is an outlier.
+    noise_scales : {"measurements", "all", None}
+        Which covariance scales are estimated from the residuals of the consistent set
+        (variance components), each at least 1 (never more confident than the model says):
+        ``"measurements"``, the revisits' and the lines'; ``"all"``, the odometry's and the
+        AHRS headings' too; None (``none``): as configured.
+    settle_share : float
+        The decisions have settled when fewer than this share of them (revisits kept or
+        dropped, line observations on another stretch) changed in a pass.
+    lines : bool
+        The line observations re-decided at each pass's estimate and kept in the graph;
+        False: a pose graph of odometry, headings and revisits.
+    stretch_m : float
+        The longest stretch of a wall one re-decided landmark stands for (m)
+        (:class:`sonarslam.slam.mapping.redecide.RedecideConfig`).
+    """
+
+    enabled: bool = True
+    max_passes: int = bounded(4, 1, 20)
+    start: str = one_of("smoothed", "smoothed", "odometry")
+    revisit_radius_m: float = bounded(10.0, 0.0, 1e4, low_open=True)
+    revisit_min_gap_s: float = bounded(60.0, 0.0, 1e6)
+    revisits_per_scan: int = bounded(4, 1, 100)
+    yaw_sigma_deg: float | None = bounded(None, 0.0, 180.0, low_open=True)
+    decision_probability: float = bounded(0.99, 0.0, 1.0, low_open=True, high_open=True)
+    noise_scales: str | None = one_of("measurements", "measurements", "all", None)
+    settle_share: float = bounded(0.02, 0.0, 1.0)
+    lines: bool = True
+    stretch_m: float = bounded(80.0, 0.0, 1e5, low_open=True)
+
+    def __post_init__(self) -> None:
+        check_fields(self)
 
 
 @dataclass(frozen=True)
@@ -78,6 +144,9 @@ class GraphConfig(BackendConfig):
         Its width (sigmas).
     scan_consecutive : bool
         Each scan registered onto the one before it.
+    start : {"smoothed", "odometry"}
+        The first pass's estimate: the run's smoothed one, or the optimum of the odometry and
+        headings alone (no revisit or line decided while drifting shapes the first scans).
     revisit_radius_m : float
         Two scans whose reference positions are this close see the same walls (m): a property
         of the sonar's range and the place, not the gate; the gate is on the relative pose.
@@ -138,6 +207,9 @@ class GraphConfig(BackendConfig):
         again at the new estimate with their node's and landmark's joint marginal, and those
         beyond the association gate removed (:mod:`sonarslam.slam.backends.isam2.retest`).
         None: never.
+    offline : OfflineConfig
+        The estimate made after the run with hindsight (``isam2_offline.tum``); on by default,
+        ``--set isam2.offline=false`` turns it off, ``--set isam2.offline.FIELD=V`` sets it.
     """
 
     ahrs_bias_prior_deg: float = bounded(0.0, -180.0, 180.0)
@@ -173,3 +245,4 @@ class GraphConfig(BackendConfig):
     redecide_stretch_m: float | None = bounded(None, 0.0, 1e5, low_open=True)
     redecide_passes: int = bounded(1, 1, 10)
     retest_window_s: float | None = bounded(None, 0.0, 1e5, low_open=True)
+    offline: OfflineConfig = field(default_factory=OfflineConfig)

@@ -66,6 +66,7 @@ from sonarslam.slam.backends.base import (
 )
 from sonarslam.slam.backends.isam2.candidates import joint_covariance, loose_distances
 from sonarslam.slam.backends.isam2.config import GraphConfig
+from sonarslam.slam.backends.isam2.gnc import gnc_tls
 from sonarslam.slam.backends.isam2.graph_io import (
     FactorKind,
     FactorRecord,
@@ -77,6 +78,7 @@ from sonarslam.slam.backends.isam2.graph_io import (
     start_records,
 )
 from sonarslam.slam.backends.isam2.odometry import NodeOdometry, local_covariance
+from sonarslam.slam.backends.isam2.offline import OfflineResult
 from sonarslam.slam.backends.isam2.pose_source import NodeTable, SmoothedPoseSource
 from sonarslam.slam.backends.isam2.redecided import RedecidedGraph, redecided_graph
 from sonarslam.slam.backends.isam2.retest import LineRetest
@@ -191,6 +193,9 @@ class LineIsam2:
         self._gate_candidates = float(chi2.ppf(config.candidate_gate_probability, 2))
         self._batch: gtsam.Values | None = None
         self._redecided: RedecidedGraph | None = None
+        #: The estimate made after the run with hindsight, when the runner made it
+        #: (:func:`sonarslam.slam.run.offline.offline_of_run`): its figures join :meth:`metrics`.
+        self.offline: OfflineResult | None = None
         # the newest optimised node (the anchor of the current pose) and its marginal
         self._anchor_pose = np.zeros(3)
         self._anchor_xyyaw = (0.0, 0.0, 0.0)
@@ -757,61 +762,22 @@ class LineIsam2:
 
     def _optimize_gnc(self, params: gtsam.LevenbergMarquardtParams) -> gtsam.Values:
         """The revisits chosen jointly by graduated non-convexity with the truncated least
-        squares loss (GNC-TLS: Yang, Antonante, Tzoumas, Carlone 2020, "Graduated non-convexity
-        for robust spatial perception", eqs. 12-14; GTSAM's ``GncLMOptimizer`` cannot clone this
-        graph's ``CustomFactor``s, so the loop is here): every revisit the registration
-        accepted, those the compatibility gate kept and those it did not
-        (:attr:`ScanConstraints.loose_revisits`), with its Gaussian noise (GNC's loss replaces
-        the kernel); every other factor a known inlier. With ``r^2`` a revisit's squared
-        Mahalanobis residual and ``c^2`` chi2(3) at ``scan_compatibility_probability`` (the
-        online gate's), its weight is 1 for ``r^2 <= mu / (mu + 1) c^2``, 0 beyond
-        ``(mu + 1) / mu c^2`` and ``c / r sqrt(mu (mu + 1)) - mu`` between; a Levenberg-Marquardt
-        pass at the weights (``cov / w``), ``mu`` from ``c^2 / (2 max r^2 - c^2)`` times 1.4
-        each step until the weights settle. ``gnc_revisits_*`` in :meth:`metrics`."""
+        squares loss (:func:`sonarslam.slam.backends.isam2.gnc.gnc_tls`): every revisit the
+        registration accepted, those the compatibility gate kept and those it did not
+        (:attr:`ScanConstraints.loose_revisits`); every other factor a known inlier; the
+        truncation chi2(3) at ``scan_compatibility_probability`` (the online gate's).
+        ``gnc_revisits_*`` in :meth:`metrics`."""
         loose = self.scans.loose_revisits if self.scans is not None else []
         known = gtsam.NonlinearFactorGraph()
         revisits: list[FactorRecord] = []
         for record in [*self.records, *loose]:
             if record.constraint == "scan-revisit":
-                revisits.append(replace(record, robust=None))
+                revisits.append(record)
             else:
                 known.add(record.to_gtsam())
         c2 = float(chi2.ppf(self.config.scan_compatibility_probability, 3))
-        values = self.isam.calculateEstimate()
-        plain = [r.to_gtsam() for r in revisits]
-
-        def squared(v: gtsam.Values) -> FloatArray:
-            return np.array([2.0 * f.error(v) for f in plain])
-
-        def optimise(weights: FloatArray, start: gtsam.Values) -> gtsam.Values:
-            graph = gtsam.NonlinearFactorGraph(known)
-            for record, w in zip(revisits, weights, strict=True):
-                if w > 1e-6:
-                    graph.add(replace(record, cov=record.cov / w).to_gtsam())
-            return gtsam.LevenbergMarquardtOptimizer(graph, start, params).optimize()
-
-        weights = np.ones(len(revisits))
-        r2 = squared(values)
-        mu = c2 / max(2.0 * float(r2.max(initial=0.0)) - c2, 1e-9)
-        steps = 0
-        while r2.size and r2.max() > c2 and steps < 100:
-            lo, hi = mu / (mu + 1.0) * c2, (mu + 1.0) / mu * c2
-            r = np.sqrt(np.maximum(r2, 1e-12))
-            new = np.where(
-                r2 <= lo,
-                1.0,
-                np.where(r2 >= hi, 0.0, np.sqrt(c2) / r * np.sqrt(mu * (mu + 1.0)) - mu),
-            )
-            new = np.clip(new, 0.0, 1.0)
-            values = optimise(new, values)
-            r2 = squared(values)
-            settled = np.abs(new - weights).sum() < 1e-3 * max(len(new), 1)
-            weights = new
-            steps += 1
-            if settled and np.all((weights < 1e-6) | (weights > 1.0 - 1e-6)):
-                break
-            mu *= 1.4
-        values = optimise(weights, values)
+        found = gnc_tls(known, revisits, self.isam.calculateEstimate(), c2, params)
+        weights = found.weights
         n_loose = len(loose)
         self._gnc_stats = {
             "gnc_revisits_candidates": len(revisits),
@@ -819,9 +785,9 @@ class LineIsam2:
             "gnc_revisits_loose_inliers": int(np.sum(weights[len(weights) - n_loose :] > 0.5))
             if n_loose
             else 0,
-            "gnc_steps": steps,
+            "gnc_steps": found.steps,
         }
-        return values
+        return found.values
 
     def _marginals(self) -> Callable[[int], FloatArray]:
         """Marginal covariance by key: iSAM2's, or ``gtsam.Marginals`` at the batch optimum."""
@@ -899,6 +865,8 @@ class LineIsam2:
             out.update(self.retest.stats)
         if self._redecided is not None:
             out.update(self._redecided.metrics())
+        if self.offline is not None:
+            out.update(self.offline.metrics())
         update_ms = 1e3 * np.array([wall for _, wall, _ in self.update_log])
         if update_ms.size:
             out["isam2_updates"] = int(update_ms.size)

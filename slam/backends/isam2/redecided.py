@@ -39,9 +39,21 @@ from sonarslam.slam.mapping.redecide import (
     redecide,
 )
 
-__all__ = ["RedecidedGraph", "redecided_graph", "line_observations", "optimise_records"]
+__all__ = [
+    "RedecidedGraph",
+    "redecided_graph",
+    "redecided_records",
+    "line_observations",
+    "optimise_records",
+    "is_line_record",
+]
 
 _LINE_KINDS = (FactorKind.LINE_OBSERVATION, FactorKind.LINE_OBSERVATION_CALIBRATED)
+
+
+def is_line_record(record: FactorRecord) -> bool:
+    """A line observation (plain or calibrated)."""
+    return record.kind in _LINE_KINDS
 
 
 @dataclass(frozen=True, eq=False)
@@ -135,13 +147,21 @@ def line_observations(
     return rows, obs, landmark.reshape(-1).astype(int)
 
 
-def _pass(
-    records: list[FactorRecord],
-    values: gtsam.Values,
-    config: RedecideConfig,
-    params: gtsam.LevenbergMarquardtParams,
-) -> tuple[gtsam.Values, list[FactorRecord], Redecision]:
-    """Steps 1-4 once."""
+def redecided_records(
+    records: list[FactorRecord], values: gtsam.Values, config: RedecideConfig
+) -> tuple[list[FactorRecord], dict[int, np.ndarray], Redecision]:
+    """Steps 1-3: the graph's records with its line observations re-decided at ``values``.
+
+    Returns
+    -------
+    records : list of FactorRecord
+        Every factor that is not a line's as it is, a line observation per kept observation on
+        its stretch's landmark ``S(j)``, no line equality.
+    lines : dict of int to ndarray
+        Each stretch's fitted world line ``(rho_m, theta_rad)`` by its key ``S(j)``: the start
+        of its variable.
+    decision : Redecision
+    """
     rows, obs, landmark = line_observations(records, values)
     decision = redecide(obs, landmark, config)
     row_of = {row: n for n, row in enumerate(rows)}
@@ -156,6 +176,17 @@ def _pass(
             continue
         out.append(r)
     lines = {int(S(j)): np.asarray(v) for j, v in enumerate(decision.stretches.lines_w)}
+    return out, lines, decision
+
+
+def _pass(
+    records: list[FactorRecord],
+    values: gtsam.Values,
+    config: RedecideConfig,
+    params: gtsam.LevenbergMarquardtParams,
+) -> tuple[gtsam.Values, list[FactorRecord], Redecision]:
+    """Steps 1-4 once."""
+    out, lines, decision = redecided_records(records, values, config)
     return optimise_records(out, values, params, lines), out, decision
 
 

@@ -59,6 +59,7 @@ __all__ = [
     "ScanLog",
     "ScanConstraints",
     "relative_pose_covariance",
+    "between_nodes",
     "radial_gate_distance",
     "choose_revisits",
 ]
@@ -123,6 +124,38 @@ def relative_pose_covariance(wTa: FloatArray, wTb: FloatArray, P: FloatArray) ->
     J_inv = np.array([[-c, -s, s * x - c * y], [s, -c, c * x + s * y], [0.0, 0.0, -1.0]])
     J = np.hstack([J_inv_a @ J_inv, J_w])
     return J @ P @ J.T
+
+
+def between_nodes(
+    jn_T_j: FloatArray, z_jk: FloatArray, cov_jk: FloatArray, kn_T_k: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """A relative pose of two scans' references moved onto their nodes: the measurement and
+    covariance of the ``BetweenFactorPose2`` between the nodes.
+
+    Parameters
+    ----------
+    jn_T_j, kn_T_k : ndarray, shape (3,)
+        Each scan's reference in its node's frame.
+    z_jk : ndarray, shape (3,)
+        ``jTk``, the registration.
+    cov_jk : ndarray, shape (3, 3)
+        Its covariance in plain ``(x_m, y_m, yaw_rad)``.
+
+    Returns
+    -------
+    z : ndarray, shape (3,)
+        ``jnTkn = jnTj * jTk * inverse(knTk)``.
+    cov : ndarray, shape (3, 3)
+        Its covariance in the measurement's local tangent (GTSAM's).
+    """
+    a = compose(jn_T_j, z_jk)
+    z = compose(a, inverse(kn_T_k))
+    _, J1_z = compose_jacobians(jn_T_j, z_jk)
+    J2_a, _ = compose_jacobians(a, inverse(kn_T_k))
+    J = J2_a @ J1_z
+    cov = J @ cov_jk @ J.T
+    A = local_to_world(-float(z[2]))  # plain -> the measurement's local tangent
+    return z, A @ cov @ A.T
 
 
 def radial_gate_distance(d_xy: FloatArray, S_xy: FloatArray, radius_m: float) -> float:
@@ -235,21 +268,16 @@ class ScanConstraints:
         revisit's covariance times the learned scan scale
         (:class:`sonarslam.slam.backends.learned.LearnedNoise`)."""
         (nj, jn_T_j), (nk, kn_T_k) = self.log.nodes[j], self.log.nodes[k]
-        a = compose(jn_T_j, reg.z)
-        z = compose(a, inverse(kn_T_k))
-        J1_a, J1_z = compose_jacobians(jn_T_j, reg.z)
-        J2_a, _ = compose_jacobians(a, inverse(kn_T_k))
-        J = J2_a @ J1_z
-        scale = self.graph.noise.value("scan_scale") if kind == "revisit" else 1.0
-        cov = scale * (J @ reg.cov @ J.T)
-        A = local_to_world(-float(z[2]))  # plain -> the measurement's local tangent
+        z, cov = between_nodes(jn_T_j, reg.z, reg.cov, kn_T_k)
+        if kind == "revisit":
+            cov = self.graph.noise.value("scan_scale") * cov
         calibration = self.graph.calibration_keys() if self.config.scan_calibration else []
         if calibration:
             return FactorRecord.of(
                 FactorKind.SCAN_CALIBRATED,
                 [X(nj), X(nk), *calibration],
                 z,
-                A @ cov @ A.T,
+                cov,
                 bTs=np.asarray(self.graph.bTs, dtype=np.float64).copy(),
                 robust=self._robust(),
                 constraint=f"scan-{kind}",
@@ -258,7 +286,7 @@ class ScanConstraints:
             FactorKind.BETWEEN_POSE,
             [X(nj), X(nk)],
             z,
-            A @ cov @ A.T,
+            cov,
             robust=self._robust(),
             constraint=f"scan-{kind}",
         )
