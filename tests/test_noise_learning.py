@@ -40,13 +40,14 @@ def test_path_moments_integrate_the_path() -> None:
     m = PathMoments()
     for ti, pi in zip(t, p, strict=True):
         m.advance(float(ti), pi)
-    T, m1, m2 = m.snapshot()
+    T, m1, m2, p_now = m.snapshot()
     rel = p - p[0]
     assert T == pytest.approx(t[-1] - t[0], abs=1e-12)
     # trapezoids of a piecewise-linear path: exact to its linear pieces
     np.testing.assert_allclose(m1, np.trapezoid(rel, t, axis=0), rtol=1e-12, atol=1e-9)
     outer = np.einsum("ni,nj->nij", rel, rel)
     np.testing.assert_allclose(m2, np.trapezoid(outer, t, axis=0), rtol=2e-3, atol=1e-6)
+    np.testing.assert_allclose(p_now, rel[-1], atol=1e-12)  # the position now, relative
 
 
 def test_walk_sensitivities_match_monte_carlo() -> None:
