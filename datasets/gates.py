@@ -43,6 +43,7 @@ import numpy as np
 from sonarslam.datasets.config import GateConfig
 from sonarslam.datasets.errors import DataError, DataWarning
 from sonarslam.datasets.geodesy import local_en_to_geodetic
+from sonarslam.datasets.qgccsv import is_qgc_csv  # the reader's own test of the header
 from sonarslam.datasets.records import AttitudeSeries, DvlSeries, GpsSeries
 from sonarslam.features.geometry import FloatArray
 
@@ -359,8 +360,6 @@ def dvl_speed_quantiles(dvl: DvlSeries, quantiles: tuple[int, ...] = (50, 90)) -
 def _is_qgc_export(path: Path | None) -> bool:
     if path is None or path.suffix.lower() != ".csv":
         return False
-    from sonarslam.datasets.qgccsv import is_qgc_csv  # the reader's own test of the header
-
     return is_qgc_csv(path)
 
 
