@@ -187,11 +187,22 @@ def _config_file(p: Perturbation, path: Path) -> Path | None:
 
 
 def run_one(
-    source: str, backend: str, p: Perturbation, out: Path, shared: tuple[str, ...] = ()
+    source: str,
+    backend: str,
+    p: Perturbation,
+    out: Path,
+    shared: tuple[str, ...] = (),
+    reuse: bool = False,
 ) -> dict[str, Any]:
     """``sonarslam run`` of one member (with the ``--set`` settings ``shared`` of every
-    closed-loop run); its metrics.json, the wall time, or the error."""
+    closed-loop run); its metrics.json, the wall time, or the error. ``reuse``: a run directory
+    that already holds a metrics.json is read, not run again (its commit is kept with it)."""
     run_dir = out / "runs" / backend / p.name
+    metrics_path = run_dir / "metrics.json"
+    if reuse and metrics_path.is_file():
+        metrics = json.loads(metrics_path.read_text())
+        commit = str(metrics.get("provenance", {}).get("git_commit", "?"))[:10]
+        return {"metrics": metrics, "wall_s": float("nan"), "reused": commit}
     run_dir.mkdir(parents=True, exist_ok=True)
     args = [source, "--out", str(run_dir), "--quiet", *BACKENDS[backend][0]]
     for key, value in p.settings.items():
@@ -209,7 +220,6 @@ def run_one(
         [sys.executable, "-c", code, "run", *args], env=env, capture_output=True, text=True
     )
     wall = time.perf_counter() - t0
-    metrics_path = run_dir / "metrics.json"
     if proc.returncode != 0 or not metrics_path.exists():
         tail = (proc.stderr or proc.stdout).strip().splitlines()[-3:]
         return {"error": f"exit {proc.returncode}: {' / '.join(tail)}", "wall_s": wall}
@@ -285,6 +295,13 @@ def main(argv: list[str] | None = None) -> int:
         help="a setting of every closed-loop run (repeatable)",
     )
     ap.add_argument("--out", type=Path, default=Path("out/marina_family"))
+    ap.add_argument(
+        "--reuse",
+        action="store_true",
+        help="read a member's run already in --out (its metrics.json) instead of running it again"
+        " (only when nothing that changes its estimates has changed since: family.md names the"
+        " commits the reused runs were made at)",
+    )
     args = ap.parse_args(argv)
     backends = [b.strip() for b in args.backends.split(",") if b.strip()]
     unknown = [b for b in backends if b not in BACKENDS]
@@ -320,7 +337,10 @@ def main(argv: list[str] | None = None) -> int:
     with ThreadPoolExecutor(max_workers=args.workers) as pool:
         results = list(
             pool.map(
-                lambda job: run_one(args.source, job[0], job[1], args.out, tuple(args.set)), jobs
+                lambda job: run_one(
+                    args.source, job[0], job[1], args.out, tuple(args.set), args.reuse
+                ),
+                jobs,
             )
         )
     wall = time.perf_counter() - wall0
@@ -333,6 +353,7 @@ def main(argv: list[str] | None = None) -> int:
             "config": {f"[{t}] {k}": v for (t, k), v in p.config.items()},
             "wall_s": res["wall_s"],
             **({"error": res["error"]} if "error" in res else {}),
+            **({"reused": res["reused"]} if "reused" in res else {}),
         }
         if "error" in res:
             errors.append(f"{backend} {p.name}: {res['error']}")
@@ -342,6 +363,10 @@ def main(argv: list[str] | None = None) -> int:
             runs[backend][p.name][label] = f
             per_estimate.setdefault(label, {})[p.name] = f
     summary = {label: summarise(rows) for label, rows in per_estimate.items()}
+    reused = sorted({r["reused"] for b in runs.values() for r in b.values() if "reused" in r})
+    if reused:
+        n = sum("reused" in r for b in runs.values() for r in b.values())
+        notes.append(f"{n} runs reused from {args.out} (made at commits {', '.join(reused)})")
     result = {
         "source": args.source,
         "members": [p.name for p in family],
