@@ -1,5 +1,5 @@
 """The EKF's AHRS heading NIS, per group of 40 updates, with the run's ATE: the marina or a
-drawn world, with the yaw-rate source and back-end settings given (docs/consistency.md).
+drawn world, with the yaw-rate source and back-end settings given (docs/research/consistency.md).
 
     .venv/bin/python benchmarks/heading_nis.py marina
     .venv/bin/python benchmarks/heading_nis.py marina --yaw-rate-source gyro

@@ -1,6 +1,6 @@
 """``make readme-figures``: the README's and docs/' figures that the code produces, from one source.
 
-Each generated block of ``README.md`` and ``docs/*.md`` sits between ``<!-- figures: NAME -->``
+Each generated block of ``README.md`` and ``docs/**/*.md`` sits between ``<!-- figures: NAME -->``
 and ``<!-- /figures -->`` and is the rendering (:data:`RENDERERS`) of ``docs/figures.json``,
 which this script measures on the marina:
 
@@ -39,7 +39,7 @@ from sonarslam.slam.run.sources import dvl_quality, pose_source_by_name  # noqa:
 
 ROOT = Path(__file__).resolve().parents[1]
 FIGURES = ROOT / "docs" / "figures.json"
-PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
 BLOCK = re.compile(r"(<!-- figures: ([a-z0-9-]+) -->\n)(.*?)(<!-- /figures -->)", re.S)
 
 #: The runs measured: name -> (back end, --set settings, --batch), and their labels.

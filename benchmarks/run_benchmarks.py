@@ -1,7 +1,7 @@
 """``make bench``: every benchmark of this folder, each writing its JSON under ``out/``.
 
 * ``machine_speed.py`` (first): the machine's reference workloads, pure Python and numpy, in
-  the same run as the figures below (the README's speed table divides by them);
+  the same run as the figures below (docs/speed.md's table divides by them);
 * ``cli_startup.py``: how fast ``sonarslam --version``, ``--help`` and ``COMMAND --help``
   answer, pinned to one core, and how many modules each imports;
 * ``extractor_speed.py``: real-time factor of the whole marina extraction on one core, time per
@@ -21,7 +21,7 @@
 * ``marina_line_quality.py``: lines extracted with GPS and with dead-reckoning poses against
   wall references fitted through the GPS-projected leading edges (skipped without the marina).
 
-Then ``speed_table.py`` prints the README's speed table from them.
+Then ``speed_table.py`` prints docs/speed.md's speed table from them.
 """
 
 from __future__ import annotations

@@ -1,13 +1,13 @@
-"""The README's speed table from the JSON that ``make bench`` writes under ``out/``.
+"""The speed table of docs/speed.md from the JSON that ``make bench`` writes under ``out/``.
 
 Reads ``machine_speed.json`` (the reference workloads of the same run), ``ekf_speed.json``,
 ``isam2_speed.json``, ``isam2_speed_scans.json`` (lines + scans) and ``extractor_speed.json``,
-prints the table as markdown and, with ``--readme``, puts it between the README's
-``<!-- speed -->`` and ``<!-- /speed -->`` lines. A missing file leaves its row out.
+prints the table as markdown and, with ``--readme PAGE``, puts it between the page's
+``<!-- speed -->`` and ``<!-- /speed -->`` lines (``docs/speed.md``). A missing file leaves its row out.
 
 Usage::
 
-    .venv/bin/python benchmarks/speed_table.py --dir out [--readme README.md]
+    .venv/bin/python benchmarks/speed_table.py --dir out [--readme docs/speed.md]
 """
 
 from __future__ import annotations
@@ -97,7 +97,7 @@ def put_in_readme(readme: Path, text: str) -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--dir", default="out", help="where make bench wrote its JSON")
-    parser.add_argument("--readme", help="put the table into this README")
+    parser.add_argument("--readme", help="put the table into this page (docs/speed.md)")
     args = parser.parse_args(argv)
     text = table(Path(args.dir))
     print(text)

@@ -69,7 +69,7 @@ Every value is checked against the field it sets (type, finite, range: :mod:`son
 a wrong one is a ``DataError`` naming the file and the key. Keys a file leaves out take the
 neutral defaults of :class:`DatasetConfig` (no clock offset,
 identity mountings); the simulator writes every key. Without a file, a dataset gets the marina's
-calibration (``MARINA_CONFIG``; docs/calibration.md says how each number was found and
+calibration (``MARINA_CONFIG``; docs/research/calibration.md says how each number was found and
 whether GPS was used).
 """
 
@@ -239,10 +239,10 @@ class GateConfig:
 #: What turns the estimators' heading between AHRS samples (``[motion] yaw_rate_source``):
 #: ``"gyro"``, the logged yaw rate; ``"heading"``, the change of the AHRS heading since its
 #: previous sample (causal). A gyro bias the estimators do not model (the marina's MTi,
-#: docs/calibration.md) runs the closed-loop heading off the compass between heading updates.
+#: docs/research/calibration.md) runs the closed-loop heading off the compass between heading updates.
 YAW_RATE_SOURCES = ("gyro", "heading")
 #: Largest clock offset of the sonar (s). A calibrated offset is a fraction of a second (the
-#: marina's 0.75 s, docs/calibration.md); 10 s is most of a Miniking's 360 deg turn (~14 s),
+#: marina's 0.75 s, docs/research/calibration.md); 10 s is most of a Miniking's 360 deg turn (~14 s),
 #: over which every wall of a sector moves: a larger one is a unit slip (``150`` for 150 ms)
 #: or clocks in other time zones, whose logs' times must be put right, not offset here.
 MAX_TIME_OFFSET_S = 10.0
@@ -309,7 +309,7 @@ class DatasetConfig:
             )
 
 
-#: The abandoned marina (Ribas et al. 2008). How each mounting was calibrated is in docs/calibration.md.
+#: The abandoned marina (Ribas et al. 2008). How each mounting was calibrated is in docs/research/calibration.md.
 MARINA_CONFIG = DatasetConfig(
     sonar=SonarHead(
         n_bins=500,
@@ -335,7 +335,7 @@ MARINA_CONFIG = DatasetConfig(
     # dvl_sigma_mps is the drift-causing part of the DVL's error (most of its scatter is the
     # vehicle's wobble); the nominal scatter is its usual level, the excess over it is added
     # (slam.model.noise.dvl_sample_sigma; sonarslam info prints the quantiles; GPS-free; the
-    # figures are in docs/calibration.md).
+    # figures are in docs/research/calibration.md).
     noise=NoiseConfig(
         dvl_sigma_mps=0.05,
         ahrs_sigma_deg=2.0,

@@ -1,5 +1,5 @@
 """The settings the documentation shows are the code's: every TOML block of README.md and
-docs/*.md, and the ``sonarslam.toml`` example of :mod:`sonarslam.datasets.config`, loads through
+docs/**/*.md, and the ``sonarslam.toml`` example of :mod:`sonarslam.datasets.config`, loads through
 the real loader; that example names every key of the file; every ``[table] key`` and every
 ``--set SCOPE.FIELD`` the docs mention exists."""
 
@@ -23,7 +23,7 @@ from sonarslam.settings import field_types
 from sonarslam.slam.backends.registry import BACKENDS
 
 ROOT = Path(__file__).resolve().parent.parent
-DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
 #: Every key of ``sonarslam.toml`` by table, as the code writes them.
 SCHEMA = {table: set(keys) for table, keys in config_tables(MARINA_CONFIG).items()}
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import re
 import sys
 from pathlib import Path
 from types import ModuleType
@@ -82,3 +83,89 @@ def test_recorded_figures_are_what_the_code_gives(marina: Dataset):
         assert fig["runs"][name]["settings_sha256"] == rf.run_digest(marina, name), (
             f"{name}: its settings changed since docs/figures.json was measured: make readme-figures"
         )
+
+
+#: The pages whose relative links are checked: the README and every page under docs/.
+LINKED_PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+_FENCED = re.compile(r"^(```|~~~).*?^\1[ \t]*$", re.S | re.M)
+_CODE_SPAN = re.compile(r"(`+)[^`].*?\1", re.S)
+_LINK = re.compile(r"!?\[[^\]]*\]\(\s*<?([^)\s>]+)>?(?:\s+\"[^\"]*\")?\s*\)")
+
+
+def _prose(text: str) -> str:
+    """``text`` without its fenced blocks and code spans (a link there is an example)."""
+    return _CODE_SPAN.sub("", _FENCED.sub("", text))
+
+
+def github_anchor(heading: str) -> str:
+    """The anchor GitHub gives a heading: its text (links and code as their words), lowercase,
+    every character but letters, digits, spaces, '-' and '_' removed, spaces to '-'."""
+    text = re.sub(r"!?\[([^\]]*)\]\([^)]*\)", r"\1", heading.strip())
+    text = re.sub(r"[^\w\- ]", "", text.lower())
+    return text.replace(" ", "-")
+
+
+def anchors(page: Path) -> set[str]:
+    """Every heading anchor of a markdown page (a repeated heading's as GitHub numbers it)."""
+    seen: dict[str, int] = {}
+    out = set()
+    for line in _FENCED.sub("", page.read_text(encoding="utf-8")).splitlines():
+        m = re.match(r"^#{1,6}\s+(.*?)\s*#*\s*$", line)
+        if not m:
+            continue
+        anchor = github_anchor(m[1])
+        out.add(anchor if anchor not in seen else f"{anchor}-{seen[anchor]}")
+        seen[anchor] = seen.get(anchor, 0) + 1
+    return out
+
+
+def broken_links(pages: list[Path], root: Path = ROOT) -> list[str]:
+    """``page: target`` (the page relative to ``root``) for every relative link of ``pages``
+    whose file, or heading, is missing; web and mail links are not followed."""
+    broken = []
+    for page in pages:
+        for target in _LINK.findall(_prose(page.read_text(encoding="utf-8"))):
+            if re.match(r"(https?|mailto):", target):
+                continue
+            path, _, anchor = target.partition("#")
+            dest = (page.parent / path).resolve() if path else page
+            if not dest.exists():
+                broken.append(f"{page.relative_to(root)}: {target} (no such file)")
+            elif anchor and dest.suffix == ".md" and anchor not in anchors(dest):
+                broken.append(f"{page.relative_to(root)}: {target} (no such heading)")
+    return broken
+
+
+def test_github_anchor_rule():
+    assert github_anchor("Ping Viewer logs (a BlueROV2 with a Ping360 and an A50)") == (
+        "ping-viewer-logs-a-bluerov2-with-a-ping360-and-an-a50"
+    )
+    assert (
+        github_anchor("A Girona-style rig: the caves preset")
+        == "a-girona-style-rig-the-caves-preset"
+    )
+    assert github_anchor("The `marina-seed` preset") == "the-marina-seed-preset"
+    assert github_anchor("Revisits at the reference's pairs (issue 29)") == (
+        "revisits-at-the-references-pairs-issue-29"
+    )
+
+
+def test_a_broken_link_is_found(tmp_path):
+    (tmp_path / "b.md").write_text("# Some heading: here\n")
+    page = tmp_path / "a.md"
+    page.write_text(
+        "[ok](b.md) [ok](b.md#some-heading-here) [web](https://x.org/y.md) `[code](no.md)`\n"
+        "[gone](c.md) [bad anchor](b.md#nowhere) [self](#nowhere-either)\n"
+        "```sh\n[in a block](no.md)\n```\n"
+    )
+    assert broken_links([page], root=tmp_path) == [
+        "a.md: c.md (no such file)",
+        "a.md: b.md#nowhere (no such heading)",
+        "a.md: #nowhere-either (no such heading)",
+    ]
+
+
+def test_every_relative_link_of_the_docs_resolves():
+    """Every relative link of README.md and docs/ names a file that exists, and a heading of it
+    where it gives one (a moved or renamed page breaks no link)."""
+    assert broken_links(LINKED_PAGES) == []

@@ -55,8 +55,9 @@ from tests.conftest import marina_root
 from tests.fuzz_inputs import marina_window
 
 ROOT = Path(__file__).resolve().parents[1]
-#: The pages whose examples run, in this order.
-PAGES = ["README.md", *sorted(f"docs/{p.name}" for p in (ROOT / "docs").glob("*.md"))]
+#: The pages whose examples run, in this order: the README, then every page under docs/ (the
+#: research record in docs/research/ too).
+PAGES = ["README.md", *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs").rglob("*.md"))]
 #: Length of the marina window the examples run on (s from the start of the navigation logs).
 MARINA_WINDOW_S = 150.0
 #: Commands run shorter than written: (sonarslam subcommand, a token the command holds) ->

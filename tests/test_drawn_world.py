@@ -297,7 +297,7 @@ def test_the_sonar_logs_echoes_at_the_scaled_range() -> None:
 
 def test_walls_a_gate_cannot_tell_apart_are_one_truth_unit() -> None:
     """Two quays on one line 40 m apart whose lines differ by 4 cm (drawn 5's walls 21 and 25,
-    docs/consistency.md) are one truth unit, as exactly collinear ones are: an observation of
+    docs/research/consistency.md) are one truth unit, as exactly collinear ones are: an observation of
     either paired with the other's landmark is right. A parallel wall 0.58 m behind (drawn 7's
     walls 100 and 104), one 2 deg off, and the same walls under the exact tolerances of before
     stay apart."""

@@ -181,7 +181,7 @@ def test_bad_calibration_priors_are_refused_by_name(bad):
         EkfConfig(**bad)
 
 
-#: The drawn world of the end-to-end check: a tuning seed (docs/calibration.md), 600 s.
+#: The drawn world of the end-to-end check: a tuning seed (docs/research/calibration.md), 600 s.
 DRAWN_SEED, DRAWN_DURATION_S = 1, 600.0
 
 

@@ -142,7 +142,7 @@ def test_innovations_three_times_their_variance_trip_the_nis_check() -> None:
 
 
 def test_innovations_a_twentieth_of_their_variance_are_a_finding_not_an_issue() -> None:
-    """The marina EKF's heading (docs/consistency.md): after 600 s the heading NIS is a twentieth
+    """The marina EKF's heading (docs/research/consistency.md): after 600 s the heading NIS is a twentieth
     of chi2(1) (a prediction that already holds the AHRS heading it is compared with). The
     monitor reports it as under-confident, on that span only, and the run stays healthy: no
     issue, no warning."""

@@ -64,7 +64,7 @@ class SensorNoise:
     dvl_compass_deviation_deg : tuple of float
         ``(B, C)``: the DVL compass reads ``B sin(yaw) + C cos(yaw)`` (deg) off, ``yaw`` the
         DVL frame's yaw, as a compass deflected by the vehicle's own field (hard iron)
-        (docs/calibration.md gives the marina's).
+        (docs/research/calibration.md gives the marina's).
     ahrs_sigma_deg : float
         White noise of the AHRS heading (deg).
     ahrs_bias_deg : float
@@ -76,7 +76,7 @@ class SensorNoise:
         ``(B, C)``: the AHRS yaw (counter-clockwise) reads ``B sin(psi) + C cos(psi)`` (deg)
         off, ``psi`` the true body yaw, as a compass deflected by the vehicle (hard iron).
     ahrs_gyro_bias_rad_per_s : float
-        Constant bias of the AHRS yaw rate (rad/s, counter-clockwise) (docs/calibration.md
+        Constant bias of the AHRS yaw rate (rad/s, counter-clockwise) (docs/research/calibration.md
         gives the marina MTi's).
     ahrs_acc_sigma_mps2 : float
         White noise of the AHRS accelerations (m/s^2).
@@ -87,7 +87,7 @@ class SensorNoise:
     dvl_degraded_from_s : float or None
         From this many seconds after the start, the DVL's white noise is
         ``dvl_degraded_sigma_mps`` instead (as the marina's DVL degrades at the end of its run:
-        docs/results.md); None: never.
+        docs/research/results.md); None: never.
     dvl_degraded_sigma_mps : float
         The DVL's white noise once degraded (m/s).
     """

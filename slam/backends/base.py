@@ -88,7 +88,7 @@ class BackendConfig(LandmarkConfig):
         line (and, in the factor graph, scan) observation
         (:mod:`sonarslam.slam.model.calibration`), with the dataset's mounting as the prior
         mean: the graph's variable ``C(0)``, three states of the EKF. Off by default
-        (docs/design-decisions.md, "Sonar calibration as state"; the EKF's: docs/calibration.md,
+        (docs/design-decisions.md, "Sonar calibration as state"; the EKF's: docs/research/calibration.md,
         "The EKF's calibration states").
     sonar_mount_sigma_m : float
         Its prior 1-sigma in x and in y (m): a lever arm a user measures with a tape, or not at
@@ -105,7 +105,7 @@ class BackendConfig(LandmarkConfig):
         sonar's map drawn with dead-reckoning poses (``sonarslam calibrate --poses dr``) is
         known relative to the DVL's track, and the data see only that difference, so the
         misalignment's own prior alone then decides where the two turn together
-        (docs/calibration.md, "The sonar/DVL direction").
+        (docs/research/calibration.md, "The sonar/DVL direction").
     range_scale_sigma : float
         Prior 1-sigma of the sonar's range scale ``s`` around 1 (an echo from range ``r`` is
         logged at ``s * r``: a sound-speed error), shared as the mounting (the graph's

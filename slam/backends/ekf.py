@@ -209,7 +209,7 @@ class EkfConfig(BackendConfig):
     side_gate : bool
         As :class:`sonarslam.slam.mapping.landmarks.LandmarkConfig`, on as there: without it
         the EKF paired a wall's observations with the parallel face 4.9 m behind it (the
-        choice's measurements: docs/consistency.md).
+        choice's measurements: docs/research/consistency.md).
     first_estimates_jacobians : bool
         FEJ-EKF: line Jacobians at the landmarks' first estimates (consistency; see
         :meth:`LineEkf.predict_line`).
@@ -481,7 +481,7 @@ class LineEkf:
         # filterpy's Joseph form (I - K H) P (I - K H)^T + K R K^T is symmetric only to
         # round-off, and nothing else symmetrises P: over hundreds of updates of a filter
         # whose variances span 1e-8 to 1e2 the asymmetry grows until P is indefinite, a gate's
-        # squared Mahalanobis distance goes negative and any pairing passes it (docs/consistency.md)
+        # squared Mahalanobis distance goes negative and any pairing passes it (docs/research/consistency.md)
         P = self.kf.P
         P[...] = 0.5 * (P + P.T)
         self._normalise()

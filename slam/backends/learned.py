@@ -148,7 +148,7 @@ class LearnedNoise:
         walk is not learned (True: dropped). The walk would then be the prediction's own error
         as well as the AHRS's, with nothing but the lines to tell a heading error from a turn;
         by the gyro, the walk is the AHRS's alone and the gyro holds the heading between the
-        lines (docs/consistency.md, "Noise learned online": on the marina the walk learned with
+        lines (docs/research/consistency.md, "Noise learned online": on the marina the walk learned with
         the heading's own change hands the heading to the lines and loses metres)."""
         if self._rate_seen or step.dt_s <= 0.0 or step.var_yaw_gap_rad2 > 0.0:
             return False

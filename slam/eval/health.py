@@ -46,7 +46,7 @@ innovations of a consistent filter are white with the covariance it predicts):
     ``travel_min_share`` of the travel goes one way, flagged beyond ``travel_max_angle_deg``
     off the bow. A vehicle travels bow first; a DVL mounting turned the wrong way round moves
     it stern- or side-first, and the map is as sharp with the sonar's yaw turned alike, so no
-    other check sees it (docs/calibration.md).
+    other check sees it (docs/research/calibration.md).
 ``odometry``
     Every closed loop, with GPS or without: the sonar's motion between nearby scans
     against dead reckoning's (:func:`sonarslam.slam.eval.loops.odometry_check`), flagged when they disagree by more than

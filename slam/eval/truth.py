@@ -244,7 +244,7 @@ SAME_LINE_RHO_M = 0.1
 #: range bin of the simulated head (0.1 m), below one sigma of an extracted line's own systematic
 #: error (calibrated 0.06-0.19 m and 0.5-1.1 deg on the drawn worlds, GPS-free): no gate tells
 #: such lines apart, and pairing an observation of one with the other's landmark moves the
-#: estimate by less than one line's error (docs/consistency.md).
+#: estimate by less than one line's error (docs/research/consistency.md).
 SAME_LINE_THETA_RAD = float(np.deg2rad(0.5))
 
 

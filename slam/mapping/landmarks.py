@@ -121,7 +121,7 @@ class LandmarkConfig:
         nearly the same place share their systematic error (the echo band seen at the same
         incidence and range), which does not average down as independent errors would. None:
         every associated observation is used. The default's measurements are in
-        docs/marina-accuracy.md.
+        docs/research/marina-accuracy.md.
     """
 
     association: AssociationConfig = field(default_factory=AssociationConfig)

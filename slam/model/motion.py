@@ -483,7 +483,7 @@ def gyro_bias_against_heading(
     over windows of ``window_s``, the gyro's integral minus the heading's change (unwrapped)
     per second; their median and its standard error (from the median absolute deviation),
     rad/s. A window's heading noise enters once, not at every sample. ``(0, inf)`` with fewer
-    than 5 windows (docs/calibration.md gives the marina MTi's)."""
+    than 5 windows (docs/research/calibration.md gives the marina MTi's)."""
     t = attitude.t
     if t.size < 2:
         return 0.0, float("inf")

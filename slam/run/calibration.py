@@ -307,7 +307,7 @@ def yaw_change_doubt(dataset: Dataset, yaw_rad: float) -> str | None:
 #: units (the summed entropy's sampling spread at the minimum,
 #: :func:`sonarslam.slam.eval.sharpness.map_entropy_variance`) below the coarse grid's median:
 #: a flat objective has no minimum to trust (:attr:`ClockSearch.decisive`; the measured
-#: contrasts are in docs/calibration.md).
+#: contrasts are in docs/research/calibration.md).
 MIN_CLOCK_DEPTH = 2.5
 #: ... and the least entropy more than :data:`CLOCK_BASIN_S` from it this many noise units above.
 MIN_CLOCK_MARGIN = 2.0
@@ -469,7 +469,7 @@ def calibrate_time_offset(
 CLOCK_CHECK_HALF_RANGE_S = 1.5
 #: ... and warns when the sharpest map's offset lies this far (s) from ``[sonar] time_offset_s``:
 #: the search finds the simulated clocks within -0.03 to +0.10 s, and the marina's bottom is
-#: flat within 0.12 s of its best (docs/calibration.md).
+#: flat within 0.12 s of its best (docs/research/calibration.md).
 CLOCK_DOUBT_S = 0.3
 #: ... with a minimum this many noise units below the median of the +-1.5 s grid (not
 #: ``calibrate``'s 2.5 over +-3 s: the narrower grid's median lies nearer the bottom, and a
@@ -579,7 +579,7 @@ def calibrate_ahrs_yaw(dataset: Dataset, harmonics: int = 1) -> CompassFit:
     errs by ``B sin psi + C cos psi`` around the heading ``psi``, which averages to zero over
     *all headings*, not over the run's time (a run spends unequal time at each heading). So the
     constant is fitted together with ``harmonics`` harmonics of the AHRS heading, least
-    squares over every DVL row (the marina's figures: docs/calibration.md).
+    squares over every DVL row (the marina's figures: docs/research/calibration.md).
 
     Parameters
     ----------

@@ -73,7 +73,7 @@ _DEG = math.pi / 180.0
 #: range, 3 deg beam; beams are 0/255 masks (a third party's threshold, first 10 bins dropped),
 #: with runs of returns metres thick. The first return of each run votes and the line is
 #: the least-squares fit through those leading edges ("fit": the wall's face; the paper's
-#: overlap-ratio ellipse's centre sits inside the echo band, docs/results.md, "Line features on the
+#: overlap-ratio ellipse's centre sits inside the echo band, docs/research/results.md, "Line features on the
 #: marina"); the fit's covariance describes the echoes' own noise, the rest of a line's error is
 #: the dataset's calibrated systematic error (``[noise] line_sigma_*``, sonarslam calibrate
 #: --line-noise) added to it; a 360 deg sector gives longer segments; the odometry's uncertainty
@@ -105,7 +105,7 @@ EXTRACTOR_PRESETS: dict[str, ExtractorConfig] = {
     # the same over a 180 deg sector and 10 votes without the odometry's uncertainty: more,
     # shorter lines whose covariance describes the sonar's own noise only
     "marina-fit": _MARINA.replace(sector_deg=180.0, min_votes=10, pose_uncertainty=False),
-    # the paper's overlap-ratio ellipse and its centre (docs/results.md: why the closed loops
+    # the paper's overlap-ratio ellipse and its centre (docs/research/results.md: why the closed loops
     # take the fit instead)
     "marina-seed": _MARINA.replace(covariance_method="seed"),
 }

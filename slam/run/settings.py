@@ -3,7 +3,7 @@
 
 * The dataset's settings (``sonarslam.toml``'s keys, :func:`sonarslam.datasets.config.config_tables`): from
   the dataset's own ``sonarslam.toml``, else its ``*_SETUP.log`` (the head) and the marina
-  calibration (``datasets.config.MARINA_CONFIG``, docs/calibration.md) for the marina's logs,
+  calibration (``datasets.config.MARINA_CONFIG``, docs/research/calibration.md) for the marina's logs,
   neutral defaults for any other; keys a
   ``sonarslam.toml`` leaves out take the neutral defaults of ``DatasetConfig``.
 * The run settings (``--set SCOPE.FIELD=VALUE``, :mod:`sonarslam.slam.run.presets`): the extractor preset

@@ -84,7 +84,7 @@ class GraphConfig(BackendConfig):
     scale, shared by every line and scan observation) and the following. With the sonar's
     mounting a variable, estimate the DVL's misalignment too
     (``estimate_misalignment``): it takes the crab a DVL's lateral bias puts on the odometry,
-    which the mounting's yaw would otherwise absorb (docs/calibration.md, "Calibration as state:
+    which the mounting's yaw would otherwise absorb (docs/research/calibration.md, "Calibration as state:
     the three together").
 
     Attributes

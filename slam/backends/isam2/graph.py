@@ -909,7 +909,7 @@ class LineIsam2:
         """The correlation of the sonar mounting's yaw with the DVL misalignment in their joint
         marginal (the whole graph's, at ``values``): a rotation of both by one angle turns the
         track and the map together and leaves the AHRS headings alone, so the data see their
-        difference and only the priors their sum (docs/calibration.md, "The sonar/DVL
+        difference and only the priors their sum (docs/research/calibration.md, "The sonar/DVL
         direction")."""
         keys = gtsam.KeyVector([C(0), D(0)])
         joint = gtsam.Marginals(self.graph, values).jointMarginalCovariance(keys)
