@@ -269,7 +269,7 @@ def _calibrate(sub: Subparsers) -> argparse.ArgumentParser:
         action="store_true",
         help="write a sonar yaw found more than 45 deg from a configured (given) one: only"
         " after checking the DVL's and AHRS's mountings, which map sharpness cannot tell from"
-        " the sonar's (docs/calibration.md)",
+        " the sonar's (docs/calibration.md, its section When it refuses)",
     )
     p.add_argument(
         "--time-offset",
