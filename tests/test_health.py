@@ -546,7 +546,7 @@ def test_an_issue_ends_where_the_run_ends_and_the_line_counts_each_check() -> No
     )
     assert [i.check for i in report.issues] == ["landmarks", "landmarks"], report.line()
     assert report.issues[-1].t1_s == pytest.approx(short.t_s[-1], abs=1e-6)
-    assert "2 inconsistencies (landmarks x2)" in report.line()
+    assert "2 inconsistencies in the online loop (landmarks x2)" in report.line()
 
 
 def test_the_first_window_builds_the_map_and_is_not_judged_by_the_landmarks_check() -> None:

@@ -241,3 +241,15 @@ def test_offline_from_saved_refuses_another_runs_dataset(simulated, tmp_path):
         offline_from_saved(tmp_path / "r", part, check_dataset=False)
     with pytest.raises(SettingError, match="no such run directory"):
         offline_from_saved(tmp_path / "nothing", other)
+    # the run's own data opened with another sonar mounting (a review: rebuilt silently with it)
+    used = (tmp_path / "r" / "config_used.toml").read_text()
+    assert "[mounting.sonar]" in used
+    turned = tmp_path / "turned.toml"
+    turned.write_text("[mounting.sonar]\nx_m = 0.0\ny_m = 0.0\nyaw_deg = 20.0\n")
+    source = simulated("harbour", 4, 100.0)
+    with pytest.raises(SettingError, match=r"another configuration .*\[mounting.sonar\] yaw_deg"):
+        offline_from_saved(tmp_path / "r", open_dataset(source, config_override=turned))
+    own = open_dataset(source, config_override=tmp_path / "r" / "config_used.toml")
+    from sonarslam.slam.run.offline import _check_config
+
+    _check_config(tmp_path / "r", own)  # the run's own configuration passes

@@ -6,6 +6,7 @@ examples of the README and docs/ are run by tests/test_docs_examples.py.)"""
 from __future__ import annotations
 
 import fnmatch
+import itertools
 import json
 import re
 import subprocess
@@ -154,11 +155,9 @@ def test_every_output_file_is_in_the_docs_table(runs):
     key_patterns = []
     for token in re.findall(r"`([^`]+)`", keys_part):
         token = re.sub(r"<[^>]+>", "*", token)
-        alts = re.match(r"(.*)\{([^}]+)\}(.*)", token)
-        if alts:
-            key_patterns += [alts[1] + a + alts[3] for a in alts[2].split(",")]
-        else:
-            key_patterns.append(token)
+        pieces = re.split(r"\{([^}]*)\}", token)  # text, alternatives, text, ...
+        choices = [[p] if i % 2 == 0 else p.split(",") for i, p in enumerate(pieces)]
+        key_patterns += ["".join(c) for c in itertools.product(*choices)]
     for r in runs.values():
         for key in r.metrics:
             assert any(fnmatch.fnmatch(key, p) for p in key_patterns), (

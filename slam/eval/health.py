@@ -318,13 +318,14 @@ class HealthReport:
         if self.ok:
             n = sum(self.judged.values())
             out = (
-                f"health: no inconsistency found ({n} windows and states judged, each check at"
+                f"health: no inconsistency found in the online loop ({n} windows and states"
+                f" judged, each check at"
                 f" a {100 * self.config.false_alarm:g} % false-alarm rate)"
             )
         else:
             counts = [(c, sum(i.check == c for i in self.issues)) for c in self.checks_flagged()]
             out = (
-                f"health: {len(self.issues)} inconsistencies"
+                f"health: {len(self.issues)} inconsistencies in the online loop"
                 f" ({', '.join(c if k == 1 else f'{c} x{k}' for c, k in counts)});"
                 f" first: {self.issues[0].message(self.t_ref_s).removeprefix('health: ')}"
             )

@@ -29,7 +29,13 @@ from sonarslam.slam.eval.ate import (
     halves,
     heading_against_truth,
 )
-from sonarslam.slam.eval.consistency import COMPONENTS, NeesSeries, chi2_band, nees_series
+from sonarslam.slam.eval.consistency import (
+    COMPONENTS,
+    NeesSeries,
+    chi2_band,
+    gps_position_nees,
+    nees_series,
+)
 from sonarslam.slam.eval.loops import Loop, LoopError, LoopSearch, OdometryCheck
 from sonarslam.slam.eval.sharpness import trajectory_sharpness
 from sonarslam.slam.eval.truth import AssociationScores, association_against_truth, truth_trajectory
@@ -72,9 +78,14 @@ class TrajectoryFigures:
     map_entropy_nats : float or None
         The map's entropy projected with the trajectory (:mod:`sonarslam.slam.eval.sharpness`).
     nees : dict of str to NeesSeries
-        Simulated data, the run's own trajectory with covariances: its NEES against the truth
-        by block (``pose``, ``position``, ``heading``;
+        Simulated data, a trajectory with covariances: its NEES against the truth by block
+        (``pose``, ``position``, ``heading``;
         :func:`sonarslam.slam.eval.consistency.nees_series`).
+    nees_gps : NeesSeries or None
+        A trajectory with covariances and GPS fixes inside it: its position NEES at the fixes,
+        the GPS sigma (``[noise] gps_sigma_m``) added
+        (:func:`sonarslam.slam.eval.consistency.gps_position_nees`; GPS errors are correlated in
+        time, so read it as a summary, not a test).
     """
 
     KEYS: ClassVar[tuple[str, ...]] = (
@@ -108,6 +119,9 @@ class TrajectoryFigures:
         "nees_{pose,position,heading}_mean",
         "nees_{pose,position,heading}_in_band_fraction",
         "nees_{pose,position,heading}_band",
+        "nees_{pose,position,heading}_<name>_{mean,in_band_fraction,band}",
+        "nees_gps_position_{mean,in_band_fraction}",
+        "nees_gps_position_<name>_{mean,in_band_fraction}",
     )
 
     name: str
@@ -124,16 +138,22 @@ class TrajectoryFigures:
     heading_truth: HeadingResult | None = None
     map_entropy_nats: float | None = None
     nees: Mapping[str, NeesSeries] = field(default_factory=dict)
+    nees_gps: NeesSeries | None = None
 
     def nees_json(self) -> dict[str, JsonValue]:
-        """Each NEES block's mean over the run's samples, the share of samples inside the
-        two-sided 95 % band of chi2(dof) and that band (a consistent estimate's mean is dof)."""
+        """Each NEES block's mean over the trajectory's samples, the share of samples inside
+        the two-sided 95 % band of chi2(dof) and that band (a consistent estimate's mean is
+        dof); against GPS, the mean and the share in band (suffix ``_<name>``)."""
+        suffix = f"_{self.name}" if self.name else ""
         out: dict[str, JsonValue] = {}
         for block, series in self.nees.items():
             lo, hi = chi2_band(series.dof)
-            out[f"nees_{block}_mean"] = _finite(series.mean)
-            out[f"nees_{block}_in_band_fraction"] = series.in_band_fraction()
-            out[f"nees_{block}_band"] = [lo, hi]
+            out[f"nees_{block}{suffix}_mean"] = _finite(series.mean)
+            out[f"nees_{block}{suffix}_in_band_fraction"] = series.in_band_fraction()
+            out[f"nees_{block}{suffix}_band"] = [lo, hi]
+        if self.nees_gps is not None and self.nees_gps.nees.size:
+            out[f"nees_gps_position{suffix}_mean"] = _finite(self.nees_gps.mean)
+            out[f"nees_gps_position{suffix}_in_band_fraction"] = self.nees_gps.in_band_fraction()
         return out
 
     def whole_json(self) -> dict[str, JsonValue]:
@@ -285,6 +305,7 @@ class ClosedLoopFigures:
         "retest_{runs,factors,removed}",
         "offline_passes",
         "offline_settled",
+        "offline_moved_m",
         "offline_changed",
         "offline_decisions",
         "offline_scans",
@@ -555,6 +576,7 @@ class RunMetrics:
             out.update(other.entropy_json())
             out.update(other.whole_json())
             out.update(other.span_json())
+            out.update(other.nees_json())
         if self.loops is not None:
             out.update(self.loops.to_json())
         if self.provenance is not None:
@@ -611,8 +633,13 @@ def trajectory_figures(dataset: Dataset, trajectory: Trajectory, name: str) -> T
             ate_against_truth(trajectory, truth, align=True),
         )
         heading = heading_against_truth(trajectory, truth)
-        if not name and trajectory.covs is not None:
+        if trajectory.covs is not None:
             nees = {block: nees_series(trajectory, truth, block) for block in COMPONENTS}
+    nees_gps = None
+    if gps is not None and trajectory.covs is not None and dataset.truth is None:
+        nees_gps = gps_position_nees(
+            trajectory, gps.t, gps.en_m, float(dataset.config.noise.gps_sigma_m)
+        )
     return TrajectoryFigures(
         name=name,
         ate=ate_against_gps(trajectory, gps) if gps is not None else None,
@@ -626,6 +653,7 @@ def trajectory_figures(dataset: Dataset, trajectory: Trajectory, name: str) -> T
         heading_truth=heading,
         map_entropy_nats=_sharpness(dataset, trajectory),
         nees=nees,
+        nees_gps=nees_gps,
     )
 
 

@@ -12,6 +12,8 @@ its inputs).
 from __future__ import annotations
 
 import json
+import math
+import tomllib
 from collections.abc import Iterator
 from dataclasses import fields, replace
 from pathlib import Path
@@ -21,6 +23,7 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import X
 
+from sonarslam.datasets.config import config_tables
 from sonarslam.datasets.dataset import Dataset
 from sonarslam.features.scans import ScanConfig
 from sonarslam.settings import SettingError
@@ -135,7 +138,11 @@ def offline_from_saved(
         (``metrics.json``), as the run took them.
     check_dataset : bool
         Refuse a dataset whose files' digest is not the run's (``metrics.json``
-        ``provenance.dataset_sha256``): another dataset, or this one's files changed since.
+        ``provenance.dataset_sha256``): another dataset, or this one's files changed since; and
+        one opened with another configuration than the run's (``config_used.toml``: the sonar,
+        the mountings, the noise and the motion model, which the scans and dead reckoning are
+        rebuilt with). Open it with the run's: ``open_dataset(SOURCE,
+        config_override=run_dir / "config_used.toml")``.
 
     Raises
     ------
@@ -168,6 +175,7 @@ def offline_from_saved(
     saved = _saved_metrics(run)
     if check_dataset:
         _check_digest(run, saved, dataset)
+        _check_config(run, dataset)
     found = saved.get("settings", {})
     settings = dict(found) if isinstance(found, dict) else {}
     graph = _graph_config(doc["meta"].get("config", {}))
@@ -201,6 +209,57 @@ def _check_digest(run: Path, metrics: dict[str, Any], dataset: Dataset) -> None:
             f" {metrics.get('source')}); give that dataset, or check_dataset=False if its files"
             " changed on purpose",
         )
+
+
+#: The tables of ``config_used.toml`` the offline estimate rebuilds its scans and dead
+#: reckoning with, as :func:`sonarslam.datasets.config.config_tables` names them.
+CONFIG_TABLES = (
+    "sonar",
+    "mounting.sonar",
+    "mounting.dvl",
+    "mounting.ahrs",
+    "noise",
+    "motion",
+)
+
+
+def _check_config(run: Path, dataset: Dataset) -> None:
+    """Refuse ``dataset`` when its configuration differs from the run's ``config_used.toml``
+    in a value the offline estimate reads (:data:`CONFIG_TABLES`; a run whose directory has no
+    such file is not checked)."""
+    path = run / "config_used.toml"
+    if not path.is_file():
+        return
+    used = tomllib.loads(path.read_text())
+    ours = config_tables(dataset.config)
+    differ = []
+    for name in CONFIG_TABLES:
+        table: Any = used
+        for part in name.split("."):
+            table = table.get(part, {}) if isinstance(table, dict) else {}
+        for key, theirs in (table or {}).items():
+            if key == "source" or key not in ours[name]:
+                continue
+            mine = ours[name][key]
+            if not _same(mine, theirs):
+                differ.append(f"[{name}] {key} = {theirs!r} in the run, {mine!r} here")
+    if differ:
+        raise SettingError(
+            "dataset",
+            f"{dataset.root} was opened with another configuration than {run}'s"
+            f" ({path}): {'; '.join(differ[:4])}{' ...' if len(differ) > 4 else ''}; the"
+            " offline estimate rebuilds the scans and dead reckoning with it: open the dataset"
+            f" with the run's, open_dataset(SOURCE, config_override={str(path)!r})",
+        )
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Two configuration values alike (numbers to 1e-9 relative, lists element by element)."""
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)):
+        return math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-12)
+    return bool(a == b)
 
 
 def _graph_config(saved: dict[str, Any]) -> GraphConfig:

@@ -939,9 +939,11 @@ def offline_words(m: dict[str, Any]) -> str:
     if m["offline_settled"]:
         settled = f"settled after {passes} passes"
     else:
+        moved = m.get("offline_moved_m")
+        by = f", which moved a node by at most {moved:.2f} m" if moved is not None else ""
         settled = (
             f"still changing after {passes} passes ({m['offline_changed']} of"
-            f" {m['offline_decisions']} decisions in the last; a valid estimate, another"
+            f" {m['offline_decisions']} decisions in the last{by}; a valid estimate, another"
             " pass would move it: isam2.offline.max_passes)"
         )
     return (

@@ -124,6 +124,9 @@ class OfflinePass:
         of.
     settled : bool
         Fewer than ``settle_share`` of the decisions changed: the last pass.
+    moved_m : float
+        The largest move of a node's position in the pass (m): how far the pass moved the
+        estimate it started from.
     wall_s : float
     timing_s : dict of str to float
         Wall time of each step (s): ``scans``, ``registrations``, ``decision``, ``lines``,
@@ -140,6 +143,7 @@ class OfflinePass:
     changed: int = -1
     decisions: int = 0
     settled: bool = False
+    moved_m: float = float("nan")
     wall_s: float = 0.0
     timing_s: dict[str, float] = field(default_factory=dict)
 
@@ -168,12 +172,14 @@ class OfflineResult:
     passes: list[OfflinePass]
     revisits: list[dict[str, Any]]
 
-    def metrics(self) -> dict[str, float | int]:
-        """``offline_*``: the last pass's decisions, the passes made and whether they settled."""
+    def metrics(self) -> dict[str, float | int | bool]:
+        """``offline_*``: the last pass's decisions, the passes made, whether they settled and
+        how far the last pass moved the estimate."""
         last = self.passes[-1]
-        out: dict[str, float | int] = {
+        out: dict[str, float | int | bool] = {
             "offline_passes": len(self.passes),
-            "offline_settled": int(last.settled),
+            "offline_settled": bool(last.settled),
+            "offline_moved_m": last.moved_m,
             "offline_changed": last.changed,
             "offline_decisions": last.decisions,
             "offline_scans": last.scans,
@@ -616,6 +622,7 @@ def offline_estimate(
     for p in range(config.max_passes):
         wall0 = time.perf_counter()
         log = OfflinePass()
+        before_xy = _node_poses(current, n)[:, :2]
         clock = _Clock(log.timing_s)
         # steps 1-3
         pairs = _Pairs(
@@ -681,6 +688,7 @@ def offline_estimate(
         kept_before, stretch_before = kept, stretch
         log.decisions = len(registered) + int(stretch.size)
         current = _merge(current, estimate)
+        log.moved_m = float(np.max(np.hypot(*(_node_poses(current, n)[:, :2] - before_xy).T)))
         graph_records = _scaled(final, scales)
         log.wall_s = time.perf_counter() - wall0
         passes.append(log)
