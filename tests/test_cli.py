@@ -7,6 +7,7 @@ import json
 import subprocess
 import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ from sonarslam.datasets.errors import DataWarning
 from sonarslam.datasets.rosbag import BAG_KINDS
 from sonarslam.datasets.simulator import KINDS, simulate
 from sonarslam.datasets.simulator.bluerov import NAV_KINDS
-from sonarslam.datasets.source import open_dataset
+from sonarslam.datasets.source import MARINA_DOCS, open_dataset
 from sonarslam.slam.cli.common import POSES
 from sonarslam.slam.cli.main import build_parser, main
 from sonarslam.slam.cli.parsers import (
@@ -32,10 +33,12 @@ from sonarslam.slam.eval.ate import ate_against_gps
 from sonarslam.slam.eval.truth import truth_trajectory
 from sonarslam.slam.io.trajectory import Trajectory, read_tum
 from sonarslam.slam.run.demo import SIM_DURATION_S as DEMO_SIM_DURATION_S
+from sonarslam.slam.run.demo import demo_source
 from sonarslam.slam.run.presets import EXTRACTOR_PRESETS as PRESETS
 from sonarslam.slam.run.presets import SettingError, check_settings, run_config
 from sonarslam.slam.run.run import RunResult, backend_names, results_table
 from sonarslam.slam.run.sources import POSE_SOURCES, dead_reckoning_trajectory
+from tests.test_docs import anchors
 
 
 @pytest.fixture(scope="module")
@@ -228,7 +231,17 @@ def test_known_errors_are_one_line_and_exit_1(tmp_path, capsys, monkeypatch):
     assert len(err) == 1 and "needs $SONARSLAM_DATA" in err[0]
     # where the data comes from and the layout SONARSLAM_DATA must point above, in that line
     assert "StPereDataset.zip" in err[0] and "marina/logs/" in err[0]
-    assert "marina/keyframes/" in err[0] and "Getting the data" in err[0]
+    assert "marina/keyframes/" in err[0]
+    # the section that says how to get it (it left the README for docs/data.md)
+    assert "see docs/data.md#the-marina-getting-the-data" in err[0]
+
+
+def test_the_marina_hints_point_at_a_section_that_exists(monkeypatch):
+    page, _, anchor = MARINA_DOCS.partition("#")
+    assert anchor in anchors(Path(__file__).resolve().parents[1] / page)
+    # `make run` without the marina says where to get it, at the same place
+    monkeypatch.delenv("SONARSLAM_DATA", raising=False)
+    assert f"how to get the marina: {MARINA_DOCS}" in demo_source().description
 
 
 def test_unknown_backend_is_a_usage_error_naming_the_choices(short_harbour, tmp_path, capsys):
