@@ -74,6 +74,38 @@ def test_every_command_has_help(capsys):
     assert "ROS bag" in said and "Ping Viewer" in said and "BlueROV2" in said, said
 
 
+#: A shortest command line of each command (its required arguments only).
+SHORTEST = {
+    "simulate": ["pool", "--out", "o"],
+    "run": ["src", "--out", "o"],
+    "plot-scans": ["src"],
+    "extract": ["src", "--out", "o"],
+    "demo": [],
+    "calibrate": ["src"],
+    "info": ["src"],
+    "report": ["run_dir", "--out", "o"],
+    "sweep": ["--out", "o"],
+}
+
+
+def test_every_command_takes_quiet(capsys):
+    """The README: "Every command has ``--help``; ``--quiet`` turns the progress bars off" (a
+    review: report, info, simulate and plot-scans refused it)."""
+    parser = build_parser()
+    commands = parser._subparsers._group_actions[0].choices  # type: ignore[union-attr]
+    assert set(SHORTEST) == set(commands)
+    for name, argv in SHORTEST.items():
+        assert parser.parse_args([name, *argv, "--quiet"]).quiet, name
+        assert not parser.parse_args([name, *argv]).quiet, name
+        with pytest.raises(SystemExit):
+            main([name, "--help"])
+        out = " ".join(capsys.readouterr().out.split())
+        said = out[out.index("--quiet ") :]
+        assert said.startswith("--quiet no progress bars") or said.startswith(
+            "--quiet accepted as by every command; this one draws no progress bars"
+        ), name
+
+
 #: What ``--version`` and ``--help`` must not import: each costs seconds on the 2-core machine
 #: (the whole library imported 2,295 modules in 7.7-14 s; benchmarks/cli_startup.py times it).
 HEAVY = ("gtsam", "numba", "matplotlib", "scipy", "pandas", "dask", "distributed", "evo", "shapely")
