@@ -106,6 +106,20 @@ def test_every_command_takes_quiet(capsys):
         ), name
 
 
+def test_an_unknown_argument_is_said_by_its_command(capsys):
+    """argparse says an unrecognised argument as the top-level parser ("sonarslam: error"); the
+    command's own parser says it, naming the command and its --help."""
+    for name in ("report", "simulate", "run"):
+        with pytest.raises(SystemExit) as exit_:
+            main([name, *SHORTEST[name], "--bogus"])
+        assert exit_.value.code == 2
+        err = capsys.readouterr().err.strip()
+        assert err == (
+            f"sonarslam {name}: error: unrecognized arguments: --bogus"
+            f" (see sonarslam {name} --help)"
+        )
+
+
 #: What ``--version`` and ``--help`` must not import: each costs seconds on the 2-core machine
 #: (the whole library imported 2,295 modules in 7.7-14 s; benchmarks/cli_startup.py times it).
 HEAVY = ("gtsam", "numba", "matplotlib", "scipy", "pandas", "dask", "distributed", "evo", "shapely")
