@@ -92,3 +92,20 @@ def test_lint_checks_the_projects_folders_and_every_tracked_python_file() -> Non
     ).stdout.split()
     outside = [p for p in tracked if p.split("/")[0] not in linted | {"notebooks"}]
     assert not outside, outside
+
+
+def test_a_setting_of_no_scope_lists_the_scopes(
+    simulated: Callable[..., Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--set foo.bar=1`` said "does not apply to back end 'isam2'" (a review): the scope is
+    unknown, and the scopes are listed; another back end's setting still says so."""
+    args = ["run", str(simulated("harbour", 0, 60.0)), "--backend", "isam2"]
+    args += ["--out", str(tmp_path / "o"), "--quiet"]
+    assert main([*args, "--set", "foo.bar=1"]) == 2
+    assert _error(capsys) == (
+        "sonarslam run: error: foo.bar: no such scope 'foo'; the scopes are"
+        " ['ekf', 'extractor', 'isam2', 'scans']"
+    )
+    assert main([*args, "--set", "ekf.min_rho_m=2"]) == 2
+    assert _error(capsys).endswith("ekf.min_rho_m: does not apply to back end 'isam2'")
+    assert not (tmp_path / "o").exists()
