@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from sonarslam.slam.cli.main import main
+from sonarslam.slam.run.presets import backend_config, parse_settings
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -109,3 +110,20 @@ def test_a_setting_of_no_scope_lists_the_scopes(
     assert main([*args, "--set", "ekf.min_rho_m=2"]) == 2
     assert _error(capsys).endswith("ekf.min_rho_m: does not apply to back end 'isam2'")
     assert not (tmp_path / "o").exists()
+
+
+def test_a_choice_of_none_is_said_as_typed(
+    simulated: Callable[..., Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The choices of a field that may be None say it 'none', as ``--set`` (and a TOML file)
+    spell it, not Python's None (a review)."""
+    args = ["run", str(simulated("harbour", 0, 60.0)), "--backend", "isam2"]
+    args += ["--out", str(tmp_path / "o"), "--quiet"]
+    assert main([*args, "--set", "isam2.offline.noise_scales=some"]) == 2
+    assert _error(capsys).endswith(
+        "isam2.offline.noise_scales: must be one of 'measurements', 'all', 'none', got 'some'"
+    )
+    # and 'none' is what --set takes for None
+    (value,) = parse_settings(["isam2.offline.noise_scales=none"]).values()
+    config = backend_config("isam2", {"offline.noise_scales": value})
+    assert config.offline.noise_scales is None  # type: ignore[attr-defined]
