@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from sonarslam.datasets.source import open_dataset
 from sonarslam.slam.cli.main import main
 from sonarslam.slam.run.presets import backend_config, parse_settings
 
@@ -127,3 +128,26 @@ def test_a_choice_of_none_is_said_as_typed(
     (value,) = parse_settings(["isam2.offline.noise_scales=none"]).values()
     config = backend_config("isam2", {"offline.noise_scales": value})
     assert config.offline.noise_scales is None  # type: ignore[attr-defined]
+
+
+def test_a_span_without_a_gps_fix_in_its_navigation_names_span(
+    simulated: Callable[..., Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--span 0,1`` on the marina said "no GPS fix inside the navigation span" (a review):
+    its one fix came before the span's first DVL row. The error names --span."""
+    source = simulated("harbour", 0, 60.0)
+    d = open_dataset(source)
+    assert d.gps is not None
+    t0, gps_t, dvl_t = d.nav_span_s[0], d.gps.t, d.dvl.t
+    # a fix followed by two DVL rows before the next fix; the span from just before the fix
+    # to just after the second row: its navigation starts at the first row, after the fix
+    for g, after in zip(gps_t[1:], gps_t[2:], strict=False):
+        d1, d2 = dvl_t[dvl_t > g][:2]
+        if d2 + 1e-3 < after:
+            break
+    span = f"{g - 1e-3 - t0:.4f},{d2 + 1e-3 - t0:.4f}"
+    args = ["run", str(source), "--span", span, "--out", str(tmp_path / "o"), "--quiet"]
+    assert main(args) == 1
+    err = _error(capsys)
+    assert "--span " in err and "holds no GPS fix inside its navigation" in err
+    assert f"both logging, {d1 - t0:.3f}-" in err and "its 1 fix(es) fall outside" in err
