@@ -223,8 +223,9 @@ def dataset_span(dataset: Dataset, span_rel_s: tuple[float, float]) -> Dataset:
     Raises
     ------
     DataError
-        A span that leaves fewer than two DVL or AHRS rows (no time to navigate) or no beam,
-        naming the span and the source's own.
+        A span that leaves fewer than two DVL or AHRS rows (no time to navigate), no beam, or
+        GPS fixes none of which is inside its navigation (a run with GPS starts at the first
+        one there), naming the span and the source's own.
     """
     t_nav0, t_nav1 = dataset.nav_span_s
     lo, hi = t_nav0 + span_rel_s[0], t_nav0 + span_rel_s[1]
@@ -253,11 +254,31 @@ def dataset_span(dataset: Dataset, span_rel_s: tuple[float, float]) -> Dataset:
                 f"{said} holds {np.count_nonzero(keep)} {name} row(s): a run needs a time span"
                 " to navigate",
             )
+    dvl = replace(
+        d, t=d.t[keep_d], v_mps=d.v_mps[keep_d], valid=d.valid[keep_d],
+        heading_rad=d.heading_rad[keep_d],
+    )  # fmt: skip
+    attitude = replace(
+        a, t=a.t[keep_a], yaw_rad=a.yaw_rad[keep_a],
+        yaw_rate_rad_per_s=a.yaw_rate_rad_per_s[keep_a],
+    )  # fmt: skip
     gps = None
     if g is not None:
         keep_g = (g.t >= lo) & (g.t <= hi)
         fix = None if g.fix is None else g.fix[keep_g]
         gps = replace(g, t=g.t[keep_g], en_m=g.en_m[keep_g], fix=fix) if keep_g.any() else None
+    if gps is not None and not dataset.still:
+        # a run with GPS starts at its first fix inside the navigation (start_pose): fixes of
+        # the span before the DVL and AHRS both log, or after, leave it none
+        n0, n1 = navigation_span_s(dvl, attitude)
+        if not np.any((gps.t >= n0) & (gps.t <= n1)):
+            raise DataError(
+                dataset.root,
+                None,
+                f"{said} holds no GPS fix inside its navigation (the DVL and AHRS both logging,"
+                f" {n0 - t_nav0:.3f}-{n1 - t_nav0:.3f} s; its {gps.t.size} fix(es) fall outside):"
+                " a run with GPS starts at its first fix there; give a longer span",
+            )
     cut = [replace(s, t0_s=max(s.t0_s, lo), t1_s=min(s.t1_s, hi)) for s in dataset.segments]
     segments = tuple(
         replace(s, beams=len(beams.between(s.t0_s, s.t1_s))) for s in cut if s.t0_s <= s.t1_s
@@ -283,17 +304,11 @@ def dataset_span(dataset: Dataset, span_rel_s: tuple[float, float]) -> Dataset:
         dataset,
         config=config,
         beams=beams,
-        dvl=replace(
-            d, t=d.t[keep_d], v_mps=d.v_mps[keep_d], valid=d.valid[keep_d],
-            heading_rad=d.heading_rad[keep_d],
-        ),
-        attitude=replace(
-            a, t=a.t[keep_a], yaw_rad=a.yaw_rad[keep_a],
-            yaw_rate_rad_per_s=a.yaw_rate_rad_per_s[keep_a],
-        ),
+        dvl=dvl,
+        attitude=attitude,
         gps=gps,
         segments=segments,
-    )  # fmt: skip
+    )
 
 
 #: DVL and AHRS whose overlap covers less than this share of their logs' span, or leaves out

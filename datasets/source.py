@@ -75,11 +75,13 @@ ENV_VAR = "SONARSLAM_DATA"
 #: :data:`MARINA_CONFIG`.
 MARINA_LOG_PREFIX = "_040825_1735_"
 NAMED_SOURCES = ("marina",)
+#: The section of the docs that says how to get the marina and where to put it.
+MARINA_DOCS = "docs/data.md#the-marina-getting-the-data"
 #: Where the marina comes from and its layout, in one line (errors of a missing named source).
 MARINA_LAYOUT_HINT = (
     "marina/logs/ (_040825_1735_*.log from the University of Girona's StPereDataset.zip, "
     "Ribas et al. 2008) and marina/keyframes/ (the thresholded scans, pclKeyFrame*.pcd with "
-    "keyFrameTimeStamps.csv); see the README's 'Getting the data'"
+    f"keyFrameTimeStamps.csv); see {MARINA_DOCS}"
 )
 
 

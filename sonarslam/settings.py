@@ -115,8 +115,13 @@ def check_fields(obj: Any) -> None:
                 _check_within(f.name, v, r.low, r.high, r.low_open, r.high_open)
         choices = f.metadata.get("choices")
         if choices is not None and value not in choices:
-            said = ", ".join(repr(c) for c in choices)
-            raise ValueError(f"{f.name} must be one of {said}, got {value!r}")
+            said = ", ".join(_choice(c) for c in choices)
+            raise ValueError(f"{f.name} must be one of {said}, got {_choice(value)}")
+
+
+def _choice(value: object) -> str:
+    """A choice as it is typed: None as ``'none'`` (:func:`parse_text`; a TOML file's string)."""
+    return repr("none") if value is None else repr(value)
 
 
 class SettingError(ValueError):

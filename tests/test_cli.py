@@ -7,6 +7,7 @@ import json
 import subprocess
 import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ from sonarslam.datasets.errors import DataWarning
 from sonarslam.datasets.rosbag import BAG_KINDS
 from sonarslam.datasets.simulator import KINDS, simulate
 from sonarslam.datasets.simulator.bluerov import NAV_KINDS
-from sonarslam.datasets.source import open_dataset
+from sonarslam.datasets.source import MARINA_DOCS, open_dataset
 from sonarslam.slam.cli.common import POSES
 from sonarslam.slam.cli.main import build_parser, main
 from sonarslam.slam.cli.parsers import (
@@ -32,10 +33,12 @@ from sonarslam.slam.eval.ate import ate_against_gps
 from sonarslam.slam.eval.truth import truth_trajectory
 from sonarslam.slam.io.trajectory import Trajectory, read_tum
 from sonarslam.slam.run.demo import SIM_DURATION_S as DEMO_SIM_DURATION_S
+from sonarslam.slam.run.demo import demo_source
 from sonarslam.slam.run.presets import EXTRACTOR_PRESETS as PRESETS
 from sonarslam.slam.run.presets import SettingError, check_settings, run_config
 from sonarslam.slam.run.run import RunResult, backend_names, results_table
 from sonarslam.slam.run.sources import POSE_SOURCES, dead_reckoning_trajectory
+from tests.test_docs import anchors
 
 
 @pytest.fixture(scope="module")
@@ -69,6 +72,52 @@ def test_every_command_has_help(capsys):
     out = " ".join(capsys.readouterr().out.split())
     said = out[out.index("simulate simulate") : out.index("run run a back end")]
     assert "ROS bag" in said and "Ping Viewer" in said and "BlueROV2" in said, said
+
+
+#: A shortest command line of each command (its required arguments only).
+SHORTEST = {
+    "simulate": ["pool", "--out", "o"],
+    "run": ["src", "--out", "o"],
+    "plot-scans": ["src"],
+    "extract": ["src", "--out", "o"],
+    "demo": [],
+    "calibrate": ["src"],
+    "info": ["src"],
+    "report": ["run_dir", "--out", "o"],
+    "sweep": ["--out", "o"],
+}
+
+
+def test_every_command_takes_quiet(capsys):
+    """The README: "Every command has ``--help``; ``--quiet`` turns the progress bars off" (a
+    review: report, info, simulate and plot-scans refused it)."""
+    parser = build_parser()
+    commands = parser._subparsers._group_actions[0].choices  # type: ignore[union-attr]
+    assert set(SHORTEST) == set(commands)
+    for name, argv in SHORTEST.items():
+        assert parser.parse_args([name, *argv, "--quiet"]).quiet, name
+        assert not parser.parse_args([name, *argv]).quiet, name
+        with pytest.raises(SystemExit):
+            main([name, "--help"])
+        out = " ".join(capsys.readouterr().out.split())
+        said = out[out.index("--quiet ") :]
+        assert said.startswith("--quiet no progress bars") or said.startswith(
+            "--quiet accepted as by every command; this one draws no progress bars"
+        ), name
+
+
+def test_an_unknown_argument_is_said_by_its_command(capsys):
+    """argparse says an unrecognised argument as the top-level parser ("sonarslam: error"); the
+    command's own parser says it, naming the command and its --help."""
+    for name in ("report", "simulate", "run"):
+        with pytest.raises(SystemExit) as exit_:
+            main([name, *SHORTEST[name], "--bogus"])
+        assert exit_.value.code == 2
+        err = capsys.readouterr().err.strip()
+        assert err == (
+            f"sonarslam {name}: error: unrecognized arguments: --bogus"
+            f" (see sonarslam {name} --help)"
+        )
 
 
 #: What ``--version`` and ``--help`` must not import: each costs seconds on the 2-core machine
@@ -228,7 +277,17 @@ def test_known_errors_are_one_line_and_exit_1(tmp_path, capsys, monkeypatch):
     assert len(err) == 1 and "needs $SONARSLAM_DATA" in err[0]
     # where the data comes from and the layout SONARSLAM_DATA must point above, in that line
     assert "StPereDataset.zip" in err[0] and "marina/logs/" in err[0]
-    assert "marina/keyframes/" in err[0] and "Getting the data" in err[0]
+    assert "marina/keyframes/" in err[0]
+    # the section that says how to get it (it left the README for docs/data.md)
+    assert "see docs/data.md#the-marina-getting-the-data" in err[0]
+
+
+def test_the_marina_hints_point_at_a_section_that_exists(monkeypatch):
+    page, _, anchor = MARINA_DOCS.partition("#")
+    assert anchor in anchors(Path(__file__).resolve().parents[1] / page)
+    # `make run` without the marina says where to get it, at the same place
+    monkeypatch.delenv("SONARSLAM_DATA", raising=False)
+    assert f"how to get the marina: {MARINA_DOCS}" in demo_source().description
 
 
 def test_unknown_backend_is_a_usage_error_naming_the_choices(short_harbour, tmp_path, capsys):

@@ -335,6 +335,19 @@ def test_examples_are_found() -> None:
         assert set(options) <= strings, (command, set(options) - strings)
 
 
+def test_the_readme_api_example_says_the_warning_it_prints(tmp_path, monkeypatch) -> None:
+    """A new user's first API call prints a DataWarning of DVL gaps (the simulator's dropouts):
+    the example says so, and the warning is there to be said."""
+    (example,) = [e for e in examples("README.md") if e.lang == "python"]
+    opening = example.code[: example.code.index("result = ")]
+    assert "a warning of DVL gaps is expected" in opening
+    monkeypatch.chdir(tmp_path)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        exec(opening, {})
+    assert any("gap(s) of the DVL" in str(w.message) for w in caught), caught
+
+
 def test_quickstart_says_what_it_ran(quickstart: Path) -> None:
     printed = (quickstart / "make_run.txt").read_text()
     assert "on the real marina" in printed and "against GPS" in printed

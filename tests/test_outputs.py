@@ -165,6 +165,17 @@ def test_every_output_file_is_in_the_docs_table(runs):
             )
 
 
+def test_the_docs_trajectories_picture_row_names_every_estimate_drawn(runs):
+    """``<name>_trajectories.png`` draws each run's every trajectory (demo.main_job): the row of
+    docs/outputs.md names each an isam2 run makes (a review: it left out the offline one)."""
+    text = _outputs_page()
+    row = next(line for line in text.splitlines() if line.startswith("| `<name>_trajectories"))
+    drawn = row[row.index("every estimate of the runs (") :].split(")")[0]
+    assert {"smoothed", "offline"} <= set(runs["isam2"].trajectories)
+    for name in [*runs["isam2"].trajectories, "batch"]:  # batch: demo runs isam2 with --batch
+        assert name in drawn, (name, drawn)
+
+
 def test_the_docs_key_table_is_the_keys_run_metrics_writes():
     """docs/outputs.md's ``metrics.json`` table names exactly the keys (and key patterns) of
     :class:`sonarslam.slam.run.metrics.RunMetrics`' records, both ways."""

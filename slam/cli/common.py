@@ -153,9 +153,17 @@ def poses_for(poses: str | None, still: bool) -> str:
     return poses if poses is not None else "dr" if still else "gps"
 
 
-def add_quiet(p: argparse.ArgumentParser) -> None:
-    """``--quiet``: no progress bars."""
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
+def add_quiet(p: argparse.ArgumentParser, progress: bool = True) -> None:
+    """``--quiet``: no progress bars; every command takes it (``progress``: the command draws
+    any; one that draws none accepts it and says so)."""
+    p.add_argument(
+        "--quiet",
+        action="store_true",
+        help="no progress bars (warnings are still printed)"
+        if progress
+        else "accepted as by every command; this one draws no progress bars, so it changes"
+        " nothing (warnings are still printed)",
+    )
 
 
 def parse_start(text: str) -> tuple[float, float, float]:

@@ -33,6 +33,11 @@ def _version() -> str:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    return _parsers()[0]
+
+
+def _parsers() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
+    """The ``sonarslam`` parser, and each command's own parser by its name."""
     parser = Parser(
         prog="sonarslam",
         description="Line features with honest uncertainty from MSIS sonar, and SLAM with them.",
@@ -40,14 +45,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"sonarslam {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for _name, add_parser, module in COMMANDS:
-        add_parser(cast(Subparsers, sub)).set_defaults(implementation=module)
-    return parser
+    commands: dict[str, argparse.ArgumentParser] = {}
+    for name, add_parser, module in COMMANDS:
+        commands[name] = add_parser(cast(Subparsers, sub))
+        commands[name].set_defaults(implementation=module)
+    return parser, commands
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    parser, commands = _parsers()
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:  # argparse says these as the top-level parser's; the command's own says them
+        commands[args.command].error(f"unrecognized arguments: {' '.join(unknown)}")
     with warnings.catch_warnings():
         warnings.simplefilter("always", DataWarning)
         warnings.showwarning = _OnceEach()

@@ -134,6 +134,7 @@ def _simulate(sub: Subparsers) -> argparse.ArgumentParser:
         action="store_true",
         help="with --ping360: the .bin alone, no nav.bag (a tank test; read as a still head)",
     )
+    add_quiet(p, progress=False)
     return p
 
 
@@ -205,6 +206,7 @@ def _plot_scans(sub: Subparsers) -> argparse.ArgumentParser:
         "extractor's threshold for raw beams)",
     )
     add_start(p)
+    add_quiet(p, progress=False)
     return p
 
 
@@ -335,6 +337,7 @@ def _info(sub: Subparsers) -> argparse.ArgumentParser:
     add_source(p)
     add_topics(p)
     add_config_and_set(p)
+    add_quiet(p, progress=False)
     return p
 
 
@@ -359,6 +362,7 @@ def _report(sub: Subparsers) -> argparse.ArgumentParser:
         action="store_true",
         help="do not re-open the runs' datasets (no reprojected map, no truth)",
     )
+    add_quiet(p, progress=False)
     return p
 
 

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from sonarslam.datasets.simulator import simulate
-from sonarslam.datasets.source import ENV_VAR, data_root, open_dataset
+from sonarslam.datasets.source import ENV_VAR, MARINA_DOCS, data_root, open_dataset
 from sonarslam.features.projection import project_beams
 from sonarslam.slam.eval.truth import truth_walls
 from sonarslam.slam.io.files import write_atomic
@@ -59,8 +59,8 @@ def demo_source(duration_s: float = SIM_DURATION_S) -> DemoSource:
         f"sim_harbour_{SIM_SEED}",
         True,
         f"{runs} on a simulated harbour (seed {SIM_SEED}, {duration_s:g} s), because {where}; "
-        "its figures are against the simulator's truth (the README's 'Getting the data' says "
-        "how to get the marina)",
+        "its figures are against the simulator's truth (how to get the marina: "
+        f"{MARINA_DOCS})",
     )
 
 

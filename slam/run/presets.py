@@ -44,7 +44,7 @@ from sonarslam.features.config import ExtractorConfig
 from sonarslam.features.scans import ScanConfig
 from sonarslam.settings import SettingError, parse_text, replace_checked
 from sonarslam.slam.backends.base import BACKEND_NOISE_KEYS, BackendConfig
-from sonarslam.slam.backends.registry import backend_spec
+from sonarslam.slam.backends.registry import BACKENDS, backend_spec
 from sonarslam.slam.model.motion import gyro_bias_against_heading
 from sonarslam.sonar.beam import SonarBeam
 from sonarslam.sonar.store import sector_beam_count
@@ -398,7 +398,8 @@ def apply_overrides(config: Any, overrides: dict[str, Any], prefix: str = "") ->
 
 def split_settings(params: dict[str, Any], backend: str) -> tuple[dict[str, Any], dict[str, Any]]:
     """``(extractor settings, back-end settings)`` of ``params`` for ``backend``; a setting of
-    another scope is a SettingError naming it."""
+    another back end's scope, or of no scope at all, is a SettingError naming it (and the
+    scopes, for the latter)."""
     ext: dict[str, Any] = {}
     own: dict[str, Any] = {}
     for name, value in params.items():
@@ -407,8 +408,11 @@ def split_settings(params: dict[str, Any], backend: str) -> tuple[dict[str, Any]
             ext[rest] = value
         elif scope == backend:
             own[rest] = value
-        else:
+        elif scope in BACKENDS:
             raise SettingError(name, f"does not apply to back end {backend!r}")
+        else:
+            scopes = sorted({"extractor", "scans", *BACKENDS})
+            raise SettingError(name, f"no such scope {scope!r}; the scopes are {scopes}")
     return ext, own
 
 

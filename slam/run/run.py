@@ -976,7 +976,7 @@ def _row_figures(m: dict[str, Any], name: str | None) -> dict[str, float]:
 
 def results_table(results: list[RunResult]) -> str:
     """A Markdown table of the runs' ATE, one row per trajectory (a factor graph's online,
-    smoothed and batch estimates), as the published protocol takes it (no alignment) and after
+    smoothed, batch and offline estimates), as the published protocol takes it (no alignment) and after
     a rigid SE(2) fit (``evo_ape -a``): against GPS over the sonar span and the whole run; on
     simulated runs against the simulator's truth first, then against its simulated GPS over the
     whole run."""

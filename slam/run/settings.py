@@ -178,7 +178,7 @@ def _by_scope(settings: dict[str, Any]) -> dict[str, dict[str, Any]]:
     for name, value in settings.items():
         scope, _, field = name.partition(".")
         if scope not in scopes:
-            raise SettingError(name, f"no such scope; the scopes are {sorted(scopes)}")
+            raise SettingError(name, f"no such scope {scope!r}; the scopes are {sorted(scopes)}")
         given[scope][field] = value
     return given
 
