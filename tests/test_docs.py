@@ -169,3 +169,18 @@ def test_every_relative_link_of_the_docs_resolves():
     """Every relative link of README.md and docs/ names a file that exists, and a heading of it
     where it gives one (a moved or renamed page breaks no link)."""
     assert broken_links(LINKED_PAGES) == []
+
+
+def test_the_readme_is_short_and_answers_first():
+    """README.md is a user's (issue 43): at most 160 lines, and its first 80 give the
+    quickstart, the marina result, bringing one's own data and calling the library."""
+    lines = (ROOT / "README.md").read_text(encoding="utf-8").splitlines()
+    assert len(lines) <= 160, f"README.md has {len(lines)} lines: keep it at most 160"
+    head = "\n".join(lines[:80])
+    for what, needle in [
+        ("the quickstart", "make run"),
+        ("the marina result", "<!-- figures: marina-headline -->"),
+        ("own data", "docs/data.md"),
+        ("the API", "docs/api.md"),
+    ]:
+        assert needle in head, f"README.md's first 80 lines lack {what} ({needle!r})"
