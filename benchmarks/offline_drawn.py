@@ -2,7 +2,7 @@
 held-back worlds' verdict (issue 40's targets).
 
 python benchmarks/offline_drawn.py --seeds 0-9 [--noise own,marina] [--cache out/sim-drawn] \\
-    [--variant NAME=FIELD=V,FIELD=V ...] [--workers 2] [--out out/offline_drawn]
+    [--variant NAME=FIELD=V,FIELD=V ...] [--set SCOPE.FIELD=V ...] [--workers 2] [--out out/offline_drawn]
 
 Each seed's drawn world is simulated and calibrated GPS-free once into ``--cache`` (as
 ``benchmarks/drawn_defaults.py`` does), then run once per noise model with dead reckoning and
@@ -85,13 +85,19 @@ def _run(world: str, config: str, backend_args: list[str], out: Path) -> dict[st
     return dict(json.loads((out / "metrics.json").read_text()))
 
 
-def world_job(job: tuple[int, str, str, str, Path, dict[str, dict[str, Any]]]) -> dict[str, Any]:
-    """One world and noise model: its runs, then every variant of the offline estimate."""
-    seed, noise_name, world, calibration, out, variants = job
+def world_job(
+    job: tuple[int, str, str, str, Path, dict[str, dict[str, Any]], tuple[str, ...]],
+) -> dict[str, Any]:
+    """One world and noise model: its runs (the iSAM2 run with the ``--set`` settings), then
+    every variant of the offline estimate."""
+    seed, noise_name, world, calibration, out, variants, settings = job
     config = _config(calibration, NOISE_MODELS[noise_name], out)
     dr = _run(world, config, ["--backend", "dr"], out / "dr")
     graph_dir = out / "isam2"
-    online = _run(world, config, ["--backend", "isam2", "--set", "isam2.offline=false"], graph_dir)
+    extra = [a for setting in settings for a in ("--set", setting)]
+    online = _run(
+        world, config, ["--backend", "isam2", "--set", "isam2.offline=false", *extra], graph_dir
+    )
     row: dict[str, Any] = {
         "seed": seed,
         "noise": noise_name,
@@ -185,6 +191,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cache", default="out/sim-drawn", help="simulated worlds, reused")
     ap.add_argument("--variant", action="append", default=[], metavar="NAME=[FIELD=V,...]")
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SCOPE.FIELD=V",
+        help="a setting of every world's iSAM2 run (repeatable; e.g. isam2.range_scale_sigma=0.04)",
+    )
     ap.add_argument("--out", type=Path, default=Path("out/offline_drawn"))
     args = ap.parse_args(argv)
     variants: dict[str, dict[str, Any]] = {}
@@ -204,7 +217,7 @@ def main(argv: list[str] | None = None) -> int:
         calibration = calibrate_cached(folder)
         for noise in noises:
             out = args.out / "worlds" / noise / str(s)
-            jobs.append((s, noise, folder, calibration, out, variants))
+            jobs.append((s, noise, folder, calibration, out, variants, tuple(args.set)))
     with ProcessPoolExecutor(max_workers=args.workers) as pool:
         rows = list(pool.map(world_job, jobs))
     result: dict[str, Any] = {
