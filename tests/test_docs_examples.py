@@ -351,6 +351,7 @@ def test_the_readme_api_example_says_the_warning_it_prints(tmp_path, monkeypatch
 def test_quickstart_says_what_it_ran(quickstart: Path) -> None:
     printed = (quickstart / "make_run.txt").read_text()
     assert "on the real marina" in printed and "against GPS" in printed
+    assert "isam2 offline: ATE over the sonar span" in printed  # the offline estimate's line
     for backend in ("dr", "ekf", "isam2"):
         assert (quickstart / "clone" / "out" / f"marina-{backend}" / "metrics.json").is_file()
 

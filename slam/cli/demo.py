@@ -7,7 +7,7 @@ from pathlib import Path
 
 from sonarslam.slam.io.files import check_output_dir
 from sonarslam.slam.run.demo import demo_source, main_job
-from sonarslam.slam.run.run import results_table, summary_line
+from sonarslam.slam.run.run import results_table, smoothed_lines, summary_line
 
 
 def command(args: argparse.Namespace) -> int:
@@ -26,6 +26,11 @@ def command(args: argparse.Namespace) -> int:
         print("\nResults (ATE against GPS, no alignment):")
     for r in results:
         print("  " + summary_line(r.metrics))
+        # the factor graph's offline estimate, decided again after the run (docs/offline.md)
+        offline = f"{r.metrics['backend']} offline:"
+        for line in smoothed_lines(r.metrics):
+            if line.startswith(offline):
+                print("  " + line)
     if source.simulated:
         print(
             "\nEvery trajectory against the simulator's truth, then against its simulated GPS"
