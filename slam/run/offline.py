@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 import math
-import tomllib
 from collections.abc import Iterator
 from dataclasses import fields, replace
 from pathlib import Path
@@ -23,7 +22,7 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import X
 
-from sonarslam.datasets.config import config_tables
+from sonarslam.datasets.config import config_tables, load_dataset_config
 from sonarslam.datasets.dataset import Dataset
 from sonarslam.features.scans import ScanConfig
 from sonarslam.settings import SettingError
@@ -225,24 +224,19 @@ CONFIG_TABLES = (
 
 def _check_config(run: Path, dataset: Dataset) -> None:
     """Refuse ``dataset`` when its configuration differs from the run's ``config_used.toml``
-    in a value the offline estimate reads (:data:`CONFIG_TABLES`; a run whose directory has no
-    such file is not checked)."""
+    (read as a run reads a ``--config``, over the dataset's own) in a value the offline estimate
+    reads (:data:`CONFIG_TABLES`; a run whose directory has no such file is not checked)."""
     path = run / "config_used.toml"
     if not path.is_file():
         return
-    used = tomllib.loads(path.read_text())
+    used = config_tables(load_dataset_config(path, base=dataset.config))
     ours = config_tables(dataset.config)
-    differ = []
-    for name in CONFIG_TABLES:
-        table: Any = used
-        for part in name.split("."):
-            table = table.get(part, {}) if isinstance(table, dict) else {}
-        for key, theirs in (table or {}).items():
-            if key == "source" or key not in ours[name]:
-                continue
-            mine = ours[name][key]
-            if not _same(mine, theirs):
-                differ.append(f"[{name}] {key} = {theirs!r} in the run, {mine!r} here")
+    differ = [
+        f"[{name}] {key} = {theirs!r} in the run, {ours[name].get(key)!r} here"
+        for name in CONFIG_TABLES
+        for key, theirs in used[name].items()
+        if key != "source" and not _same(ours[name].get(key), theirs)
+    ]
     if differ:
         raise SettingError(
             "dataset",
