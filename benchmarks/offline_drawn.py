@@ -43,7 +43,7 @@ import tomli_w
 
 from sonarslam.datasets.errors import DataWarning
 from sonarslam.datasets.source import open_dataset
-from sonarslam.settings import parse_text, replace_checked
+from sonarslam.settings import replace_checked
 from sonarslam.slam.backends.isam2.config import OfflineConfig
 from sonarslam.slam.eval.ate import ate_against_truth
 from sonarslam.slam.eval.consistency import nees_series
@@ -51,6 +51,8 @@ from sonarslam.slam.eval.truth import truth_trajectory
 from sonarslam.slam.io.trajectory import write_tum
 from sonarslam.slam.run.offline import offline_from_saved
 from sonarslam.slam.run.sweep import calibrate_cached, parse_seeds, simulate_cached
+
+from offline_variants import parse_variant  # one NAME=FIELD=V,... syntax  # isort: skip
 
 HERE = Path(__file__).resolve().parent
 NOISE_MODELS = {"own": None, "marina": HERE / "marina_noise_model.toml"}
@@ -202,10 +204,11 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     variants: dict[str, dict[str, Any]] = {}
     for v in args.variant or ["default="]:
-        name, _, sets = v.partition("=")
-        variants[name] = {
-            k: parse_text(x) for k, _, x in (s.partition("=") for s in sets.split(",") if s)
-        }
+        try:
+            name, fields = parse_variant(v)
+        except ValueError as exc:
+            ap.error(str(exc))
+        variants[name] = fields
     noises = [n for n in args.noise.split(",") if n]
     unknown = [n for n in noises if n not in NOISE_MODELS]
     if unknown:
