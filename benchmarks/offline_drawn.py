@@ -29,17 +29,13 @@ import common  # noqa: F401  # first: one BLAS thread  # isort: skip
 import argparse
 import json
 import os
-import subprocess
-import sys
 import time
-import tomllib
 import warnings
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tomli_w
 
 from sonarslam.datasets.errors import DataWarning
 from sonarslam.datasets.source import open_dataset
@@ -52,6 +48,7 @@ from sonarslam.slam.io.trajectory import write_tum
 from sonarslam.slam.run.offline import offline_from_saved
 from sonarslam.slam.run.sweep import calibrate_cached, parse_seeds, simulate_cached
 
+from drawn_defaults import run_one, with_noise_model  # isort: skip
 from offline_variants import parse_variant  # one NAME=FIELD=V,... syntax  # isort: skip
 
 HERE = Path(__file__).resolve().parent
@@ -60,44 +57,17 @@ NOISE_MODELS = {"own": None, "marina": HERE / "marina_noise_model.toml"}
 RUN_ESTIMATES = {"dr": "", "online": "", "smoothed": "_smoothed"}
 
 
-def _config(calibration: str, noise: Path | None, folder: Path) -> str:
-    """The run's ``--config``: the world's calibration, with the noise model's keys over it."""
-    if noise is None:
-        return calibration
-    doc = tomllib.loads(Path(calibration).read_text())
-    for table, keys in tomllib.loads(noise.read_text()).items():
-        doc.setdefault(table, {}).update(keys)
-    path = folder / "config_marina_noise.toml"
-    folder.mkdir(parents=True, exist_ok=True)
-    path.write_text(tomli_w.dumps(doc))
-    return str(path)
-
-
-def _run(world: str, config: str, backend_args: list[str], out: Path) -> dict[str, Any]:
-    """``sonarslam run`` of one world (kept when its metrics.json exists); its metrics."""
-    if not (out / "metrics.json").is_file():
-        out.mkdir(parents=True, exist_ok=True)
-        code = "import sys; from sonarslam.slam.cli.main import main; sys.exit(main(sys.argv[1:]))"
-        cmd = [sys.executable, "-c", code, "run", world, "--config", config]
-        cmd += ["--out", str(out), "--quiet", *backend_args]
-        env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
-        done = subprocess.run(cmd, env={**env, "MPLBACKEND": "Agg"}, capture_output=True, text=True)
-        if done.returncode != 0:
-            raise RuntimeError(f"{' '.join(cmd)}: {done.stderr.strip()[-300:]}")
-    return dict(json.loads((out / "metrics.json").read_text()))
-
-
 def world_job(
     job: tuple[int, str, str, str, Path, dict[str, dict[str, Any]], tuple[str, ...]],
 ) -> dict[str, Any]:
     """One world and noise model: its runs (the iSAM2 run with the ``--set`` settings), then
     every variant of the offline estimate."""
     seed, noise_name, world, calibration, out, variants, settings = job
-    config = _config(calibration, NOISE_MODELS[noise_name], out)
-    dr = _run(world, config, ["--backend", "dr"], out / "dr")
+    config = with_noise_model(calibration, NOISE_MODELS[noise_name])
+    dr = run_one(world, config, ["--backend", "dr"], out / "dr")
     graph_dir = out / "isam2"
     extra = [a for setting in settings for a in ("--set", setting)]
-    online = _run(
+    online = run_one(
         world, config, ["--backend", "isam2", "--set", "isam2.offline=false", *extra], graph_dir
     )
     row: dict[str, Any] = {
