@@ -11,6 +11,7 @@ import shutil
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 
 # bytecode caches written, whatever PYTHONDONTWRITEBYTECODE says: the suite starts ~40 Python
@@ -38,6 +39,9 @@ from hypothesis import settings  # noqa: E402
 import sonarslam.features.hough  # noqa: E402, F401
 import sonarslam.sonar.segmentation  # noqa: E402, F401
 from sonarslam.datasets.simulator import simulate  # noqa: E402
+from sonarslam.datasets.simulator.ping360 import ping360_head  # noqa: E402
+from sonarslam.datasets.simulator.scenario import make_scenario, simulate_records  # noqa: E402
+from sonarslam.datasets.simulator.writer import write_dataset  # noqa: E402
 from sonarslam.datasets.source import Dataset, data_root, open_dataset  # noqa: E402
 
 # no wall-clock limit on a property's examples: speed is measured by benchmarks/, and on the
@@ -197,3 +201,18 @@ def opened(
         return loaded
 
     return get
+
+
+@pytest.fixture(scope="session")
+def ping360_layout(shared_dir: Callable[[str, Callable[[Path], None]], Path]) -> Path:
+    """A 150 s harbour (seed 3) with a Ping360-shaped head, in the marina layout (its DVL drops
+    out: the rows without lock carry (0, 0), as the simulator writes them): the dive the
+    Ping Viewer and navigation-log tests write in each field format. Built once per session;
+    read only."""
+
+    def build(folder: Path) -> None:
+        scenario = make_scenario("harbour", 3, 150.0)
+        scenario = replace(scenario, head=ping360_head(scenario.head))
+        write_dataset(simulate_records(scenario), folder / "layout")
+
+    return shared_dir("ping360_harbour_3_150s", build) / "layout"

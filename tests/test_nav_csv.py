@@ -8,7 +8,6 @@ import json
 import math
 import warnings
 from collections.abc import Callable
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -23,9 +22,7 @@ from sonarslam.datasets.ping360 import (
     read_ping360_log,
     write_ping360_log,
 )
-from sonarslam.datasets.simulator.ping360 import ping360_head, write_ping360_run
-from sonarslam.datasets.simulator.scenario import make_scenario, simulate_records
-from sonarslam.datasets.simulator.writer import write_dataset
+from sonarslam.datasets.simulator.ping360 import write_ping360_run
 from sonarslam.datasets.source import open_dataset
 from sonarslam.slam.cli.main import main
 from sonarslam.slam.run.sources import dead_reckoning_trajectory
@@ -35,12 +32,9 @@ COLUMNS = ["t_s", "dvl_vx_mps", "dvl_vy_mps", "dvl_valid", "ahrs_yaw_enu_rad",
 
 
 @pytest.fixture(scope="module")
-def layout(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A 150 s harbour with a Ping360-shaped head, in the marina layout (its DVL drops out:
-    the rows without lock carry (0, 0), as the simulator writes them)."""
-    scenario = make_scenario("harbour", 3, 150.0)
-    scenario = replace(scenario, head=ping360_head(scenario.head))
-    return write_dataset(simulate_records(scenario), tmp_path_factory.mktemp("navcsv") / "layout")
+def layout(ping360_layout: Path) -> Path:
+    """The harbour dive in the marina layout (conftest's ``ping360_layout``, read only)."""
+    return ping360_layout
 
 
 def _quiet_open(path: Path, **kw: object) -> Dataset:
@@ -55,8 +49,8 @@ def direct(layout: Path) -> Dataset:
 
 
 @pytest.fixture(scope="module")
-def binlog(direct: Dataset, layout: Path) -> Path:
-    return write_ping360_run(direct, layout.parent / "bin", layout)
+def binlog(direct: Dataset, layout: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return write_ping360_run(direct, tmp_path_factory.mktemp("navcsv") / "bin", layout)
 
 
 def _write_nav(

@@ -39,9 +39,7 @@ from sonarslam.datasets.simulator.bluerov import (
     write_qgc_csv,
     write_tlog,
 )
-from sonarslam.datasets.simulator.ping360 import ping360_head, write_ping360_run
-from sonarslam.datasets.simulator.scenario import make_scenario, simulate_records
-from sonarslam.datasets.simulator.writer import write_dataset
+from sonarslam.datasets.simulator.ping360 import write_ping360_run
 from sonarslam.datasets.source import open_dataset
 from sonarslam.slam.cli.main import main
 from sonarslam.slam.run.run import run_backend
@@ -55,11 +53,9 @@ ROUND_TRIP_REL, ROUND_TRIP_ABS_M = 0.05, 0.05
 
 
 @pytest.fixture(scope="module")
-def layout(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A 150 s harbour with a Ping360-shaped head, in the marina layout."""
-    scenario = make_scenario("harbour", 3, 150.0)
-    scenario = replace(scenario, head=ping360_head(scenario.head))
-    return write_dataset(simulate_records(scenario), tmp_path_factory.mktemp("bluerov") / "lay")
+def layout(ping360_layout: Path) -> Path:
+    """The harbour dive in the marina layout (conftest's ``ping360_layout``, read only)."""
+    return ping360_layout
 
 
 def _quiet_open(path: Path, **kw: object) -> Dataset:
