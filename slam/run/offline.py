@@ -28,7 +28,7 @@ from sonarslam.features.scans import ScanConfig
 from sonarslam.settings import SettingError
 from sonarslam.slam.backends.isam2.config import GraphConfig, OfflineConfig
 from sonarslam.slam.backends.isam2.graph import LineIsam2
-from sonarslam.slam.backends.isam2.graph_io import FactorRecord, Robust, key_of
+from sonarslam.slam.backends.isam2.graph_io import FactorRecord, Robust, values_from_json
 from sonarslam.slam.backends.isam2.offline import OfflineResult, offline_estimate
 from sonarslam.slam.run.presets import SCAN_PRESETS, apply_overrides, preset_for
 from sonarslam.slam.run.provenance import dataset_digests
@@ -159,13 +159,7 @@ def offline_from_saved(
     records = [
         FactorRecord.from_json(item, f"{path}: factor {i}") for i, item in enumerate(doc["factors"])
     ]
-    values = gtsam.Values()
-    for name, item in doc["values"].items():
-        v = np.asarray(item["value"], dtype=np.float64)
-        if item["type"] == "Pose2":
-            values.insert(key_of(name), gtsam.Pose2(*v))
-        else:
-            values.insert(key_of(name), v.reshape(-1))
+    values = values_from_json(doc["values"])
     node_times = doc["meta"]["node_times_s"]
     n = len(node_times)
     node_t = np.array([node_times[f"x{k}"] for k in range(n)], dtype=np.float64)

@@ -50,6 +50,7 @@ __all__ = [
     "values_to_json",
     "save_graph",
     "load_graph",
+    "values_from_json",
 ]
 
 GRAPH_FORMAT = "sonarslam-graph/1"
@@ -537,11 +538,17 @@ def load_graph(path: str | Path) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Valu
             graph.add(record.to_gtsam())
         except (TypeError, ValueError, RuntimeError) as e:
             raise ValueError(f"{where}: {record.kind.value} factor: {e}") from e
+    return graph, values_from_json(doc["values"])
+
+
+def values_from_json(items: dict[str, Any]) -> gtsam.Values:
+    """The ``values`` object of a :func:`save_graph` file as ``gtsam.Values`` (poses as
+    ``Pose2``, the other variables as vectors)."""
     values = gtsam.Values()
-    for name, item in doc["values"].items():
+    for name, item in items.items():
         v = np.asarray(item["value"], dtype=np.float64)
         if item["type"] == "Pose2":
             values.insert(key_of(name), gtsam.Pose2(*v))
         else:
             values.insert(key_of(name), v.reshape(-1))
-    return graph, values
+    return values
