@@ -176,6 +176,18 @@ class Redecision:
     def dropped(self) -> int:
         return int(np.sum(self.stretch < 0))
 
+    def counts(self) -> dict[str, int]:
+        """The observations, those kept, dropped and moved to another landmark's stretch, and
+        the stretches (``redecided_*`` and ``offline_lines_*`` in ``metrics.json``)."""
+        n = int(self.stretch.size)
+        return {
+            "observations": n,
+            "kept": n - self.dropped,
+            "dropped": self.dropped,
+            "moved": self.moved,
+            "stretches": len(self.stretches.members),
+        }
+
 
 def fit_line(
     obs: LineObservations,

@@ -488,17 +488,6 @@ class _Clock:
         self._t = now
 
 
-def _line_counts(decision: Redecision) -> dict[str, int]:
-    n = int(decision.stretch.size)
-    return {
-        "observations": n,
-        "kept": n - decision.dropped,
-        "dropped": decision.dropped,
-        "moved": decision.moved,
-        "stretches": len(decision.stretches.members),
-    }
-
-
 def _decision_graph(known: list[FactorRecord], values: gtsam.Values) -> gtsam.NonlinearFactorGraph:
     """The known factors of the joint decision, each AHRS heading ``yaw + b = z`` a native
     prior on the yaw at the bias's current estimate (``PoseRotationPrior2D`` on ``z - b``): a
@@ -671,7 +660,7 @@ def offline_estimate(
                 redecide_config,
             )
             lines = [replace(r, cov=r.cov / scales["line"]) for r in out if is_line_record(r)]
-            log.lines = _line_counts(decision)
+            log.lines = decision.counts()
         final = [*base, *inliers, *lines]
         estimate = optimise_records(_scaled(final, scales), estimate, lm, line_starts)
         clock("lines")

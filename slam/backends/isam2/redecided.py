@@ -78,16 +78,8 @@ class RedecidedGraph:
     def metrics(self) -> dict[str, int]:
         """The last pass's counts (``redecided_*``): observations, kept, dropped, moved to
         another landmark's stretch, stretches."""
-        last = self.decisions[-1]
-        n = int(last.stretch.size)
-        return {
-            "redecided_observations": n,
-            "redecided_kept": n - last.dropped,
-            "redecided_dropped": last.dropped,
-            "redecided_moved": last.moved,
-            "redecided_stretches": len(last.stretches.members),
-            "redecided_passes": len(self.decisions),
-        }
+        counts = {f"redecided_{k}": v for k, v in self.decisions[-1].counts().items()}
+        return {**counts, "redecided_passes": len(self.decisions)}
 
 
 def line_observations(
